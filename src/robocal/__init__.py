@@ -1,0 +1,40 @@
+"""robocal — calibration of serial robot arms.
+
+>>> import robocal as rc
+>>> model = rc.robot("ur10")
+>>> T = model.fk([[0, -1.57, 1.57, 0, 1.57, 0]])   # (1, 4, 4) tool frame, m
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+from robocal import spatial
+from robocal.model import (
+    Body,
+    Joint,
+    Model,
+    ModelFileError,
+    Step,
+    load_model,
+    robot,
+    robots,
+    save_model,
+)
+
+try:
+    __version__ = version("robocal")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0.0.0"
+
+__all__ = [
+    "Body",
+    "Joint",
+    "Model",
+    "ModelFileError",
+    "Step",
+    "__version__",
+    "load_model",
+    "robot",
+    "robots",
+    "save_model",
+    "spatial",
+]

@@ -1,0 +1,171 @@
+"""The ``robocal`` command (Typer + Rich).
+
+Commands:
+    robocal robots                    table of the catalog
+    robocal robots show NAME          parameter table of one robot (mm, deg)
+    robocal fk NAME --q "..." [--deg] tool pose at joint values
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from robocal import spatial
+from robocal.model.catalog import robot, robots
+from robocal.model.chain import Model
+from robocal.model.files import ModelFileError, load_model
+
+app = typer.Typer(
+    help="robocal: calibration of serial robot arms.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+robots_app = typer.Typer(help="The robot catalog.", invoke_without_command=True)
+app.add_typer(robots_app, name="robots")
+
+console = Console()
+err_console = Console(stderr=True)
+
+
+def _fail(message: str) -> typer.Exit:
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+    return typer.Exit(code=2)
+
+
+def resolve_model(name_or_path: str) -> Model:
+    """A catalog robot by name, or a model file by path (``.yaml``/``.yml``)."""
+    path = Path(name_or_path)
+    try:
+        if path.suffix in (".yaml", ".yml") or path.exists():
+            if not path.is_file():
+                raise _fail(f"model file {path} does not exist")
+            return load_model(path)
+        return robot(name_or_path)
+    except (KeyError, ModelFileError) as err:
+        raise _fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+
+
+def _fmt(value: float, digits: int = 4) -> str:
+    text = f"{value:.{digits}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def _display(step_unit: str, value: float) -> str:
+    return _fmt(math.degrees(value)) if step_unit == "rad" else _fmt(value * 1000.0)
+
+
+@robots_app.callback()
+def robots_list(ctx: typer.Context) -> None:
+    """List the catalog robots (use `robocal robots show NAME` for one)."""
+    if ctx.invoked_subcommand is not None:
+        return
+    table = Table(title="robocal catalog", title_justify="left")
+    for col in ("name", "robot", "joints", "parameters", "mass data"):
+        table.add_column(col)
+    for name in robots():
+        m = robot(name)
+        types = "".join("R" if t == "revolute" else "P" for t in m.joint_types)
+        table.add_row(name, m.title, f"{m.dof} ({types})", str(len(m.steps)), "yes" if m.bodies else "-")
+    console.print(table)
+
+
+@robots_app.command("show")
+def robots_show(name: Annotated[str, typer.Argument(help="catalog name or model file")]) -> None:
+    """Parameter table of one robot in mm and degrees."""
+    m = resolve_model(name)
+    console.print(f"[bold]{m.name}[/] — {m.title}", highlight=False)
+    if m.source:
+        console.print(f"[dim]source: {m.source}[/]", highlight=False)
+    table = Table(show_lines=False)
+    for col in ("#", "motion", "parameter", "value", "unit", "free", "joint", "limits"):
+        table.add_column(col, justify="right" if col in ("#", "value") else "left")
+    for i, s in enumerate(m.steps):
+        unit = "deg" if s.is_rotation else "mm"
+        joint, limits = "", ""
+        if s.joint is not None:
+            joint = f"{s.joint.name} ({s.joint_type})"
+            if s.joint.limits is not None:
+                limits = " .. ".join(_display(s.unit, v) for v in s.joint.limits)
+        table.add_row(
+            str(i), s.motion, s.name, _display(s.unit, s.value), unit, "yes" if s.free else "no", joint, limits
+        )
+    console.print(table)
+    if m.bodies:
+        bodies = Table(title="mass properties", title_justify="left")
+        for col in ("body", "frame", "mass kg", "com mm", "inertia kg·m² (xx yy zz xy xz yz)"):
+            bodies.add_column(col)
+        for b in m.bodies:
+            inertia = " ".join(_fmt(v, 6) for v in b.inertia) if b.inertia else "-"
+            com = " ".join(_fmt(v * 1000) for v in b.com)
+            bodies.add_row(b.name, b.frame, _fmt(b.mass), com, inertia)
+        console.print(bodies)
+
+
+def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise _fail(f"--q {text!r}: joint values must be numbers separated by commas or spaces") from None
+    if len(values) != m.dof:
+        raise _fail(f"--q has {len(values)} values but {m.name} has {m.dof} joints ({', '.join(m.joint_names)})")
+    q = np.array(values)
+    if deg:
+        q = np.where(np.array(m.joint_types) == "revolute", np.radians(q), q / 1000.0)
+    return q
+
+
+@app.command()
+def fk(
+    name: Annotated[str, typer.Argument(help="catalog name or model file")],
+    q: Annotated[str, typer.Option("--q", help='joint values, e.g. "0, -90, 90, 0, 90, 0"')],
+    deg: Annotated[bool, typer.Option("--deg", help="joint values in degrees (prismatic in mm)")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="print JSON (m, rad) instead of a table")] = False,
+) -> None:
+    """Tool pose of a robot at the given joint values (rad and m unless --deg)."""
+    m = resolve_model(name)
+    qv = _parse_q(q, m, deg)
+    limits = m.joint_limits
+    outside = [m.joint_names[j] for j in range(m.dof) if not limits[j, 0] <= qv[j] <= limits[j, 1]]
+    T = m.fk(qv)
+    quat = spatial.matrix_to_quaternion(T[:3, :3])
+    rpy = spatial.matrix_to_euler(T[:3, :3], "xyz")
+    zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")
+    if as_json:
+        print(json.dumps({
+            "robot": m.name, "q": qv.tolist(), "T": T.tolist(), "position_m": T[:3, 3].tolist(),
+            "quaternion_wxyz": quat.tolist(), "rpy_xyz_rad": rpy.tolist(), "zxz_rad": zxz.tolist(),
+            "outside_limits": outside,
+        }))
+        return
+    console.print(f"[bold]{m.name}[/] tool frame in the base frame", highlight=False)
+    table = Table(show_header=False)
+    for _ in range(4):
+        table.add_column(justify="right")
+    for r in range(4):
+        table.add_row(*[f"{T[r, c] * (1000 if c == 3 and r < 3 else 1):.6f}" for c in range(4)])
+    console.print(table)
+    p = T[:3, 3] * 1000
+    console.print(f"position mm      x {p[0]:.4f}  y {p[1]:.4f}  z {p[2]:.4f}", highlight=False)
+    console.print("quaternion wxyz  " + "  ".join(f"{v:.6f}" for v in quat), highlight=False)
+    console.print("roll-pitch-yaw   " + "  ".join(f"{math.degrees(v):.4f}" for v in rpy) + "  deg (Rz Ry Rx)",
+                  highlight=False)
+    console.print("ZXZ Euler        " + "  ".join(f"{math.degrees(v):.4f}" for v in zxz) + "  deg", highlight=False)
+    if outside:
+        err_console.print(f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False)
+
+
+def main() -> None:  # pragma: no cover - console entry point
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

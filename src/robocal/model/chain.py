@@ -1,0 +1,556 @@
+"""The one model representation: a chain of elementary transforms.
+
+A robot model is an ordered tuple of :class:`Step` objects.  Each step is one
+elementary motion ``Tx, Ty, Tz, Rx, Ry, Rz`` whose value is a named parameter
+(constant, e.g. a DH link length) or a joint variable plus the joint's offset
+parameter.  Every convention of the seeds (DH, modified DH, Hayati, Veitschegger,
+Schröer's link sets, base and tool frames) is such a sequence, so one forward
+kinematics routine and one analytic Jacobian serve them all.
+
+Frames and shapes
+-----------------
+* ``q`` is ``(n, dof)`` (rad for revolute, m for prismatic joints); a 1-D ``q`` of
+  length ``dof`` is one configuration and the leading ``n`` axis is dropped.
+* ``T_base_tool = model.fk(q)`` is ``(n, 4, 4)``: the frame at the end of the chain
+  expressed in the frame at its start.
+* ``model.joint_frames(q)`` is ``(n, dof, 4, 4)``: for each joint the frame directly
+  after its joint step (it moves with the joint's child link; its origin is on the
+  joint axis).
+* Joint perturbations ``(n, dof, 3) = (δα, δβ, δθ)`` model non-geometric effects
+  (seed 003 eq. 5.9): δθ is added to the joint variable (rad, or m for a prismatic
+  joint), then the child frame is tilted by δα about its first perpendicular axis and
+  δβ about its second (x then y for a joint about z; y, z for x; z, x for y).  The
+  tilt is expressed in the joint frame, the frame in which joint moments are
+  computed.
+* ``model.jacobian(q)`` is the identification Jacobian d(tool position)/d(free
+  parameters), ``(3n, p)`` with rows ``[x, y, z]`` per pose; ``rows="pose"`` gives
+  ``(6n, p)`` with rows ``[x, y, z, ωx, ωy, ωz]`` per pose, where ω is the
+  small-rotation vector in the base frame (see :func:`robocal.spatial.pose_error`).
+* ``model.joint_jacobian(q)`` is the geometric Jacobian ``(n, 6, dof)``, rows
+  ``[v; ω]`` of the tool point in the base frame.
+
+Analytic derivatives (DESIGN.md): for a rotation step about unit axis ``a`` whose
+frame has origin ``o``, dp/dvalue = a × (p − o) and dω/dvalue = a; for a translation
+step dp/dvalue = a and dω/dvalue = 0, with ``a`` and ``o`` in base coordinates.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal.spatial import MOTIONS, elementary
+
+__all__ = ["Body", "Joint", "Model", "Step"]
+
+Array = NDArray[np.float64]
+JointType = Literal["revolute", "prismatic"]
+
+
+def _check_name(kind: str, name: str) -> None:
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"{kind} name must be a non-empty string, got {name!r}")
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint variable driving one step of the chain.
+
+    Attributes:
+        name: unique joint name (e.g. ``"q1"`` or ``"shoulder_pan_joint"``).
+        limits: ``(lower, upper)`` on the commanded joint value ``q`` (rad or m), or
+            ``None`` when unknown.
+    """
+
+    name: str
+    limits: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        _check_name("joint", self.name)
+        if self.limits is not None:
+            lo, hi = (float(v) for v in self.limits)
+            if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+                raise ValueError(f"joint {self.name!r}: limits {self.limits} must be finite, lower <= upper")
+            object.__setattr__(self, "limits", (lo, hi))
+
+
+@dataclass(frozen=True)
+class Step:
+    """One elementary transform of the chain.
+
+    Attributes:
+        motion: ``"Tx" | "Ty" | "Tz" | "Rx" | "Ry" | "Rz"``.
+        name: the parameter's unique name (``"d1"``, ``"alpha2"``, ``"theta3"``...).
+        value: nominal value in SI (m or rad).  For a joint step it is the joint
+            offset: the transform is ``motion(q + value)``.
+        free: whether identification may change the value.
+        bounds: optional ``(lower, upper)`` on the value (SI) for bounded solvers.
+        joint: the joint variable driving this step, or ``None`` for a constant.
+    """
+
+    motion: str
+    name: str
+    value: float = 0.0
+    free: bool = True
+    bounds: tuple[float, float] | None = None
+    joint: Joint | None = None
+
+    def __post_init__(self) -> None:
+        if self.motion not in MOTIONS:
+            raise ValueError(f"step {self.name!r}: motion {self.motion!r} is not one of {MOTIONS}")
+        _check_name("parameter", self.name)
+        value = float(self.value)
+        if not math.isfinite(value):
+            raise ValueError(f"parameter {self.name!r}: value {self.value!r} is not finite")
+        object.__setattr__(self, "value", value)
+        object.__setattr__(self, "free", bool(self.free))
+        if self.bounds is not None:
+            lo, hi = (float(v) for v in self.bounds)
+            if math.isnan(lo) or math.isnan(hi) or lo > hi:
+                raise ValueError(f"parameter {self.name!r}: bounds {self.bounds} need lower <= upper")
+            object.__setattr__(self, "bounds", (lo, hi))
+
+    @property
+    def axis(self) -> int:
+        """Index 0, 1, 2 of the local axis x, y, z."""
+        return "xyz".index(self.motion[1])
+
+    @property
+    def is_rotation(self) -> bool:
+        return self.motion[0] == "R"
+
+    @property
+    def unit(self) -> str:
+        """SI unit of the value: ``"rad"`` or ``"m"``."""
+        return "rad" if self.is_rotation else "m"
+
+    @property
+    def joint_type(self) -> JointType | None:
+        if self.joint is None:
+            return None
+        return "revolute" if self.is_rotation else "prismatic"
+
+
+@dataclass(frozen=True)
+class Body:
+    """Mass properties of one rigid link (for joint wrenches, seed 003 ch. 4-5).
+
+    Attributes:
+        name: link name.
+        frame: name of the step after which the body's frame is taken; the centre of
+            mass and inertia are expressed in that frame.  The body is the link the
+            frame belongs to (the one moved by the last joint before that step).
+        mass: kg.
+        com: centre of mass (m) in ``frame``.
+        inertia: ``(Ixx, Iyy, Izz, Ixy, Ixz, Iyz)`` in kg·m² about the centre of
+            mass, axes of ``frame``; ``None`` when unpublished.
+    """
+
+    name: str
+    frame: str
+    mass: float
+    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    inertia: tuple[float, float, float, float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        _check_name("body", self.name)
+        if not (math.isfinite(self.mass) and self.mass >= 0):
+            raise ValueError(f"body {self.name!r}: mass {self.mass!r} must be finite and >= 0")
+        com = tuple(float(v) for v in self.com)
+        if len(com) != 3 or not all(map(math.isfinite, com)):
+            raise ValueError(f"body {self.name!r}: com must be 3 finite numbers, got {self.com!r}")
+        object.__setattr__(self, "com", com)
+        object.__setattr__(self, "mass", float(self.mass))
+        if self.inertia is not None:
+            inertia = tuple(float(v) for v in self.inertia)
+            if len(inertia) != 6 or not all(map(math.isfinite, inertia)):
+                raise ValueError(f"body {self.name!r}: inertia must be 6 finite numbers")
+            object.__setattr__(self, "inertia", inertia)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Structure of a chain, compiled once per model for batched evaluation."""
+
+    joint_steps: NDArray[np.intp]  # (dof,) step index of each joint
+    joint_axis: tuple[int, ...]  # local axis of each joint step
+    joint_rot: tuple[bool, ...]  # revolute?
+    anchor_of: NDArray[np.intp]  # (P,) anchor frame index of each step (0 = base, j+1 = after joint j)
+    segments: tuple[tuple[int, ...], ...]  # constant steps after anchor a, for a = 0..dof
+    step_axis: NDArray[np.intp]  # (P,)
+    step_rot: NDArray[np.bool_]  # (P,)
+
+
+@dataclass(frozen=True)
+class Model:
+    """An immutable robot model: a named chain of elementary transforms.
+
+    Build models with the helpers of :mod:`robocal.model.conventions`, load them
+    with :func:`robocal.load_model` or take one from the catalog with
+    :func:`robocal.robot`.  All values are SI (m, rad).
+    """
+
+    name: str
+    steps: tuple[Step, ...]
+    bodies: tuple[Body, ...] = ()
+    title: str = ""
+    source: str = ""
+    notes: str = field(default="", compare=True)
+
+    def __post_init__(self) -> None:
+        _check_name("model", self.name)
+        steps = tuple(self.steps)
+        object.__setattr__(self, "steps", steps)
+        object.__setattr__(self, "bodies", tuple(self.bodies))
+        if not steps:
+            raise ValueError(f"model {self.name!r} has no steps")
+        for step in steps:
+            if not isinstance(step, Step):
+                raise TypeError(f"model {self.name!r}: steps must be Step objects, got {step!r}")
+        seen: set[str] = set()
+        for step in steps:
+            if step.name in seen:
+                raise ValueError(f"model {self.name!r}: parameter name {step.name!r} is used twice")
+            seen.add(step.name)
+        joint_names = [s.joint.name for s in steps if s.joint is not None]
+        for name in joint_names:
+            if joint_names.count(name) > 1:
+                raise ValueError(f"model {self.name!r}: joint name {name!r} is used twice")
+        for body in self.bodies:
+            if body.frame not in seen:
+                raise ValueError(
+                    f"model {self.name!r}: body {body.name!r} refers to frame {body.frame!r}, "
+                    "which is not a step of the chain"
+                )
+
+    # ------------------------------------------------------------------ parameters
+    @property
+    def dof(self) -> int:
+        """Number of joint variables."""
+        return len(self._plan.joint_steps)
+
+    @property
+    def joints(self) -> tuple[Joint, ...]:
+        return tuple(s.joint for s in self.steps if s.joint is not None)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    @property
+    def joint_types(self) -> tuple[JointType, ...]:
+        return tuple(s.joint_type for s in self.steps if s.joint is not None)
+
+    @property
+    def joint_limits(self) -> Array:
+        """``(dof, 2)`` lower/upper joint limits; ±inf where unknown."""
+        out = np.tile([-np.inf, np.inf], (self.dof, 1))
+        for j, joint in enumerate(self.joints):
+            if joint.limits is not None:
+                out[j] = joint.limits
+        return out
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of all parameters, in chain order."""
+        return tuple(s.name for s in self.steps)
+
+    @property
+    def values(self) -> Array:
+        """Values (SI) of all parameters, in chain order, shape ``(P,)``."""
+        return np.array([s.value for s in self.steps])
+
+    @cached_property
+    def free_mask(self) -> NDArray[np.bool_]:
+        return np.array([s.free for s in self.steps], dtype=bool)
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        """Names of the free parameters, in chain order (the Jacobian's columns)."""
+        return tuple(s.name for s in self.steps if s.free)
+
+    @property
+    def free_values(self) -> Array:
+        """Values (SI) of the free parameters, shape ``(p,)``."""
+        return np.array([s.value for s in self.steps if s.free])
+
+    def step(self, name: str) -> Step:
+        """The step whose parameter is called ``name``."""
+        try:
+            return self.steps[self._index[name]]
+        except KeyError:
+            raise KeyError(f"model {self.name!r} has no parameter {name!r}") from None
+
+    @cached_property
+    def _index(self) -> dict[str, int]:
+        return {s.name: i for i, s in enumerate(self.steps)}
+
+    def with_free_values(self, x: ArrayLike) -> Model:
+        """A new model whose free parameters take the values ``x`` (SI, shape ``(p,)``)."""
+        x = np.asarray(x, dtype=float)
+        p = int(self.free_mask.sum())
+        if x.shape != (p,):
+            raise ValueError(f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}")
+        return self.with_values(dict(zip(self.free_names, x.tolist(), strict=True)))
+
+    def with_values(self, values: Mapping[str, float]) -> Model:
+        """A new model with the named parameters set to new values (SI)."""
+        steps = list(self.steps)
+        for name, value in values.items():
+            i = self._index.get(name)
+            if i is None:
+                raise KeyError(f"model {self.name!r} has no parameter {name!r}")
+            steps[i] = dataclasses.replace(steps[i], value=float(value))
+        return dataclasses.replace(self, steps=tuple(steps))
+
+    def with_free(self, names: Iterable[str] | None = None, free: bool = True) -> Model:
+        """A new model with the named parameters (all when ``names`` is None) freed or fixed."""
+        selected = set(self.names if names is None else names)
+        unknown = selected - set(self.names)
+        if unknown:
+            raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
+        steps = tuple(dataclasses.replace(s, free=free) if s.name in selected else s for s in self.steps)
+        return dataclasses.replace(self, steps=steps)
+
+    def fixed(self, names: Iterable[str]) -> Model:
+        """A new model with the named parameters fixed (not identified)."""
+        return self.with_free(names, free=False)
+
+    # ------------------------------------------------------------------ kinematics
+    @cached_property
+    def _plan(self) -> _Plan:
+        joint_steps = [i for i, s in enumerate(self.steps) if s.joint is not None]
+        anchor_of = np.zeros(len(self.steps), dtype=np.intp)
+        segments: list[list[int]] = [[]]
+        anchor = 0
+        for i, step in enumerate(self.steps):
+            if step.joint is not None:
+                anchor_of[i] = anchor  # a joint step hangs off the previous anchor's segment end
+                anchor += 1
+                segments.append([])
+            else:
+                anchor_of[i] = anchor
+                segments[anchor].append(i)
+        return _Plan(
+            joint_steps=np.array(joint_steps, dtype=np.intp),
+            joint_axis=tuple(self.steps[i].axis for i in joint_steps),
+            joint_rot=tuple(self.steps[i].is_rotation for i in joint_steps),
+            anchor_of=anchor_of,
+            segments=tuple(tuple(s) for s in segments),
+            step_axis=np.array([s.axis for s in self.steps], dtype=np.intp),
+            step_rot=np.array([s.is_rotation for s in self.steps], dtype=bool),
+        )
+
+    def _check_q(self, q: ArrayLike) -> tuple[Array, bool]:
+        q = np.asarray(q, dtype=float)
+        single = q.ndim == 1
+        if single:
+            q = q[None, :]
+        if q.ndim != 2 or q.shape[1] != self.dof:
+            raise ValueError(
+                f"joint values shaped {q.shape if not single else q.shape[1:]} do not fit model "
+                f"{self.name!r} with {self.dof} joints; expected (n, {self.dof})"
+            )
+        if not np.all(np.isfinite(q)):
+            bad = np.argwhere(~np.isfinite(q))[0]
+            raise ValueError(f"joint values contain NaN/inf (pose {bad[0]}, joint {self.joint_names[bad[1]]})")
+        return q, single
+
+    def _check_perturbations(self, perturbations: ArrayLike | None, n: int) -> Array | None:
+        if perturbations is None:
+            return None
+        d = np.asarray(perturbations, dtype=float)
+        if d.ndim == 2:
+            d = d[None]
+        if d.shape != (n, self.dof, 3):
+            raise ValueError(f"joint perturbations shaped {d.shape}; expected ({n}, {self.dof}, 3)")
+        return d
+
+    def _segment_data(self, values: Array) -> tuple[list[Array], Array]:
+        """Constant segment transforms and each step's local frame (before the step).
+
+        Returns:
+            segment transforms ``C_a`` (4, 4) for a = 0..dof, and ``local`` (P, 4, 4):
+            the frame just before step i expressed in its anchor frame.
+        """
+        plan = self._plan
+        local = np.empty((len(self.steps), 4, 4))
+        seg_T: list[Array] = []
+        for a, seg in enumerate(plan.segments):
+            T = np.eye(4)
+            for i in seg:
+                local[i] = T
+                T = T @ elementary(self.steps[i].motion, values[i])
+            seg_T.append(T)
+        for j, i in enumerate(plan.joint_steps):
+            local[i] = seg_T[j]  # a joint step starts where the previous segment ends
+        return seg_T, local
+
+    def _forward(
+        self, values: Array, q: Array, perturbations: Array | None, keep_anchors: bool
+    ) -> tuple[Array, list[Array]]:
+        """Batched FK.  Returns the tool frame as ``(n, 3, 4)`` and, when asked, the
+        anchor frames after each joint step (list of ``(n, 3, 4)``)."""
+        plan = self._plan
+        seg_T, _ = self._segment_data(values)
+        n = q.shape[0]
+        F = np.empty((n, 3, 4))
+        F[:] = seg_T[0][:3]
+        anchors: list[Array] = []
+        for j, i in enumerate(plan.joint_steps):
+            k = plan.joint_axis[j]
+            qj = q[:, j] + values[i]
+            if perturbations is not None:
+                qj = qj + perturbations[:, j, 2]
+            if plan.joint_rot[j]:
+                _rotate_columns(F, k, qj)
+            else:
+                F[:, :, 3] += F[:, :, k] * qj[:, None]
+            if perturbations is not None:
+                _rotate_columns(F, (k + 1) % 3, perturbations[:, j, 0])
+                _rotate_columns(F, (k + 2) % 3, perturbations[:, j, 1])
+            if keep_anchors:
+                anchors.append(F.copy())
+            C = seg_T[j + 1]
+            if not np.array_equal(C, _EYE4):
+                F = (F.reshape(3 * n, 4) @ C).reshape(n, 3, 4)
+        return F, anchors
+
+    def fk(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
+        """Tool frames ``T_base_tool`` shaped ``(n, 4, 4)`` for joint values ``q`` ``(n, dof)``.
+
+        ``perturbations`` ``(n, dof, 3)`` are per-pose joint perturbations (δα, δβ, δθ).
+        """
+        q, single = self._check_q(q)
+        d = self._check_perturbations(perturbations, len(q))
+        F, _ = self._forward(self.values, q, d, keep_anchors=False)
+        T = _to_homogeneous(F)
+        return T[0] if single else T
+
+    def joint_frames(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
+        """Frames after each joint step, ``(n, dof, 4, 4)`` in the base frame."""
+        q, single = self._check_q(q)
+        d = self._check_perturbations(perturbations, len(q))
+        _, anchors = self._forward(self.values, q, d, keep_anchors=True)
+        T = _to_homogeneous(np.stack(anchors, axis=1))
+        return T[0] if single else T
+
+    def _columns(
+        self, values: Array, q: Array, perturbations: Array | None, steps: Sequence[int]
+    ) -> tuple[Array, Array, Array]:
+        """Derivative columns of the tool pose wrt the values of ``steps``.
+
+        Returns ``(F_tool (n,3,4), dp (n,3,m), dw (n,3,m))``.
+        """
+        plan = self._plan
+        steps = np.asarray(steps, dtype=np.intp)
+        F, anchors = self._forward(values, q, perturbations, keep_anchors=True)
+        _, local = self._segment_data(values)
+        n, m = q.shape[0], len(steps)
+        axes = np.empty((n, 3, m))
+        origins = np.empty((n, 3, m))
+        # a_local = axis of each step in its anchor frame; o_local = its origin there
+        loc = local[steps]
+        a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3)
+        o_loc = loc[:, :3, 3]  # (m, 3)
+        step_anchor = plan.anchor_of[steps]
+        for a in np.unique(step_anchor):
+            cols = np.flatnonzero(step_anchor == a)
+            if a == 0:
+                axes[:, :, cols] = a_loc[cols].T
+                origins[:, :, cols] = o_loc[cols].T
+                continue
+            k = len(cols)
+            M = np.zeros((4, 2 * k))
+            M[:3, :k] = a_loc[cols].T
+            M[:3, k:] = o_loc[cols].T
+            M[3, k:] = 1.0
+            W = (anchors[a - 1].reshape(3 * n, 4) @ M).reshape(n, 3, 2 * k)
+            axes[:, :, cols] = W[:, :, :k]
+            origins[:, :, cols] = W[:, :, k:]
+        rot = plan.step_rot[steps]
+        d = F[:, :, 3, None] - origins
+        dp = axes.copy()
+        if rot.any():
+            a, r = axes[:, :, rot], d[:, :, rot]
+            dp[:, :, rot] = np.cross(a, r, axis=1)
+        dw = np.where(rot[None, None, :], axes, 0.0)
+        return F, dp, dw
+
+    def fk_jacobian(
+        self,
+        q: ArrayLike,
+        rows: Literal["position", "pose"] = "position",
+        perturbations: ArrayLike | None = None,
+    ) -> tuple[Array, Array]:
+        """Tool frames ``(n, 4, 4)`` and the identification Jacobian in one pass.
+
+        See :meth:`jacobian` for the Jacobian's layout.
+        """
+        if rows not in ("position", "pose"):
+            raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
+        q, single = self._check_q(q)
+        d = self._check_perturbations(perturbations, len(q))
+        free = np.flatnonzero(self.free_mask)
+        F, dp, dw = self._columns(self.values, q, d, free)
+        n = q.shape[0]
+        J = dp if rows == "position" else np.concatenate([dp, dw], axis=1)
+        J = J.reshape(n * J.shape[1], len(free))
+        T = _to_homogeneous(F)
+        return (T[0] if single else T), J
+
+    def jacobian(
+        self,
+        q: ArrayLike,
+        rows: Literal["position", "pose"] = "position",
+        perturbations: ArrayLike | None = None,
+    ) -> Array:
+        """Identification Jacobian wrt the free parameters (SI units).
+
+        Returns ``(3n, p)`` for ``rows="position"`` (rows x, y, z of pose 0, then pose
+        1, ...) or ``(6n, p)`` for ``rows="pose"`` (x, y, z, ωx, ωy, ωz per pose).
+        Columns follow :attr:`free_names`.
+        """
+        return self.fk_jacobian(q, rows, perturbations)[1]
+
+    def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
+        """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
+        in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
+        q, single = self._check_q(q)
+        d = self._check_perturbations(perturbations, len(q))
+        _, dp, dw = self._columns(self.values, q, d, self._plan.joint_steps)
+        J = np.concatenate([dp, dw], axis=1)
+        return J[0] if single else J
+
+
+_EYE4 = np.eye(4)
+
+
+def _rotate_columns(F: Array, axis: int, angle: Array) -> None:
+    """In place ``F[:, :, :3] <- F[:, :, :3] @ rot(axis, angle)`` for per-pose angles ``(n,)``.
+
+    Only the two columns perpendicular to ``axis`` change, so this costs six
+    vector operations instead of a batched 3x3 product.
+    """
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    c = np.cos(angle)[:, None]
+    s = np.sin(angle)[:, None]
+    ci = F[:, :, i].copy()
+    cj = F[:, :, j]
+    F[:, :, i] = ci * c + cj * s
+    F[:, :, j] = cj * c - ci * s
+
+
+def _to_homogeneous(F: Array) -> Array:
+    """``(..., 3, 4)`` -> ``(..., 4, 4)``."""
+    T = np.zeros(F.shape[:-2] + (4, 4))
+    T[..., :3, :] = F
+    T[..., 3, 3] = 1.0
+    return T

@@ -1,0 +1,310 @@
+"""YAML model files: read (validated), write (atomic, exact round trip).
+
+A model file describes one chain.  Two forms are accepted and may be combined with
+optional ``base`` and ``tool`` step lists:
+
+``links`` with a ``convention`` (``dh``, ``mdh`` or ``hayati``), one row per joint::
+
+    name: ur10
+    units: {length: mm, angle: deg}
+    convention: dh
+    links:
+      - {theta: 0, d: 127.3, a: 0, alpha: 90, joint: shoulder_pan, limits: [-360, 360]}
+
+or an explicit ``chain`` of elementary steps::
+
+    chain:
+      - {motion: Rz, param: theta1, value: 0, joint: q1, limits: [-169.5, 169.5]}
+      - {motion: Tx, param: a2, value: 190, free: false}
+
+Step fields: ``motion`` (Tx Ty Tz Rx Ry Rz), ``param`` (unique name), ``value``
+(nominal; the offset for a joint step), ``free`` (default true), ``bounds``
+(``[lower, upper]`` on the value), ``joint`` (joint name: the step is driven by that
+joint variable) and ``limits`` (joint limits).  Link rows: ``theta d a alpha``
+(``beta`` for hayati, optional ``d``), ``type`` (revolute/prismatic), ``joint``,
+``limits``, ``free`` and ``fixed`` (names of the row's parameters to keep fixed,
+e.g. ``[alpha]``).  ``bodies`` give mass properties: ``name``, ``frame`` (the
+parameter after whose step the body frame is taken), ``mass`` (kg), ``com``
+(length unit), ``inertia`` (``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` in kg·m², always SI).
+
+Lengths and angles are in ``units`` (default m and rad).  Files written by
+:func:`save_model` use m and rad with shortest round-trip float formatting, so
+``load_model(save_model(m))`` equals ``m`` exactly.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from robocal.model import conventions
+from robocal.model.chain import Body, Joint, Model, Step
+
+__all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "save_model"]
+
+FORMAT_VERSION = 1
+MAX_FILE_BYTES = 5_000_000
+
+LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
+ANGLE_SCALE = {"rad": 1.0, "deg": math.pi / 180.0}
+
+
+class ModelFileError(ValueError):
+    """A model file could not be read; the message names the file and the field."""
+
+
+_Config = ConfigDict(extra="forbid", allow_inf_nan=False, str_strip_whitespace=True)
+Pair = tuple[float, float]
+Name = Annotated[str, Field(min_length=1)]
+
+
+class _Units(BaseModel):
+    model_config = _Config
+    length: Literal["m", "mm"] = "m"
+    angle: Literal["rad", "deg"] = "rad"
+
+
+class _StepSpec(BaseModel):
+    model_config = _Config
+    motion: Literal["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]
+    param: Name
+    value: float = 0.0
+    free: bool = True
+    bounds: Pair | None = None
+    joint: Name | None = None
+    limits: Pair | None = None
+
+    @model_validator(mode="after")
+    def _limits_need_joint(self) -> _StepSpec:
+        if self.limits is not None and self.joint is None:
+            raise ValueError("'limits' given for a step that is not a joint (add 'joint: NAME')")
+        return self
+
+
+class _LinkRow(BaseModel):
+    model_config = _Config
+    theta: float = 0.0
+    d: float | None = None
+    a: float = 0.0
+    alpha: float = 0.0
+    beta: float | None = None
+    type: Literal["revolute", "prismatic"] = "revolute"
+    joint: Name | None = None
+    limits: Pair | None = None
+    free: bool = True
+    fixed: list[Literal["theta", "d", "a", "alpha", "beta"]] = []
+
+
+class _BodySpec(BaseModel):
+    model_config = _Config
+    name: Name
+    frame: Name
+    mass: Annotated[float, Field(ge=0)]
+    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    inertia: tuple[float, float, float, float, float, float] | None = None
+
+
+class _ModelFile(BaseModel):
+    model_config = _Config
+    robocal_model: Literal[1] = 1
+    name: Name
+    title: str = ""
+    source: str = ""
+    notes: str = ""
+    units: _Units = _Units()
+    convention: Literal["dh", "mdh", "hayati"] | None = None
+    base: list[_StepSpec] = []
+    links: list[_LinkRow] = []
+    chain: list[_StepSpec] = []
+    tool: list[_StepSpec] = []
+    bodies: list[_BodySpec] = []
+
+    @model_validator(mode="after")
+    def _one_form(self) -> _ModelFile:
+        if self.links and self.chain:
+            raise ValueError("give either 'links' (with 'convention') or 'chain', not both")
+        if self.links and self.convention is None:
+            raise ValueError("'links' needs 'convention: dh | mdh | hayati'")
+        if not (self.links or self.chain or self.base or self.tool):
+            raise ValueError("the model has no 'links' and no 'chain'")
+        return self
+
+
+def _step(spec: _StepSpec, units: _Units) -> Step:
+    scale = ANGLE_SCALE[units.angle] if spec.motion[0] == "R" else LENGTH_SCALE[units.length]
+    joint = None
+    if spec.joint is not None:
+        lim = None
+        if spec.limits is not None:
+            lim = tuple(v * scale for v in spec.limits)
+        joint = Joint(spec.joint, lim)
+    bounds = None if spec.bounds is None else tuple(v * scale for v in spec.bounds)
+    return Step(spec.motion, spec.param, spec.value * scale, spec.free, bounds, joint)
+
+
+def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[Step]:
+    L, A = LENGTH_SCALE[units.length], ANGLE_SCALE[units.angle]
+    limit_scale = A if row.type == "revolute" else L
+    limits = None if row.limits is None else tuple(v * limit_scale for v in row.limits)
+    common = dict(joint=row.type, joint_name=row.joint, limits=limits, free=row.free)
+    if convention == "dh":
+        if row.beta is not None:
+            raise ValueError(f"links[{i - 1}]: 'beta' is not a DH parameter (use convention: hayati)")
+        steps = conventions.dh(i, row.theta * A, (row.d or 0.0) * L, row.a * L, row.alpha * A, **common)
+    elif convention == "mdh":
+        if row.beta is not None:
+            raise ValueError(f"links[{i - 1}]: 'beta' is not a modified-DH parameter")
+        steps = conventions.mdh(i, row.alpha * A, row.a * L, row.theta * A, (row.d or 0.0) * L, **common)
+    else:
+        d = None if row.d is None else row.d * L
+        steps = conventions.hayati(i, row.theta * A, row.a * L, row.alpha * A, (row.beta or 0.0) * A, d, **common)
+    if row.fixed:
+        # parameter names of a row start with the symbol (theta3, alpha2 ...) and end
+        # with a link index: fix those whose symbol is listed.
+        fixed = set(row.fixed)
+        steps = [
+            Step(s.motion, s.name, s.value, False, s.bounds, s.joint) if s.name.rstrip("0123456789") in fixed else s
+            for s in steps
+        ]
+    return steps
+
+
+def _format_validation_error(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ""
+        for part in e["loc"]:
+            loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
+        got = e.get("input")
+        got_text = "" if isinstance(got, dict | list) or got is None else f" (got {got!r})"
+        lines.append(f"{loc or '<file>'}: {e['msg']}{got_text}")
+    return "; ".join(lines)
+
+
+def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
+    """Build a model from parsed YAML data; errors name ``origin`` and the field."""
+    if not isinstance(data, dict):
+        raise ModelFileError(f"{origin}: a model file must be a mapping, got {type(data).__name__}")
+    try:
+        spec = _ModelFile.model_validate(data)
+    except ValidationError as err:
+        raise ModelFileError(f"{origin}: {_format_validation_error(err)}") from None
+    units = spec.units
+    try:
+        steps: list[Step] = [_step(s, units) for s in spec.base]
+        if spec.links:
+            for i, row in enumerate(spec.links, start=1):
+                steps += _link_steps(row, i, spec.convention, units)
+        steps += [_step(s, units) for s in spec.chain]
+        steps += [_step(s, units) for s in spec.tool]
+        L = LENGTH_SCALE[units.length]
+        bodies = [
+            Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia) for b in spec.bodies
+        ]
+        return Model(
+            name=spec.name,
+            steps=tuple(steps),
+            bodies=tuple(bodies),
+            title=spec.title,
+            source=spec.source.strip(),
+            notes=spec.notes.strip(),
+        )
+    except (ValueError, TypeError) as err:
+        raise ModelFileError(f"{origin}: {err}") from None
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """Safe loader that refuses YAML aliases (they allow exponential 'billion laughs' blow-up)."""
+
+    def compose_node(self, parent, index):  # type: ignore[override]
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.constructor.ConstructorError(
+                None, None, "YAML aliases (*name) are not allowed in model files", event.start_mark
+            )
+        return super().compose_node(parent, index)
+
+
+def load_model(path: str | os.PathLike[str]) -> Model:
+    """Read and validate a YAML model file.
+
+    Raises:
+        ModelFileError: naming the file and the offending field or line.
+        FileNotFoundError: when the file does not exist.
+    """
+    path = Path(path)
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ModelFileError(f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})")
+    text = path.read_text(encoding="utf-8")
+    try:
+        data = yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(err, "problem", None) or str(err)
+        raise ModelFileError(f"{path}: {where}{problem}") from None
+    return model_from_dict(data, origin=str(path))
+
+
+def _step_to_dict(step: Step) -> dict[str, Any]:
+    out: dict[str, Any] = {"motion": step.motion, "param": step.name, "value": step.value}
+    if not step.free:
+        out["free"] = False
+    if step.bounds is not None:
+        out["bounds"] = list(step.bounds)
+    if step.joint is not None:
+        out["joint"] = step.joint.name
+        if step.joint.limits is not None:
+            out["limits"] = list(step.joint.limits)
+    return out
+
+
+def model_to_dict(model: Model) -> dict[str, Any]:
+    """The model as plain data in the file format (SI units, explicit chain)."""
+    data: dict[str, Any] = {"robocal_model": FORMAT_VERSION, "name": model.name}
+    for key in ("title", "source", "notes"):
+        if getattr(model, key):
+            data[key] = getattr(model, key)
+    data["units"] = {"length": "m", "angle": "rad"}
+    data["chain"] = [_step_to_dict(s) for s in model.steps]
+    if model.bodies:
+        data["bodies"] = [
+            {
+                "name": b.name,
+                "frame": b.frame,
+                "mass": b.mass,
+                "com": list(b.com),
+                **({"inertia": list(b.inertia)} if b.inertia is not None else {}),
+            }
+            for b in model.bodies
+        ]
+    return data
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file and a rename (never half-written)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def save_model(model: Model, path: str | os.PathLike[str]) -> Path:
+    """Write ``model`` to a YAML file atomically (SI units, exact round trip)."""
+    header = f"# robocal model '{model.name}': {model.dof} joints, {len(model.steps)} parameters; values in m and rad\n"
+    body = yaml.safe_dump(model_to_dict(model), sort_keys=False, default_flow_style=None, width=100, allow_unicode=True)
+    return atomic_write_text(path, header + body)

@@ -1,0 +1,219 @@
+"""Batched SE(3) and SO(3) helpers shared by every part of robocal.
+
+Conventions
+-----------
+* Homogeneous transforms are arrays shaped ``(..., 4, 4)``; rotations ``(..., 3, 3)``.
+  Every function accepts any number of leading batch dimensions.
+* Units are SI: metres and radians.
+* Quaternions are scalar-first ``(w, x, y, z)``, as in the measurement CSV files
+  (``qw, qx, qy, qz``).  scipy uses scalar-last internally; the conversion happens here.
+* Euler sequences follow scipy: upper case (``"ZXZ"``, ``"XYZ"``) are intrinsic
+  (rotations about the moving axes, R = R1 R2 R3), lower case (``"xyz"``) extrinsic
+  (about the fixed axes, R = R3 R2 R1).  Seed 003 describes tool orientation with
+  intrinsic ZXZ angles (Phi, theta, Psi); seed 000 eq. (1) uses
+  Rz(gamma) Ry(beta) Rx(alpha), which is extrinsic ``"xyz"`` = (alpha, beta, gamma).
+* Orientation errors are rotation vectors in the reference (world) frame:
+  ``log(R_actual @ R_referenceᵀ)``.  This is the convention of the identification
+  Jacobian's orientation rows (see ``robocal.model.chain``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "MOTIONS",
+    "compose",
+    "elementary",
+    "euler_to_matrix",
+    "homogeneous",
+    "inverse",
+    "matrix_to_euler",
+    "matrix_to_quaternion",
+    "matrix_to_rotvec",
+    "pose_error",
+    "quaternion_to_matrix",
+    "rot",
+    "rotvec_to_matrix",
+    "rotx",
+    "roty",
+    "rotz",
+    "skew",
+    "transl",
+]
+
+#: The six elementary motions a kinematic chain is made of.
+MOTIONS = ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")
+
+Array = NDArray[np.float64]
+
+
+def rot(axis: str | int, angle: ArrayLike) -> Array:
+    """Rotation matrices about a principal axis.
+
+    Args:
+        axis: ``"x"``, ``"y"``, ``"z"`` or 0, 1, 2.
+        angle: angles in rad, any shape ``S``.
+
+    Returns:
+        Array shaped ``S + (3, 3)``.
+    """
+    k = "xyz".index(axis) if isinstance(axis, str) else int(axis)
+    a = np.asarray(angle, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    i, j = (k + 1) % 3, (k + 2) % 3
+    R[..., k, k] = 1.0
+    R[..., i, i] = c
+    R[..., j, j] = c
+    R[..., i, j] = -s
+    R[..., j, i] = s
+    return R
+
+
+def rotx(angle: ArrayLike) -> Array:
+    """Rotations about x, shape ``S + (3, 3)`` for angles (rad) shaped ``S``."""
+    return rot(0, angle)
+
+
+def roty(angle: ArrayLike) -> Array:
+    """Rotations about y, shape ``S + (3, 3)`` for angles (rad) shaped ``S``."""
+    return rot(1, angle)
+
+
+def rotz(angle: ArrayLike) -> Array:
+    """Rotations about z, shape ``S + (3, 3)`` for angles (rad) shaped ``S``."""
+    return rot(2, angle)
+
+
+def homogeneous(R: ArrayLike | None = None, p: ArrayLike | None = None) -> Array:
+    """Assemble homogeneous transforms from rotations ``(..., 3, 3)`` and positions ``(..., 3)``.
+
+    Either may be omitted (identity rotation or zero translation).  The batch shapes
+    broadcast.
+    """
+    R = np.eye(3) if R is None else np.asarray(R, dtype=float)
+    p = np.zeros(3) if p is None else np.asarray(p, dtype=float)
+    batch = np.broadcast_shapes(R.shape[:-2], p.shape[:-1])
+    T = np.zeros(batch + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = p
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def transl(x: ArrayLike = 0.0, y: ArrayLike = 0.0, z: ArrayLike = 0.0) -> Array:
+    """Pure translations (m); the arguments broadcast to a batch shape ``S``: ``S + (4, 4)``."""
+    x, y, z = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (x, y, z)))
+    return homogeneous(p=np.stack([x, y, z], axis=-1))
+
+
+def elementary(motion: str, value: ArrayLike) -> Array:
+    """Elementary transforms ``Tx, Ty, Tz`` (value in m) or ``Rx, Ry, Rz`` (value in rad).
+
+    Returns ``S + (4, 4)`` for values shaped ``S``.
+    """
+    if motion not in MOTIONS:
+        raise ValueError(f"unknown elementary motion {motion!r}; expected one of {MOTIONS}")
+    value = np.asarray(value, dtype=float)
+    k = "xyz".index(motion[1])
+    if motion[0] == "R":
+        return homogeneous(R=rot(k, value))
+    p = np.zeros(value.shape + (3,))
+    p[..., k] = value
+    return homogeneous(p=p)
+
+
+def compose(*transforms: ArrayLike) -> Array:
+    """Product ``T1 @ T2 @ ...`` of (batched, broadcasting) homogeneous transforms."""
+    if not transforms:
+        return np.eye(4)
+    out = np.asarray(transforms[0], dtype=float)
+    for T in transforms[1:]:
+        out = out @ np.asarray(T, dtype=float)
+    return out
+
+
+def inverse(T: ArrayLike) -> Array:
+    """Inverse of rigid transforms ``(..., 4, 4)`` using ``Rᵀ`` (no general matrix inverse)."""
+    T = np.asarray(T, dtype=float)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    return homogeneous(Rt, -np.einsum("...ij,...j->...i", Rt, T[..., :3, 3]))
+
+
+def skew(v: ArrayLike) -> Array:
+    """Skew-symmetric matrices ``[v]x`` shaped ``(..., 3, 3)`` for vectors ``(..., 3)``."""
+    v = np.asarray(v, dtype=float)
+    S = np.zeros(v.shape[:-1] + (3, 3))
+    S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
+    S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
+    S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
+    return S
+
+
+def _as_rotation(R: ArrayLike) -> tuple[Rotation, tuple[int, ...]]:
+    R = np.asarray(R, dtype=float)
+    batch = R.shape[:-2]
+    return Rotation.from_matrix(R.reshape(-1, 3, 3)), batch
+
+
+def rotvec_to_matrix(rotvec: ArrayLike) -> Array:
+    """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis * angle, rad)."""
+    v = np.asarray(rotvec, dtype=float)
+    return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape(v.shape[:-1] + (3, 3))
+
+
+def matrix_to_rotvec(R: ArrayLike) -> Array:
+    """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``."""
+    rotation, batch = _as_rotation(R)
+    return rotation.as_rotvec().reshape(batch + (3,))
+
+
+def quaternion_to_matrix(quat: ArrayLike) -> Array:
+    """Rotation matrices from scalar-first unit quaternions ``(..., 4)`` = (w, x, y, z).
+
+    Quaternions are normalised; a zero quaternion raises ``ValueError``.
+    """
+    q = np.asarray(quat, dtype=float)
+    flat = q.reshape(-1, 4)
+    return Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape(q.shape[:-1] + (3, 3))
+
+
+def matrix_to_quaternion(R: ArrayLike) -> Array:
+    """Scalar-first unit quaternions ``(..., 4)`` with ``w >= 0`` of rotation matrices."""
+    rotation, batch = _as_rotation(R)
+    q = rotation.as_quat(canonical=True)[:, [3, 0, 1, 2]]
+    return q.reshape(batch + (4,))
+
+
+def euler_to_matrix(angles: ArrayLike, seq: str = "ZXZ") -> Array:
+    """Rotation matrices from Euler angles ``(..., 3)`` (rad) in scipy's ``seq`` convention."""
+    a = np.asarray(angles, dtype=float)
+    return Rotation.from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape(a.shape[:-1] + (3, 3))
+
+
+def matrix_to_euler(R: ArrayLike, seq: str = "ZXZ") -> Array:
+    """Euler angles ``(..., 3)`` (rad) of rotation matrices in scipy's ``seq`` convention.
+
+    At gimbal lock scipy sets the third angle to zero and warns.
+    """
+    rotation, batch = _as_rotation(R)
+    return rotation.as_euler(seq).reshape(batch + (3,))
+
+
+def pose_error(T_actual: ArrayLike, T_reference: ArrayLike) -> Array:
+    """Pose difference ``actual - reference`` shaped ``(..., 6)``.
+
+    The first three components are the position error ``p_actual - p_reference`` (m),
+    the last three the orientation error as a rotation vector in the reference's
+    parent frame, ``log(R_actual R_referenceᵀ)`` (rad).  For small errors this is the
+    small-angle vector whose first-order model is the identification Jacobian's
+    orientation rows.
+    """
+    Ta = np.asarray(T_actual, dtype=float)
+    Tr = np.asarray(T_reference, dtype=float)
+    dp = Ta[..., :3, 3] - Tr[..., :3, 3]
+    dR = Ta[..., :3, :3] @ np.swapaxes(Tr[..., :3, :3], -1, -2)
+    return np.concatenate([dp, matrix_to_rotvec(dR)], axis=-1)
