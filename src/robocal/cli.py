@@ -74,7 +74,9 @@ def robots_list(ctx: typer.Context) -> None:
     for name in robots():
         m = robot(name)
         types = "".join("R" if t == "revolute" else "P" for t in m.joint_types)
-        table.add_row(name, m.title, f"{m.dof} ({types})", str(len(m.steps)), "yes" if m.bodies else "-")
+        table.add_row(
+            name, m.title, f"{m.dof} ({types})", str(len(m.steps)), "yes" if m.bodies else "-"
+        )
     console.print(table)
 
 
@@ -96,7 +98,14 @@ def robots_show(name: Annotated[str, typer.Argument(help="catalog name or model 
             if s.joint.limits is not None:
                 limits = " .. ".join(_display(s.unit, v) for v in s.joint.limits)
         table.add_row(
-            str(i), s.motion, s.name, _display(s.unit, s.value), unit, "yes" if s.free else "no", joint, limits
+            str(i),
+            s.motion,
+            s.name,
+            _display(s.unit, s.value),
+            unit,
+            "yes" if s.free else "no",
+            joint,
+            limits,
         )
     console.print(table)
     if m.bodies:
@@ -114,9 +123,14 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError:
-        raise _fail(f"--q {text!r}: joint values must be numbers separated by commas or spaces") from None
+        raise _fail(
+            f"--q {text!r}: joint values must be numbers separated by commas or spaces"
+        ) from None
     if len(values) != m.dof:
-        raise _fail(f"--q has {len(values)} values but {m.name} has {m.dof} joints ({', '.join(m.joint_names)})")
+        raise _fail(
+            f"--q has {len(values)} values but {m.name} has {m.dof} joints "
+            f"({', '.join(m.joint_names)})"
+        )
     q = np.array(values)
     if deg:
         q = np.where(np.array(m.joint_types) == "revolute", np.radians(q), q / 1000.0)
@@ -127,8 +141,12 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
 def fk(
     name: Annotated[str, typer.Argument(help="catalog name or model file")],
     q: Annotated[str, typer.Option("--q", help='joint values, e.g. "0, -90, 90, 0, 90, 0"')],
-    deg: Annotated[bool, typer.Option("--deg", help="joint values in degrees (prismatic in mm)")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="print JSON (m, rad) instead of a table")] = False,
+    deg: Annotated[
+        bool, typer.Option("--deg", help="joint values in degrees (prismatic in mm)")
+    ] = False,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="print JSON (m, rad) instead of a table")
+    ] = False,
 ) -> None:
     """Tool pose of a robot at the given joint values (rad and m unless --deg)."""
     m = resolve_model(name)
@@ -140,11 +158,20 @@ def fk(
     rpy = spatial.matrix_to_euler(T[:3, :3], "xyz")
     zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")
     if as_json:
-        print(json.dumps({
-            "robot": m.name, "q": qv.tolist(), "T": T.tolist(), "position_m": T[:3, 3].tolist(),
-            "quaternion_wxyz": quat.tolist(), "rpy_xyz_rad": rpy.tolist(), "zxz_rad": zxz.tolist(),
-            "outside_limits": outside,
-        }))
+        print(
+            json.dumps(
+                {
+                    "robot": m.name,
+                    "q": qv.tolist(),
+                    "T": T.tolist(),
+                    "position_m": T[:3, 3].tolist(),
+                    "quaternion_wxyz": quat.tolist(),
+                    "rpy_xyz_rad": rpy.tolist(),
+                    "zxz_rad": zxz.tolist(),
+                    "outside_limits": outside,
+                }
+            )
+        )
         return
     console.print(f"[bold]{m.name}[/] tool frame in the base frame", highlight=False)
     table = Table(show_header=False)
@@ -156,11 +183,18 @@ def fk(
     p = T[:3, 3] * 1000
     console.print(f"position mm      x {p[0]:.4f}  y {p[1]:.4f}  z {p[2]:.4f}", highlight=False)
     console.print("quaternion wxyz  " + "  ".join(f"{v:.6f}" for v in quat), highlight=False)
-    console.print("roll-pitch-yaw   " + "  ".join(f"{math.degrees(v):.4f}" for v in rpy) + "  deg (Rz Ry Rx)",
-                  highlight=False)
-    console.print("ZXZ Euler        " + "  ".join(f"{math.degrees(v):.4f}" for v in zxz) + "  deg", highlight=False)
+    console.print(
+        "roll-pitch-yaw   " + "  ".join(f"{math.degrees(v):.4f}" for v in rpy) + "  deg (Rz Ry Rx)",
+        highlight=False,
+    )
+    console.print(
+        "ZXZ Euler        " + "  ".join(f"{math.degrees(v):.4f}" for v in zxz) + "  deg",
+        highlight=False,
+    )
     if outside:
-        err_console.print(f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False)
+        err_console.print(
+            f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False
+        )
 
 
 def main() -> None:  # pragma: no cover - console entry point

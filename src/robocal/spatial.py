@@ -63,7 +63,7 @@ def rot(axis: str | int, angle: ArrayLike) -> Array:
     k = "xyz".index(axis) if isinstance(axis, str) else int(axis)
     a = np.asarray(angle, dtype=float)
     c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
+    R = np.zeros((*a.shape, 3, 3))
     i, j = (k + 1) % 3, (k + 2) % 3
     R[..., k, k] = 1.0
     R[..., i, i] = c
@@ -97,7 +97,7 @@ def homogeneous(R: ArrayLike | None = None, p: ArrayLike | None = None) -> Array
     R = np.eye(3) if R is None else np.asarray(R, dtype=float)
     p = np.zeros(3) if p is None else np.asarray(p, dtype=float)
     batch = np.broadcast_shapes(R.shape[:-2], p.shape[:-1])
-    T = np.zeros(batch + (4, 4))
+    T = np.zeros((*batch, 4, 4))
     T[..., :3, :3] = R
     T[..., :3, 3] = p
     T[..., 3, 3] = 1.0
@@ -121,7 +121,7 @@ def elementary(motion: str, value: ArrayLike) -> Array:
     k = "xyz".index(motion[1])
     if motion[0] == "R":
         return homogeneous(R=rot(k, value))
-    p = np.zeros(value.shape + (3,))
+    p = np.zeros((*value.shape, 3))
     p[..., k] = value
     return homogeneous(p=p)
 
@@ -146,7 +146,7 @@ def inverse(T: ArrayLike) -> Array:
 def skew(v: ArrayLike) -> Array:
     """Skew-symmetric matrices ``[v]x`` shaped ``(..., 3, 3)`` for vectors ``(..., 3)``."""
     v = np.asarray(v, dtype=float)
-    S = np.zeros(v.shape[:-1] + (3, 3))
+    S = np.zeros((*v.shape[:-1], 3, 3))
     S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
     S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
     S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
@@ -162,13 +162,13 @@ def _as_rotation(R: ArrayLike) -> tuple[Rotation, tuple[int, ...]]:
 def rotvec_to_matrix(rotvec: ArrayLike) -> Array:
     """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis * angle, rad)."""
     v = np.asarray(rotvec, dtype=float)
-    return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape(v.shape[:-1] + (3, 3))
+    return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape((*v.shape[:-1], 3, 3))
 
 
 def matrix_to_rotvec(R: ArrayLike) -> Array:
     """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``."""
     rotation, batch = _as_rotation(R)
-    return rotation.as_rotvec().reshape(batch + (3,))
+    return rotation.as_rotvec().reshape((*batch, 3))
 
 
 def quaternion_to_matrix(quat: ArrayLike) -> Array:
@@ -178,20 +178,20 @@ def quaternion_to_matrix(quat: ArrayLike) -> Array:
     """
     q = np.asarray(quat, dtype=float)
     flat = q.reshape(-1, 4)
-    return Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape(q.shape[:-1] + (3, 3))
+    return Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape((*q.shape[:-1], 3, 3))
 
 
 def matrix_to_quaternion(R: ArrayLike) -> Array:
     """Scalar-first unit quaternions ``(..., 4)`` with ``w >= 0`` of rotation matrices."""
     rotation, batch = _as_rotation(R)
     q = rotation.as_quat(canonical=True)[:, [3, 0, 1, 2]]
-    return q.reshape(batch + (4,))
+    return q.reshape((*batch, 4))
 
 
 def euler_to_matrix(angles: ArrayLike, seq: str = "ZXZ") -> Array:
     """Rotation matrices from Euler angles ``(..., 3)`` (rad) in scipy's ``seq`` convention."""
     a = np.asarray(angles, dtype=float)
-    return Rotation.from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape(a.shape[:-1] + (3, 3))
+    return Rotation.from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape((*a.shape[:-1], 3, 3))
 
 
 def matrix_to_euler(R: ArrayLike, seq: str = "ZXZ") -> Array:
@@ -200,7 +200,7 @@ def matrix_to_euler(R: ArrayLike, seq: str = "ZXZ") -> Array:
     At gimbal lock scipy sets the third angle to zero and warns.
     """
     rotation, batch = _as_rotation(R)
-    return rotation.as_euler(seq).reshape(batch + (3,))
+    return rotation.as_euler(seq).reshape((*batch, 3))
 
 
 def pose_error(T_actual: ArrayLike, T_reference: ArrayLike) -> Array:

@@ -4,4 +4,14 @@ from robocal.model.catalog import robot, robots
 from robocal.model.chain import Body, Joint, Model, Step
 from robocal.model.files import ModelFileError, load_model, save_model
 
-__all__ = ["Body", "Joint", "Model", "ModelFileError", "Step", "load_model", "robot", "robots", "save_model"]
+__all__ = [
+    "Body",
+    "Joint",
+    "Model",
+    "ModelFileError",
+    "Step",
+    "load_model",
+    "robot",
+    "robots",
+    "save_model",
+]

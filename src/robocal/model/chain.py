@@ -77,7 +77,9 @@ class Joint:
         if self.limits is not None:
             lo, hi = (float(v) for v in self.limits)
             if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ValueError(f"joint {self.name!r}: limits {self.limits} must be finite, lower <= upper")
+                raise ValueError(
+                    f"joint {self.name!r}: limits {self.limits} must be finite, lower <= upper"
+                )
             object.__setattr__(self, "limits", (lo, hi))
 
 
@@ -114,7 +116,9 @@ class Step:
         if self.bounds is not None:
             lo, hi = (float(v) for v in self.bounds)
             if math.isnan(lo) or math.isnan(hi) or lo > hi:
-                raise ValueError(f"parameter {self.name!r}: bounds {self.bounds} need lower <= upper")
+                raise ValueError(
+                    f"parameter {self.name!r}: bounds {self.bounds} need lower <= upper"
+                )
             object.__setattr__(self, "bounds", (lo, hi))
 
     @property
@@ -182,7 +186,9 @@ class _Plan:
     joint_steps: NDArray[np.intp]  # (dof,) step index of each joint
     joint_axis: tuple[int, ...]  # local axis of each joint step
     joint_rot: tuple[bool, ...]  # revolute?
-    anchor_of: NDArray[np.intp]  # (P,) anchor frame index of each step (0 = base, j+1 = after joint j)
+    anchor_of: NDArray[
+        np.intp
+    ]  # (P,) anchor frame index of each step (0 = base, j+1 = after joint j)
     segments: tuple[tuple[int, ...], ...]  # constant steps after anchor a, for a = 0..dof
     step_axis: NDArray[np.intp]  # (P,)
     step_rot: NDArray[np.bool_]  # (P,)
@@ -297,7 +303,9 @@ class Model:
         x = np.asarray(x, dtype=float)
         p = int(self.free_mask.sum())
         if x.shape != (p,):
-            raise ValueError(f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}")
+            raise ValueError(
+                f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}"
+            )
         return self.with_values(dict(zip(self.free_names, x.tolist(), strict=True)))
 
     def with_values(self, values: Mapping[str, float]) -> Model:
@@ -316,7 +324,9 @@ class Model:
         unknown = selected - set(self.names)
         if unknown:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
-        steps = tuple(dataclasses.replace(s, free=free) if s.name in selected else s for s in self.steps)
+        steps = tuple(
+            dataclasses.replace(s, free=free) if s.name in selected else s for s in self.steps
+        )
         return dataclasses.replace(self, steps=steps)
 
     def fixed(self, names: Iterable[str]) -> Model:
@@ -360,7 +370,9 @@ class Model:
             )
         if not np.all(np.isfinite(q)):
             bad = np.argwhere(~np.isfinite(q))[0]
-            raise ValueError(f"joint values contain NaN/inf (pose {bad[0]}, joint {self.joint_names[bad[1]]})")
+            raise ValueError(
+                f"joint values contain NaN/inf (pose {bad[0]}, joint {self.joint_names[bad[1]]})"
+            )
         return q, single
 
     def _check_perturbations(self, perturbations: ArrayLike | None, n: int) -> Array | None:
@@ -383,7 +395,7 @@ class Model:
         plan = self._plan
         local = np.empty((len(self.steps), 4, 4))
         seg_T: list[Array] = []
-        for a, seg in enumerate(plan.segments):
+        for seg in plan.segments:
             T = np.eye(4)
             for i in seg:
                 local[i] = T
@@ -394,12 +406,18 @@ class Model:
         return seg_T, local
 
     def _forward(
-        self, values: Array, q: Array, perturbations: Array | None, keep_anchors: bool
+        self,
+        values: Array,
+        q: Array,
+        perturbations: Array | None,
+        keep_anchors: bool,
+        seg_T: list[Array] | None = None,
     ) -> tuple[Array, list[Array]]:
         """Batched FK.  Returns the tool frame as ``(n, 3, 4)`` and, when asked, the
         anchor frames after each joint step (list of ``(n, 3, 4)``)."""
         plan = self._plan
-        seg_T, _ = self._segment_data(values)
+        if seg_T is None:
+            seg_T, _ = self._segment_data(values)
         n = q.shape[0]
         F = np.empty((n, 3, 4))
         F[:] = seg_T[0][:3]
@@ -443,46 +461,71 @@ class Model:
         return T[0] if single else T
 
     def _columns(
-        self, values: Array, q: Array, perturbations: Array | None, steps: Sequence[int]
-    ) -> tuple[Array, Array, Array]:
-        """Derivative columns of the tool pose wrt the values of ``steps``.
+        self,
+        values: Array,
+        q: Array,
+        perturbations: Array | None,
+        steps: Sequence[int],
+        orientation: bool = True,
+    ) -> tuple[Array, Array]:
+        """Derivative columns of the tool pose wrt the values of ``steps`` (chain order).
 
-        Returns ``(F_tool (n,3,4), dp (n,3,m), dw (n,3,m))``.
+        Returns ``F_tool (n, 3, 4)`` and ``J (n, 6, m)`` with rows [dp; dω], or
+        ``(n, 3, m)`` position rows only when ``orientation`` is false.
+
+        For a step hanging off anchor frame (R, p_a) with local axis a_l and local
+        origin o_l, the world axis is a = R a_l and origin o = p_a + R o_l, so
+        a × (p − o) = a × (p − p_a) − R (a_l × o_l): one small gemm per anchor gives
+        a and R (a_l × o_l) for all its columns, and one cross product with the
+        shared vector p − p_a finishes them.  The steps of one anchor are contiguous
+        in chain order, so every write is a slice.
         """
         plan = self._plan
         steps = np.asarray(steps, dtype=np.intp)
-        F, anchors = self._forward(values, q, perturbations, keep_anchors=True)
-        _, local = self._segment_data(values)
+        seg_T, local = self._segment_data(values)
+        F, anchors = self._forward(values, q, perturbations, keep_anchors=True, seg_T=seg_T)
         n, m = q.shape[0], len(steps)
-        axes = np.empty((n, 3, m))
-        origins = np.empty((n, 3, m))
-        # a_local = axis of each step in its anchor frame; o_local = its origin there
+        J = np.zeros((n, 6 if orientation else 3, m))
         loc = local[steps]
-        a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3)
-        o_loc = loc[:, :3, 3]  # (m, 3)
-        step_anchor = plan.anchor_of[steps]
-        for a in np.unique(step_anchor):
-            cols = np.flatnonzero(step_anchor == a)
-            if a == 0:
-                axes[:, :, cols] = a_loc[cols].T
-                origins[:, :, cols] = o_loc[cols].T
-                continue
-            k = len(cols)
-            M = np.zeros((4, 2 * k))
-            M[:3, :k] = a_loc[cols].T
-            M[:3, k:] = o_loc[cols].T
-            M[3, k:] = 1.0
-            W = (anchors[a - 1].reshape(3 * n, 4) @ M).reshape(n, 3, 2 * k)
-            axes[:, :, cols] = W[:, :, :k]
-            origins[:, :, cols] = W[:, :, k:]
+        a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3) axis in the anchor frame
+        c_loc = np.cross(a_loc, loc[:, :3, 3])  # (m, 3) a_l × o_l
         rot = plan.step_rot[steps]
-        d = F[:, :, 3, None] - origins
-        dp = axes.copy()
-        if rot.any():
-            a, r = axes[:, :, rot], d[:, :, rot]
-            dp[:, :, rot] = np.cross(a, r, axis=1)
-        dw = np.where(rot[None, None, :], axes, 0.0)
-        return F, dp, dw
+        p_tool = F[:, :, 3]
+        step_anchor = plan.anchor_of[steps]
+        bounds = np.flatnonzero(np.diff(step_anchor)) + 1
+        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True):
+            a = step_anchor[lo]
+            k = hi - lo
+            if a == 0:  # constant frames before the first joint
+                A = np.broadcast_to(a_loc[lo:hi].T, (n, 3, k))
+                RC = np.broadcast_to(c_loc[lo:hi].T, (n, 3, k))
+                r = p_tool
+            else:
+                M = np.zeros((4, 2 * k))
+                M[:3, :k] = a_loc[lo:hi].T
+                M[:3, k:] = c_loc[lo:hi].T
+                W = (anchors[a - 1].reshape(3 * n, 4) @ M).reshape(n, 3, 2 * k)
+                A, RC = W[:, :, :k], W[:, :, k:]
+                r = p_tool - anchors[a - 1][:, :, 3]
+            is_rot = rot[lo:hi]
+            if is_rot.all():
+                J[:, 0, lo:hi] = A[:, 1] * r[:, 2, None] - A[:, 2] * r[:, 1, None] - RC[:, 0]
+                J[:, 1, lo:hi] = A[:, 2] * r[:, 0, None] - A[:, 0] * r[:, 2, None] - RC[:, 1]
+                J[:, 2, lo:hi] = A[:, 0] * r[:, 1, None] - A[:, 1] * r[:, 0, None] - RC[:, 2]
+                if orientation:
+                    J[:, 3:, lo:hi] = A
+                continue
+            J[:, :3, lo:hi] = A  # translation columns; rotation columns overwritten below
+            cols = np.flatnonzero(is_rot)
+            if len(cols):
+                Ar, RCr = A[:, :, cols], RC[:, :, cols]
+                Jr = J[:, :, lo:hi]
+                Jr[:, 0, cols] = Ar[:, 1] * r[:, 2, None] - Ar[:, 2] * r[:, 1, None] - RCr[:, 0]
+                Jr[:, 1, cols] = Ar[:, 2] * r[:, 0, None] - Ar[:, 0] * r[:, 2, None] - RCr[:, 1]
+                Jr[:, 2, cols] = Ar[:, 0] * r[:, 1, None] - Ar[:, 1] * r[:, 0, None] - RCr[:, 2]
+                if orientation:
+                    Jr[:, 3:, cols] = Ar
+        return F, J
 
     def fk_jacobian(
         self,
@@ -499,10 +542,8 @@ class Model:
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         free = np.flatnonzero(self.free_mask)
-        F, dp, dw = self._columns(self.values, q, d, free)
-        n = q.shape[0]
-        J = dp if rows == "position" else np.concatenate([dp, dw], axis=1)
-        J = J.reshape(n * J.shape[1], len(free))
+        F, J = self._columns(self.values, q, d, free, orientation=rows == "pose")
+        J = J.reshape(-1, len(free))
         T = _to_homogeneous(F)
         return (T[0] if single else T), J
 
@@ -525,8 +566,7 @@ class Model:
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
-        _, dp, dw = self._columns(self.values, q, d, self._plan.joint_steps)
-        J = np.concatenate([dp, dw], axis=1)
+        _, J = self._columns(self.values, q, d, self._plan.joint_steps)
         return J[0] if single else J
 
 
@@ -550,7 +590,7 @@ def _rotate_columns(F: Array, axis: int, angle: Array) -> None:
 
 def _to_homogeneous(F: Array) -> Array:
     """``(..., 3, 4)`` -> ``(..., 4, 4)``."""
-    T = np.zeros(F.shape[:-2] + (4, 4))
+    T = np.zeros((*F.shape[:-2], 4, 4))
     T[..., :3, :] = F
     T[..., 3, 3] = 1.0
     return T

@@ -107,7 +107,9 @@ def sequence(
     if len(flags) != len(motions):
         raise ValueError(f"{len(flags)} free flags for {len(motions)} motions")
     steps = []
-    for k, (motion, value, name, flag) in enumerate(zip(motions, values, names, flags, strict=True)):
+    for k, (motion, value, name, flag) in enumerate(
+        zip(motions, values, names, flags, strict=True)
+    ):
         joint = None
         if k == joint_step:
             joint = Joint(joint_name or f"q_{name}", tuple(limits) if limits is not None else None)
@@ -249,7 +251,9 @@ def frame6(
     )
 
 
-def tool_point(x: float = 0.0, y: float = 0.0, z: float = 0.0, *, prefix: str = "tool", free: bool = True) -> list[Step]:
+def tool_point(
+    x: float = 0.0, y: float = 0.0, z: float = 0.0, *, prefix: str = "tool", free: bool = True
+) -> list[Step]:
     """A 3-parameter tool point ``Tx Ty Tz`` named ``{prefix}_x, {prefix}_y, {prefix}_z``."""
     return sequence(("Tx", "Ty", "Tz"), (x, y, z), [f"{prefix}_{s}" for s in "xyz"], free=free)
 
@@ -291,4 +295,6 @@ def model_from_steps(
 ) -> Model:
     """A model from lists of steps (base, links, tool...) concatenated in order."""
     steps = [s for link in links for s in link]
-    return Model(name=name, steps=tuple(steps), bodies=tuple(bodies), title=title, source=source, notes=notes)
+    return Model(
+        name=name, steps=tuple(steps), bodies=tuple(bodies), title=title, source=source, notes=notes
+    )

@@ -155,21 +155,31 @@ def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[S
     common = dict(joint=row.type, joint_name=row.joint, limits=limits, free=row.free)
     if convention == "dh":
         if row.beta is not None:
-            raise ValueError(f"links[{i - 1}]: 'beta' is not a DH parameter (use convention: hayati)")
-        steps = conventions.dh(i, row.theta * A, (row.d or 0.0) * L, row.a * L, row.alpha * A, **common)
+            raise ValueError(
+                f"links[{i - 1}]: 'beta' is not a DH parameter (use convention: hayati)"
+            )
+        steps = conventions.dh(
+            i, row.theta * A, (row.d or 0.0) * L, row.a * L, row.alpha * A, **common
+        )
     elif convention == "mdh":
         if row.beta is not None:
             raise ValueError(f"links[{i - 1}]: 'beta' is not a modified-DH parameter")
-        steps = conventions.mdh(i, row.alpha * A, row.a * L, row.theta * A, (row.d or 0.0) * L, **common)
+        steps = conventions.mdh(
+            i, row.alpha * A, row.a * L, row.theta * A, (row.d or 0.0) * L, **common
+        )
     else:
         d = None if row.d is None else row.d * L
-        steps = conventions.hayati(i, row.theta * A, row.a * L, row.alpha * A, (row.beta or 0.0) * A, d, **common)
+        steps = conventions.hayati(
+            i, row.theta * A, row.a * L, row.alpha * A, (row.beta or 0.0) * A, d, **common
+        )
     if row.fixed:
         # parameter names of a row start with the symbol (theta3, alpha2 ...) and end
         # with a link index: fix those whose symbol is listed.
         fixed = set(row.fixed)
         steps = [
-            Step(s.motion, s.name, s.value, False, s.bounds, s.joint) if s.name.rstrip("0123456789") in fixed else s
+            Step(s.motion, s.name, s.value, False, s.bounds, s.joint)
+            if s.name.rstrip("0123456789") in fixed
+            else s
             for s in steps
         ]
     return steps
@@ -205,7 +215,8 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
         steps += [_step(s, units) for s in spec.tool]
         L = LENGTH_SCALE[units.length]
         bodies = [
-            Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia) for b in spec.bodies
+            Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia)
+            for b in spec.bodies
         ]
         return Model(
             name=spec.name,
@@ -241,10 +252,12 @@ def load_model(path: str | os.PathLike[str]) -> Model:
     path = Path(path)
     size = path.stat().st_size
     if size > MAX_FILE_BYTES:
-        raise ModelFileError(f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})")
+        raise ModelFileError(
+            f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})"
+        )
     text = path.read_text(encoding="utf-8")
     try:
-        data = yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
+        data = yaml.load(text, Loader=_NoAliasLoader)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
@@ -305,6 +318,15 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
 
 def save_model(model: Model, path: str | os.PathLike[str]) -> Path:
     """Write ``model`` to a YAML file atomically (SI units, exact round trip)."""
-    header = f"# robocal model '{model.name}': {model.dof} joints, {len(model.steps)} parameters; values in m and rad\n"
-    body = yaml.safe_dump(model_to_dict(model), sort_keys=False, default_flow_style=None, width=100, allow_unicode=True)
+    header = (
+        f"# robocal model '{model.name}': {model.dof} joints, {len(model.steps)} parameters; "
+        "values in m and rad\n"
+    )
+    body = yaml.safe_dump(
+        model_to_dict(model),
+        sort_keys=False,
+        default_flow_style=None,
+        width=100,
+        allow_unicode=True,
+    )
     return atomic_write_text(path, header + body)
