@@ -18,14 +18,28 @@ Results are cross-checked before anything is timed.  Every method is warmed up o
 then timed with time.perf_counter in ``--repeats`` interleaved rounds (each method once
 per round, so bursts of concurrent load hit all methods alike) and the minimum is kept.
 RTB's per-call Jacobians are timed over ``--loop-n`` configurations per round and
-scaled per configuration.
-Ratios are time ratios ``t / t_ref`` (below 1 = faster than the reference).  RTB rows
-are skipped, with a note, when roboticstoolbox cannot be imported.
+scaled per configuration.  BLAS is single-threaded unless OPENBLAS_NUM_THREADS,
+OMP_NUM_THREADS or MKL_NUM_THREADS is set.  Ratios are time ratios ``t / t_ref``
+(below 1 = faster than the reference).  RTB rows are skipped, with a note, when
+roboticstoolbox cannot be imported.
+
+Allocator state matters for the batched calls: their temporaries are megabytes, and
+whether glibc hands out memory that is still mapped ("warm") or fresh pages that fault
+in on first touch ("cold") changes the Jacobian's time by up to 2-3x.  With glibc's
+default adaptive thresholds which one a program gets depends on what it allocated and
+freed before, so this script fixes them (mallopt: mmap threshold 32 MiB, no automatic
+trimming) and times every method twice per round: cold, right after ``malloc_trim(0)``
+gave all free memory back to the OS (the cost in a fresh process, or whenever glibc
+trims), then warm, reusing what the cold call left mapped (pure compute).  It reports
+the minor page faults per call of both.  Ratios use the warm times.  Without glibc
+only warm times are taken, with the platform's allocator as it is.
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import ctypes.util
 import gc
 import json
 import math
@@ -38,10 +52,23 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
+# Single-threaded BLAS unless the caller says otherwise (before numpy is imported).  The
+# RTB and numpy-reference paths are single-threaded, and robocal's tall-skinny gemms
+# (3n x 4 @ 4 x k) gain nothing from threads but, with other work on the cores, lose a
+# lot waiting for them.  Run with OPENBLAS_NUM_THREADS=2 (etc.) to measure that case.
+BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+for _var in BLAS_THREAD_VARS:
+    os.environ.setdefault(_var, "1")
 
-import robocal as rc
-from robocal.model.conventions import frame6, model_from_steps, tool_point
+import numpy as np  # noqa: E402
+
+import robocal as rc  # noqa: E402
+from robocal.model.conventions import frame6, model_from_steps, tool_point  # noqa: E402
+
+try:
+    import resource  # Unix only: minor page-fault counts
+except ImportError:  # pragma: no cover - Windows
+    resource = None
 
 #: UR10 (CB3) standard DH table the benchmark expects: (theta offset, d, a, alpha), SI.
 UR10_DH = np.array(
@@ -64,15 +91,22 @@ JAC_TOL = 1e-9  # max abs difference of the joint Jacobians
 class Row:
     group: str  # "FK" or "Jacobian"
     method: str
-    seconds: float  # best time for `configs` configurations
+    seconds: float  # best warm time for `configs` configurations
     configs: int
     output: str  # shape of what one call returns
-    ratio_rtb: float | None = None  # t / t(RTB reference of the group)
-    ratio_numpy: float | None = None  # t / t(plain-numpy FK reference)
+    seconds_cold: float | None = None  # best time right after malloc_trim(0)
+    faults_warm: float | None = None  # median minor page faults per call
+    faults_cold: float | None = None
+    ratio_rtb: float | None = None  # t / t(RTB reference of the group), warm
+    ratio_numpy: float | None = None  # t / t(plain-numpy FK reference), warm
 
     @property
     def us_per_config(self) -> float:
         return self.seconds / self.configs * 1e6
+
+    @property
+    def us_per_config_cold(self) -> float | None:
+        return None if self.seconds_cold is None else self.seconds_cold / self.configs * 1e6
 
 
 @dataclass
@@ -92,31 +126,94 @@ class Bench:
     shape: tuple[int, ...]  # shape one call returns (per call of the wrapped function for loops)
 
 
-def best_times(benches: list[Bench], repeats: int) -> list[float]:
-    """Minimum wall time (s) of each benchmark over ``repeats`` runs.
+_M_TRIM_THRESHOLD = -1  # glibc mallopt parameters (malloc.h)
+_M_MMAP_THRESHOLD = -3
+
+
+def _glibc_allocator_control() -> Callable[[], object] | None:
+    """Make glibc's allocator state explicit; return ``malloc_trim(0)``, or ``None``.
+
+    By default glibc returns freed memory to the OS depending on adaptive thresholds
+    (so whether a call reuses mapped memory or page-faults fresh memory depends on
+    what the process did before).  Fixing the mmap threshold at its 32 MiB maximum
+    and never trimming automatically makes freed memory stay mapped ("warm") until
+    ``malloc_trim(0)`` gives it all back ("cold").  ``None`` when not on glibc.
+    """
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        trim, mallopt = libc.malloc_trim, libc.mallopt
+    except (OSError, AttributeError):  # not glibc (e.g. musl)
+        return None
+    trim.argtypes = [ctypes.c_size_t]
+    trim.restype = ctypes.c_int
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    if not (mallopt(_M_MMAP_THRESHOLD, 32 << 20) and mallopt(_M_TRIM_THRESHOLD, 2**31 - 1)):
+        return None
+    return lambda: trim(0)
+
+
+def _minor_faults() -> int:
+    if resource is None:
+        return 0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+
+
+@dataclass
+class Timing:
+    warm: float  # best seconds per call
+    cold: float | None
+    faults_warm: float | None  # median minor page faults per call
+    faults_cold: float | None
+
+
+def best_times(benches: list[Bench], repeats: int) -> list[Timing]:
+    """Minimum wall time (s) of each benchmark over ``repeats`` runs, warm and cold.
 
     Each benchmark is warmed up once (a batched call's result is checked against its
     expected shape).  The timed runs are interleaved in rounds (every benchmark once
     per round), so a burst of load from concurrent work hits all methods alike rather
     than all the repeats of one method; the garbage collector is off while timing.
+    In each round a method is timed cold (right after ``malloc_trim(0)``), then warm
+    (reusing the memory the cold call left mapped); see :func:`_glibc_allocator_control`.
     """
+    trim = _glibc_allocator_control()
     for b in benches:
         out = b.fn()
         if out is not None:  # a batched call; per-call loops return None
             assert out.shape == b.shape, f"{b.method}: returned {out.shape}, expected {b.shape}"
-    best = [math.inf] * len(benches)
+    modes = ("cold", "warm") if trim is not None else ("warm",)
+    times = {(i, mode): [] for i in range(len(benches)) for mode in modes}
+    faults = {(i, mode): [] for i in range(len(benches)) for mode in modes}
     gc_was_enabled = gc.isenabled()
     gc.disable()
     try:
         for _ in range(repeats):
             for i, b in enumerate(benches):
-                t0 = time.perf_counter()
-                b.fn()
-                best[i] = min(best[i], time.perf_counter() - t0)
+                for mode in modes:
+                    if mode == "cold":
+                        trim()
+                    f0 = _minor_faults()
+                    t0 = time.perf_counter()
+                    b.fn()
+                    t = time.perf_counter() - t0
+                    faults[i, mode].append(_minor_faults() - f0)
+                    times[i, mode].append(t)
     finally:
         if gc_was_enabled:
             gc.enable()
-    return best
+    has_faults = resource is not None
+    return [
+        Timing(
+            warm=min(times[i, "warm"]),
+            cold=min(times[i, "cold"]) if trim is not None else None,
+            faults_warm=float(np.median(faults[i, "warm"])) if has_faults else None,
+            faults_cold=(float(np.median(faults[i, "cold"])) if has_faults and trim is not None else None),
+        )
+        for i in range(len(benches))
+    ]
 
 
 def per_config_loop(fn: Callable[[np.ndarray], object], Q: np.ndarray) -> Callable[[], None]:
@@ -148,9 +245,7 @@ def dh_table(model: rc.Model) -> np.ndarray:
         link = steps[4 * k : 4 * k + 4]
         motions = tuple(s.motion for s in link)
         if motions != ("Rz", "Tz", "Tx", "Rx") or link[0].joint is None:
-            raise ValueError(
-                f"link {k + 1} of {model.name!r} is {motions}, not revolute standard DH"
-            )
+            raise ValueError(f"link {k + 1} of {model.name!r} is {motions}, not revolute standard DH")
         rows.append([s.value for s in link])
     return np.array(rows)
 
@@ -244,6 +339,7 @@ def machine_info(np_version: str, rtb_version: str | None, rtb_c: bool | None) -
         "cpu_count": os.cpu_count(),
         "cpus_usable": affinity,
         "numpy": np_version,
+        "blas_threads": ", ".join(f"{v}={os.environ.get(v)}" for v in BLAS_THREAD_VARS),
         "robocal": rc.__version__,
         "roboticstoolbox": rtb_version,
         "rtb_c_extension": rtb_c,
@@ -272,12 +368,7 @@ def finite_difference_jacobian(model: rc.Model, Q: np.ndarray, h: float = 1e-6) 
         # small rotation in the base frame: skew(w) ~ dR R^T
         S = (Tp[:, :3, :3] - Tm[:, :3, :3]) @ np.swapaxes(Tp[:, :3, :3] + Tm[:, :3, :3], 1, 2)
         S /= 4 * h
-        dw = (
-            np.stack(
-                [S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]], axis=1
-            )
-            / 2
-        )
+        dw = np.stack([S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]], axis=1) / 2
         cols.append(np.concatenate([dpos, dw], axis=1).reshape(-1))
     return np.stack(cols, axis=1)
 
@@ -298,52 +389,78 @@ def fmt_rate(row: Row) -> str:
     return f"{rate / 1e3:.1f} k/s"
 
 
-def print_table(rows: list[Row], rtb_fk_ref: str, rtb_jac_ref: str) -> None:
-    head = ("group", "method", "µs/config", "configs/s", "× RTB ref", "× numpy ref")
-    body = [
-        (
-            r.group,
-            r.method,
-            f"{r.us_per_config:.3f}",
-            fmt_rate(r),
-            fmt_ratio(r.ratio_rtb),
-            fmt_ratio(r.ratio_numpy),
-        )
-        for r in rows
-    ]
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
-    line = "  ".join(
-        h.ljust(w) if i < 2 else h.rjust(w)
-        for i, (h, w) in enumerate(zip(head, widths, strict=True))
+def fmt_us(us: float | None) -> str:
+    return "n/a" if us is None else f"{us:.3f}"
+
+
+def fmt_faults(f: float | None) -> str:
+    return "n/a" if f is None else f"{f:.0f}"
+
+
+TABLE_HEAD = (
+    "group",
+    "method",
+    "output per call",
+    "µs/config",
+    "configs/s",
+    "× RTB ref",
+    "× numpy ref",
+    "µs/config cold",
+    "faults/call warm",
+    "faults/call cold",
+)
+
+
+def table_cells(r: Row) -> tuple[str, ...]:
+    return (
+        r.group,
+        r.method,
+        r.output,
+        fmt_us(r.us_per_config),
+        fmt_rate(r),
+        fmt_ratio(r.ratio_rtb),
+        fmt_ratio(r.ratio_numpy),
+        fmt_us(r.us_per_config_cold),
+        fmt_faults(r.faults_warm),
+        fmt_faults(r.faults_cold),
     )
-    print(line)
-    print("-" * len(line))
+
+
+TABLE_NOTES = (
+    "µs/config, configs/s and the ratios are warm (freed memory kept mapped by the allocator);",
+    "'cold' is timed right after malloc_trim(0) (fresh pages, as in a new process); faults/call",
+    "are median minor page faults per timed call (one batched call, or one loop of --loop-n).",
+    "× RTB ref   = t / t_ref with t_ref = RTB ETS.eval (batched) for FK rows and",
+    "              RTB DHRobot.jacob0 (per config) for Jacobian rows; below 1 = faster.",
+    "× numpy ref = t / t(plain-numpy batched DH FK).",
+)
+
+
+def print_table(rows: list[Row]) -> None:
+    body = [table_cells(r) for r in rows]
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(TABLE_HEAD)]
+
+    def fmt(cells) -> str:
+        return "  ".join(
+            c.ljust(w) if i < 3 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True))
+        )
+
+    print(fmt(TABLE_HEAD))
+    print("-" * len(fmt(TABLE_HEAD)))
     for b in body:
-        print(
-            "  ".join(
-                c.ljust(w) if i < 2 else c.rjust(w)
-                for i, (c, w) in enumerate(zip(b, widths, strict=True))
-            )
-        )
+        print(fmt(b))
     print()
-    print(
-        "  × RTB ref   = t / t_ref, t_ref = "
-        + f"{rtb_fk_ref} for FK rows, {rtb_jac_ref} for Jacobian rows"
-    )
-    print("  × numpy ref = t / t(plain-numpy batched DH FK); below 1 = faster than the reference")
+    for note in TABLE_NOTES:
+        print("  " + note)
 
 
 def markdown_table(rows: list[Row]) -> str:
-    lines = [
-        "| group | method | output per call | µs / config | configs / s "
-        "| × RTB ref | × numpy FK ref |",
-        "|---|---|---|---:|---:|---:|---:|",
-    ]
+    align = ["---"] * 3 + ["---:"] * (len(TABLE_HEAD) - 3)
+    lines = ["| " + " | ".join(TABLE_HEAD) + " |", "|" + "|".join(align) + "|"]
     for r in rows:
-        lines.append(
-            f"| {r.group} | {r.method} | `{r.output}` | {r.us_per_config:.3f} | {fmt_rate(r)} "
-            f"| {fmt_ratio(r.ratio_rtb)} | {fmt_ratio(r.ratio_numpy)} |"
-        )
+        cells = list(table_cells(r))
+        cells[2] = f"`{cells[2]}`"
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -361,9 +478,7 @@ def main(argv: list[str] | None = None) -> int:
         help="configurations for RTB's per-call Jacobians (default 2000)",
     )
     parser.add_argument("--seed", type=int, default=20240601, help="random seed")
-    parser.add_argument(
-        "--json", type=Path, default=None, metavar="PATH", help="write results as JSON"
-    )
+    parser.add_argument("--json", type=Path, default=None, metavar="PATH", help="write results as JSON")
     args = parser.parse_args(argv)
     if args.n < 1 or args.loop_n < 1:
         parser.error("--n and --loop-n must be positive")
@@ -415,9 +530,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # ------------------------------------------------------------------ checks
     print("correctness checks")
-    assert np.allclose(table, UR10_DH, rtol=0.0, atol=1e-12), (
-        f"robocal's UR10 DH table differs:\n{table}"
-    )
+    assert np.allclose(table, UR10_DH, rtol=0.0, atol=1e-12), f"robocal's UR10 DH table differs:\n{table}"
     print(
         "  robocal UR10 DH table matches d1 .1273, a2 -.612, a3 -.5723, d4 .163941, "
         "d5 .1157, d6 .0922, alpha 90 0 0 90 -90 0 deg"
@@ -429,12 +542,8 @@ def main(argv: list[str] | None = None) -> int:
     checks["fk_robocal_vs_numpy"] = check_fk("FK robocal vs numpy DH reference", T_rc, T_np, FK_TOL)
     if ets is not None:
         T_rtb = ets.eval(Q)
-        checks["fk_robocal_vs_rtb_ets"] = check_fk(
-            "FK robocal vs RTB ETS.eval", T_rc, T_rtb, FK_TOL
-        )
-        checks["fk_numpy_vs_rtb_ets"] = check_fk(
-            "FK numpy reference vs RTB ETS.eval", T_np, T_rtb, FK_TOL
-        )
+        checks["fk_robocal_vs_rtb_ets"] = check_fk("FK robocal vs RTB ETS.eval", T_rc, T_rtb, FK_TOL)
+        checks["fk_numpy_vs_rtb_ets"] = check_fk("FK numpy reference vs RTB ETS.eval", T_np, T_rtb, FK_TOL)
     flange_to_tool = np.eye(4)
     flange_to_tool[2, 3] = 0.1
     checks["fk_ur10_30_vs_ur10"] = check_fk(
@@ -489,9 +598,7 @@ def main(argv: list[str] | None = None) -> int:
         return len(benches) - 1
 
     Qloop = Q[:loop_n]
-    fk_np = add(
-        "FK", "numpy DH reference, batched matmul", lambda: numpy_dh_fk(table, Q), n, (n, 4, 4)
-    )
+    fk_np = add("FK", "numpy DH reference, batched matmul", lambda: numpy_dh_fk(table, Q), n, (n, 4, 4))
     fk_rtb = None
     if ets is not None:
         fk_rtb = add("FK", "RTB ETS.eval (C), batched", lambda: ets.eval(Q), n, (n, 4, 4))
@@ -552,12 +659,21 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"timing: {len(benches)} methods, {repeats} interleaved rounds, min per method ...")
     t_start = time.perf_counter()
-    times = best_times(benches, repeats)
+    timings = best_times(benches, repeats)
     print(f"  done in {time.perf_counter() - t_start:.1f} s")
     print()
     rows.extend(
-        Row(b.group, b.method, t, b.configs, str(b.shape))
-        for b, t in zip(benches, times, strict=True)
+        Row(
+            b.group,
+            b.method,
+            t.warm,
+            b.configs,
+            str(b.shape),
+            seconds_cold=t.cold,
+            faults_warm=t.faults_warm,
+            faults_cold=t.faults_cold,
+        )
+        for b, t in zip(benches, timings, strict=True)
     )
     for row in rows:
         row.ratio_numpy = row.us_per_config / rows[fk_np].us_per_config
@@ -565,19 +681,30 @@ def main(argv: list[str] | None = None) -> int:
         if ref is not None:
             row.ratio_rtb = row.us_per_config / rows[ref].us_per_config
 
-    print_table(rows, "RTB ETS.eval batched", "RTB DHRobot.jacob0 per config")
+    print_table(rows)
     if rtb is None:
         print(f"  RTB rows skipped: roboticstoolbox not importable ({rtb_error})")
     print()
     print("Markdown:")
     print()
+    print(
+        f"UR10, {args.n} random configurations; {info['cpu']} ({info['cpu_count']} CPUs), "
+        f"{info['platform']}, Python {info['python']}, numpy {info['numpy']}, "
+        f"roboticstoolbox {info['roboticstoolbox'] or 'not installed'}; "
+        f"BLAS threads {os.environ.get('OPENBLAS_NUM_THREADS')}; "
+        f"min of {repeats} interleaved rounds."
+    )
+    print()
     print(markdown_table(rows))
+    print()
+    print(" ".join(" ".join(TABLE_NOTES).split()))  # the notes as one paragraph
     print()
 
     if args.json is not None:
         payload = asdict(results)
         for d, row in zip(payload["rows"], rows, strict=True):
             d["us_per_config"] = row.us_per_config
+            d["us_per_config_cold"] = row.us_per_config_cold
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(payload, indent=2) + "\n", encoding="utf-8")
         print(f"results written to {args.json}")

@@ -19,6 +19,7 @@ from robocal.model import (
     robots,
     save_model,
 )
+from robocal.model.builder import build_model
 
 try:
     __version__ = version("robocal")
@@ -32,9 +33,18 @@ __all__ = [
     "ModelFileError",
     "Step",
     "__version__",
+    "build_model",
     "load_model",
+    "model_from_urdf",
     "robot",
     "robots",
     "save_model",
     "spatial",
 ]
+
+
+def model_from_urdf(path, measure: str = "pose", tip: str | None = None) -> Model:
+    """A complete, minimal, singularity-free calibration model of a URDF robot."""
+    from robocal.model.urdf import model_from_urdf as _from_urdf  # Pinocchio: imported on use
+
+    return _from_urdf(path, measure, tip)

@@ -197,6 +197,15 @@ def fk(
         )
 
 
+# Command groups of the other calibration steps register themselves here, one line
+# each: `from robocal.<package> import <module>; <module>.register(app)`.
+# --- registered commands ---
+from robocal.model import commands as _model_commands  # noqa: E402
+
+_model_commands.register(app)
+# --- end of registered commands ---
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

@@ -18,9 +18,7 @@ def _directory():
 
 def robots() -> list[str]:
     """Names of the catalog robots, sorted."""
-    return sorted(
-        p.name.removesuffix(".yaml") for p in _directory().iterdir() if p.name.endswith(".yaml")
-    )
+    return sorted(p.name.removesuffix(".yaml") for p in _directory().iterdir() if p.name.endswith(".yaml"))
 
 
 @cache

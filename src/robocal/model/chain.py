@@ -77,9 +77,7 @@ class Joint:
         if self.limits is not None:
             lo, hi = (float(v) for v in self.limits)
             if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
-                raise ValueError(
-                    f"joint {self.name!r}: limits {self.limits} must be finite, lower <= upper"
-                )
+                raise ValueError(f"joint {self.name!r}: limits {self.limits} must be finite, lower <= upper")
             object.__setattr__(self, "limits", (lo, hi))
 
 
@@ -116,9 +114,7 @@ class Step:
         if self.bounds is not None:
             lo, hi = (float(v) for v in self.bounds)
             if math.isnan(lo) or math.isnan(hi) or lo > hi:
-                raise ValueError(
-                    f"parameter {self.name!r}: bounds {self.bounds} need lower <= upper"
-                )
+                raise ValueError(f"parameter {self.name!r}: bounds {self.bounds} need lower <= upper")
             object.__setattr__(self, "bounds", (lo, hi))
 
     @property
@@ -186,9 +182,7 @@ class _Plan:
     joint_steps: NDArray[np.intp]  # (dof,) step index of each joint
     joint_axis: tuple[int, ...]  # local axis of each joint step
     joint_rot: tuple[bool, ...]  # revolute?
-    anchor_of: NDArray[
-        np.intp
-    ]  # (P,) anchor frame index of each step (0 = base, j+1 = after joint j)
+    anchor_of: NDArray[np.intp]  # (P,) anchor frame index of each step (0 = base, j+1 = after joint j)
     segments: tuple[tuple[int, ...], ...]  # constant steps after anchor a, for a = 0..dof
     step_axis: NDArray[np.intp]  # (P,)
     step_rot: NDArray[np.bool_]  # (P,)
@@ -303,9 +297,7 @@ class Model:
         x = np.asarray(x, dtype=float)
         p = int(self.free_mask.sum())
         if x.shape != (p,):
-            raise ValueError(
-                f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}"
-            )
+            raise ValueError(f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}")
         return self.with_values(dict(zip(self.free_names, x.tolist(), strict=True)))
 
     def with_values(self, values: Mapping[str, float]) -> Model:
@@ -324,9 +316,7 @@ class Model:
         unknown = selected - set(self.names)
         if unknown:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
-        steps = tuple(
-            dataclasses.replace(s, free=free) if s.name in selected else s for s in self.steps
-        )
+        steps = tuple(dataclasses.replace(s, free=free) if s.name in selected else s for s in self.steps)
         return dataclasses.replace(self, steps=steps)
 
     def fixed(self, names: Iterable[str]) -> Model:

@@ -100,16 +100,12 @@ def sequence(
     """
     motions = [m[0].upper() + m[1].lower() for m in motions]
     if not (len(motions) == len(values) == len(names)):
-        raise ValueError(
-            f"{len(motions)} motions, {len(values)} values and {len(names)} names do not match"
-        )
+        raise ValueError(f"{len(motions)} motions, {len(values)} values and {len(names)} names do not match")
     flags = [free] * len(motions) if isinstance(free, bool) else list(free)
     if len(flags) != len(motions):
         raise ValueError(f"{len(flags)} free flags for {len(motions)} motions")
     steps = []
-    for k, (motion, value, name, flag) in enumerate(
-        zip(motions, values, names, flags, strict=True)
-    ):
+    for k, (motion, value, name, flag) in enumerate(zip(motions, values, names, flags, strict=True)):
         joint = None
         if k == joint_step:
             joint = Joint(joint_name or f"q_{name}", tuple(limits) if limits is not None else None)
@@ -295,6 +291,4 @@ def model_from_steps(
 ) -> Model:
     """A model from lists of steps (base, links, tool...) concatenated in order."""
     steps = [s for link in links for s in link]
-    return Model(
-        name=name, steps=tuple(steps), bodies=tuple(bodies), title=title, source=source, notes=notes
-    )
+    return Model(name=name, steps=tuple(steps), bodies=tuple(bodies), title=title, source=source, notes=notes)

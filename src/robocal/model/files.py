@@ -155,18 +155,12 @@ def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[S
     common = dict(joint=row.type, joint_name=row.joint, limits=limits, free=row.free)
     if convention == "dh":
         if row.beta is not None:
-            raise ValueError(
-                f"links[{i - 1}]: 'beta' is not a DH parameter (use convention: hayati)"
-            )
-        steps = conventions.dh(
-            i, row.theta * A, (row.d or 0.0) * L, row.a * L, row.alpha * A, **common
-        )
+            raise ValueError(f"links[{i - 1}]: 'beta' is not a DH parameter (use convention: hayati)")
+        steps = conventions.dh(i, row.theta * A, (row.d or 0.0) * L, row.a * L, row.alpha * A, **common)
     elif convention == "mdh":
         if row.beta is not None:
             raise ValueError(f"links[{i - 1}]: 'beta' is not a modified-DH parameter")
-        steps = conventions.mdh(
-            i, row.alpha * A, row.a * L, row.theta * A, (row.d or 0.0) * L, **common
-        )
+        steps = conventions.mdh(i, row.alpha * A, row.a * L, row.theta * A, (row.d or 0.0) * L, **common)
     else:
         d = None if row.d is None else row.d * L
         steps = conventions.hayati(
@@ -214,10 +208,7 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
         steps += [_step(s, units) for s in spec.chain]
         steps += [_step(s, units) for s in spec.tool]
         L = LENGTH_SCALE[units.length]
-        bodies = [
-            Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia)
-            for b in spec.bodies
-        ]
+        bodies = [Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia) for b in spec.bodies]
         return Model(
             name=spec.name,
             steps=tuple(steps),
@@ -252,9 +243,7 @@ def load_model(path: str | os.PathLike[str]) -> Model:
     path = Path(path)
     size = path.stat().st_size
     if size > MAX_FILE_BYTES:
-        raise ModelFileError(
-            f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})"
-        )
+        raise ModelFileError(f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})")
     text = path.read_text(encoding="utf-8")
     try:
         data = yaml.load(text, Loader=_NoAliasLoader)

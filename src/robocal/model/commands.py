@@ -1,0 +1,136 @@
+"""``robocal model build | show | check``: the builder, the 3D view and the singularity check."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+__all__ = ["register"]
+
+console = Console()
+err_console = Console(stderr=True)
+
+model_app = typer.Typer(help="Build, view and check calibration models.", no_args_is_help=True)
+
+
+def _fail(message: str) -> typer.Exit:
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+    return typer.Exit(code=2)
+
+
+@model_app.command("build")
+def build_command(
+    geometry: Annotated[Path, typer.Argument(help="joint-geometry YAML file or a URDF file")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="model file to write (YAML)")],
+    measure: Annotated[
+        str | None, typer.Option("--measure", help="position | pose (default: the file's, else pose)")
+    ] = None,
+    tip: Annotated[str | None, typer.Option("--tip", help="URDF: frame to end the chain at")] = None,
+) -> None:
+    """Build a complete, minimal, singularity-free model from joint geometry (seed 000)."""
+    from robocal.model.builder import GeometryError, load_geometry
+    from robocal.model.files import save_model
+    from robocal.model.urdf import URDFError, build_from_urdf
+
+    if measure not in (None, "position", "pose"):
+        raise _fail(f"--measure must be 'position' or 'pose', got {measure!r}")
+    if not geometry.is_file():
+        raise _fail(f"{geometry} does not exist")
+    try:
+        if geometry.suffix.lower() == ".urdf":
+            result = build_from_urdf(geometry, measure or "pose", tip)
+        else:
+            result = load_geometry(geometry).build(measure)
+    except (GeometryError, URDFError) as err:
+        raise _fail(str(err)) from None
+    model = result.model
+    table = Table(title=f"{model.name}: links", title_justify="left")
+    for col in ("link", "parameterisation", "parameters (identified in bold)"):
+        table.add_column(col)
+    free = set(model.free_names)
+    for info in result.links:
+        params = " ".join(f"[bold]{p}[/]" if p in free else f"[dim]{p}[/]" for p in info.parameters)
+        table.add_row(str(info.index), info.label, params)
+    console.print(table)
+    R = model.joint_types.count("revolute")
+    P = model.dof - R
+    console.print(
+        f"{result.measure} measurement: {len(model.free_names)} identified parameters "
+        f"(4R + 2P + {6 if result.measure == 'pose' else 3} = {result.expected_free} for R={R}, P={P}); "
+        f"Jacobian rank {result.rank}",
+        highlight=False,
+    )
+    for warning in result.warnings:
+        err_console.print(f"[yellow]warning:[/] {warning}", highlight=False)
+    save_model(model, output)
+    console.print(f"wrote {output}", highlight=False)
+
+
+@model_app.command("show")
+def show_command(
+    model_name: Annotated[str, typer.Argument(help="catalog name or model file")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write")],
+) -> None:
+    """Write a self-contained interactive 3D view of a model with its parameter table."""
+    from robocal.cli import resolve_model
+    from robocal.model.view import write_model_view
+
+    model = resolve_model(model_name)
+    write_model_view(model, output)
+    console.print(f"wrote {output}", highlight=False)
+
+
+@model_app.command("check")
+def check_command(
+    model_name: Annotated[str, typer.Argument(help="catalog name or model file")],
+    measure: Annotated[str, typer.Option("--measure", help="position | pose")] = "pose",
+) -> None:
+    """Check a model for parameterisation singularities and discontinuities (exit 1 if any)."""
+    from robocal.cli import resolve_model
+    from robocal.model.singularity import check_model
+
+    if measure not in ("position", "pose"):
+        raise _fail(f"--measure must be 'position' or 'pose', got {measure!r}")
+    model = resolve_model(model_name)
+    result = check_model(model, measure)
+    table = Table(title=f"{model.name}: link parameterisations", title_justify="left")
+    for col in ("link", "parameters", "places", "rank", "verdict"):
+        table.add_column(col)
+    colours = {"ok": "green", "near-singular": "yellow", "singular": "red"}
+    for link in result.links:
+        verdict = f"[{colours[link.verdict]}]{link.verdict}[/]"
+        table.add_row(
+            str(link.index), " ".join(link.parameters), link.target, f"{link.rank}/{link.needed}", verdict
+        )
+    console.print(table)
+    cont = Table(title="continuity (axis tilted by 1e-6 rad)", title_justify="left")
+    for col in ("joint", "max parameter change / tilt", "unrepresentable part", "verdict"):
+        cont.add_column(col)
+    for c in result.continuity:
+        verdict = "[green]continuous[/]" if c.continuous else "[red]jumps / cannot follow[/]"
+        cont.add_row(c.joint, f"{c.parameter_change:.3g}", f"{c.residual:.2e}", verdict)
+    console.print(cont)
+    full = result.identification_rank == result.identification_columns
+    console.print(
+        f"identification Jacobian ({measure}): rank {result.identification_rank} of "
+        f"{result.identification_columns} free parameters, condition number {result.condition_number:.3g}"
+        + ("" if full else " [red](rank deficient)[/]"),
+        highlight=False,
+    )
+    if result.ok:
+        console.print("[bold green]verdict: complete, minimal and continuous[/]")
+    else:
+        console.print("[bold red]verdict: singular or discontinuous parameterisation[/]")
+        for link in result.links:
+            if link.verdict != "ok":
+                console.print(f"  link {link.index}: {link.explanation}", highlight=False)
+        raise typer.Exit(code=1)
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``model`` command group to the ``robocal`` app."""
+    app.add_typer(model_app, name="model")

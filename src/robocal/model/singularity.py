@@ -1,0 +1,276 @@
+"""Parameterisation singularities and model continuity (seed 000 eqs. 1-10).
+
+A link parameterisation must be able to describe every nearby position of what it
+places: the next joint's axis line (4 degrees of freedom for a revolute joint), the
+next prismatic joint's direction (2), or the tool frame (6 for pose, 3 for position).
+Seed 000 finds the singular manifolds symbolically (XYZ-ZYX frames at β = ±90°, DH
+with parallel axes, Hayati with perpendicular axes or an axis through the origin,
+Veitschegger); here the same question is answered numerically for any chain: the
+rank of the map from the link's parameters to what it places.
+
+Three checks, all at the nominal parameter values:
+
+* per link, the rank and singular values of d(target)/d(link parameters), where a
+  link is the parameters from one joint's offset up to the next joint step (the base
+  link: everything before the first joint; the tool link: the last joint's offset and
+  everything after it);
+* the rank and condition number of the identification Jacobian (free parameters,
+  columns scaled to unit norm) over sampled configurations;
+* continuity: each joint axis is tilted by ``1e-6`` rad about two perpendicular
+  directions and the smallest parameter change that follows it (least squares on the
+  whole chain) must be of the same order; a DH model of parallel axes cannot follow a
+  tilt at all (the common normal jumps to infinity), which the check reports.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from robocal.model.chain import Model
+
+__all__ = ["ContinuityCheck", "LinkCheck", "ModelCheck", "check_model"]
+
+Verdict = Literal["ok", "near-singular", "singular"]
+
+
+@dataclass(frozen=True)
+class LinkCheck:
+    """Rank of one link's parameterisation."""
+
+    index: int  # 0 = base -> joint 1; j = joint j -> joint j+1 (or the tool for j = dof)
+    parameters: tuple[str, ...]
+    target: str
+    needed: int
+    rank: int
+    singular_values: tuple[float, ...]
+    verdict: Verdict
+
+    @property
+    def explanation(self) -> str:
+        if self.verdict == "ok":
+            return f"describes the {self.target} with full rank {self.needed}"
+        return (
+            f"rank {self.rank} < {self.needed}: cannot describe every nearby {self.target} "
+            f"({self.verdict}; smallest relevant singular value {self.singular_values[self.needed - 1]:.2e})"
+        )
+
+
+@dataclass(frozen=True)
+class ContinuityCheck:
+    """How the chain's parameters follow a tiny tilt of one joint axis."""
+
+    joint: str
+    perturbation: float  # rad
+    parameter_change: float  # largest scaled parameter change / perturbation
+    residual: float  # part of the tilt the chain cannot represent / perturbation
+    continuous: bool
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """The result of :func:`check_model`."""
+
+    model: str
+    links: tuple[LinkCheck, ...]
+    identification_rank: int
+    identification_columns: int
+    condition_number: float
+    continuity: tuple[ContinuityCheck, ...]
+
+    @property
+    def ok(self) -> bool:
+        return (
+            all(link.verdict == "ok" for link in self.links)
+            and self.identification_rank == self.identification_columns
+            and all(c.continuous for c in self.continuity)
+        )
+
+
+def _plucker(T: np.ndarray, axis: int, scale: float) -> np.ndarray:
+    """Line (direction u, moment o × u / scale) of local axis ``axis`` of frames ``T``."""
+    u = T[..., :3, axis]
+    o = T[..., :3, 3]
+    return np.concatenate([u, np.cross(o, u) / scale], axis=-1)
+
+
+def _size(model: Model) -> float:
+    T = model.joint_frames(np.zeros(model.dof)) if model.dof else np.eye(4)[None]
+    tool = model.fk(np.zeros(model.dof))
+    pts = np.concatenate([T[:, :3, 3], tool[None, :3, 3]])
+    return max(float(np.abs(pts).max()), 0.1)
+
+
+def _geometry(model: Model, values: np.ndarray, measure: str, scale: float) -> np.ndarray:
+    """All joint axis lines at q = 0 (scaled Plücker) and the tool pose/position."""
+    m = (
+        model
+        if np.array_equal(values, model.values)
+        else model.with_values(dict(zip(model.names, values, strict=True)))
+    )
+    q = np.zeros((1, m.dof))
+    parts = []
+    if m.dof:
+        frames = m.joint_frames(q)[0]
+        for j, step in enumerate(s for s in m.steps if s.joint is not None):
+            line = _plucker(frames[j], step.axis, scale)
+            parts.append(line if step.is_rotation else line[:3])  # prismatic: direction only
+    T = m.fk(q)[0]
+    parts.append(T[:3, 3] / scale)
+    if measure == "pose":
+        parts.append(T[:3, :3].ravel())
+    return np.concatenate(parts)
+
+
+def _numeric_jacobian(f, x: np.ndarray, h: float = 1e-7) -> np.ndarray:
+    cols = []
+    for k in range(len(x)):
+        xp, xm = x.copy(), x.copy()
+        xp[k] += h
+        xm[k] -= h
+        cols.append((f(xp) - f(xm)) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
+def _link_checks(model: Model, measure: str, scale: float, near: float) -> list[LinkCheck]:
+    steps = model.steps
+    joint_idx = [i for i, s in enumerate(steps) if s.joint is not None]
+    bounds = [(0, joint_idx[0] if joint_idx else len(steps))]  # base link: before joint 1
+    for k, start in enumerate(joint_idx):
+        end = joint_idx[k + 1] if k + 1 < len(joint_idx) else len(steps)
+        bounds.append((start, end))
+    checks = []
+    for index, (lo, hi) in enumerate(bounds):
+        if hi <= lo:
+            continue
+        # the link's transform from the frame before step lo to the frame before step hi
+        names = [s.name for s in steps[lo:hi]]
+        if hi < len(steps):
+            nxt = steps[hi]
+            target = (
+                "axis line of joint " + nxt.joint.name
+                if nxt.is_rotation
+                else ("direction of prismatic joint " + nxt.joint.name)
+            )
+            needed = 4 if nxt.is_rotation else 2
+
+            def f(x, lo=lo, hi=hi, nxt=nxt):
+                T = np.eye(4)
+                for s, v in zip(steps[lo:hi], x, strict=True):
+                    T = T @ _elem(s.motion, v)
+                line = _plucker(T, nxt.axis, scale)
+                return line if nxt.is_rotation else line[:3]
+        else:
+            target = "tool pose" if measure == "pose" else "tool position"
+            needed = 6 if measure == "pose" else 3
+
+            def f(x, lo=lo, hi=hi):
+                T = np.eye(4)
+                for s, v in zip(steps[lo:hi], x, strict=True):
+                    T = T @ _elem(s.motion, v)
+                out = T[:3, 3] / scale
+                return np.concatenate([out, T[:3, :3].ravel()]) if measure == "pose" else out
+
+        x0 = np.array([s.value for s in steps[lo:hi]])
+        J = _numeric_jacobian(f, x0)
+        sv = np.linalg.svd(J, compute_uv=False)
+        sv = np.concatenate([sv, np.zeros(max(0, needed - len(sv)))])
+        top = sv[0] if sv[0] > 0 else 1.0
+        rank = int(np.sum(sv > 1e-6 * top))
+        if rank < needed:
+            verdict: Verdict = "singular"
+        elif sv[needed - 1] < near * top:
+            verdict = "near-singular"
+        else:
+            verdict = "ok"
+        checks.append(
+            LinkCheck(index, tuple(names), target, needed, min(rank, needed), tuple(sv.tolist()), verdict)
+        )
+    return checks
+
+
+def _elem(motion: str, value: float) -> np.ndarray:
+    from robocal.spatial import elementary
+
+    return elementary(motion, value)
+
+
+def _continuity(model: Model, measure: str, scale: float, eps: float) -> list[ContinuityCheck]:
+    x0 = model.values
+    angular = np.array([s.is_rotation for s in model.steps])
+    # dimensionless parameters: lengths in units of the robot's size
+    xs = np.where(angular, 1.0, scale)
+
+    def g(xn):
+        return _geometry(model, xn * xs, measure, scale)
+
+    J = _numeric_jacobian(g, x0 / xs)
+    G0 = g(x0 / xs)
+    out = []
+    if model.dof == 0:
+        return out
+    frames = model.joint_frames(np.zeros(model.dof))
+    offset = 0
+    for j, step in enumerate(s for s in model.steps if s.joint is not None):
+        width = 6 if step.is_rotation else 3
+        u = frames[j, :3, step.axis]
+        o = frames[j, :3, 3]
+        # two unit directions perpendicular to the axis
+        w1 = np.cross(u, [1.0, 0, 0] if abs(u[0]) < 0.9 else [0, 1.0, 0])
+        w1 /= np.linalg.norm(w1)
+        w2 = np.cross(u, w1)
+        worst_change, worst_residual = 0.0, 0.0
+        for w in (w1, w2):
+            dG = np.zeros_like(G0)
+            du = eps * w
+            block = np.concatenate([du, np.cross(o, du) / scale]) if step.is_rotation else du
+            dG[offset : offset + width] = block
+            # singular values below 1e-6 of the largest are finite-difference noise of a
+            # rank-deficient map, not directions the chain can follow
+            dx, *_ = np.linalg.lstsq(J, dG, rcond=1e-6)
+            worst_change = max(worst_change, float(np.abs(dx).max()) / eps)
+            worst_residual = max(worst_residual, float(np.linalg.norm(J @ dx - dG)) / eps)
+        continuous = worst_residual < 1e-3 and worst_change < 1e3
+        out.append(ContinuityCheck(step.joint.name, eps, worst_change, worst_residual, continuous))
+        offset += width
+    return out
+
+
+def check_model(
+    model: Model,
+    measure: Literal["position", "pose"] = "pose",
+    n_poses: int = 60,
+    seed: int = 0,
+    perturbation: float = 1e-6,
+    near_singular: float = 1e-2,
+) -> ModelCheck:
+    """Check a chain for parameterisation singularities and discontinuities.
+
+    Args:
+        model: any chain.
+        measure: whether the tool's orientation is measured (``"pose"``) or only its
+            position; decides what the tool link must describe and the Jacobian's rows.
+        n_poses: configurations sampled for the identification Jacobian.
+        perturbation: axis tilt (rad) of the continuity check.
+        near_singular: a link whose relevant singular value is below this fraction of
+            its largest is reported as near-singular.
+    """
+    scale = _size(model)
+    links = _link_checks(model, measure, scale, near_singular)
+    rng = np.random.default_rng(seed)
+    lim = np.clip(model.joint_limits, -np.pi, np.pi)
+    q = rng.uniform(lim[:, 0], lim[:, 1], size=(n_poses, model.dof))
+    p = len(model.free_names)
+    if p:
+        J = model.jacobian(q, rows="pose" if measure == "pose" else "position")
+        norms = np.linalg.norm(J, axis=0)
+        Jn = J / np.where(norms > 0, norms, 1.0)
+        sv = np.linalg.svd(Jn, compute_uv=False)
+        rank = int(np.sum(sv > 1e-8 * sv[0])) if sv[0] > 0 else 0
+        cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    else:
+        rank, cond = 0, float("nan")
+    continuity = _continuity(model, measure, scale, perturbation)
+    return ModelCheck(model.name, tuple(links), rank, p, cond, tuple(continuity))

@@ -1,0 +1,59 @@
+"""URDF import through Pinocchio into the builder."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import robocal as rc
+from robocal.model.urdf import URDFError, build_from_urdf, geometry_from_urdf
+
+pin = pytest.importorskip("pinocchio")
+UR10_URDF = Path(__file__).parent / "data" / "ur10.urdf"
+
+
+def test_urdf_model_reproduces_pinocchio_fk():
+    result = build_from_urdf(UR10_URDF, measure="pose")
+    model = result.model
+    assert len(model.free_names) == result.rank == 30
+    pm = pin.buildModelFromUrdf(str(UR10_URDF))
+    data = pm.createData()
+    tool = pm.getFrameId("tool0")
+    q = np.random.default_rng(0).uniform(-3, 3, (25, 6))
+    T = model.fk(q)
+    for k in range(len(q)):
+        qp = np.concatenate([q[k, :5], [np.cos(q[k, 5]), np.sin(q[k, 5])]])  # wrist_3 is continuous
+        pin.framesForwardKinematics(pm, data, qp)
+        np.testing.assert_allclose(data.oMf[tool].homogeneous, T[k], atol=1e-12)
+
+
+def test_urdf_joints_names_and_limits():
+    name, joints, tcp = geometry_from_urdf(UR10_URDF)
+    assert name == "ur10_urdf"
+    assert [j.name for j in joints][:2] == ["shoulder_pan_joint", "shoulder_lift_joint"]
+    assert joints[2].limits == pytest.approx((-3.1416, 3.1416))
+    assert joints[5].limits is None  # continuous
+    np.testing.assert_allclose(tcp.position, [0, 0.0922, 0], atol=1e-12)
+
+
+def test_rc_model_from_urdf_and_tip_choice():
+    model = rc.model_from_urdf(UR10_URDF, measure="position", tip="wrist_2_link")
+    assert model.dof == 5
+    with pytest.raises(URDFError, match="no frame 'nope'"):
+        geometry_from_urdf(UR10_URDF, tip="nope")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaa">]><robot name="r"/>', "DOCTYPE/ENTITY"),
+        ("<html></html>", "not a URDF"),
+        ('<robot name="r"><link name="a"/></robot>', "no movable joint"),
+    ],
+)
+def test_bad_urdf_files_are_rejected(tmp_path, text, message):
+    path = tmp_path / "bad.urdf"
+    path.write_text(text)
+    with pytest.raises(URDFError, match=message) as info:
+        build_from_urdf(path)
+    assert str(path) in str(info.value)
