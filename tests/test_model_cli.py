@@ -60,3 +60,25 @@ def test_model_errors_are_one_line(tmp_path):
     bad.write_text("name: b\njoints:\n  - {type: revolute, position: [0, 0, 0], axis: [0, 0, 0]}\n")
     result = runner.invoke(app, ["model", "build", str(bad), "-o", str(tmp_path / "o.yaml")])
     assert result.exit_code == 2 and "joint 1: axis" in result.output
+
+
+def test_model_view_renders_in_headless_chromium(tmp_path):
+    """Runs where Chromium is installed (apt install chromium); CI machines skip it."""
+    import shutil
+    import subprocess
+
+    import pytest
+
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("chromium is not installed")
+    out = tmp_path / "view.html"
+    runner.invoke(app, ["model", "show", "irb2400", "-o", str(out)])
+    flags = [
+        "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync",
+        f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=5000",
+    ]
+    dom = subprocess.run([browser, *flags, "--dump-dom", out.as_uri()], capture_output=True, text=True, timeout=120)
+    assert "main-svg" in dom.stdout  # plotly drew the figure
+    assert "gl-container" in dom.stdout or "scene" in dom.stdout  # the 3D scene exists

@@ -46,7 +46,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.spatial import MOTIONS, elementary
+from robocal.spatial import MOTIONS
 
 __all__ = ["Body", "Joint", "Model", "Step"]
 
@@ -375,12 +375,14 @@ class Model:
             raise ValueError(f"joint perturbations shaped {d.shape}; expected ({n}, {self.dof}, 3)")
         return d
 
-    def _segment_data(self, values: Array) -> tuple[list[Array], Array]:
-        """Constant segment transforms and each step's local frame (before the step).
+    @cached_property
+    def _segments(self) -> tuple[list[Array], Array]:
+        """Constant segment transforms and each step's local frame, for this model's values.
 
         Returns:
-            segment transforms ``C_a`` (4, 4) for a = 0..dof, and ``local`` (P, 4, 4):
-            the frame just before step i expressed in its anchor frame.
+            segment transforms ``C_a`` (4, 4) for a = 0..dof (the constant steps after
+            anchor a), and ``local`` (P, 4, 4): the frame just before step i expressed
+            in its anchor frame.  Models are immutable, so this is computed once.
         """
         plan = self._plan
         local = np.empty((len(self.steps), 4, 4))
@@ -389,46 +391,53 @@ class Model:
             T = np.eye(4)
             for i in seg:
                 local[i] = T
-                T = T @ elementary(self.steps[i].motion, values[i])
+                T = T @ _elementary(self.steps[i].motion, self.steps[i].value)
             seg_T.append(T)
         for j, i in enumerate(plan.joint_steps):
             local[i] = seg_T[j]  # a joint step starts where the previous segment ends
         return seg_T, local
 
     def _forward(
-        self,
-        values: Array,
-        q: Array,
-        perturbations: Array | None,
-        keep_anchors: bool,
-        seg_T: list[Array] | None = None,
+        self, q: Array, perturbations: Array | None, keep_anchors: bool
     ) -> tuple[Array, list[Array]]:
-        """Batched FK.  Returns the tool frame as ``(n, 3, 4)`` and, when asked, the
-        anchor frames after each joint step (list of ``(n, 3, 4)``)."""
+        """Batched FK in structure-of-arrays layout.
+
+        Frames are ``F`` shaped ``(3, 4, n)``: the rows of ``[R | p]`` with the poses
+        last, so that every update below is a contiguous vector operation.
+
+        Returns the tool frame and, when asked, the anchor frames (after each joint
+        step), each ``(3, 4, n)``.
+        """
         plan = self._plan
-        if seg_T is None:
-            seg_T, _ = self._segment_data(values)
+        seg_T, _ = self._segments
         n = q.shape[0]
-        F = np.empty((n, 3, 4))
-        F[:] = seg_T[0][:3]
+        offsets = np.array([self.steps[i].value for i in plan.joint_steps])
+        qt = q.T + offsets[:, None]  # (dof, n) joint step values
+        if perturbations is not None:
+            qt = qt + perturbations[:, :, 2].T
+        rot = np.array(plan.joint_rot, dtype=bool)
+        cos = np.cos(qt[rot]) if rot.any() else None  # one trig call for all revolute joints
+        sin = np.sin(qt[rot]) if rot.any() else None
+        F = np.empty((3, 4, n))
+        F[:] = seg_T[0][:3, :, None]
         anchors: list[Array] = []
-        for j, i in enumerate(plan.joint_steps):
+        r = 0
+        for j in range(len(plan.joint_steps)):
             k = plan.joint_axis[j]
-            qj = q[:, j] + values[i]
-            if perturbations is not None:
-                qj = qj + perturbations[:, j, 2]
             if plan.joint_rot[j]:
-                _rotate_columns(F, k, qj)
+                _rotate_rows(F, k, cos[r], sin[r])
+                r += 1
             else:
-                F[:, :, 3] += F[:, :, k] * qj[:, None]
+                F[:, 3] += F[:, k] * qt[j]
             if perturbations is not None:
-                _rotate_columns(F, (k + 1) % 3, perturbations[:, j, 0])
-                _rotate_columns(F, (k + 2) % 3, perturbations[:, j, 1])
+                tilt_a, tilt_b = perturbations[:, j, 0], perturbations[:, j, 1]
+                _rotate_rows(F, (k + 1) % 3, np.cos(tilt_a), np.sin(tilt_a))
+                _rotate_rows(F, (k + 2) % 3, np.cos(tilt_b), np.sin(tilt_b))
             if keep_anchors:
                 anchors.append(F.copy())
             C = seg_T[j + 1]
             if not np.array_equal(C, _EYE4):
-                F = (F.reshape(3 * n, 4) @ C).reshape(n, 3, 4)
+                F = np.matmul(C.T, F)  # each row r of [R | p]: (4, 4)ᵀ @ (4, n)
         return F, anchors
 
     def fk(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
@@ -438,7 +447,7 @@ class Model:
         """
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
-        F, _ = self._forward(self.values, q, d, keep_anchors=False)
+        F, _ = self._forward(q, d, keep_anchors=False)
         T = _to_homogeneous(F)
         return T[0] if single else T
 
@@ -446,13 +455,12 @@ class Model:
         """Frames after each joint step, ``(n, dof, 4, 4)`` in the base frame."""
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
-        _, anchors = self._forward(self.values, q, d, keep_anchors=True)
-        T = _to_homogeneous(np.stack(anchors, axis=1))
+        _, anchors = self._forward(q, d, keep_anchors=True)
+        T = np.stack([_to_homogeneous(F) for F in anchors], axis=1)
         return T[0] if single else T
 
     def _columns(
         self,
-        values: Array,
         q: Array,
         perturbations: Array | None,
         steps: Sequence[int],
@@ -460,61 +468,60 @@ class Model:
     ) -> tuple[Array, Array]:
         """Derivative columns of the tool pose wrt the values of ``steps`` (chain order).
 
-        Returns ``F_tool (n, 3, 4)`` and ``J (n, 6, m)`` with rows [dp; dω], or
-        ``(n, 3, m)`` position rows only when ``orientation`` is false.
+        Returns ``F_tool (3, 4, n)`` and ``J (m, 6, n)`` with rows [dp; dω], or
+        ``(m, 3, n)`` position rows only when ``orientation`` is false.
 
         For a step hanging off anchor frame (R, p_a) with local axis a_l and local
         origin o_l, the world axis is a = R a_l and origin o = p_a + R o_l, so
-        a × (p − o) = a × (p − p_a) − R (a_l × o_l): one small gemm per anchor gives
-        a and R (a_l × o_l) for all its columns, and one cross product with the
-        shared vector p − p_a finishes them.  The steps of one anchor are contiguous
-        in chain order, so every write is a slice.
+        a × (p − o) = a × (p − p_a) − R (a_l × o_l): one small matrix product per
+        anchor gives a and R (a_l × o_l) for all its columns, and one cross product with
+        the shared vector p − p_a finishes them.  The steps of one anchor are
+        contiguous in chain order, so each block of columns is a slice.
         """
         plan = self._plan
         steps = np.asarray(steps, dtype=np.intp)
-        seg_T, local = self._segment_data(values)
-        F, anchors = self._forward(values, q, perturbations, keep_anchors=True, seg_T=seg_T)
+        _, local = self._segments
+        F, anchors = self._forward(q, perturbations, keep_anchors=True)
         n, m = q.shape[0], len(steps)
-        J = np.zeros((n, 6 if orientation else 3, m))
+        J = np.empty((m, 6 if orientation else 3, n))
         loc = local[steps]
         a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3) axis in the anchor frame
         c_loc = np.cross(a_loc, loc[:, :3, 3])  # (m, 3) a_l × o_l
         rot = plan.step_rot[steps]
-        p_tool = F[:, :, 3]
+        p_tool = F[:, 3]  # (3, n)
         step_anchor = plan.anchor_of[steps]
         bounds = np.flatnonzero(np.diff(step_anchor)) + 1
         for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True):
-            a = step_anchor[lo]
-            k = hi - lo
+            a, k = step_anchor[lo], hi - lo
             if a == 0:  # constant frames before the first joint
-                A = np.broadcast_to(a_loc[lo:hi].T, (n, 3, k))
-                RC = np.broadcast_to(c_loc[lo:hi].T, (n, 3, k))
+                A = np.broadcast_to(a_loc[lo:hi, :, None], (k, 3, n))
+                RC = np.broadcast_to(c_loc[lo:hi, :, None], (k, 3, n))
                 r = p_tool
             else:
-                M = np.zeros((4, 2 * k))
-                M[:3, :k] = a_loc[lo:hi].T
-                M[:3, k:] = c_loc[lo:hi].T
-                W = (anchors[a - 1].reshape(3 * n, 4) @ M).reshape(n, 3, 2 * k)
-                A, RC = W[:, :, :k], W[:, :, k:]
-                r = p_tool - anchors[a - 1][:, :, 3]
-            is_rot = rot[lo:hi]
-            if is_rot.all():
-                J[:, 0, lo:hi] = A[:, 1] * r[:, 2, None] - A[:, 2] * r[:, 1, None] - RC[:, 0]
-                J[:, 1, lo:hi] = A[:, 2] * r[:, 0, None] - A[:, 0] * r[:, 2, None] - RC[:, 1]
-                J[:, 2, lo:hi] = A[:, 0] * r[:, 1, None] - A[:, 1] * r[:, 0, None] - RC[:, 2]
+                Mt = np.zeros((2 * k, 4))
+                Mt[:k, :3] = a_loc[lo:hi]
+                Mt[k:, :3] = c_loc[lo:hi]
+                W = np.matmul(Mt, anchors[a - 1]).transpose(1, 0, 2)  # (2k, 3, n)
+                A, RC = W[:k], W[k:]
+                r = p_tool - anchors[a - 1][:, 3]
+            Jb = J[lo:hi]
+            # rotation columns: a × (p − p_a) − R (a_l × o_l) ...
+            np.multiply(A[:, 1], r[2], out=Jb[:, 0])
+            Jb[:, 0] -= A[:, 2] * r[1]
+            Jb[:, 0] -= RC[:, 0]
+            np.multiply(A[:, 2], r[0], out=Jb[:, 1])
+            Jb[:, 1] -= A[:, 0] * r[2]
+            Jb[:, 1] -= RC[:, 1]
+            np.multiply(A[:, 0], r[1], out=Jb[:, 2])
+            Jb[:, 2] -= A[:, 1] * r[0]
+            Jb[:, 2] -= RC[:, 2]
+            if orientation:
+                Jb[:, 3:] = A
+            # ... then the few translation columns: dp = a, dω = 0
+            for c in np.flatnonzero(~rot[lo:hi]):
+                Jb[c, :3] = A[c]
                 if orientation:
-                    J[:, 3:, lo:hi] = A
-                continue
-            J[:, :3, lo:hi] = A  # translation columns; rotation columns overwritten below
-            cols = np.flatnonzero(is_rot)
-            if len(cols):
-                Ar, RCr = A[:, :, cols], RC[:, :, cols]
-                Jr = J[:, :, lo:hi]
-                Jr[:, 0, cols] = Ar[:, 1] * r[:, 2, None] - Ar[:, 2] * r[:, 1, None] - RCr[:, 0]
-                Jr[:, 1, cols] = Ar[:, 2] * r[:, 0, None] - Ar[:, 0] * r[:, 2, None] - RCr[:, 1]
-                Jr[:, 2, cols] = Ar[:, 0] * r[:, 1, None] - Ar[:, 1] * r[:, 0, None] - RCr[:, 2]
-                if orientation:
-                    Jr[:, 3:, cols] = Ar
+                    Jb[c, 3:] = 0.0
         return F, J
 
     def fk_jacobian(
@@ -532,8 +539,8 @@ class Model:
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         free = np.flatnonzero(self.free_mask)
-        F, J = self._columns(self.values, q, d, free, orientation=rows == "pose")
-        J = J.reshape(-1, len(free))
+        F, J = self._columns(q, d, free, orientation=rows == "pose")
+        J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(free))
         T = _to_homogeneous(F)
         return (T[0] if single else T), J
 
@@ -556,31 +563,49 @@ class Model:
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
-        _, J = self._columns(self.values, q, d, self._plan.joint_steps)
+        _, J = self._columns(q, d, self._plan.joint_steps)
+        J = np.ascontiguousarray(J.transpose(2, 1, 0))
         return J[0] if single else J
 
 
 _EYE4 = np.eye(4)
 
 
-def _rotate_columns(F: Array, axis: int, angle: Array) -> None:
-    """In place ``F[:, :, :3] <- F[:, :, :3] @ rot(axis, angle)`` for per-pose angles ``(n,)``.
+def _rotate_rows(F: Array, axis: int, c: Array, s: Array) -> None:
+    """In place ``F[:, :3] <- F[:, :3] @ rot(axis, angle)`` for ``F`` ``(3, 4, n)``.
 
-    Only the two columns perpendicular to ``axis`` change, so this costs six
-    vector operations instead of a batched 3x3 product.
+    ``c``, ``s`` are the angle's cosine and sine per pose ``(n,)``.  Only the two
+    columns perpendicular to ``axis`` change: six vector operations instead of a
+    batched 3x3 product.
     """
     i, j = (axis + 1) % 3, (axis + 2) % 3
-    c = np.cos(angle)[:, None]
-    s = np.sin(angle)[:, None]
-    ci = F[:, :, i].copy()
-    cj = F[:, :, j]
-    F[:, :, i] = ci * c + cj * s
-    F[:, :, j] = cj * c - ci * s
+    Fi, Fj = F[:, i], F[:, j]  # (3, n) each
+    t = Fi * s
+    Fi *= c
+    Fi += Fj * s
+    Fj *= c
+    Fj -= t
+
+
+def _elementary(motion: str, value: float) -> Array:
+    """One elementary 4x4 transform for a scalar value (faster than the batched
+    :func:`robocal.spatial.elementary` for the per-model constant products)."""
+    T = np.eye(4)
+    k = "xyz".index(motion[1])
+    if motion[0] == "T":
+        T[k, 3] = value
+    else:
+        c, s = math.cos(value), math.sin(value)
+        i, j = (k + 1) % 3, (k + 2) % 3
+        T[i, i] = T[j, j] = c
+        T[i, j], T[j, i] = -s, s
+    return T
 
 
 def _to_homogeneous(F: Array) -> Array:
-    """``(..., 3, 4)`` -> ``(..., 4, 4)``."""
-    T = np.zeros((*F.shape[:-2], 4, 4))
-    T[..., :3, :] = F
-    T[..., 3, 3] = 1.0
+    """Structure-of-arrays frames ``(3, 4, n)`` -> homogeneous ``(n, 4, 4)``."""
+    n = F.shape[-1]
+    T = np.zeros((n, 4, 4))
+    T[:, :3, :] = F.transpose(2, 0, 1)
+    T[:, 3, 3] = 1.0
     return T

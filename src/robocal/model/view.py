@@ -99,6 +99,7 @@ def model_figure(model: Model, q: np.ndarray | None = None, title: str | None = 
         title=title or f"{model.name}: {model.title}" if model.title else (title or model.name),
         scene={
             "aspectmode": "data",
+            "camera": {"eye": {"x": 1.9, "y": -1.9, "z": 1.1}, "center": {"x": 0, "y": 0, "z": -0.1}},
             "xaxis_title": "x mm",
             "yaxis_title": "y mm",
             "zaxis_title": "z mm",
