@@ -8,6 +8,7 @@
 from importlib.metadata import PackageNotFoundError, version
 
 from robocal import spatial
+from robocal.measure import Measurements, read_measurements, write_measurements
 from robocal.model import (
     Body,
     Joint,
@@ -29,6 +30,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 __all__ = [
     "Body",
     "Joint",
+    "Measurements",
     "Model",
     "ModelFileError",
     "Step",
@@ -36,10 +38,12 @@ __all__ = [
     "build_model",
     "load_model",
     "model_from_urdf",
+    "read_measurements",
     "robot",
     "robots",
     "save_model",
     "spatial",
+    "write_measurements",
 ]
 
 

@@ -203,6 +203,9 @@ def fk(
 from robocal.model import commands as _model_commands  # noqa: E402
 
 _model_commands.register(app)
+from robocal.measure import commands as _measure_commands  # noqa: E402
+
+_measure_commands.register(app)
 # --- end of registered commands ---
 
 

@@ -28,6 +28,7 @@ __all__ = [
     "compose",
     "elementary",
     "euler_to_matrix",
+    "fit_rigid_transform",
     "homogeneous",
     "inverse",
     "matrix_to_euler",
@@ -217,3 +218,64 @@ def pose_error(T_actual: ArrayLike, T_reference: ArrayLike) -> Array:
     dp = Ta[..., :3, 3] - Tr[..., :3, 3]
     dR = Ta[..., :3, :3] @ np.swapaxes(Tr[..., :3, :3], -1, -2)
     return np.concatenate([dp, matrix_to_rotvec(dR)], axis=-1)
+
+
+def fit_rigid_transform(P: ArrayLike, Q: ArrayLike, weights: ArrayLike | None = None) -> Array:
+    """Least-squares rigid transform ``T_B_A`` mapping points ``P`` (frame A) onto ``Q`` (frame B).
+
+    Minimises ``sum_k w_k |Q_k - (R P_k + t)|²`` over rotations R (det +1) and
+    translations t, in closed form (Kabsch/Horn: SVD of the weighted cross-covariance
+    of the centred point sets, with the sign correction that excludes reflections).
+    Used to reconstruct a tool pose from measured markers and for the initial guess of
+    a measuring device's frame.
+
+    Args:
+        P: ``(..., m, 3)`` points in frame A (m), ``m >= 3`` not all on one line.
+        Q: ``(..., m, 3)`` the same points measured in frame B (m).  The batch shapes
+            of ``P`` and ``Q`` broadcast (e.g. one marker layout ``(m, 3)`` against
+            ``(n, m, 3)`` measurements).
+        weights: optional ``(..., m)`` non-negative weights (e.g. ``1/sigma²``).
+
+    Returns:
+        ``(..., 4, 4)`` transforms ``T_B_A`` with ``Q ≈ R P + t``.
+
+    Raises:
+        ValueError: on mismatched shapes, fewer than 3 points, negative or all-zero
+            weights, non-finite input, or (near-)collinear points, naming the batch index.
+    """
+    P = np.asarray(P, dtype=float)
+    Q = np.asarray(Q, dtype=float)
+    if P.ndim < 2 or Q.ndim < 2 or P.shape[-1] != 3 or Q.shape[-1] != 3 or P.shape[-2] != Q.shape[-2]:
+        raise ValueError(f"point sets shaped {P.shape} and {Q.shape}; expected (..., m, 3) both")
+    m = P.shape[-2]
+    if m < 3:
+        raise ValueError(f"a rigid fit needs at least 3 points, got {m}")
+    if not (np.all(np.isfinite(P)) and np.all(np.isfinite(Q))):
+        raise ValueError("point sets contain NaN or inf")
+    batch = np.broadcast_shapes(P.shape[:-2], Q.shape[:-2])
+    if weights is None:
+        w = np.ones((*batch, m))
+    else:
+        w = np.broadcast_to(np.asarray(weights, dtype=float), (*batch, m))
+        if np.any(~np.isfinite(w)) or np.any(w < 0) or np.any(w.sum(axis=-1) <= 0):
+            raise ValueError("weights must be finite, >= 0 and not all zero")
+    wn = w / w.sum(axis=-1, keepdims=True)
+    p0 = np.einsum("...k,...ki->...i", wn, np.broadcast_to(P, (*batch, m, 3)))
+    q0 = np.einsum("...k,...ki->...i", wn, np.broadcast_to(Q, (*batch, m, 3)))
+    Pc = P - p0[..., None, :]
+    Qc = Q - q0[..., None, :]
+    H = np.einsum("...k,...ki,...kj->...ij", wn, Pc, Qc)  # (..., 3, 3) = sum w p q^T
+    U, s, Vt = np.linalg.svd(H)
+    degenerate = s[..., 1] <= 1e-12 * np.maximum(s[..., 0], 1e-300)
+    if np.any(degenerate):
+        where = np.argwhere(np.atleast_1d(degenerate))[0]
+        raise ValueError(
+            f"points of fit {tuple(where.tolist()) if batch else ()} are (nearly) collinear; "
+            "a rigid transform is not determined"
+        )
+    V = np.swapaxes(Vt, -1, -2)
+    d = np.sign(np.linalg.det(V @ np.swapaxes(U, -1, -2)))
+    V[..., :, 2] *= d[..., None]
+    R = V @ np.swapaxes(U, -1, -2)
+    t = q0 - np.einsum("...ij,...j->...i", R, p0)
+    return homogeneous(R, t)

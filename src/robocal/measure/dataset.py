@@ -11,10 +11,38 @@ A :class:`Measurements` holds one row per measured pose:
 * ``metadata``: device, frame, units and source file as plain strings.
 
 CSV layout (DESIGN.md): columns ``q1..qN``, ``x, y, z`` and optionally
-``qw, qx, qy, qz`` (or ``rx, ry, rz`` as a rotation vector), ``sx, sy, sz``, ``set``
-and ``temperature``.  Files written by :func:`write_measurements` are SI with
-``# key: value`` metadata lines at the top.  A poses file (what to measure) is the
-same format with joint columns only.
+``qw, qx, qy, qz`` (or ``rx, ry, rz``), ``sx, sy, sz``, ``set`` and ``temperature``.
+Files written by :func:`write_measurements` are SI with ``# key: value`` metadata
+lines at the top.  A poses file (what to measure) is the same format with joint
+columns only.
+
+Reading (:func:`read_measurements`) converts units at the edge: lengths (positions,
+standard deviations, prismatic joints) in ``length_unit``, angles (revolute joints,
+rotation vectors, Euler angles) in ``angle_unit``.  Orientation columns are read as
+
+* ``"quaternion"``: ``qw qx qy qz`` (scalar first, normalised on read);
+* ``"rotvec"``: ``rx ry rz`` rotation vector (axis × angle);
+* ``"euler:SEQ"`` or ``"euler:SEQ:UNIT"``: ``rx ry rz`` are Euler angles in scipy's
+  sequence ``SEQ`` (upper case intrinsic, lower case extrinsic, see
+  :mod:`robocal.spatial`); ``UNIT`` (``deg``/``rad``) overrides ``angle_unit`` for
+  these columns only, for files whose joints are in rad and angles in degrees;
+* ``"auto"`` (default): quaternion columns if present, else ``rx ry rz`` as a
+  rotation vector; ``"none"`` ignores orientation columns.
+
+The UR10 laser-tracker file (``shared/data/ur10_laser_tracker``) stores the T-Mac
+orientation as ``measurement_rx/ry/rz`` in degrees.  They are **intrinsic** XYZ Euler
+angles, ``R = Rx(rx) Ry(ry) Rz(rz)`` (``orientation="euler:XYZ:deg"``).  Found by
+fitting ``R_measured = A · R_fk(q) · B`` (constant tracker rotation A and constant
+flange-to-T-Mac rotation B) over all 11,910 rows: intrinsic XYZ leaves a residual of
+0.10° median / 0.29° max (the arm's own orientation error), extrinsic ``xyz`` 2.6°
+median and up to 172° (it breaks down near ry = -90°, where the file has many rows).
+The robot's commanded ``Goal roll/pitch/yaw`` are extrinsic ``xyz`` (ROS RPY,
+``R = Rz(yaw) Ry(pitch) Rx(roll)``): they agree with the nominal FK to 0.07° median
+once the controller's base is turned by 180° about z and the tool by 90° about z, and
+the measured XYZ angles agree with them to 0.12° median (tests/test_dataset.py).
+
+Everything rejected names the file, the row (1-based line number in the file) and the
+column.  :func:`check_measurements` lists all problems of a file at once.
 """
 
 from __future__ import annotations
@@ -23,26 +51,125 @@ import csv
 import dataclasses
 import io
 import math
+import re
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
+from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text
 
-__all__ = ["MeasurementFileError", "Measurements", "read_measurements", "write_measurements"]
+__all__ = [
+    "MeasurementFileError",
+    "MeasurementWarning",
+    "Measurements",
+    "Problem",
+    "check_measurements",
+    "read_measurements",
+    "write_measurements",
+]
 
 Array = NDArray[np.float64]
 
-LENGTH_UNITS = {"m": 1.0, "mm": 1e-3}
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+
+#: A position column set whose median distance from the device origin (in m, after
+#: conversion) exceeds this is taken to be in mm although read as m (50 m is beyond
+#: any arm-calibration set-up).
+MAX_MEDIAN_DISTANCE = 50.0
+#: ... and below this (m) to be in m although read as mm: 5 mm from the device origin
+#: for the median pose is implausible even for plate and paper frames, whose points lie
+#: centimetres from their origin.
+MIN_MEDIAN_DISTANCE = 0.005
+#: Revolute joint values beyond this (rad) in magnitude look like degrees.
+MAX_REVOLUTE_RAD = 4.0 * math.pi
+
+Severity = Literal["error", "warning"]
+
+#: The kinds of problem :func:`check_measurements` reports (``Problem.code``).
+PROBLEM_CODES = {
+    "file": "the file cannot be read",
+    "header": "no header, or a column named twice",
+    "columns": "a renamed or required column is absent, or a column group is incomplete",
+    "missing-joint": "fewer joint columns than the robot has joints",
+    "extra-joint": "more joint columns than the robot has joints",
+    "no-data": "no data rows",
+    "ragged": "a row with more or fewer cells than the header",
+    "empty": "an empty cell",
+    "not-a-number": "a cell that is not a number",
+    "not-finite": "NaN or inf",
+    "length-unit": "positions whose size suggests another length unit",
+    "angle-unit": "angles whose size suggests degrees read as radians",
+    "limits": "a joint value outside the robot's joint limits",
+    "duplicate": "a row identical to an earlier one",
+    "repeated-pose": "joint values repeated in a poses file (a warning)",
+    "split": "a train/test label other than 'train' or 'test'",
+    "quaternion": "a quaternion whose norm is not 1",
+    "sigma": "a negative standard deviation",
+}
+LimitsMode = Literal["error", "warn", "ignore"]
+
+_POSITION = ("x", "y", "z")
+_QUATERNION = ("qw", "qx", "qy", "qz")
+_ANGLES = ("rx", "ry", "rz")
+_SIGMA = ("sx", "sy", "sz")
+_KNOWN = {*_POSITION, *_QUATERNION, *_ANGLES, *_SIGMA, "set", "temperature"}
 
 
 class MeasurementFileError(ValueError):
-    """A measurement file could not be used; the message names file, row and column."""
+    """A measurement file could not be used; the message names file, row and column.
+
+    Attributes:
+        problems: every problem found (errors and warnings), as :class:`Problem`.
+    """
+
+    def __init__(self, message: str, problems: Sequence[Problem] = ()) -> None:
+        super().__init__(message)
+        self.problems = list(problems)
+
+
+class MeasurementWarning(UserWarning):
+    """A measurement file was read but something in it looks doubtful."""
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One problem found in a measurement file.
+
+    Attributes:
+        severity: ``"error"`` (the file is rejected) or ``"warning"``.
+        code: the kind of problem, one of :data:`PROBLEM_CODES`.
+        message: what is wrong, with a hint on how to fix it where one is known.
+        file: the file.
+        row: 1-based line number in the file (the header's line for header problems),
+            or None when the problem concerns a whole column.
+        column: the column's name as written in the file, or None for a whole row.
+    """
+
+    severity: Severity
+    code: str
+    message: str
+    file: str
+    row: int | None = None
+    column: str | None = None
+
+    def __str__(self) -> str:
+        where = [self.file]
+        loc = []
+        if self.row is not None:
+            loc.append(f"row {self.row}")
+        if self.column is not None:
+            loc.append(f"column {self.column!r}")
+        if loc:
+            where.append(", ".join(loc))
+        return ": ".join([*where, self.message])
 
 
 def _optional(a: ArrayLike | None, shape_tail: tuple[int, ...], n: int, what: str) -> Array | None:
@@ -62,10 +189,12 @@ class Measurements:
         q: ``(n, dof)`` joint values (rad or m).
         position: ``(n, 3)`` measured positions (m) in the device frame, or None.
         orientation: ``(n, 3, 3)`` measured rotations in the device frame, or None.
-        sigma: ``(n, 3)`` per-row position standard deviations (m), or None.
+        sigma: ``(n, 3)`` per-row position standard deviations (m) along the device
+            axes, or None.
         split: ``(n,)`` labels ``"train"``/``"test"``, or None.
         temperature: ``(n,)`` °C, or None.
-        extra: other numeric columns by name, each ``(n,)``.
+        extra: other numeric columns by name, each ``(n,)`` (as in the file, no unit
+            conversion).
         joint_names: names of the joint columns in the source (default q1..qN).
         metadata: free-form strings (device, frame, units, file...).
     """
@@ -118,6 +247,14 @@ class Measurements:
     def dof(self) -> int:
         return self.q.shape[1]
 
+    @property
+    def observes(self) -> Literal["joints", "position", "pose"]:
+        """What the rows hold besides joints: ``"joints"`` only (a poses file),
+        ``"position"`` or ``"pose"`` (position and orientation)."""
+        if self.position is None:
+            return "joints"
+        return "position" if self.orientation is None else "pose"
+
     def subset(self, rows: ArrayLike) -> Measurements:
         """The rows selected by an index array or boolean mask, in that order."""
         idx = np.asarray(rows)
@@ -163,7 +300,8 @@ def write_measurements(data: Measurements, path: str | Path) -> Path:
     """Write ``data`` as CSV (SI units, ``,`` separator) atomically.
 
     Columns: joint names as ``q1..qN``, then ``x y z``, ``qw qx qy qz``, ``sx sy sz``,
-    ``temperature``, extra columns and ``set`` when present.
+    ``temperature``, extra columns and ``set`` when present.  Floats are written with
+    shortest round-trip formatting, so reading the file back gives the same numbers.
     """
     header = [f"q{j + 1}" for j in range(data.dof)]
     cols: list[Array] = [data.q]
@@ -189,7 +327,7 @@ def write_measurements(data: Measurements, path: str | Path) -> Path:
     if data.joint_names != tuple(header[: data.dof]):
         meta["joints"] = " ".join(data.joint_names)
     for key, value in meta.items():
-        buf.write(f"# {key}: {value}\n")
+        buf.write(f"# {key}: {' '.join(str(value).split())}\n")
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header + (["set"] if data.split is not None else []))
     for i, row in enumerate(table):
@@ -201,154 +339,678 @@ def write_measurements(data: Measurements, path: str | Path) -> Path:
 
 
 # ------------------------------------------------------------------------ reading
-def read_measurements(
-    path: str | Path,
-    *,
-    length_unit: str = "m",
-    angle_unit: str = "rad",
-    columns: Mapping[str, str] | Sequence[str] | None = None,
-    sep: str | None = None,
-    decimal: str = ".",
-    dof: int | None = None,
-) -> Measurements:
-    """Read a measurement (or poses) CSV file.
+@dataclass(frozen=True)
+class _Orientation:
+    kind: Literal["auto", "none", "quaternion", "rotvec", "euler"]
+    seq: str = ""
+    unit: str | None = None
 
-    Args:
-        path: the file.
-        length_unit: ``"m"`` or ``"mm"`` for positions and standard deviations.
-        angle_unit: ``"rad"`` or ``"deg"`` for revolute joint values and rotation
-            vectors.
-        columns: renames from robocal's column names to the file's, e.g.
-            ``{"q1": "shoulder_pan_joint", "x": "measurement_x"}`` or
-            ``["q1=shoulder_pan_joint", ...]``.
-        sep: column separator; sniffed from the header when None (``,`` ``;`` tab).
-        decimal: decimal mark, ``"."`` or ``","`` (real exports use ``;`` and ``,``).
-        dof: expected number of joint columns; when None, ``q1, q2, ...`` are taken
-            while present.
 
-    Raises:
-        MeasurementFileError: naming the file, row (1-based line number) and column.
-    """
-    path = Path(path)
-    if length_unit not in LENGTH_UNITS:
-        raise ValueError(f"length_unit must be one of {sorted(LENGTH_UNITS)}, got {length_unit!r}")
-    if angle_unit not in ANGLE_UNITS:
-        raise ValueError(f"angle_unit must be one of {sorted(ANGLE_UNITS)}, got {angle_unit!r}")
-    rename = _parse_columns(columns)
-    text = path.read_text(encoding="utf-8-sig")
-    lines = text.splitlines()
-    metadata: dict[str, str] = {}
-    first = 0
-    while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
-        line = lines[first].lstrip("#").strip()
-        if ":" in line:
-            key, value = line.split(":", 1)
-            metadata[key.strip()] = value.strip()
-        first += 1
-    if first >= len(lines):
-        raise MeasurementFileError(f"{path}: no header row")
-    if sep is None:
-        header_line = lines[first]
-        sep = max((";", "\t", ","), key=header_line.count)
-    reader = csv.reader(lines[first:], delimiter=sep)
-    header = [h.strip() for h in next(reader)]
-    where = {name: k for k, name in enumerate(header)}
-    for dup in {h for h in header if header.count(h) > 1}:
-        raise MeasurementFileError(f"{path}: column {dup!r} appears more than once in the header")
-
-    def col(name: str) -> str:
-        return rename.get(name, name)
-
-    def has(name: str) -> bool:
-        return col(name) in where
-
-    if dof is None:
-        dof = 0
-        while has(f"q{dof + 1}"):
-            dof += 1
-    if dof == 0:
-        raise MeasurementFileError(
-            f"{path}: no joint columns: expected q1, q2, ... (or renames such as "
-            f"columns={{'q1': 'shoulder_pan_joint'}}); header is {header}"
-        )
-    missing = [f"q{j + 1}" for j in range(dof) if not has(f"q{j + 1}")]
-    if missing:
-        raise MeasurementFileError(f"{path}: missing joint column(s) {', '.join(col(m) for m in missing)}")
-
-    rows = [r for r in reader]
-    body_start = first + 2  # 1-based line number of the first data row
-
-    def numbers(names: list[str]) -> Array:
-        out = np.empty((len(rows), len(names)))
-        for c, name in enumerate(names):
-            k = where[col(name)]
-            for i, r in enumerate(rows):
-                cell = r[k].strip() if k < len(r) else ""
-                if decimal == ",":
-                    cell = cell.replace(",", ".")
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise MeasurementFileError(
-                        f"{path}: row {body_start + i}, column {col(name)!r}: {cell!r} is not a number"
-                    ) from None
-                if not math.isfinite(v):
-                    raise MeasurementFileError(
-                        f"{path}: row {body_start + i}, column {col(name)!r}: value {cell!r} is not finite"
-                    )
-                out[i, c] = v
-        return out
-
-    for i, r in enumerate(rows):
-        if len(r) != len(header) and any(cell.strip() for cell in r):
-            raise MeasurementFileError(
-                f"{path}: row {body_start + i} has {len(r)} cells but the header has {len(header)}"
+def _parse_orientation(spec: str) -> _Orientation:
+    text = str(spec).strip()
+    low = text.lower()
+    if low in ("auto", "none", "rotvec"):
+        return _Orientation(low)  # type: ignore[arg-type]
+    if low in ("quaternion", "quat"):
+        return _Orientation("quaternion")
+    if low.startswith("euler"):
+        parts = text.split(":")
+        if len(parts) not in (2, 3) or parts[0].lower() != "euler":
+            raise ValueError(f"orientation={spec!r}: expected 'euler:SEQ' or 'euler:SEQ:deg'")
+        seq = parts[1]
+        if not re.fullmatch(r"[xyz]{3}|[XYZ]{3}", seq) or seq[0] == seq[1] or seq[1] == seq[2]:
+            raise ValueError(
+                f"orientation={spec!r}: Euler sequence {seq!r} must be three axes, all upper case "
+                "(intrinsic, e.g. 'XYZ') or all lower case (extrinsic, e.g. 'xyz'), no axis twice in a row"
             )
-    L, A = LENGTH_UNITS[length_unit], ANGLE_UNITS[angle_unit]
-    q = numbers([f"q{j + 1}" for j in range(dof)]) * A
-    position = numbers(["x", "y", "z"]) * L if all(has(c) for c in "xyz") else None
-    orientation = None
-    if all(has(c) for c in ("qw", "qx", "qy", "qz")):
-        orientation = spatial.quaternion_to_matrix(numbers(["qw", "qx", "qy", "qz"]))
-    elif all(has(c) for c in ("rx", "ry", "rz")):
-        orientation = spatial.rotvec_to_matrix(numbers(["rx", "ry", "rz"]) * A)
-    sigma = numbers(["sx", "sy", "sz"]) * L if all(has(c) for c in ("sx", "sy", "sz")) else None
-    temperature = numbers(["temperature"])[:, 0] if has("temperature") else None
-    split = None
-    if has("set"):
-        k = where[col("set")]
-        split = np.array([r[k].strip().lower() for r in rows])
-        bad = [i for i, s in enumerate(split) if s not in ("train", "test")]
-        if bad:
-            raise MeasurementFileError(
-                f"{path}: row {body_start + bad[0]}, column {col('set')!r}: "
-                f"{rows[bad[0]][k]!r} is not 'train' or 'test'"
-            )
-    joint_names = tuple(metadata.pop("joints", "").split()) or tuple(col(f"q{j + 1}") for j in range(dof))
-    if len(joint_names) != dof:
-        joint_names = tuple(col(f"q{j + 1}") for j in range(dof))
-    metadata.setdefault("file", str(path))
-    return Measurements(
-        q=q,
-        position=position,
-        orientation=orientation,
-        sigma=sigma,
-        split=split,
-        temperature=temperature,
-        joint_names=joint_names,
-        metadata=metadata,
+        unit = parts[2].lower() if len(parts) == 3 else None
+        if unit is not None and unit not in ANGLE_UNITS:
+            raise ValueError(f"orientation={spec!r}: angle unit must be one of {sorted(ANGLE_UNITS)}")
+        return _Orientation("euler", seq, unit)
+    raise ValueError(
+        f"orientation={spec!r}: expected 'auto', 'none', 'quaternion', 'rotvec', 'euler:SEQ' "
+        "or 'euler:SEQ:UNIT'"
     )
 
 
-def _parse_columns(columns: Mapping[str, str] | Sequence[str] | None) -> dict[str, str]:
+def _parse_columns(columns: Mapping[str, str] | Sequence[str] | str | None) -> dict[str, str]:
+    """Renames robocal name -> file column from a mapping, ``["q1=a", ...]`` or ``"q1=a,q2=b"``."""
     if columns is None:
         return {}
     if isinstance(columns, Mapping):
-        return {str(k): str(v) for k, v in columns.items()}
+        return {str(k).strip(): str(v).strip() for k, v in columns.items()}
+    items = columns.split(",") if isinstance(columns, str) else list(columns)
     out = {}
-    for item in columns:
+    for item in items:
+        if not str(item).strip():
+            continue
         if "=" not in item:
             raise ValueError(f"column rename {item!r} must look like 'q1=shoulder_pan_joint'")
         k, v = item.split("=", 1)
         out[k.strip()] = v.strip()
     return out
+
+
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+
+
+class _Reader:
+    """One pass over a file that collects every problem instead of stopping at the first."""
+
+    def __init__(
+        self,
+        path: Path,
+        *,
+        length_unit: str,
+        angle_unit: str,
+        columns: Mapping[str, str] | Sequence[str] | str | None,
+        sep: str | None,
+        decimal: str,
+        dof: int | None,
+        model: Model | None,
+        limits: LimitsMode,
+        orientation: str,
+        extra: Sequence[str],
+    ) -> None:
+        if length_unit not in LENGTH_UNITS:
+            raise ValueError(f"length_unit must be one of {sorted(LENGTH_UNITS)}, got {length_unit!r}")
+        if angle_unit not in ANGLE_UNITS:
+            raise ValueError(f"angle_unit must be one of {sorted(ANGLE_UNITS)}, got {angle_unit!r}")
+        if decimal not in (".", ","):
+            raise ValueError(f"decimal must be '.' or ',', got {decimal!r}")
+        if sep is not None and (len(sep) != 1 or sep == decimal or sep in "\"'"):
+            raise ValueError(f"sep must be one character other than the decimal mark, got {sep!r}")
+        if limits not in ("error", "warn", "ignore"):
+            raise ValueError(f"limits must be 'error', 'warn' or 'ignore', got {limits!r}")
+        if model is not None and dof is not None and dof != model.dof:
+            raise ValueError(f"dof={dof} contradicts model {model.name!r} with {model.dof} joints")
+        self.path = path
+        self.L = LENGTH_UNITS[length_unit]
+        self.A = ANGLE_UNITS[angle_unit]
+        self.length_unit, self.angle_unit = length_unit, angle_unit
+        self.rename = _parse_columns(columns)
+        self.sep, self.decimal = sep, decimal
+        self.dof, self.model, self.limits = dof, model, limits
+        self.orientation = _parse_orientation(orientation)
+        self.extra_names = list(extra)
+        self.problems: list[Problem] = []
+
+    # -- problem helpers
+    def error(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
+        self.problems.append(Problem("error", code, message, str(self.path), row, column))
+
+    def warn(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
+        self.problems.append(Problem("warning", code, message, str(self.path), row, column))
+
+    @property
+    def ok(self) -> bool:
+        return not any(p.severity == "error" for p in self.problems)
+
+    # -- the pass
+    def read(self) -> Measurements | None:
+        path = self.path
+        try:
+            text = path.read_text(encoding="utf-8-sig")
+        except FileNotFoundError:
+            self.error("file", "file not found")
+            return None
+        except (OSError, UnicodeDecodeError) as err:
+            self.error("file", f"cannot be read as UTF-8 text: {err}")
+            return None
+        lines = text.splitlines()
+        metadata: dict[str, str] = {}
+        first = 0
+        while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
+            line = lines[first].lstrip("#").strip()
+            if ":" in line:
+                key, value = line.split(":", 1)
+                metadata[key.strip()] = value.strip()
+            first += 1
+        if first >= len(lines):
+            self.error("header", "no header row (the file is empty or only has comments)")
+            return None
+        self.header_line = first + 1
+        sep = self.sep
+        if sep is None:
+            header_text = lines[first]
+            sep = max((";", "\t", ","), key=header_text.count)
+            if sep == self.decimal:
+                sep = ";"
+        header = [h.strip() for h in next(csv.reader([lines[first]], delimiter=sep))]
+        self.header = header
+        where: dict[str, int] = {}
+        for k, name in enumerate(header):
+            if name in where:
+                self.error(
+                    "header",
+                    f"column {name!r} appears more than once in the header (columns {where[name] + 1} "
+                    f"and {k + 1})",
+                    self.header_line,
+                    name,
+                )
+            elif name:
+                where[name] = k
+        self.where = where
+
+        body = [(i + 1, ln) for i, ln in enumerate(lines[first + 1 :], start=first + 1) if ln.strip()]
+        body = [(no, ln) for no, ln in body if not ln.lstrip().startswith("#")]
+        rows = list(csv.reader([ln for _, ln in body], delimiter=sep))
+        self.line_no = np.array([no for no, _ in body], dtype=int)
+        self.rows = rows
+
+        cols = self._resolve_columns()
+        if cols is None:
+            return None
+        if not rows:
+            self.error("no-data", "no data rows after the header", self.header_line)
+            return None
+
+        # ragged rows: reported once, their cells are not looked at again
+        good = np.ones(len(rows), dtype=bool)
+        for i, r in enumerate(rows):
+            if len(r) != len(header):
+                good[i] = False
+                self.error(
+                    "ragged",
+                    f"has {len(r)} cells but the header has {len(header)} (separator {sep!r})",
+                    int(self.line_no[i]),
+                )
+        self.good = good
+
+        joint_cols, joint_scale = cols["joints"], cols["joint_scale"]
+        q = self._numbers(joint_cols) * joint_scale
+        position = sigma = orientation = temperature = None
+        if cols["position"]:
+            position = self._numbers(cols["position"]) * self.L
+        if cols["sigma"]:
+            sigma = self._numbers(cols["sigma"]) * self.L
+            bad = good[:, None] & np.isfinite(sigma) & (sigma < 0)
+            for i, c in np.argwhere(bad):
+                self.error(
+                    "sigma",
+                    f"standard deviation {self._cell(i, cols['sigma'][c])!r} is negative",
+                    int(self.line_no[i]),
+                    cols["sigma"][c],
+                )
+        ori_cols = cols["orientation"]
+        ori_values = self._numbers(ori_cols) if ori_cols else None
+        if cols["temperature"]:
+            temperature = self._numbers(cols["temperature"])[:, 0]
+        extra = {name: self._numbers([name])[:, 0] for name in cols["extra"]}
+        split = self._split(cols["set"]) if cols["set"] else None
+
+        if ori_values is not None:
+            orientation = self._orientation(ori_values, ori_cols, cols["orientation_kind"])
+
+        if position is not None:
+            self._check_length_unit(position, cols["position"])
+        self._check_joints(q, joint_cols)
+        self._check_duplicates(cols, q, position, ori_values, sigma, split)
+
+        if not self.ok:
+            return None
+        joint_names = tuple(metadata.pop("joints", "").split())
+        if len(joint_names) != len(joint_cols):
+            joint_names = tuple(joint_cols)
+        metadata.setdefault("file", str(path))
+        metadata["read_units"] = f"{self.length_unit}, {self.angle_unit}"
+        if orientation is not None:
+            metadata["read_orientation"] = cols["orientation_kind"]
+        return Measurements(
+            q=q,
+            position=position,
+            orientation=orientation,
+            sigma=sigma,
+            split=split,
+            temperature=temperature,
+            extra=extra,
+            joint_names=joint_names,
+            metadata=metadata,
+        )
+
+    # -- columns
+    def _col(self, name: str) -> str:
+        return self.rename.get(name, name)
+
+    def _has(self, name: str) -> bool:
+        return self._col(name) in self.where
+
+    def _resolve_columns(self) -> dict | None:
+        hl = self.header_line
+        model = self.model
+        joint_like = re.compile(r"q(\d+)$")
+        known_keys = set(_KNOWN) | set(model.joint_names if model else ())
+        for key, target in self.rename.items():
+            if not (key in known_keys or joint_like.match(key)):
+                raise ValueError(
+                    f"columns: {key!r} is not a robocal column name (q1.., x y z, qw qx qy qz, "
+                    f"rx ry rz, sx sy sz, set, temperature{', model joint names' if model else ''})"
+                )
+            if target not in self.where:
+                self.error(
+                    "columns",
+                    f"column {target!r} (given for {key!r} in columns=) is not in the header; header: "
+                    f"{', '.join(self.header)}",
+                    hl,
+                    target,
+                )
+        # joints
+        joints: list[str] = []
+        if model is not None:
+            missing = []
+            for j, jname in enumerate(model.joint_names):
+                candidates = [self.rename.get(f"q{j + 1}"), self.rename.get(jname), f"q{j + 1}", jname]
+                found = next((c for c in candidates if c is not None and c in self.where), None)
+                if found is None:
+                    missing.append(f"q{j + 1} ({jname})")
+                else:
+                    joints.append(found)
+            if missing:
+                self.error(
+                    "missing-joint",
+                    f"missing joint column(s) {', '.join(missing)}: model {model.name!r} has "
+                    f"{model.dof} joints ({', '.join(model.joint_names)}); rename with e.g. "
+                    f"columns={{'q1': '<file column>'}}",
+                    hl,
+                )
+            dof = model.dof
+        else:
+            dof = self.dof
+            if dof is None:
+                dof = 0
+                while self._has(f"q{dof + 1}"):
+                    dof += 1
+            missing = [f"q{j + 1}" for j in range(dof) if not self._has(f"q{j + 1}")]
+            if missing:
+                self.error(
+                    "missing-joint",
+                    f"missing joint column(s) {', '.join(missing)} (expected {dof} joints)",
+                    hl,
+                )
+            joints = [self._col(f"q{j + 1}") for j in range(dof) if self._has(f"q{j + 1}")]
+            if dof == 0:
+                self.error(
+                    "missing-joint",
+                    "no joint columns: expected q1, q2, ... (or renames such as "
+                    f"columns={{'q1': 'shoulder_pan_joint'}}); header is {', '.join(self.header)}",
+                    hl,
+                )
+        # joint-like columns beyond the model's or the counted joints
+        if model is not None:
+            expected = f"model {model.name!r} has {dof} joints ({', '.join(model.joint_names)})"
+        elif self.dof is not None:
+            expected = f"dof={dof} joints expected"
+        else:
+            expected = f"joints are read as q1..q{dof} while present, and q{dof + 1} is missing"
+        for name in self.header:
+            m = joint_like.match(name)
+            if m and int(m.group(1)) > dof and name not in self.rename.values():
+                self.error("extra-joint", f"extra joint column {name!r}: {expected}", hl, name)
+        for key in self.rename:
+            m = joint_like.match(key)
+            if m and int(m.group(1)) > dof:
+                self.error(
+                    "extra-joint",
+                    f"extra joint column {self.rename[key]!r} (given for {key!r}): {expected}",
+                    hl,
+                    self.rename[key],
+                )
+        types = model.joint_types if model is not None else ("revolute",) * len(joints)
+        joint_scale = np.array([self.A if t == "revolute" else self.L for t in types[: len(joints)]])
+
+        def group(names: Sequence[str], what: str, required: bool = False) -> list[str]:
+            present = [n for n in names if self._has(n)]
+            if (present and len(present) < len(names)) or (required and not present):
+                absent = [self._col(n) for n in names if not self._has(n)]
+                listed = ", ".join(map(self._col, names))
+                self.error(
+                    "columns", f"{what} needs columns {listed}; missing {', '.join(absent)}", hl, absent[0]
+                )
+                return []
+            return [self._col(n) for n in names] if present else []
+
+        position = group(_POSITION, "a position")
+        sigma = group(_SIGMA, "a per-row standard deviation")
+        ori = self.orientation
+        ori_cols: list[str] = []
+        kind = ""
+        if ori.kind == "auto":
+            if any(self._has(n) for n in _QUATERNION):
+                ori_cols, kind = group(_QUATERNION, "a quaternion"), "quaternion"
+            elif any(self._has(n) for n in _ANGLES):
+                ori_cols, kind = group(_ANGLES, "a rotation vector"), "rotvec"
+        elif ori.kind == "quaternion":
+            ori_cols, kind = group(_QUATERNION, "orientation='quaternion'", True), "quaternion"
+        elif ori.kind == "rotvec":
+            ori_cols, kind = group(_ANGLES, "orientation='rotvec'", True), "rotvec"
+        elif ori.kind == "euler":
+            ori_cols = group(_ANGLES, f"orientation='euler:{ori.seq}'", True)
+            kind = f"euler:{ori.seq}:{ori.unit or self.angle_unit}"
+        if ori_cols and not position:
+            self.error("columns", "orientation columns without position columns x, y, z", hl, ori_cols[0])
+        for name in self.extra_names:
+            if name not in self.where:
+                self.error("columns", f"column {name!r} (asked for in extra=) is not in the header", hl, name)
+        if not self.ok:
+            return None
+        return {
+            "joints": joints,
+            "joint_scale": joint_scale,
+            "position": position,
+            "sigma": sigma,
+            "orientation": ori_cols,
+            "orientation_kind": kind,
+            "temperature": [self._col("temperature")] if self._has("temperature") else [],
+            "set": self._col("set") if self._has("set") else None,
+            "extra": [n for n in self.extra_names if n in self.where],
+        }
+
+    # -- cells
+    def _cell(self, i: int, name: str) -> str:
+        r = self.rows[i]
+        k = self.where[name]
+        return r[k].strip() if k < len(r) else ""
+
+    def _numbers(self, names: Sequence[str]) -> Array:
+        """``(n, len(names))`` floats; bad cells are reported and left NaN."""
+        n = len(self.rows)
+        out = np.full((n, len(names)), np.nan)
+        good = np.flatnonzero(self.good)
+        for c, name in enumerate(names):
+            k = self.where[name]
+            cells = [self.rows[i][k].strip() for i in good]
+            if self.decimal == ",":
+                cells = [s.replace(",", ".") for s in cells]
+            try:
+                values = np.array(cells).astype(float) if cells else np.zeros(0)
+            except ValueError:
+                values = np.full(len(cells), np.nan)
+                for m, (i, s) in enumerate(zip(good, cells, strict=True)):
+                    try:
+                        values[m] = float(s)
+                    except ValueError:
+                        raw = self.rows[i][k].strip()
+                        if not raw:
+                            self.error("empty", "empty cell (missing value)", int(self.line_no[i]), name)
+                            continue
+                        hint = ""
+                        if self.decimal == "." and _DECIMAL_COMMA.match(raw):
+                            hint = "; it looks like a decimal comma: pass decimal=','"
+                        self.error(
+                            "not-a-number", f"{raw!r} is not a number{hint}", int(self.line_no[i]), name
+                        )
+                    else:
+                        if not math.isfinite(values[m]):
+                            values[m] = np.nan  # reported below
+                            self.error("not-finite", f"value {s!r} is not finite", int(self.line_no[i]), name)
+                out[good, c] = values
+                continue
+            bad = ~np.isfinite(values)
+            for m in np.flatnonzero(bad):
+                i = good[m]
+                self.error(
+                    "not-finite",
+                    f"value {self.rows[i][k].strip()!r} is not finite",
+                    int(self.line_no[i]),
+                    name,
+                )
+            out[good, c] = values
+        return out
+
+    def _split(self, name: str) -> NDArray[np.str_] | None:
+        k = self.where[name]
+        labels = np.array([r[k].strip().lower() if k < len(r) else "" for r in self.rows], dtype="<U5")
+        for i in np.flatnonzero(self.good & ~np.isin(labels, ("train", "test"))):
+            self.error(
+                "split",
+                f"{self.rows[i][k].strip()!r} is not a train/test label (expected 'train' or 'test')",
+                int(self.line_no[i]),
+                name,
+            )
+        return labels
+
+    def _orientation(self, values: Array, names: list[str], kind: str) -> Array | None:
+        ok = self.good & np.all(np.isfinite(values), axis=1)
+        if kind == "quaternion":
+            norm = np.linalg.norm(values, axis=1)
+            for i in np.flatnonzero(ok & (np.abs(norm - 1.0) > 1e-2)):
+                self.error(
+                    "quaternion",
+                    f"quaternion ({', '.join(names)}) has norm {norm[i]:.6g}, not 1",
+                    int(self.line_no[i]),
+                    names[0],
+                )
+            if not self.ok:
+                return None
+            return spatial.quaternion_to_matrix(values)
+        unit = self.A
+        if kind.startswith("euler"):
+            unit = ANGLE_UNITS[kind.split(":")[2]]
+        big = np.nanmax(np.abs(values), axis=0, initial=0.0) * unit
+        fix = "angle_unit='deg'"
+        if kind.startswith("euler"):
+            fix = f"orientation={kind.rsplit(':', 1)[0] + ':deg'!r}"
+        for c in np.flatnonzero(big > 2 * math.pi + 1e-6):
+            self.error(
+                "angle-unit",
+                f"orientation angles up to {big[c]:.4g} rad ({self._rows_text()}): "
+                f"looks like degrees: pass {fix}",
+                None,
+                names[c],
+            )
+        if not self.ok:
+            return None
+        if kind == "rotvec":
+            return spatial.rotvec_to_matrix(values * unit)
+        return spatial.euler_to_matrix(values * unit, kind.split(":")[1])
+
+    # -- checks across rows
+    def _rows_text(self) -> str:
+        return f"rows {self.line_no[0]}-{self.line_no[-1]}"
+
+    def _check_length_unit(self, position: Array, names: list[str]) -> None:
+        dist = np.linalg.norm(position, axis=1)
+        dist = dist[np.isfinite(dist)]
+        if dist.size == 0:
+            return
+        med = float(np.median(dist))
+        cols = "/".join(names)
+        if med > MAX_MEDIAN_DISTANCE and self.length_unit != "mm":
+            self.error(
+                "length-unit",
+                f"median distance of the positions from the device origin is {med:.4g} m with "
+                f"length_unit={self.length_unit!r} ({self._rows_text()}): "
+                "looks like mm: pass length_unit='mm'",
+                None,
+                cols,
+            )
+        elif med < MIN_MEDIAN_DISTANCE and self.length_unit != "m":
+            self.error(
+                "length-unit",
+                f"median distance of the positions from the device origin is {med * 1000:.4g} mm with "
+                f"length_unit={self.length_unit!r} ({self._rows_text()}): "
+                "looks like m: pass length_unit='m'",
+                None,
+                cols,
+            )
+
+    def _check_joints(self, q: Array, names: list[str]) -> None:
+        model = self.model
+        types = model.joint_types if model is not None else ("revolute",) * len(names)
+        for j, name in enumerate(names):
+            if types[j] != "revolute" or self.angle_unit != "rad":
+                continue
+            col = q[:, j]
+            big = np.nanmax(np.abs(col), initial=0.0)
+            if big > MAX_REVOLUTE_RAD:
+                i = int(np.nanargmax(np.abs(col)))
+                self.error(
+                    "angle-unit",
+                    f"revolute joint values up to {big:.4g} rad (row {self.line_no[i]}): looks like "
+                    "degrees: pass angle_unit='deg'",
+                    None,
+                    name,
+                )
+        if model is None or self.limits == "ignore":
+            return
+        lim = model.joint_limits
+        outside = (q < lim[:, 0]) | (q > lim[:, 1])
+        report = self.error if self.limits == "error" else self.warn
+        for i, j in np.argwhere(outside):
+            kind = model.joint_types[j]
+            unit, scale = (self.angle_unit, self.A) if kind == "revolute" else (self.length_unit, self.L)
+            lo, hi = lim[j] / scale
+            report(
+                "limits",
+                f"joint {model.joint_names[j]} = {q[i, j] / scale:.6g} {unit} is outside the limits "
+                f"[{lo:.6g}, {hi:.6g}] {unit} of model {model.name!r}",
+                int(self.line_no[i]),
+                names[j],
+            )
+
+    def _check_duplicates(self, cols, q, position, ori_values, sigma, split) -> None:
+        parts = [q] + [a for a in (position, ori_values, sigma) if a is not None]
+        table = np.concatenate(parts, axis=1)
+        if split is not None:
+            table = np.concatenate([table, (split == "train")[:, None].astype(float)], axis=1)
+        usable = np.flatnonzero(self.good & np.all(np.isfinite(table), axis=1))
+        if usable.size < 2:
+            return
+        _, first, inverse, counts = np.unique(
+            table[usable], axis=0, return_index=True, return_inverse=True, return_counts=True
+        )
+        inverse = inverse.reshape(-1)
+        joints_only = position is None
+        for m in np.flatnonzero(counts[inverse] > 1):
+            i, i0 = usable[m], usable[first[inverse[m]]]
+            if i == i0:
+                continue
+            if joints_only:
+                self.warn(
+                    "repeated-pose",
+                    f"repeats the joint values of row {self.line_no[i0]} (a repeated pose)",
+                    int(self.line_no[i]),
+                )
+            else:
+                self.error(
+                    "duplicate",
+                    f"duplicates row {self.line_no[i0]} (joint values and measurements identical: "
+                    "a copied row?)",
+                    int(self.line_no[i]),
+                )
+
+
+def _collect(path: str | Path, options: dict) -> tuple[Measurements | None, list[Problem]]:
+    reader = _Reader(Path(path), **options)
+    data = reader.read()
+    return data, reader.problems
+
+
+def _options(
+    length_unit: str = "m",
+    angle_unit: str = "rad",
+    columns: Mapping[str, str] | Sequence[str] | str | None = None,
+    sep: str | None = None,
+    decimal: str = ".",
+    dof: int | None = None,
+    model: Model | None = None,
+    limits: LimitsMode = "error",
+    orientation: str = "auto",
+    extra: Sequence[str] = (),
+) -> dict:
+    return dict(
+        length_unit=length_unit,
+        angle_unit=angle_unit,
+        columns=columns,
+        sep=sep,
+        decimal=decimal,
+        dof=dof,
+        model=model,
+        limits=limits,
+        orientation=orientation,
+        extra=extra,
+    )
+
+
+def read_measurements(
+    path: str | Path,
+    *,
+    length_unit: str = "m",
+    angle_unit: str = "rad",
+    columns: Mapping[str, str] | Sequence[str] | str | None = None,
+    sep: str | None = None,
+    decimal: str = ".",
+    dof: int | None = None,
+    model: Model | None = None,
+    limits: LimitsMode = "error",
+    orientation: str = "auto",
+    extra: Sequence[str] = (),
+) -> Measurements:
+    """Read a measurement (or poses) CSV file; all or nothing.
+
+    Args:
+        path: the file.
+        length_unit: ``"m"``, ``"mm"`` or ``"um"`` for positions, standard deviations
+            and prismatic joint values.
+        angle_unit: ``"rad"`` or ``"deg"`` for revolute joint values and orientation
+            angles (see ``orientation`` for a separate unit of Euler angles).
+        columns: renames from robocal's column names to the file's, e.g.
+            ``{"q1": "shoulder_pan_joint", "x": "measurement_x"}``,
+            ``["q1=shoulder_pan_joint", ...]`` or ``"q1=shoulder_pan_joint,x=measurement_x"``.
+            With a model, joint columns may also be keyed (or named in the file) by the
+            model's joint names.
+        sep: column separator; sniffed from the header when None (``;`` tab ``,``).
+        decimal: decimal mark, ``"."`` or ``","`` (real exports use ``;`` and ``,``).
+        dof: expected number of joint columns when no model is given; when None,
+            ``q1, q2, ...`` are taken while present.
+        model: the robot; the file must then have exactly its joints (missing and extra
+            joint columns are named), prismatic joints are read in ``length_unit`` and
+            revolute ones in ``angle_unit``, and values are checked against its limits.
+        limits: what a joint value outside the model's limits is: ``"error"``,
+            ``"warn"`` (a :class:`MeasurementWarning`) or ``"ignore"``.
+        orientation: ``"auto"``, ``"none"``, ``"quaternion"``, ``"rotvec"``,
+            ``"euler:SEQ"`` or ``"euler:SEQ:UNIT"`` (module docstring).
+        extra: further numeric columns to keep, by their names in the file, in
+            :attr:`Measurements.extra` (unconverted).
+
+    Returns:
+        :class:`Measurements` in SI units; ``metadata`` has the ``# key: value`` lines
+        of the file, ``file`` and the units and orientation convention read.
+
+    Raises:
+        MeasurementFileError: naming the file, row (1-based line number) and column of
+            the first error, with every problem in ``.problems``.  Rejected: NaN/inf,
+            empty and non-numeric cells, ragged rows, missing/extra joint columns,
+            incomplete column groups, joint values outside the limits (unless
+            ``limits`` says otherwise), duplicated rows, positions or angles whose size
+            suggests the wrong unit, non-unit quaternions, negative standard
+            deviations, train/test labels other than ``train``/``test``.  Repeated joint
+            values in a joints-only (poses) file are only warned about: repeating a
+            pose is how repeatability is measured.
+        ValueError: on invalid options.
+    """
+    opts = _options(length_unit, angle_unit, columns, sep, decimal, dof, model, limits, orientation, extra)
+    data, problems = _collect(path, opts)
+    errors = [p for p in problems if p.severity == "error"]
+    if errors or data is None:
+        more = f" (and {len(errors) - 1} more problem(s); `robocal data check` lists them all)"
+        raise MeasurementFileError(str(errors[0]) + (more if len(errors) > 1 else ""), problems)
+    found = [p for p in problems if p.severity == "warning"]
+    if found:
+        shown = "\n".join(f"  {p}" for p in found[:10])
+        rest = f"\n  ... and {len(found) - 10} more" if len(found) > 10 else ""
+        warnings.warn(
+            MeasurementWarning(f"{len(found)} warning(s) reading {path}:\n{shown}{rest}"), stacklevel=2
+        )
+    return data
+
+
+def check_measurements(path: str | Path, model: Model | None = None, **read_options) -> list[Problem]:
+    """Every problem of a measurement file (errors and warnings), in file order.
+
+    Takes the options of :func:`read_measurements`; an empty list means the file reads
+    cleanly.  ``limits`` defaults to ``"error"`` as in :func:`read_measurements`.
+    """
+    opts = _options(model=model, **read_options)
+    _, problems = _collect(path, opts)
+    return sorted(problems, key=lambda p: (p.row is not None, p.row or 0))

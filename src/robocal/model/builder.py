@@ -440,23 +440,11 @@ def select_identifiable(
         J = J.reshape(len(q), 6, -1)
         J[:, 3:] *= size
         J = J.reshape(len(q) * 6, -1)
-    names = list(full.names)
-    order = list(order) if order is not None else names
-    basis: list[np.ndarray] = []
-    kept: list[str] = []
-    for name in order:
-        col = J[:, names.index(name)]
-        norm = float(np.linalg.norm(col))
-        if norm < 1e-12 * size:
-            continue
-        v = col.copy()
-        for _ in range(2):  # Gram-Schmidt twice for numerical orthogonality
-            for u in basis:
-                v -= (u @ v) * u
-        if np.linalg.norm(v) > tolerance * norm:
-            basis.append(v / np.linalg.norm(v))
-            kept.append(name)
-    kept_set = set(kept)
+    from robocal.identify.subset import select_columns  # identify builds on model: import late
+
+    selection = select_columns(J, full.names, order, tolerance, explain=False)
+    kept_set = set(selection.kept)
+    kept = selection.kept
     return full.with_free(None, free=False).with_free(kept_set), len(kept)
 
 

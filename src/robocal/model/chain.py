@@ -377,12 +377,16 @@ class Model:
 
     @cached_property
     def _segments(self) -> tuple[list[Array], Array]:
-        """Constant segment transforms and each step's local frame, for this model's values.
+        """:meth:`_segment_data` for this model's own values (models are immutable)."""
+        return self._segment_data(self.values)
+
+    def _segment_data(self, values: Array) -> tuple[list[Array], Array]:
+        """Constant segment transforms and each step's local frame for parameter ``values``.
 
         Returns:
             segment transforms ``C_a`` (4, 4) for a = 0..dof (the constant steps after
             anchor a), and ``local`` (P, 4, 4): the frame just before step i expressed
-            in its anchor frame.  Models are immutable, so this is computed once.
+            in its anchor frame.
         """
         plan = self._plan
         local = np.empty((len(self.steps), 4, 4))
@@ -391,14 +395,18 @@ class Model:
             T = np.eye(4)
             for i in seg:
                 local[i] = T
-                T = T @ _elementary(self.steps[i].motion, self.steps[i].value)
+                T = T @ _elementary(self.steps[i].motion, values[i])
             seg_T.append(T)
         for j, i in enumerate(plan.joint_steps):
             local[i] = seg_T[j]  # a joint step starts where the previous segment ends
         return seg_T, local
 
     def _forward(
-        self, q: Array, perturbations: Array | None, keep_anchors: bool
+        self,
+        q: Array,
+        perturbations: Array | None,
+        keep_anchors: bool,
+        values: Array | None = None,
     ) -> tuple[Array, list[Array]]:
         """Batched FK in structure-of-arrays layout.
 
@@ -409,9 +417,13 @@ class Model:
         step), each ``(3, 4, n)``.
         """
         plan = self._plan
-        seg_T, _ = self._segments
+        if values is None:
+            seg_T, _ = self._segments
+            offsets = np.array([self.steps[i].value for i in plan.joint_steps])
+        else:
+            seg_T, _ = self._segment_data(values)
+            offsets = values[plan.joint_steps]
         n = q.shape[0]
-        offsets = np.array([self.steps[i].value for i in plan.joint_steps])
         qt = q.T + offsets[:, None]  # (dof, n) joint step values
         if perturbations is not None:
             qt = qt + perturbations[:, :, 2].T
@@ -465,6 +477,7 @@ class Model:
         perturbations: Array | None,
         steps: Sequence[int],
         orientation: bool = True,
+        values: Array | None = None,
     ) -> tuple[Array, Array]:
         """Derivative columns of the tool pose wrt the values of ``steps`` (chain order).
 
@@ -480,8 +493,8 @@ class Model:
         """
         plan = self._plan
         steps = np.asarray(steps, dtype=np.intp)
-        _, local = self._segments
-        F, anchors = self._forward(q, perturbations, keep_anchors=True)
+        _, local = self._segments if values is None else self._segment_data(values)
+        F, anchors = self._forward(q, perturbations, keep_anchors=True, values=values)
         n, m = q.shape[0], len(steps)
         J = np.empty((m, 6 if orientation else 3, n))
         loc = local[steps]
@@ -543,6 +556,38 @@ class Model:
         J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(free))
         T = _to_homogeneous(F)
         return (T[0] if single else T), J
+
+    def evaluate(
+        self,
+        q: ArrayLike,
+        values: ArrayLike | None = None,
+        rows: Literal["position", "pose"] = "position",
+        jacobian: bool = True,
+        perturbations: ArrayLike | None = None,
+    ) -> tuple[Array, Array | None]:
+        """Tool frames and identification Jacobian for other parameter values, without
+        building a new model (the inner loop of the solvers).
+
+        Args:
+            q: ``(n, dof)`` joint values.
+            values: all parameter values ``(P,)`` in chain order (default: the model's).
+            rows, perturbations: as for :meth:`jacobian`.
+            jacobian: whether to compute the Jacobian (columns: :attr:`free_names`).
+
+        Returns:
+            ``T (n, 4, 4)`` and ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``.
+        """
+        q, _ = self._check_q(q)
+        d = self._check_perturbations(perturbations, len(q))
+        v = None if values is None else np.asarray(values, dtype=float)
+        if v is not None and v.shape != (len(self.steps),):
+            raise ValueError(f"values shaped {v.shape}; model {self.name!r} has {len(self.steps)} parameters")
+        if not jacobian:
+            F, _ = self._forward(q, d, keep_anchors=False, values=v)
+            return _to_homogeneous(F), None
+        free = np.flatnonzero(self.free_mask)
+        F, J = self._columns(q, d, free, orientation=rows == "pose", values=v)
+        return _to_homogeneous(F), np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(free))
 
     def jacobian(
         self,

@@ -1,0 +1,536 @@
+"""The calibration pipeline: ``rc.calibrate(model, data) -> CalibrationResult``.
+
+1. Start: the nominal robot; the tool (a point for position measurements, a frame for
+   pose measurements) and the device frame ``T_device_base`` from alternating
+   closed-form fits (Kabsch/Horn for the frame, linear least squares for the tool).
+2. Choose the unknowns: the robot's free parameters, the device frame and the tool,
+   reduced to an identifiable set by a sequential rank test over the scaled Jacobian
+   at the measured poses, preferring the device frame, then the tool, then the
+   robot's parameters in chain order; every parameter left out is reported with the
+   parameters that absorb it.
+3. Solve with the chosen method (:mod:`robocal.identify.solvers`).
+4. Tell the truth: residual standard deviation, parameter covariance
+   σ̂²(JᵀWJ)⁻¹ and standard deviations, correlations above 0.9, the condition number,
+   and the predicted position uncertainty at any pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal import spatial
+from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
+from robocal.identify.solvers import METHODS, SolveResult, solve
+from robocal.identify.subset import Dropped, select_columns
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Model
+from robocal.model.files import atomic_write_text, load_model, save_model
+
+__all__ = ["CalibrationResult", "calibrate", "default_bounds"]
+
+Array = NDArray[np.float64]
+Method = Literal["lm", "pinv", "bounded", "influence"]
+
+
+# ---------------------------------------------------------------------- start values
+def _project_rotation(M: Array) -> Array:
+    U, _, Vt = np.linalg.svd(M)
+    R = U @ Vt
+    if np.linalg.det(R) < 0:
+        U[:, -1] *= -1
+        R = U @ Vt
+    return R
+
+
+def initial_frame_and_tool(
+    robot: Model,
+    data: Measurements,
+    measure: str,
+    tool: Array | None,
+    fit_frame: bool,
+    fit_tool: bool,
+    T_device_base: Array | None = None,
+    rounds: int = 4,
+) -> tuple[Array, Array]:
+    """Alternate closed-form fits of the device frame and the tool (both 4x4)."""
+    T_flange = robot.fk(data.q)
+    T_tool = np.eye(4) if tool is None else np.asarray(tool, dtype=float)
+    T_frame = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
+    y = data.position
+    for _ in range(rounds if (fit_frame and fit_tool) else 1):
+        if fit_frame:
+            p_base = T_flange[:, :3, :3] @ T_tool[:3, 3] + T_flange[:, :3, 3]
+            T_frame = spatial.fit_rigid_transform(p_base, y)
+        if fit_tool:
+            # y = R0 (R_f t + p_f) + t0  =>  R_fᵀ (R0ᵀ (y - t0) - p_f) = t  (least squares: the mean)
+            R0, t0 = T_frame[:3, :3], T_frame[:3, 3]
+            b = (y - t0) @ R0 - T_flange[:, :3, 3]
+            T_tool = T_tool.copy()
+            T_tool[:3, 3] = np.einsum("nji,nj->i", T_flange[:, :3, :3], b) / len(y)
+            if measure == "pose":
+                R_f = T_frame[:3, :3] @ T_flange[:, :3, :3]
+                T_tool[:3, :3] = _project_rotation(np.einsum("nji,njk->ik", R_f, data.orientation))
+    return T_frame, T_tool
+
+
+def default_bounds(
+    names: Sequence[str],
+    rotation: Sequence[bool],
+    nominal: Array,
+    length: float = 5e-3,
+    angle: float = math.radians(2.0),
+) -> tuple[Array, Array]:
+    """Seed 001's bounds: ±5 mm on lengths and ±2° on angles around the nominal robot
+    parameters; the device frame and the tool are left free."""
+    lo, hi = np.full(len(names), -np.inf), np.full(len(names), np.inf)
+    for k, (name, rot) in enumerate(zip(names, rotation, strict=True)):
+        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)):
+            continue
+        w = angle if rot else length
+        lo[k], hi[k] = nominal[k] - w, nominal[k] + w
+    return lo, hi
+
+
+# ---------------------------------------------------------------------- result
+@dataclass
+class CalibrationResult:
+    """A calibrated model with its uncertainty and the record of how it was obtained.
+
+    Attributes:
+        model: the calibrated robot model with the measured tool appended (base frame:
+            the robot's base).
+        frame: ``T_device_base`` (4, 4), the measuring device's frame identified.
+        names: estimated parameters (robot, ``frame_*`` corrections, ``tcp_*``).
+        estimates, nominal, std: their values (SI), start values and standard deviations.
+        covariance, correlation: ``(p, p)``.
+        dropped: parameters not identified and why.
+        residual_std: σ̂ of the weighted residuals (m for unit weights).
+        rms_before, rms_after: RMS position error on the calibration data (m), with the
+            start model (fitted frame and tool) and after calibration.
+        condition_number: of the column-scaled Jacobian.
+    """
+
+    model: Model
+    frame: Array
+    measure: str
+    method: str
+    names: tuple[str, ...]
+    estimates: Array
+    nominal: Array
+    std: Array
+    covariance: Array
+    correlation: Array
+    dropped: tuple[Dropped, ...]
+    residual_std: float
+    rms_before: float
+    rms_after: float
+    condition_number: float
+    n: int
+    success: bool
+    message: str
+    iterations: int
+    seconds: float
+    measurement_chain: Model | None = field(default=None, repr=False)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def high_correlations(self) -> list[tuple[str, str, float]]:
+        """Parameter pairs with |correlation| > 0.9."""
+        out = []
+        p = len(self.names)
+        for i in range(p):
+            for j in range(i + 1, p):
+                if abs(self.correlation[i, j]) > 0.9:
+                    out.append((self.names[i], self.names[j], float(self.correlation[i, j])))
+        return out
+
+    def deltas(self) -> dict[str, float]:
+        return {n: float(e - v) for n, e, v in zip(self.names, self.estimates, self.nominal, strict=True)}
+
+    def position_covariance(self, q: ArrayLike) -> Array:
+        """Covariance ``(n, 3, 3)`` (m²) of the calibrated tool position at joint values ``q``,
+        from the parameter covariance (robot and tool parameters; the device frame does not
+        enter a prediction in the robot's base frame)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        robot_names = [n for n in self.names if not n.startswith(FRAME_PREFIX)]
+        idx = [self.names.index(n) for n in robot_names]
+        model = self.model.with_free(None, free=False).with_free(robot_names)
+        J = model.jacobian(q).reshape(len(q), 3, -1)
+        cols = [model.free_names.index(n) for n in robot_names]
+        J = J[:, :, cols]
+        C = self.covariance[np.ix_(idx, idx)]
+        return np.einsum("nik,kl,njl->nij", J, C, J)
+
+    def position_uncertainty(self, q: ArrayLike) -> Array:
+        """1-σ radial position uncertainty ``sqrt(trace(cov))`` (m) at each pose, ``(n,)``."""
+        return np.sqrt(np.trace(self.position_covariance(q), axis1=1, axis2=2))
+
+    def summary(self) -> str:
+        """A plain-text report of the calibration."""
+        lines = [
+            f"calibration of {self.model.name!r}: {self.method}, {self.measure} measurements, {self.n} poses",
+            f"  {'converged' if self.success else 'NOT CONVERGED'}: {self.message} "
+            f"({self.iterations} iterations, {self.seconds * 1e3:.1f} ms)",
+            f"  RMS position error on the calibration poses: {self.rms_before * 1e3:.4f} mm -> "
+            f"{self.rms_after * 1e3:.4f} mm",
+            f"  residual standard deviation {self.residual_std * 1e3:.4f} mm, "
+            f"condition number {self.condition_number:.3g}",
+            "  parameter                nominal       estimate          delta           sigma",
+        ]
+        rot = {s.name: s.is_rotation for s in (self.measurement_chain or self.model).steps}
+        for n, v0, v, s in zip(self.names, self.nominal, self.estimates, self.std, strict=True):
+            f, unit = (math.degrees(1), "deg") if rot.get(n) else (1e3, "mm")
+            lines.append(
+                f"  {n:<20} {v0 * f:>12.5f} {v * f:>14.5f} {(v - v0) * f:>14.5f} {s * f:>11.5f} {unit}"
+            )
+        if self.dropped:
+            lines.append("  not identified:")
+            lines += [f"    {d}" for d in self.dropped]
+        for a, b, rho in self.high_correlations:
+            lines.append(f"  warning: {a} and {b} are correlated ({rho:+.3f})")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        rot = {s.name: s.is_rotation for s in (self.measurement_chain or self.model).steps}
+        return {
+            "robocal_version": _version(),
+            "model": self.model.name,
+            "method": self.method,
+            "measure": self.measure,
+            "n": self.n,
+            "success": self.success,
+            "message": self.message,
+            "iterations": self.iterations,
+            "seconds": self.seconds,
+            "rms_before_mm": self.rms_before * 1e3,
+            "rms_after_mm": self.rms_after * 1e3,
+            "residual_std_mm": self.residual_std * 1e3,
+            "condition_number": self.condition_number,
+            "frame": {"T_device_base": self.frame.tolist()},
+            "parameters": [
+                {
+                    "name": n,
+                    "unit": "rad" if rot.get(n) else "m",
+                    "nominal": float(v0),
+                    "estimate": float(v),
+                    "delta": float(v - v0),
+                    "std": float(s),
+                }
+                for n, v0, v, s in zip(self.names, self.nominal, self.estimates, self.std, strict=True)
+            ],
+            "covariance": self.covariance.tolist(),
+            "dropped": [
+                {"name": d.name, "reason": d.reason, "absorbed_by": [list(a) for a in d.absorbed_by]}
+                for d in self.dropped
+            ],
+            "high_correlations": [list(c) for c in self.high_correlations],
+            **self.metadata,
+        }
+
+    def save(self, directory: str | Path) -> Path:
+        """Write ``model.yaml`` (calibrated) and ``result.json`` to ``directory`` atomically."""
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        save_model(self.model, directory / "model.yaml")
+        if self.measurement_chain is not None:
+            save_model(self.measurement_chain, directory / "measurement_model.yaml")
+        atomic_write_text(directory / "result.json", json.dumps(self.to_dict(), indent=2) + "\n")
+        return directory
+
+    @classmethod
+    def load(cls, directory: str | Path) -> CalibrationResult:
+        """Read a result written by :meth:`save`."""
+        directory = Path(directory)
+        data = json.loads((directory / "result.json").read_text())
+        model = load_model(directory / "model.yaml")
+        chain_path = directory / "measurement_model.yaml"
+        params = data["parameters"]
+        cov = np.array(data["covariance"], dtype=float).reshape(len(params), len(params))
+        std = np.array([p["std"] for p in params])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = cov / np.outer(std, std)
+        known = {f.name for f in dataclasses.fields(cls)}
+        extra = {k: v for k, v in data.items() if k not in known and k not in _DICT_ONLY}
+        return cls(
+            model=model,
+            frame=np.array(data["frame"]["T_device_base"], dtype=float),
+            measure=data["measure"],
+            method=data["method"],
+            names=tuple(p["name"] for p in params),
+            estimates=np.array([p["estimate"] for p in params]),
+            nominal=np.array([p["nominal"] for p in params]),
+            std=std,
+            covariance=cov,
+            correlation=corr,
+            dropped=tuple(
+                Dropped(d["name"], d["reason"], tuple(tuple(a) for a in d["absorbed_by"]))
+                for d in data["dropped"]
+            ),
+            residual_std=data["residual_std_mm"] / 1e3,
+            rms_before=data["rms_before_mm"] / 1e3,
+            rms_after=data["rms_after_mm"] / 1e3,
+            condition_number=data["condition_number"],
+            n=data["n"],
+            success=data["success"],
+            message=data["message"],
+            iterations=data["iterations"],
+            seconds=data["seconds"],
+            measurement_chain=load_model(chain_path) if chain_path.exists() else None,
+            metadata=extra,
+        )
+
+
+_DICT_ONLY = {
+    "robocal_version",
+    "model",
+    "rms_before_mm",
+    "rms_after_mm",
+    "residual_std_mm",
+    "parameters",
+    "high_correlations",
+    "frame",
+}
+
+
+def _version() -> str:
+    from robocal import __version__
+
+    return __version__
+
+
+def file_hash(path: str | Path) -> str:
+    """SHA-256 of a file (recorded in results so that a calibration can be traced)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------------- pipeline
+def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array, float]:
+    """σ̂², covariance σ̂²(JᵀWJ)⁻¹, standard deviations, correlations, condition number."""
+    r = problem.residual(x)
+    J = problem.jacobian(x)
+    s2 = float(r @ r) / max(len(r) - len(x), 1)
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    Jn = J / norms
+    sv = np.linalg.svd(Jn, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
+    cov = s2 * np.linalg.pinv(Jn.T @ Jn) / np.outer(norms, norms)
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
+    return s2, cov, std, corr, cond
+
+
+def _robot_size(robot: Model, q: Array) -> float:
+    T = robot.fk(q[: min(len(q), 50)])
+    return max(float(np.abs(T[:, :3, 3]).max()), 0.1)
+
+
+def calibrate(
+    model: Model,
+    data: Measurements,
+    method: Method = "lm",
+    *,
+    measure: Literal["position", "pose"] | None = None,
+    frame: Literal["fit", "fixed"] | ArrayLike = "fit",
+    tool: Literal["fit", "fixed"] | ArrayLike | None = "fit",
+    tool_guess: ArrayLike | None = None,
+    weights: Literal["sigma", "none"] = "sigma",
+    orientation_weight: float = 0.1,
+    loss: str = "linear",
+    f_scale: float = 1e-4,
+    bounds: tuple[ArrayLike, ArrayLike] | Literal["default"] | None = "default",
+    resolution: float = 1e-5,
+    relaxation: float = 0.5,
+    max_iterations: int = 200,
+    max_std: float = 5e-4,
+) -> CalibrationResult:
+    """Identify the robot's parameters from measurements.
+
+    Args:
+        model: the robot model; its free parameters are the candidates.
+        data: joint values and measured positions (and orientations) in the device frame.
+        method: ``"lm"`` (default), ``"pinv"``, ``"bounded"`` or ``"influence"``
+            (see :mod:`robocal.identify.solvers`).
+        measure: ``"position"`` or ``"pose"``; default: pose when the data has
+            orientations.
+        frame: ``"fit"`` (identify ``T_device_base``, default), ``"fixed"`` (the data is
+            in the robot's base frame) or a known 4x4 ``T_device_base``.
+        tool: ``"fit"`` (identify the tool point/frame), ``"fixed"`` (use ``tool_guess``
+            as known), a known 4x4 tool transform or position, or ``None`` (no tool:
+            the model's end is measured).
+        tool_guess: start value of the tool (position (3,) or 4x4).
+        weights: ``"sigma"`` weights rows by 1/σ when the data has ``sigma``.
+        orientation_weight: metres per radian, the weight of orientation residuals
+            relative to position residuals for pose measurements.
+        loss: ``"linear"`` or a robust loss of scipy (``"soft_l1"``, ``"huber"``...) for
+            ``lm``; ``f_scale`` (m) is where it starts to down-weight.
+        bounds: ``method="bounded"`` only: ``"default"`` (seed 001: ±5 mm, ±2°) or
+            ``(lower, upper)`` arrays over the free robot parameters' values.
+        resolution: measurement resolution (m): the ``pinv``/``influence`` stop criterion.
+        relaxation: C < 1 of the ``influence`` method.
+        max_std: a parameter whose standard deviation, as a displacement of the tool (m;
+            rotations times the robot's size), exceeds this is fixed at its start value
+            and the fit repeated: it is not identifiable from these measurements.
+    """
+    t_start = time.perf_counter()
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if data.position is None:
+        raise ValueError("the measurements have no positions to calibrate against")
+    if data.dof != model.dof:
+        raise ValueError(
+            f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
+        )
+    if measure is None:
+        measure = "pose" if data.orientation is not None else "position"
+    if measure == "pose" and data.orientation is None:
+        raise ValueError("measure='pose' needs measured orientations")
+    n = data.n
+
+    # tool and frame start values
+    fit_frame = isinstance(frame, str) and frame == "fit"
+    T_known = None
+    if not isinstance(frame, str):
+        T_known = np.asarray(frame, dtype=float)
+        if T_known.shape != (4, 4):
+            raise ValueError(f"frame must be 'fit', 'fixed' or a 4x4 transform, got shape {T_known.shape}")
+    T_tool0 = np.eye(4)
+    if tool_guess is not None:
+        g = np.asarray(tool_guess, dtype=float)
+        T_tool0 = g if g.shape == (4, 4) else spatial.homogeneous(p=g)
+    fit_tool = isinstance(tool, str) and tool == "fit"
+    if tool is not None and not isinstance(tool, str):
+        g = np.asarray(tool, dtype=float)
+        T_tool0 = g if g.shape == (4, 4) else spatial.homogeneous(p=g)
+    T_frame, T_tool = initial_frame_and_tool(
+        model, data, measure, T_tool0, fit_frame, fit_tool and tool is not None, T_known
+    )
+
+    chain = measurement_chain(model, T_frame, None if tool is None else T_tool, measure, fit_frame)
+    if tool is not None and not fit_tool:
+        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
+    length = _robot_size(model, data.q)
+    rows = 3 if measure == "position" else 6
+    w = np.ones((n, rows))
+    if weights == "sigma" and data.sigma is not None:
+        w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
+    if rows == 6:
+        w[:, 3:] = orientation_weight * (w[:, :3].mean(axis=1, keepdims=True))
+    problem = Problem(
+        chain, data.q, data.position, data.orientation if rows == 6 else None, w.reshape(-1), length
+    )
+
+    # identifiable set, preferring the frame, then the tool, then the robot in chain order
+    J0 = problem.scaled_jacobian(problem.x0)
+    names = problem.free_names
+    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
+    order += [x for x in names if x not in set(order)]
+    selection = select_columns(J0, names, order)
+    if selection.dropped:
+        chain = chain.fixed([d.name for d in selection.dropped])
+        problem = dataclasses.replace(problem, chain=chain, _cache={})
+    names = problem.free_names
+    x0 = problem.x0
+
+    options: dict[str, Any] = {"max_iterations": max_iterations}
+    if method == "lm":
+        options |= {"loss": loss, "f_scale": f_scale * float(np.median(w[:, :3]))}
+    elif method in ("pinv", "influence"):
+        options |= {"resolution": resolution}
+        if method == "influence":
+            options["relaxation"] = relaxation
+    elif method == "bounded":
+        if bounds is None:
+            lo, hi = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
+        elif isinstance(bounds, str):
+            lo, hi = default_bounds(names, problem.free_is_rotation, x0)
+        else:
+            lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+            if lo.shape != x0.shape or hi.shape != x0.shape:
+                raise ValueError(f"bounds must be two arrays over the {len(x0)} estimated parameters {names}")
+        options["bounds"] = (lo, hi)
+    result: SolveResult = solve(problem, x0, method, **options)
+    x = result.x
+    dropped = list(selection.dropped)
+    _, cov, std, corr, cond = _uncertainty(problem, x)
+    # drop what these measurements cannot determine, worst first, and refit
+    for _ in range(len(x)):
+        move = std * np.where(problem.free_is_rotation, length, 1.0)
+        worst = int(np.argmax(move)) if len(move) else 0
+        if not len(move) or move[worst] <= max_std:
+            break
+        dropped.append(Dropped(names[worst], "poorly identifiable", sigma=float(move[worst])))
+        keep = np.arange(len(x)) != worst
+        chain = chain.fixed([names[worst]])
+        problem = dataclasses.replace(problem, chain=chain, _cache={})
+        names = problem.free_names
+        x0 = x0[keep]
+        if method == "bounded":
+            options["bounds"] = (options["bounds"][0][keep], options["bounds"][1][keep])
+        result = solve(problem, x[keep], method, **options)
+        x = result.x
+        _, cov, std, corr, cond = _uncertainty(problem, x)
+
+    r_plain = problem.residual(x, weighted=False).reshape(n, rows)
+    rms_after = float(np.sqrt(np.mean(np.sum(r_plain[:, :3] ** 2, axis=1))))
+    rms_before = float(
+        np.sqrt(np.mean(np.sum(problem.residual(x0, weighted=False).reshape(n, rows)[:, :3] ** 2, axis=1)))
+    )
+
+    # the calibrated chain, and the robot model with the tool in the base frame
+    values = problem.values(x)
+    calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
+    frame_names = [s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))]
+    T_device_base = np.eye(4)
+    if frame_names:
+        sub = dataclasses.replace(
+            calibrated_chain, steps=tuple(s for s in calibrated_chain.steps if s.name in frame_names)
+        )
+        T_device_base = sub.fk(np.zeros(0))
+    robot_steps = [s for s in calibrated_chain.steps if s.name not in set(frame_names)]
+    free_before = {s.name: s.free for s in model.steps}
+    robot_steps = [dataclasses.replace(s, free=free_before.get(s.name, True)) for s in robot_steps]
+    calibrated = dataclasses.replace(
+        model, steps=tuple(robot_steps), notes=(model.notes + " calibrated").strip()
+    )
+    nominal_values = problem.values(x0)[chain.free_mask]
+    seconds = time.perf_counter() - t_start
+    return CalibrationResult(
+        model=calibrated,
+        frame=T_device_base,
+        measure=measure,
+        method=method,
+        names=names,
+        estimates=x,
+        nominal=nominal_values,
+        std=std,
+        covariance=cov,
+        correlation=corr,
+        dropped=tuple(dropped),
+        residual_std=float(np.sqrt(np.sum(r_plain[:, :3] ** 2) / max(3 * n - len(x), 1))),
+        rms_before=rms_before,
+        rms_after=rms_after,
+        condition_number=cond,
+        n=n,
+        success=result.success,
+        message=result.message,
+        iterations=result.iterations,
+        seconds=seconds,
+        measurement_chain=calibrated_chain,
+    )

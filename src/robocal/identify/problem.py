@@ -1,0 +1,146 @@
+"""The calibration problem: a measurement model and the observations it must explain.
+
+The measurement model is one chain (DESIGN.md: one representation):
+
+    [device frame, fixed start] [device frame corrections] [robot] [tool]
+
+* the device frame ``T_device_base`` starts from a closed-form Kabsch/Horn fit and is
+  written as six fixed steps ``frame0_*`` plus six free corrections ``frame_*``
+  (Tx Ty Tz Rz Ry Rx) that stay near zero, so the Euler parameterisation is never
+  near its β = ±90° singularity (seed 000 eq. 2) whatever the device's placement;
+* the tool is a point (``tcp_x, tcp_y, tcp_z``) for position measurements or a frame
+  (plus ``tcp_rz, tcp_ry, tcp_rx``) for pose measurements.
+
+Residuals are predicted minus measured, in the device frame, pose-major
+(``x, y, z[, ωx, ωy, ωz]`` per pose), divided by the measurement uncertainty.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal import spatial
+from robocal.model.chain import Model, Step
+from robocal.model.conventions import frame6, sequence
+
+__all__ = ["FRAME_PREFIX", "TOOL_PREFIX", "Problem", "frame_steps", "measurement_chain"]
+
+Array = NDArray[np.float64]
+FRAME_PREFIX = "frame_"
+TOOL_PREFIX = "tcp_"
+
+
+def frame_steps(T: Array, prefix: str, free: bool) -> list[Step]:
+    """A rigid transform as six steps Tx Ty Tz Rz Ry Rx (intrinsic ZYX angles)."""
+    rz, ry, rx = spatial.matrix_to_euler(T[:3, :3], "ZYX")
+    return frame6(prefix, *T[:3, 3], rz, ry, rx, free=free)
+
+
+def measurement_chain(
+    robot: Model, T_device_base: Array, tool: Array, measure: str, fit_frame: bool
+) -> Model:
+    """The chain predicting observations in the device frame (see the module docstring)."""
+    before: list[Step] = []
+    if fit_frame or not np.allclose(T_device_base, np.eye(4)):
+        before += frame_steps(T_device_base, "frame0", free=False)
+    if fit_frame:
+        before += frame6("frame", free=True)
+    after: list[Step] = []
+    if tool is not None:
+        T_tool = np.asarray(tool, dtype=float)
+        if measure == "pose":
+            after += frame_steps(T_tool, "tcp", free=True)
+        else:
+            after += sequence(("Tx", "Ty", "Tz"), T_tool[:3, 3], [f"{TOOL_PREFIX}{c}" for c in "xyz"])
+    clash = {s.name for s in before + after} & set(robot.names)
+    if clash:
+        raise ValueError(f"model {robot.name!r} already uses the reserved parameter name(s) {sorted(clash)}")
+    steps = (*before, *robot.steps, *after)
+    return dataclasses.replace(robot, name=robot.name + "+measurement", steps=steps, bodies=())
+
+
+@dataclass
+class Problem:
+    """Residuals and Jacobian of a calibration, as functions of the free values ``x``.
+
+    Attributes:
+        chain: the measurement chain; its free steps are the unknowns.
+        q: ``(n, dof)`` joint values.
+        position: ``(n, 3)`` measured positions (m, device frame).
+        orientation: ``(n, 3, 3)`` measured rotations or None (position-only).
+        weights: ``(n * rows,)`` residual weights (1/σ).
+        length_scale: the robot's size (m), to compare rotations with lengths.
+    """
+
+    chain: Model
+    q: Array
+    position: Array
+    orientation: Array | None
+    weights: Array
+    length_scale: float
+    _cache: dict = dataclasses.field(default_factory=dict, repr=False)
+
+    @property
+    def rows(self) -> int:
+        return 3 if self.orientation is None else 6
+
+    @property
+    def measure(self) -> str:
+        return "position" if self.orientation is None else "pose"
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        return self.chain.free_names
+
+    @property
+    def free_is_rotation(self) -> NDArray[np.bool_]:
+        return np.array([s.is_rotation for s in self.chain.steps if s.free])
+
+    @property
+    def x0(self) -> Array:
+        return self.chain.free_values
+
+    def values(self, x: Array) -> Array:
+        v = self.chain.values
+        v[self.chain.free_mask] = x
+        return v
+
+    def _evaluate(self, x: Array, jacobian: bool):
+        key = (x.tobytes(), jacobian)
+        if key not in self._cache:
+            if len(self._cache) > 4:
+                self._cache.clear()
+            T, J = self.chain.evaluate(self.q, self.values(x), rows=self.measure, jacobian=jacobian)
+            self._cache[key] = (T, J)
+        return self._cache[key]
+
+    def predicted(self, x: Array) -> Array:
+        """Predicted tool frames ``(n, 4, 4)`` in the device frame."""
+        key = (x.tobytes(), True)
+        if key in self._cache:
+            return self._cache[key][0]
+        return self._evaluate(x, jacobian=False)[0]
+
+    def residual(self, x: Array, weighted: bool = True) -> Array:
+        """Predicted minus measured, ``(n * rows,)``."""
+        T = self.predicted(np.asarray(x, dtype=float))
+        dp = T[:, :3, 3] - self.position
+        if self.orientation is None:
+            r = dp.reshape(-1)
+        else:
+            dw = spatial.matrix_to_rotvec(T[:, :3, :3] @ np.swapaxes(self.orientation, -1, -2))
+            r = np.concatenate([dp, dw], axis=1).reshape(-1)
+        return r * self.weights if weighted else r
+
+    def jacobian(self, x: Array, weighted: bool = True) -> Array:
+        """d residual / d x, ``(n * rows, p)``."""
+        _, J = self._evaluate(np.asarray(x, dtype=float), jacobian=True)
+        return J * self.weights[:, None] if weighted else J
+
+    def scaled_jacobian(self, x: Array) -> Array:
+        """The weighted Jacobian with rotations in length units (times ``length_scale``)."""
+        return self.jacobian(x) * np.where(self.free_is_rotation, self.length_scale, 1.0)

@@ -1,0 +1,203 @@
+"""Parameter estimation methods on a calibration :class:`~robocal.identify.problem.Problem`.
+
+=============  =========================================================================
+``lm``         Levenberg-Marquardt on the analytic Jacobian (scipy ``least_squares``,
+               MINPACK ``lm``; ``trf`` when a robust loss is asked for), columns scaled
+               by the Jacobian's norms, rows weighted by the measurement uncertainty.
+``pinv``       Seed 003 eq. 3.6: the classic iterated pseudo-inverse
+               ΔE = (JᵀJ)⁻¹JᵀΔP over all poses, repeated until the correction moves the
+               tool by less than the measurement resolution.
+``bounded``    Seed 001 eq. 4: minimise Σ_j |X_j − X'_j| (sum of distances, not of
+               squares) with |δd|, |δL| ≤ 5 mm and |δθ|, |δα| ≤ 2°.  Solved with scipy
+               ``least_squares(method="trf")`` — trust-region reflective is scipy's
+               least-squares routine that honours bounds — on the residuals
+               r_j = (|e_j|² + ε²)^¼, whose squares sum to the (ε-smoothed) sum of
+               distances, so the solver keeps Gauss-Newton speed on an L1 objective.
+``influence``  Seed 003 ch. 3 (eqs. 3.7-3.8): per pose an influence vector k from
+               perturbing each parameter (+0.05° angular, +0.1 mm linear), relative to
+               the most influential one; per pose the correction
+               ΔE = C·k∘Jᵀ(JJᵀ)⁻¹ΔP is iterated (C < 1) until the pose's error is below
+               the resolution; the best-fit set over all poses is the one that best
+               reproduces every pose's corrected position, argmin Σ_i |J_i (E − E_i)|²;
+               it is relinearised until it stops moving.
+=============  =========================================================================
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+__all__ = ["METHODS", "SolveResult", "solve"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass
+class SolveResult:
+    """What a solver returns (scipy-style)."""
+
+    x: Array
+    success: bool
+    message: str
+    iterations: int
+    evaluations: int = 0
+    history: list[float] = field(default_factory=list)  # RMS residual per iteration (weighted)
+
+
+def _lm(
+    problem, x0: Array, *, loss: str = "linear", f_scale: float = 1.0, max_iterations: int = 200, **_
+) -> SolveResult:
+    method = "lm" if loss == "linear" else "trf"
+    res = least_squares(
+        problem.residual,
+        x0,
+        jac=problem.jacobian,
+        method=method,
+        x_scale="jac",
+        loss=loss,
+        f_scale=f_scale,
+        ftol=1e-12,
+        xtol=1e-12,
+        gtol=1e-12,
+        max_nfev=max_iterations * (1 if method == "trf" else len(x0) + 1),
+    )
+    return SolveResult(res.x, bool(res.status > 0), res.message, int(res.njev or res.nfev), int(res.nfev))
+
+
+def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100, **_) -> SolveResult:
+    """Seed 003 eq. 3.6, iterated: Gauss-Newton with the pseudo-inverse of J."""
+    x = x0.copy()
+    history = []
+    L = problem.length_scale
+    move_scale = np.where(problem.free_is_rotation, L, 1.0)  # correction as a tool displacement
+    for it in range(1, max_iterations + 1):
+        r = problem.residual(x)
+        J = problem.jacobian(x)
+        history.append(float(np.sqrt(np.mean(r * r))))
+        norms = np.linalg.norm(J, axis=0)
+        norms[norms == 0] = 1.0
+        dx = -np.linalg.lstsq(J / norms, r, rcond=None)[0] / norms  # = -(JᵀJ)⁻¹Jᵀ r
+        x = x + dx
+        if np.max(np.abs(dx) * move_scale) < resolution:
+            return SolveResult(x, True, f"correction below the resolution {resolution * 1e3:g} mm", it, it)
+    return SolveResult(
+        x, False, f"no convergence in {max_iterations} iterations", max_iterations, max_iterations
+    )
+
+
+def _bounded(
+    problem,
+    x0: Array,
+    *,
+    bounds: tuple[Array, Array] | None = None,
+    epsilon: float = 1e-7,
+    max_iterations: int = 200,
+    **_,
+) -> SolveResult:
+    """Seed 001 eq. 4: min Σ_j |e_j| under bounds, via r_j = (|e_j|² + ε²)^¼ and trf."""
+    lo, hi = bounds if bounds is not None else (np.full_like(x0, -np.inf), np.full_like(x0, np.inf))
+    width = problem.rows
+
+    def point_errors(x):
+        return problem.residual(x).reshape(-1, width)
+
+    def fun(x):
+        e = point_errors(x)
+        return (np.einsum("ij,ij->i", e, e) + epsilon**2) ** 0.25
+
+    def jac(x):
+        e = point_errors(x)
+        J = problem.jacobian(x).reshape(e.shape[0], width, -1)
+        s = np.einsum("ij,ij->i", e, e) + epsilon**2
+        return 0.5 * s[:, None] ** -0.75 * np.einsum("ij,ijk->ik", e, J)
+
+    x_start = np.clip(x0, lo, hi)
+    res = least_squares(
+        fun,
+        x_start,
+        jac=jac,
+        bounds=(lo, hi),
+        method="trf",
+        x_scale="jac",
+        ftol=1e-12,
+        xtol=1e-12,
+        gtol=1e-12,
+        max_nfev=max_iterations,
+    )
+    return SolveResult(res.x, bool(res.status > 0), res.message, int(res.njev or res.nfev), int(res.nfev))
+
+
+def _influence(
+    problem,
+    x0: Array,
+    *,
+    relaxation: float = 0.5,
+    resolution: float = 1e-5,
+    max_iterations: int = 200,
+    inner_iterations: int = 50,
+    angular_step: float = math.radians(0.05),
+    linear_step: float = 1e-4,
+    **_,
+) -> SolveResult:
+    """Seed 003 ch. 3: influence-weighted per-pose identification, then the best fit."""
+    if not 0 < relaxation < 1:
+        raise ValueError(f"the influence method needs 0 < C < 1, got C={relaxation}")
+    x = x0.copy()
+    width = problem.rows
+    rot = problem.free_is_rotation
+    L = problem.length_scale
+    step = np.where(rot, angular_step, linear_step)
+    move_scale = np.where(rot, L, 1.0)
+    history = []
+    for it in range(1, max_iterations + 1):
+        r = problem.residual(x, weighted=False).reshape(-1, width)  # ΔP per pose (model - measured)
+        J = problem.jacobian(x, weighted=False).reshape(r.shape[0], width, -1)  # (n, w, p)
+        history.append(float(np.sqrt(np.mean(r * r))))
+        # influence of each parameter at each pose: tool displacement for its test step
+        influence = np.linalg.norm(J[:, :3], axis=1) * step  # (n, p)
+        k = influence / np.maximum(influence.max(axis=1, keepdims=True), 1e-300)
+        # per pose, iterate ΔE = C k∘Jᵀ(JJᵀ)⁻¹ΔP in the linearised model until |ΔP| < resolution
+        # unknowns as tool displacements (rotations times the robot's size), so that the
+        # minimum-norm step weighs a radian and a metre consistently
+        Js = J / move_scale
+        JJt = Js @ Js.transpose(0, 2, 1)
+        JJt_inv = np.linalg.pinv(JJt, rcond=1e-10)
+        e = np.zeros((r.shape[0], len(x)))
+        remaining = -r.copy()
+        for _ in range(inner_iterations):
+            if np.all(np.linalg.norm(remaining[:, :3], axis=1) < resolution):
+                break
+            step_e = relaxation * k * np.einsum("nwp,nwv,nv->np", Js, JJt_inv, remaining)
+            e += step_e
+            remaining -= np.einsum("nwp,np->nw", Js, step_e)
+        # the best-fit set: the parameters that best reproduce every pose's corrected
+        # position, argmin_E Σ_i |J_i (E - e_i)|² (seed 003 §3.6)
+        targets = np.einsum("nwp,np->nw", Js, e).reshape(-1)
+        dx = np.linalg.lstsq(Js.reshape(-1, len(x)), targets, rcond=None)[0] / move_scale
+        x = x + dx
+        if np.max(np.abs(dx) * move_scale) < 1e-3 * resolution:
+            return SolveResult(x, True, "the best-fit set stopped moving", it, it, history)
+    return SolveResult(
+        x, False, f"no convergence in {max_iterations} iterations", max_iterations, max_iterations, history
+    )
+
+
+METHODS: dict[str, Callable[..., SolveResult]] = {
+    "lm": _lm,
+    "pinv": _pinv,
+    "bounded": _bounded,
+    "influence": _influence,
+}
+
+
+def solve(problem, x0: Array, method: str = "lm", **options) -> SolveResult:
+    """Run ``method`` on ``problem`` from ``x0`` (the free parameter values)."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    return METHODS[method](problem, np.asarray(x0, dtype=float), **options)

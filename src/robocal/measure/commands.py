@@ -1,0 +1,319 @@
+"""Command-line commands of the measurement step (registered on the ``robocal`` app).
+
+Commands:
+    robocal data check FILE [--robot NAME] [--length-unit mm] [--angle-unit deg] [--sep ";"]
+                       [--decimal ","] [--columns "q1=shoulder_pan_joint,..."]
+                       [--orientation euler:XYZ:deg] [--limits error|warn|ignore]
+        every problem of a measurement file (exit code 1 if any error), or a summary
+    robocal simulate ROBOT --poses POSES.csv --device laser-tracker --noise 0.02mm --seed 1
+                     -o meas.csv
+        simulated measurements of a robot with drawn errors, and their truth beside them
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections import defaultdict
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from robocal import spatial
+from robocal.measure.dataset import (
+    PROBLEM_CODES,
+    MeasurementFileError,
+    Measurements,
+    Problem,
+    check_measurements,
+    read_measurements,
+)
+from robocal.measure.devices import DEVICES, make_device
+from robocal.measure.simulate import (
+    VirtualRobot,
+    draw_true_model,
+    parse_quantity,
+    save_simulation,
+    simulate,
+)
+
+__all__ = ["register"]
+
+console = Console()
+err_console = Console(stderr=True)
+
+data_app = typer.Typer(help="Measurement files: check them before a calibration.", no_args_is_help=True)
+
+
+def _fail(message: str) -> typer.Exit:
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    return typer.Exit(code=2)
+
+
+def _model(name: str | None):
+    if name is None:
+        return None
+    from robocal.cli import resolve_model  # late import: robocal.cli imports this module
+
+    return resolve_model(name)
+
+
+def _numbers(text: str, count: int, option: str) -> np.ndarray:
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        raise _fail(f"{option} {text!r}: expected {count} numbers separated by commas or spaces") from None
+    if len(values) != count:
+        raise _fail(f"{option} {text!r}: expected {count} numbers, got {len(values)}")
+    return np.array(values)
+
+
+# ------------------------------------------------------------------ data check
+def _rows_text(rows: list[int | None], limit: int = 6) -> str:
+    rows = [r for r in rows if r is not None]
+    if not rows:
+        return "-"
+    shown = ", ".join(str(r) for r in rows[:limit])
+    return shown + (f" … ({len(rows)} rows)" if len(rows) > limit else "")
+
+
+def _problem_table(problems: list[Problem], title: str) -> Table:
+    groups: dict[tuple, list[Problem]] = defaultdict(list)
+    for p in problems:
+        groups[(p.severity, p.code, p.column)].append(p)
+    table = Table(title=title, title_justify="left", show_lines=True)
+    for col in ("severity", "problem", "column", "rows", "first message"):
+        table.add_column(col, overflow="fold")
+    order = sorted(groups, key=lambda k: (k[0] != "error", min(p.row or 0 for p in groups[k])))
+    for key in order:
+        items = groups[key]
+        severity, code, column = key
+        style = "bold red" if severity == "error" else "yellow"
+        table.add_row(
+            f"[{style}]{severity}[/]",
+            f"{code}\n[dim]{PROBLEM_CODES.get(code, '')}[/]",
+            column or "-",
+            _rows_text([p.row for p in items]),
+            items[0].message,
+        )
+    return table
+
+
+def _summary(data: Measurements, path: Path, model, length_unit: str, angle_unit: str) -> list[str]:
+    """Print the column table of a clean file; return the facts to print under it."""
+    table = Table(title=f"{path}: {data.n} rows, clean", title_justify="left")
+    for col in ("column", "meaning", "min", "max", "unit"):
+        table.add_column(col, justify="right" if col in ("min", "max") else "left")
+    types = model.joint_types if model is not None else ("revolute",) * data.dof
+    names = model.joint_names if model is not None else data.joint_names
+    for j in range(data.dof):
+        scale, unit = (math.pi / 180, "deg") if types[j] == "revolute" else (1e-3, "mm")
+        col = data.q[:, j] / scale
+        table.add_row(data.joint_names[j], f"joint {names[j]}", f"{col.min():.3f}", f"{col.max():.3f}", unit)
+    if data.position is not None:
+        for k, axis in enumerate("xyz"):
+            col = data.position[:, k] * 1000
+            table.add_row(axis, "position (device frame)", f"{col.min():.3f}", f"{col.max():.3f}", "mm")
+    if data.sigma is not None:
+        s = data.sigma * 1000
+        table.add_row("sx sy sz", "standard deviation", f"{s.min():.4f}", f"{s.max():.4f}", "mm")
+    if data.temperature is not None:
+        t = data.temperature
+        table.add_row("temperature", "", f"{t.min():.2f}", f"{t.max():.2f}", "°C")
+    console.print(table)
+    facts = [
+        f"read as: lengths in {length_unit}, angles in {angle_unit} (shown in mm and deg)",
+        f"observes: {data.observes}",
+    ]
+    if data.orientation is not None:
+        facts.append(f"orientation: {data.metadata.get('read_orientation', '?')}")
+    if data.split is not None:
+        n_train = int(np.sum(data.split == "train"))
+        facts.append(f"split: {n_train} train, {data.n - n_train} test")
+    if model is not None:
+        facts.append(f"robot: {model.name} ({model.dof} joints), all joint values within its limits")
+    return facts
+
+
+@data_app.command("check")
+def data_check(
+    file: Annotated[Path, typer.Argument(help="measurement or poses CSV file")],
+    robot: Annotated[
+        str | None, typer.Option("--robot", help="catalog name or model file (joint count, types, limits)")
+    ] = None,
+    length_unit: Annotated[str, typer.Option(help="m, mm or um (positions, sigmas, prismatic joints)")] = "m",
+    angle_unit: Annotated[str, typer.Option(help="rad or deg (revolute joints, orientation)")] = "rad",
+    sep: Annotated[str | None, typer.Option(help="column separator (default: sniffed)")] = None,
+    decimal: Annotated[str, typer.Option(help="decimal mark, '.' or ','")] = ".",
+    columns: Annotated[
+        str | None, typer.Option(help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
+    ] = None,
+    orientation: Annotated[
+        str, typer.Option(help="auto, none, quaternion, rotvec, euler:SEQ or euler:SEQ:deg")
+    ] = "auto",
+    limits: Annotated[
+        str, typer.Option(help="joint values outside the limits: error, warn, ignore")
+    ] = "error",
+) -> None:
+    """List every problem of a measurement file, or summarise it if it is clean."""
+    model = _model(robot)
+    options = dict(
+        length_unit=length_unit,
+        angle_unit=angle_unit,
+        sep=sep,
+        decimal=decimal,
+        columns=columns,
+        orientation=orientation,
+        limits=limits,
+    )
+    try:
+        problems = check_measurements(file, model, **options)
+    except (ValueError, KeyError) as err:
+        raise _fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+    errors = [p for p in problems if p.severity == "error"]
+    warns = [p for p in problems if p.severity == "warning"]
+    if problems:
+        console.print(_problem_table(problems, f"{file}: {len(errors)} error(s), {len(warns)} warning(s)"))
+    if errors:
+        console.print(
+            f"[bold red]{len(errors)} error(s)[/]: the file cannot be used as read; first: {errors[0]}",
+            highlight=False,
+            soft_wrap=True,
+        )
+        raise typer.Exit(code=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_measurements(file, model=model, **options)
+    for fact in _summary(data, file, model, length_unit, angle_unit):
+        console.print(fact, highlight=False)
+
+
+# -------------------------------------------------------------------- simulate
+def simulate_command(
+    robot: Annotated[str, typer.Argument(help="catalog name or model file (the nominal model)")],
+    poses: Annotated[Path, typer.Option("--poses", help="poses CSV: joint columns q1..qN (rad, m)")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="measurements CSV to write")],
+    device: Annotated[str, typer.Option(help=f"one of: {', '.join(DEVICES)}")] = "laser-tracker",
+    noise: Annotated[
+        str | None,
+        typer.Option(
+            help="the device's main noise, 1-sigma with a unit, e.g. 0.02mm: laser-tracker per axis "
+            "(no distance term), optical-cmm per marker coordinate, camera across the line of sight "
+            "(3x along it), plate touching error, pen in the paper plane (1/10 of it out of the plane); "
+            "default: the device's own (robocal.measure.devices)"
+        ),
+    ] = None,
+    seed: Annotated[int | None, typer.Option(help="seed of the drawn errors and the noise")] = None,
+    length_tol: Annotated[str, typer.Option(help="tolerance of length parameters, e.g. 0.5mm")] = "0.5mm",
+    angle_tol: Annotated[str, typer.Option(help="tolerance of angle parameters, e.g. 0.05deg")] = "0.05deg",
+    tol: Annotated[
+        list[str] | None, typer.Option(help="per-parameter tolerance NAME=VALUE, e.g. theta2=0.2deg")
+    ] = None,
+    distribution: Annotated[str, typer.Option(help="uniform (in ±tol) or normal (sigma = tol)")] = "uniform",
+    device_pose: Annotated[
+        str | None,
+        typer.Option(help="device pose in the robot base: 'x,y,z,roll,pitch,yaw' in mm and deg (Rz Ry Rx)"),
+    ] = None,
+    tool_offset: Annotated[
+        str | None, typer.Option(help="observed point in the tool frame: 'x,y,z' in mm")
+    ] = None,
+    train: Annotated[
+        float | None, typer.Option(help="fraction of rows labelled train (the rest test)")
+    ] = None,
+) -> None:
+    """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
+    model = _model(robot)
+    if device not in DEVICES:
+        raise _fail(f"unknown device {device!r}; known: {', '.join(DEVICES)}")
+    if distribution not in ("uniform", "normal"):
+        raise _fail(f"--distribution must be uniform or normal, got {distribution!r}")
+    kwargs = {}
+    if device_pose is not None:
+        v = _numbers(device_pose, 6, "--device-pose")
+        T_base_device = spatial.homogeneous(spatial.euler_to_matrix(np.radians(v[3:]), "xyz"), v[:3] / 1000)
+        kwargs["T_device_base"] = spatial.inverse(T_base_device)
+    if tool_offset is not None:
+        kwargs["p_tool_target"] = _numbers(tool_offset, 3, "--tool-offset") / 1000
+    tolerances = {}
+    for item in tol or []:
+        if "=" not in item:
+            raise _fail(f"--tol {item!r}: expected NAME=VALUE, e.g. theta2=0.2deg")
+        name, value = item.split("=", 1)
+        tolerances[name.strip()] = value.strip()
+    try:
+        dev = make_device(device, **kwargs)
+        if noise is not None:
+            dev = dev.with_noise(parse_quantity(noise, "length"))
+        q = read_measurements(poses, model=model)
+        if q.position is not None:
+            err_console.print(
+                f"[yellow]note:[/] {poses} has measured positions; only its joint values are used",
+                highlight=False,
+            )
+        model_rng = np.random.default_rng(None if seed is None else [seed, 1])
+        true = draw_true_model(
+            model,
+            tolerances,
+            length=length_tol,
+            angle=angle_tol,
+            distribution=distribution,  # type: ignore[arg-type]
+            seed=model_rng,
+        )
+        vr = VirtualRobot(model, true, dev)
+        data = simulate(vr, q, seed)
+        if train is not None:
+            if not 0 < train <= 1:
+                raise ValueError(f"--train {train}: expected a fraction in (0, 1]")
+            data = data.with_split(max(1, round(train * data.n)), seed)
+        info = {
+            "command": "robocal simulate",
+            "poses": str(poses),
+            "length_tol": parse_quantity(length_tol, "length"),
+            "angle_tol": parse_quantity(angle_tol, "angle"),
+            "tolerances": {k: str(v) for k, v in tolerances.items()},
+            "distribution": distribution,
+            "model_seed": "none" if seed is None else f"[{seed}, 1]",
+        }
+        data_path, truth = save_simulation(vr, data, output, seed, **info)
+    except MeasurementFileError as err:
+        raise _fail(str(err)) from None
+    except (ValueError, KeyError) as err:
+        raise _fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+    dev_all = np.abs(np.array(list(_deviations(model, true))))
+    console.print(
+        f"wrote {data_path} ({data.n} rows, {dev.kind}: {', '.join(dev.columns)}) and the truth {truth}",
+        highlight=False,
+        soft_wrap=True,
+    )
+    console.print(
+        f"true robot: {len(dev_all)} parameters drawn ({distribution}, ±{length_tol}, ±{angle_tol}); "
+        f"device noise {_noise_text(dev)}",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
+def _deviations(model, true):
+    for a, b in zip(model.values, true.values, strict=True):
+        if a != b:
+            yield b - a
+
+
+def _noise_text(dev) -> str:
+    d = dev.to_dict()
+    parts = [
+        f"{k}={v * 1000:g} mm" if k != "sigma_per_m" else f"{k}={v * 1000:g} mm/m"
+        for k, v in d.items()
+        if k.startswith("sigma") and isinstance(v, float)
+    ]
+    return ", ".join(parts) or "-"
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``data check`` and ``simulate`` to the ``robocal`` app."""
+    app.add_typer(data_app, name="data")
+    app.command("simulate")(simulate_command)
