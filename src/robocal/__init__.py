@@ -8,6 +8,7 @@
 from importlib.metadata import PackageNotFoundError, version
 
 from robocal import spatial
+from robocal.identify import CalibrationResult, calibrate, cross_validate, validate
 from robocal.measure import Measurements, read_measurements, write_measurements
 from robocal.model import (
     Body,
@@ -29,6 +30,7 @@ except PackageNotFoundError:  # pragma: no cover - running from a source tree
 
 __all__ = [
     "Body",
+    "CalibrationResult",
     "Joint",
     "Measurements",
     "Model",
@@ -36,6 +38,8 @@ __all__ = [
     "Step",
     "__version__",
     "build_model",
+    "calibrate",
+    "cross_validate",
     "load_model",
     "model_from_urdf",
     "read_measurements",
@@ -43,6 +47,7 @@ __all__ = [
     "robots",
     "save_model",
     "spatial",
+    "validate",
     "write_measurements",
 ]
 

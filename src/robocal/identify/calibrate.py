@@ -90,12 +90,14 @@ def default_bounds(
     nominal: Array,
     length: float = 5e-3,
     angle: float = math.radians(2.0),
+    robot: set[str] | None = None,
 ) -> tuple[Array, Array]:
     """Seed 001's bounds: ±5 mm on lengths and ±2° on angles around the nominal robot
-    parameters; the device frame and the tool are left free."""
+    parameters (those in ``robot``, default: all but ``frame_*``/``tcp_*``); the device
+    frame, the tool and effect coefficients are left free."""
     lo, hi = np.full(len(names), -np.inf), np.full(len(names), np.inf)
     for k, (name, rot) in enumerate(zip(names, rotation, strict=True)):
-        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)):
+        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)) or (robot is not None and name not in robot):
             continue
         w = angle if rot else length
         lo[k], hi[k] = nominal[k] - w, nominal[k] + w
@@ -142,7 +144,31 @@ class CalibrationResult:
     iterations: int
     seconds: float
     measurement_chain: Model | None = field(default=None, repr=False)
+    compliance: dict[str, float] = field(default_factory=dict)  # joint -> rad per N·m
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     metadata: dict[str, Any] = field(default_factory=dict)
+
+    def joint_perturbations(self, q: ArrayLike) -> Array | None:
+        """Joint perturbations ``(n, dof, 3)`` of the identified joint effects at ``q``
+        (None for a geometric calibration)."""
+        if not self.compliance:
+            return None
+        from robocal.model.dynamics import gravity_torques
+
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        tau = gravity_torques(self.model, q, np.asarray(self.gravity))
+        pert = np.zeros((len(q), self.model.dof, 3))
+        for name, c in self.compliance.items():
+            j = self.model.joint_names.index(name)
+            pert[:, j, 2] = c * tau[:, j]
+        return pert
+
+    def predict(self, q: ArrayLike, frame: ArrayLike | None = None) -> Array:
+        """Tool frames ``(n, 4, 4)`` of the calibrated robot (with its joint effects) at
+        ``q``, in the device frame (default: the calibrated one; identity for the base)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        T = self.model.fk(q, self.joint_perturbations(q))
+        return (self.frame if frame is None else np.asarray(frame, dtype=float)) @ T
 
     @property
     def high_correlations(self) -> list[tuple[str, str, float]]:
@@ -191,6 +217,8 @@ class CalibrationResult:
         rot = {s.name: s.is_rotation for s in (self.measurement_chain or self.model).steps}
         for n, v0, v, s in zip(self.names, self.nominal, self.estimates, self.std, strict=True):
             f, unit = (math.degrees(1), "deg") if rot.get(n) else (1e3, "mm")
+            if n.startswith(COMPLIANCE_PREFIX):
+                f, unit = 1e6, "µrad/N·m"
             lines.append(
                 f"  {n:<20} {v0 * f:>12.5f} {v * f:>14.5f} {(v - v0) * f:>14.5f} {s * f:>11.5f} {unit}"
             )
@@ -221,7 +249,9 @@ class CalibrationResult:
             "parameters": [
                 {
                     "name": n,
-                    "unit": "rad" if rot.get(n) else "m",
+                    "unit": "rad/(N·m)"
+                    if n.startswith(COMPLIANCE_PREFIX)
+                    else ("rad" if rot.get(n) else "m"),
                     "nominal": float(v0),
                     "estimate": float(v),
                     "delta": float(v - v0),
@@ -235,6 +265,8 @@ class CalibrationResult:
                 for d in self.dropped
             ],
             "high_correlations": [list(c) for c in self.high_correlations],
+            "compliance_rad_per_Nm": self.compliance,
+            "gravity": list(self.gravity),
             **self.metadata,
         }
 
@@ -287,6 +319,8 @@ class CalibrationResult:
             iterations=data["iterations"],
             seconds=data["seconds"],
             measurement_chain=load_model(chain_path) if chain_path.exists() else None,
+            compliance=dict(data.get("compliance_rad_per_Nm", {})),
+            gravity=tuple(data.get("gravity", (0.0, 0.0, -9.81))),
             metadata=extra,
         )
 
@@ -336,6 +370,39 @@ def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array
     return s2, cov, std, corr, cond
 
 
+COMPLIANCE_PREFIX = "compliance_"
+
+
+def _unit(name: str, rotation: bool) -> str:
+    if name.startswith(COMPLIANCE_PREFIX):
+        return "rad/(N·m)"
+    return "rad" if rotation else "m"
+
+
+def _compliance_basis(
+    model: Model, q: Array, joints: bool | Sequence[str], gravity: ArrayLike
+) -> tuple[Array, tuple[str, ...]]:
+    """Gravity torques as joint-angle effect bases, one per selected joint."""
+    from robocal.model.dynamics import gravity_torques
+
+    names = model.joint_names if joints is True else tuple(joints)
+    unknown = set(names) - set(model.joint_names)
+    if unknown:
+        raise ValueError(f"compliance: model {model.name!r} has no joint(s) {sorted(unknown)}")
+    tau = gravity_torques(model, q, np.asarray(gravity, dtype=float))
+    basis = []
+    out = []
+    for name in names:
+        j = model.joint_names.index(name)
+        if np.ptp(tau[:, j]) < 1e-9:  # a torque that never changes cannot be told from an offset
+            continue
+        b = np.zeros_like(tau)
+        b[:, j] = tau[:, j]
+        basis.append(b)
+        out.append(COMPLIANCE_PREFIX + name)
+    return np.array(basis), tuple(out)
+
+
 def _robot_size(robot: Model, q: Array) -> float:
     T = robot.fk(q[: min(len(q), 50)])
     return max(float(np.abs(T[:, :3, 3]).max()), 0.1)
@@ -359,6 +426,8 @@ def calibrate(
     relaxation: float = 0.5,
     max_iterations: int = 200,
     max_std: float = 5e-4,
+    compliance: bool | Sequence[str] = False,
+    gravity: ArrayLike = (0.0, 0.0, -9.81),
 ) -> CalibrationResult:
     """Identify the robot's parameters from measurements.
 
@@ -387,6 +456,11 @@ def calibrate(
         max_std: a parameter whose standard deviation, as a displacement of the tool (m;
             rotations times the robot's size), exceeds this is fixed at its start value
             and the fit repeated: it is not identifiable from these measurements.
+        compliance: also identify joint compliances under gravity, δθ_j = c_j τ_j(q)
+            (rad per N·m), with τ from the model's mass properties: ``True`` for every
+            joint or a list of joint names.  A first step towards seed 003's joint
+            effects; needs ``model.bodies``.
+        gravity: gravity in the robot's base frame (m/s²) for ``compliance``.
     """
     t_start = time.perf_counter()
     if method not in METHODS:
@@ -432,8 +506,18 @@ def calibrate(
         w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
     if rows == 6:
         w[:, 3:] = orientation_weight * (w[:, :3].mean(axis=1, keepdims=True))
+    basis, effect_names = None, ()
+    if compliance:
+        basis, effect_names = _compliance_basis(model, data.q, compliance, gravity)
     problem = Problem(
-        chain, data.q, data.position, data.orientation if rows == 6 else None, w.reshape(-1), length
+        chain,
+        data.q,
+        data.position,
+        data.orientation if rows == 6 else None,
+        w.reshape(-1),
+        length,
+        basis,
+        effect_names,
     )
 
     # identifiable set, preferring the frame, then the tool, then the robot in chain order
@@ -443,8 +527,7 @@ def calibrate(
     order += [x for x in names if x not in set(order)]
     selection = select_columns(J0, names, order)
     if selection.dropped:
-        chain = chain.fixed([d.name for d in selection.dropped])
-        problem = dataclasses.replace(problem, chain=chain, _cache={})
+        problem = problem.fix([d.name for d in selection.dropped])
     names = problem.free_names
     x0 = problem.x0
 
@@ -459,7 +542,8 @@ def calibrate(
         if bounds is None:
             lo, hi = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
         elif isinstance(bounds, str):
-            lo, hi = default_bounds(names, problem.free_is_rotation, x0)
+            rot = [s.is_rotation for s in problem.chain.steps if s.free] + [False] * problem.n_effects
+            lo, hi = default_bounds(names, rot, x0, robot=set(model.names))
         else:
             lo, hi = (np.asarray(b, dtype=float) for b in bounds)
             if lo.shape != x0.shape or hi.shape != x0.shape:
@@ -471,14 +555,13 @@ def calibrate(
     _, cov, std, corr, cond = _uncertainty(problem, x)
     # drop what these measurements cannot determine, worst first, and refit
     for _ in range(len(x)):
-        move = std * np.where(problem.free_is_rotation, length, 1.0)
+        move = std * problem.free_scale
         worst = int(np.argmax(move)) if len(move) else 0
         if not len(move) or move[worst] <= max_std:
             break
         dropped.append(Dropped(names[worst], "poorly identifiable", sigma=float(move[worst])))
         keep = np.arange(len(x)) != worst
-        chain = chain.fixed([names[worst]])
-        problem = dataclasses.replace(problem, chain=chain, _cache={})
+        problem = problem.fix([names[worst]])
         names = problem.free_names
         x0 = x0[keep]
         if method == "bounded":
@@ -494,6 +577,7 @@ def calibrate(
     )
 
     # the calibrated chain, and the robot model with the tool in the base frame
+    chain = problem.chain
     values = problem.values(x)
     calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
     frame_names = [s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))]
@@ -509,7 +593,11 @@ def calibrate(
     calibrated = dataclasses.replace(
         model, steps=tuple(robot_steps), notes=(model.notes + " calibrated").strip()
     )
-    nominal_values = problem.values(x0)[chain.free_mask]
+    effects = {
+        name.removeprefix(COMPLIANCE_PREFIX): float(v)
+        for name, v in zip(names, x, strict=True)
+        if name.startswith(COMPLIANCE_PREFIX)
+    }
     seconds = time.perf_counter() - t_start
     return CalibrationResult(
         model=calibrated,
@@ -518,7 +606,7 @@ def calibrate(
         method=method,
         names=names,
         estimates=x,
-        nominal=nominal_values,
+        nominal=x0,
         std=std,
         covariance=cov,
         correlation=corr,
@@ -533,4 +621,6 @@ def calibrate(
         iterations=result.iterations,
         seconds=seconds,
         measurement_chain=calibrated_chain,
+        compliance=effects,
+        gravity=tuple(float(g) for g in np.asarray(gravity, dtype=float)),
     )

@@ -74,6 +74,10 @@ class Problem:
         orientation: ``(n, 3, 3)`` measured rotations or None (position-only).
         weights: ``(n * rows,)`` residual weights (1/σ).
         length_scale: the robot's size (m), to compare rotations with lengths.
+        effect_basis: ``(m, n, dof)`` joint-angle effects with unknown coefficients:
+            the joint perturbation is δθ = Σ_k c_k B_k (e.g. B_k = gravity torque of a
+            joint, c_k its compliance); ``None`` for a purely geometric calibration.
+        effect_names: the ``m`` coefficient names.
     """
 
     chain: Model
@@ -82,6 +86,8 @@ class Problem:
     orientation: Array | None
     weights: Array
     length_scale: float
+    effect_basis: Array | None = None
+    effect_names: tuple[str, ...] = ()
     _cache: dict = dataclasses.field(default_factory=dict, repr=False)
 
     @property
@@ -93,28 +99,61 @@ class Problem:
         return "position" if self.orientation is None else "pose"
 
     @property
-    def free_names(self) -> tuple[str, ...]:
-        return self.chain.free_names
+    def n_effects(self) -> int:
+        return 0 if self.effect_basis is None else len(self.effect_basis)
 
     @property
-    def free_is_rotation(self) -> NDArray[np.bool_]:
-        return np.array([s.is_rotation for s in self.chain.steps if s.free])
+    def free_names(self) -> tuple[str, ...]:
+        return self.chain.free_names + tuple(self.effect_names)
+
+    @property
+    def free_scale(self) -> Array:
+        """Tool displacement (m) per unit of each unknown: 1 for lengths, the robot's size
+        for angles, size times the basis' largest value for effect coefficients."""
+        rot = np.array([s.is_rotation for s in self.chain.steps if s.free], dtype=bool)
+        scale = np.where(rot, self.length_scale, 1.0)
+        if self.n_effects:
+            peak = np.abs(self.effect_basis).reshape(self.n_effects, -1).max(axis=1)
+            scale = np.concatenate([scale, self.length_scale * np.maximum(peak, 1e-300)])
+        return scale
 
     @property
     def x0(self) -> Array:
-        return self.chain.free_values
+        return np.concatenate([self.chain.free_values, np.zeros(self.n_effects)])
 
     def values(self, x: Array) -> Array:
+        """All chain parameter values for the unknowns ``x``."""
         v = self.chain.values
-        v[self.chain.free_mask] = x
+        v[self.chain.free_mask] = x[: len(x) - self.n_effects]
         return v
+
+    def perturbations(self, x: Array) -> Array | None:
+        """Joint perturbations ``(n, dof, 3)`` of the effect coefficients in ``x``."""
+        if not self.n_effects:
+            return None
+        pert = np.zeros((len(self.q), self.q.shape[1], 3))
+        pert[:, :, 2] = np.tensordot(x[len(x) - self.n_effects :], self.effect_basis, axes=1)
+        return pert
 
     def _evaluate(self, x: Array, jacobian: bool):
         key = (x.tobytes(), jacobian)
         if key not in self._cache:
             if len(self._cache) > 4:
                 self._cache.clear()
-            T, J = self.chain.evaluate(self.q, self.values(x), rows=self.measure, jacobian=jacobian)
+            out = self.chain.evaluate(
+                self.q,
+                self.values(x),
+                rows=self.measure,
+                jacobian=jacobian,
+                perturbations=self.perturbations(x),
+                joint_columns=jacobian and self.n_effects > 0,
+            )
+            T, J = out[0], out[1]
+            if jacobian and self.n_effects:
+                n, dof = self.q.shape
+                Jq = out[2].reshape(n, self.rows, dof)
+                Jc = np.einsum("nrj,knj->nrk", Jq, self.effect_basis).reshape(n * self.rows, -1)
+                J = np.concatenate([J, Jc], axis=1)
             self._cache[key] = (T, J)
         return self._cache[key]
 
@@ -142,5 +181,18 @@ class Problem:
         return J * self.weights[:, None] if weighted else J
 
     def scaled_jacobian(self, x: Array) -> Array:
-        """The weighted Jacobian with rotations in length units (times ``length_scale``)."""
-        return self.jacobian(x) * np.where(self.free_is_rotation, self.length_scale, 1.0)
+        """The weighted Jacobian with every unknown as a tool displacement (:attr:`free_scale`)."""
+        return self.jacobian(x) * self.free_scale
+
+    def fix(self, names: list[str]) -> Problem:
+        """The same problem with some unknowns fixed at their current start values."""
+        effect_keep = [k for k, n in enumerate(self.effect_names) if n not in set(names)]
+        chain = self.chain.fixed([n for n in names if n in set(self.chain.names)])
+        basis = None if not effect_keep else self.effect_basis[effect_keep]
+        return dataclasses.replace(
+            self,
+            chain=chain,
+            effect_basis=basis,
+            effect_names=tuple(self.effect_names[k] for k in effect_keep),
+            _cache={},
+        )

@@ -74,8 +74,7 @@ def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int =
     """Seed 003 eq. 3.6, iterated: Gauss-Newton with the pseudo-inverse of J."""
     x = x0.copy()
     history = []
-    L = problem.length_scale
-    move_scale = np.where(problem.free_is_rotation, L, 1.0)  # correction as a tool displacement
+    move_scale = problem.free_scale  # a correction as a tool displacement
     for it in range(1, max_iterations + 1):
         r = problem.residual(x)
         J = problem.jacobian(x)
@@ -150,10 +149,12 @@ def _influence(
         raise ValueError(f"the influence method needs 0 < C < 1, got C={relaxation}")
     x = x0.copy()
     width = problem.rows
-    rot = problem.free_is_rotation
-    L = problem.length_scale
-    step = np.where(rot, angular_step, linear_step)
-    move_scale = np.where(rot, L, 1.0)
+    # the thesis' test steps: +0.05° on angles, +0.1 mm on lengths (effect coefficients:
+    # the step that moves the tool as much as 0.1 mm would)
+    move_scale = problem.free_scale
+    n_geo = len(x) - problem.n_effects
+    rot = np.array([s.is_rotation for s in problem.chain.steps if s.free], dtype=bool)
+    step = np.concatenate([np.where(rot, angular_step, linear_step), linear_step / move_scale[n_geo:]])
     history = []
     for it in range(1, max_iterations + 1):
         r = problem.residual(x, weighted=False).reshape(-1, width)  # ΔP per pose (model - measured)

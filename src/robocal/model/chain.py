@@ -564,7 +564,8 @@ class Model:
         rows: Literal["position", "pose"] = "position",
         jacobian: bool = True,
         perturbations: ArrayLike | None = None,
-    ) -> tuple[Array, Array | None]:
+        joint_columns: bool = False,
+    ) -> tuple[Array, ...]:
         """Tool frames and identification Jacobian for other parameter values, without
         building a new model (the inner loop of the solvers).
 
@@ -573,21 +574,31 @@ class Model:
             values: all parameter values ``(P,)`` in chain order (default: the model's).
             rows, perturbations: as for :meth:`jacobian`.
             jacobian: whether to compute the Jacobian (columns: :attr:`free_names`).
+            joint_columns: also return the joint Jacobian with the same rows
+                (``(3n, dof)`` or ``(6n, dof)``): the derivatives with respect to the
+                joint values, and so to the δθ joint perturbations.
 
         Returns:
-            ``T (n, 4, 4)`` and ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``.
+            ``T (n, 4, 4)``, ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``, and the
+            joint columns when asked.
         """
         q, _ = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         v = None if values is None else np.asarray(values, dtype=float)
         if v is not None and v.shape != (len(self.steps),):
             raise ValueError(f"values shaped {v.shape}; model {self.name!r} has {len(self.steps)} parameters")
-        if not jacobian:
+        if not jacobian and not joint_columns:
             F, _ = self._forward(q, d, keep_anchors=False, values=v)
             return _to_homogeneous(F), None
-        free = np.flatnonzero(self.free_mask)
-        F, J = self._columns(q, d, free, orientation=rows == "pose", values=v)
-        return _to_homogeneous(F), np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(free))
+        free = np.flatnonzero(self.free_mask) if jacobian else np.zeros(0, dtype=np.intp)
+        joints = self._plan.joint_steps if joint_columns else np.zeros(0, dtype=np.intp)
+        steps = np.union1d(free, joints)
+        F, J = self._columns(q, d, steps, orientation=rows == "pose", values=v)
+        J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(steps))
+        out: tuple[Array, ...] = (_to_homogeneous(F), J[:, np.searchsorted(steps, free)] if jacobian else None)
+        if joint_columns:
+            out += (J[:, np.searchsorted(steps, joints)],)
+        return out
 
     def jacobian(
         self,

@@ -83,3 +83,19 @@ def to_pinocchio(model: Model, gravity: np.ndarray | None = None):
         np.array([0.0, 0.0, -9.81]) if gravity is None else np.asarray(gravity, float), np.zeros(3)
     )
     return pm
+
+
+def gravity_torques(model, q: np.ndarray, gravity: np.ndarray | None = None) -> np.ndarray:
+    """Static joint torques (N·m, or N for prismatic joints) that hold ``model`` against
+    gravity at joint values ``q`` ``(n, dof)``: Pinocchio's generalized gravity, ``(n, dof)``.
+
+    Needs the model's mass properties (:class:`~robocal.model.chain.Body`).
+    """
+    import pinocchio as pin
+
+    if not model.bodies:
+        raise ValueError(f"model {model.name!r} has no mass properties (bodies) to compute gravity torques")
+    pm = to_pinocchio(model, gravity)
+    data = pm.createData()
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    return np.array([pin.computeGeneralizedGravity(pm, data, qk) for qk in q])

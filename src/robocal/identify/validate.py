@@ -1,0 +1,147 @@
+"""Held-out validation: how far a (calibrated) model misses real measurements.
+
+``rc.validate(result_or_model, data)`` predicts the measured positions (and
+orientations) of ``data`` and reports mean, RMS, max and 95th percentile of the
+position error, per axis, and the orientation error where measured.
+
+Which device frame: data from the calibration's own set-up uses the frame identified
+by the calibration as it is (pass the :class:`CalibrationResult`, or ``frame=``); data
+from another placement of the device may refit the frame only (``refit_frame=True``):
+a rigid Kabsch/Horn fit, the exact least-squares frame for positions.  A bare model
+without a frame is validated with a refitted frame.  The result says which was done.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal import spatial
+from robocal.identify.calibrate import CalibrationResult, calibrate
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Model
+
+__all__ = ["ValidationStats", "cross_validate", "validate"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ValidationStats:
+    """Position (and orientation) errors of a model on measured poses (SI units)."""
+
+    n: int
+    mean: float
+    rms: float
+    max: float
+    p95: float
+    axis_mean_abs: tuple[float, float, float]
+    axis_rms: tuple[float, float, float]
+    frame: str  # "calibrated", "given", "refit" or "identity"
+    errors: Array = field(repr=False)  # (n,) position error per pose, m
+    error_vectors: Array = field(repr=False)  # (n, 3) predicted - measured, device frame
+    orientation_mean: float | None = None  # rad
+    orientation_max: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "n": self.n,
+            "mean_mm": self.mean * 1e3,
+            "rms_mm": self.rms * 1e3,
+            "max_mm": self.max * 1e3,
+            "p95_mm": self.p95 * 1e3,
+            "axis_mean_abs_mm": [v * 1e3 for v in self.axis_mean_abs],
+            "axis_rms_mm": [v * 1e3 for v in self.axis_rms],
+            "frame": self.frame,
+        }
+        if self.orientation_mean is not None:
+            out["orientation_mean_deg"] = float(np.degrees(self.orientation_mean))
+            out["orientation_max_deg"] = float(np.degrees(self.orientation_max))
+        return out
+
+    def __str__(self) -> str:
+        text = (
+            f"{self.n} poses, frame {self.frame}: mean {self.mean * 1e3:.4f} mm, "
+            f"RMS {self.rms * 1e3:.4f} mm, p95 {self.p95 * 1e3:.4f} mm, max {self.max * 1e3:.4f} mm"
+        )
+        if self.orientation_mean is not None:
+            text += f"; orientation mean {np.degrees(self.orientation_mean):.4f}°"
+        return text
+
+
+def validate(
+    model: Model | CalibrationResult,
+    data: Measurements,
+    frame: ArrayLike | None = None,
+    refit_frame: bool = False,
+) -> ValidationStats:
+    """Error statistics of ``model`` on ``data`` (held-out poses).
+
+    Args:
+        model: a :class:`CalibrationResult` (its model and device frame) or a model.
+        data: measured poses, in the device frame.
+        frame: ``T_device_base`` to use instead of the result's.
+        refit_frame: refit the device frame to ``data`` (another placement of the device).
+    """
+    if data.position is None:
+        raise ValueError("the validation data has no measured positions")
+    label = "given"
+    perturbations = None
+    if isinstance(model, CalibrationResult):
+        result, model = model, model.model
+        if frame is None:
+            frame, label = result.frame, "calibrated"
+        if data.dof == model.dof:
+            perturbations = result.joint_perturbations(data.q)
+    if data.dof != model.dof:
+        raise ValueError(
+            f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
+        )
+    T = model.fk(data.q, perturbations)
+    if refit_frame or frame is None:
+        T_frame = spatial.fit_rigid_transform(T[:, :3, 3], data.position)
+        label = "refit"
+    else:
+        T_frame = np.asarray(frame, dtype=float)
+    predicted = T_frame @ T
+    d = predicted[:, :3, 3] - data.position
+    e = np.linalg.norm(d, axis=1)
+    o_mean = o_max = None
+    if data.orientation is not None:
+        w = spatial.matrix_to_rotvec(predicted[:, :3, :3] @ np.swapaxes(data.orientation, -1, -2))
+        a = np.linalg.norm(w, axis=1)
+        o_mean, o_max = float(a.mean()), float(a.max())
+    return ValidationStats(
+        n=data.n,
+        mean=float(e.mean()),
+        rms=float(np.sqrt(np.mean(e**2))),
+        max=float(e.max()),
+        p95=float(np.percentile(e, 95)),
+        axis_mean_abs=tuple(float(v) for v in np.abs(d).mean(axis=0)),
+        axis_rms=tuple(float(v) for v in np.sqrt(np.mean(d**2, axis=0))),
+        frame=label,
+        errors=e,
+        error_vectors=d,
+        orientation_mean=o_mean,
+        orientation_max=o_max,
+    )
+
+
+def cross_validate(
+    model: Model, data: Measurements, k: int = 5, seed: int | None = 0, **calibrate_options: Any
+) -> list[ValidationStats]:
+    """k-fold cross-validation for small datasets: calibrate on k-1 folds, validate on the
+    held-out fold with the calibrated device frame; one :class:`ValidationStats` per fold."""
+    if not 2 <= k <= data.n:
+        raise ValueError(f"k={k} folds need 2 <= k <= {data.n} poses")
+    order = np.random.default_rng(seed).permutation(data.n)
+    folds = np.array_split(order, k)
+    out = []
+    for fold in folds:
+        train = np.setdiff1d(order, fold)
+        result = calibrate(model, data.subset(train), **calibrate_options)
+        out.append(validate(result, data.subset(fold)))
+    return out
