@@ -184,23 +184,33 @@ class CalibrationResult:
     def deltas(self) -> dict[str, float]:
         return {n: float(e - v) for n, e, v in zip(self.names, self.estimates, self.nominal, strict=True)}
 
-    def position_covariance(self, q: ArrayLike) -> Array:
-        """Covariance ``(n, 3, 3)`` (m²) of the calibrated tool position at joint values ``q``,
-        from the parameter covariance (robot and tool parameters; the device frame does not
-        enter a prediction in the robot's base frame)."""
+    def position_covariance(self, q: ArrayLike, frame: Literal["device", "base"] = "device") -> Array:
+        """Covariance ``(n, 3, 3)`` (m²) of the predicted tool position at joint values ``q``.
+
+        ``frame="device"`` (default): the prediction of a measurement, in the device
+        frame, with the uncertainty of every estimated geometric parameter including
+        the device frame's.  ``frame="base"``: the position in the robot's base frame,
+        from the robot and tool parameters only.  Joint-effect coefficients are not
+        included.
+        """
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        robot_names = [n for n in self.names if not n.startswith(FRAME_PREFIX)]
-        idx = [self.names.index(n) for n in robot_names]
-        model = self.model.with_free(None, free=False).with_free(robot_names)
-        J = model.jacobian(q).reshape(len(q), 3, -1)
-        cols = [model.free_names.index(n) for n in robot_names]
-        J = J[:, :, cols]
+        chain = self.measurement_chain if frame == "device" else self.model
+        if chain is None:
+            raise ValueError("this result has no measurement chain (saved by an older robocal?)")
+        names = [
+            n
+            for n in self.names
+            if n in set(chain.names) and not (frame == "base" and n.startswith(FRAME_PREFIX))
+        ]
+        idx = [self.names.index(n) for n in names]
+        model = chain.with_free(None, free=False).with_free(names)
+        J = model.jacobian(q).reshape(len(q), 3, -1)[:, :, [model.free_names.index(n) for n in names]]
         C = self.covariance[np.ix_(idx, idx)]
         return np.einsum("nik,kl,njl->nij", J, C, J)
 
-    def position_uncertainty(self, q: ArrayLike) -> Array:
+    def position_uncertainty(self, q: ArrayLike, frame: Literal["device", "base"] = "device") -> Array:
         """1-σ radial position uncertainty ``sqrt(trace(cov))`` (m) at each pose, ``(n,)``."""
-        return np.sqrt(np.trace(self.position_covariance(q), axis1=1, axis2=2))
+        return np.sqrt(np.trace(self.position_covariance(q, frame), axis1=1, axis2=2))
 
     def summary(self) -> str:
         """A plain-text report of the calibration."""
@@ -554,7 +564,7 @@ def calibrate(
     dropped = list(selection.dropped)
     _, cov, std, corr, cond = _uncertainty(problem, x)
     # drop what these measurements cannot determine, worst first, and refit
-    for _ in range(len(x)):
+    for _ in range(len(x) if result.success else 0):  # an unconverged fit says nothing about σ
         move = std * problem.free_scale
         worst = int(np.argmax(move)) if len(move) else 0
         if not len(move) or move[worst] <= max_std:

@@ -9,10 +9,11 @@
                tool by less than the measurement resolution.
 ``bounded``    Seed 001 eq. 4: minimise Σ_j |X_j − X'_j| (sum of distances, not of
                squares) with |δd|, |δL| ≤ 5 mm and |δθ|, |δα| ≤ 2°.  Solved with scipy
-               ``least_squares(method="trf")`` — trust-region reflective is scipy's
-               least-squares routine that honours bounds — on the residuals
-               r_j = (|e_j|² + ε²)^¼, whose squares sum to the (ε-smoothed) sum of
-               distances, so the solver keeps Gauss-Newton speed on an L1 objective.
+               ``least_squares(method="trf", loss="soft_l1")`` — trust-region reflective
+               is scipy's least-squares routine that honours bounds, and its soft-L1 loss
+               on one residual per pose (the distance |e_j|) at a 1 µm scale turns the
+               squares into distances, so the solver keeps Gauss-Newton speed on an L1
+               objective.  (seed 001 used MATLAB's fmincon on the same objective)
 ``influence``  Seed 003 ch. 3 (eqs. 3.7-3.8): per pose an influence vector k from
                perturbing each parameter (+0.05° angular, +0.1 mm linear), relative to
                the most influential one; per pose the correction
@@ -95,41 +96,61 @@ def _bounded(
     x0: Array,
     *,
     bounds: tuple[Array, Array] | None = None,
-    epsilon: float = 1e-7,
-    max_iterations: int = 200,
+    scale: float = 1e-6,
+    max_iterations: int = 500,
     **_,
 ) -> SolveResult:
-    """Seed 001 eq. 4: min Σ_j |e_j| under bounds, via r_j = (|e_j|² + ε²)^¼ and trf."""
+    """Seed 001 eq. 4: min Σ_j |e_j| under bounds.
+
+    One residual per pose, its distance d_j = (|e_j|² + ε²)^½, with trf's ``soft_l1``
+    loss ρ(z) = 2(√(1 + z) − 1), z = (d_j / s)², at s = 1 µm: beyond a micrometre
+    ρ ≈ 2 d_j / s, so the objective is the sum of distances of seed 001, smoothed only
+    where the error is far below any measurement's resolution.
+    """
     lo, hi = bounds if bounds is not None else (np.full_like(x0, -np.inf), np.full_like(x0, np.inf))
     width = problem.rows
-
-    def point_errors(x):
-        return problem.residual(x).reshape(-1, width)
+    eps2 = (1e-3 * scale) ** 2
 
     def fun(x):
-        e = point_errors(x)
-        return (np.einsum("ij,ij->i", e, e) + epsilon**2) ** 0.25
+        e = problem.residual(x).reshape(-1, width)
+        return np.sqrt(np.einsum("ij,ij->i", e, e) + eps2)
 
     def jac(x):
-        e = point_errors(x)
+        e = problem.residual(x).reshape(-1, width)
         J = problem.jacobian(x).reshape(e.shape[0], width, -1)
-        s = np.einsum("ij,ij->i", e, e) + epsilon**2
-        return 0.5 * s[:, None] ** -0.75 * np.einsum("ij,ijk->ik", e, J)
+        d = np.sqrt(np.einsum("ij,ij->i", e, e) + eps2)
+        return np.einsum("ij,ijk->ik", e, J) / d[:, None]
 
-    x_start = np.clip(x0, lo, hi)
+    # far from the optimum the L1 objective gives trf little curvature to work with: start
+    # from the bounded least-squares solution, then minimise the sum of distances
+    start = least_squares(
+        problem.residual,
+        np.clip(x0, lo, hi),
+        jac=problem.jacobian,
+        bounds=(lo, hi),
+        method="trf",
+        x_scale="jac",
+        ftol=1e-10,
+        xtol=1e-10,
+        gtol=1e-10,
+        max_nfev=max_iterations,
+    )
     res = least_squares(
         fun,
-        x_start,
+        start.x,
         jac=jac,
         bounds=(lo, hi),
         method="trf",
         x_scale="jac",
-        ftol=1e-12,
-        xtol=1e-12,
-        gtol=1e-12,
+        loss="soft_l1",
+        f_scale=scale,
+        ftol=1e-9,
+        xtol=1e-9,
+        gtol=1e-9,
         max_nfev=max_iterations,
     )
-    return SolveResult(res.x, bool(res.status > 0), res.message, int(res.njev or res.nfev), int(res.nfev))
+    iterations = int(start.njev or start.nfev) + int(res.njev or res.nfev)
+    return SolveResult(res.x, bool(res.status > 0), res.message, iterations, int(start.nfev + res.nfev))
 
 
 def _influence(

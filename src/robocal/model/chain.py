@@ -504,7 +504,7 @@ class Model:
         p_tool = F[:, 3]  # (3, n)
         step_anchor = plan.anchor_of[steps]
         bounds = np.flatnonzero(np.diff(step_anchor)) + 1
-        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True):
+        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True) if m else ():
             a, k = step_anchor[lo], hi - lo
             if a == 0:  # constant frames before the first joint
                 A = np.broadcast_to(a_loc[lo:hi, :, None], (k, 3, n))
@@ -595,7 +595,8 @@ class Model:
         steps = np.union1d(free, joints)
         F, J = self._columns(q, d, steps, orientation=rows == "pose", values=v)
         J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(steps))
-        out: tuple[Array, ...] = (_to_homogeneous(F), J[:, np.searchsorted(steps, free)] if jacobian else None)
+        J_free = J[:, np.searchsorted(steps, free)] if jacobian else None
+        out: tuple[Array, ...] = (_to_homogeneous(F), J_free)
         if joint_columns:
             out += (J[:, np.searchsorted(steps, joints)],)
         return out
