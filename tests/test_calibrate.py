@@ -192,7 +192,7 @@ def test_joint_compliance_is_identified():
         pert = np.zeros((len(q), model.dof, 3))
         for name, c in c_true.items():
             j = model.joint_names.index(name)
-            pert[:, j, 2] = c * tau[:, j]
+            pert[:, j, 2] = -c * tau[:, j]  # the joint gives way under the gravity load
         return pert
 
     robot = virtual(model, seed=41, noise=10e-6, effects=sag)

@@ -15,10 +15,10 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from robocal import spatial
+from robocal.console import console, err_console, fail
 from robocal.model.catalog import robot, robots
 from robocal.model.chain import Model
 from robocal.model.files import ModelFileError, load_model
@@ -32,13 +32,7 @@ app = typer.Typer(
 robots_app = typer.Typer(help="The robot catalog.", invoke_without_command=True)
 app.add_typer(robots_app, name="robots")
 
-console = Console()
-err_console = Console(stderr=True)
 
-
-def _fail(message: str) -> typer.Exit:
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
-    return typer.Exit(code=2)
 
 
 def resolve_model(name_or_path: str) -> Model:
@@ -47,11 +41,11 @@ def resolve_model(name_or_path: str) -> Model:
     try:
         if path.suffix in (".yaml", ".yml") or path.exists():
             if not path.is_file():
-                raise _fail(f"model file {path} does not exist")
+                raise fail(f"model file {path} does not exist")
             return load_model(path)
         return robot(name_or_path)
     except (KeyError, ModelFileError) as err:
-        raise _fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+        raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
 
 
 def _fmt(value: float, digits: int = 4) -> str:
@@ -123,11 +117,11 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError:
-        raise _fail(
+        raise fail(
             f"--q {text!r}: joint values must be numbers separated by commas or spaces"
         ) from None
     if len(values) != m.dof:
-        raise _fail(
+        raise fail(
             f"--q has {len(values)} values but {m.name} has {m.dof} joints "
             f"({', '.join(m.joint_names)})"
         )
@@ -206,6 +200,10 @@ _model_commands.register(app)
 from robocal.measure import commands as _measure_commands  # noqa: E402
 
 _measure_commands.register(app)
+from robocal.measure import pose_commands as _pose_commands; _pose_commands.register(app)  # noqa: E402, E702, I001
+from robocal.identify import commands as _identify_commands  # noqa: E402
+
+_identify_commands.register(app)
 # --- end of registered commands ---
 
 

@@ -160,7 +160,7 @@ class CalibrationResult:
         pert = np.zeros((len(q), self.model.dof, 3))
         for name, c in self.compliance.items():
             j = self.model.joint_names.index(name)
-            pert[:, j, 2] = c * tau[:, j]
+            pert[:, j, 2] = -c * tau[:, j]
         return pert
 
     def predict(self, q: ArrayLike, frame: ArrayLike | None = None) -> Array:
@@ -407,7 +407,7 @@ def _compliance_basis(
         if np.ptp(tau[:, j]) < 1e-9:  # a torque that never changes cannot be told from an offset
             continue
         b = np.zeros_like(tau)
-        b[:, j] = tau[:, j]
+        b[:, j] = -tau[:, j]  # a compliant joint gives way: it turns against its holding torque
         basis.append(b)
         out.append(COMPLIANCE_PREFIX + name)
     return np.array(basis), tuple(out)
@@ -466,8 +466,9 @@ def calibrate(
         max_std: a parameter whose standard deviation, as a displacement of the tool (m;
             rotations times the robot's size), exceeds this is fixed at its start value
             and the fit repeated: it is not identifiable from these measurements.
-        compliance: also identify joint compliances under gravity, δθ_j = c_j τ_j(q)
-            (rad per N·m), with τ from the model's mass properties: ``True`` for every
+        compliance: also identify joint compliances under gravity, δθ_j = -c_j τ_j(q)
+            (c in rad per N·m, τ the torque that holds the arm against gravity, from
+            the model's mass properties: the joint gives way under its load): ``True`` for every
             joint or a list of joint names.  A first step towards seed 003's joint
             effects; needs ``model.bodies``.
         gravity: gravity in the robot's base frame (m/s²) for ``compliance``.

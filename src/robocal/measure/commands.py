@@ -20,10 +20,10 @@ from typing import Annotated
 
 import numpy as np
 import typer
-from rich.console import Console
 from rich.table import Table
 
 from robocal import spatial
+from robocal.console import console, err_console, fail
 from robocal.measure.dataset import (
     PROBLEM_CODES,
     MeasurementFileError,
@@ -43,15 +43,9 @@ from robocal.measure.simulate import (
 
 __all__ = ["register"]
 
-console = Console()
-err_console = Console(stderr=True)
 
 data_app = typer.Typer(help="Measurement files: check them before a calibration.", no_args_is_help=True)
 
-
-def _fail(message: str) -> typer.Exit:
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
-    return typer.Exit(code=2)
 
 
 def _model(name: str | None):
@@ -66,9 +60,9 @@ def _numbers(text: str, count: int, option: str) -> np.ndarray:
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError:
-        raise _fail(f"{option} {text!r}: expected {count} numbers separated by commas or spaces") from None
+        raise fail(f"{option} {text!r}: expected {count} numbers separated by commas or spaces") from None
     if len(values) != count:
-        raise _fail(f"{option} {text!r}: expected {count} numbers, got {len(values)}")
+        raise fail(f"{option} {text!r}: expected {count} numbers, got {len(values)}")
     return np.array(values)
 
 
@@ -173,7 +167,7 @@ def data_check(
     try:
         problems = check_measurements(file, model, **options)
     except (ValueError, KeyError) as err:
-        raise _fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+        raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
     errors = [p for p in problems if p.severity == "error"]
     warns = [p for p in problems if p.severity == "warning"]
     if problems:
@@ -228,9 +222,9 @@ def simulate_command(
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
     model = _model(robot)
     if device not in DEVICES:
-        raise _fail(f"unknown device {device!r}; known: {', '.join(DEVICES)}")
+        raise fail(f"unknown device {device!r}; known: {', '.join(DEVICES)}")
     if distribution not in ("uniform", "normal"):
-        raise _fail(f"--distribution must be uniform or normal, got {distribution!r}")
+        raise fail(f"--distribution must be uniform or normal, got {distribution!r}")
     kwargs = {}
     if device_pose is not None:
         v = _numbers(device_pose, 6, "--device-pose")
@@ -241,7 +235,7 @@ def simulate_command(
     tolerances = {}
     for item in tol or []:
         if "=" not in item:
-            raise _fail(f"--tol {item!r}: expected NAME=VALUE, e.g. theta2=0.2deg")
+            raise fail(f"--tol {item!r}: expected NAME=VALUE, e.g. theta2=0.2deg")
         name, value = item.split("=", 1)
         tolerances[name.strip()] = value.strip()
     try:
@@ -280,9 +274,9 @@ def simulate_command(
         }
         data_path, truth = save_simulation(vr, data, output, seed, **info)
     except MeasurementFileError as err:
-        raise _fail(str(err)) from None
+        raise fail(str(err)) from None
     except (ValueError, KeyError) as err:
-        raise _fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+        raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
     dev_all = np.abs(np.array(list(_deviations(model, true))))
     console.print(
         f"wrote {data_path} ({data.n} rows, {dev.kind}: {', '.join(dev.columns)}) and the truth {truth}",

@@ -6,20 +6,15 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
+
+from robocal.console import console, err_console, fail
 
 __all__ = ["register"]
 
-console = Console()
-err_console = Console(stderr=True)
 
 model_app = typer.Typer(help="Build, view and check calibration models.", no_args_is_help=True)
 
-
-def _fail(message: str) -> typer.Exit:
-    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
-    return typer.Exit(code=2)
 
 
 @model_app.command("build")
@@ -37,16 +32,16 @@ def build_command(
     from robocal.model.urdf import URDFError, build_from_urdf
 
     if measure not in (None, "position", "pose"):
-        raise _fail(f"--measure must be 'position' or 'pose', got {measure!r}")
+        raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
     if not geometry.is_file():
-        raise _fail(f"{geometry} does not exist")
+        raise fail(f"{geometry} does not exist")
     try:
         if geometry.suffix.lower() == ".urdf":
             result = build_from_urdf(geometry, measure or "pose", tip)
         else:
             result = load_geometry(geometry).build(measure)
     except (GeometryError, URDFError) as err:
-        raise _fail(str(err)) from None
+        raise fail(str(err)) from None
     model = result.model
     table = Table(title=f"{model.name}: links", title_justify="left")
     for col in ("link", "parameterisation", "parameters (identified in bold)"):
@@ -94,7 +89,7 @@ def check_command(
     from robocal.model.singularity import check_model
 
     if measure not in ("position", "pose"):
-        raise _fail(f"--measure must be 'position' or 'pose', got {measure!r}")
+        raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
     model = resolve_model(model_name)
     result = check_model(model, measure)
     table = Table(title=f"{model.name}: link parameterisations", title_justify="left")

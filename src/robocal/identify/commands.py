@@ -1,0 +1,214 @@
+"""``robocal calibrate`` and ``robocal validate``."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from robocal.console import console, fail
+
+__all__ = ["register"]
+
+
+
+
+LengthUnit = Annotated[str, typer.Option("--length-unit", help="m | mm | um: positions in the file")]
+AngleUnit = Annotated[str, typer.Option("--angle-unit", help="rad | deg: joint angles in the file")]
+Columns = Annotated[
+    str | None, typer.Option("--columns", help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
+]
+Sep = Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")]
+Decimal = Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')]
+Orientation = Annotated[
+    str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
+]
+
+
+def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, orientation):
+    from robocal.measure.dataset import MeasurementFileError, read_measurements
+
+    if not path.is_file():
+        raise fail(f"{path} does not exist")
+    try:
+        return read_measurements(
+            path,
+            length_unit=length_unit,
+            angle_unit=angle_unit,
+            columns=columns,
+            sep=sep,
+            decimal=decimal,
+            model=model,
+            orientation=orientation,
+        )
+    except (MeasurementFileError, ValueError) as err:
+        raise fail(str(err)) from None
+
+
+def _stats_table(title: str, stats) -> Table:
+    table = Table(title=title, title_justify="left")
+    for col in ("poses", "mean mm", "RMS mm", "p95 mm", "max mm", "|x| |y| |z| mean mm", "frame"):
+        table.add_column(col, justify="right")
+    axes = " ".join(f"{v * 1e3:.4f}" for v in stats.axis_mean_abs)
+    table.add_row(
+        str(stats.n),
+        f"{stats.mean * 1e3:.4f}",
+        f"{stats.rms * 1e3:.4f}",
+        f"{stats.p95 * 1e3:.4f}",
+        f"{stats.max * 1e3:.4f}",
+        axes,
+        stats.frame,
+    )
+    return table
+
+
+def calibrate_command(
+    data_path: Annotated[Path, typer.Option("--data", help="measurement CSV file")],
+    out: Annotated[Path, typer.Option("--out", help="directory for model.yaml and result.json")],
+    robot_name: Annotated[str | None, typer.Option("--robot", help="catalog robot")] = None,
+    model_path: Annotated[Path | None, typer.Option("--model", help="model YAML file")] = None,
+    measure: Annotated[str | None, typer.Option("--measure", help="position | pose")] = None,
+    method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
+    train_n: Annotated[
+        int | None, typer.Option("--train-n", help="calibrate on N random rows, validate on the rest")
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="seed of the --train-n draw")] = 0,
+    tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
+    compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
+    columns: Columns = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    orientation: Orientation = "auto",
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing result in --out")] = False,
+) -> None:
+    """Identify the robot's parameters from measurements; write the calibrated model."""
+    import robocal as rc
+    from robocal.cli import resolve_model
+    from robocal.identify.calibrate import file_hash
+
+    if (robot_name is None) == (model_path is None):
+        raise fail("give exactly one of --robot NAME or --model FILE")
+    model = resolve_model(robot_name if robot_name is not None else str(model_path))
+    if (out / "result.json").exists() and not force:
+        raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
+    data = _read(data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation)
+    train, test = data, None
+    if train_n is not None:
+        if not 0 < train_n < data.n:
+            raise fail(
+                f"--train-n {train_n} must be between 1 and {data.n - 1} (the file has {data.n} rows)"
+            )
+        split = data.with_split(train_n, seed=seed)
+        train, test = split.split_rows("train"), split.split_rows("test")
+    elif data.split is not None and "test" in set(data.split.tolist()):
+        train, test = data.split_rows("train"), data.split_rows("test")
+    guess = None
+    if tool is not None:
+        try:
+            guess = np.array([float(v) for v in tool.replace(",", " ").split()]) * 1e-3
+        except ValueError:
+            raise fail(f"--tool {tool!r}: three numbers in mm") from None
+        if guess.shape != (3,):
+            raise fail(f"--tool {tool!r}: three numbers in mm")
+    try:
+        with console.status(f"calibrating {model.name} on {train.n} poses ({method}) ..."):
+            result = rc.calibrate(
+                model, train, method=method, measure=measure, tool_guess=guess, compliance=compliance
+            )
+    except ValueError as err:
+        raise fail(str(err)) from None
+    result.metadata |= {
+        "data_file": str(data_path),
+        "data_sha256": file_hash(data_path),
+        "train_n": train.n,
+        "seed": seed,
+    }
+    validation = None
+    if test is not None:
+        validation = rc.validate(result, test)
+        result.metadata["validation"] = validation.to_dict()
+    result.save(out)
+    _print_result(result)
+    if validation is not None:
+        console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
+    console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
+
+
+def _print_result(result) -> None:
+    head = "converged" if result.success else "[red]NOT CONVERGED[/]"
+    console.print(
+        f"[bold]{result.model.name}[/] — {result.method}, {result.measure} measurements, {result.n} poses: "
+        f"{head} ({result.iterations} iterations, {result.seconds * 1e3:.0f} ms)",
+        highlight=False,
+    )
+    console.print(
+        f"RMS error on the calibration poses {result.rms_before * 1e3:.4f} mm → "
+        f"{result.rms_after * 1e3:.4f} mm; condition number {result.condition_number:.3g}",
+        highlight=False,
+    )
+    table = Table(title="identified parameters", title_justify="left")
+    for col in ("parameter", "start", "estimate", "delta", "σ", "unit"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    rot = {s.name: s.is_rotation for s in (result.measurement_chain or result.model).steps}
+    for n, v0, v, s in zip(result.names, result.nominal, result.estimates, result.std, strict=True):
+        if n.startswith("compliance_"):
+            f, unit = 1e6, "µrad/N·m"
+        else:
+            f, unit = (math.degrees(1), "deg") if rot.get(n) else (1e3, "mm")
+        table.add_row(n, f"{v0 * f:.5f}", f"{v * f:.5f}", f"{(v - v0) * f:+.5f}", f"{s * f:.5f}", unit)
+    console.print(table)
+    for d in result.dropped:
+        console.print(f"  [dim]not identified:[/] {d}", highlight=False)
+    for a, b, rho in result.high_correlations:
+        console.print(f"  [yellow]warning:[/] {a} and {b} are correlated ({rho:+.3f})", highlight=False)
+
+
+def validate_command(
+    directory: Annotated[Path, typer.Argument(help="a calibration output directory")],
+    data_path: Annotated[Path, typer.Option("--data", help="measurement CSV file")],
+    refit_frame: Annotated[
+        bool, typer.Option("--refit-frame", help="the device was moved: refit its frame only")
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="print JSON")] = False,
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
+    columns: Columns = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    orientation: Orientation = "auto",
+) -> None:
+    """Error statistics of a calibrated model on (held-out) measurements."""
+    import robocal as rc
+    from robocal.identify.calibrate import CalibrationResult
+
+    if not (directory / "result.json").is_file():
+        raise fail(f"{directory} holds no calibration result (result.json)")
+    try:
+        result = CalibrationResult.load(directory)
+    except (OSError, ValueError, KeyError) as err:
+        raise fail(f"{directory}: cannot read the result: {err}") from None
+    data = _read(data_path, result.model, length_unit, angle_unit, columns, sep, decimal, orientation)
+    stats = rc.validate(result, data, refit_frame=refit_frame)
+    if as_json:
+        print(json.dumps(stats.to_dict()))
+        return
+    console.print(_stats_table(f"{result.model.name} on {data_path.name}", stats))
+    note = {
+        "calibrated": "the device frame identified by the calibration was used as it is",
+        "refit": "the device frame was refitted to this data (--refit-frame)",
+    }.get(stats.frame, "")
+    if note:
+        console.print(note, highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``calibrate`` and ``validate`` to the ``robocal`` app."""
+    app.command("calibrate")(calibrate_command)
+    app.command("validate")(validate_command)
