@@ -560,7 +560,9 @@ def calibrate(
             if lo.shape != x0.shape or hi.shape != x0.shape:
                 raise ValueError(f"bounds must be two arrays over the {len(x0)} estimated parameters {names}")
         options["bounds"] = (lo, hi)
+    t_solve = time.perf_counter()
     result: SolveResult = solve(problem, x0, method, **options)
+    solve_seconds = time.perf_counter() - t_solve
     x = result.x
     dropped = list(selection.dropped)
     _, cov, std, corr, cond = _uncertainty(problem, x)
@@ -577,7 +579,9 @@ def calibrate(
         x0 = x0[keep]
         if method == "bounded":
             options["bounds"] = (options["bounds"][0][keep], options["bounds"][1][keep])
+        t_solve = time.perf_counter()
         result = solve(problem, x[keep], method, **options)
+        solve_seconds += time.perf_counter() - t_solve
         x = result.x
         _, cov, std, corr, cond = _uncertainty(problem, x)
 
@@ -634,4 +638,5 @@ def calibrate(
         measurement_chain=calibrated_chain,
         compliance=effects,
         gravity=tuple(float(g) for g in np.asarray(gravity, dtype=float)),
+        metadata={"solve_seconds": solve_seconds},
     )

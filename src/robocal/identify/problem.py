@@ -158,11 +158,11 @@ class Problem:
         return self._cache[key]
 
     def predicted(self, x: Array) -> Array:
-        """Predicted tool frames ``(n, 4, 4)`` in the device frame."""
-        key = (x.tobytes(), True)
-        if key in self._cache:
-            return self._cache[key][0]
-        return self._evaluate(x, jacobian=False)[0]
+        """Predicted tool frames ``(n, 4, 4)`` in the device frame.
+
+        The Jacobian is computed in the same pass: solvers ask for it at nearly every
+        point whose residual they evaluate, and one pass costs little more than FK."""
+        return self._evaluate(x, jacobian=True)[0]
 
     def residual(self, x: Array, weighted: bool = True) -> Array:
         """Predicted minus measured, ``(n * rows,)``."""

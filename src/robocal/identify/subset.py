@@ -75,7 +75,7 @@ def select_columns(
     order += [n for n in names if n not in set(order)]
     index = {n: k for k, n in enumerate(names)}
     scale = float(np.abs(J).max()) if J.size else 1.0
-    basis: list[np.ndarray] = []
+    Q = np.zeros((J.shape[0], 0))  # orthonormal basis of the kept columns
     kept: list[str] = []
     zero: list[str] = []
     redundant: list[str] = []
@@ -85,23 +85,25 @@ def select_columns(
         if norm <= 1e-12 * max(scale, 1e-300):
             zero.append(name)
             continue
-        v = col.copy()
-        for _ in range(2):  # Gram-Schmidt twice: orthogonal to working precision
-            for u in basis:
-                v -= (u @ v) * u
+        v = col - Q @ (Q.T @ col)
+        v -= Q @ (Q.T @ v)  # Gram-Schmidt twice: orthogonal to working precision
         residual = float(np.linalg.norm(v))
         if residual > tolerance * norm:
-            basis.append(v / residual)
+            Q = np.column_stack([Q, v / residual])
             kept.append(name)
         else:
             redundant.append(name)
     dropped = [Dropped(n, "no effect") for n in zero]
     if redundant:
-        K = J[:, [index[n] for n in kept]]
-        for name in redundant:
+        coefs = None
+        if explain and kept:
+            K = J[:, [index[n] for n in kept]]
+            R = J[:, [index[n] for n in redundant]]
+            coefs = np.linalg.lstsq(K, R, rcond=None)[0]  # every redundant column at once
+        for r, name in enumerate(redundant):
             absorbed: tuple[tuple[str, float], ...] = ()
-            if explain and kept:
-                coef, *_ = np.linalg.lstsq(K, J[:, index[name]], rcond=None)
+            if coefs is not None:
+                coef = coefs[:, r]
                 big = np.flatnonzero(np.abs(coef) > 1e-3 * np.abs(coef).max())
                 big = big[np.argsort(-np.abs(coef[big]))][:4]
                 absorbed = tuple((kept[k], float(coef[k])) for k in big)

@@ -389,13 +389,14 @@ class Model:
             in its anchor frame.
         """
         plan = self._plan
-        local = np.empty((len(self.steps), 4, 4))
+        E = _elementaries(plan.step_axis, plan.step_rot, values)  # (P, 4, 4), all at once
+        local = np.empty_like(E)
         seg_T: list[Array] = []
         for seg in plan.segments:
-            T = np.eye(4)
+            T = _EYE4
             for i in seg:
                 local[i] = T
-                T = T @ _elementary(self.steps[i].motion, values[i])
+                T = T @ E[i]
             seg_T.append(T)
         for j, i in enumerate(plan.joint_steps):
             local[i] = seg_T[j]  # a joint step starts where the previous segment ends
@@ -644,19 +645,27 @@ def _rotate_rows(F: Array, axis: int, c: Array, s: Array) -> None:
     Fj -= t
 
 
-def _elementary(motion: str, value: float) -> Array:
-    """One elementary 4x4 transform for a scalar value (faster than the batched
-    :func:`robocal.spatial.elementary` for the per-model constant products)."""
-    T = np.eye(4)
-    k = "xyz".index(motion[1])
-    if motion[0] == "T":
-        T[k, 3] = value
-    else:
-        c, s = math.cos(value), math.sin(value)
-        i, j = (k + 1) % 3, (k + 2) % 3
-        T[i, i] = T[j, j] = c
-        T[i, j], T[j, i] = -s, s
-    return T
+def _elementaries(axis: NDArray[np.intp], rotation: NDArray[np.bool_], values: Array) -> Array:
+    """The elementary 4x4 transforms of all steps at once, ``(P, 4, 4)``.
+
+    Built with a few vectorised assignments instead of one small matrix per step,
+    because a model's constant transforms are rebuilt at every solver iteration.
+    """
+    P = len(values)
+    E = np.zeros((P, 4, 4))
+    E[:, [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
+    idx = np.arange(P)
+    t = ~rotation
+    E[idx[t], axis[t], 3] = values[t]
+    r = idx[rotation]
+    k = axis[rotation]
+    i, j = (k + 1) % 3, (k + 2) % 3
+    c, s = np.cos(values[rotation]), np.sin(values[rotation])
+    E[r, i, i] = c
+    E[r, j, j] = c
+    E[r, i, j] = -s
+    E[r, j, i] = s
+    return E
 
 
 def _to_homogeneous(F: Array) -> Array:
