@@ -200,10 +200,15 @@ _model_commands.register(app)
 from robocal.measure import commands as _measure_commands  # noqa: E402
 
 _measure_commands.register(app)
-from robocal.measure import pose_commands as _pose_commands; _pose_commands.register(app)  # noqa: E402, E702, I001
+from robocal.measure import pose_commands as _pose_commands  # noqa: E402
+
+_pose_commands.register(app)
 from robocal.identify import commands as _identify_commands  # noqa: E402
 
 _identify_commands.register(app)
+from robocal.experiments import commands as _experiment_commands  # noqa: E402
+
+_experiment_commands.register(app)
 # --- end of registered commands ---
 
 

@@ -1,0 +1,36 @@
+"""``robocal reproduce NAME``: run one of the seeds' experiments."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from robocal.console import fail
+
+__all__ = ["register"]
+
+
+def reproduce_command(
+    name: Annotated[str, typer.Argument(help="seed000 | seed001 | seed003")],
+    out: Annotated[Path | None, typer.Option("--out", help="directory for the report and files")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
+    quick: Annotated[bool, typer.Option("--quick", help="a smaller, faster run")] = False,
+) -> None:
+    """Reproduce a seed's experiment and print its published numbers next to robocal's."""
+    from robocal.experiments import get
+
+    try:
+        run = get(name)
+    except (KeyError, NotImplementedError) as err:
+        raise fail(str(err.args[0])) from None
+    numbers = run(out=out, quick=quick, verbose=not as_json)
+    if as_json:
+        print(json.dumps(numbers))
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``reproduce`` to the ``robocal`` app."""
+    app.command("reproduce")(reproduce_command)

@@ -1,0 +1,604 @@
+"""Observability of the parameters: scaled Jacobians, singular values, identifiable
+subsets, the observability indices O1–O5 and optimal pose selection.
+
+Column scaling
+--------------
+The identification Jacobian mixes m/m and m/rad columns, so its singular values
+depend on units.  :func:`column_scales` offers
+
+* ``"norm"`` — every column scaled to unit norm over the given poses (the usual
+  choice for rank decisions; the result is unit-free but depends on the pose set);
+* ``"tolerance"`` — every column multiplied by the parameter's expected error, by
+  default 0.1 mm for lengths and 0.05° for angles, the deviations seed 003 §3.5
+  imposes in its influence analysis.  Scaled columns are then metres of tool error
+  per expected parameter error, the same for every pose set, so indices of different
+  sets (and sizes) can be compared;
+* an explicit ``(p,)`` array of factors.
+
+The scaled Jacobian is ``J_s = J diag(s)``; a parameter step is ``dx = diag(s) dx_s``.
+
+Observability indices (Sun & Hollerbach 2008, "Observability index selection for
+robot calibration", ICRA, which compares them), from the singular values σ1 ≥ … ≥ σp
+of the scaled ``J`` (``3n x p`` or ``6n x p`` — singular values of ``J`` itself,
+not eigenvalues of ``JᵀJ``) for ``n`` poses:
+
+* O1 = (σ1 σ2 … σp)^(1/p) / √n — Borm & Menq 1991 (IJRR 10(1)); maximising it is
+  D-optimal design (the determinant of ``JᵀJ``);
+* O2 = σp / σ1 — the inverse condition number (Driels & Pathre 1990); we use the
+  inverse so that, like the others, larger is better;
+* O3 = σp — the minimum singular value (Nahvi, Hollerbach & Hayward 1994);
+* O4 = σp² / σ1 — the noise amplification index (Nahvi & Hollerbach 1996);
+* O5 = 1 / (1/σ1 + … + 1/σp) — Sun & Hollerbach 2008 (A-optimality).
+
+Pose selection (:func:`select_poses`) maximises one index over subsets of a candidate
+pool: a greedy construction (each step adds the candidate that raises the index
+most; until ``JᵀJ`` has full rank a tiny ridge keeps the determinant informative),
+then exchanges in the spirit of DETMAX (Mitchell 1974): a selected pose is swapped
+for the candidate that improves the index most, pass after pass, until no swap
+helps.  Each pose adds ``B_iᵀ B_i`` to the information matrix ``M = J_sᵀ J_s``, so
+adding and swapping are rank-3 (or rank-6) updates: for O1 the determinant lemma
+``det(M + Bᵀ B) = det M · det(I + B M⁻¹ Bᵀ)`` scores every candidate with one small
+batched product; for O2–O5 the exact index is computed (batched ``eigvalsh``, whose
+square roots are the singular values of the stacked ``J``) for a shortlist of
+candidates ranked by that determinant gain.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
+
+from robocal.model.chain import Model
+
+__all__ = [
+    "INDICES",
+    "Absorbed",
+    "IdentifiableSubset",
+    "ObservabilityIndices",
+    "PoseSelection",
+    "column_scales",
+    "identifiable_parameters",
+    "identifiable_subset",
+    "observability",
+    "observability_indices",
+    "parameter_tolerances",
+    "scaled_jacobian",
+    "select_poses",
+    "singular_values",
+]
+
+Array = NDArray[np.float64]
+IndexName = Literal["O1", "O2", "O3", "O4", "O5"]
+Rows = Literal["position", "pose"]
+INDICES: tuple[str, ...] = ("O1", "O2", "O3", "O4", "O5")
+
+#: Default expected parameter errors: seed 003 §3.5 (0.1 mm on lengths, 0.05° on angles).
+LENGTH_TOLERANCE = 1e-4
+ANGLE_TOLERANCE = math.radians(0.05)
+
+
+# ------------------------------------------------------------------------ scaling
+def parameter_tolerances(
+    model: Model,
+    names: Sequence[str] | None = None,
+    *,
+    length: float = LENGTH_TOLERANCE,
+    angle: float = ANGLE_TOLERANCE,
+) -> Array:
+    """Expected errors ``(p,)`` of the named (default: free) parameters: ``length`` (m)
+    for translations, ``angle`` (rad) for rotations."""
+    names = model.free_names if names is None else tuple(names)
+    return np.array([angle if model.step(n).is_rotation else length for n in names])
+
+
+def column_scales(
+    J: ArrayLike,
+    scale: Literal["norm", "tolerance"] | ArrayLike = "norm",
+    *,
+    tolerances: ArrayLike | None = None,
+) -> Array:
+    """Column scale factors ``(p,)`` for ``J`` ``(m, p)``: ``J_s = J * s``.
+
+    Args:
+        J: the Jacobian.
+        scale: ``"norm"`` (``1/‖J_j‖``; columns without effect get 1), ``"tolerance"``
+            (``s = tolerances``) or an explicit ``(p,)`` array.
+        tolerances: ``(p,)`` expected parameter errors (SI) for ``"tolerance"``.
+    """
+    J = np.asarray(J, dtype=float)
+    if J.ndim != 2:
+        raise ValueError(f"Jacobian must be 2-D (m, p), got shape {J.shape}")
+    p = J.shape[1]
+    if isinstance(scale, str):
+        if scale == "norm":
+            norm = np.linalg.norm(J, axis=0)
+            return np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 1.0)
+        if scale == "tolerance":
+            if tolerances is None:
+                raise ValueError(
+                    "scale='tolerance' needs the parameter tolerances (see parameter_tolerances)"
+                )
+            s = np.asarray(tolerances, dtype=float)
+        else:
+            raise ValueError(f"scale must be 'norm', 'tolerance' or an array, got {scale!r}")
+    else:
+        s = np.asarray(scale, dtype=float)
+    if s.shape != (p,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise ValueError(f"column scales must be {p} positive finite numbers, got shape {s.shape}")
+    return s
+
+
+def scaled_jacobian(
+    model: Model,
+    q: ArrayLike,
+    *,
+    rows: Rows = "position",
+    params: Sequence[str] | None = None,
+    scale: Literal["norm", "tolerance"] | ArrayLike = "tolerance",
+) -> tuple[Array, Array, tuple[str, ...]]:
+    """The column-scaled identification Jacobian of ``model`` at ``q`` ``(n, dof)``.
+
+    Returns ``(J_s, s, names)``: ``J_s`` ``(3n, p)`` or ``(6n, p)``, the scale factors
+    and the parameter names (``params``, default all free parameters, in that order).
+    """
+    J = model.jacobian(q, rows=rows)
+    names = model.free_names
+    if params is not None:
+        index = {n: k for k, n in enumerate(names)}
+        missing = [p for p in params if p not in index]
+        if missing:
+            raise KeyError(f"model {model.name!r} has no free parameter(s) {missing}")
+        J = J[:, [index[p] for p in params]]
+        names = tuple(params)
+    tol = parameter_tolerances(model, names) if isinstance(scale, str) and scale == "tolerance" else None
+    s = column_scales(J, scale, tolerances=tol)
+    return J * s, s, names
+
+
+# ------------------------------------------------------------------------ indices
+def singular_values(J: ArrayLike) -> Array:
+    """Singular values of ``J`` ``(m, p)``, largest first (``min(m, p)`` of them)."""
+    J = np.asarray(J, dtype=float)
+    if J.ndim != 2:
+        raise ValueError(f"Jacobian must be 2-D (m, p), got shape {J.shape}")
+    return scipy.linalg.svdvals(J)
+
+
+@dataclass(frozen=True)
+class ObservabilityIndices:
+    """O1..O5 of a (scaled) Jacobian; see the module docstring for the definitions.
+
+    Attributes:
+        O1, O2, O3, O4, O5: the indices (0 when a parameter is unobservable).
+        sigma: the singular values used, largest first.
+        n_poses: number of poses ``n`` in O1's ``√n``.
+    """
+
+    O1: float
+    O2: float
+    O3: float
+    O4: float
+    O5: float
+    sigma: Array
+    n_poses: int
+
+    def __getitem__(self, name: str) -> float:
+        if name not in INDICES:
+            raise KeyError(f"unknown observability index {name!r}; expected one of {INDICES}")
+        return float(getattr(self, name))
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: self[k] for k in INDICES}
+
+
+def observability_indices(
+    sigma: ArrayLike, n_poses: int, n_params: int | None = None
+) -> ObservabilityIndices:
+    """The indices O1..O5 from singular values ``sigma`` of a scaled Jacobian.
+
+    Args:
+        sigma: singular values (any order).
+        n_poses: number of poses ``n`` (O1 divides by √n).
+        n_params: number of parameters ``p``; when ``sigma`` has fewer values (fewer
+            rows than columns) the missing ones are zero.
+    """
+    s = np.sort(np.asarray(sigma, dtype=float).reshape(-1))[::-1]
+    p = len(s) if n_params is None else int(n_params)
+    if len(s) > p:
+        raise ValueError(f"{len(s)} singular values for {p} parameters")
+    if len(s) < p:
+        s = np.r_[s, np.zeros(p - len(s))]
+    if p == 0 or n_poses < 1:
+        raise ValueError(f"need at least one parameter and one pose, got p={p}, n={n_poses}")
+    if np.any(s < 0) or not np.all(np.isfinite(s)):
+        raise ValueError("singular values must be finite and >= 0")
+    s1, sp = s[0], s[-1]
+    if sp <= 0:
+        o1 = o2 = o3 = o4 = o5 = 0.0
+    else:
+        o1 = math.exp(np.mean(np.log(s))) / math.sqrt(n_poses)
+        o2, o3, o4 = sp / s1, sp, sp**2 / s1
+        o5 = 1.0 / float(np.sum(1.0 / s))
+    return ObservabilityIndices(o1, o2, o3, o4, o5, s, int(n_poses))
+
+
+def observability(
+    model: Model,
+    q: ArrayLike,
+    *,
+    rows: Rows = "position",
+    params: Sequence[str] | None = None,
+    scale: Literal["norm", "tolerance"] | ArrayLike = "tolerance",
+) -> ObservabilityIndices:
+    """O1..O5 of the poses ``q`` ``(n, dof)`` for ``params`` (default: all free
+    parameters — unidentifiable ones make every index 0; pass
+    ``identifiable_parameters(...).kept``)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    Js, _, names = scaled_jacobian(model, q, rows=rows, params=params, scale=scale)
+    return observability_indices(singular_values(Js), len(q), len(names))
+
+
+# ------------------------------------------------------------------------ identifiable subset
+@dataclass(frozen=True)
+class Absorbed:
+    """A parameter left out of identification.
+
+    Attributes:
+        name: the parameter.
+        reason: ``"no effect"`` (zero column) or ``"redundant"`` (its column is, within
+            the rank tolerance, a combination of the kept columns).
+        absorbers: ``(name, coefficient)`` of the kept parameters whose combination
+            reproduces its column: a change δ of this parameter moves the tool like
+            changes ``coefficient · δ`` of those (SI units), largest scaled
+            contribution first, those above the threshold only.
+        residual: relative norm of the part of its (scaled) column the kept columns
+            do not explain (≈ 0 for an exact redundancy).
+    """
+
+    name: str
+    reason: Literal["no effect", "redundant"]
+    absorbers: tuple[tuple[str, float], ...] = ()
+    residual: float = 0.0
+
+    def __str__(self) -> str:
+        if self.reason == "no effect":
+            return f"{self.name}: no effect on the measured quantities"
+        combo = ", ".join(f"{n} ({c:+.4g})" for n, c in self.absorbers) or "(none above threshold)"
+        return f"{self.name}: redundant, absorbed by {combo}"
+
+
+@dataclass(frozen=True)
+class IdentifiableSubset:
+    """Result of :func:`identifiable_subset`.
+
+    Attributes:
+        kept: identifiable parameters, in the input column order.
+        dropped: one :class:`Absorbed` per parameter left out, in pivot order.
+        rank: numerical rank of the scaled Jacobian.
+        pivots: all names in the QR's pivot order.
+        r_diag: ``|R_kk| / |R_00|`` along the pivot order (how independent each
+            parameter is from those before it).
+    """
+
+    kept: tuple[str, ...]
+    dropped: tuple[Absorbed, ...]
+    rank: int
+    pivots: tuple[str, ...]
+    r_diag: Array
+
+    @property
+    def dropped_names(self) -> tuple[str, ...]:
+        return tuple(d.name for d in self.dropped)
+
+    def absorbers_of(self, name: str) -> tuple[tuple[str, float], ...]:
+        for d in self.dropped:
+            if d.name == name:
+                return d.absorbers
+        raise KeyError(f"parameter {name!r} was not dropped")
+
+    def summary(self) -> str:
+        lines = [f"{self.rank} identifiable parameters: {', '.join(self.kept)}"]
+        lines += [f"  {d}" for d in self.dropped]
+        return "\n".join(lines)
+
+
+def identifiable_subset(
+    J: ArrayLike,
+    names: Sequence[str],
+    *,
+    rtol: float = 1e-6,
+    prefer: Sequence[str] | None = None,
+    threshold: float = 0.05,
+) -> IdentifiableSubset:
+    """Identifiable parameters by column-pivoted QR (``scipy.linalg.qr(pivoting=True)``).
+
+    Columns are scaled to unit norm first (rank decisions should not depend on units);
+    zero columns are "no effect".  QR with column pivoting then takes, at each step,
+    the column with the largest part not yet explained by the columns taken before;
+    the rank is the number of pivots with ``|R_kk| > rtol · |R_00|``; the remaining
+    columns are redundant, and each one's absorbers are the least-squares coefficients
+    of its column in the kept columns (those whose scaled coefficient exceeds
+    ``threshold`` in magnitude are listed).
+
+    Ties between exactly redundant columns (e.g. a base ``Tz`` and the first link's
+    ``d1`` along the same axis) go to the parameter in ``prefer`` first, then to the
+    one *later* in the column order: as in Schröer's minimal models (seed 000), the
+    first link's ``d``/``θ`` absorb the base's ``Tz``/``Rz`` and the tool frame absorbs
+    the last link's parameters.
+
+    Args:
+        J: ``(m, p)`` identification Jacobian (any units).
+        names: the ``p`` parameter names.
+        rtol: relative rank tolerance on the QR's diagonal.
+        prefer: names to keep first when there is a choice.
+        threshold: smallest |scaled coefficient| listed as an absorber.
+    """
+    J = np.asarray(J, dtype=float)
+    names = tuple(names)
+    if J.ndim != 2 or J.shape[1] != len(names):
+        raise ValueError(f"Jacobian shaped {J.shape} does not fit {len(names)} parameter names")
+    if not np.all(np.isfinite(J)):
+        raise ValueError("Jacobian contains NaN or inf")
+    p = len(names)
+    norm = np.linalg.norm(J, axis=0)
+    zero = norm <= 1e-12 * max(norm.max(initial=0.0), 1e-300)
+    Js = J / np.where(zero, 1.0, norm)
+    prefer = tuple(prefer or ())
+    unknown = [n for n in prefer if n not in names]
+    if unknown:
+        raise KeyError(f"preferred parameter(s) {unknown} are not among the Jacobian's columns")
+    rank_pref = {n: k for k, n in enumerate(prefer)}
+    # column order handed to QR: preferred first, then the rest latest-first
+    live = [k for k in range(p) if not zero[k]]
+    order = sorted(live, key=lambda k: (0, rank_pref[names[k]]) if names[k] in rank_pref else (1, -k))
+    dropped: list[Absorbed] = [Absorbed(names[k], "no effect") for k in range(p) if zero[k]]
+    if not order:
+        return IdentifiableSubset((), tuple(dropped), 0, tuple(names), np.zeros(p))
+    # a relative weight of 1e-9 decreasing along `order` breaks (numerical) ties between
+    # redundant columns in favour of the earlier one; real norm differences are larger
+    A = Js[:, order] * (1.0 + 1e-9 * np.linspace(1.0, 0.0, len(order)))
+    if prefer:
+        # QR of the preferred block first, then of the rest projected off it, so that a
+        # preferred column is never displaced by a later one with a larger norm
+        n_pref = sum(1 for k in order if names[k] in rank_pref)
+        piv = _two_stage_pivots(A, n_pref)
+    else:
+        _, _, piv = scipy.linalg.qr(A, mode="economic", pivoting=True)
+    R = scipy.linalg.qr(A[:, piv], mode="r")[0]
+    d = np.abs(np.diag(R))
+    d = np.r_[d, np.zeros(len(piv) - len(d))]
+    rel = d / d[0] if d[0] > 0 else d
+    rank = int(np.sum(rel > rtol))
+    cols = [order[k] for k in piv]
+    kept_cols, red_cols = cols[:rank], cols[rank:]
+    if red_cols:
+        K = Js[:, kept_cols]
+        coef, *_ = np.linalg.lstsq(K, Js[:, red_cols], rcond=None)
+        res = np.linalg.norm(Js[:, red_cols] - K @ coef, axis=0)
+        for j, c in enumerate(red_cols):
+            big = np.flatnonzero(np.abs(coef[:, j]) > threshold)
+            big = big[np.argsort(-np.abs(coef[big, j]))]
+            absorbers = tuple(
+                (names[kept_cols[k]], float(coef[k, j] * norm[c] / norm[kept_cols[k]])) for k in big
+            )
+            dropped.append(Absorbed(names[c], "redundant", absorbers, float(res[j])))
+    kept = tuple(names[k] for k in sorted(kept_cols))
+    pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
+    r_diag = np.r_[rel, np.zeros(int(zero.sum()))]
+    return IdentifiableSubset(kept, tuple(dropped), rank, pivots, r_diag)
+
+
+def _two_stage_pivots(A: Array, n_first: int) -> NDArray[np.intp]:
+    """Pivot order: pivoted QR of the first ``n_first`` columns, then of the others
+    after projecting out the span of the first block."""
+    first, rest = A[:, :n_first], A[:, n_first:]
+    if n_first == 0:
+        return scipy.linalg.qr(rest, mode="economic", pivoting=True)[2]
+    Q1, R1, p1 = scipy.linalg.qr(first, mode="economic", pivoting=True)
+    d1 = np.abs(np.diag(R1))
+    r1 = int(np.sum(d1 > 1e-10 * max(d1[0], 1e-300)))
+    Qk = Q1[:, :r1]
+    if rest.shape[1] == 0:
+        return p1
+    proj = rest - Qk @ (Qk.T @ rest)
+    p2 = scipy.linalg.qr(proj, mode="economic", pivoting=True)[2]
+    # independent preferred columns, then the others, then the dependent preferred ones
+    return np.r_[p1[:r1], n_first + p2, p1[r1:]].astype(np.intp)
+
+
+def identifiable_parameters(
+    model: Model,
+    q: ArrayLike,
+    *,
+    rows: Rows = "position",
+    rtol: float = 1e-6,
+    prefer: Sequence[str] | None = None,
+    threshold: float = 0.05,
+) -> IdentifiableSubset:
+    """:func:`identifiable_subset` of the model's free parameters at poses ``q`` ``(n, dof)``."""
+    J = model.jacobian(np.atleast_2d(np.asarray(q, dtype=float)), rows=rows)
+    return identifiable_subset(J, model.free_names, rtol=rtol, prefer=prefer, threshold=threshold)
+
+
+# ------------------------------------------------------------------------ pose selection
+@dataclass(frozen=True)
+class PoseSelection:
+    """Result of :func:`select_poses`.
+
+    Attributes:
+        indices: ``(n,)`` rows of the candidate pool that were selected (in the order
+            they ended up in the selection).
+        q: ``(n, dof)`` the selected configurations.
+        index: the index maximised (``"O1"`` .. ``"O5"``).
+        value: its value for the selection (exact, from the SVD of the scaled ``J``).
+        greedy_value: its value after the greedy construction, before exchanges.
+        indices_all: all five indices of the selection.
+        params: parameters the Jacobian was built for.
+        scale: ``(p,)`` column scale factors used.
+        swaps: accepted exchanges.
+        passes: exchange passes over the selection.
+    """
+
+    indices: NDArray[np.intp]
+    q: Array
+    index: str
+    value: float
+    greedy_value: float
+    indices_all: ObservabilityIndices
+    params: tuple[str, ...]
+    scale: Array
+    swaps: int
+    passes: int
+
+
+def _index_from_eig(lam: Array, n: int, name: str) -> Array:
+    """Index ``name`` from eigenvalues ``(..., p)`` (ascending) of ``J_sᵀ J_s``."""
+    s = np.sqrt(np.maximum(lam, 0.0))
+    smin, smax = s[..., 0], s[..., -1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if name == "O1":
+            out = np.exp(np.mean(np.log(np.maximum(s, 1e-300)), axis=-1)) / math.sqrt(n)
+        elif name == "O2":
+            out = smin / smax
+        elif name == "O3":
+            out = smin
+        elif name == "O4":
+            out = smin**2 / smax
+        else:
+            out = 1.0 / np.sum(1.0 / s, axis=-1)
+    return np.where(smin > 0, out, 0.0)
+
+
+def _logdet_gain(Minv_solve: Array, B: Array) -> Array:
+    """``log det(I + B_c M⁻¹ B_cᵀ)`` for candidate blocks ``B`` ``(N, r, p)``, given
+    ``X = M⁻¹ Bᵀ`` laid out as ``(N, p, r)``."""
+    G = B @ Minv_solve + np.eye(B.shape[1])
+    sign, logdet = np.linalg.slogdet(G)
+    return np.where(sign > 0, logdet, -np.inf)
+
+
+def select_poses(
+    model: Model,
+    candidates: ArrayLike,
+    n: int,
+    *,
+    index: IndexName = "O1",
+    rows: Rows = "position",
+    params: Sequence[str] | None = None,
+    scale: Literal["norm", "tolerance"] | ArrayLike = "tolerance",
+    initial: ArrayLike | None = None,
+    max_passes: int = 20,
+    shortlist: int = 64,
+) -> PoseSelection:
+    """Choose ``n`` poses from ``candidates`` ``(N, dof)`` maximising an observability index.
+
+    Greedy construction, then DETMAX-style exchanges (module docstring).
+
+    Args:
+        model: the robot (its free parameters define the Jacobian).
+        candidates: the candidate pool (e.g. :func:`robocal.measure.poses.random_poses`).
+        n: number of poses to select.
+        index: ``"O1"`` .. ``"O5"``.
+        rows: ``"position"`` or ``"pose"`` measurements.
+        params: parameters to make observable; default the identifiable subset of the
+            free parameters over the whole pool (unidentifiable ones would make every
+            index but O1 zero).
+        scale: column scaling (``"tolerance"`` by default, so that values are
+            comparable with :func:`observability` of other sets); computed once on the
+            pool for ``"norm"``.
+        initial: indices into ``candidates`` to start the exchange from instead of the
+            greedy construction.
+        max_passes: maximum exchange passes.
+        shortlist: for O2..O5, candidates per step scored exactly (the best by the O1
+            determinant gain).
+    """
+    if index not in INDICES:
+        raise ValueError(f"index must be one of {INDICES}, got {index!r}")
+    Q = np.atleast_2d(np.asarray(candidates, dtype=float))
+    N = len(Q)
+    n = int(n)
+    if not 1 <= n <= N:
+        raise ValueError(f"cannot select n={n} poses from a pool of {N} candidates")
+    if params is None:
+        params = identifiable_parameters(model, Q, rows=rows).kept
+    Js, s, names = scaled_jacobian(model, Q, rows=rows, params=params, scale=scale)
+    r, p = (3 if rows == "position" else 6), len(names)
+    B = Js.reshape(N, r, p)
+    Bt = np.swapaxes(B, 1, 2)
+    info = np.einsum("nrp,nrq->npq", B, B)  # per-candidate B_cᵀ B_c
+    ridge = 1e-9 * float(np.trace(info.sum(axis=0))) / (N * p)
+    I_p = np.eye(p)
+
+    def value(M: Array, count: int) -> float:
+        lam = np.linalg.eigvalsh(M - ridge * I_p)
+        return float(_index_from_eig(lam, count, index))
+
+    def scores(M: Array, free: NDArray[np.intp], count: int) -> Array:
+        """Index after adding each free candidate to information ``M`` (with ridge)."""
+        X = np.linalg.solve(M, Bt[free].transpose(1, 0, 2).reshape(p, -1))
+        gain = _logdet_gain(X.reshape(p, len(free), r).transpose(1, 0, 2), B[free])
+        if index == "O1" or count * r < p:  # determinant while the rank cannot be full
+            return gain
+        top = np.argsort(-gain)[: max(shortlist, 1)]
+        lam = np.linalg.eigvalsh(M[None] + info[free[top]] - ridge * I_p)
+        out = np.full(len(free), -np.inf)
+        out[top] = _index_from_eig(lam, count, index)
+        return out
+
+    chosen = np.zeros(N, dtype=bool)
+    if initial is not None:
+        sel = [int(i) for i in np.asarray(initial).reshape(-1)]
+        if len(sel) != n or len(set(sel)) != n or min(sel) < 0 or max(sel) >= N:
+            raise ValueError(f"initial must be {n} distinct indices into {N} candidates")
+    else:
+        sel = []
+    M = ridge * I_p + info[sel].sum(axis=0)
+    chosen[sel] = True
+    while len(sel) < n:  # greedy construction
+        free = np.flatnonzero(~chosen)
+        k = int(free[np.argmax(scores(M, free, len(sel) + 1))])
+        sel.append(k)
+        chosen[k] = True
+        M = M + info[k]
+    greedy_value = value(M, n)
+    current = float(np.linalg.slogdet(M)[1]) if index == "O1" else greedy_value
+    swaps = passes = 0
+    for passes in range(1, max_passes + 1):  # noqa: B007 - the count is reported
+        improved = False
+        for pos in range(n):
+            out = sel[pos]
+            M_minus = M - info[out]
+            free = np.flatnonzero(~chosen)
+            sc = scores(M_minus, free, n)
+            j = int(np.argmax(sc))
+            new = float(np.linalg.slogdet(M_minus)[1]) + sc[j] if index == "O1" else sc[j]
+            if new > current + 1e-9 * max(abs(current), 1.0):
+                k = int(free[j])
+                chosen[out], chosen[k] = False, True
+                sel[pos] = k
+                M = M_minus + info[k]
+                current = new
+                swaps += 1
+                improved = True
+        if not improved:
+            break
+    idx = np.array(sel, dtype=np.intp)
+    final = observability_indices(singular_values(Js.reshape(N, r, p)[idx].reshape(-1, p)), n, p)
+    return PoseSelection(
+        indices=idx,
+        q=Q[idx],
+        index=index,
+        value=final[index],
+        greedy_value=greedy_value,
+        indices_all=final,
+        params=tuple(names),
+        scale=s,
+        swaps=swaps,
+        passes=passes,
+    )

@@ -1,0 +1,156 @@
+"""The ``robocal poses`` command: pose sets to measure, written as a poses CSV.
+
+Commands:
+    robocal poses ROBOT --method random|optimal|iso9283|diagonal --n N [--seed S]
+                  [--index O1] [--pool 2000] [--rows position|pose] [--kind pose|axis|position]
+                  [--region "xmin,ymin,zmin,xmax,ymax,zmax"] -o poses.csv
+
+``random``: random configurations within the joint limits, away from singularities.
+``optimal``: ``--n`` poses selected from a seeded random pool of ``--pool`` poses by
+greedy construction and exchanges maximising ``--index`` (O1 by default).
+``iso9283``: ISO 9283 P1..P5 on the largest test cube's diagonal plane C1-C2-C7-C8,
+one fixed tool orientation (tool z down).  ``diagonal``: the thesis' set (seed 003):
+``--n`` (118) poses on the cube's diagonal planes and near the workspace boundary,
+ordered so that all joints move between consecutive poses.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from robocal.console import console, err_console, fail
+
+__all__ = ["register"]
+
+
+
+class Method(StrEnum):
+    random = "random"
+    optimal = "optimal"
+    iso9283 = "iso9283"
+    diagonal = "diagonal"
+
+
+
+def _region(text: str | None) -> np.ndarray | None:
+    if text is None:
+        return None
+    try:
+        v = [float(x) for x in text.replace(";", ",").split(",")]
+    except ValueError:
+        raise fail(
+            f"--region {text!r}: expected six numbers in mm, 'xmin,ymin,zmin,xmax,ymax,zmax'"
+        ) from None
+    if len(v) != 6:
+        raise fail(f"--region {text!r}: expected six numbers in mm, got {len(v)}")
+    box = np.array(v).reshape(2, 3) * 1e-3
+    if np.any(box[0] >= box[1]):
+        raise fail(f"--region {text!r}: each minimum must be below its maximum")
+    return box
+
+
+def poses_command(
+    robot: Annotated[str, typer.Argument(help="catalog name or model file")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="poses CSV to write (SI units)")],
+    method: Annotated[Method, typer.Option("--method", help="how to choose the poses")] = Method.random,
+    n: Annotated[
+        int | None,
+        typer.Option("--n", help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)"),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 0,
+    index: Annotated[str, typer.Option("--index", help="index maximised by --method optimal: O1..O5")] = "O1",
+    pool: Annotated[int, typer.Option("--pool", help="candidate pool size for --method optimal")] = 2000,
+    rows: Annotated[str, typer.Option("--rows", help="measured quantities: position or pose")] = "position",
+    kind: Annotated[
+        str | None,
+        typer.Option("--kind", help="iso9283/diagonal IK constraint: pose, axis or position"),
+    ] = None,
+    region: Annotated[
+        str | None,
+        typer.Option("--region", help='box the cube must lie in, mm: "xmin,ymin,zmin,xmax,ymax,zmax"'),
+    ] = None,
+) -> None:
+    """Choose poses to measure and write them as a poses CSV (joint columns only, rad/m)."""
+    from robocal.cli import resolve_model  # late import: robocal.cli imports this module
+    from robocal.identify.observability import identifiable_parameters, observability, select_poses
+    from robocal.measure.poses import diagonal_plane_poses, iso9283_poses, random_poses, write_poses
+
+    m = resolve_model(robot)
+    index = index.upper()
+    if index not in ("O1", "O2", "O3", "O4", "O5"):
+        raise fail(f"--index {index!r}: expected one of O1, O2, O3, O4, O5")
+    if rows not in ("position", "pose"):
+        raise fail(f"--rows {rows!r}: expected 'position' or 'pose'")
+    if kind is not None and kind not in ("pose", "axis", "position"):
+        raise fail(f"--kind {kind!r}: expected 'pose', 'axis' or 'position'")
+    if n is not None and n < 1:
+        raise fail(f"--n must be at least 1, got {n}")
+    box = _region(region)
+    meta = {"robot": m.name, "method": method.value, "seed": str(seed)}
+    try:
+        if method is Method.random:
+            q = random_poses(m, n or 30, seed=seed)
+        elif method is Method.optimal:
+            count = n or 30
+            if pool < count:
+                raise fail(f"--pool {pool} is smaller than --n {count}")
+            candidates = random_poses(m, pool, seed=seed)
+            sub = identifiable_parameters(m, candidates, rows=rows)  # type: ignore[arg-type]
+            with console.status(f"selecting {count} of {pool} poses by {index}..."):
+                sel = select_poses(m, candidates, count, index=index, rows=rows, params=sub.kept)  # type: ignore[arg-type]
+            q = sel.q
+            baseline = observability(m, candidates[:count], rows=rows, params=sel.params)  # type: ignore[arg-type]
+            table = Table(title=f"observability of {count} poses ({len(sel.params)} identifiable parameters)")
+            for col in ("index", "optimal", f"first {count} of the pool"):
+                table.add_column(col, justify="right")
+            for name in ("O1", "O2", "O3", "O4", "O5"):
+                table.add_row(name, f"{sel.indices_all[name]:.4g}", f"{baseline[name]:.4g}")
+            console.print(table)
+            meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
+            for d in sub.dropped:
+                console.print(f"[dim]not identifiable: {d}[/]", highlight=False)
+        elif method is Method.iso9283:
+            if n not in (None, 5):
+                err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5")
+            with console.status("searching the largest ISO 9283 cube..."):
+                iso = iso9283_poses(m, kind=kind, seed=seed, region=box)  # type: ignore[arg-type]
+            q = iso.q
+            c = iso.cube
+            console.print(
+                f"cube centre [{', '.join(f'{v * 1e3:.1f}' for v in c.center)}] mm, "
+                f"side {c.side * 1e3:.1f} mm, "
+                f"plane C1-C2-C7-C8, constraint {iso.info['kind']}",
+                highlight=False,
+            )
+            meta.update(
+                {
+                    "cube_center_mm": " ".join(f"{v * 1e3:.3f}" for v in c.center),
+                    "cube_side_mm": f"{c.side * 1e3:.3f}",
+                }
+            )
+        else:
+            with console.status("building the diagonal-plane poses..."):
+                ps = diagonal_plane_poses(m, n=n or 118, kind=kind or "position", region=box, seed=seed)  # type: ignore[arg-type]
+            if not ps.reachable.all():
+                raise fail(f"{int((~ps.reachable).sum())} of the diagonal-plane poses are not reachable")
+            q = ps.q
+            console.print(
+                f"{len(q)} poses ({ps.info['boundary_poses']} near the boundary), smallest joint change "
+                f"between consecutive poses {np.degrees(ps.info['min_joint_change_rad']):.1f} deg",
+                highlight=False,
+            )
+    except ValueError as err:
+        raise fail(str(err)) from None
+    path = write_poses(output, q, model=m, metadata=meta)
+    console.print(f"wrote {len(q)} poses of {m.name} to {path}", highlight=False)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``robocal poses`` to the application."""
+    app.command("poses")(poses_command)
