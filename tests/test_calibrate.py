@@ -234,6 +234,9 @@ def test_result_save_and_load_round_trip(tmp_path, irb2400):
     result.save(tmp_path / "out")
     saved = json.loads((tmp_path / "out" / "result.json").read_text())
     assert saved["n"] == 50 and saved["parameters"][0]["name"] == result.names[0]
+    residuals = np.array(saved["residuals_mm"])
+    assert residuals.shape == (50, 3)
+    assert np.sqrt(np.mean(np.sum(residuals**2, axis=1))) == pytest.approx(result.rms_after * 1e3, rel=1e-4)
     again = CalibrationResult.load(tmp_path / "out")
     assert again.model == result.model
     np.testing.assert_allclose(again.frame, result.frame)

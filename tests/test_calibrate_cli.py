@@ -74,6 +74,10 @@ def test_calibrate_then_validate(measured, tmp_path):
     again = runner.invoke(app, args)
     assert again.exit_code == 2 and "--force" in again.output
     assert runner.invoke(app, [*args, "--force", "--method", "pinv"]).exit_code == 0
+    with_report = runner.invoke(app, [*args, "--force", "--report"])
+    assert with_report.exit_code == 0, with_report.output
+    page = (out / "report.html").read_text()
+    assert "plotly" in page.lower() and "held-out" in page.lower()
 
 
 def test_calibrate_errors_are_clear(measured, tmp_path):

@@ -8,11 +8,13 @@
 from importlib.metadata import PackageNotFoundError, version
 
 from robocal import spatial
+from robocal.compensate import compensate
 from robocal.identify import CalibrationResult, calibrate, cross_validate, validate
 from robocal.measure import Measurements, read_measurements, write_measurements
 from robocal.model import (
     Body,
     Joint,
+    JointEffects,
     Model,
     ModelFileError,
     Step,
@@ -32,6 +34,7 @@ __all__ = [
     "Body",
     "CalibrationResult",
     "Joint",
+    "JointEffects",
     "Measurements",
     "Model",
     "ModelFileError",
@@ -39,6 +42,7 @@ __all__ = [
     "__version__",
     "build_model",
     "calibrate",
+    "compensate",
     "cross_validate",
     "load_model",
     "model_from_urdf",

@@ -209,6 +209,15 @@ _identify_commands.register(app)
 from robocal.experiments import commands as _experiment_commands  # noqa: E402
 
 _experiment_commands.register(app)
+from robocal.compensate import cli as _compensate_commands  # noqa: E402
+
+_compensate_commands.register(app)
+from robocal.evaluate import commands as _evaluate_commands  # noqa: E402
+
+_evaluate_commands.register(app)
+from robocal import study_commands as _study_commands  # noqa: E402
+
+_study_commands.register(app)
 # --- end of registered commands ---
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Annotated
 
@@ -80,6 +79,21 @@ def calibrate_command(
     seed: Annotated[int, typer.Option("--seed", help="seed of the --train-n draw")] = 0,
     tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
     compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
+    level: Annotated[
+        str | None,
+        typer.Option(
+            "--level",
+            help="1 (joint offsets), 2 (kinematic, default) or 3 (non-geometric: with joint effects)",
+        ),
+    ] = None,
+    effects: Annotated[
+        str | None,
+        typer.Option(
+            "--effects",
+            help="joint effects: none | predict (from the model's joint_effects, seed 003's two-stage "
+            'method) | identify (default of --level 3) | kinds, e.g. "compliance,backlash"',
+        ),
+    ] = None,
     length_unit: LengthUnit = "m",
     angle_unit: AngleUnit = "rad",
     columns: Columns = None,
@@ -87,6 +101,7 @@ def calibrate_command(
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing result in --out")] = False,
+    report: Annotated[bool, typer.Option("--report", help="also write DIR/report.html")] = False,
 ) -> None:
     """Identify the robot's parameters from measurements; write the calibrated model."""
     import robocal as rc
@@ -117,10 +132,20 @@ def calibrate_command(
             raise fail(f"--tool {tool!r}: three numbers in mm") from None
         if guess.shape != (3,):
             raise fail(f"--tool {tool!r}: three numbers in mm")
+    effect_option = effects
+    if effects is not None and effects not in ("none", "predict", "identify"):
+        effect_option = [k.strip() for k in effects.split(",") if k.strip()]
     try:
         with console.status(f"calibrating {model.name} on {train.n} poses ({method}) ..."):
             result = rc.calibrate(
-                model, train, method=method, measure=measure, tool_guess=guess, compliance=compliance
+                model,
+                train,
+                method=method,
+                measure=measure,
+                tool_guess=guess,
+                compliance=compliance,
+                level=level,
+                effects=effect_option,
             )
     except ValueError as err:
         raise fail(str(err)) from None
@@ -139,6 +164,12 @@ def calibrate_command(
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
+    if report:
+        from robocal.evaluate.report import write_report
+
+        with console.status("writing the report ..."):
+            path = write_report(result, out / "report.html", data=train, test_data=test)
+        console.print(f"report: {path}", highlight=False)
 
 
 def _print_result(result) -> None:
@@ -156,14 +187,19 @@ def _print_result(result) -> None:
     table = Table(title="identified parameters", title_justify="left")
     for col in ("parameter", "start", "estimate", "delta", "σ", "unit"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    from robocal.identify.calibrate import display_unit, effect_lines
+
     rot = {s.name: s.is_rotation for s in (result.measurement_chain or result.model).steps}
     for n, v0, v, s in zip(result.names, result.nominal, result.estimates, result.std, strict=True):
-        if n.startswith("compliance_"):
-            f, unit = 1e6, "µrad/N·m"
-        else:
-            f, unit = (math.degrees(1), "deg") if rot.get(n) else (1e3, "mm")
+        f, unit = display_unit(n, rot.get(n, False))
         table.add_row(n, f"{v0 * f:.5f}", f"{v * f:.5f}", f"{(v - v0) * f:+.5f}", f"{s * f:.5f}", unit)
     console.print(table)
+    effects = result.effect_estimates()
+    if effects:
+        mode = result.metadata.get("effects", "identify")
+        console.print(f"joint effects ({mode}; ± 1σ where identified):", highlight=False)
+        for line in effect_lines(effects):
+            console.print(f"  {line}", highlight=False)
     for d in result.dropped:
         console.print(f"  [dim]not identified:[/] {d}", highlight=False)
     for a, b, rho in result.high_correlations:

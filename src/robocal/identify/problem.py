@@ -13,6 +13,12 @@ The measurement model is one chain (DESIGN.md: one representation):
 
 Residuals are predicted minus measured, in the device frame, pose-major
 (``x, y, z[, ωx, ωy, ωz]`` per pose), divided by the measurement uncertainty.
+
+Joint effects (seed 003) enter as joint perturbations ``(n, dof, 3) = (δα, δβ, δθ)``
+of the chain: known ones (``known_perturbations``, e.g. the tilting predicted from
+measured joint parameters: the thesis' two-stage method) and patterns whose
+coefficients are unknowns (``effect_basis``: clearance, backlash, compliance...,
+:func:`robocal.model.joints.effect_basis`), identified with the geometric parameters.
 """
 
 from __future__ import annotations
@@ -60,7 +66,8 @@ def measurement_chain(
     if clash:
         raise ValueError(f"model {robot.name!r} already uses the reserved parameter name(s) {sorted(clash)}")
     steps = (*before, *robot.steps, *after)
-    return dataclasses.replace(robot, name=robot.name + "+measurement", steps=steps, bodies=())
+    name = robot.name + "+measurement"
+    return dataclasses.replace(robot, name=name, steps=steps, bodies=(), joint_effects=())
 
 
 @dataclass
@@ -74,10 +81,14 @@ class Problem:
         orientation: ``(n, 3, 3)`` measured rotations or None (position-only).
         weights: ``(n * rows,)`` residual weights (1/σ).
         length_scale: the robot's size (m), to compare rotations with lengths.
-        effect_basis: ``(m, n, dof)`` joint-angle effects with unknown coefficients:
-            the joint perturbation is δθ = Σ_k c_k B_k (e.g. B_k = gravity torque of a
-            joint, c_k its compliance); ``None`` for a purely geometric calibration.
+        effect_basis: ``(m, n, dof, 3)`` joint-perturbation patterns (δα, δβ, δθ) with
+            unknown coefficients: the perturbation is Σ_k c_k B_k (e.g. B_k = the load
+            moment about a joint's axis, c_k its compliance); ``(m, n, dof)`` means δθ
+            patterns; ``None`` for a purely geometric calibration.
         effect_names: the ``m`` coefficient names.
+        known_perturbations: ``(n, dof, 3)`` joint perturbations added to every
+            evaluation (known joint effects), or None.
+        effect_start: ``(m,)`` start values of the coefficients (default zero).
     """
 
     chain: Model
@@ -88,7 +99,38 @@ class Problem:
     length_scale: float
     effect_basis: Array | None = None
     effect_names: tuple[str, ...] = ()
+    known_perturbations: Array | None = None
+    effect_start: Array | None = None
     _cache: dict = dataclasses.field(default_factory=dict, repr=False)
+    _tilts: bool = dataclasses.field(default=False, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        n, dof = self.q.shape
+        if self.effect_basis is not None:
+            B = np.asarray(self.effect_basis, dtype=float)
+            if B.ndim == 3:  # legacy: δθ patterns
+                full = np.zeros(B.shape + (3,))
+                full[..., 2] = B
+                B = full
+            if B.shape[1:] != (n, dof, 3) or len(B) != len(self.effect_names):
+                raise ValueError(
+                    f"effect_basis shaped {B.shape} does not fit {len(self.effect_names)} names, "
+                    f"{n} poses and {dof} joints"
+                )
+            self.effect_basis = B if len(B) else None
+        if self.effect_basis is None and self.effect_names:
+            raise ValueError("effect_names given without effect_basis")
+        if self.known_perturbations is not None:
+            K = np.asarray(self.known_perturbations, dtype=float)
+            if K.shape != (n, dof, 3):
+                raise ValueError(f"known_perturbations shaped {K.shape}; expected ({n}, {dof}, 3)")
+            self.known_perturbations = K
+        m = self.n_effects
+        start = np.zeros(m) if self.effect_start is None else np.asarray(self.effect_start, dtype=float)
+        if start.shape != (m,):
+            raise ValueError(f"effect_start shaped {start.shape}; expected ({m},)")
+        self.effect_start = start
+        self._tilts = self.effect_basis is not None and bool(np.any(self.effect_basis[..., :2]))
 
     @property
     def rows(self) -> int:
@@ -119,7 +161,12 @@ class Problem:
 
     @property
     def x0(self) -> Array:
-        return np.concatenate([self.chain.free_values, np.zeros(self.n_effects)])
+        return np.concatenate([self.chain.free_values, self.effect_start])
+
+    @property
+    def tilts(self) -> bool:
+        """Whether any effect pattern tilts a joint (needs the tilt columns)."""
+        return self._tilts
 
     def values(self, x: Array) -> Array:
         """All chain parameter values for the unknowns ``x``."""
@@ -128,11 +175,13 @@ class Problem:
         return v
 
     def perturbations(self, x: Array) -> Array | None:
-        """Joint perturbations ``(n, dof, 3)`` of the effect coefficients in ``x``."""
+        """Joint perturbations ``(n, dof, 3)``: the known ones plus the effect
+        coefficients in ``x`` times their patterns (None when there are neither)."""
         if not self.n_effects:
-            return None
-        pert = np.zeros((len(self.q), self.q.shape[1], 3))
-        pert[:, :, 2] = np.tensordot(x[len(x) - self.n_effects :], self.effect_basis, axes=1)
+            return self.known_perturbations
+        pert = np.tensordot(x[len(x) - self.n_effects :], self.effect_basis, axes=1)
+        if self.known_perturbations is not None:
+            pert = pert + self.known_perturbations
         return pert
 
     def _evaluate(self, x: Array, jacobian: bool):
@@ -140,20 +189,27 @@ class Problem:
         if key not in self._cache:
             if len(self._cache) > 4:
                 self._cache.clear()
+            effects = jacobian and self.n_effects > 0
+            tilts = effects and self.tilts
             out = self.chain.evaluate(
                 self.q,
                 self.values(x),
                 rows=self.measure,
                 jacobian=jacobian,
                 perturbations=self.perturbations(x),
-                joint_columns=jacobian and self.n_effects > 0,
+                joint_columns=effects and not tilts,
+                perturbation_columns=tilts,
             )
             T, J = out[0], out[1]
-            if jacobian and self.n_effects:
+            if effects:
                 n, dof = self.q.shape
-                Jq = out[2].reshape(n, self.rows, dof)
-                Jc = np.einsum("nrj,knj->nrk", Jq, self.effect_basis).reshape(n * self.rows, -1)
-                J = np.concatenate([J, Jc], axis=1)
+                if tilts:  # derivatives wrt (δα, δβ, δθ) of every joint
+                    P = out[2].reshape(n, self.rows, dof, 3)
+                    Jc = np.einsum("nrjc,knjc->nrk", P, self.effect_basis)
+                else:
+                    Jq = out[2].reshape(n, self.rows, dof)
+                    Jc = np.einsum("nrj,knj->nrk", Jq, self.effect_basis[..., 2])
+                J = np.concatenate([J, Jc.reshape(n * self.rows, -1)], axis=1)
             self._cache[key] = (T, J)
         return self._cache[key]
 
@@ -185,14 +241,22 @@ class Problem:
         return self.jacobian(x) * self.free_scale
 
     def fix(self, names: list[str]) -> Problem:
-        """The same problem with some unknowns fixed at their current start values."""
+        """The same problem with some unknowns fixed at their current start values
+        (a fixed effect coefficient's perturbation joins the known perturbations)."""
         effect_keep = [k for k, n in enumerate(self.effect_names) if n not in set(names)]
+        effect_drop = [k for k, n in enumerate(self.effect_names) if n in set(names)]
         chain = self.chain.fixed([n for n in names if n in set(self.chain.names)])
+        known = self.known_perturbations
+        if effect_drop and np.any(self.effect_start[effect_drop]):
+            fixed = np.tensordot(self.effect_start[effect_drop], self.effect_basis[effect_drop], axes=1)
+            known = fixed if known is None else known + fixed
         basis = None if not effect_keep else self.effect_basis[effect_keep]
         return dataclasses.replace(
             self,
             chain=chain,
             effect_basis=basis,
             effect_names=tuple(self.effect_names[k] for k in effect_keep),
+            known_perturbations=known,
+            effect_start=self.effect_start[effect_keep],
             _cache={},
         )

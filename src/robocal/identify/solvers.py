@@ -8,12 +8,12 @@
                ΔE = (JᵀJ)⁻¹JᵀΔP over all poses, repeated until the correction moves the
                tool by less than the measurement resolution.
 ``bounded``    Seed 001 eq. 4: minimise Σ_j |X_j − X'_j| (sum of distances, not of
-               squares) with |δd|, |δL| ≤ 5 mm and |δθ|, |δα| ≤ 2°.  Solved with scipy
-               ``least_squares(method="trf", loss="soft_l1")`` — trust-region reflective
-               is scipy's least-squares routine that honours bounds, and its soft-L1 loss
-               on one residual per pose (the distance |e_j|) at a 1 µm scale turns the
-               squares into distances, so the solver keeps Gauss-Newton speed on an L1
-               objective.  (seed 001 used MATLAB's fmincon on the same objective)
+               squares) with |δd|, |δL| ≤ 5 mm and |δθ|, |δα| ≤ 2°.  Solved by
+               iteratively reweighted least squares (Weiszfeld's scheme for sums of
+               distances), each round a bounded weighted least-squares problem for
+               scipy's ``least_squares(method="trf")`` — trust-region reflective is the
+               scipy least-squares routine that honours bounds.  (Seed 001 used MATLAB's
+               fmincon on the same objective.)
 ``influence``  Seed 003 ch. 3 (eqs. 3.7-3.8): per pose an influence vector k from
                perturbing each parameter (+0.05° angular, +0.1 mm linear), relative to
                the most influential one; per pose the correction
@@ -96,61 +96,56 @@ def _bounded(
     x0: Array,
     *,
     bounds: tuple[Array, Array] | None = None,
-    scale: float = 1e-6,
+    tolerance: float = 1e-7,
     max_iterations: int = 500,
+    max_rounds: int = 200,
     **_,
 ) -> SolveResult:
-    """Seed 001 eq. 4: min Σ_j |e_j| under bounds.
+    """Seed 001 eq. 4: min Σ_j |e_j| (sum of the poses' error distances) under bounds.
 
-    One residual per pose, its distance d_j = (|e_j|² + ε²)^½, with trf's ``soft_l1``
-    loss ρ(z) = 2(√(1 + z) − 1), z = (d_j / s)², at s = 1 µm: beyond a micrometre
-    ρ ≈ 2 d_j / s, so the objective is the sum of distances of seed 001, smoothed only
-    where the error is far below any measurement's resolution.
+    Iteratively reweighted least squares (Weiszfeld's scheme for sums of distances): each
+    round solves the bounded weighted least-squares problem Σ_j |e_j|² / d_j, with d_j the
+    distances of the previous round, by scipy's trust-region reflective ``least_squares``;
+    a majorise-minimise iteration, so Σ_j |e_j| decreases every round.  It starts from the
+    bounded least-squares solution and stops when the sum changes by less than
+    ``tolerance`` (relative).
     """
     lo, hi = bounds if bounds is not None else (np.full_like(x0, -np.inf), np.full_like(x0, np.inf))
     width = problem.rows
-    eps2 = (1e-3 * scale) ** 2
 
-    def fun(x):
-        e = problem.residual(x).reshape(-1, width)
-        return np.sqrt(np.einsum("ij,ij->i", e, e) + eps2)
+    def distances(x):
+        return np.linalg.norm(problem.residual(x).reshape(-1, width), axis=1)
 
-    def jac(x):
-        e = problem.residual(x).reshape(-1, width)
-        J = problem.jacobian(x).reshape(e.shape[0], width, -1)
-        d = np.sqrt(np.einsum("ij,ij->i", e, e) + eps2)
-        return np.einsum("ij,ijk->ik", e, J) / d[:, None]
+    def weighted_fit(x, w):
+        def fun(z):
+            return (problem.residual(z).reshape(-1, width) * w[:, None]).reshape(-1)
 
-    # far from the optimum the L1 objective gives trf little curvature to work with: start
-    # from the bounded least-squares solution, then minimise the sum of distances
-    start = least_squares(
-        problem.residual,
-        np.clip(x0, lo, hi),
-        jac=problem.jacobian,
-        bounds=(lo, hi),
-        method="trf",
-        x_scale="jac",
-        ftol=1e-10,
-        xtol=1e-10,
-        gtol=1e-10,
-        max_nfev=max_iterations,
-    )
-    res = least_squares(
-        fun,
-        start.x,
-        jac=jac,
-        bounds=(lo, hi),
-        method="trf",
-        x_scale="jac",
-        loss="soft_l1",
-        f_scale=scale,
-        ftol=1e-9,
-        xtol=1e-9,
-        gtol=1e-9,
-        max_nfev=max_iterations,
-    )
-    iterations = int(start.njev or start.nfev) + int(res.njev or res.nfev)
-    return SolveResult(res.x, bool(res.status > 0), res.message, iterations, int(start.nfev + res.nfev))
+        def jac(z):
+            return problem.jacobian(z) * np.repeat(w, width)[:, None]
+
+        return least_squares(
+            fun, x, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+            ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_iterations,
+        )
+
+    fit = weighted_fit(np.clip(x0, lo, hi), np.ones(len(problem.q)))  # bounded least squares
+    x, evaluations = fit.x, int(fit.nfev)
+    d = distances(x)
+    floor = 1e-9 * max(float(np.median(d)), 1e-300)  # a zero distance would get infinite weight
+    total = float(d.sum())
+    for rounds in range(1, max_rounds + 1):
+        fit = weighted_fit(x, 1.0 / np.sqrt(np.maximum(d, floor)))
+        evaluations += int(fit.nfev)
+        d_new = distances(fit.x)
+        new_total = float(d_new.sum())
+        if new_total <= total:  # Weiszfeld never increases the sum; guard against round-off
+            x, d = fit.x, d_new
+        if abs(total - new_total) <= tolerance * total:
+            message = f"sum of distances converged ({rounds} reweighting rounds)"
+            return SolveResult(x, True, message, rounds, evaluations)
+        total = min(total, new_total)
+    message = f"sum of distances still changing after {max_rounds} rounds"
+    return SolveResult(x, False, message, max_rounds, evaluations)
 
 
 def _influence(

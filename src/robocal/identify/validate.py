@@ -100,6 +100,10 @@ def validate(
         raise ValueError(
             f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
         )
+    if perturbations is None and model.joint_effects:
+        from robocal.model.joints import joint_perturbations
+
+        perturbations = joint_perturbations(model, data.q)  # a bare model's own joint effects
     T = model.fk(data.q, perturbations)
     if refit_frame or frame is None:
         T_frame = spatial.fit_rigid_transform(T[:, :3, 3], data.position)

@@ -90,6 +90,9 @@ MAX_MEDIAN_DISTANCE = 50.0
 MIN_MEDIAN_DISTANCE = 0.005
 #: Revolute joint values beyond this (rad) in magnitude look like degrees.
 MAX_REVOLUTE_RAD = 4.0 * math.pi
+#: Largest measurement file read (bytes): about five million poses; reading takes about
+#: ten times the file's size in memory.
+MAX_FILE_BYTES = 512 * 1024 * 1024
 
 Severity = Literal["error", "warning"]
 
@@ -391,6 +394,11 @@ def _parse_columns(columns: Mapping[str, str] | Sequence[str] | str | None) -> d
     return out
 
 
+def _short(cell: str, limit: int = 40) -> str:
+    """A cell for a message: quoted, and cut to ``limit`` characters."""
+    return repr(cell) if len(cell) <= limit else repr(cell[:limit]) + f"... ({len(cell)} characters)"
+
+
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 
 
@@ -449,6 +457,15 @@ class _Reader:
     # -- the pass
     def read(self) -> Measurements | None:
         path = self.path
+        if path.exists() and not path.is_file():  # a directory, FIFO or device (which never ends)
+            self.error("file", "not a regular file")
+            return None
+        if path.exists() and path.stat().st_size > MAX_FILE_BYTES:
+            self.error(
+                "file",
+                f"{path.stat().st_size} bytes is more than the {MAX_FILE_BYTES} a measurement file may have",
+            )
+            return None
         try:
             text = path.read_text(encoding="utf-8-sig")
         except FileNotFoundError:
@@ -476,7 +493,11 @@ class _Reader:
             sep = max((";", "\t", ","), key=header_text.count)
             if sep == self.decimal:
                 sep = ";"
-        header = [h.strip() for h in next(csv.reader([lines[first]], delimiter=sep))]
+        try:
+            header = [h.strip() for h in next(csv.reader([lines[first]], delimiter=sep))]
+        except csv.Error as err:
+            self.error("header", f"the header cannot be read as CSV: {err}", self.header_line)
+            return None
         self.header = header
         where: dict[str, int] = {}
         for k, name in enumerate(header):
@@ -494,7 +515,7 @@ class _Reader:
 
         body = [(i + 1, ln) for i, ln in enumerate(lines[first + 1 :], start=first + 1) if ln.strip()]
         body = [(no, ln) for no, ln in body if not ln.lstrip().startswith("#")]
-        rows = list(csv.reader([ln for _, ln in body], delimiter=sep))
+        rows, unreadable = self._split_lines(body, sep)
         self.line_no = np.array([no for no, _ in body], dtype=int)
         self.rows = rows
 
@@ -507,8 +528,9 @@ class _Reader:
 
         # ragged rows: reported once, their cells are not looked at again
         good = np.ones(len(rows), dtype=bool)
+        good[unreadable] = False
         for i, r in enumerate(rows):
-            if len(r) != len(header):
+            if len(r) != len(header) and i not in unreadable:
                 good[i] = False
                 self.error(
                     "ragged",
@@ -568,6 +590,31 @@ class _Reader:
             metadata=metadata,
         )
 
+    def _split_lines(self, body: list[tuple[int, str]], sep: str) -> tuple[list[list[str]], list[int]]:
+        """One row of cells per line; a line the csv module cannot read (a cell over its
+        field limit) is reported and left out.  A quote opened on one line does not
+        swallow the next lines: every line is its own row."""
+        lines = [ln for _, ln in body]
+        try:
+            rows = list(csv.reader(lines, delimiter=sep))
+            if len(rows) == len(lines):
+                return rows, []
+        except csv.Error:
+            pass
+        rows, unreadable = [], []
+        for i, (no, ln) in enumerate(body):
+            try:
+                rows.append(next(csv.reader([ln], delimiter=sep), []))
+            except csv.Error as err:
+                rows.append([])
+                unreadable.append(i)
+                self.error("file", f"cannot be read as CSV: {err}", no)
+        return rows, unreadable
+
+    def _header_text(self, limit: int = 20) -> str:
+        shown = ", ".join(self.header[:limit])
+        return shown + (f", ... ({len(self.header)} columns)" if len(self.header) > limit else "")
+
     # -- columns
     def _col(self, name: str) -> str:
         return self.rename.get(name, name)
@@ -590,7 +637,7 @@ class _Reader:
                 self.error(
                     "columns",
                     f"column {target!r} (given for {key!r} in columns=) is not in the header; header: "
-                    f"{', '.join(self.header)}",
+                    f"{self._header_text()}",
                     hl,
                     target,
                 )
@@ -632,7 +679,7 @@ class _Reader:
                 self.error(
                     "missing-joint",
                     "no joint columns: expected q1, q2, ... (or renames such as "
-                    f"columns={{'q1': 'shoulder_pan_joint'}}); header is {', '.join(self.header)}",
+                    f"columns={{'q1': 'shoulder_pan_joint'}}); header is {self._header_text()}",
                     hl,
                 )
         # joint-like columns beyond the model's or the counted joints
@@ -737,12 +784,14 @@ class _Reader:
                         if self.decimal == "." and _DECIMAL_COMMA.match(raw):
                             hint = "; it looks like a decimal comma: pass decimal=','"
                         self.error(
-                            "not-a-number", f"{raw!r} is not a number{hint}", int(self.line_no[i]), name
+                            "not-a-number", f"{_short(raw)} is not a number{hint}", int(self.line_no[i]), name
                         )
                     else:
                         if not math.isfinite(values[m]):
                             values[m] = np.nan  # reported below
-                            self.error("not-finite", f"value {s!r} is not finite", int(self.line_no[i]), name)
+                            self.error(
+                                "not-finite", f"value {_short(s)} is not finite", int(self.line_no[i]), name
+                            )
                 out[good, c] = values
                 continue
             bad = ~np.isfinite(values)
@@ -750,7 +799,7 @@ class _Reader:
                 i = good[m]
                 self.error(
                     "not-finite",
-                    f"value {self.rows[i][k].strip()!r} is not finite",
+                    f"value {_short(self.rows[i][k].strip())} is not finite",
                     int(self.line_no[i]),
                     name,
                 )
@@ -763,7 +812,7 @@ class _Reader:
         for i in np.flatnonzero(self.good & ~np.isin(labels, ("train", "test"))):
             self.error(
                 "split",
-                f"{self.rows[i][k].strip()!r} is not a train/test label (expected 'train' or 'test')",
+                f"{_short(self.rows[i][k].strip())} is not a train/test label (expected 'train' or 'test')",
                 int(self.line_no[i]),
                 name,
             )

@@ -29,11 +29,22 @@ Targets that fail from their first seed are restarted from random configurations
 the limits are wider); the best solution over all seeds is returned.  Give ``q0`` to
 start from known configurations (e.g. the previous sample of a path, to keep the
 configuration branch) and ``restarts=0`` to forbid switching branch.
+
+Non-geometric joint effects
+---------------------------
+``joint_effects(q) -> (n, dof, 3)`` (or None) gives joint perturbations (δα, δβ, δθ)
+that depend on the commanded configuration (e.g. compliance under gravity,
+:meth:`robocal.identify.CalibrationResult.joint_perturbations`).  They are evaluated
+at every iterate and passed to ``fk`` and ``joint_jacobian``; the Jacobian neglects
+their own derivative with respect to ``q``, so the iteration converges to the fixed
+point ``fk(q, joint_effects(q)) = target`` as long as the effects change slowly with
+``q`` (used by :mod:`robocal.compensate`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Literal
@@ -45,10 +56,12 @@ from scipy.spatial import cKDTree
 from robocal import spatial
 from robocal.model.chain import Model
 
-__all__ = ["IKResult", "TargetKind", "random_configurations", "solve_ik"]
+__all__ = ["IKResult", "PerturbationFunction", "TargetKind", "random_configurations", "solve_ik"]
 
 Array = NDArray[np.float64]
 TargetKind = Literal["position", "pose", "axis"]
+#: ``joint_effects(q (m, dof)) -> (m, dof, 3)`` joint perturbations, or None for none
+PerturbationFunction = Callable[[NDArray[np.float64]], NDArray[np.float64] | None]
 _POOL_SEED = 20240917  # the seed pool is fixed: results depend on `seed` only through random restarts
 
 
@@ -155,9 +168,16 @@ class _Problem:
     """Residuals and Jacobians of one IK problem, batched over configurations."""
 
     def __init__(
-        self, model: Model, T_target: Array, kind: TargetKind, tool_axis: int, weight: float
+        self,
+        model: Model,
+        T_target: Array,
+        kind: TargetKind,
+        tool_axis: int,
+        weight: float,
+        joint_effects: PerturbationFunction | None = None,
     ) -> None:
         self.model = model
+        self.effects = joint_effects
         self.T = T_target
         self.kind = kind
         self.k = tool_axis
@@ -169,8 +189,9 @@ class _Problem:
         ``e`` (m, rows), weighted Jacobians ``J`` (m, rows, dof), position errors (m)
         and angle errors (rad)."""
         model = self.model
-        T = model.fk(q)
-        Jg = model.joint_jacobian(q)
+        d = None if self.effects is None else self.effects(q)
+        T = model.fk(q, d)
+        Jg = model.joint_jacobian(q, d)
         Tt = self.T[idx]
         e_p = Tt[:, :3, 3] - T[:, :3, 3]
         dist = np.linalg.norm(e_p, axis=1)
@@ -319,6 +340,7 @@ def solve_ik(
     orientation_weight: float = 1.0,
     damping: float = 1e-3,
     seed_pool: int = 50000,
+    joint_effects: PerturbationFunction | None = None,
 ) -> IKResult:
     """Joint values that put the tool on ``targets``, batched over targets.
 
@@ -344,6 +366,9 @@ def solve_ik(
             target starts from the pool configuration whose tool frame is nearest to the
             target, and restarts alternate between next-nearest pool configurations and
             fresh random ones (0: random starts only).
+        joint_effects: configuration-dependent joint perturbations ``q (m, dof) ->
+            (m, dof, 3)`` (or None) applied at every iterate (module docstring); the
+            starting configurations from the pool ignore them.
 
     Returns:
         :class:`IKResult`; ``q`` is ``(n, dof)`` even for a single target.
@@ -370,7 +395,7 @@ def solve_ik(
             )
         if not np.all(np.isfinite(q_start)):
             raise ValueError("q0 contains NaN or inf")
-    problem = _Problem(model, T, kind, tool_axis, float(orientation_weight))
+    problem = _Problem(model, T, kind, tool_axis, float(orientation_weight), joint_effects)
     idx = np.arange(n)
     if n == 0:
         empty = np.zeros(0)

@@ -1,12 +1,13 @@
 """Step 1 of a calibration — what the robot is: chains, conventions, files and the catalog."""
 
 from robocal.model.catalog import robot, robots
-from robocal.model.chain import Body, Joint, Model, Step
+from robocal.model.chain import Body, Joint, JointEffects, Model, Step
 from robocal.model.files import ModelFileError, load_model, save_model
 
 __all__ = [
     "Body",
     "Joint",
+    "JointEffects",
     "Model",
     "ModelFileError",
     "Step",

@@ -614,13 +614,23 @@ def load_geometry(path: str | Path) -> Geometry:
           - {type: revolute, position: [0, 0, -50], axis: [0, 0, -1]}
         tcp: {position: [0, 0, -100]}
     """
-    from robocal.model.files import _format_validation_error  # shared error formatting
+    from robocal.model.files import MAX_FILE_BYTES, _format_validation_error, _NoAliasLoader
 
     path = Path(path)
+    if path.exists() and not path.is_file():  # a FIFO or a device would never end
+        raise GeometryError(f"{path}: not a regular file")
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise GeometryError(f"{path}: too large for a geometry file (limit {MAX_FILE_BYTES} bytes)")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader)  # no alias bombs
     except yaml.YAMLError as err:
-        raise GeometryError(f"{path}: {err}") from None
+        mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise GeometryError(f"{path}: {where}{getattr(err, 'problem', None) or err}") from None
+    except UnicodeDecodeError as err:
+        raise GeometryError(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
+    except RecursionError:
+        raise GeometryError(f"{path}: nested too deeply to be a geometry file") from None
     if not isinstance(data, dict):
         raise GeometryError(f"{path}: a geometry file must be a mapping")
     try:

@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal.spatial import MOTIONS
 
-__all__ = ["Body", "Joint", "Model", "Step"]
+__all__ = ["Body", "Joint", "JointEffects", "Model", "Step"]
 
 Array = NDArray[np.float64]
 JointType = Literal["revolute", "prismatic"]
@@ -176,6 +176,74 @@ class Body:
 
 
 @dataclass(frozen=True)
+class JointEffects:
+    """Non-geometric parameters of one joint (seed 003 ch. 4-5, Table 5.2), SI units.
+
+    They turn the joint's load into the joint perturbations (δα, δβ, δθ) of the
+    chain (see :mod:`robocal.model.joints` for the equations):
+
+    Attributes:
+        joint: the joint's name.
+        clearance_tilt: ``C_cle_tilt`` (rad), the angle by which the shaft can tilt in
+            its housing (eq. 4.11); the tilt is split between the two axes
+            perpendicular to the joint axis by the ratio of the moments about them
+            (eqs. 5.16-5.18).
+        backlash: ``δθ_bkl`` (rad; m for a prismatic joint): the joint turns by
+            ``±backlash`` with the sign of the load moment about its axis (eq. 5.19).
+        compliance: axial compliance ``1/k_z`` (rad/(N·m); m/N for a prismatic joint):
+            the joint gives way by ``compliance × load moment`` (eqs. 4.15, 5.19).
+        radial_compliance: ``1/k_r`` (rad/(N·m)): elastic tilt about the two
+            perpendicular axes, ``compliance × load moment`` about each (seed 003 names
+            it and neglects it; optional).
+        shaft_length: ``L`` (m), the length of the shaft in its housing, or None.  With
+            ``clearance_tilt`` it gives the radial clearance ``r = (L/2) tan C`` (eq.
+            5.15); the tilt itself does not depend on it.
+
+    Identified values may come out slightly negative when an effect is below the
+    measurement noise; they are kept as they are (finite values only).
+    """
+
+    joint: str
+    clearance_tilt: float = 0.0
+    backlash: float = 0.0
+    compliance: float = 0.0
+    radial_compliance: float = 0.0
+    shaft_length: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_name("joint", self.joint)
+        for name in ("clearance_tilt", "backlash", "compliance", "radial_compliance"):
+            value = float(getattr(self, name))
+            if not math.isfinite(value):
+                raise ValueError(f"joint effects of {self.joint!r}: {name} {value!r} is not finite")
+            object.__setattr__(self, name, value)
+        if abs(self.clearance_tilt) >= math.pi / 2:
+            raise ValueError(
+                f"joint effects of {self.joint!r}: clearance_tilt {self.clearance_tilt!r} rad must be "
+                "smaller than 90°"
+            )
+        if self.shaft_length is not None:
+            length = float(self.shaft_length)
+            if not (math.isfinite(length) and length > 0):
+                raise ValueError(
+                    f"joint effects of {self.joint!r}: shaft_length {self.shaft_length!r} must be > 0 (m)"
+                )
+            object.__setattr__(self, "shaft_length", length)
+
+    @property
+    def stiffness(self) -> float:
+        """Axial stiffness ``k_z = 1/compliance`` (N·m/rad; inf for a rigid joint)."""
+        return math.inf if self.compliance == 0 else 1.0 / self.compliance
+
+    @property
+    def clearance_radius(self) -> float | None:
+        """Radial clearance ``r = (L/2) tan C`` (m, seed 003 eq. 5.15), None without ``shaft_length``."""
+        if self.shaft_length is None:
+            return None
+        return 0.5 * self.shaft_length * math.tan(self.clearance_tilt)
+
+
+@dataclass(frozen=True)
 class _Plan:
     """Structure of a chain, compiled once per model for batched evaluation."""
 
@@ -203,12 +271,14 @@ class Model:
     title: str = ""
     source: str = ""
     notes: str = field(default="", compare=True)
+    joint_effects: tuple[JointEffects, ...] = ()
 
     def __post_init__(self) -> None:
         _check_name("model", self.name)
         steps = tuple(self.steps)
         object.__setattr__(self, "steps", steps)
         object.__setattr__(self, "bodies", tuple(self.bodies))
+        object.__setattr__(self, "joint_effects", tuple(self.joint_effects))
         if not steps:
             raise ValueError(f"model {self.name!r} has no steps")
         for step in steps:
@@ -229,6 +299,18 @@ class Model:
                     f"model {self.name!r}: body {body.name!r} refers to frame {body.frame!r}, "
                     "which is not a step of the chain"
                 )
+        effect_joints: set[str] = set()
+        for effects in self.joint_effects:
+            if not isinstance(effects, JointEffects):
+                raise TypeError(f"model {self.name!r}: joint_effects must be JointEffects, got {effects!r}")
+            if effects.joint not in joint_names:
+                raise ValueError(
+                    f"model {self.name!r}: joint effects refer to joint {effects.joint!r}, which is not a "
+                    f"joint of the chain ({', '.join(joint_names)})"
+                )
+            if effects.joint in effect_joints:
+                raise ValueError(f"model {self.name!r}: joint {effects.joint!r} has joint effects twice")
+            effect_joints.add(effects.joint)
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -479,11 +561,14 @@ class Model:
         steps: Sequence[int],
         orientation: bool = True,
         values: Array | None = None,
-    ) -> tuple[Array, Array]:
+        tilt: bool = False,
+    ) -> tuple[Array, ...]:
         """Derivative columns of the tool pose wrt the values of ``steps`` (chain order).
 
         Returns ``F_tool (3, 4, n)`` and ``J (m, 6, n)`` with rows [dp; dω], or
-        ``(m, 3, n)`` position rows only when ``orientation`` is false.
+        ``(m, 3, n)`` position rows only when ``orientation`` is false; with ``tilt``
+        also the columns of the joint tilts ``(dof, 2, rows, n)`` (δα, δβ; see
+        :meth:`_tilt_columns`).
 
         For a step hanging off anchor frame (R, p_a) with local axis a_l and local
         origin o_l, the world axis is a = R a_l and origin o = p_a + R o_l, so
@@ -536,7 +621,39 @@ class Model:
                 Jb[c, :3] = A[c]
                 if orientation:
                     Jb[c, 3:] = 0.0
+        if tilt:
+            return F, J, self._tilt_columns(F, anchors, perturbations, orientation)
         return F, J
+
+    def _tilt_columns(
+        self, F: Array, anchors: list[Array], perturbations: Array | None, orientation: bool
+    ) -> Array:
+        """Exact derivatives of the tool pose wrt the joint tilts δα, δβ, ``(dof, 2, rows, n)``.
+
+        After joint ``j`` (axis ``k``, perpendicular axes ``u = k+1``, ``w = k+2``) the
+        frame is ``F_j = F Rot_k(θ) Rot_u(δα) Rot_w(δβ)``.  A change of δβ turns the tool
+        about ``F_j``'s ``w`` axis; a change of δα about the ``u`` axis of
+        ``F Rot_k(θ) Rot_u(δα)``, which is ``cos δβ e_u + sin δβ e_k`` in ``F_j``'s axes.
+        Both axes pass through the joint frame's origin.
+        """
+        plan = self._plan
+        n = F.shape[-1]
+        rows = 6 if orientation else 3
+        out = np.empty((len(anchors), 2, rows, n))
+        p_tool = F[:, 3]
+        for j, A in enumerate(anchors):
+            k = plan.joint_axis[j]
+            u, w = (k + 1) % 3, (k + 2) % 3
+            a_alpha = A[:, u]
+            if perturbations is not None:
+                b = perturbations[:, j, 1]
+                a_alpha = np.cos(b) * A[:, u] + np.sin(b) * A[:, k]
+            r = p_tool - A[:, 3]
+            for c, axis in enumerate((a_alpha, A[:, w])):
+                out[j, c, :3] = np.cross(axis, r, axis=0)
+                if orientation:
+                    out[j, c, 3:] = axis
+        return out
 
     def fk_jacobian(
         self,
@@ -566,6 +683,7 @@ class Model:
         jacobian: bool = True,
         perturbations: ArrayLike | None = None,
         joint_columns: bool = False,
+        perturbation_columns: bool = False,
     ) -> tuple[Array, ...]:
         """Tool frames and identification Jacobian for other parameter values, without
         building a new model (the inner loop of the solvers).
@@ -578,28 +696,37 @@ class Model:
             joint_columns: also return the joint Jacobian with the same rows
                 (``(3n, dof)`` or ``(6n, dof)``): the derivatives with respect to the
                 joint values, and so to the δθ joint perturbations.
+            perturbation_columns: also return the derivatives with respect to all
+                joint perturbations, ``(3n, dof, 3)`` or ``(6n, dof, 3)`` for (δα, δβ, δθ)
+                (see :meth:`perturbation_jacobian`).
 
         Returns:
-            ``T (n, 4, 4)``, ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``, and the
-            joint columns when asked.
+            ``T (n, 4, 4)``, ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``, the joint
+            columns when asked, and the perturbation columns when asked.
         """
         q, _ = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         v = None if values is None else np.asarray(values, dtype=float)
         if v is not None and v.shape != (len(self.steps),):
             raise ValueError(f"values shaped {v.shape}; model {self.name!r} has {len(self.steps)} parameters")
-        if not jacobian and not joint_columns:
+        if not jacobian and not joint_columns and not perturbation_columns:
             F, _ = self._forward(q, d, keep_anchors=False, values=v)
             return _to_homogeneous(F), None
         free = np.flatnonzero(self.free_mask) if jacobian else np.zeros(0, dtype=np.intp)
-        joints = self._plan.joint_steps if joint_columns else np.zeros(0, dtype=np.intp)
+        need_joints = joint_columns or perturbation_columns
+        joints = self._plan.joint_steps if need_joints else np.zeros(0, dtype=np.intp)
         steps = np.union1d(free, joints)
-        F, J = self._columns(q, d, steps, orientation=rows == "pose", values=v)
-        J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(steps))
+        F, J, *tilt = self._columns(
+            q, d, steps, orientation=rows == "pose", values=v, tilt=perturbation_columns
+        )
+        J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(J.shape[2] * J.shape[1], len(steps))
         J_free = J[:, np.searchsorted(steps, free)] if jacobian else None
         out: tuple[Array, ...] = (_to_homogeneous(F), J_free)
+        J_joints = J[:, np.searchsorted(steps, joints)] if need_joints else None
         if joint_columns:
-            out += (J[:, np.searchsorted(steps, joints)],)
+            out += (J_joints,)
+        if perturbation_columns:
+            out += (_perturbation_layout(tilt[0], J_joints),)
         return out
 
     def jacobian(
@@ -615,6 +742,27 @@ class Model:
         Columns follow :attr:`free_names`.
         """
         return self.fk_jacobian(q, rows, perturbations)[1]
+
+    def perturbation_jacobian(
+        self,
+        q: ArrayLike,
+        rows: Literal["position", "pose"] = "position",
+        perturbations: ArrayLike | None = None,
+    ) -> Array:
+        """Derivatives of the tool pose wrt the joint perturbations (δα, δβ, δθ),
+        ``(n, 3, dof, 3)`` for position rows or ``(n, 6, dof, 3)`` for pose rows
+        ``[x, y, z, ωx, ωy, ωz]`` (ω: small rotation in the base frame), exact at the
+        given ``perturbations`` ``(n, dof, 3)`` (default zero).  The δθ column is the
+        joint Jacobian; the tilt columns turn the tool about the joint frame's
+        perpendicular axes (x, y for a joint about z) through its origin."""
+        if rows not in ("position", "pose"):
+            raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
+        q, single = self._check_q(q)
+        _, _, P = self.evaluate(
+            q, rows=rows, jacobian=False, perturbations=perturbations, perturbation_columns=True
+        )
+        P = P.reshape(len(q), 3 if rows == "position" else 6, self.dof, 3)
+        return P[0] if single else P
 
     def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
         """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
@@ -666,6 +814,16 @@ def _elementaries(axis: NDArray[np.intp], rotation: NDArray[np.bool_], values: A
     E[r, i, j] = -s
     E[r, j, i] = s
     return E
+
+
+def _perturbation_layout(tilt: Array, joints: Array) -> Array:
+    """Tilt columns ``(dof, 2, rows, n)`` and joint columns ``(n * rows, dof)`` ->
+    ``(n * rows, dof, 3)`` in the order (δα, δβ, δθ)."""
+    dof, _, rows, n = tilt.shape
+    out = np.empty((n, rows, dof, 3))
+    out[..., :2] = tilt.transpose(3, 2, 0, 1)
+    out[..., 2] = joints.reshape(n, rows, dof)
+    return out.reshape(n * rows, dof, 3)
 
 
 def _to_homogeneous(F: Array) -> Array:

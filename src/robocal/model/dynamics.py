@@ -1,4 +1,4 @@
-"""Rigid-body models for Pinocchio built from a chain (joint wrenches build on this).
+"""Rigid-body models for Pinocchio built from a chain, and the wrenches at the joints.
 
 Pinocchio does the dynamics (RNEA and friends); this module only translates the
 chain: constant steps are folded into joint placements, each joint step becomes a
@@ -6,16 +6,36 @@ Pinocchio revolute or prismatic joint about the step's axis (its offset folded i
 the placement, since a rotation or translation about one axis composes additively),
 and each :class:`~robocal.model.chain.Body` is attached to the joint that moves it.
 The chain's end is the operational frame ``"tool"``.
+
+Joint wrenches (seed 003 eqs. 4.21 and 5.14): :func:`joint_wrenches` gives, at every
+joint, the full force and moment the joint transmits from its parent link to its
+child link — the moment about the joint axis is the joint torque, the two others are
+carried by the bearings — in the joint frame (the frame right after the joint step,
+:meth:`~robocal.model.chain.Model.joint_frames`; Pinocchio's joint frame ``j + 1``),
+for static poses (gravity in any direction, a payload) and along trajectories
+(velocities and accelerations: the dynamic recursion of eq. 5.14).  It is Pinocchio's
+recursive Newton-Euler algorithm (``pin.rnea``) with the per-joint forces
+``data.f[j + 1]`` it leaves behind.
+
+Sign: these are *support* wrenches (what the joint applies to hold and move the
+link: Craig's ``n_i`` and ``f_i``, eq. 5.14).  Seed 003's static eq. 4.21 writes the
+moment of the loads (gravity) on the joint instead, ``η = −n``; the joint effects of
+:mod:`robocal.model.joints` deflect along that load moment.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from robocal.model.chain import Model
 from robocal.spatial import elementary
 
-__all__ = ["TOOL_FRAME", "to_pinocchio"]
+__all__ = ["TOOL_FRAME", "Payload", "gravity_torques", "joint_moments", "joint_wrenches", "to_pinocchio"]
+
+Array = NDArray[np.float64]
 
 TOOL_FRAME = "tool"
 
@@ -99,3 +119,120 @@ def gravity_torques(model, q: np.ndarray, gravity: np.ndarray | None = None) -> 
     data = pm.createData()
     q = np.atleast_2d(np.asarray(q, dtype=float))
     return np.array([pin.computeGeneralizedGravity(pm, data, qk) for qk in q])
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A load carried by the tool (a rigid body fixed to the chain's end).
+
+    Attributes:
+        mass: kg.
+        com: centre of mass (m) in the tool frame.
+        inertia: ``(Ixx, Iyy, Izz, Ixy, Ixz, Iyz)`` (kg·m²) about the centre of mass,
+            tool axes; ``None``: a point mass.
+    """
+
+    mass: float
+    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    inertia: tuple[float, float, float, float, float, float] | None = None
+
+    def __post_init__(self) -> None:
+        mass = float(self.mass)
+        if not (np.isfinite(mass) and mass >= 0):
+            raise ValueError(f"payload mass {self.mass!r} must be finite and >= 0 (kg)")
+        com = tuple(float(v) for v in self.com)
+        if len(com) != 3 or not np.all(np.isfinite(com)):
+            raise ValueError(f"payload com must be 3 finite numbers (m, tool frame), got {self.com!r}")
+        object.__setattr__(self, "mass", mass)
+        object.__setattr__(self, "com", com)
+        if self.inertia is not None:
+            inertia = tuple(float(v) for v in self.inertia)
+            if len(inertia) != 6 or not np.all(np.isfinite(inertia)):
+                raise ValueError("payload inertia must be 6 finite numbers (Ixx, Iyy, Izz, Ixy, Ixz, Iyz)")
+            object.__setattr__(self, "inertia", inertia)
+
+
+def _joint_rates(value: ArrayLike | None, shape: tuple[int, int], what: str) -> Array:
+    if value is None:
+        return np.zeros(shape)
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 1:
+        a = a[None]
+    if a.shape != shape:
+        raise ValueError(f"joint {what} shaped {a.shape}; expected {shape} like q")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"joint {what} contain NaN or inf")
+    return a
+
+
+def joint_wrenches(
+    model: Model,
+    q: ArrayLike,
+    qd: ArrayLike | None = None,
+    qdd: ArrayLike | None = None,
+    *,
+    gravity: ArrayLike | None = None,
+    payload: Payload | None = None,
+) -> Array:
+    """Force and moment transmitted by every joint, in its joint frame, ``(n, dof, 6)``.
+
+    Rows ``[fx, fy, fz, ηx, ηy, ηz]``: the force (N) and the moment (N·m) about the
+    joint frame's origin that joint ``j`` applies to the links beyond it (support
+    wrench, eq. 5.14's ``f_i``, ``n_i``), expressed in the frame right after the joint
+    step (``model.joint_frames(q)[:, j]``).  The component along the joint axis is the
+    joint torque (force for a prismatic joint); the others are carried by the
+    bearings.  Seed 003's eq. 4.21 load moment is ``−η``.
+
+    Computed with Pinocchio's recursive Newton-Euler algorithm on :func:`to_pinocchio`'s
+    model (one C++ call per pose).
+
+    Args:
+        model: the chain with mass properties (``model.bodies``).
+        q: ``(n, dof)`` joint values (rad, m); ``(dof,)`` for one pose.
+        qd, qdd: joint velocities (rad/s, m/s) and accelerations (rad/s², m/s²) like
+            ``q``; default zero (static poses).
+        gravity: gravity in the robot's base frame (m/s²), default ``[0, 0, -9.81]``.
+        payload: a load fixed to the tool frame.
+
+    Returns:
+        ``(n, dof, 6)`` (``(dof, 6)`` for a 1-D ``q``).
+    """
+    import pinocchio as pin
+
+    if not model.bodies and (payload is None or payload.mass == 0):
+        raise ValueError(f"model {model.name!r} has no mass properties (bodies) to compute joint wrenches")
+    q_arr = np.asarray(q, dtype=float)
+    single = q_arr.ndim == 1
+    q_arr, _ = model._check_q(q_arr)
+    shape = q_arr.shape
+    v = _joint_rates(qd, shape, "velocities")
+    a = _joint_rates(qdd, shape, "accelerations")
+    pm = to_pinocchio(model, gravity)
+    if payload is not None and payload.mass > 0:
+        tool = pm.frames[pm.getFrameId(TOOL_FRAME)]
+        Ixx, Iyy, Izz, Ixy, Ixz, Iyz = payload.inertia or (0.0,) * 6
+        inertia = np.array([[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]])
+        pm.appendBodyToJoint(
+            tool.parentJoint, pin.Inertia(payload.mass, np.array(payload.com), inertia), tool.placement
+        )
+    data = pm.createData()
+    dof = model.dof
+    out = np.empty((len(q_arr), dof, 6))
+    for k in range(len(q_arr)):  # one Pinocchio RNEA per pose (C++; a few µs)
+        pin.rnea(pm, data, q_arr[k], v[k], a[k])
+        for j in range(dof):
+            out[k, j] = data.f[j + 1].vector
+    return out[0] if single else out
+
+
+def joint_moments(
+    model: Model,
+    q: ArrayLike,
+    qd: ArrayLike | None = None,
+    qdd: ArrayLike | None = None,
+    *,
+    gravity: ArrayLike | None = None,
+    payload: Payload | None = None,
+) -> Array:
+    """The moment part ``[ηx, ηy, ηz]`` (N·m) of :func:`joint_wrenches`, ``(n, dof, 3)``."""
+    return joint_wrenches(model, q, qd, qdd, gravity=gravity, payload=payload)[..., 3:]

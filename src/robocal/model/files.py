@@ -27,6 +27,19 @@ e.g. ``[alpha]``).  ``bodies`` give mass properties: ``name``, ``frame`` (the
 parameter after whose step the body frame is taken), ``mass`` (kg), ``com``
 (length unit), ``inertia`` (``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` in kg·m², always SI).
 
+``joint_effects`` give each joint's non-geometric parameters (seed 003 Table 5.2,
+:class:`~robocal.model.chain.JointEffects`)::
+
+    units: {length: mm, angle: deg, stiffness: kgf*m/deg}
+    joint_effects:
+      - {joint: q2, clearance_tilt: 0.024, backlash: 0.061, stiffness: 90}
+
+Fields: ``joint``, ``clearance_tilt`` (angle unit), ``backlash`` (angle unit; length
+unit for a prismatic joint), ``stiffness`` (``units.stiffness``: ``N*m/rad`` (default),
+``N*m/deg`` or ``kgf*m/deg`` as in seed 003; N/m for a prismatic joint, SI files only)
+or ``compliance`` (its inverse, always SI: rad/(N·m) or m/N), ``radial_stiffness`` or
+``radial_compliance`` (the same for the tilt), ``shaft_length`` (length unit).
+
 Lengths and angles are in ``units`` (default m and rad).  Files written by
 :func:`save_model` use m and rad with shortest round-trip float formatting, so
 ``load_model(save_model(m))`` equals ``m`` exactly.
@@ -44,12 +57,15 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from robocal.model import conventions
-from robocal.model.chain import Body, Joint, Model, Step
+from robocal.model.chain import Body, Joint, JointEffects, Model, Step
 
 __all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "save_model"]
 
 FORMAT_VERSION = 1
 MAX_FILE_BYTES = 5_000_000
+#: Elementary steps a model file may describe (a 6-DOF arm has about 30; the checks of a
+#: chain grow with the square of its length).
+MAX_STEPS = 1000
 
 LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
 ANGLE_SCALE = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -68,6 +84,11 @@ class _Units(BaseModel):
     model_config = _Config
     length: Literal["m", "mm"] = "m"
     angle: Literal["rad", "deg"] = "rad"
+    stiffness: Literal["N*m/rad", "N*m/deg", "kgf*m/deg"] = "N*m/rad"
+
+
+#: N·m/rad per unit of each stiffness unit (kgf: standard gravity 9.80665 m/s²)
+STIFFNESS_SCALE = {"N*m/rad": 1.0, "N*m/deg": 180.0 / math.pi, "kgf*m/deg": 9.80665 * 180.0 / math.pi}
 
 
 class _StepSpec(BaseModel):
@@ -110,6 +131,26 @@ class _BodySpec(BaseModel):
     inertia: tuple[float, float, float, float, float, float] | None = None
 
 
+class _JointEffectsSpec(BaseModel):
+    model_config = _Config
+    joint: Name
+    clearance_tilt: float = 0.0
+    backlash: float = 0.0
+    stiffness: Annotated[float, Field(gt=0)] | None = None
+    compliance: float | None = None
+    radial_stiffness: Annotated[float, Field(gt=0)] | None = None
+    radial_compliance: float | None = None
+    shaft_length: Annotated[float, Field(gt=0)] | None = None
+
+    @model_validator(mode="after")
+    def _stiffness_or_compliance(self) -> _JointEffectsSpec:
+        for kind in ("", "radial_"):
+            k, c = getattr(self, kind + "stiffness"), getattr(self, kind + "compliance")
+            if k is not None and c is not None:
+                raise ValueError(f"give '{kind}stiffness' or '{kind}compliance' (its inverse), not both")
+        return self
+
+
 class _ModelFile(BaseModel):
     model_config = _Config
     robocal_model: Literal[1] = 1
@@ -124,6 +165,7 @@ class _ModelFile(BaseModel):
     chain: list[_StepSpec] = []
     tool: list[_StepSpec] = []
     bodies: list[_BodySpec] = []
+    joint_effects: list[_JointEffectsSpec] = []
 
     @model_validator(mode="after")
     def _one_form(self) -> _ModelFile:
@@ -179,6 +221,42 @@ def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[S
     return steps
 
 
+def _joint_effects(specs: list[_JointEffectsSpec], steps: list[Step], units: _Units) -> list[JointEffects]:
+    L, A = LENGTH_SCALE[units.length], ANGLE_SCALE[units.angle]
+    types = {s.joint.name: s.joint_type for s in steps if s.joint is not None}
+    out = []
+    for i, e in enumerate(specs):
+        where = f"joint_effects[{i}] (joint {e.joint!r})"
+        if e.joint not in types:
+            raise ValueError(f"{where}: no such joint in the chain ({', '.join(types)})")
+        prismatic = types[e.joint] == "prismatic"
+        compliance = {}
+        for kind in ("", "radial_"):
+            k, c = getattr(e, kind + "stiffness"), getattr(e, kind + "compliance")
+            if k is not None:
+                if prismatic and units.stiffness != "N*m/rad":
+                    raise ValueError(
+                        f"{where}: {kind}stiffness of a prismatic joint is in N/m; give 'compliance' (m/N) "
+                        f"or use units.stiffness N*m/rad, not {units.stiffness}"
+                    )
+                c = 1.0 / (k * (1.0 if prismatic else STIFFNESS_SCALE[units.stiffness]))
+            compliance[kind] = 0.0 if c is None else c
+        try:
+            out.append(
+                JointEffects(
+                    joint=e.joint,
+                    clearance_tilt=e.clearance_tilt * A,
+                    backlash=e.backlash * (L if prismatic else A),
+                    compliance=compliance[""],
+                    radial_compliance=compliance["radial_"],
+                    shaft_length=None if e.shaft_length is None else e.shaft_length * L,
+                )
+            )
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+    return out
+
+
 def _format_validation_error(err: ValidationError) -> str:
     lines = []
     for e in err.errors():
@@ -199,6 +277,9 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
         spec = _ModelFile.model_validate(data)
     except ValidationError as err:
         raise ModelFileError(f"{origin}: {_format_validation_error(err)}") from None
+    count = len(spec.base) + 5 * len(spec.links) + len(spec.chain) + len(spec.tool)
+    if count > MAX_STEPS:
+        raise ModelFileError(f"{origin}: about {count} steps; a model file may have up to {MAX_STEPS}")
     units = spec.units
     try:
         steps: list[Step] = [_step(s, units) for s in spec.base]
@@ -216,6 +297,7 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
             title=spec.title,
             source=spec.source.strip(),
             notes=spec.notes.strip(),
+            joint_effects=tuple(_joint_effects(spec.joint_effects, steps, units)),
         )
     except (ValueError, TypeError) as err:
         raise ModelFileError(f"{origin}: {err}") from None
@@ -242,9 +324,14 @@ def load_model(path: str | os.PathLike[str]) -> Model:
     """
     path = Path(path)
     size = path.stat().st_size
+    if path.exists() and not path.is_file():  # a FIFO or a device would never end
+        raise ModelFileError(f"{path}: not a regular file")
     if size > MAX_FILE_BYTES:
         raise ModelFileError(f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})")
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ModelFileError(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
     try:
         data = yaml.load(text, Loader=_NoAliasLoader)
     except yaml.YAMLError as err:
@@ -252,6 +339,8 @@ def load_model(path: str | os.PathLike[str]) -> Model:
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         problem = getattr(err, "problem", None) or str(err)
         raise ModelFileError(f"{path}: {where}{problem}") from None
+    except RecursionError:
+        raise ModelFileError(f"{path}: nested too deeply to be a model file") from None
     return model_from_dict(data, origin=str(path))
 
 
@@ -287,7 +376,28 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             }
             for b in model.bodies
         ]
+    if model.joint_effects:
+        data["joint_effects"] = [_effects_to_dict(e) for e in model.joint_effects]
     return data
+
+
+def _effects_to_dict(e: JointEffects) -> dict[str, Any]:
+    out: dict[str, Any] = {"joint": e.joint}
+    for key in ("clearance_tilt", "backlash", "compliance", "radial_compliance"):
+        if getattr(e, key) != 0.0:
+            out[key] = getattr(e, key)
+    if e.shaft_length is not None:
+        out["shaft_length"] = e.shaft_length
+    return out
+
+
+def _read_umask() -> int:
+    mask = os.umask(0)  # the only way to read it; set back at once (at import, before any threads)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
@@ -298,6 +408,8 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
+        # mkstemp makes the file private (0600); give it the permissions of a normal new file
+        os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -1,0 +1,166 @@
+"""Throughput of complete calibrations: simulate + calibrate + validate, per second.
+
+The problem (a Monte Carlo study, :mod:`robocal.study`): virtual UR10s (6R) with uniform
+errors of ±0.5 mm / ±0.05° on every free parameter, a laser tracker (20 µm) measuring a
+reflector 109 mm from the flange at 50 random poses, each robot calibrated (device frame
+and tool point fitted) and validated on 200 held-out poses.  Two models:
+
+* ``built``: the complete, minimal model robocal builds from the UR10's joint geometry
+  (examples/geometry/ur10.yaml, seed 000), the model of examples/study_ur10.yaml;
+* ``dh``: the catalog's plain DH UR10, whose wrist parameters θ5/α5 50 random poses
+  leave poorly identifiable: rc.calibrate fits three times (pruning them one by one),
+  and ~10 % of the robots need 50-100 Levenberg-Marquardt iterations on the first fit.
+
+Rows (same machine, same run, interleaved rounds, the best of ``--rounds``):
+
+* ``rc.calibrate``: one ``rc.calibrate`` + ``rc.validate`` per robot, this process
+  (the study's ``engine: calibrate``);
+* ``batched``: the study's batched engine, this process (``workers=0``);
+* ``Dask 1 worker`` / ``Dask 2 workers``: the batched engine on a Dask LocalCluster (one
+  single-threaded process per worker); the time is from the first task submitted to the
+  last row written, the cluster's start-up is reported apart.
+
+``--malloc`` adds a Dask row with Dask's default worker environment
+(``MALLOC_TRIM_THRESHOLD_=65536`` without robocal's ``MALLOC_MMAP_THRESHOLD_``), to show
+why study.py sets it.
+
+Run: ``python benchmarks/bench_throughput.py [--robots 400] [--rounds 3] [--model built|dh|both]``
+(about two minutes for both models).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only add noise
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+
+from robocal.study import StudyConfig, run_study
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def config(model: str, robots: int, engine: str, seed: int) -> StudyConfig:
+    robot = (
+        {"geometry": str(ROOT / "examples" / "geometry" / "ur10.yaml")}
+        if model == "built"
+        else {"robot": "ur10"}
+    )
+    return StudyConfig.model_validate(
+        dict(
+            name=f"throughput-{model}",
+            robots=robots,
+            seed=seed,
+            tool=(0.0, 0.0, 109.0),
+            pose_sets=[{"name": "random50", "kind": "random", "n": 50}],
+            devices=[{"name": "tracker-20um", "kind": "laser-tracker", "noise": "0.02mm"}],
+            validation={"n": 200},
+            engine=engine,
+            chunk=50,
+            **robot,
+        )
+    )
+
+
+def measure(model: str, robots: int, engine: str, workers: int, seed: int, dask_defaults: bool = False):
+    """(calibrations per second, start-up seconds) of one fresh study.
+
+    ``dask_defaults``: a LocalCluster made here with Dask's own worker environment
+    (robocal's cluster adds ``MALLOC_MMAP_THRESHOLD_``), passed to the study as a client.
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        if not dask_defaults:
+            run = run_study(config(model, robots, engine, seed), Path(tmp) / "s", workers=workers)
+            startup = run.startup_seconds
+        else:
+            import logging
+
+            from distributed import Client, LocalCluster
+
+            os.environ.pop("MALLOC_MMAP_THRESHOLD_", None)
+            t0 = time.perf_counter()
+            with (
+                LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    dashboard_address=None,
+                    silence_logs=logging.CRITICAL,
+                ) as cluster,
+                Client(cluster) as client,
+            ):
+                startup = time.perf_counter() - t0
+                run = run_study(config(model, robots, engine, seed), Path(tmp) / "s", client=client)
+    assert run.errors == 0 and run.computed == robots, (run.errors, run.computed)
+    return run.calibrations_per_second, startup
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument(
+        "--robots", type=int, default=400, help="virtual robots per measurement (Dask rows: 2x)"
+    )
+    parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds; the best is reported")
+    parser.add_argument("--model", choices=["built", "dh", "both"], default="both")
+    parser.add_argument("--malloc", action="store_true", help="also Dask with its default malloc settings")
+    args = parser.parse_args()
+
+    import dask
+    import distributed
+    import scipy
+
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, dask "
+        f"{dask.__version__}, distributed {distributed.__version__}; load average at start "
+        f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}"
+    )
+    models = ["built", "dh"] if args.model == "both" else [args.model]
+    rows = [
+        ("rc.calibrate, this process", "calibrate", 0, max(args.robots // 4, 20)),
+        ("batched, this process", "batched", 0, args.robots),
+        ("batched, Dask 1 worker", "batched", 1, 2 * args.robots),
+        ("batched, Dask 2 workers", "batched", 2, 2 * args.robots),
+    ]
+    for model in models:
+        best: dict[str, float] = {}
+        startup: dict[str, float] = {}
+        for r in range(args.rounds):
+            for label, engine, workers, robots in rows:
+                rate, start = measure(model, robots, engine, workers, seed=1000 * r + 7)
+                best[label] = max(best.get(label, 0.0), rate)
+                startup[label] = start
+                print(f"  [{model} round {r + 1}] {label}: {rate:.1f}/s", file=sys.stderr, flush=True)
+            if args.malloc:
+                label = "batched, Dask 1 worker, Dask's default malloc"
+                rate, start = measure(
+                    model, 2 * args.robots, "batched", 1, seed=1000 * r + 7, dask_defaults=True
+                )
+                best[label] = max(best.get(label, 0.0), rate)
+                startup[label] = start
+        base = best["rc.calibrate, this process"]
+        one = best["batched, this process"]
+        print(
+            f"\n{model} UR10, 50 poses, 200 validation poses: complete calibrations per second "
+            f"(best of {args.rounds})"
+        )
+        print(f"{'':44s} {'cal/s':>8s} {'per core':>9s} {'vs rc.calibrate':>16s} {'start-up s':>11s}")
+        for label, rate in best.items():
+            workers = 2 if "2 workers" in label else 1
+            print(
+                f"{label:44s} {rate:8.1f} {rate / workers:9.1f} {rate / base:15.2f}x {startup[label]:11.1f}"
+            )
+        d1, d2 = best["batched, Dask 1 worker"], best["batched, Dask 2 workers"]
+        print(f"scaling 1 -> 2 workers: {d2 / d1:.2f}x; Dask 1 worker vs this process: {d1 / one:.2f}x")
+    print(f"load average at the end {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,31 @@
+"""Step 4 of a calibration — what to command instead: corrected joint commands for
+Cartesian targets, calibration filters for joint programs, path correction (full IK or
+seed 003 eq. 5.22) and off-line program files (``robocal compensate``)."""
+
+from robocal.compensate.commands import (
+    Compensation,
+    PathCompensation,
+    TargetFileError,
+    Targets,
+    compensate,
+    compensate_cartesian_path,
+    compensate_path,
+    filter_program,
+    nominal_model,
+    read_program,
+    read_targets,
+)
+
+__all__ = [
+    "Compensation",
+    "PathCompensation",
+    "TargetFileError",
+    "Targets",
+    "compensate",
+    "compensate_cartesian_path",
+    "compensate_path",
+    "filter_program",
+    "nominal_model",
+    "read_program",
+    "read_targets",
+]

@@ -1,0 +1,225 @@
+"""``robocal compensate``: corrected joint commands for an off-line program.
+
+    robocal compensate DIR --targets FILE.csv [--frame base|measurement] [--length-unit mm] -o corrected.csv
+    robocal compensate DIR --program FILE.csv [--angle-unit deg] -o corrected.csv
+
+``DIR`` is a calibration output directory (``robocal calibrate --out DIR``: ``model.yaml``
+and ``result.json``) or a calibrated model file (``.yaml``; base frame only, no
+predicted errors "before").  ``--targets`` is a CSV of Cartesian targets ``name,x,y,z``
+(+ ``qw,qx,qy,qz`` for tool orientations) in the robot's base frame or in the
+measurement (cell) frame identified by the calibration; ``--program`` a joint program
+``[name,]q1..qN`` computed with the nominal model (the calibration-filter use).  The
+output (``-o``, CSV or ``.json``) holds ``name``, the corrected ``q1..qN``, the nominal
+``nominal_q1..nominal_qN``, ``predicted_error_before_mm``, ``predicted_error_after_mm``
+and ``reachable``.  Exit status 1 when a target was not reached (the file is written
+all the same), 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from robocal.console import console, err_console, fail
+
+__all__ = ["register"]
+
+
+def _load(source: Path):
+    """A CalibrationResult from a directory, or a Model from a model file."""
+    from robocal.identify.calibrate import CalibrationResult
+    from robocal.model.files import ModelFileError, load_model
+
+    if source.is_dir():
+        if not (source / "result.json").is_file():
+            raise fail(
+                f"{source} holds no calibration result (result.json); run robocal calibrate --out {source}"
+            )
+        try:
+            return CalibrationResult.load(source)
+        except (OSError, ValueError, KeyError, ModelFileError) as err:
+            raise fail(f"{source}: cannot read the calibration result: {err}") from None
+    if source.is_file():
+        try:
+            return load_model(source)
+        except (OSError, ModelFileError) as err:
+            raise fail(str(err)) from None
+    raise fail(f"{source} does not exist (a calibration directory or a model file)")
+
+
+def _parse_q0(text: str, dof: int, factor: np.ndarray) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in text.replace(",", " ").split()])
+    except ValueError:
+        raise fail(f"--q0 {text!r}: joint values must be numbers separated by commas or spaces") from None
+    if values.shape != (dof,):
+        raise fail(f"--q0 has {len(values)} values but the robot has {dof} joints")
+    return values * factor
+
+
+def compensate_command(
+    source: Annotated[Path, typer.Argument(help="calibration directory (result.json) or model .yaml")],
+    targets: Annotated[
+        Path | None, typer.Option("--targets", help="CSV of Cartesian targets name,x,y,z[,qw,qx,qy,qz]")
+    ] = None,
+    program: Annotated[
+        Path | None,
+        typer.Option("--program", help="CSV joint program q1..qN (+ optional name) from the nominal model"),
+    ] = None,
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="output file: .csv or .json")] = None,
+    frame: Annotated[
+        str, typer.Option("--frame", help="base | measurement: the frame of the targets")
+    ] = "base",
+    length_unit: Annotated[
+        str, typer.Option("--length-unit", help="m | mm | um: target positions, prismatic joints")
+    ] = "m",
+    angle_unit: Annotated[
+        str, typer.Option("--angle-unit", help="rad | deg: joint values in --program, --q0 and the output")
+    ] = "rad",
+    kind: Annotated[
+        str | None, typer.Option("--kind", help="position | pose | axis (default from the file / robot)")
+    ] = None,
+    nominal: Annotated[
+        str | None, typer.Option("--nominal", help="the controller's model: catalog name or .yaml")
+    ] = None,
+    q0: Annotated[
+        str | None, typer.Option("--q0", help='configuration choosing the branch, e.g. "0,-90,90,0,90,0"')
+    ] = None,
+    sep: Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")] = None,
+    decimal: Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')] = ".",
+    as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
+) -> None:
+    """Corrected joint commands that bring the calibrated robot onto an off-line program's targets."""
+    from robocal.compensate.commands import (
+        TargetFileError,
+        compensate,
+        filter_program,
+        read_program,
+        read_targets,
+    )
+    from robocal.identify.calibrate import CalibrationResult
+
+    if (targets is None) == (program is None):
+        raise fail("give exactly one of --targets FILE (Cartesian) or --program FILE (joint program)")
+    if frame not in ("base", "measurement"):
+        raise fail(f"--frame must be base or measurement, got {frame!r}")
+    if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
+        raise fail(
+            f"units: --length-unit m|mm|um and --angle-unit rad|deg, got {length_unit!r}, {angle_unit!r}"
+        )
+    if kind not in (None, "position", "pose", "axis"):
+        raise fail(f"--kind must be position, pose or axis, got {kind!r}")
+    if out is not None and out.suffix.lower() not in (".csv", ".json", ".txt"):
+        raise fail(f"-o {out}: the output must be a .csv or .json file")
+    calibrated = _load(source)
+    model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
+    if frame == "measurement" and not isinstance(calibrated, CalibrationResult):
+        raise fail(
+            f"--frame measurement needs a calibration directory (its identified frame); {source} is a model"
+        )
+    nominal_model = None
+    if nominal is not None:
+        from robocal.cli import resolve_model
+
+        nominal_model = resolve_model(nominal)
+    angle_f = np.pi / 180 if angle_unit == "deg" else 1.0
+    length_f = {"m": 1.0, "mm": 1e-3, "um": 1e-6}[length_unit]
+    factor = np.array([angle_f if t == "revolute" else length_f for t in model.joint_types])
+    q_start = None if q0 is None else _parse_q0(q0, model.dof, factor)
+    try:
+        if targets is not None:
+            tgt = read_targets(targets, length_unit=length_unit, sep=sep, decimal=decimal)
+            if kind == "position" and tgt.kind == "pose":
+                values = tgt.values[:, :3, 3]
+            elif kind in ("pose", "axis") and tgt.kind == "position":
+                raise fail(f"--kind {kind} needs orientation columns qw,qx,qy,qz in {targets}")
+            else:
+                values = tgt.values
+            with console.status(f"compensating {len(tgt.names)} targets ..."):
+                result = compensate(
+                    calibrated,
+                    values,
+                    nominal_model,
+                    kind=kind or "auto",
+                    frame=frame,
+                    q0=q_start,
+                    names=tgt.names,
+                )
+            source_file = targets
+        else:
+            names, q = read_program(
+                program,
+                model.dof,
+                angle_unit=angle_unit,
+                length_unit=length_unit,
+                joint_types=model.joint_types,
+                sep=sep,
+                decimal=decimal,
+            )
+            with console.status(f"filtering {len(names)} program points ..."):
+                result = filter_program(calibrated, q, nominal_model, kind=kind, names=names)
+            source_file = program
+    except TargetFileError as err:
+        raise fail(str(err)) from None
+    except ValueError as err:
+        raise fail(f"{source_file}: {err}") from None
+
+    if out is not None:
+        result.write(out, angle_unit=angle_unit, length_unit=length_unit)
+    if as_json:
+        print(json.dumps(result.to_dict(angle_unit, length_unit)))
+    else:
+        _print(result, model.name, source_file)
+        if out is not None:
+            console.print(f"wrote {out}", highlight=False)
+    if not result.reachable.all():
+        bad = [result.names[i] for i in np.flatnonzero(~result.reachable)]
+        err_console.print(
+            f"[yellow]warning:[/] {len(bad)} target(s) not reached: {', '.join(bad[:10])}"
+            + (" ..." if len(bad) > 10 else ""),
+            highlight=False,
+        )
+        raise typer.Exit(code=1)
+
+
+def _print(result, robot: str, source: Path) -> None:
+    s = result.summary()
+    console.print(
+        f"[bold]{robot}[/] — {s['n']} {result.kind} targets from {source.name}: "
+        f"{s['reachable']} reached, {s['branch_kept']} in the nominal configuration",
+        highlight=False,
+    )
+    table = Table(
+        title=f"predicted error of the calibrated robot at the {s['reachable']} reached targets",
+        title_justify="left",
+    )
+    for col in (
+        "commands",
+        "mean mm",
+        "max mm",
+        *(("mean deg", "max deg") if result.kind != "position" else ()),
+    ):
+        table.add_column(col, justify="left" if col == "commands" else "right")
+
+    def cell(v) -> str:
+        return "-" if v is None else f"{v:.4f}"
+
+    for label, key, akey in (
+        ("nominal (before)", "error_before_mm", "angle_before_deg"),
+        ("compensated (after)", "error_after_mm", "angle_after_deg"),
+    ):
+        row = [label, cell(s[key]["mean"]), cell(s[key]["max"])]
+        if result.kind != "position":
+            row += [cell(s[akey]["mean"]), cell(s[akey]["max"])]
+        table.add_row(*row)
+    console.print(table)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``compensate`` to the ``robocal`` app."""
+    app.command("compensate")(compensate_command)

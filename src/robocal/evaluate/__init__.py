@@ -1,0 +1,43 @@
+"""Evaluation — did it work, shown to a person: ISO 9283 metrics, the seeds' error
+tables and the self-contained HTML report."""
+
+from robocal.evaluate.metrics import (
+    ERROR_QUANTITIES,
+    ErrorTable,
+    Improvement,
+    PathAccuracy,
+    PoseAccuracy,
+    PoseCharacteristics,
+    PoseErrors,
+    PoseRepeatability,
+    error_table,
+    improvement,
+    iso9283_pose_characteristics,
+    mean_ci,
+    path_accuracy,
+    pose_accuracy,
+    pose_errors,
+    pose_repeatability,
+)
+from robocal.evaluate.report import build_report, write_report
+
+__all__ = [
+    "ERROR_QUANTITIES",
+    "ErrorTable",
+    "Improvement",
+    "PathAccuracy",
+    "PoseAccuracy",
+    "PoseCharacteristics",
+    "PoseErrors",
+    "PoseRepeatability",
+    "build_report",
+    "error_table",
+    "improvement",
+    "iso9283_pose_characteristics",
+    "mean_ci",
+    "path_accuracy",
+    "pose_accuracy",
+    "pose_errors",
+    "pose_repeatability",
+    "write_report",
+]

@@ -1,0 +1,588 @@
+"""ISO 9283 performance characteristics and the seeds' error tables.
+
+All inputs and outputs are SI (m, rad); convert to mm and degrees at the edges.
+
+ISO 9283:1998 pose characteristics (§7.2), for one commanded pose ``c`` visited in
+``n`` cycles, attained positions ``(x_j, y_j, z_j)`` and orientation angles
+``(a_j, b_j, c_j)`` (rotations about the base x, y and z axes), ``j = 1..n``:
+
+* pose accuracy (§7.2.1): the distance from the command to the barycentre of the
+  attained positions, ``AP_P = sqrt((x̄ − x_c)² + (ȳ − y_c)² + (z̄ − z_c)²)`` with
+  ``x̄ = (1/n) Σ x_j`` …, its components ``AP_x = x̄ − x_c`` …, and for the
+  orientation ``AP_a = ā − a_c``, ``AP_b = b̄ − b_c``, ``AP_c = c̄ − c_c``;
+* pose repeatability (§7.2.2): the radius of the sphere around the barycentre,
+  ``RP_l = l̄ + 3 S_l`` with ``l_j = sqrt((x_j − x̄)² + (y_j − ȳ)² + (z_j − z̄)²)``,
+  ``l̄ = (1/n) Σ l_j`` and ``S_l = sqrt(Σ (l_j − l̄)² / (n − 1))``, and for the
+  orientation ``RP_a = ±3 S_a`` with ``S_a = sqrt(Σ (a_j − ā)² / (n − 1))`` (also b, c).
+
+Path characteristics (§8.2, §8.3), for a commanded path sampled at points ``c_i``,
+``i = 1..m``, followed in ``n`` cycles: the attained path of cycle ``j`` is cut by the
+plane normal to the commanded path at ``c_i`` (the point ``x_ij``), and
+
+* path accuracy ``AT_P = max_i sqrt((x̄_i − x_ci)² + (ȳ_i − y_ci)² + (z̄_i − z_ci)²)``
+  with ``x̄_i = (1/n) Σ_j x_ij`` …;
+* path repeatability ``RT_P = max_i (l̄_i + 3 S_li)`` with ``l_ij`` the distance of
+  ``x_ij`` from the barycentre ``(x̄_i, ȳ_i, z̄_i)``.
+
+Angles: the standard leaves the orientation convention to the robot; here ``a, b, c``
+are extrinsic rotations about the base x, y, z axes (``R = Rz(c) Ry(b) Rx(a)``,
+scipy ``"xyz"``), and every angle difference is wrapped to (−π, π] so that a cluster
+of poses around ±180° averages correctly.
+
+The seeds' tables (seed 003 Tables 3.4, 4.5, 4.6; seed 001 Tables 4, 6):
+:func:`pose_errors` gives ``|ΔX| |ΔY| |ΔZ| |ΔP|`` and the Euler-angle errors
+``|ΔΦ| |Δθ| |ΔΨ|`` (seed 003 §2: ZXZ Euler angles, the default; note that ZXZ angles
+are singular when the tool z axis is parallel to the base z axis, so prefer ``"xyz"``
+for tool-down poses), :func:`error_table` their minimum, maximum and average per
+case (before / after calibration ...), and :func:`improvement` the improvement of a
+mean error in per cent with its confidence interval (seed 001: "with a 95 %
+confidence interval").
+
+Improvement confidence interval: ``I = 1 − ā/b̄`` for errors ``a`` (after) and ``b``
+(before).  Its standard error comes from the delta method,
+``se(ā/b̄)² = (s_a² + R² s_b² − 2 R s_ab) / (n b̄²)`` with ``R = ā/b̄`` for paired
+samples (the same poses before and after; ``s_ab`` their covariance), and
+``s_a²/(n_a b̄²) + R² s_b²/(n_b b̄²)`` for independent samples; the interval is
+``I ± t_{(1+γ)/2, ν} se`` with Student's t (ν = n − 1, or the smaller sample's
+n − 1 for independent samples).  Mean errors get ``x̄ ± t s/√n``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import stats
+
+from robocal import spatial
+
+__all__ = [
+    "ERROR_QUANTITIES",
+    "ErrorTable",
+    "Improvement",
+    "PathAccuracy",
+    "PoseAccuracy",
+    "PoseCharacteristics",
+    "PoseErrors",
+    "PoseRepeatability",
+    "error_table",
+    "improvement",
+    "iso9283_pose_characteristics",
+    "mean_ci",
+    "path_accuracy",
+    "pose_accuracy",
+    "pose_errors",
+    "pose_repeatability",
+]
+
+Array = NDArray[np.float64]
+
+#: The seeds' error quantities, in table order (seed 003 Tables 3.4, 4.5).
+ERROR_QUANTITIES: tuple[str, ...] = ("|ΔX|", "|ΔY|", "|ΔZ|", "|ΔP|", "|ΔΦ|", "|Δθ|", "|ΔΨ|")
+ISO_ANGLES = "xyz"  # a, b, c: extrinsic rotations about the base x, y, z axes
+
+
+def _wrap(angle: ArrayLike) -> Array:
+    """Angles wrapped to (−π, π]."""
+    a = np.asarray(angle, dtype=float)
+    return np.pi - np.mod(np.pi - a, 2 * np.pi)
+
+
+def _split(poses: ArrayLike, what: str) -> tuple[Array, Array | None]:
+    """Positions ``(..., 3)`` and rotations ``(..., 3, 3)`` (or None) of positions
+    ``(..., 3)`` or frames ``(..., 4, 4)``."""
+    a = np.asarray(poses, dtype=float)
+    if a.shape[-2:] == (4, 4):
+        return a[..., :3, 3], a[..., :3, :3]
+    if a.shape[-1:] == (3,):
+        return a, None
+    raise ValueError(f"{what} must be positions (..., 3) or frames (..., 4, 4) in m, got shape {a.shape}")
+
+
+def _angle_deltas(R: Array, R_c: Array, seq: str) -> Array:
+    """Euler angles of ``R`` minus those of ``R_c``, wrapped, ``(..., 3)`` rad."""
+    return _wrap(spatial.matrix_to_euler(R, seq) - spatial.matrix_to_euler(R_c, seq))
+
+
+# ---------------------------------------------------------------------- ISO 9283 poses
+@dataclass(frozen=True)
+class PoseAccuracy:
+    """ISO 9283 §7.2.1 pose accuracy of one commanded pose over ``n`` cycles.
+
+    Attributes:
+        AP: ``AP_P`` (m), the distance from the commanded position to the barycentre.
+        AP_xyz: ``(AP_x, AP_y, AP_z)`` (m), barycentre minus command.
+        AP_abc: ``(AP_a, AP_b, AP_c)`` (rad), mean attained minus commanded angles, or
+            None without orientations.
+        barycentre: ``(3,)`` mean attained position (m).
+        n: number of cycles.
+    """
+
+    AP: float
+    AP_xyz: Array
+    AP_abc: Array | None
+    barycentre: Array
+    n: int
+
+
+def pose_accuracy(attained: ArrayLike, commanded: ArrayLike, angles: str = ISO_ANGLES) -> PoseAccuracy:
+    """ISO 9283 pose accuracy AP of ``n`` attained poses of one commanded pose.
+
+    Args:
+        attained: ``(n, 3)`` positions or ``(n, 4, 4)`` frames (m), robot base frame.
+        commanded: ``(3,)`` position or ``(4, 4)`` frame (m).
+        angles: Euler sequence of the orientation angles a, b, c (scipy convention;
+            default ``"xyz"``, rotations about the base x, y, z axes).
+    """
+    p, R = _split(attained, "attained")
+    pc, Rc = _split(commanded, "commanded")
+    p = np.atleast_2d(p)
+    if p.ndim != 2 or pc.shape != (3,):
+        raise ValueError(
+            f"attained must be (n, 3)/(n, 4, 4) and commanded (3,)/(4, 4); got {p.shape}, {pc.shape}"
+        )
+    if len(p) == 0:
+        raise ValueError("pose accuracy needs at least one attained pose")
+    bary = p.mean(axis=0)
+    d = bary - pc
+    abc = None
+    if R is not None and Rc is not None:
+        abc = _wrap(_angle_deltas(R.reshape(-1, 3, 3), Rc, angles).mean(axis=0))
+    return PoseAccuracy(float(np.linalg.norm(d)), d, abc, bary, len(p))
+
+
+@dataclass(frozen=True)
+class PoseRepeatability:
+    """ISO 9283 §7.2.2 pose repeatability of one commanded pose over ``n`` cycles.
+
+    Attributes:
+        RP: ``RP_l = l̄ + 3 S_l`` (m).
+        l_mean: ``l̄`` (m), mean distance of the attained positions from their barycentre.
+        S_l: ``S_l`` (m), the standard deviation of those distances (n − 1).
+        RP_abc: ``(3 S_a, 3 S_b, 3 S_c)`` (rad; the standard writes ±), or None.
+        n: number of cycles.
+    """
+
+    RP: float
+    l_mean: float
+    S_l: float
+    RP_abc: Array | None
+    n: int
+
+
+def pose_repeatability(attained: ArrayLike, angles: str = ISO_ANGLES) -> PoseRepeatability:
+    """ISO 9283 pose repeatability RP of ``n >= 2`` attained poses of one commanded pose.
+
+    Args:
+        attained: ``(n, 3)`` positions or ``(n, 4, 4)`` frames (m).
+        angles: Euler sequence of a, b, c (see :func:`pose_accuracy`).
+    """
+    p, R = _split(attained, "attained")
+    if p.ndim != 2 or len(p) < 2:
+        raise ValueError(f"pose repeatability needs n >= 2 attained poses (n, 3), got shape {p.shape}")
+    n = len(p)
+    dist = np.linalg.norm(p - p.mean(axis=0), axis=1)  # l_j
+    l_mean = float(dist.mean())
+    S_l = float(np.sqrt(np.sum((dist - l_mean) ** 2) / (n - 1)))
+    abc = None
+    if R is not None:
+        a = _angle_deltas(R, R[0], angles)  # relative to one attained pose: no wrap across ±π
+        abc = 3.0 * np.sqrt(np.sum((a - a.mean(axis=0)) ** 2, axis=0) / (n - 1))
+    return PoseRepeatability(l_mean + 3.0 * S_l, l_mean, S_l, abc, n)
+
+
+@dataclass(frozen=True)
+class PoseCharacteristics:
+    """AP and RP at several commanded poses (ISO 9283 P1..P5)."""
+
+    labels: tuple[str, ...]
+    accuracy: tuple[PoseAccuracy, ...]
+    repeatability: tuple[PoseRepeatability, ...]
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per pose in mm and degrees: label, AP, APx..APz, RP [, APa..APc, RPa..RPc]."""
+        out = []
+        for label, acc, rep in zip(self.labels, self.accuracy, self.repeatability, strict=True):
+            row: dict[str, Any] = {
+                "pose": label,
+                "n": acc.n,
+                "AP_mm": acc.AP * 1e3,
+                "APx_mm": float(acc.AP_xyz[0] * 1e3),
+                "APy_mm": float(acc.AP_xyz[1] * 1e3),
+                "APz_mm": float(acc.AP_xyz[2] * 1e3),
+                "RP_mm": rep.RP * 1e3,
+            }
+            if acc.AP_abc is not None and rep.RP_abc is not None:
+                for k, c in enumerate("abc"):
+                    row[f"AP{c}_deg"] = float(np.degrees(acc.AP_abc[k]))
+                for k, c in enumerate("abc"):
+                    row[f"RP{c}_deg"] = float(np.degrees(rep.RP_abc[k]))
+            out.append(row)
+        return out
+
+
+def iso9283_pose_characteristics(
+    commanded: ArrayLike,
+    attained: ArrayLike,
+    labels: Sequence[str] | None = None,
+    angles: str = ISO_ANGLES,
+) -> PoseCharacteristics:
+    """AP and RP of ``k`` commanded poses (e.g. P1..P5), each attained in ``n`` cycles.
+
+    Args:
+        commanded: ``(k, 3)`` positions or ``(k, 4, 4)`` frames (m).
+        attained: ``(k, n, 3)`` or ``(k, n, 4, 4)``: pose ``i`` of cycle ``j`` at ``[i, j]``.
+        labels: pose names (default ``P1``..``Pk``).
+    """
+    c = np.asarray(commanded, dtype=float)
+    a = np.asarray(attained, dtype=float)
+    k = len(c)
+    if len(a) != k:
+        raise ValueError(f"{k} commanded poses but attained has {len(a)} rows (shape {a.shape})")
+    labels = tuple(labels) if labels is not None else tuple(f"P{i + 1}" for i in range(k))
+    if len(labels) != k:
+        raise ValueError(f"{len(labels)} labels for {k} poses")
+    acc = tuple(pose_accuracy(a[i], c[i], angles) for i in range(k))
+    rep = tuple(pose_repeatability(a[i], angles) for i in range(k))
+    return PoseCharacteristics(labels, acc, rep)
+
+
+# ---------------------------------------------------------------------- ISO 9283 paths
+@dataclass(frozen=True)
+class PathAccuracy:
+    """ISO 9283 §8.2-8.3 path accuracy and repeatability (positions).
+
+    Attributes:
+        AT: ``AT_P`` (m), the largest distance from a commanded point to the barycentre
+            of the attained path's crossings of its normal plane.
+        RT: ``RT_P`` (m), the largest ``l̄_i + 3 S_li`` (NaN for one cycle).
+        at: ``(m,)`` the distance at every commanded point (NaN where no cycle crossed).
+        rt: ``(m,)`` ``l̄_i + 3 S_li`` at every commanded point.
+        barycentres: ``(m, 3)`` barycentres of the crossings (m).
+        crossings: ``(n, m, 3)`` crossing points per cycle (NaN where the attained path
+            does not cross the normal plane near the commanded point).
+        n_cycles: ``n``.
+    """
+
+    AT: float
+    RT: float
+    at: Array
+    rt: Array
+    barycentres: Array
+    crossings: Array = field(repr=False)
+    n_cycles: int = 0
+
+
+def _tangents(c: Array) -> Array:
+    t = np.gradient(c, axis=0)
+    norm = np.linalg.norm(t, axis=1, keepdims=True)
+    if np.any(norm == 0):
+        raise ValueError("the commanded path has repeated consecutive points: no tangent")
+    return t / norm
+
+
+def _arc_fraction(points: Array) -> Array:
+    """Cumulative arc length of a polyline as a fraction of its length, ``(k,)``."""
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))]
+    return s / s[-1] if s[-1] > 0 else np.linspace(0.0, 1.0, len(points))
+
+
+def _crossings(c: Array, t: Array, path: Array, window: float) -> Array:
+    """Points ``(m, 3)`` where polyline ``path`` ``(k, 3)`` crosses the planes through
+    ``c`` ``(m, 3)`` normal to ``t``: of the crossings on segments within ``window``
+    (fraction of the path's length) of the commanded point's place along its path, the
+    one nearest to ``c_i`` (NaN if none)."""
+    s = np.einsum("mi,kmi->mk", t, path[:, None, :] - c[None, :, :])  # (m, k) signed distances
+    s0, s1 = s[:, :-1], s[:, 1:]
+    cross = ((s0 <= 0) & (s1 > 0)) | ((s0 >= 0) & (s1 < 0))
+    f = _arc_fraction(path)
+    g = _arc_fraction(c)
+    near = (f[None, 1:] >= g[:, None] - window) & (f[None, :-1] <= g[:, None] + window)  # (m, k-1)
+    cross &= near
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(cross, s0 / (s0 - s1), np.nan)  # (m, k-1) fraction along each segment
+    pts = path[None, :-1, :] + u[..., None] * (path[None, 1:, :] - path[None, :-1, :])  # (m, k-1, 3)
+    dist = np.linalg.norm(pts - c[:, None, :], axis=2)
+    dist = np.where(cross, dist, np.inf)
+    best = np.argmin(dist, axis=1)
+    out = pts[np.arange(len(c)), best]
+    out[~np.isfinite(dist[np.arange(len(c)), best])] = np.nan
+    return out
+
+
+def path_accuracy(
+    commanded: ArrayLike, attained: ArrayLike | Sequence[ArrayLike], window: float = 0.1
+) -> PathAccuracy:
+    """ISO 9283 path accuracy AT and repeatability RT (positions).
+
+    Args:
+        commanded: ``(m, 3)`` points of the commanded path (m), in order.
+        attained: the attained paths of ``n`` cycles, each ``(k_j, 3)`` points in order
+            (an ``(n, k, 3)`` array or a list), sampled finely enough that the segments
+            between samples are straight.
+        window: a crossing counts for commanded point ``c_i`` only on the part of the
+            attained path within this fraction of its length of ``c_i``'s place along
+            the commanded path (so that a closed or folded path is not cut on its far
+            side).
+
+    A commanded point whose normal plane no attained path crosses (e.g. an end point
+    that every cycle stops short of) gets NaN and is left out of AT and RT; an error is
+    raised if that leaves no point.
+    """
+    c = np.asarray(commanded, dtype=float)
+    if c.ndim != 2 or c.shape[1] != 3 or len(c) < 2:
+        raise ValueError(f"commanded path must be (m >= 2, 3) points (m), got shape {c.shape}")
+    paths = [np.asarray(p, dtype=float) for p in attained]
+    if not paths:
+        raise ValueError("path accuracy needs at least one attained path")
+    for j, p in enumerate(paths):
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2:
+            raise ValueError(f"attained path {j} must be (k >= 2, 3) points (m), got shape {p.shape}")
+    t = _tangents(c)
+    X = np.array([_crossings(c, t, p, window) for p in paths])  # (n, m, 3); a loop over cycles, not points
+    n = len(paths)
+    with np.errstate(invalid="ignore"):
+        count = np.sum(np.isfinite(X[..., 0]), axis=0)
+        bary = np.nanmean(np.where(count[None, :, None] > 0, X, 0.0), axis=0)
+        bary[count == 0] = np.nan
+        at = np.linalg.norm(bary - c, axis=1)
+        dist = np.linalg.norm(X - bary[None], axis=2)  # (n, m): l_ij
+        l_mean = np.nanmean(np.where(count[None] > 0, dist, 0.0), axis=0)
+        S = np.sqrt(np.nansum((dist - l_mean) ** 2, axis=0) / np.maximum(count - 1, 1))
+    rt = np.where(count >= 2, l_mean + 3 * S, np.nan)
+    at = np.where(count > 0, at, np.nan)
+    if not np.any(np.isfinite(at)):
+        raise ValueError("no attained path crosses the normal plane of any commanded point")
+    RT = float(np.nanmax(rt)) if np.any(np.isfinite(rt)) else float("nan")
+    return PathAccuracy(float(np.nanmax(at)), RT, at, rt, bary, X, n)
+
+
+# ---------------------------------------------------------------------- seed tables
+@dataclass(frozen=True)
+class PoseErrors:
+    """Attained-minus-commanded errors of ``n`` poses (seed 003 eq. 2.4: ΔP = P_a − P_t).
+
+    Attributes:
+        delta: ``(n, 3)`` position errors ΔX, ΔY, ΔZ (m).
+        angles: ``(n, 3)`` Euler-angle errors ΔΦ, Δθ, ΔΨ (rad, wrapped), or None.
+        euler: the Euler sequence of the angles.
+    """
+
+    delta: Array
+    angles: Array | None = None
+    euler: str = "ZXZ"
+
+    @property
+    def n(self) -> int:
+        return len(self.delta)
+
+    @property
+    def distance(self) -> Array:
+        """``(n,)`` |ΔP| (m)."""
+        return np.linalg.norm(self.delta, axis=1)
+
+    @property
+    def quantities(self) -> tuple[str, ...]:
+        return ERROR_QUANTITIES if self.angles is not None else ERROR_QUANTITIES[:4]
+
+    def absolute(self) -> Array:
+        """``(n, 4)`` or ``(n, 7)``: |ΔX| |ΔY| |ΔZ| |ΔP| (m) [|ΔΦ| |Δθ| |ΔΨ| (rad)]."""
+        cols = [np.abs(self.delta), self.distance[:, None]]
+        if self.angles is not None:
+            cols.append(np.abs(self.angles))
+        return np.hstack(cols)
+
+
+def pose_errors(attained: ArrayLike, commanded: ArrayLike, euler: str = "ZXZ") -> PoseErrors:
+    """Errors of attained poses with respect to commanded (or nominal) poses.
+
+    Args:
+        attained: ``(n, 3)`` positions or ``(n, 4, 4)`` frames (m).
+        commanded: the same shape.
+        euler: Euler sequence of ΔΦ, Δθ, ΔΨ (seed 003: ``"ZXZ"``).
+    """
+    p, R = _split(attained, "attained")
+    pc, Rc = _split(commanded, "commanded")
+    if p.shape != pc.shape or p.ndim != 2:
+        raise ValueError(f"attained {p.shape} and commanded {pc.shape} must both be (n, 3) or (n, 4, 4)")
+    angles = None
+    if R is not None and Rc is not None:
+        angles = _angle_deltas(R, Rc, euler)
+    return PoseErrors(p - pc, angles, euler)
+
+
+def mean_ci(x: ArrayLike, confidence: float = 0.95) -> tuple[float, float]:
+    """Mean and the half-width of its Student-t confidence interval (``x̄ ± t s/√n``)."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    if len(x) == 0:
+        raise ValueError("mean_ci needs at least one value")
+    if not 0 < confidence < 1:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence}")
+    if len(x) < 2:
+        return float(x.mean()), float("nan")
+    t = stats.t.ppf(0.5 + confidence / 2, len(x) - 1)
+    return float(x.mean()), float(t * x.std(ddof=1) / math.sqrt(len(x)))
+
+
+@dataclass(frozen=True)
+class Improvement:
+    """How much a mean error shrank, in per cent, with a confidence interval.
+
+    ``percent = 100 (1 − mean_after / mean_before)``; ``percent_low``/``percent_high``
+    bound it at ``confidence``; the means carry ``± ci`` half-widths.
+    """
+
+    mean_before: float
+    ci_before: float
+    mean_after: float
+    ci_after: float
+    percent: float
+    percent_low: float
+    percent_high: float
+    n_before: int
+    n_after: int
+    paired: bool
+    confidence: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+def improvement(
+    before: ArrayLike, after: ArrayLike, confidence: float = 0.95, paired: bool | None = None
+) -> Improvement:
+    """Improvement of the mean of ``after`` over the mean of ``before`` (errors ≥ 0).
+
+    Args:
+        before, after: error samples (any unit, the same for both).
+        confidence: of the intervals (default 95 %).
+        paired: whether ``before[i]`` and ``after[i]`` belong to the same pose (default:
+            when the lengths agree); see the module docstring for the intervals.
+    """
+    b = np.asarray(before, dtype=float).reshape(-1)
+    a = np.asarray(after, dtype=float).reshape(-1)
+    if len(b) < 2 or len(a) < 2:
+        raise ValueError(f"improvement needs at least two errors before and after, got {len(b)} and {len(a)}")
+    if paired is None:
+        paired = len(a) == len(b)
+    if paired and len(a) != len(b):
+        raise ValueError(f"paired samples must have the same length, got {len(b)} and {len(a)}")
+    mb, cb = mean_ci(b, confidence)
+    ma, ca = mean_ci(a, confidence)
+    if mb <= 0:
+        raise ValueError("the mean error before must be > 0 to express an improvement in per cent")
+    R = ma / mb
+    if paired:
+        n = len(a)
+        cov = np.cov(np.vstack([a, b]), ddof=1)
+        var = (cov[0, 0] + R**2 * cov[1, 1] - 2 * R * cov[0, 1]) / (n * mb**2)
+        dof = n - 1
+    else:
+        var = a.var(ddof=1) / (len(a) * mb**2) + R**2 * b.var(ddof=1) / (len(b) * mb**2)
+        dof = min(len(a), len(b)) - 1
+    half = float(stats.t.ppf(0.5 + confidence / 2, dof) * math.sqrt(max(var, 0.0)))
+    return Improvement(
+        mean_before=mb,
+        ci_before=cb,
+        mean_after=ma,
+        ci_after=ca,
+        percent=100.0 * (1 - R),
+        percent_low=100.0 * (1 - R - half),
+        percent_high=100.0 * (1 - R + half),
+        n_before=len(b),
+        n_after=len(a),
+        paired=bool(paired),
+        confidence=confidence,
+    )
+
+
+@dataclass(frozen=True)
+class ErrorTable:
+    """Minimum, maximum and average of the seeds' error quantities, per case.
+
+    Attributes:
+        cases: case names in column order (e.g. ``("before", "after")``).
+        quantities: row quantities (``|ΔX|`` ... ``|ΔP|`` [``|ΔΦ|`` ``|Δθ|`` ``|ΔΨ|``]).
+        minimum, maximum, average: ``(quantities, cases)`` arrays, m for positions and
+            rad for angles.
+        improvements: per case after the first, per quantity: the improvement of the
+            average over the first case's.
+        n: number of poses per case.
+    """
+
+    cases: tuple[str, ...]
+    quantities: tuple[str, ...]
+    minimum: Array
+    maximum: Array
+    average: Array
+    improvements: dict[str, dict[str, Improvement]]
+    n: tuple[int, ...]
+
+    def display(self, row: int, value: float) -> str:
+        """A value of quantity ``row`` in mm or degrees, as text."""
+        if self.quantities[row] in ERROR_QUANTITIES[4:]:
+            return f"{math.degrees(value):.3f}"
+        return f"{value * 1e3:.3f}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data in mm and degrees."""
+
+        def conv(q: str, v: float) -> float:
+            return float(math.degrees(v)) if q in ERROR_QUANTITIES[4:] else float(v * 1e3)
+
+        out: dict[str, Any] = {"cases": list(self.cases), "n": list(self.n), "units": "mm, deg"}
+        for stat, arr in (("minimum", self.minimum), ("maximum", self.maximum), ("average", self.average)):
+            out[stat] = {
+                q: {c: conv(q, arr[i, j]) for j, c in enumerate(self.cases)}
+                for i, q in enumerate(self.quantities)
+            }
+        out["improvement_percent"] = {
+            case: {
+                q: {"percent": imp.percent, "low": imp.percent_low, "high": imp.percent_high}
+                for q, imp in per.items()
+            }
+            for case, per in self.improvements.items()
+        }
+        return out
+
+    def to_text(self) -> str:
+        """A plain-text table like the seeds' (mm, degrees)."""
+        width = max(12, *(len(c) + 2 for c in self.cases))
+        lines = [f"{'':9}{'':8}" + "".join(f"{c:>{width}}" for c in self.cases)]
+        for stat, arr in (("Minimum", self.minimum), ("Maximum", self.maximum), ("Average", self.average)):
+            for i, q in enumerate(self.quantities):
+                unit = "°" if q in ERROR_QUANTITIES[4:] else ""
+                values = "".join(f"{self.display(i, arr[i, j]):>{width}}" for j in range(len(self.cases)))
+                lines.append(f"{stat if i == 0 else '':9}{q + unit:8}{values}")
+        return "\n".join(lines)
+
+
+def error_table(cases: Mapping[str, PoseErrors], confidence: float = 0.95) -> ErrorTable:
+    """The seeds' min / max / average table of ``cases`` (name -> :class:`PoseErrors`),
+    with the improvement of every case's averages over the first case's."""
+    if not cases:
+        raise ValueError("error_table needs at least one case")
+    names = tuple(cases)
+    errs = [cases[c] for c in names]
+    with_angles = all(e.angles is not None for e in errs)
+    quantities = ERROR_QUANTITIES if with_angles else ERROR_QUANTITIES[:4]
+    cols = [e.absolute()[:, : len(quantities)] for e in errs]
+    if any(len(c) == 0 for c in cols):
+        raise ValueError("every case needs at least one pose")
+    minimum = np.array([c.min(axis=0) for c in cols]).T
+    maximum = np.array([c.max(axis=0) for c in cols]).T
+    average = np.array([c.mean(axis=0) for c in cols]).T
+    imps: dict[str, dict[str, Improvement]] = {}
+    first = cols[0]
+    for name, c in zip(names[1:], cols[1:], strict=True):
+        if len(first) < 2 or len(c) < 2:
+            continue
+        imps[name] = {}
+        for i, q in enumerate(quantities):
+            if first[:, i].mean() > 0:
+                imps[name][q] = improvement(first[:, i], c[:, i], confidence)
+    return ErrorTable(names, quantities, minimum, maximum, average, imps, tuple(len(c) for c in cols))

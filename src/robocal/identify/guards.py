@@ -1,0 +1,276 @@
+"""Numerical guards: stop a calibration with an explanation instead of a silent bad model.
+
+Two checks around :func:`robocal.calibrate`:
+
+* :func:`check_problem` before the fit — the data cannot determine the model:
+  non-finite values, all poses the same, measured positions that never change, fewer
+  equations than identifiable parameters, or poses that leave parameters undetermined
+  which richer poses would determine (rank-deficient data: a joint that never moves,
+  poses all in one plane...).  The last one compares the identifiable set of the
+  measured poses with that of random poses over the joint ranges, with the same
+  sequential rank test as the calibration (:func:`robocal.identify.subset.select_columns`),
+  and names the parameters lost and the joints that do not move.
+* :func:`check_solution` after the fit — the fit did not work: not converged,
+  diverged (the error after calibration larger than before), non-finite estimates or
+  uncertainties, or parameters moved further from their start than any manufacturing
+  error (a sign of data from another robot, wrong units or a wrong joint order).
+
+Both raise :class:`CalibrationGuardError` (a ``ValueError``) whose message says what is
+wrong and what to do; :func:`check_problem` returns warnings (strings) for doubtful but
+usable data.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Model
+
+__all__ = ["CalibrationGuardError", "check_problem", "check_solution"]
+
+Array = NDArray[np.float64]
+
+
+class CalibrationGuardError(ValueError):
+    """The calibration cannot be trusted; the message explains why and what to do."""
+
+
+def _rows_text(rows: Sequence[int], limit: int = 6) -> str:
+    shown = ", ".join(str(r) for r in rows[:limit])
+    return shown + (f" ... ({len(rows)} rows)" if len(rows) > limit else "")
+
+
+def _measurement_chain(
+    model: Model, measure: str, frame: Any, tool: Any, tool_guess: ArrayLike | None
+) -> Model:
+    from robocal import spatial
+    from robocal.identify.problem import TOOL_PREFIX, measurement_chain
+
+    fit_frame = isinstance(frame, str) and frame == "fit"
+    T_frame = np.eye(4) if isinstance(frame, str) else np.asarray(frame, dtype=float)
+    T_tool: Array | None = None
+    if tool is not None:
+        T_tool = np.eye(4)
+        source = tool if not isinstance(tool, str) else tool_guess
+        if source is not None:
+            g = np.asarray(source, dtype=float)
+            T_tool = g if g.shape == (4, 4) else spatial.homogeneous(p=g)
+    chain = measurement_chain(model, T_frame, T_tool, measure, fit_frame)
+    if tool is not None and not (isinstance(tool, str) and tool == "fit"):
+        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
+    return chain
+
+
+def _identifiable(
+    chain: Model, q: Array, measure: str, length: float, explain: bool = False
+) -> tuple[set[str], Any]:
+    """Identifiable free parameters of ``chain`` at poses ``q`` (the calibration's rank test)."""
+    from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
+    from robocal.identify.subset import select_columns
+
+    J = chain.jacobian(q, rows=measure)
+    rot = np.array([s.is_rotation for s in chain.steps if s.free])
+    J = J * np.where(rot, length, 1.0)
+    if measure == "pose":
+        J = J.reshape(len(q), 6, -1)
+        J[:, 3:] *= length  # orientation rows as displacements at the robot's size
+        J = J.reshape(6 * len(q), -1)
+    names = chain.free_names
+    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
+    order += [x for x in names if x not in set(order)]
+    selection = select_columns(J, names, order, explain=explain)
+    return set(selection.kept), selection
+
+
+@functools.lru_cache(maxsize=32)
+def _generic(chain: Model, model: Model, measure: str, n: int, seed: int) -> tuple[frozenset[str], float]:
+    """Parameters identifiable from ``n`` random poses (seeded), and the robot's size (m).
+
+    Cached: a model's identifiable set does not depend on the data."""
+    from robocal.measure.ik import random_configurations
+
+    q = random_configurations(model, n, np.random.default_rng(seed))
+    length = max(float(np.abs(model.fk(q)[:, :3, 3]).max()), 0.1)
+    kept, _ = _identifiable(chain, q, measure, length)
+    return frozenset(kept), length
+
+
+def check_problem(
+    model: Model,
+    data: Measurements,
+    *,
+    measure: Literal["position", "pose"] | None = None,
+    frame: Literal["fit", "fixed"] | ArrayLike = "fit",
+    tool: Literal["fit", "fixed"] | ArrayLike | None = "fit",
+    tool_guess: ArrayLike | None = None,
+    allow_rank_deficient: bool = False,
+    reference_poses: int = 200,
+    seed: int = 0,
+) -> list[str]:
+    """Check that ``data`` can determine the calibration of ``model`` (before fitting).
+
+    Args:
+        model, data, measure, frame, tool, tool_guess: as for :func:`robocal.calibrate`.
+        allow_rank_deficient: accept poses that leave some generally identifiable
+            parameters undetermined (they are then fixed and reported by the
+            calibration); the other checks still apply.
+        reference_poses: random poses (seeded) over the joint ranges that define which
+            parameters are identifiable at all.
+        seed: their seed.
+
+    Returns:
+        Warnings (e.g. joints that never move) — the data can be used.
+
+    Raises:
+        CalibrationGuardError: NaN/inf, a single distinct pose, measured positions that
+            do not change, fewer equations than identifiable parameters, or (unless
+            ``allow_rank_deficient``) rank-deficient poses; the message names rows,
+            joints and parameters.
+    """
+    if data.position is None:
+        raise CalibrationGuardError("the measurements have no positions to calibrate against")
+    if data.dof != model.dof:
+        raise CalibrationGuardError(
+            f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
+        )
+    measure = measure or ("pose" if data.orientation is not None else "position")
+    q, y = data.q, data.position
+    for what, a in (("joint values", q), ("positions", y)):
+        bad = np.flatnonzero(~np.all(np.isfinite(a.reshape(len(a), -1)), axis=1))
+        if bad.size:
+            raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
+    if data.n == 0:
+        raise CalibrationGuardError("no measured poses")
+    distinct = np.unique(q, axis=0)
+    if len(distinct) == 1:
+        raise CalibrationGuardError(
+            f"all {data.n} poses have the same joint values ({', '.join(f'{v:.6g}' for v in q[0])}): "
+            "a calibration needs poses that move the joints"
+        )
+    spread = float(np.max(np.ptp(y, axis=0)))
+    if spread < 1e-9:
+        raise CalibrationGuardError(
+            f"the measured positions do not change over {data.n} poses (spread {spread * 1e3:.3g} mm): "
+            "is the device following the target?"
+        )
+    warnings: list[str] = []
+    still = [model.joint_names[j] for j in range(model.dof) if np.ptp(q[:, j]) < 1e-9]
+    if still:
+        warnings.append(f"joint(s) {', '.join(still)} do not move in the data")
+    chain = _measurement_chain(model, measure, frame, tool, tool_guess)
+    rows = 3 if measure == "position" else 6
+    generic, length = _generic(chain, model, measure, reference_poses, seed)
+    if rows * len(distinct) < len(generic):
+        raise CalibrationGuardError(
+            f"{len(distinct)} distinct poses give {rows * len(distinct)} equations for the {len(generic)} "
+            f"parameters of {model.name!r} that {measure} measurements can identify (device frame and tool "
+            f"included): measure at least {math.ceil(len(generic) / rows)} distinct poses, better "
+            f"{3 * math.ceil(len(generic) / rows)} or more"
+        )
+    kept, selection = _identifiable(chain, distinct, measure, length)
+    lost = [n for n in chain.free_names if n in generic and n not in kept]
+    if lost:
+        _, selection = _identifiable(chain, distinct, measure, length, explain=True)
+        why = {d.name: d for d in selection.dropped}
+        parts = []
+        for name in lost[:8]:
+            d = why.get(name)
+            if d is not None and d.absorbed_by:
+                with_ = ", ".join(n for n, _ in d.absorbed_by[:3])
+                parts.append(f"{name} (cannot be told from {with_})")
+            else:
+                parts.append(f"{name} (no effect)")
+        more = f" and {len(lost) - 8} more" if len(lost) > 8 else ""
+        text = (
+            f"rank-deficient data: these {len(distinct)} distinct poses determine {len(kept & generic)} of "
+            f"the {len(generic)} parameters that varied poses determine; "
+            f"undetermined: {'; '.join(parts)}{more}"
+        )
+        if still:
+            text += f"; joint(s) {', '.join(still)} never move"
+        text += ": add poses that move every joint over its range (or allow_rank_deficient=True to fix them)"
+        if not allow_rank_deficient:
+            raise CalibrationGuardError(text)
+        warnings.append(text)
+    return warnings
+
+
+def check_solution(
+    result: Any,
+    *,
+    max_length_change: float = 0.05,
+    max_angle_change: float = math.radians(15.0),
+    require_convergence: bool = False,
+) -> list[str]:
+    """Check a :class:`~robocal.identify.calibrate.CalibrationResult` (after fitting).
+
+    Args:
+        result: the calibration result.
+        max_length_change: largest plausible change of a robot length parameter (m)
+            from its start value; the device frame (``frame_*``) and the tool
+            (``tcp_*``) are exempt.
+        max_angle_change: the same for angles (rad).
+        require_convergence: a fit that did not converge is an error (by default a
+            warning: a solver that stopped at its iteration limit may still have
+            improved the model, which the divergence check verifies).
+
+    Returns:
+        Warnings (not converged).
+
+    Raises:
+        CalibrationGuardError: not converged, diverged (RMS error after the fit larger
+            than before), non-finite estimates or standard deviations, or implausible
+            parameter changes (named, with their change).
+    """
+    from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
+
+    warnings: list[str] = []
+    if not result.success:
+        text = (
+            f"the fit did not converge ({result.message}, {result.iterations} iterations): "
+            "check units, joint order and the start values (tool_guess)"
+        )
+        if require_convergence:
+            raise CalibrationGuardError(text)
+        warnings.append(text)
+    values = np.concatenate([np.atleast_1d(result.estimates), [result.rms_after, result.rms_before]])
+    if not np.all(np.isfinite(values)):
+        bad = [n for n, v in zip(result.names, result.estimates, strict=True) if not math.isfinite(v)]
+        raise CalibrationGuardError(
+            "the fit produced non-finite values" + (f" for {', '.join(bad)}" if bad else "")
+        )
+    if not np.all(np.isfinite(result.std)):
+        bad = [n for n, v in zip(result.names, result.std, strict=True) if not math.isfinite(v)]
+        raise CalibrationGuardError(f"the uncertainty of {', '.join(bad)} is not finite: the fit is singular")
+    if result.rms_after > result.rms_before * (1 + 1e-9) + 1e-12:
+        raise CalibrationGuardError(
+            f"the fit diverged: RMS error {result.rms_before * 1e3:.4g} mm before, "
+            f"{result.rms_after * 1e3:.4g} mm after; check units, joint order and the start values"
+        )
+    rot = {}
+    chain = result.measurement_chain or result.model
+    for s in chain.steps:
+        rot[s.name] = s.is_rotation
+    implausible = []
+    for name, v, v0 in zip(result.names, result.estimates, result.nominal, strict=True):
+        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)) or name not in rot:
+            continue
+        change = abs(float(v - v0))
+        if rot[name] and change > max_angle_change:
+            implausible.append(f"{name} {math.degrees(v - v0):+.3g} deg")
+        elif not rot[name] and change > max_length_change:
+            implausible.append(f"{name} {(v - v0) * 1e3:+.4g} mm")
+    if implausible:
+        raise CalibrationGuardError(
+            f"implausible parameter changes ({', '.join(implausible)}; limits "
+            f"{max_length_change * 1e3:g} mm, {math.degrees(max_angle_change):g} deg): the data may belong "
+            "to another robot or model, or be in other units or joint order"
+        )
+    return warnings

@@ -1,0 +1,1676 @@
+"""Monte Carlo studies and fleet calibrations, on one process or on Dask.
+
+A **study** answers "which pose set, which device, how good will it be?" before anyone
+measures: N virtual robots drawn from tolerances (:func:`robocal.measure.draw_true_model`)
+× pose-set choices × device-noise choices, each one simulated
+(:class:`~robocal.measure.VirtualRobot`, :func:`~robocal.measure.simulate`),
+calibrated and validated on held-out poses.  One row per case goes to
+``DIR/results.csv`` the moment the case is finished, so a crashed task, a killed
+worker or a killed study loses nothing that was finished: running the same study
+again resumes from the table.  ``robocal study config.yaml --out DIR`` (config format:
+:class:`StudyConfig`, example ``examples/study_ur10.yaml``).
+
+A **fleet** run calibrates one robot per measurement file of a folder
+(``robocal fleet DIR --robot NAME``): ``OUT/<file stem>/`` gets the calibration
+(``model.yaml``, ``result.json``) and ``OUT/fleet.csv`` one row per file, also
+resumable.
+
+Where the work runs (both): ``workers=0`` in this process; ``workers=None`` (default)
+a Dask ``LocalCluster`` with one single-threaded worker process per core; ``workers=N``
+N processes; ``scheduler="tcp://host:8786"`` an existing Dask cluster (whose workers
+need robocal installed and, for fleets, the files on a shared path).  Results are
+gathered by the client as they complete and written there, by one writer.
+
+Two calibration engines compute the same thing:
+
+* ``"calibrate"``: :func:`robocal.calibrate` then :func:`robocal.validate` per case,
+  any method and device;
+* ``"batched"`` (:func:`calibrate_batch`, default when it applies: position
+  measurements, ``method: lm``): the chunk's robots are calibrated together.  Their
+  measurement chains share one structure, so the chain is rewritten with *every*
+  step as a joint variable (a step's value becomes a per-row input) and one call of
+  :meth:`~robocal.model.chain.Model.evaluate` gives the tool positions and all the
+  derivative columns of all robots × poses at once; identifiable set (the same
+  sequential rank test as :func:`robocal.identify.subset.select_columns`),
+  Levenberg–Marquardt, covariance, pruning of poorly identifiable parameters and
+  validation run batched over robots.  Estimates agree with ``rc.calibrate`` to
+  solver precision (tests/test_study.py).
+
+Units: SI inside; the tables use mm (columns ending ``_mm``) and seconds.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import io
+import json
+import math
+import os
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from numpy.typing import ArrayLike, NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from robocal import spatial
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Joint, Model, Step
+from robocal.model.files import atomic_write_text
+
+__all__ = [
+    "RESULT_COLUMNS",
+    "BatchFit",
+    "Case",
+    "StudyConfig",
+    "StudyError",
+    "StudyRun",
+    "calibrate_batch",
+    "load_study_config",
+    "run_fleet",
+    "run_study",
+    "study_cases",
+]
+
+Array = NDArray[np.float64]
+
+#: Columns of ``results.csv`` (one row per case; lengths in mm).
+RESULT_COLUMNS = (
+    "case",
+    "robot",
+    "pose_set",
+    "device",
+    "status",
+    "message",
+    "engine",
+    "n_poses",
+    "n_params",
+    "dropped",
+    "iterations",
+    "rms_before_mm",
+    "rms_after_mm",
+    "residual_std_mm",
+    "condition_number",
+    "val_n",
+    "val_mean_mm",
+    "val_rms_mm",
+    "val_p95_mm",
+    "val_max_mm",
+    "true_rms_mm",
+    "true_max_mm",
+    "seconds",
+)
+
+#: Columns of ``fleet.csv``.
+FLEET_COLUMNS = (
+    "file",
+    "sha256",
+    "status",
+    "message",
+    "n_poses",
+    "n_params",
+    "rms_before_mm",
+    "rms_after_mm",
+    "residual_std_mm",
+    "condition_number",
+    "val_n",
+    "val_mean_mm",
+    "val_rms_mm",
+    "val_p95_mm",
+    "val_max_mm",
+    "seconds",
+    "result_dir",
+)
+
+
+class StudyError(ValueError):
+    """A study or fleet cannot run; the message names the file, field or directory."""
+
+
+# =============================================================== configuration
+_Config = ConfigDict(extra="forbid", allow_inf_nan=False, str_strip_whitespace=True)
+Quantity = float | str
+
+
+class _Errors(BaseModel):
+    model_config = _Config
+    length: Quantity = "0.5mm"
+    angle: Quantity = "0.05deg"
+    distribution: Literal["uniform", "normal"] = "uniform"
+    tolerances: dict[str, Quantity] = {}
+
+
+class PoseSetSpec(BaseModel):
+    """One pose-set choice: ``random`` (``n`` random poses away from singularities),
+    ``optimal`` (``n`` poses chosen from a random ``pool`` maximising ``index``) or
+    ``file`` (a poses CSV, ``path`` relative to the config file)."""
+
+    model_config = _Config
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.+-]+$")
+    kind: Literal["random", "optimal", "file"] = "random"
+    n: int | None = Field(default=None, ge=1, le=100_000)
+    seed: int | None = None
+    pool: int = Field(default=1000, ge=1, le=1_000_000)
+    index: Literal["O1", "O2", "O3", "O4", "O5"] = "O1"
+    path: str | None = None
+    per_robot: bool = False  # random: a new draw for every robot
+
+
+class DeviceSpec(BaseModel):
+    """One device choice: a device kind of :mod:`robocal.measure.devices` with its noise
+    (a length such as ``0.02mm``; the device's main noise figure) and further fields."""
+
+    model_config = _Config
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.+-]+$")
+    kind: str = "laser-tracker"
+    noise: Quantity | None = None
+    options: dict[str, Any] = {}
+
+
+class _Validation(BaseModel):
+    model_config = _Config
+    n: int = Field(default=200, ge=1, le=1_000_000)
+    seed: int | None = None
+
+
+class StudyConfig(BaseModel):
+    """A Monte Carlo study (YAML file; lengths as text with a unit or SI numbers).
+
+    ::
+
+        robocal_study: 1
+        name: ur10_1000
+        robot: ur10                 # catalog name or model file (relative to this file), or
+        # geometry: ../examples/geometry/ur10.yaml   # joint geometry: the complete model built from it
+        robots: 1000                # virtual robots drawn from the tolerances
+        seed: 2024                  # everything below is reproducible from it
+        errors: {length: 0.5mm, angle: 0.05deg, distribution: uniform}
+        tool: [0, 0, 100]           # mm: measured target point in the flange frame
+        pose_sets: [{name: random50, kind: random, n: 50}]
+        devices: [{name: tracker-20um, kind: laser-tracker, noise: 0.02mm}]
+        validation: {n: 200}        # held-out poses per robot
+        method: lm                  # rc.calibrate method
+        engine: auto                # auto | batched | calibrate
+        chunk: 50                   # robots per task
+    """
+
+    model_config = _Config
+    robocal_study: Literal[1] = 1
+    name: str = Field(default="study", min_length=1)
+    robot: str | None = Field(default=None, min_length=1)
+    geometry: str | None = Field(default=None, min_length=1)
+    robots: int = Field(ge=1, le=10_000_000)
+    seed: int = 0
+    errors: _Errors = _Errors()
+    tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pose_sets: list[PoseSetSpec] = Field(min_length=1)
+    devices: list[DeviceSpec] = Field(
+        default_factory=lambda: [DeviceSpec(name="laser-tracker")], min_length=1
+    )
+    validation: _Validation = _Validation()
+    method: Literal["lm", "pinv", "bounded", "influence"] = "lm"
+    max_std: Quantity = "0.5mm"
+    engine: Literal["auto", "batched", "calibrate"] = "auto"
+    chunk: int = Field(default=50, ge=1, le=100_000)
+
+    @model_validator(mode="after")
+    def _one_robot(self) -> StudyConfig:
+        if (self.robot is None) == (self.geometry is None):
+            raise ValueError("give exactly one of 'robot' (catalog name or model file) and 'geometry'")
+        return self
+
+    @model_validator(mode="after")
+    def _quantities(self) -> StudyConfig:
+        from robocal.measure.simulate import parse_quantity
+
+        checks = [
+            ("errors.length", self.errors.length, "length"),
+            ("errors.angle", self.errors.angle, "angle"),
+        ]
+        checks += [("max_std", self.max_std, "length")]
+        checks += [(f"devices[{i}].noise", d.noise, "length") for i, d in enumerate(self.devices) if d.noise]
+        for where, value, kind in checks:
+            try:
+                if parse_quantity(value, kind) < 0:
+                    raise ValueError(f"{value!r} is negative")
+            except ValueError as err:
+                raise ValueError(f"{where}: {err}") from None
+        return self
+
+    @field_validator("pose_sets", "devices")
+    @classmethod
+    def _unique_names(cls, items: list) -> list:
+        names = [i.name for i in items]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"names must be unique, {', '.join(twice)} used twice")
+        return items
+
+
+def _format_validation_error(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        loc = ""
+        for part in e["loc"]:
+            loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
+        got = e.get("input")
+        got_text = "" if isinstance(got, dict | list) or got is None else f" (got {got!r})"
+        lines.append(f"{loc or '<file>'}: {e['msg']}{got_text}")
+    return "; ".join(lines)
+
+
+def load_study_config(path: str | os.PathLike[str]) -> StudyConfig:
+    """Read and validate a study YAML file.
+
+    Raises:
+        StudyError: naming the file and the offending field.
+        FileNotFoundError: when the file does not exist.
+    """
+    from robocal.model.files import MAX_FILE_BYTES, _NoAliasLoader
+
+    path = Path(path)
+    size = path.stat().st_size
+    if path.exists() and not path.is_file():
+        raise StudyError(f"{path}: not a regular file")
+    if size > MAX_FILE_BYTES:
+        raise StudyError(f"{path}: {size} bytes is too large for a study file (limit {MAX_FILE_BYTES})")
+    try:
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise StudyError(f"{path}: {where}{getattr(err, 'problem', None) or err}") from None
+    except UnicodeDecodeError as err:
+        raise StudyError(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
+    except RecursionError:
+        raise StudyError(f"{path}: nested too deeply to be a study file") from None
+    if not isinstance(data, dict):
+        raise StudyError(f"{path}: a study file must be a mapping, got {type(data).__name__}")
+    try:
+        config = StudyConfig.model_validate(data)
+    except ValidationError as err:
+        raise StudyError(f"{path}: {_format_validation_error(err)}") from None
+    # paths relative to the config file
+    base = path.parent
+    robot, geometry = config.robot, config.geometry
+    if robot is not None and robot.endswith((".yaml", ".yml")) and not Path(robot).is_absolute():
+        robot = str((base / robot).resolve())
+    if geometry is not None and not Path(geometry).is_absolute():
+        geometry = str((base / geometry).resolve())
+    sets = [
+        s.model_copy(update={"path": str((base / s.path).resolve())})
+        if s.path is not None and not Path(s.path).is_absolute()
+        else s
+        for s in config.pose_sets
+    ]
+    return config.model_copy(update={"robot": robot, "geometry": geometry, "pose_sets": sets})
+
+
+# =============================================================== the cases
+@dataclass(frozen=True)
+class Case:
+    """One virtual robot, pose set and device: a row of the results table."""
+
+    robot: int
+    pose_set: str
+    device: str
+
+    @property
+    def key(self) -> str:
+        return f"r{self.robot:07d}/{self.pose_set}/{self.device}"
+
+
+def study_cases(config: StudyConfig) -> list[Case]:
+    """Every case of a study, in the order they are computed (pose set, device, robot)."""
+    return [
+        Case(k, s.name, d.name)
+        for s in config.pose_sets
+        for d in config.devices
+        for k in range(config.robots)
+    ]
+
+
+def _seed(config: StudyConfig, *parts: int) -> np.random.SeedSequence:
+    return np.random.SeedSequence([int(config.seed) & 0xFFFFFFFF, *parts])
+
+
+def _quantity(value: Quantity, kind: Literal["length", "angle"], where: str) -> float:
+    from robocal.measure.simulate import parse_quantity
+
+    try:
+        return parse_quantity(value, kind)
+    except ValueError as err:
+        raise StudyError(f"{where}: {err}") from None
+
+
+def _resolve_model(name_or_path: str) -> Model:
+    from robocal.model.catalog import robot
+    from robocal.model.files import ModelFileError, load_model
+
+    path = Path(name_or_path)
+    try:
+        if path.suffix in (".yaml", ".yml") or path.exists():
+            return load_model(path)
+        return robot(name_or_path)
+    except FileNotFoundError:
+        raise StudyError(f"model file {path} does not exist") from None
+    except (KeyError, ModelFileError) as err:
+        raise StudyError(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+
+
+def _make_device(spec: DeviceSpec, p_tool_target: Array, index: int):
+    from robocal.measure.devices import DEVICES, make_device
+
+    where = f"devices[{index}] ({spec.name})"
+    if spec.kind not in DEVICES:
+        raise StudyError(f"{where}: unknown device kind {spec.kind!r}; known: {', '.join(DEVICES)}")
+    options = dict(spec.options)
+    options.setdefault("p_tool_target", p_tool_target)
+    try:
+        device = make_device(spec.kind, **options)
+        if spec.noise is not None:
+            device = device.with_noise(_quantity(spec.noise, "length", where + ".noise"))
+    except (TypeError, ValueError, NotImplementedError) as err:
+        raise StudyError(f"{where}: {err}") from None
+    return device
+
+
+def _pose_set(config: StudyConfig, spec: PoseSetSpec, index: int, model: Model) -> Array:
+    """``(n, dof)`` joint values of a shared pose set (per-robot draws are made in the tasks)."""
+    from robocal.measure.poses import random_poses, read_poses
+
+    where = f"pose_sets[{index}] ({spec.name})"
+    seed = np.random.default_rng(_seed(config, 4, index) if spec.seed is None else spec.seed)
+    try:
+        if spec.kind == "file":
+            if spec.path is None:
+                raise StudyError(f"{where}: kind 'file' needs 'path'")
+            return read_poses(spec.path, model)
+        if spec.n is None:
+            raise StudyError(f"{where}: kind {spec.kind!r} needs 'n' (number of poses)")
+        if spec.kind == "random":
+            return random_poses(model, spec.n, seed=seed)
+        from robocal.identify.observability import select_poses
+
+        pool = random_poses(model, max(spec.pool, spec.n), seed=seed)
+        chosen = select_poses(model, pool, spec.n, index=spec.index)
+        return pool[np.asarray(chosen.indices)]
+    except StudyError:
+        raise
+    except (ValueError, OSError) as err:
+        raise StudyError(f"{where}: {err}") from None
+
+
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    """Everything a task needs, computed once by the client (small, picklable)."""
+
+    config: StudyConfig
+    nominal: Model
+    devices: dict[str, Any]
+    pose_sets: dict[str, Array | None]  # None: drawn per robot
+    q_test: Array
+    tool_guess: Array
+    engine: str
+    max_std: float
+
+
+def _built_model(path: str, measure: str) -> Model:
+    from robocal.model.builder import GeometryError, load_geometry
+
+    try:
+        return load_geometry(path).build(measure).model
+    except FileNotFoundError:
+        raise StudyError(f"geometry file {path} does not exist") from None
+    except (GeometryError, ValueError) as err:
+        raise StudyError(f"geometry: {err}") from None
+
+
+def _prepare(config: StudyConfig) -> _Prepared:
+    tool = np.asarray(config.tool, dtype=float) * 1e-3
+    devices = {d.name: _make_device(d, tool, i) for i, d in enumerate(config.devices)}
+    if config.geometry is not None:
+        measure = "position" if all(d.measures == "position" for d in devices.values()) else "pose"
+        nominal = _built_model(config.geometry, measure)
+    else:
+        nominal = _resolve_model(config.robot)
+    sets: dict[str, Array | None] = {}
+    for i, s in enumerate(config.pose_sets):
+        if s.per_robot and s.kind != "random":
+            raise StudyError(f"pose_sets[{i}] ({s.name}): per_robot draws need kind 'random'")
+        sets[s.name] = None if s.per_robot else _pose_set(config, s, i, nominal)
+    from robocal.measure.poses import random_poses
+
+    seed = config.validation.seed
+    q_test = random_poses(
+        nominal, config.validation.n, seed=np.random.default_rng(_seed(config, 3) if seed is None else seed)
+    )
+    _quantity(config.errors.length, "length", "errors.length")
+    _quantity(config.errors.angle, "angle", "errors.angle")
+    for name in config.errors.tolerances:
+        if name not in nominal.names:
+            raise StudyError(f"errors.tolerances: model {nominal.name!r} has no parameter {name!r}")
+    batched_ok = config.method == "lm" and all(d.measures == "position" for d in devices.values())
+    engine = config.engine
+    if engine == "auto":
+        engine = "batched" if batched_ok else "calibrate"
+    elif engine == "batched" and not batched_ok:
+        raise StudyError(
+            "engine 'batched' needs method 'lm' and position-measuring devices (laser-tracker); "
+            "use engine 'calibrate' or 'auto'"
+        )
+    return _Prepared(
+        config=config,
+        nominal=nominal,
+        devices=devices,
+        pose_sets=sets,
+        q_test=q_test,
+        tool_guess=tool,
+        engine=engine,
+        max_std=_quantity(config.max_std, "length", "max_std"),
+    )
+
+
+# =============================================================== batched calibration
+@dataclass
+class BatchFit:
+    """The calibration of one robot by :func:`calibrate_batch` (SI units).
+
+    Attributes:
+        names: the identified parameters (robot, ``frame_*``, ``tcp_*``), chain order.
+        estimates, start, std: their values, start values and standard deviations.
+        dropped: ``(name, reason)`` of the parameters left out ("no effect",
+            "redundant", "poorly identifiable").
+        values: all values of the measurement chain after calibration ``(P,)``
+            (:attr:`chain` order; ``frame0_*`` are the device frame's start).
+        chain: the measurement chain (structure and start values of robot 0).
+        rms_before, rms_after, residual_std: m.
+    """
+
+    names: tuple[str, ...]
+    estimates: Array
+    start: Array
+    std: Array
+    dropped: tuple[tuple[str, str], ...]
+    values: Array
+    chain: Model = field(repr=False)
+    rms_before: float
+    rms_after: float
+    residual_std: float
+    condition_number: float
+    iterations: int
+    success: bool
+    message: str
+
+    def predict(self, q: ArrayLike) -> Array:
+        """Predicted target positions ``(n, 3)`` (m) in the device frame at joint values ``q``."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return _positions(self.chain, self.values[None], [q])
+
+
+_AUG_CACHE: dict[tuple, tuple[Model, NDArray[np.intp], NDArray[np.intp], Model]] = {}
+
+
+def _augmented(chain: Model, values: Array | None = None, varying: NDArray[np.bool_] | None = None):
+    """The chain with steps made joint variables (value 0), for batches of robots.
+
+    Row ``u`` of the augmented model's joint values holds the original chain's values
+    of those steps, plus the joint values on the original joint steps: its FK is the
+    original FK at those values, and its joint Jacobian columns are the derivatives
+    with respect to those parameters, for a different parameter vector on every row.
+
+    Args:
+        chain: the chain.
+        values: ``(P,)`` values of the steps that stay constant (default: the chain's).
+        varying: ``(P,)`` steps to turn into joint variables (default: all); the
+            original joint steps always are.
+
+    Returns:
+        The augmented model, the chain indices of its joint variables (in order) and
+        the positions among them of the original joint steps.
+    """
+    P = len(chain.steps)
+    joint = np.array([s.joint is not None for s in chain.steps])
+    mask = np.ones(P, dtype=bool) if varying is None else (np.asarray(varying, dtype=bool) | joint)
+    values = chain.values if values is None else np.asarray(values, dtype=float)
+    key = (id(chain), mask.tobytes(), values[~mask].tobytes())
+    hit = _AUG_CACHE.get(key)
+    if hit is not None and hit[3] is chain:
+        return hit[0], hit[1], hit[2]
+    steps = tuple(
+        Step(s.motion, s.name, 0.0, True, None, Joint("u:" + s.name))
+        if mask[i]
+        else Step(s.motion, s.name, float(values[i]), False)
+        for i, s in enumerate(chain.steps)
+    )
+    aug = dataclasses.replace(chain, name=chain.name + "+batch", steps=steps, bodies=())
+    ucols = np.flatnonzero(mask)
+    joint_pos = np.flatnonzero(joint[ucols])
+    if len(_AUG_CACHE) > 64:
+        _AUG_CACHE.clear()
+    _AUG_CACHE[key] = (aug, ucols, joint_pos, chain)
+    return aug, ucols, joint_pos
+
+
+def _rows(values: Array, qs: Sequence[Array], joint_pos: NDArray[np.intp]) -> Array:
+    """Augmented joint values ``(Σ n_k, p)``: robot k's values ``(K, p)`` on each of its rows,
+    plus its joint values at ``joint_pos``."""
+    counts = [len(q) for q in qs]
+    u = np.repeat(values, counts, axis=0)
+    u[:, joint_pos] += np.concatenate(qs, axis=0)
+    return u
+
+
+def _positions(chain: Model, values: Array, qs: Sequence[Array]) -> Array:
+    """Positions ``(Σ n_k, 3)`` at the end of ``chain`` for robot k's values ``values[k]`` ``(P,)``
+    at its joint values ``qs[k]``, in one batched FK."""
+    aug, ucols, joint_pos = _augmented(chain)
+    return aug.fk(_rows(values[:, ucols], qs, joint_pos))[:, :3, 3]
+
+
+def _initial_frames(
+    nominal: Model, qs: Sequence[Array], ys: Sequence[Array], T_tool0: Array, rounds: int = 4
+) -> tuple[Array, Array]:
+    """Batched :func:`robocal.identify.calibrate.initial_frame_and_tool` for position data:
+    alternating Kabsch fits of ``T_device_base`` and mean fits of the tool point.
+
+    Returns ``(K, 4, 4)`` device frames and ``(K, 3)`` tool points.
+    """
+    K, n = len(qs), len(qs[0])
+    T_flange = nominal.fk(np.concatenate(qs, axis=0)).reshape(K, n, 4, 4)
+    R_f, p_f = T_flange[..., :3, :3], T_flange[..., :3, 3]
+    y = np.stack(ys)
+    t = np.broadcast_to(np.asarray(T_tool0, dtype=float)[:3, 3], (K, 3)).copy()
+    T_frame = np.broadcast_to(np.eye(4), (K, 4, 4)).copy()
+    for _ in range(rounds):
+        p_base = np.einsum("knij,kj->kni", R_f, t) + p_f
+        T_frame = spatial.fit_rigid_transform(p_base, y)
+        R0, t0 = T_frame[:, :3, :3], T_frame[:, :3, 3]
+        b = np.einsum("kni,kij->knj", y - t0[:, None], R0) - p_f
+        t = np.einsum("knji,knj->ki", R_f, b) / n
+    return T_frame, t
+
+
+def _frame_values(T: Array) -> Array:
+    """``(K, 6)`` values ``x y z rz ry rx`` of frames ``(K, 4, 4)`` (as :func:`frame_steps`)."""
+    e = spatial.matrix_to_euler(T[:, :3, :3], "ZYX")
+    return np.concatenate([T[:, :3, 3], e], axis=1)
+
+
+def _gram_schmidt_select(J: Array, order: Sequence[int], tolerance: float = 1e-7) -> tuple[Array, Array]:
+    """Batched sequential rank test of :func:`robocal.identify.subset.select_columns`.
+
+    Args:
+        J: ``(K, m, p)`` scaled Jacobians.
+        order: column indices in order of preference.
+
+    Returns:
+        ``kept (K, p)`` and ``no_effect (K, p)`` boolean masks.
+    """
+    K, m, p = J.shape
+    scale = np.abs(J).reshape(K, -1).max(axis=1)
+    Q = np.zeros((K, m, p))
+    kept = np.zeros((K, p), dtype=bool)
+    zero = np.zeros((K, p), dtype=bool)
+    for slot, c in enumerate(order):
+        col = J[:, :, c]
+        norm = np.linalg.norm(col, axis=1)
+        is_zero = norm <= 1e-12 * np.maximum(scale, 1e-300)
+        v = col - np.einsum("kmj,kj->km", Q, np.einsum("kmj,km->kj", Q, col))
+        v -= np.einsum("kmj,kj->km", Q, np.einsum("kmj,km->kj", Q, v))
+        res = np.linalg.norm(v, axis=1)
+        keep = ~is_zero & (res > tolerance * norm)
+        Q[:, :, slot] = np.where(keep[:, None], v / np.where(res > 0, res, 1.0)[:, None], 0.0)
+        kept[:, c] = keep
+        zero[:, c] = is_zero
+    return kept, zero
+
+
+class _Group:
+    """Robots of a batch that share the same unknowns: residuals and Jacobians at once.
+
+    The steps that are unknowns, or whose values differ between the robots, become
+    joint variables of one augmented chain (:func:`_augmented`); the others stay
+    constant steps, which keeps the batched evaluation short.
+    """
+
+    def __init__(
+        self, chain: Model, V: Array, qs: Sequence[Array], ys: Array, w: Array, cols: NDArray[np.intp]
+    ) -> None:
+        self.chain = chain
+        self.V = V  # (K, P) start values of every chain parameter
+        self.qs = qs
+        self.ys = ys  # (K, n, 3)
+        self.w = w  # (K, n, 3) weights 1/σ
+        self.cols = cols  # (p,) chain indices of the unknowns
+        varying = np.ptp(V, axis=0) > 0
+        varying[cols] = True
+        self.aug, self.ucols, self.joint_pos = _augmented(chain, V[0], varying)
+        self.dcols = np.searchsorted(self.ucols, cols)
+
+    def subset(self, idx: NDArray[np.intp]) -> _Group:
+        """The group of robots ``idx`` only (same augmented chain)."""
+        g = object.__new__(_Group)
+        g.chain, g.V, g.qs, g.ys, g.w, g.cols = (
+            self.chain,
+            self.V[idx],
+            [self.qs[k] for k in idx],
+            self.ys[idx],
+            self.w[idx],
+            self.cols,
+        )
+        g.aug, g.ucols, g.joint_pos, g.dcols = self.aug, self.ucols, self.joint_pos, self.dcols
+        return g
+
+    def values(self, x: Array) -> Array:
+        V = self.V.copy()
+        V[:, self.cols] = x
+        return V
+
+    def evaluate(self, x: Array, weighted: bool = True) -> tuple[Array, Array]:
+        """Residuals ``(K, 3n)`` and Jacobians ``(K, 3n, p)`` at unknowns ``x`` ``(K, p)``."""
+        K = len(x)
+        u = _rows(self.values(x)[:, self.ucols], self.qs, self.joint_pos)
+        T, _, Jq = self.aug.evaluate(u, jacobian=False, joint_columns=True)
+        n = self.ys.shape[1]
+        r = (T[:, :3, 3].reshape(K, n, 3) - self.ys).reshape(K, -1)
+        J = Jq[:, self.dcols].reshape(K, 3 * n, -1)
+        if weighted:
+            wr = self.w.reshape(K, -1)
+            return r * wr, J * wr[:, :, None]
+        return r, J
+
+
+def _lm_batch(
+    group: _Group, x0: Array, max_iterations: int, step_tolerance: Array
+) -> tuple[Array, NDArray[np.bool_], NDArray[np.intp]]:
+    """Levenberg–Marquardt for every robot of a group at once.
+
+    Per robot: damped Gauss–Newton steps ``min |J δ + r|² + λ |D δ|²`` (D the running
+    maximum of the column norms, as MINPACK's ``x_scale='jac'``), solved by QR of the
+    stacked matrix; a step is kept when it lowers the cost (then λ /= 10) and refused
+    otherwise (λ *= 10).  A robot has converged when its step is below
+    ``step_tolerance`` ``(p,)`` (per unknown) or 1e-12 of the scaled parameters, or the
+    linear model predicts a relative reduction of the cost below 1e-12 (MINPACK's
+    criteria at rc.calibrate's tolerances); it has failed when λ exceeds 1e12 or the
+    iterations run out.
+
+    Returns ``x (K, p)``, converged flags and the number of Jacobian evaluations.
+    """
+    x = x0.copy()
+    K, p = x.shape
+    r, J = group.evaluate(x)
+    cost = np.einsum("km,km->k", r, r)
+    lam = np.full(K, 1e-9)
+    done = np.zeros(K, dtype=bool)
+    converged = np.zeros(K, dtype=bool)
+    evaluations = np.ones(K, dtype=np.intp)
+    D = np.linalg.norm(J, axis=1)
+    D[D == 0] = 1.0
+    eye = np.eye(p)
+    for _ in range(max_iterations):
+        active = np.flatnonzero(~done)
+        if not len(active):
+            break
+        Ja, ra, Da = J[active], r[active], D[active]
+        A = np.concatenate([Ja / Da[:, None, :], np.sqrt(lam[active])[:, None, None] * eye], axis=1)
+        Qm, R = np.linalg.qr(A)
+        rhs = -np.einsum("kmp,km->kp", Qm[:, : ra.shape[1]], ra)
+        z = np.linalg.solve(R, rhs[..., None])[..., 0]
+        dx = z / Da
+        linear = ra + np.einsum("kmp,kp->km", Ja, dx)
+        predicted = cost[active] - np.einsum("km,km->k", linear, linear)
+        nothing_left = predicted <= 1e-12 * np.maximum(cost[active], 1e-300)
+        x_new = x[active] + dx
+        r_new, J_new = group.subset(active).evaluate(x_new)
+        evaluations[active] += 1
+        cost_new = np.einsum("km,km->k", r_new, r_new)
+        better = cost_new <= cost[active]
+        small = np.all(np.abs(dx) <= step_tolerance[None, :], axis=1) | (
+            np.linalg.norm(dx * Da, axis=1) <= 1e-12 * np.linalg.norm(x[active] * Da, axis=1)
+        )
+        acc = active[better]
+        x[acc], r[acc], J[acc], cost[acc] = x_new[better], r_new[better], J_new[better], cost_new[better]
+        D[acc] = np.maximum(D[acc], np.linalg.norm(J_new[better], axis=1))
+        lam[acc] = np.maximum(lam[acc] / 10.0, 1e-12)
+        lam[active[~better]] *= 10.0
+        finished = nothing_left | (better & small)
+        converged[active[finished]] = True
+        done[active[finished | (lam[active] > 1e12)]] = True
+    return x, converged, evaluations
+
+
+def _uncertainty_batch(r: Array, J: Array) -> tuple[Array, Array]:
+    """Standard deviations ``(K, p)`` (σ̂²(JᵀJ)⁻¹, as rc.calibrate) and condition numbers ``(K,)``."""
+    _, m, p = J.shape
+    s2 = np.einsum("km,km->k", r, r) / max(m - p, 1)
+    norms = np.linalg.norm(J, axis=1)
+    norms[norms == 0] = 1.0
+    Jn = J / norms[:, None, :]
+    sv = np.linalg.svd(Jn, compute_uv=False)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cond = np.where(sv[:, -1] > 0, sv[:, 0] / sv[:, -1], np.inf)
+    cov_diag = np.diagonal(np.linalg.pinv(np.einsum("kmi,kmj->kij", Jn, Jn)), axis1=1, axis2=2)
+    std = np.sqrt(np.clip(s2[:, None] * cov_diag / norms**2, 0.0, None))
+    return std, cond
+
+
+def calibrate_batch(
+    model: Model,
+    data: Sequence[Measurements],
+    *,
+    tool_guess: ArrayLike | None = None,
+    max_std: float = 5e-4,
+    max_iterations: int = 200,
+) -> list[BatchFit]:
+    """Calibrate many robots of the same model at once (position measurements).
+
+    Computes what ``rc.calibrate(model, d, method="lm", tool_guess=tool_guess,
+    max_std=max_std)`` computes for each ``d`` in ``data`` — device frame and tool point
+    fitted, rows weighted by 1/σ, identifiable set preferring the device frame, then
+    the tool, then the robot in chain order, poorly identifiable parameters pruned —
+    but evaluates every robot's chain in one batched call per iteration (module
+    docstring).  Dropped parameters are named without the absorbing combination.
+
+    Args:
+        model: the nominal robot model (free parameters: the candidates).
+        data: K measurement sets with positions ``(n_k, 3)`` (m) in the device frame and
+            the same pose count ``n`` (their joint values may differ).
+        tool_guess: start of the tool point (m, flange frame), ``(3,)``.
+        max_std: pruning threshold (m as tool displacement), as in ``rc.calibrate``.
+        max_iterations: Levenberg–Marquardt iterations per fit.
+
+    Returns:
+        One :class:`BatchFit` per measurement set.
+
+    Raises:
+        ValueError: no positions, orientation-only data, different pose counts or a
+            joint count that does not fit the model.
+    """
+    from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, measurement_chain
+
+    if not data:
+        return []
+    n = data[0].n
+    for k, d in enumerate(data):
+        if d.position is None:
+            raise ValueError(f"data[{k}] has no measured positions")
+        if d.dof != model.dof:
+            raise ValueError(f"data[{k}] has {d.dof} joint columns but model {model.name!r} has {model.dof}")
+        if d.n != n:
+            raise ValueError(f"data[{k}] has {d.n} poses; a batch needs the same count ({n}) for all")
+    K = len(data)
+    qs = [d.q for d in data]
+    ys = np.stack([d.position for d in data])
+    T_tool0 = np.eye(4) if tool_guess is None else spatial.homogeneous(p=np.asarray(tool_guess, dtype=float))
+    T_frame, t_tool = _initial_frames(model, qs, list(ys), T_tool0)
+    chain = measurement_chain(model, T_frame[0], spatial.homogeneous(p=t_tool[0]), "position", True)
+    names = chain.names
+    index = {nm: i for i, nm in enumerate(names)}
+    V = np.tile(chain.values, (K, 1))
+    f0 = [index[f"frame0_{c}"] for c in ("x", "y", "z", "rz", "ry", "rx")]
+    V[:, f0] = _frame_values(T_frame)
+    V[:, [index[f"{TOOL_PREFIX}{c}"] for c in "xyz"]] = t_tool
+    w = np.ones((K, n, 3))
+    for k, d in enumerate(data):
+        if d.sigma is not None:
+            w[k] = 1.0 / np.maximum(d.sigma, 1e-12)
+    # the robot's size, to weigh rotations against lengths (as rc.calibrate)
+    head = [q[: min(len(q), 50)] for q in qs]
+    p_head = np.abs(model.fk(np.concatenate(head))[:, :3, 3]).max(axis=1)
+    ends = np.cumsum([len(h) for h in head])
+    length = np.array(
+        [max(float(p_head[e - len(h) : e].max()), 0.1) for h, e in zip(head, ends, strict=True)]
+    )
+    free = np.flatnonzero(chain.free_mask)
+    rot = np.array([s.is_rotation for s in chain.steps])
+    free_names = [names[i] for i in free]
+    order_names = [x for x in free_names if x.startswith(FRAME_PREFIX)]
+    order_names += [x for x in free_names if x.startswith(TOOL_PREFIX)]
+    order_names += [x for x in free_names if x not in set(order_names)]
+    order = [free_names.index(x) for x in order_names]
+
+    # identifiable set from the scaled Jacobian at the start
+    full = _Group(chain, V, qs, ys, w, free)
+    _, J0 = full.evaluate(V[:, free])
+    scale = np.where(rot[free][None, :], length[:, None], 1.0)  # (K, p)
+    kept, zero = _gram_schmidt_select(J0 * scale[:, None, :], order)
+
+    dropped: list[list[tuple[str, str]]] = [
+        [
+            (free_names[c], "no effect" if zero[k, c] else "redundant")
+            for c in range(len(free))
+            if not kept[k, c]
+        ]
+        for k in range(K)
+    ]
+    masks = kept.copy()  # (K, p_free) current unknowns per robot
+    out: list[BatchFit | None] = [None] * K
+    x_start = V[:, free]  # start values of every candidate
+    x_current = x_start.copy()
+    pending = np.arange(K)
+    while len(pending):
+        # robots with the same unknowns are solved together
+        groups: dict[bytes, list[int]] = {}
+        for k in pending:
+            groups.setdefault(masks[k].tobytes(), []).append(int(k))
+        pending_next: list[int] = []
+        for members in groups.values():
+            idx = np.array(members, dtype=np.intp)
+            mask = masks[idx[0]].copy()
+            cols = free[mask]
+            g = _Group(chain, V[idx], [qs[k] for k in idx], ys[idx], w[idx], cols)
+            size = np.where(
+                rot[cols][None, :], length[idx][:, None], 1.0
+            )  # (k, p) tool displacement per unit
+            tol = 1e-11 / size.max(axis=0)
+            x, ok, evals = _lm_batch(g, x_current[idx][:, mask], max_iterations, tol)
+            r, J = g.evaluate(x)
+            std, cond = _uncertainty_batch(r, J)
+            r_plain = (r / g.w.reshape(len(idx), -1)).reshape(len(idx), n, 3)
+            r_start, _ = g.evaluate(x_start[idx][:, mask], weighted=False)
+            move = std * size
+            for i, k in enumerate(idx):
+                worst = int(np.argmax(move[i])) if move.shape[1] else 0
+                if ok[i] and move.shape[1] and move[i, worst] > max_std:
+                    c = np.flatnonzero(mask)[worst]
+                    masks[k, c] = False
+                    dropped[k].append((free_names[c], "poorly identifiable"))
+                    x_current[k, mask] = x[i]
+                    x_current[k, c] = x_start[k, c]  # kept at its start value
+                    pending_next.append(int(k))
+                    continue
+                values = V[k].copy()
+                values[cols] = x[i]
+                e2 = float(np.sum(r_plain[i] ** 2))
+                out[k] = BatchFit(
+                    names=tuple(names[c] for c in cols),
+                    estimates=x[i].copy(),
+                    start=x_start[k, mask].copy(),
+                    std=std[i].copy(),
+                    dropped=tuple(dropped[k]),
+                    values=values,
+                    chain=chain,
+                    rms_before=float(np.sqrt(np.sum(r_start[i] ** 2) / n)),
+                    rms_after=float(np.sqrt(e2 / n)),
+                    residual_std=float(np.sqrt(e2 / max(3 * n - len(cols), 1))),
+                    condition_number=float(cond[i]),
+                    iterations=int(evals[i]),
+                    success=bool(ok[i]),
+                    message="converged" if ok[i] else f"no convergence in {max_iterations} iterations",
+                )
+        pending = np.array(pending_next, dtype=np.intp)
+    return [o for o in out if o is not None]
+
+
+# =============================================================== the tasks
+@dataclass(frozen=True, eq=False)
+class _Chunk:
+    """One task: some robots of one pose set and one device."""
+
+    prepared: _Prepared
+    pose_set: str
+    device: str
+    robots: tuple[int, ...]
+
+    def describe(self) -> str:
+        lo, hi = self.robots[0], self.robots[-1]
+        span = f"robot {lo}" if lo == hi else f"robots {lo}-{hi}"
+        seed = self.prepared.config.seed
+        return f"{span} of pose set {self.pose_set!r}, device {self.device!r} (study seed {seed})"
+
+
+def _empty_row(case: Case, engine: str) -> dict[str, Any]:
+    row: dict[str, Any] = dict.fromkeys(RESULT_COLUMNS, "")
+    row.update(case=case.key, robot=case.robot, pose_set=case.pose_set, device=case.device, engine=engine)
+    return row
+
+
+def _stats(errors: Array) -> dict[str, float]:
+    """Validation statistics (mm) of position errors ``(m,)`` (m), as rc.validate."""
+    return {
+        "val_n": len(errors),
+        "val_mean_mm": float(errors.mean() * 1e3),
+        "val_rms_mm": float(np.sqrt(np.mean(errors**2)) * 1e3),
+        "val_p95_mm": float(np.percentile(errors, 95) * 1e3),
+        "val_max_mm": float(errors.max() * 1e3),
+    }
+
+
+def _simulate_case(chunk: _Chunk, k: int):
+    """True robot, calibration data, validation data and noise-free truth of robot ``k``."""
+    from robocal.measure.poses import random_poses
+    from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
+
+    prep = chunk.prepared
+    config = prep.config
+    i_set = [s.name for s in config.pose_sets].index(chunk.pose_set)
+    i_dev = [d.name for d in config.devices].index(chunk.device)
+    errors = config.errors
+    true = draw_true_model(
+        prep.nominal,
+        errors.tolerances or None,
+        length=errors.length,
+        angle=errors.angle,
+        distribution=errors.distribution,
+        seed=np.random.default_rng(_seed(config, 0, k)),
+    )
+    device = prep.devices[chunk.device]
+    robot = VirtualRobot(prep.nominal, true, device)
+    q = prep.pose_sets[chunk.pose_set]
+    if q is None:  # a new random draw for every robot
+        spec = config.pose_sets[i_set]
+        q = random_poses(prep.nominal, spec.n, seed=np.random.default_rng(_seed(config, 5, i_set, k)))
+    data = simulate(robot, q, seed=np.random.default_rng(_seed(config, 1, k, i_set, i_dev)))
+    test = simulate(robot, prep.q_test, seed=np.random.default_rng(_seed(config, 2, k, i_dev)))
+    truth = device.predict(robot.T_base_tool(prep.q_test)).position
+    return data, test, truth
+
+
+def _fill_fit(row: dict[str, Any], fit, n: int, seconds: float) -> None:
+    row.update(
+        status="ok" if fit.success else "not-converged",
+        message="" if fit.success else fit.message,
+        n_poses=n,
+        n_params=len(fit.names),
+        dropped=" ".join(d[0] if isinstance(d, tuple) else d.name for d in fit.dropped),
+        iterations=fit.iterations,
+        rms_before_mm=fit.rms_before * 1e3,
+        rms_after_mm=fit.rms_after * 1e3,
+        residual_std_mm=fit.residual_std * 1e3,
+        condition_number=fit.condition_number,
+        seconds=seconds,
+    )
+
+
+def _error_row(case: Case, engine: str, chunk: _Chunk, err: BaseException) -> dict[str, Any]:
+    row = _empty_row(case, engine)
+    text = " ".join(f"{type(err).__name__}: {err}".split())
+    row.update(
+        status="error",
+        message=f"{text} [input: robot {case.robot} (true-model seed [{chunk.prepared.config.seed}, 0, "
+        f"{case.robot}]), pose set {case.pose_set!r}, device {case.device!r}]",
+    )
+    return row
+
+
+def _run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
+    """Simulate, calibrate and validate the robots of one chunk; one row per robot.
+
+    A robot whose simulation or calibration raises gets an ``error`` row naming its
+    input; the others are unaffected.
+    """
+    prep = chunk.prepared
+    rows: dict[int, dict[str, Any]] = {}
+    sims: dict[int, tuple] = {}
+    t0 = time.perf_counter()
+    for k in chunk.robots:
+        case = Case(k, chunk.pose_set, chunk.device)
+        try:
+            sims[k] = _simulate_case(chunk, k)
+        except Exception as err:
+            rows[k] = _error_row(case, prep.engine, chunk, err)
+    t_sim = (time.perf_counter() - t0) / max(len(chunk.robots), 1)
+    todo = [k for k in chunk.robots if k in sims]
+    if prep.engine == "batched" and todo:
+        try:
+            _batched_rows(chunk, todo, sims, rows, t_sim)
+            todo = []
+        except Exception:
+            todo = [k for k in todo if k not in rows]
+    for k in todo:
+        case = Case(k, chunk.pose_set, chunk.device)
+        t1 = time.perf_counter()
+        try:
+            rows[k] = _calibrate_row(chunk, case, *sims[k], t_sim)
+        except Exception as err:
+            rows[k] = _error_row(case, "calibrate", chunk, err)
+        rows[k]["seconds"] = t_sim + time.perf_counter() - t1
+    return [rows[k] for k in chunk.robots]
+
+
+def _calibrate_row(chunk: _Chunk, case: Case, data, test, truth, t_sim: float) -> dict[str, Any]:
+    from robocal.identify.calibrate import calibrate
+    from robocal.identify.validate import validate
+
+    prep = chunk.prepared
+    result = calibrate(
+        prep.nominal, data, method=prep.config.method, tool_guess=prep.tool_guess, max_std=prep.max_std
+    )
+    stats = validate(result, test)
+    row = _empty_row(case, "calibrate")
+    _fill_fit(row, result, data.n, 0.0)
+    row.update(_stats(stats.errors))
+    true_err = np.linalg.norm(result.predict(prep.q_test)[:, :3, 3] - truth, axis=1)
+    row.update(
+        true_rms_mm=float(np.sqrt(np.mean(true_err**2)) * 1e3), true_max_mm=float(true_err.max() * 1e3)
+    )
+    return row
+
+
+def _batched_rows(chunk: _Chunk, todo: list[int], sims: dict, rows: dict, t_sim: float) -> None:
+    prep = chunk.prepared
+    t0 = time.perf_counter()
+    by_count: dict[int, list[int]] = {}
+    for k in todo:
+        by_count.setdefault(sims[k][0].n, []).append(k)
+    for members in by_count.values():
+        fits = calibrate_batch(
+            prep.nominal, [sims[k][0] for k in members], tool_guess=prep.tool_guess, max_std=prep.max_std
+        )
+        # validation: predictions of every robot at the held-out poses in one call
+        values = np.stack([f.values for f in fits])
+        m = len(prep.q_test)
+        pred = _positions(fits[0].chain, values, [prep.q_test] * len(fits)).reshape(len(fits), m, 3)
+        for i, k in enumerate(members):
+            case = Case(k, chunk.pose_set, chunk.device)
+            data, test, truth = sims[k]
+            row = _empty_row(case, "batched")
+            _fill_fit(row, fits[i], data.n, 0.0)
+            row.update(_stats(np.linalg.norm(pred[i] - test.position, axis=1)))
+            true_err = np.linalg.norm(pred[i] - truth, axis=1)
+            row.update(
+                true_rms_mm=float(np.sqrt(np.mean(true_err**2)) * 1e3),
+                true_max_mm=float(true_err.max() * 1e3),
+            )
+            rows[k] = row
+    per_robot = (time.perf_counter() - t0) / max(len(todo), 1)
+    for k in todo:
+        rows[k]["seconds"] = t_sim + per_robot
+
+
+# =============================================================== the results table
+class _Table:
+    """An append-only CSV journal: a row is flushed to disk as soon as it is known.
+
+    On opening, rows already there are read (a last line cut short by a crash is
+    dropped, and the file rewritten atomically without it); :meth:`append` adds rows
+    and ``fsync``s them.
+    """
+
+    def __init__(self, path: Path, columns: Sequence[str], key: str) -> None:
+        self.path, self.columns, self.key = path, tuple(columns), key
+        self.rows: dict[str, dict[str, str]] = {}
+        if path.exists():
+            self._load()
+        else:
+            atomic_write_text(path, ",".join(self.columns) + "\n")
+
+    def _load(self) -> None:
+        text = self.path.read_text(encoding="utf-8")
+        lines = text.splitlines(keepends=True)
+        if not lines or lines[0].strip() != ",".join(self.columns):
+            raise StudyError(
+                f"{self.path}: not a robocal results table of this version (header differs); "
+                "use --force to start over"
+            )
+        good: list[str] = [lines[0]]
+        for i, line in enumerate(lines[1:], start=2):
+            cells = next(csv.reader([line]), [])
+            complete = line.endswith("\n") and len(cells) == len(self.columns)
+            if not complete:
+                if i == len(lines):  # cut short by a crash: drop it
+                    break
+                raise StudyError(f"{self.path}: row {i} has {len(cells)} cells, expected {len(self.columns)}")
+            row = dict(zip(self.columns, cells, strict=True))
+            self.rows[row[self.key]] = row
+            good.append(line)
+        if len(good) != len(lines):
+            atomic_write_text(self.path, "".join(good))
+
+    def append(self, rows: Iterable[Mapping[str, Any]]) -> None:
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        new = []
+        for row in rows:
+            cells = [_cell(row.get(c, "")) for c in self.columns]
+            writer.writerow(cells)
+            new.append(dict(zip(self.columns, cells, strict=True)))
+        with open(self.path, "a", encoding="utf-8") as fh:
+            fh.write(buf.getvalue())
+            fh.flush()
+            os.fsync(fh.fileno())
+        for row in new:
+            self.rows[row[self.key]] = row
+
+
+def _cell(value: Any) -> str:
+    if isinstance(value, float | np.floating):
+        return repr(float(value))
+    return str(value)
+
+
+def _atomic_write_bytes(path: Path, data: bytes) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+# =============================================================== running
+@dataclass
+class StudyRun:
+    """What :func:`run_study` did.
+
+    Attributes:
+        out: the study directory.
+        total: cases in the study; computed: cases computed by this run; resumed: cases
+            found in the table already; errors: error rows written by this run.
+        seconds: wall time of the computation (from the first task submitted to the
+            last row written; the cluster's start-up excluded), ``startup_seconds`` that.
+        calibrations_per_second: ``computed / seconds``.
+        workers: Dask worker processes (0: this process).
+        engine: ``"batched"`` or ``"calibrate"``.
+        summary: per (pose set, device) statistics (also in ``summary.json``).
+    """
+
+    out: Path
+    total: int
+    computed: int
+    resumed: int
+    errors: int
+    seconds: float
+    startup_seconds: float
+    workers: int
+    engine: str
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def calibrations_per_second(self) -> float:
+        return self.computed / self.seconds if self.seconds > 0 else 0.0
+
+
+def _config_text(config: StudyConfig) -> str:
+    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=True, default_flow_style=None, width=100)
+
+
+def _identity(dumped: Mapping[str, Any]) -> dict[str, Any]:
+    """The part of a configuration that decides the rows (not how many robots, nor the chunking)."""
+    return {k: v for k, v in dumped.items() if k not in ("robots", "chunk")}
+
+
+def _chunks(prep: _Prepared, todo: Sequence[Case], size: int) -> list[_Chunk]:
+    groups: dict[tuple[str, str], list[int]] = {}
+    for c in todo:
+        groups.setdefault((c.pose_set, c.device), []).append(c.robot)
+    out = []
+    for (pose_set, device), robots in groups.items():
+        for i in range(0, len(robots), size):
+            out.append(_Chunk(prep, pose_set, device, tuple(robots[i : i + size])))
+    return out
+
+
+def _warm_up() -> bool:
+    import robocal.identify.calibrate
+    import robocal.identify.validate
+    import robocal.measure.poses
+    import robocal.measure.simulate  # noqa: F401
+
+    return True
+
+
+class _Executor:
+    """In-process execution or a Dask client (local cluster or a scheduler address)."""
+
+    def __init__(self, workers: int | None, scheduler: str | None) -> None:
+        self.client = None
+        self.cluster = None
+        self.workers = 0
+        if scheduler is None and workers == 0:
+            return
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        if scheduler is not None:
+            self.client = Client(scheduler, timeout="30s")
+            self.workers = len(self.client.scheduler_info().get("workers", {}))
+        else:
+            import dask
+
+            n = workers if workers is not None else (os.cpu_count() or 1)
+            if n < 1:
+                raise StudyError(f"workers={n}: give 1 or more (0 runs in this process)")
+            # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's
+            # mmap threshold at 128 KiB: every Jacobian-sized array is then mmapped and
+            # page-faulted afresh, about half the speed here (benchmarks/bench_throughput.py
+            # --malloc).  Arrays up to 16 MiB come from the heap instead.  (The nanny sets
+            # these variables in this process before it spawns a worker: put them back.)
+            environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+            environ["MALLOC_MMAP_THRESHOLD_"] = 16 << 20
+            saved = {k: os.environ.get(k) for k in environ}
+            try:
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                    self.cluster = LocalCluster(
+                        n_workers=n,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                        silence_logs=logging.CRITICAL,  # not the workers' shutdown chatter
+                    )
+            finally:
+                for k, v in saved.items():
+                    if v is None:
+                        os.environ.pop(k, None)
+                    else:
+                        os.environ[k] = v
+            self.client = Client(self.cluster)
+            self.workers = n
+        self.warm_up()
+
+    def warm_up(self) -> None:
+        """Import robocal on every worker now, not inside the first task (excluded from timing)."""
+        if self.client is not None:
+            self.client.run(_warm_up)
+
+    def map(self, fn: Callable, items: Sequence, on_error: Callable) -> Iterator[tuple[Any, Any]]:
+        """``(item, fn(item))`` as they complete; a failed task yields ``(item, on_error(item, exc))``."""
+        if self.client is None:
+            for item in items:
+                try:
+                    yield item, fn(item)
+                except Exception as err:
+                    yield item, on_error(item, err)
+            return
+        from distributed import as_completed
+
+        futures = {self.client.submit(fn, item, pure=False): item for item in items}
+        for future in as_completed(futures):
+            item = futures[future]
+            try:
+                yield item, future.result()
+            except Exception as err:
+                yield item, on_error(item, err)
+            future.release()
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def run_study(
+    config: StudyConfig | str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    robots: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    client: Any = None,
+) -> StudyRun:
+    """Run (or resume) a Monte Carlo study; rows go to ``out/results.csv`` as they finish.
+
+    Args:
+        config: a :class:`StudyConfig` or the path of its YAML file.
+        out: the study directory: ``study.yaml`` (the configuration), ``results.csv``
+            (one row per case, :data:`RESULT_COLUMNS`), ``summary.json``, ``summary.png``.
+        workers: Dask worker processes of a local cluster (default: one per core);
+            0 runs in this process.
+        scheduler: address of a running Dask scheduler (instead of a local cluster).
+        force: start over when ``out`` holds a study with another configuration (its
+            results are deleted); without it such a directory is refused.
+        robots: run only the first N robots of the configuration (a smaller study with
+            the same seeds; rows are the same as the full study's).
+        progress: called with ``(done, total)`` after every task.
+        client: an existing ``distributed.Client`` to use (tests, notebooks).
+
+    Returns:
+        A :class:`StudyRun`.
+
+    Raises:
+        StudyError: bad configuration, or ``out`` holds another study (without ``force``).
+    """
+    if not isinstance(config, StudyConfig):
+        config = load_study_config(config)
+    if robots is not None:
+        if robots < 1:
+            raise StudyError(f"robots={robots} must be >= 1")
+        config = config.model_copy(update={"robots": min(robots, config.robots)})
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg_path = out / "study.yaml"
+    results_path = out / "results.csv"
+    if cfg_path.exists():
+        try:
+            old = yaml.safe_load(cfg_path.read_text(encoding="utf-8"))
+        except (yaml.YAMLError, UnicodeDecodeError):
+            old = None
+        same = isinstance(old, dict) and _identity(old) == _identity(config.model_dump(mode="json"))
+        if not same:
+            if not force:
+                raise StudyError(
+                    f"{out} holds a study with another configuration ({cfg_path}); use --force to "
+                    "start over (its results are deleted) or choose another --out"
+                )
+            results_path.unlink(missing_ok=True)
+    elif results_path.exists():
+        if not force:
+            raise StudyError(f"{results_path} exists without its study.yaml; use --force to start over")
+        results_path.unlink()
+    prep = _prepare(config)
+    atomic_write_text(cfg_path, _config_text(config))
+    table = _Table(results_path, RESULT_COLUMNS, "case")
+    cases = study_cases(config)
+    done = {c.key for c in cases if c.key in table.rows and table.rows[c.key]["status"] != "error"}
+    todo = [c for c in cases if c.key not in done]
+    chunks = _chunks(prep, todo, config.chunk)
+    t0 = time.perf_counter()
+    executor = _Executor(workers, scheduler) if client is None else None
+    if client is not None:
+        executor = _Executor(0, None)
+        executor.client = client
+        executor.workers = len(client.scheduler_info().get("workers", {}))
+        executor.warm_up()
+    startup = time.perf_counter() - t0
+    computed = errors = finished = 0
+
+    def on_error(chunk: _Chunk, err: BaseException) -> list[dict[str, Any]]:
+        text = " ".join(f"{type(err).__name__}: {err}".split())
+        rows = []
+        for k in chunk.robots:
+            row = _empty_row(Case(k, chunk.pose_set, chunk.device), prep.engine)
+            row.update(status="error", message=f"task failed: {text} [input: {chunk.describe()}]")
+            rows.append(row)
+        return rows
+
+    t1 = time.perf_counter()
+    try:
+        for _chunk, rows in executor.map(_run_chunk, chunks, on_error):
+            table.append(rows)
+            computed += len(rows)
+            errors += sum(r["status"] == "error" for r in rows)
+            finished += 1
+            if progress is not None:
+                progress(len(done) + computed, len(cases))
+    finally:
+        seconds = time.perf_counter() - t1
+        if client is None:
+            executor.close()
+    mine = [table.rows[c.key] for c in cases if c.key in table.rows]
+    summary = _summarise(config, mine)
+    summary["seconds"] = seconds
+    summary["calibrations_per_second"] = computed / seconds if seconds > 0 else 0.0
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    _plot_summary(config, mine, out / "summary.png")
+    return StudyRun(
+        out=out,
+        total=len(cases),
+        computed=computed,
+        resumed=len(done),
+        errors=errors,
+        seconds=seconds,
+        startup_seconds=startup,
+        workers=executor.workers,
+        engine=prep.engine,
+        summary=summary,
+    )
+
+
+def _floats(rows: Sequence[Mapping[str, str]], column: str) -> Array:
+    out = []
+    for r in rows:
+        try:
+            v = float(r[column])
+        except (KeyError, ValueError):
+            continue
+        if math.isfinite(v):
+            out.append(v)
+    return np.array(out)
+
+
+def _summarise(config: StudyConfig, rows: Iterable[Mapping[str, str]]) -> dict[str, Any]:
+    """Per (pose set, device): counts and statistics of the ok rows (mm)."""
+    rows = list(rows)
+    groups = []
+    for s in config.pose_sets:
+        for d in config.devices:
+            mine = [r for r in rows if r["pose_set"] == s.name and r["device"] == d.name]
+            ok = [r for r in mine if r["status"] == "ok"]
+            entry: dict[str, Any] = {
+                "pose_set": s.name,
+                "device": d.name,
+                "cases": len(mine),
+                "ok": len(ok),
+                "not_converged": sum(r["status"] == "not-converged" for r in mine),
+                "errors": sum(r["status"] == "error" for r in mine),
+            }
+            for col in ("true_rms_mm", "val_rms_mm", "rms_after_mm", "rms_before_mm"):
+                v = _floats(ok, col)
+                if len(v):
+                    entry[col] = {
+                        "mean": float(v.mean()),
+                        "median": float(np.median(v)),
+                        "p95": float(np.percentile(v, 95)),
+                        "max": float(v.max()),
+                    }
+            groups.append(entry)
+    robot = config.robot if config.robot is not None else f"built from {config.geometry}"
+    return {"study": config.name, "robot": robot, "robots": config.robots, "groups": groups}
+
+
+def _plot_summary(config: StudyConfig, rows: Iterable[Mapping[str, str]], path: Path) -> None:
+    """Box plot of the held-out error against the true robot per (pose set, device), as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = list(rows)
+    labels, values = [], []
+    for s in config.pose_sets:
+        for d in config.devices:
+            v = _floats(
+                [
+                    r
+                    for r in rows
+                    if r["pose_set"] == s.name and r["device"] == d.name and r["status"] == "ok"
+                ],
+                "true_rms_mm",
+            )
+            labels.append(f"{s.name}\n{d.name}\n({len(v)} robots)")
+            values.append(v if len(v) else np.array([np.nan]))
+    fig, ax = plt.subplots(figsize=(max(4.0, 1.6 * len(labels)), 4.0), dpi=100)
+    ax.boxplot(values, showfliers=True)
+    ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=8)
+    ax.set_ylabel("held-out RMS error vs. the true robot (mm)")
+    robot = Path(config.robot or config.geometry or "").stem
+    ax.set_title(f"{config.name}: {config.robots} virtual robots ({robot})", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    _atomic_write_bytes(path, buf.getvalue())
+
+
+# =============================================================== fleets
+@dataclass(frozen=True, eq=False)
+class _FleetItem:
+    path: Path
+    name: str
+    model: Model
+    read_options: Mapping[str, Any]
+    calibrate_options: Mapping[str, Any]
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _fleet_task(item: _FleetItem) -> tuple[dict[str, Any], Any]:
+    """Read, calibrate and validate one measurement file: ``(row, CalibrationResult | None)``."""
+    from robocal.identify.calibrate import calibrate
+    from robocal.identify.validate import validate
+    from robocal.measure.dataset import read_measurements
+
+    t0 = time.perf_counter()
+    row: dict[str, Any] = dict.fromkeys(FLEET_COLUMNS, "")
+    row["file"] = item.name
+    try:
+        row["sha256"] = _sha256(item.path)
+        data = read_measurements(item.path, model=item.model, **item.read_options)
+        train, test = data, None
+        if data.split is not None and "test" in set(data.split.tolist()):
+            train, test = data.split_rows("train"), data.split_rows("test")
+        result = calibrate(item.model, train, **item.calibrate_options)
+        result.metadata |= {"data_file": str(item.path), "data_sha256": row["sha256"], "train_n": train.n}
+        _fill_fit(row, result, train.n, 0.0)
+        row.pop("iterations", None)
+        row.pop("dropped", None)
+        if test is not None:
+            stats = validate(result, test)
+            result.metadata["validation"] = stats.to_dict()
+            row.update(_stats(stats.errors))
+    except Exception as err:
+        row.update(status="error", message=" ".join(str(err).split()) or type(err).__name__)
+        result = None
+    row["seconds"] = time.perf_counter() - t0
+    return row, result
+
+
+@dataclass
+class FleetRun:
+    """What :func:`run_fleet` did: files calibrated now, found done, failed, skipped
+    (changed since their calibration, without ``force``), and where the table is."""
+
+    out: Path
+    table: Path
+    calibrated: int
+    resumed: int
+    errors: int
+    skipped: list[str]
+    seconds: float
+    workers: int
+    rows: list[dict[str, str]]
+
+    @property
+    def calibrations_per_second(self) -> float:
+        return self.calibrated / self.seconds if self.seconds > 0 else 0.0
+
+
+def run_fleet(
+    directory: str | os.PathLike[str],
+    model: Model,
+    out: str | os.PathLike[str] | None = None,
+    *,
+    pattern: str = "*.csv",
+    read_options: Mapping[str, Any] | None = None,
+    calibrate_options: Mapping[str, Any] | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    client: Any = None,
+) -> FleetRun:
+    """Calibrate one robot per measurement file of ``directory`` (files matching ``pattern``).
+
+    Every file is read with ``read_options`` (those of
+    :func:`robocal.read_measurements`), calibrated with ``calibrate_options`` (those of
+    :func:`robocal.calibrate`) and, when it has ``set`` = ``test`` rows, validated on
+    them.  ``out/<file stem>/`` receives ``model.yaml`` and ``result.json``;
+    ``out/fleet.csv`` one row per file (:data:`FLEET_COLUMNS`), written as each file is
+    done.  A file already calibrated with the same content (SHA-256) is not redone;
+    one changed since its calibration is skipped unless ``force`` (which recalibrates
+    every file and replaces the results).  A file that cannot be read or calibrated
+    gets an ``error`` row with the reason (file, row, column) and is retried next time.
+
+    Args:
+        directory: the folder of measurement files.
+        model: the robot model.
+        out: output folder (default ``directory/calibrated``).
+        workers, scheduler, client: where to run, as :func:`run_study`.
+        progress: called with ``(done, total)`` after every file.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise StudyError(f"{directory} is not a directory")
+    files = sorted(p for p in directory.glob(pattern) if p.is_file())
+    if not files:
+        raise StudyError(f"{directory}: no files match {pattern!r}")
+    out = Path(out) if out is not None else directory / "calibrated"
+    out.mkdir(parents=True, exist_ok=True)
+    table_path = out / "fleet.csv"
+    if force:
+        table_path.unlink(missing_ok=True)
+    table = _Table(table_path, FLEET_COLUMNS, "file")
+    names = {p: str(p.relative_to(directory)) for p in files}
+    stems = [p.stem for p in files]
+    twice = sorted({s for s in stems if stems.count(s) > 1})
+    if twice:
+        raise StudyError(
+            f"{directory}: several files share the name(s) {', '.join(twice)} (their results would clash)"
+        )
+    todo, skipped, resumed = [], [], 0
+    for p in files:
+        old = table.rows.get(names[p])
+        if old is None or old["status"] == "error":
+            todo.append(p)
+            continue
+        if old["sha256"] == _sha256(p):
+            resumed += 1
+        else:
+            skipped.append(names[p])
+    items = [
+        _FleetItem(p, names[p], model, dict(read_options or {}), dict(calibrate_options or {})) for p in todo
+    ]
+    t0 = time.perf_counter()
+    executor = _Executor(workers, scheduler) if client is None else _Executor(0, None)
+    if client is not None:
+        executor.client = client
+        executor.workers = len(client.scheduler_info().get("workers", {}))
+    calibrated = errors = 0
+
+    def on_error(item: _FleetItem, err: BaseException) -> tuple[dict[str, Any], None]:
+        row: dict[str, Any] = dict.fromkeys(FLEET_COLUMNS, "")
+        row.update(file=item.name, status="error", message=f"task failed: {type(err).__name__}: {err}")
+        return row, None
+
+    t1 = time.perf_counter()
+    try:
+        for item, (row, result) in executor.map(_fleet_task, items, on_error):
+            if result is not None:
+                target = out / item.path.stem
+                result.save(target)
+                row["result_dir"] = str(target)
+                calibrated += 1
+            else:
+                errors += 1
+            table.append([row])
+            if progress is not None:
+                progress(resumed + calibrated + errors, len(files))
+    finally:
+        seconds = time.perf_counter() - t1
+        if client is None:
+            executor.close()
+    del t0
+    return FleetRun(
+        out=out,
+        table=table_path,
+        calibrated=calibrated,
+        resumed=resumed,
+        errors=errors,
+        skipped=skipped,
+        seconds=seconds,
+        workers=executor.workers,
+        rows=[table.rows[names[p]] for p in files if names[p] in table.rows],
+    )

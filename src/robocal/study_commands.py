@@ -1,0 +1,246 @@
+"""``robocal study`` (Monte Carlo studies) and ``robocal fleet`` (one calibration per file).
+
+Commands:
+    robocal study CONFIG.yaml --out DIR [--workers N | --scheduler ADDR] [--robots N] [--force]
+        run or resume a study; the last line printed is ``calibrations/s: <number>``
+    robocal fleet DIR --robot NAME [--out OUT] [--pattern "*.csv"] [read options] [--force]
+        calibrate every measurement file of a folder; the last line is ``calibrations/s: <number>``
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.table import Table
+
+from robocal.console import console, err_console, fail
+
+__all__ = ["register"]
+
+Workers = Annotated[
+    int | None,
+    typer.Option(
+        "--workers", help="Dask worker processes on this machine (default: one per core; 0: no Dask)"
+    ),
+]
+Scheduler = Annotated[
+    str | None, typer.Option("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
+]
+NoProgress = Annotated[bool, typer.Option("--no-progress", help="no progress bar")]
+
+
+def _progress(enabled: bool, what: str):
+    if not enabled:
+        return None, None
+    bar = Progress(
+        TextColumn(f"[bold]{what}[/]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=err_console,
+        transient=True,
+    )
+    task = bar.add_task(what, total=None)
+
+    def update(done: int, total: int) -> None:
+        bar.update(task, completed=done, total=total)
+
+    return bar, update
+
+
+def _mm(stats: dict | None, key: str = "mean") -> str:
+    return "-" if not stats else f"{stats[key]:.4f}"
+
+
+def study_command(
+    config: Annotated[Path, typer.Argument(help="study configuration (YAML)")],
+    out: Annotated[Path, typer.Option("--out", help="study directory (results.csv, summary.json/png)")],
+    workers: Workers = None,
+    scheduler: Scheduler = None,
+    robots: Annotated[
+        int | None, typer.Option("--robots", help="only the first N robots (same seeds as the full study)")
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="--out holds another study: delete its results and start over")
+    ] = False,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="print the summary as JSON before the last line")
+    ] = False,
+    no_progress: NoProgress = False,
+) -> None:
+    """Monte Carlo study: virtual robots x pose sets x devices, each simulated, calibrated and
+    validated; resumes from OUT/results.csv."""
+    from robocal.study import StudyError, load_study_config, run_study
+
+    if not config.is_file():
+        raise fail(f"study file {config} does not exist")
+    try:
+        cfg = load_study_config(config)
+    except StudyError as err:
+        raise fail(str(err)) from None
+    bar, update = _progress(not no_progress, f"{cfg.name}")
+    try:
+        if bar is not None:
+            bar.start()
+        run = run_study(
+            cfg, out, workers=workers, scheduler=scheduler, force=force, robots=robots, progress=update
+        )
+    except StudyError as err:
+        raise fail(str(err)) from None
+    except OSError as err:
+        raise fail(f"{out}: {err}") from None
+    finally:
+        if bar is not None:
+            bar.stop()
+    if as_json:
+        print(json.dumps(run.summary))
+    else:
+        table = Table(
+            title=f"{cfg.name}: {run.total} cases (RMS: mean over the robots; true: against the true robot)",
+            title_justify="left",
+        )
+        table.add_column("pose set", no_wrap=True)
+        table.add_column("device", no_wrap=True)
+        for col in ("ok", "not conv.", "errors", "true RMS mm", "p95 mm", "val RMS mm"):
+            table.add_column(col, justify="right")
+        for g in run.summary["groups"]:
+            table.add_row(
+                g["pose_set"],
+                g["device"],
+                str(g["ok"]),
+                str(g["not_converged"]),
+                str(g["errors"]),
+                _mm(g.get("true_rms_mm")),
+                _mm(g.get("true_rms_mm"), "p95"),
+                _mm(g.get("val_rms_mm")),
+            )
+        console.print(table)
+    where = f"{run.workers} Dask worker(s)" if run.workers else "this process"
+    console.print(
+        f"wrote {run.out / 'results.csv'}, {run.out / 'summary.json'} and {run.out / 'summary.png'}; "
+        f"{run.computed} computed on {where} (engine {run.engine}) in {run.seconds:.2f} s"
+        + (f" + {run.startup_seconds:.1f} s start-up" if run.startup_seconds >= 0.05 else "")
+        + (f", {run.resumed} already in the table" if run.resumed else "")
+        + (f", [red]{run.errors} error(s)[/] (see the message column)" if run.errors else ""),
+        highlight=False,
+    )
+    console.print(f"calibrations/s: {run.calibrations_per_second:.1f}", highlight=False)
+
+
+def fleet_command(
+    directory: Annotated[Path, typer.Argument(help="folder of measurement files, one per robot")],
+    robot_name: Annotated[str | None, typer.Option("--robot", help="catalog robot")] = None,
+    model_path: Annotated[Path | None, typer.Option("--model", help="model YAML file")] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="output folder (default DIR/calibrated)")] = None,
+    pattern: Annotated[str, typer.Option("--pattern", help="which files of DIR")] = "*.csv",
+    method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
+    tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
+    compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
+    length_unit: Annotated[str, typer.Option("--length-unit", help="m | mm | um")] = "m",
+    angle_unit: Annotated[str, typer.Option("--angle-unit", help="rad | deg")] = "rad",
+    columns: Annotated[str | None, typer.Option("--columns", help='renames, "q1=a,x=b"')] = None,
+    sep: Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")] = None,
+    decimal: Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')] = ".",
+    orientation: Annotated[
+        str, typer.Option("--orientation", help="auto | none | quaternion | ...")
+    ] = "auto",
+    workers: Workers = None,
+    scheduler: Scheduler = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="recalibrate every file and replace the previous results")
+    ] = False,
+    no_progress: NoProgress = False,
+) -> None:
+    """Calibrate every measurement file of a folder (one robot each); resumes from OUT/fleet.csv."""
+    from robocal.cli import resolve_model
+    from robocal.study import StudyError, run_fleet
+
+    if (robot_name is None) == (model_path is None):
+        raise fail("give exactly one of --robot NAME or --model FILE")
+    model = resolve_model(robot_name if robot_name is not None else str(model_path))
+    calibrate_options: dict = {"method": method, "compliance": compliance}
+    if tool is not None:
+        try:
+            guess = np.array([float(v) for v in tool.replace(",", " ").split()]) * 1e-3
+        except ValueError:
+            raise fail(f"--tool {tool!r}: three numbers in mm") from None
+        if guess.shape != (3,):
+            raise fail(f"--tool {tool!r}: three numbers in mm")
+        calibrate_options["tool_guess"] = guess
+    read_options = dict(
+        length_unit=length_unit,
+        angle_unit=angle_unit,
+        columns=columns,
+        sep=sep,
+        decimal=decimal,
+        orientation=orientation,
+    )
+    bar, update = _progress(not no_progress, "fleet")
+    try:
+        if bar is not None:
+            bar.start()
+        run = run_fleet(
+            directory,
+            model,
+            out,
+            pattern=pattern,
+            read_options=read_options,
+            calibrate_options=calibrate_options,
+            workers=workers,
+            scheduler=scheduler,
+            force=force,
+            progress=update,
+        )
+    except StudyError as err:
+        raise fail(str(err)) from None
+    finally:
+        if bar is not None:
+            bar.stop()
+    table = Table(title=f"{model.name} fleet: {directory}", title_justify="left")
+    for col in ("file", "status", "poses", "RMS before mm", "RMS after mm", "held-out RMS mm"):
+        table.add_column(col, justify="left" if col in ("file", "status") else "right")
+    for row in run.rows:
+        status = row["status"] if row["status"] == "ok" else f"[red]{row['status']}[/]"
+        table.add_row(
+            row["file"],
+            status,
+            row["n_poses"] or "-",
+            _fmt(row["rms_before_mm"]),
+            _fmt(row["rms_after_mm"]),
+            _fmt(row["val_rms_mm"]),
+        )
+    console.print(table)
+    for row in run.rows:
+        if row["status"] != "ok" and row["message"]:
+            err_console.print(f"[red]{row['file']}:[/] {row['message']}", highlight=False)
+    for name in run.skipped:
+        err_console.print(
+            f"[yellow]skipped {name}:[/] changed since its calibration; --force recalibrates it "
+            "(and replaces the previous result)",
+            highlight=False,
+        )
+    console.print(
+        f"wrote {run.table} and one folder per calibrated file in {run.out}; {run.calibrated} calibrated, "
+        f"{run.errors} failed, {run.resumed} already done, {len(run.skipped)} skipped, "
+        f"in {run.seconds:.2f} s",
+        highlight=False,
+    )
+    console.print(f"calibrations/s: {run.calibrations_per_second:.1f}", highlight=False)
+
+
+def _fmt(text: str) -> str:
+    try:
+        return f"{float(text):.4f}"
+    except ValueError:
+        return "-"
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``study`` and ``fleet`` to the ``robocal`` app."""
+    app.command("study")(study_command)
+    app.command("fleet")(fleet_command)
