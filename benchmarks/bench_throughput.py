@@ -21,8 +21,8 @@ Rows (same machine, same run, interleaved rounds, the best of ``--rounds``):
   last row written, the cluster's start-up is reported apart.
 
 ``--malloc`` adds a Dask row with Dask's default worker environment
-(``MALLOC_TRIM_THRESHOLD_=65536`` without robocal's ``MALLOC_MMAP_THRESHOLD_``), to show
-why study.py sets it.
+(``MALLOC_TRIM_THRESHOLD_=65536``, glibc's mmap threshold then frozen at 128 KiB) instead
+of robocal's (16 MiB mmap threshold, 64 MiB trim threshold), to show why study.py sets it.
 
 Run: ``python benchmarks/bench_throughput.py [--robots 400] [--rounds 3] [--model built|dh|both]``
 (about two minutes for both models).
@@ -74,7 +74,7 @@ def measure(model: str, robots: int, engine: str, workers: int, seed: int, dask_
     """(calibrations per second, start-up seconds) of one fresh study.
 
     ``dask_defaults``: a LocalCluster made here with Dask's own worker environment
-    (robocal's cluster adds ``MALLOC_MMAP_THRESHOLD_``), passed to the study as a client.
+    (robocal's cluster changes the malloc thresholds), passed to the study as a client.
     """
     with tempfile.TemporaryDirectory() as tmp:
         if not dask_defaults:
@@ -85,7 +85,8 @@ def measure(model: str, robots: int, engine: str, workers: int, seed: int, dask_
 
             from distributed import Client, LocalCluster
 
-            os.environ.pop("MALLOC_MMAP_THRESHOLD_", None)
+            for name in ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_"):
+                os.environ.pop(name, None)
             t0 = time.perf_counter()
             with (
                 LocalCluster(

@@ -439,6 +439,6 @@ def test_guard_on_data_of_another_robot(tracker_data):
     """UR10 measurements calibrated as a UR5: the guard sees what the fit did."""
     _, _, _, data = tracker_data
     ur5 = rc.robot("ur5")
-    result = rc.calibrate(ur5, data, tool_guess=[0, 0, 0.1])
+    # rc.calibrate runs the guard itself: it stops instead of returning a bad model
     with pytest.raises(CalibrationGuardError, match="implausible parameter changes"):
-        check_solution(result)
+        rc.calibrate(ur5, data, tool_guess=[0, 0, 0.1])

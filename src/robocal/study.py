@@ -63,12 +63,16 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from robocal import spatial
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Joint, Model, Step
-from robocal.model.files import atomic_write_text
+from robocal.model.files import atomic_write_text, format_validation_error
 
 __all__ = [
+    "FLEET_COLUMNS",
     "RESULT_COLUMNS",
     "BatchFit",
     "Case",
+    "DeviceSpec",
+    "FleetRun",
+    "PoseSetSpec",
     "StudyConfig",
     "StudyError",
     "StudyRun",
@@ -254,18 +258,6 @@ class StudyConfig(BaseModel):
         return items
 
 
-def _format_validation_error(err: ValidationError) -> str:
-    lines = []
-    for e in err.errors():
-        loc = ""
-        for part in e["loc"]:
-            loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
-        got = e.get("input")
-        got_text = "" if isinstance(got, dict | list) or got is None else f" (got {got!r})"
-        lines.append(f"{loc or '<file>'}: {e['msg']}{got_text}")
-    return "; ".join(lines)
-
-
 def load_study_config(path: str | os.PathLike[str]) -> StudyConfig:
     """Read and validate a study YAML file.
 
@@ -296,7 +288,7 @@ def load_study_config(path: str | os.PathLike[str]) -> StudyConfig:
     try:
         config = StudyConfig.model_validate(data)
     except ValidationError as err:
-        raise StudyError(f"{path}: {_format_validation_error(err)}") from None
+        raise StudyError(f"{path}: {format_validation_error(err)}") from None
     # paths relative to the config file
     base = path.parent
     robot, geometry = config.robot, config.geometry
@@ -1246,14 +1238,22 @@ class _Executor:
                 raise StudyError(f"workers={n}: give 1 or more (0 runs in this process)")
             # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's
             # mmap threshold at 128 KiB: every Jacobian-sized array is then mmapped and
-            # page-faulted afresh, about half the speed here (benchmarks/bench_throughput.py
-            # --malloc).  Arrays up to 16 MiB come from the heap instead.  (The nanny sets
-            # these variables in this process before it spawns a worker: put them back.)
+            # page-faulted afresh, and freed heap is given back at once, ~1.5x slower here
+            # (benchmarks/bench_throughput.py --malloc).  Arrays up to 16 MiB come from the
+            # heap instead, and up to 64 MiB of freed heap is kept.  (The nanny sets these
+            # variables in this process before it spawns a worker: put them back after.)
             environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
             environ["MALLOC_MMAP_THRESHOLD_"] = 16 << 20
+            environ["MALLOC_TRIM_THRESHOLD_"] = 64 << 20
             saved = {k: os.environ.get(k) for k in environ}
+            settings = {
+                "distributed.nanny.pre-spawn-environ": environ,
+                # the statistical profiler feeds the dashboard (off here) and samples the
+                # task's stack every 10 ms: ~15 % of a worker's time in this code
+                "distributed.worker.profile.enabled": False,
+            }
             try:
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                with dask.config.set(settings):
                     self.cluster = LocalCluster(
                         n_workers=n,
                         threads_per_worker=1,
@@ -1610,6 +1610,9 @@ def run_fleet(
     out = Path(out) if out is not None else directory / "calibrated"
     out.mkdir(parents=True, exist_ok=True)
     table_path = out / "fleet.csv"
+    files = [p for p in files if p.resolve() != table_path.resolve()]  # --out DIR: not its own table
+    if not files:
+        raise StudyError(f"{directory}: no measurement files match {pattern!r}")
     if force:
         table_path.unlink(missing_ok=True)
     table = _Table(table_path, FLEET_COLUMNS, "file")
@@ -1633,11 +1636,11 @@ def run_fleet(
     items = [
         _FleetItem(p, names[p], model, dict(read_options or {}), dict(calibrate_options or {})) for p in todo
     ]
-    t0 = time.perf_counter()
     executor = _Executor(workers, scheduler) if client is None else _Executor(0, None)
     if client is not None:
         executor.client = client
         executor.workers = len(client.scheduler_info().get("workers", {}))
+        executor.warm_up()
     calibrated = errors = 0
 
     def on_error(item: _FleetItem, err: BaseException) -> tuple[dict[str, Any], None]:
@@ -1662,7 +1665,6 @@ def run_fleet(
         seconds = time.perf_counter() - t1
         if client is None:
             executor.close()
-    del t0
     return FleetRun(
         out=out,
         table=table_path,

@@ -100,29 +100,9 @@ def start_chain(result: CalibrationResult) -> Model | None:
 
 def _stats(predicted: Array, data: Measurements, label: str) -> ValidationStats:
     """Error statistics of predicted tool frames ``(n, 4, 4)`` (device frame) on ``data``."""
-    from robocal import spatial
+    from robocal.identify.validate import validation_statistics
 
-    d = predicted[:, :3, 3] - data.position
-    e = np.linalg.norm(d, axis=1)
-    o_mean = o_max = None
-    if data.orientation is not None:
-        w = spatial.matrix_to_rotvec(predicted[:, :3, :3] @ np.swapaxes(data.orientation, -1, -2))
-        a = np.linalg.norm(w, axis=1)
-        o_mean, o_max = float(a.mean()), float(a.max())
-    return ValidationStats(
-        n=data.n,
-        mean=float(e.mean()),
-        rms=float(np.sqrt(np.mean(e**2))),
-        max=float(e.max()),
-        p95=float(np.percentile(e, 95)),
-        axis_mean_abs=tuple(float(v) for v in np.abs(d).mean(axis=0)),
-        axis_rms=tuple(float(v) for v in np.sqrt(np.mean(d**2, axis=0))),
-        frame=label,
-        errors=e,
-        error_vectors=d,
-        orientation_mean=o_mean,
-        orientation_max=o_max,
-    )
+    return validation_statistics(predicted, data, label)
 
 
 def before_validation(result: CalibrationResult, data: Measurements) -> ValidationStats | None:

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
+from robocal.identify.guards import check_problem, check_solution
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
 from robocal.identify.subset import Dropped, select_columns
@@ -642,7 +643,7 @@ def calibrate(
     relaxation: float = 0.5,
     max_iterations: int = 200,
     max_std: float = 5e-4,
-    max_std_ratio: float = 20.0,
+    max_std_ratio: float = 3.0,
     compliance: bool | Sequence[str] = False,
     gravity: ArrayLike = (0.0, 0.0, -9.81),
     level: int | str | None = None,
@@ -681,9 +682,9 @@ def calibrate(
         max_std: a parameter whose standard deviation, as a displacement of the tool (m;
             rotations times the robot's size), exceeds this is fixed at its start value
             and the fit repeated: it is not identifiable from these measurements.
-        max_std_ratio: ... or exceeds this many times the residual standard deviation
-            (per axis), whichever is larger: with noisy measurements the threshold grows
-            with the noise.
+        max_std_ratio: ... and exceeds this many times the median standard deviation of
+            all estimated parameters (as tool displacement): with noisy measurements
+            every σ is large, which is not a reason to drop a parameter.
         compliance: also identify joint compliances under gravity, δθ_j = -c_j τ_j(q)
             (c in rad per N·m, τ the torque that holds the arm against gravity, from
             the model's mass properties: the joint gives way under its load): ``True`` for every
@@ -732,6 +733,11 @@ def calibrate(
     if measure == "pose" and data.orientation is None:
         raise ValueError("measure='pose' needs measured orientations")
     n = data.n
+    # stop with an explanation when the data cannot determine the model (identical
+    # poses, joints that never move, too few poses...) rather than fit a silent bad model
+    problem_warnings = check_problem(
+        model, data, measure=measure, frame=frame, tool=tool, tool_guess=tool_guess
+    )
     level_number = parse_level(level)
     plan = _effect_plan(model, level_number, effects, compliance)
     if plan.mode != "none" and load_passes > 1:
@@ -847,11 +853,15 @@ def calibrate(
     dropped = list(selection.dropped)
     _, cov, std, corr, cond = _uncertainty(problem, x)
     # drop what these measurements cannot determine, worst first, and refit
-    for _ in range(len(x) - 1 if result.success else 0):  # an unconverged fit says nothing about σ
+    # an unconverged fit says nothing about σ; a bounded fit keeps every parameter within
+    # its bounds, so a poorly determined one cannot run away and is better kept
+    prune = result.success and method != "bounded"
+    for _ in range(len(x) - 1 if prune else 0):
         move = std * problem.free_scale
         worst = int(np.argmax(move))
-        noise = float(np.sqrt(np.mean(problem.residual(x, weighted=False).reshape(n, rows)[:, :3] ** 2)))
-        if move[worst] <= max(max_std, max_std_ratio * noise):
+        # poorly identifiable: beyond the absolute threshold and far beyond the other
+        # parameters' uncertainty (noisy data makes every σ large; that is not a reason)
+        if move[worst] <= max(max_std, max_std_ratio * float(np.median(move))):
             break
         dropped.append(Dropped(names[worst], "poorly identifiable", sigma=float(move[worst])))
         keep = np.arange(len(x)) != worst
@@ -905,7 +915,7 @@ def calibrate(
         }
         calibrated = dataclasses.replace(calibrated, joint_effects=effects_from_values(model, values))
     seconds = time.perf_counter() - t_start
-    return CalibrationResult(
+    calibration = CalibrationResult(
         model=calibrated,
         frame=T_device_base,
         measure=measure,
@@ -938,3 +948,5 @@ def calibrate(
         },
         payload=payload,
     )
+    calibration.metadata["warnings"] = problem_warnings + check_solution(calibration)
+    return calibration

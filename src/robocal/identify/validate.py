@@ -24,7 +24,7 @@ from robocal.identify.calibrate import CalibrationResult, calibrate
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 
-__all__ = ["ValidationStats", "cross_validate", "validate"]
+__all__ = ["ValidationStats", "cross_validate", "validate", "validation_statistics"]
 
 Array = NDArray[np.float64]
 
@@ -110,7 +110,13 @@ def validate(
         label = "refit"
     else:
         T_frame = np.asarray(frame, dtype=float)
-    predicted = T_frame @ T
+    return validation_statistics(T_frame @ T, data, label)
+
+
+def validation_statistics(predicted: Array, data: Measurements, frame: str = "given") -> ValidationStats:
+    """Error statistics of predicted tool frames ``(n, 4, 4)`` (device frame) against the
+    measured positions (and orientations) of ``data``; ``frame`` says how the device
+    frame was obtained."""
     d = predicted[:, :3, 3] - data.position
     e = np.linalg.norm(d, axis=1)
     o_mean = o_max = None
@@ -126,7 +132,7 @@ def validate(
         p95=float(np.percentile(e, 95)),
         axis_mean_abs=tuple(float(v) for v in np.abs(d).mean(axis=0)),
         axis_rms=tuple(float(v) for v in np.sqrt(np.mean(d**2, axis=0))),
-        frame=label,
+        frame=frame,
         errors=e,
         error_vectors=d,
         orientation_mean=o_mean,

@@ -614,7 +614,7 @@ def load_geometry(path: str | Path) -> Geometry:
           - {type: revolute, position: [0, 0, -50], axis: [0, 0, -1]}
         tcp: {position: [0, 0, -100]}
     """
-    from robocal.model.files import MAX_FILE_BYTES, _format_validation_error, _NoAliasLoader
+    from robocal.model.files import MAX_FILE_BYTES, _NoAliasLoader, format_validation_error
 
     path = Path(path)
     if path.exists() and not path.is_file():  # a FIFO or a device would never end
@@ -636,7 +636,7 @@ def load_geometry(path: str | Path) -> Geometry:
     try:
         spec = _GeometryFile.model_validate(data)
     except ValidationError as err:
-        raise GeometryError(f"{path}: {_format_validation_error(err)}") from None
+        raise GeometryError(f"{path}: {format_validation_error(err)}") from None
     L = 1e-3 if spec.unit == "mm" else 1.0
     A = math.pi / 180 if spec.angle_unit == "deg" else 1.0
     joints = []

@@ -257,7 +257,7 @@ def _joint_effects(specs: list[_JointEffectsSpec], steps: list[Step], units: _Un
     return out
 
 
-def _format_validation_error(err: ValidationError) -> str:
+def format_validation_error(err: ValidationError) -> str:
     lines = []
     for e in err.errors():
         loc = ""
@@ -276,7 +276,7 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
     try:
         spec = _ModelFile.model_validate(data)
     except ValidationError as err:
-        raise ModelFileError(f"{origin}: {_format_validation_error(err)}") from None
+        raise ModelFileError(f"{origin}: {format_validation_error(err)}") from None
     count = len(spec.base) + 5 * len(spec.links) + len(spec.chain) + len(spec.tool)
     if count > MAX_STEPS:
         raise ModelFileError(f"{origin}: about {count} steps; a model file may have up to {MAX_STEPS}")
