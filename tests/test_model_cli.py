@@ -19,6 +19,10 @@ def test_model_build_writes_a_model_and_reports_the_count(tmp_path):
     result = runner.invoke(
         app, ["model", "build", str(GEOMETRY / "scara_rrpr.yaml"), "--measure", "position", "-o", str(out)]
     )
+    assert result.exit_code == 2 and "already exists; use --force" in result.output
+    assert len(rc.load_model(out).free_names) == 20  # the first model is untouched
+    args = ["model", "build", str(GEOMETRY / "scara_rrpr.yaml"), "--measure", "position", "-o", str(out)]
+    result = runner.invoke(app, [*args, "--force"])
     assert "17 identified parameters" in result.output
 
 

@@ -96,7 +96,9 @@ def test_report_from_a_directory_and_the_command(calibration, tmp_path):
     res = runner.invoke(app, ["report", str(tmp_path), "-o", str(out)])
     assert res.exit_code == 0, res.output
     assert out.is_file() and "wrote" in res.output
-    res = runner.invoke(app, ["report", str(tmp_path / "nothing"), "-o", str(out)])
+    res = runner.invoke(app, ["report", str(tmp_path), "-o", str(out)])
+    assert res.exit_code == 2 and "--force" in res.output  # an existing report is kept
+    res = runner.invoke(app, ["report", str(tmp_path / "nothing"), "-o", str(out), "--force"])
     assert res.exit_code == 2 and "holds no calibration result" in res.output
 
 

@@ -25,7 +25,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail
+from robocal.console import console, err_console, fail, refuse_overwrite
 
 __all__ = ["register"]
 
@@ -93,8 +93,11 @@ def compensate_command(
     sep: Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")] = None,
     decimal: Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')] = ".",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Corrected joint commands that bring the calibrated robot onto an off-line program's targets."""
+    if out is not None:
+        refuse_overwrite(out, force, "output file")
     from robocal.compensate.commands import (
         TargetFileError,
         compensate,

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from robocal.console import console, fail
+from robocal.console import console, fail, refuse_overwrite
 
 __all__ = ["register"]
 
@@ -41,8 +41,11 @@ def report_command(
     orientation: Annotated[
         str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
     ] = "auto",
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Write the self-contained HTML report of a calibration (works offline)."""
+    if output is not None:
+        refuse_overwrite(output, force, "report")
     from robocal.evaluate.report import write_report
     from robocal.identify.calibrate import CalibrationResult
     from robocal.measure.dataset import MeasurementFileError, read_measurements
@@ -102,8 +105,11 @@ def demo_command(
     poses: Annotated[int, typer.Option("--poses", help="calibration poses (chosen O1-optimally)")] = 50,
     quick: Annotated[bool, typer.Option("--quick", help="fewer poses and cycles: a faster run")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Calibrate a virtual robot end to end and write the report (under a minute)."""
+    if out is not None:
+        refuse_overwrite(out, force, "demo folder")
     from robocal.demo import run_demo
     from robocal.model.catalog import robots
 

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from robocal.console import fail
+from robocal.console import fail, refuse_overwrite
 
 __all__ = ["register"]
 
@@ -18,8 +18,11 @@ def reproduce_command(
     out: Annotated[Path | None, typer.Option("--out", help="directory for the report and files")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
     quick: Annotated[bool, typer.Option("--quick", help="a smaller, faster run")] = False,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Reproduce a seed's experiment and print its published numbers next to robocal's."""
+    if out is not None:
+        refuse_overwrite(out, force, "folder")
     from robocal.experiments import get
 
     try:

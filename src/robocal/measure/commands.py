@@ -23,7 +23,7 @@ import typer
 from rich.table import Table
 
 from robocal import spatial
-from robocal.console import console, err_console, fail
+from robocal.console import console, err_console, fail, refuse_overwrite
 from robocal.measure.dataset import (
     PROBLEM_CODES,
     MeasurementFileError,
@@ -218,8 +218,11 @@ def simulate_command(
     train: Annotated[
         float | None, typer.Option(help="fraction of rows labelled train (the rest test)")
     ] = None,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
+    if output is not None:
+        refuse_overwrite(output, force, "measurement file")
     model = _model(robot)
     if device not in DEVICES:
         raise fail(f"unknown device {device!r}; known: {', '.join(DEVICES)}")

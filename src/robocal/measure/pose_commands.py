@@ -24,7 +24,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail
+from robocal.console import console, err_console, fail, refuse_overwrite
 
 __all__ = ["register"]
 
@@ -75,8 +75,11 @@ def poses_command(
         str | None,
         typer.Option("--region", help='box the cube must lie in, mm: "xmin,ymin,zmin,xmax,ymax,zmax"'),
     ] = None,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Choose poses to measure and write them as a poses CSV (joint columns only, rad/m)."""
+    if output is not None:
+        refuse_overwrite(output, force, "poses file")
     from robocal.cli import resolve_model  # late import: robocal.cli imports this module
     from robocal.identify.observability import identifiable_parameters, observability, select_poses
     from robocal.measure.poses import diagonal_plane_poses, iso9283_poses, random_poses, write_poses

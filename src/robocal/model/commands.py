@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail
+from robocal.console import console, err_console, fail, refuse_overwrite
 
 __all__ = ["register"]
 
@@ -25,8 +25,11 @@ def build_command(
         str | None, typer.Option("--measure", help="position | pose (default: the file's, else pose)")
     ] = None,
     tip: Annotated[str | None, typer.Option("--tip", help="URDF: frame to end the chain at")] = None,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Build a complete, minimal, singularity-free model from joint geometry (seed 000)."""
+    if output is not None:
+        refuse_overwrite(output, force, "model file")
     from robocal.model.builder import GeometryError, load_geometry
     from robocal.model.files import save_model
     from robocal.model.urdf import URDFError, build_from_urdf
@@ -69,8 +72,11 @@ def build_command(
 def show_command(
     model_name: Annotated[str, typer.Argument(help="catalog name or model file")],
     output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write")],
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Write a self-contained interactive 3D view of a model with its parameter table."""
+    if output is not None:
+        refuse_overwrite(output, force, "view")
     from robocal.cli import resolve_model
     from robocal.model.view import write_model_view
 
