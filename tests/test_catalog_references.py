@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
+from tests.reference import dh_matrix as dh_std
+from tests.reference import mdh_matrix as dh_mod
 
 PI = np.pi
 DEG = PI / 180.0
@@ -59,32 +61,6 @@ def urdf_fk(joints, tool: np.ndarray, q) -> np.ndarray:
     for (place, axis), qi in zip(joints, q, strict=True):
         T = T @ place @ rot(axis, qi)
     return T @ tool
-
-
-def dh_std(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
-    """Standard DH link matrix written out (Spong/Corke form)."""
-    ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
-    return np.array(
-        [
-            [ct, -st * ca, st * sa, a * ct],
-            [st, ct * ca, -ct * sa, a * st],
-            [0.0, sa, ca, d],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
-
-
-def dh_mod(alpha: float, a: float, theta: float, d: float) -> np.ndarray:
-    """Craig's modified DH link matrix written out (Craig eq. 3.6)."""
-    ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
-    return np.array(
-        [
-            [ct, -st, 0.0, a],
-            [st * ca, ct * ca, -sa, -sa * d],
-            [st * sa, ct * sa, ca, ca * d],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
 
 
 def random_q(model, n: int, seed: int) -> np.ndarray:

@@ -1,9 +1,11 @@
+import subprocess
 from pathlib import Path
 
 from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
+from tests.browser import chromium
 
 runner = CliRunner()
 GEOMETRY = Path(__file__).resolve().parents[1] / "examples" / "geometry"
@@ -68,30 +70,9 @@ def test_model_errors_are_one_line(tmp_path):
 
 def test_model_view_renders_in_headless_chromium(tmp_path):
     """Runs where Chromium is installed (apt install chromium); CI machines skip it."""
-    import shutil
-    import subprocess
-
-    import pytest
-
-    browser = shutil.which("chromium") or shutil.which("chromium-browser")
-    if browser is None:
-        pytest.skip("chromium is not installed")
+    command = chromium(tmp_path / "profile", "--dump-dom")
     out = tmp_path / "view.html"
     runner.invoke(app, ["model", "show", "irb2400", "-o", str(out)])
-    flags = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--virtual-time-budget=5000",
-    ]
-    dom = subprocess.run(
-        [browser, *flags, "--dump-dom", out.as_uri()], capture_output=True, text=True, timeout=120
-    )
+    dom = subprocess.run([*command, out.as_uri()], capture_output=True, text=True, timeout=120)
     assert "main-svg" in dom.stdout  # plotly drew the figure
     assert "gl-container" in dom.stdout or "scene" in dom.stdout  # the 3D scene exists

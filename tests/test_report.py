@@ -2,7 +2,6 @@
 renders in headless Chromium without console errors (where Chromium is installed)."""
 
 import re
-import shutil
 import subprocess
 
 import numpy as np
@@ -14,6 +13,7 @@ from robocal.cli import app
 from robocal.demo import GravityCompliance, complete_model
 from robocal.evaluate.report import before_validation, build_report, start_chain, write_report
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
+from tests.browser import chromium
 
 runner = CliRunner()
 SECTIONS = (
@@ -118,30 +118,16 @@ def test_report_rejects_data_of_another_robot(calibration):
 
 def test_report_renders_in_headless_chromium_without_console_errors(calibration, tmp_path):
     """Runs where Chromium is installed (apt install chromium); CI machines skip it."""
-    browser = shutil.which("chromium") or shutil.which("chromium-browser")
-    if browser is None:
-        pytest.skip("chromium is not installed")
     result, train, test = calibration
     path = write_report(result, tmp_path / "r.html", data=train, test_data=test)
-    flags = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        "--virtual-time-budget=5000",
+    flags = chromium(
+        tmp_path / "profile",
         "--host-resolver-rules=MAP * ~NOTFOUND",  # any request off the page would fail and be logged
         "--enable-logging=stderr",
         "--v=0",
         "--window-size=1300,2000",
-    ]
-    run = subprocess.run(
-        [browser, *flags, "--dump-dom", path.as_uri()], capture_output=True, text=True, timeout=180
     )
+    run = subprocess.run([*flags, "--dump-dom", path.as_uri()], capture_output=True, text=True, timeout=180)
     console = [line for line in run.stderr.splitlines() if ":CONSOLE" in line]
     errors = [line for line in console if re.search(r"Uncaught|Error|Failed|net::ERR|Refused", line)]
     assert not errors, errors

@@ -85,6 +85,15 @@ PLOT_CONFIG = {"displaylogo": False, "responsive": True, "toImageButtonOptions":
 
 
 # ---------------------------------------------------------------------- before / after
+
+
+def _points3d(points: Array, **style: Any):
+    """A plotly 3D scatter of ``(n, 3)`` points (mm) with the given trace style."""
+    import plotly.graph_objects as go
+
+    return go.Scatter3d(x=points[:, 0], y=points[:, 1], z=points[:, 2], **style)
+
+
 def start_chain(result: CalibrationResult) -> Model | None:
     """The measurement chain at the identification's start values: the nominal robot
     with the device frame and the tool fitted in closed form (None for results saved
@@ -199,10 +208,8 @@ def _fig_coverage(result: CalibrationResult, sets: Sequence[tuple[str, Measureme
     for name, data, colour in sets:
         p = result.model.fk(data.q)[:, :3, 3] * 1e3
         fig.add_trace(
-            go.Scatter3d(
-                x=p[:, 0],
-                y=p[:, 1],
-                z=p[:, 2],
+            _points3d(
+                p,
                 mode="markers",
                 name=f"{name} ({data.n})",
                 marker={
@@ -218,10 +225,8 @@ def _fig_coverage(result: CalibrationResult, sets: Sequence[tuple[str, Measureme
         if cube:
             e = _cube_edges(np.asarray(cube["center"]), cube["side"]) * 1e3
             fig.add_trace(
-                go.Scatter3d(
-                    x=e[:, 0],
-                    y=e[:, 1],
-                    z=e[:, 2],
+                _points3d(
+                    e,
                     mode="lines",
                     name="ISO 9283 cube",
                     line={"color": "#555", "width": 2},
@@ -229,10 +234,8 @@ def _fig_coverage(result: CalibrationResult, sets: Sequence[tuple[str, Measureme
             )
         c = np.asarray(iso["commanded"]) * 1e3
         fig.add_trace(
-            go.Scatter3d(
-                x=c[:, 0],
-                y=c[:, 1],
-                z=c[:, 2],
+            _points3d(
+                c,
                 mode="markers+text",
                 text=iso["labels"],
                 name="P1–P5",
@@ -242,10 +245,8 @@ def _fig_coverage(result: CalibrationResult, sets: Sequence[tuple[str, Measureme
     for path in ev.get("paths", []):
         c = np.asarray(path["commanded"]) * 1e3
         fig.add_trace(
-            go.Scatter3d(
-                x=c[:, 0],
-                y=c[:, 1],
-                z=c[:, 2],
+            _points3d(
+                c,
                 mode="lines",
                 name=path["name"],
                 line={"color": COMPENSATED, "width": 4},
@@ -434,10 +435,8 @@ def _fig_error_vectors(points: Array, before: Array | None, after: Array, title:
     fig = go.Figure()
     p = points * 1e3
     fig.add_trace(
-        go.Scatter3d(
-            x=p[:, 0],
-            y=p[:, 1],
-            z=p[:, 2],
+        _points3d(
+            p,
             mode="markers",
             name="measured position",
             marker={"size": 2, "color": "#444"},
@@ -453,10 +452,8 @@ def _fig_error_vectors(points: Array, before: Array | None, after: Array, title:
         tips = p + vec * 1e3 * k
         seg = np.stack([p, tips, np.full_like(p, np.nan)], axis=1).reshape(-1, 3)
         fig.add_trace(
-            go.Scatter3d(
-                x=seg[:, 0],
-                y=seg[:, 1],
-                z=seg[:, 2],
+            _points3d(
+                seg,
                 mode="lines",
                 visible=visible,
                 name=f"error {label} calibration × {k:g}",
