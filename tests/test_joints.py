@@ -406,3 +406,24 @@ def test_cli_level_3(tmp_path, katana_data):
         ],
     )
     assert result.exit_code == 2 and "unknown calibration level" in result.output
+
+
+def test_joint_tilting_round_trips_through_a_simulation_truth_file(tmp_path):
+    """A simulated robot with seed 003's joint model can be rebuilt from its saved truth."""
+    import robocal as rc
+    from robocal.measure.devices import LaserTracker
+    from robocal.measure.simulate import VirtualRobot, load_truth, save_simulation, simulate
+    from robocal.model.dynamics import Payload
+    from robocal.model.joints import JointTilting
+
+    katana = rc.robot("katana450")
+    effect = JointTilting(payload=Payload(0.3, (0.0, 0.0, 0.05)))
+    robot = VirtualRobot(katana, katana, LaserTracker(), effect)
+    q = np.zeros((3, katana.dof))
+    data = simulate(robot, q, seed=1)
+    path, _ = save_simulation(robot, data, tmp_path / "meas.csv", seed=1)
+    truth = load_truth(path)
+    assert len(truth.joint_effects) == 1
+    rebuilt = truth.joint_effects[0]
+    assert isinstance(rebuilt, JointTilting)
+    np.testing.assert_allclose(rebuilt(katana, q), effect(katana, q), atol=1e-15)

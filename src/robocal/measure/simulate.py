@@ -236,6 +236,10 @@ _EFFECTS: dict[str, type] = {"encoder-noise": EncoderNoise, "payload-compliance"
 
 def _effect_from_dict(data: Mapping[str, Any]) -> JointEffect | None:
     data = dict(data)
+    if data.get("type") == "joint-tilting":  # seed 003's joint model (robocal.model.joints)
+        from robocal.model.joints import JointTilting
+
+        return JointTilting.from_dict(data)
     cls = _EFFECTS.get(data.pop("type", None))
     if cls is None:
         return None

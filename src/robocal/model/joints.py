@@ -403,6 +403,22 @@ class JointTilting:
             rule=self.rule,
         )
 
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> JointTilting:
+        """The inverse of :meth:`to_dict` (SI values), for simulation truth files."""
+        effects = data.get("effects")
+        payload = data.get("payload")
+        return cls(
+            effects=None if effects is None else tuple(JointEffects(**e) for e in effects),
+            kinds=tuple(data.get("kinds", EFFECT_KINDS)),
+            gravity=tuple(data.get("gravity", (0.0, 0.0, -9.81))),
+            payload=None if payload is None else Payload(
+                payload["mass"], tuple(payload.get("com", (0.0, 0.0, 0.0))),
+                None if payload.get("inertia") is None else tuple(payload["inertia"]),
+            ),
+            rule=data.get("rule", "thesis"),
+        )
+
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "type": "joint-tilting",
