@@ -265,24 +265,10 @@ def load_study_config(path: str | os.PathLike[str]) -> StudyConfig:
         StudyError: naming the file and the offending field.
         FileNotFoundError: when the file does not exist.
     """
-    from robocal.model.files import MAX_FILE_BYTES, _NoAliasLoader
+    from robocal.model.files import read_yaml
 
     path = Path(path)
-    size = path.stat().st_size
-    if path.exists() and not path.is_file():
-        raise StudyError(f"{path}: not a regular file")
-    if size > MAX_FILE_BYTES:
-        raise StudyError(f"{path}: {size} bytes is too large for a study file (limit {MAX_FILE_BYTES})")
-    try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise StudyError(f"{path}: {where}{getattr(err, 'problem', None) or err}") from None
-    except UnicodeDecodeError as err:
-        raise StudyError(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
-    except RecursionError:
-        raise StudyError(f"{path}: nested too deeply to be a study file") from None
+    data = read_yaml(path, "study", StudyError)
     if not isinstance(data, dict):
         raise StudyError(f"{path}: a study file must be a mapping, got {type(data).__name__}")
     try:

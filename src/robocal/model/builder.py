@@ -39,7 +39,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from robocal import spatial
@@ -614,23 +613,10 @@ def load_geometry(path: str | Path) -> Geometry:
           - {type: revolute, position: [0, 0, -50], axis: [0, 0, -1]}
         tcp: {position: [0, 0, -100]}
     """
-    from robocal.model.files import MAX_FILE_BYTES, _NoAliasLoader, format_validation_error
+    from robocal.model.files import format_validation_error, read_yaml
 
     path = Path(path)
-    if path.exists() and not path.is_file():  # a FIFO or a device would never end
-        raise GeometryError(f"{path}: not a regular file")
-    if path.stat().st_size > MAX_FILE_BYTES:
-        raise GeometryError(f"{path}: too large for a geometry file (limit {MAX_FILE_BYTES} bytes)")
-    try:
-        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_NoAliasLoader)  # no alias bombs
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise GeometryError(f"{path}: {where}{getattr(err, 'problem', None) or err}") from None
-    except UnicodeDecodeError as err:
-        raise GeometryError(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
-    except RecursionError:
-        raise GeometryError(f"{path}: nested too deeply to be a geometry file") from None
+    data = read_yaml(path, "geometry", GeometryError)
     if not isinstance(data, dict):
         raise GeometryError(f"{path}: a geometry file must be a mapping")
     try:

@@ -315,6 +315,36 @@ class _NoAliasLoader(yaml.SafeLoader):
         return super().compose_node(parent, index)
 
 
+def read_yaml(path: str | os.PathLike[str], kind: str, error: type[Exception] = ModelFileError) -> Any:
+    """Parse a YAML file defensively: a regular file of at most ``MAX_FILE_BYTES``, UTF-8,
+    no aliases (alias bombs), no runaway nesting.  Every failure raises ``error`` with the
+    file, and the line and column where the parser knows them; ``kind`` names the kind of
+    file in the messages (model, geometry, study...).
+
+    Raises:
+        FileNotFoundError: when the file does not exist.
+    """
+    path = Path(path)
+    size = path.stat().st_size
+    if path.exists() and not path.is_file():  # a FIFO or a device would never end
+        raise error(f"{path}: not a regular file")
+    if size > MAX_FILE_BYTES:
+        raise error(f"{path}: {size} bytes is too large for a {kind} file (limit {MAX_FILE_BYTES})")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise error(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
+    try:
+        return yaml.load(text, Loader=_NoAliasLoader)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(err, "problem", None) or str(err)
+        raise error(f"{path}: {where}{problem}") from None
+    except RecursionError:
+        raise error(f"{path}: nested too deeply to be a {kind} file") from None
+
+
 def load_model(path: str | os.PathLike[str]) -> Model:
     """Read and validate a YAML model file.
 
@@ -322,26 +352,7 @@ def load_model(path: str | os.PathLike[str]) -> Model:
         ModelFileError: naming the file and the offending field or line.
         FileNotFoundError: when the file does not exist.
     """
-    path = Path(path)
-    size = path.stat().st_size
-    if path.exists() and not path.is_file():  # a FIFO or a device would never end
-        raise ModelFileError(f"{path}: not a regular file")
-    if size > MAX_FILE_BYTES:
-        raise ModelFileError(f"{path}: {size} bytes is too large for a model file (limit {MAX_FILE_BYTES})")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as err:
-        raise ModelFileError(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
-    try:
-        data = yaml.load(text, Loader=_NoAliasLoader)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        problem = getattr(err, "problem", None) or str(err)
-        raise ModelFileError(f"{path}: {where}{problem}") from None
-    except RecursionError:
-        raise ModelFileError(f"{path}: nested too deeply to be a model file") from None
-    return model_from_dict(data, origin=str(path))
+    return model_from_dict(read_yaml(path, "model"), origin=str(path))
 
 
 def _step_to_dict(step: Step) -> dict[str, Any]:
