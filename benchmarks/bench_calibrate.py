@@ -35,14 +35,15 @@ from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
 from robocal.model.builder import Tcp, load_geometry
 
 ROOT = Path(__file__).resolve().parents[1]
+PROBE = (0.06, -0.04, 0.109)  # the reflector, off the flange axis (on it, two parameters are lost)
 
 
 def problem(n_poses: int, seed: int):
     g = load_geometry(ROOT / "examples" / "geometry" / "ur10.yaml")
-    model = g.__class__(**{**g.__dict__, "tcp": Tcp((0.0, 0.0, 0.0))}).build("position").model
+    model = g.__class__(**{**g.__dict__, "tcp": Tcp(PROBE)}).build("position").model
     true = draw_true_model(model, seed=seed)
     tracker = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.1, -0.2, 2.0]), [2.0, -1.0, 0.3])
-    device = LaserTracker(T_device_base=tracker, p_tool_target=np.array([0.0, 0.0, 0.109]), sigma=20e-6)
+    device = LaserTracker(T_device_base=tracker, p_tool_target=np.zeros(3), sigma=20e-6)
     lim = np.clip(model.joint_limits, -np.pi, np.pi)
     q = np.random.default_rng(seed + 1).uniform(lim[:, 0], lim[:, 1], (n_poses, model.dof))
     return model, simulate(VirtualRobot(model, true, device), q, seed=seed + 2)

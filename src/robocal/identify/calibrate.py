@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.identify.guards import check_problem, check_solution
+from robocal.identify.guards import check_data, check_rank, check_solution
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
 from robocal.identify.subset import Dropped, select_columns
@@ -105,6 +105,7 @@ def initial_frame_and_tool(
     T_frame = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
     y = data.position
     for _ in range(rounds if (fit_frame and fit_tool) else 1):
+        previous = T_tool[:3, 3].copy()
         if fit_frame:
             p_base = T_flange[:, :3, :3] @ T_tool[:3, 3] + T_flange[:, :3, 3]
             T_frame = spatial.fit_rigid_transform(p_base, y)
@@ -117,6 +118,8 @@ def initial_frame_and_tool(
             if measure == "pose":
                 R_f = T_frame[:3, :3] @ T_flange[:, :3, :3]
                 T_tool[:3, :3] = _project_rotation(np.einsum("nji,njk->ik", R_f, data.orientation))
+            elif np.linalg.norm(T_tool[:3, 3] - previous) < 1e-7:  # settled: the frame fits it already
+                break
     return T_frame, T_tool
 
 
@@ -735,9 +738,11 @@ def calibrate(
     n = data.n
     # stop with an explanation when the data cannot determine the model (identical
     # poses, joints that never move, too few poses...) rather than fit a silent bad model
-    problem_warnings = check_problem(
-        model, data, measure=measure, frame=frame, tool=tool, tool_guess=tool_guess
-    )
+    problem_warnings = check_data(model, data)
+    if (3 if measure == "position" else 6) * data.n < len(model.free_names) + 12:
+        # so few poses that there may be fewer equations than unknowns: say so before fitting
+        # (otherwise the rank check below, which reuses the fit's own rank test, decides)
+        check_rank(model, data, measure=measure, frame=frame, tool=tool, tool_guess=tool_guess)
     level_number = parse_level(level)
     plan = _effect_plan(model, level_number, effects, compliance)
     if plan.mode != "none" and load_passes > 1:
@@ -823,6 +828,16 @@ def calibrate(
     order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
     order += [x for x in names if x not in set(order)]
     selection = select_columns(J0, names, order)
+    problem_warnings += check_rank(
+        given_model,
+        data,
+        measure=measure,
+        frame=frame,
+        tool=tool,
+        tool_guess=tool_guess,
+        kept=selection.kept,
+        candidates=names,
+    )
     if selection.dropped:
         problem = problem.fix([d.name for d in selection.dropped])
     names = problem.free_names
@@ -895,7 +910,10 @@ def calibrate(
         T_device_base = sub.fk(np.zeros(0))
     robot_steps = [s for s in calibrated_chain.steps if s.name not in set(frame_names)]
     free_before = {s.name: s.free for s in given_model.steps}
-    robot_steps = [dataclasses.replace(s, free=free_before.get(s.name, True)) for s in robot_steps]
+    robot_steps = [
+        s if s.free == free_before.get(s.name, True) else dataclasses.replace(s, free=not s.free)
+        for s in robot_steps
+    ]
     calibrated = dataclasses.replace(
         given_model, steps=tuple(robot_steps), notes=(given_model.notes + " calibrated").strip()
     )

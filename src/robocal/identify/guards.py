@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 
-__all__ = ["CalibrationGuardError", "check_problem", "check_solution"]
+__all__ = ["CalibrationGuardError", "check_data", "check_problem", "check_rank", "check_solution"]
 
 Array = NDArray[np.float64]
 
@@ -134,13 +134,31 @@ def check_problem(
             ``allow_rank_deficient``) rank-deficient poses; the message names rows,
             joints and parameters.
     """
+    measure = measure or ("pose" if data.orientation is not None else "position")
+    warnings = check_data(model, data)
+    return warnings + check_rank(
+        model,
+        data,
+        measure=measure,
+        frame=frame,
+        tool=tool,
+        tool_guess=tool_guess,
+        allow_rank_deficient=allow_rank_deficient,
+        reference_poses=reference_poses,
+        seed=seed,
+    )
+
+
+def check_data(model: Model, data: Measurements) -> list[str]:
+    """The checks of :func:`check_problem` that need no model evaluation: non-finite
+    values, a single distinct pose, positions that never change.  Returns warnings
+    (joints that never move)."""
     if data.position is None:
         raise CalibrationGuardError("the measurements have no positions to calibrate against")
     if data.dof != model.dof:
         raise CalibrationGuardError(
             f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
         )
-    measure = measure or ("pose" if data.orientation is not None else "position")
     q, y = data.q, data.position
     for what, a in (("joint values", q), ("positions", y)):
         bad = np.flatnonzero(~np.all(np.isfinite(a.reshape(len(a), -1)), axis=1))
@@ -148,8 +166,7 @@ def check_problem(
             raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
     if data.n == 0:
         raise CalibrationGuardError("no measured poses")
-    distinct = np.unique(q, axis=0)
-    if len(distinct) == 1:
+    if not np.any(q != q[0]):
         raise CalibrationGuardError(
             f"all {data.n} poses have the same joint values ({', '.join(f'{v:.6g}' for v in q[0])}): "
             "a calibration needs poses that move the joints"
@@ -160,13 +177,39 @@ def check_problem(
             f"the measured positions do not change over {data.n} poses (spread {spread * 1e3:.3g} mm): "
             "is the device following the target?"
         )
-    warnings: list[str] = []
-    still = [model.joint_names[j] for j in range(model.dof) if np.ptp(q[:, j]) < 1e-9]
-    if still:
-        warnings.append(f"joint(s) {', '.join(still)} do not move in the data")
+    still = _still_joints(model, q)
+    return [f"joint(s) {', '.join(still)} do not move in the data"] if still else []
+
+
+def _still_joints(model: Model, q: Array) -> list[str]:
+    return [model.joint_names[j] for j in range(model.dof) if np.ptp(q[:, j]) < 1e-9]
+
+
+def check_rank(
+    model: Model,
+    data: Measurements,
+    *,
+    measure: Literal["position", "pose"],
+    frame: Literal["fit", "fixed"] | ArrayLike = "fit",
+    tool: Literal["fit", "fixed"] | ArrayLike | None = "fit",
+    tool_guess: ArrayLike | None = None,
+    allow_rank_deficient: bool = False,
+    reference_poses: int = 200,
+    seed: int = 0,
+    kept: Sequence[str] | None = None,
+    candidates: Sequence[str] | None = None,
+) -> list[str]:
+    """The rank checks of :func:`check_problem`: enough equations, and no parameter
+    left undetermined by these poses that varied poses determine.
+
+    ``kept`` is the identifiable set the calibration found at these poses (its own rank
+    test on the same Jacobian, so it is not computed twice) among its ``candidates``
+    (its free parameters); by default both are computed here.
+    """
     chain = _measurement_chain(model, measure, frame, tool, tool_guess)
     rows = 3 if measure == "position" else 6
     generic, length = _generic(chain, model, measure, reference_poses, seed)
+    distinct = np.unique(data.q, axis=0)
     if rows * len(distinct) < len(generic):
         raise CalibrationGuardError(
             f"{len(distinct)} distinct poses give {rows * len(distinct)} equations for the {len(generic)} "
@@ -174,32 +217,42 @@ def check_problem(
             f"included): measure at least {math.ceil(len(generic) / rows)} distinct poses, better "
             f"{3 * math.ceil(len(generic) / rows)} or more"
         )
-    kept, selection = _identifiable(chain, distinct, measure, length)
-    lost = [n for n in chain.free_names if n in generic and n not in kept]
-    if lost:
-        _, selection = _identifiable(chain, distinct, measure, length, explain=True)
-        why = {d.name: d for d in selection.dropped}
-        parts = []
-        for name in lost[:8]:
-            d = why.get(name)
-            if d is not None and d.absorbed_by:
-                with_ = ", ".join(n for n, _ in d.absorbed_by[:3])
-                parts.append(f"{name} (cannot be told from {with_})")
-            else:
-                parts.append(f"{name} (no effect)")
-        more = f" and {len(lost) - 8} more" if len(lost) > 8 else ""
-        text = (
-            f"rank-deficient data: these {len(distinct)} distinct poses determine {len(kept & generic)} of "
-            f"the {len(generic)} parameters that varied poses determine; "
-            f"undetermined: {'; '.join(parts)}{more}"
-        )
-        if still:
-            text += f"; joint(s) {', '.join(still)} never move"
-        text += ": add poses that move every joint over its range (or allow_rank_deficient=True to fix them)"
-        if not allow_rank_deficient:
-            raise CalibrationGuardError(text)
-        warnings.append(text)
-    return warnings
+    if kept is None:
+        kept_set, _ = _identifiable(chain, distinct, measure, length)
+    else:
+        kept_set = set(kept)
+    pool = chain.free_names if candidates is None else tuple(candidates)
+    lost = [n for n in pool if n in generic and n not in kept_set]
+    if not lost:
+        return []
+    # confirmed by this guard's own rank test (the caller's may differ at the margin: its
+    # start values, weights and joint-effect columns are not the reference's)
+    kept_set, selection = _identifiable(chain, distinct, measure, length, explain=True)
+    lost = [n for n in pool if n in generic and n not in kept_set]
+    if not lost:
+        return []
+    why = {d.name: d for d in selection.dropped}
+    parts = []
+    for name in lost[:8]:
+        d = why.get(name)
+        if d is not None and d.absorbed_by:
+            with_ = ", ".join(n for n, _ in d.absorbed_by[:3])
+            parts.append(f"{name} (cannot be told from {with_})")
+        else:
+            parts.append(f"{name} (no effect)")
+    more = f" and {len(lost) - 8} more" if len(lost) > 8 else ""
+    text = (
+        f"rank-deficient data: these {len(distinct)} distinct poses determine {len(kept_set & generic)} of "
+        f"the {len(generic)} parameters that varied poses determine; "
+        f"undetermined: {'; '.join(parts)}{more}"
+    )
+    still = _still_joints(model, data.q)
+    if still:
+        text += f"; joint(s) {', '.join(still)} never move"
+    text += ": add poses that move every joint over its range (or allow_rank_deficient=True to fix them)"
+    if not allow_rank_deficient:
+        raise CalibrationGuardError(text)
+    return [text]
 
 
 def check_solution(

@@ -251,7 +251,7 @@ class Problem:
             fixed = np.tensordot(self.effect_start[effect_drop], self.effect_basis[effect_drop], axes=1)
             known = fixed if known is None else known + fixed
         basis = None if not effect_keep else self.effect_basis[effect_keep]
-        return dataclasses.replace(
+        fixed = dataclasses.replace(
             self,
             chain=chain,
             effect_basis=basis,
@@ -260,3 +260,11 @@ class Problem:
             effect_start=self.effect_start[effect_keep],
             _cache={},
         )
+        # at the start values the fixed problem predicts the same frames, and its Jacobian
+        # is this one's without the fixed columns: keep that evaluation (a solver starts there)
+        x0 = self.x0
+        cached = self._cache.get((x0.tobytes(), True))
+        if cached is not None:
+            keep = np.array([name not in set(names) for name in self.free_names], dtype=bool)
+            fixed._cache[(x0[keep].tobytes(), True)] = (cached[0], cached[1][:, keep])
+        return fixed

@@ -75,39 +75,68 @@ def select_columns(
     order += [n for n in names if n not in set(order)]
     index = {n: k for k, n in enumerate(names)}
     scale = float(np.abs(J).max()) if J.size else 1.0
-    Q = np.zeros((J.shape[0], 0))  # orthonormal basis of the kept columns
-    kept: list[str] = []
-    zero: list[str] = []
-    redundant: list[str] = []
-    for name in order:
-        col = J[:, index[name]]
-        norm = float(np.linalg.norm(col))
-        if norm <= 1e-12 * max(scale, 1e-300):
-            zero.append(name)
-            continue
-        v = col - Q @ (Q.T @ col)
-        v -= Q @ (Q.T @ v)  # Gram-Schmidt twice: orthogonal to working precision
-        residual = float(np.linalg.norm(v))
-        if residual > tolerance * norm:
-            Q = np.column_stack([Q, v / residual])
-            kept.append(name)
-        else:
-            redundant.append(name)
+    columns = [index[n] for n in order]
+    norms = np.linalg.norm(J[:, columns], axis=0)
+    effect = norms > 1e-12 * max(scale, 1e-300)
+    zero = [n for n, e in zip(order, effect, strict=True) if not e]
+    candidates = [n for n, e in zip(order, effect, strict=True) if e]
+    keep, coefs = _rank_test(J[:, [index[n] for n in candidates]], tolerance)
+    kept = [n for n, k in zip(candidates, keep, strict=True) if k]
+    redundant = [n for n, k in zip(candidates, keep, strict=True) if not k]
     dropped = [Dropped(n, "no effect") for n in zero]
-    if redundant:
-        coefs = None
+    for r, name in enumerate(redundant):
+        absorbed: tuple[tuple[str, float], ...] = ()
         if explain and kept:
-            K = J[:, [index[n] for n in kept]]
-            R = J[:, [index[n] for n in redundant]]
-            coefs = np.linalg.lstsq(K, R, rcond=None)[0]  # every redundant column at once
-        for r, name in enumerate(redundant):
-            absorbed: tuple[tuple[str, float], ...] = ()
-            if coefs is not None:
-                coef = coefs[:, r]
-                big = np.flatnonzero(np.abs(coef) > 1e-3 * np.abs(coef).max())
-                big = big[np.argsort(-np.abs(coef[big]))][:4]
-                absorbed = tuple((kept[k], float(coef[k])) for k in big)
-            dropped.append(Dropped(name, "redundant", absorbed))
+            coef = coefs[:, r]
+            big = np.flatnonzero(np.abs(coef) > 1e-3 * np.abs(coef).max())
+            big = big[np.argsort(-np.abs(coef[big]))][:4]
+            absorbed = tuple((kept[k], float(coef[k])) for k in big)
+        dropped.append(Dropped(name, "redundant", absorbed))
     dropped.sort(key=lambda d: index[d.name])
     kept_in_order = tuple(n for n in names if n in set(kept))
     return Selection(kept_in_order, tuple(dropped))
+
+
+def _rank_test(J: NDArray[np.float64], tolerance: float) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    """Keep each column (in order) unless it lies in the span of the kept ones before it.
+
+    Returns the mask of kept columns and the coefficients ``(kept, dropped)`` of every
+    dropped column in the kept ones.
+
+    One unpivoted QR answers it for all columns: ``|R_kk|`` is the part of column k
+    orthogonal to all the columns before it.  A kept column passes against a span that
+    includes the dropped columns, so it passes against the kept ones alone too; a
+    dropped column still enters the QR as a (numerically random) direction, so its
+    verdict is checked by a least-squares fit in the kept columns, and if the check
+    disagrees (possible only with about as many rows as columns) the exact sequential
+    Gram-Schmidt decides.
+    """
+    norms = np.linalg.norm(J, axis=0)
+    if J.shape[1] == 0:
+        return np.zeros(0, dtype=bool), np.zeros((0, 0))
+    diag = np.abs(np.diag(np.linalg.qr(J, mode="r")))
+    keep = np.zeros(J.shape[1], dtype=bool)
+    keep[: len(diag)] = diag > tolerance * norms[: len(diag)]
+    for _ in range(2):
+        K, D = J[:, keep], J[:, ~keep]
+        coefs = np.zeros((K.shape[1], D.shape[1]))
+        if K.shape[1] and D.shape[1]:
+            coefs = np.linalg.lstsq(K, D, rcond=None)[0]
+        if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance * norms[~keep]):
+            break
+        keep = _gram_schmidt(J, tolerance, norms)
+    return keep, coefs
+
+
+def _gram_schmidt(J: NDArray[np.float64], tolerance: float, norms: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """The sequential rank test one column at a time (the reference for :func:`_rank_test`)."""
+    Q = np.zeros((J.shape[0], 0))
+    keep = np.zeros(J.shape[1], dtype=bool)
+    for k in range(J.shape[1]):
+        v = J[:, k] - Q @ (Q.T @ J[:, k])
+        v -= Q @ (Q.T @ v)  # twice: orthogonal to working precision
+        residual = float(np.linalg.norm(v))
+        if residual > tolerance * norms[k]:
+            Q = np.column_stack([Q, v / residual])
+            keep[k] = True
+    return keep

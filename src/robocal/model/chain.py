@@ -117,6 +117,17 @@ class Step:
                 raise ValueError(f"parameter {self.name!r}: bounds {self.bounds} need lower <= upper")
             object.__setattr__(self, "bounds", (lo, hi))
 
+    def _with_value(self, value: float) -> Step:
+        """This step with another value.  Only the value needs checking, so the copy skips
+        ``__post_init__``: solvers and results derive many models per calibration."""
+        value = float(value)
+        if not math.isfinite(value):
+            raise ValueError(f"parameter {self.name!r}: value {value!r} is not finite")
+        step = object.__new__(Step)
+        step.__dict__.update(self.__dict__)
+        step.__dict__["value"] = value
+        return step
+
     @property
     def axis(self) -> int:
         """Index 0, 1, 2 of the local axis x, y, z."""
@@ -254,6 +265,11 @@ class _Plan:
     segments: tuple[tuple[int, ...], ...]  # constant steps after anchor a, for a = 0..dof
     step_axis: NDArray[np.intp]  # (P,)
     step_rot: NDArray[np.bool_]  # (P,)
+    segment_table: NDArray[np.intp]  # (dof + 1, L) steps of each segment, padded with P (identity)
+    segment_slot: NDArray[np.intp]  # (P,) flat index a * L + t of each constant step in the table
+
+
+_PLANS: dict[tuple[tuple[str, bool], ...], _Plan] = {}  # compiled plans by chain structure
 
 
 @dataclass(frozen=True)
@@ -389,7 +405,7 @@ class Model:
             i = self._index.get(name)
             if i is None:
                 raise KeyError(f"model {self.name!r} has no parameter {name!r}")
-            steps[i] = dataclasses.replace(steps[i], value=float(value))
+            steps[i] = steps[i]._with_value(value)
         return dataclasses.replace(self, steps=tuple(steps))
 
     def with_free(self, names: Iterable[str] | None = None, free: bool = True) -> Model:
@@ -408,6 +424,17 @@ class Model:
     # ------------------------------------------------------------------ kinematics
     @cached_property
     def _plan(self) -> _Plan:
+        structure = tuple((s.motion, s.joint is not None) for s in self.steps)
+        plan = _PLANS.get(structure)
+        if plan is None:
+            if len(_PLANS) > 256:
+                _PLANS.clear()
+            plan = _PLANS[structure] = self._compile_plan()
+        return plan
+
+    def _compile_plan(self) -> _Plan:
+        """The chain's structure for batched evaluation (it depends only on the steps'
+        motions and which are joints, so models that differ in values share it)."""
         joint_steps = [i for i, s in enumerate(self.steps) if s.joint is not None]
         anchor_of = np.zeros(len(self.steps), dtype=np.intp)
         segments: list[list[int]] = [[]]
@@ -420,6 +447,12 @@ class Model:
             else:
                 anchor_of[i] = anchor
                 segments[anchor].append(i)
+        width = max(max(len(seg) for seg in segments), 1)
+        table = np.full((len(segments), width), len(self.steps), dtype=np.intp)
+        slot = np.zeros(len(self.steps), dtype=np.intp)
+        for a, seg in enumerate(segments):
+            table[a, : len(seg)] = seg
+            slot[list(seg)] = a * width + np.arange(len(seg))
         return _Plan(
             joint_steps=np.array(joint_steps, dtype=np.intp),
             joint_axis=tuple(self.steps[i].axis for i in joint_steps),
@@ -428,6 +461,8 @@ class Model:
             segments=tuple(tuple(s) for s in segments),
             step_axis=np.array([s.axis for s in self.steps], dtype=np.intp),
             step_rot=np.array([s.is_rotation for s in self.steps], dtype=bool),
+            segment_table=table,
+            segment_slot=slot,
         )
 
     def _check_q(self, q: ArrayLike) -> tuple[Array, bool]:
@@ -458,30 +493,41 @@ class Model:
         return d
 
     @cached_property
-    def _segments(self) -> tuple[list[Array], Array]:
+    def _segments(self) -> tuple[Array, Array]:
         """:meth:`_segment_data` for this model's own values (models are immutable)."""
         return self._segment_data(self.values)
 
-    def _segment_data(self, values: Array) -> tuple[list[Array], Array]:
+    def _segment_data(self, values: Array) -> tuple[Array, Array]:
         """Constant segment transforms and each step's local frame for parameter ``values``.
 
         Returns:
-            segment transforms ``C_a`` (4, 4) for a = 0..dof (the constant steps after
-            anchor a), and ``local`` (P, 4, 4): the frame just before step i expressed
-            in its anchor frame.
+            segment transforms ``C_a`` ``(dof + 1, 4, 4)`` (the product of the constant
+            steps after anchor a, for a = 0..dof), and ``local`` ``(P, 4, 4)``: the frame
+            just before step i expressed in its anchor frame.
+
+        All segments at once: their elementary transforms in one padded table
+        ``(dof + 1, L, 4, 4)`` (padding: identity), multiplied into running products by a
+        Hillis-Steele prefix scan, log2(L) batched matrix products instead of one
+        small product per step (this runs at every solver iteration).
         """
         plan = self._plan
-        E = _elementaries(plan.step_axis, plan.step_rot, values)  # (P, 4, 4), all at once
-        local = np.empty_like(E)
-        seg_T: list[Array] = []
-        for seg in plan.segments:
-            T = _EYE4
-            for i in seg:
-                local[i] = T
-                T = T @ E[i]
-            seg_T.append(T)
-        for j, i in enumerate(plan.joint_steps):
-            local[i] = seg_T[j]  # a joint step starts where the previous segment ends
+        E = np.empty((len(values) + 1, 4, 4))
+        E[:-1] = _elementaries(plan.step_axis, plan.step_rot, values)
+        E[-1] = _EYE4
+        X = E[plan.segment_table]  # (dof + 1, L, 4, 4)
+        width = X.shape[1]
+        d = 1
+        while d < width:  # X[:, t] <- X[:, t - d] X[:, t]: running products, earlier steps first
+            X[:, d:] = np.matmul(X[:, :-d], X[:, d:])
+            d *= 2
+        seg_T = X[:, -1].copy()
+        before = np.empty_like(X)  # product of the steps before each slot: shifted by one
+        before[:, 0] = _EYE4
+        before[:, 1:] = X[:, :-1]
+        local = np.empty((len(values), 4, 4))
+        flat = before.reshape(-1, 4, 4)
+        local[:] = flat[plan.segment_slot]
+        local[plan.joint_steps] = seg_T[:-1]  # a joint step starts where the previous segment ends
         return seg_T, local
 
     def _forward(
@@ -490,34 +536,40 @@ class Model:
         perturbations: Array | None,
         keep_anchors: bool,
         values: Array | None = None,
-    ) -> tuple[Array, list[Array]]:
+        segments: tuple[Array, Array] | None = None,
+    ) -> tuple[Array, Array | None]:
         """Batched FK in structure-of-arrays layout.
 
         Frames are ``F`` shaped ``(3, 4, n)``: the rows of ``[R | p]`` with the poses
         last, so that every update below is a contiguous vector operation.
 
-        Returns the tool frame and, when asked, the anchor frames (after each joint
-        step), each ``(3, 4, n)``.
+        Returns the tool frame and, when asked, the anchor frames ``(dof + 1, 3, 4, n)``:
+        anchor 0 is the base (identity), anchor j + 1 the frame just after joint j's step.
+        ``segments``: :meth:`_segment_data` of ``values`` when the caller has it already.
         """
         plan = self._plan
         if values is None:
             seg_T, _ = self._segments
             offsets = np.array([self.steps[i].value for i in plan.joint_steps])
         else:
-            seg_T, _ = self._segment_data(values)
+            seg_T, _ = self._segment_data(values) if segments is None else segments
             offsets = values[plan.joint_steps]
-        n = q.shape[0]
+        n, dof = q.shape
         qt = q.T + offsets[:, None]  # (dof, n) joint step values
         if perturbations is not None:
             qt = qt + perturbations[:, :, 2].T
         rot = np.array(plan.joint_rot, dtype=bool)
         cos = np.cos(qt[rot]) if rot.any() else None  # one trig call for all revolute joints
         sin = np.sin(qt[rot]) if rot.any() else None
+        constant = ~np.all(seg_T == _EYE4, axis=(1, 2))  # segments that change the frame
+        anchors = None
+        if keep_anchors:
+            anchors = np.empty((dof + 1, 3, 4, n))
+            anchors[0] = _EYE4[:3, :, None]
         F = np.empty((3, 4, n))
         F[:] = seg_T[0][:3, :, None]
-        anchors: list[Array] = []
         r = 0
-        for j in range(len(plan.joint_steps)):
+        for j in range(dof):
             k = plan.joint_axis[j]
             if plan.joint_rot[j]:
                 _rotate_rows(F, k, cos[r], sin[r])
@@ -529,10 +581,9 @@ class Model:
                 _rotate_rows(F, (k + 1) % 3, np.cos(tilt_a), np.sin(tilt_a))
                 _rotate_rows(F, (k + 2) % 3, np.cos(tilt_b), np.sin(tilt_b))
             if keep_anchors:
-                anchors.append(F.copy())
-            C = seg_T[j + 1]
-            if not np.array_equal(C, _EYE4):
-                F = np.matmul(C.T, F)  # each row r of [R | p]: (4, 4)ᵀ @ (4, n)
+                anchors[j + 1] = F
+            if constant[j + 1]:
+                F = np.matmul(seg_T[j + 1].T, F)  # each row r of [R | p]: (4, 4)ᵀ @ (4, n)
         return F, anchors
 
     def fk(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
@@ -551,7 +602,9 @@ class Model:
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         _, anchors = self._forward(q, d, keep_anchors=True)
-        T = np.stack([_to_homogeneous(F) for F in anchors], axis=1)
+        T = np.zeros((len(q), self.dof, 4, 4))
+        T[:, :, :3, :] = anchors[1:].transpose(3, 0, 1, 2)
+        T[:, :, 3, 3] = 1.0
         return T[0] if single else T
 
     def _columns(
@@ -572,61 +625,52 @@ class Model:
 
         For a step hanging off anchor frame (R, p_a) with local axis a_l and local
         origin o_l, the world axis is a = R a_l and origin o = p_a + R o_l, so
-        a × (p − o) = a × (p − p_a) − R (a_l × o_l): one small matrix product per
-        anchor gives a and R (a_l × o_l) for all its columns, and one cross product with
-        the shared vector p − p_a finishes them.  The steps of one anchor are
-        contiguous in chain order, so each block of columns is a slice.
+        a × (p − o) = a × (p − p_a) − R (a_l × o_l).  All steps at once: each step's
+        anchor frame is gathered, ``a`` and ``R (a_l × o_l)`` are three multiply-adds
+        over the anchors' rotation columns, and one cross product with ``p − p_a``
+        finishes the rotation columns; a translation step's column is ``dp = a, dω = 0``.
+        A fixed handful of whole-array operations, whatever the chain's length: at a
+        hundred poses the cost is the number of numpy calls, not the arithmetic.
         """
         plan = self._plan
         steps = np.asarray(steps, dtype=np.intp)
-        _, local = self._segments if values is None else self._segment_data(values)
-        F, anchors = self._forward(q, perturbations, keep_anchors=True, values=values)
+        segments = self._segments if values is None else self._segment_data(values)
+        local = segments[1]
+        F, anchors = self._forward(q, perturbations, keep_anchors=True, values=values, segments=segments)
         n, m = q.shape[0], len(steps)
-        J = np.empty((m, 6 if orientation else 3, n))
+        rows = 6 if orientation else 3
         loc = local[steps]
         a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3) axis in the anchor frame
-        c_loc = np.cross(a_loc, loc[:, :3, 3])  # (m, 3) a_l × o_l
-        rot = plan.step_rot[steps]
-        p_tool = F[:, 3]  # (3, n)
-        step_anchor = plan.anchor_of[steps]
-        bounds = np.flatnonzero(np.diff(step_anchor)) + 1
-        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True) if m else ():
-            a, k = step_anchor[lo], hi - lo
-            if a == 0:  # constant frames before the first joint
-                A = np.broadcast_to(a_loc[lo:hi, :, None], (k, 3, n))
-                RC = np.broadcast_to(c_loc[lo:hi, :, None], (k, 3, n))
-                r = p_tool
-            else:
-                Mt = np.zeros((2 * k, 4))
-                Mt[:k, :3] = a_loc[lo:hi]
-                Mt[k:, :3] = c_loc[lo:hi]
-                W = np.matmul(Mt, anchors[a - 1]).transpose(1, 0, 2)  # (2k, 3, n)
-                A, RC = W[:k], W[k:]
-                r = p_tool - anchors[a - 1][:, 3]
-            Jb = J[lo:hi]
-            # rotation columns: a × (p − p_a) − R (a_l × o_l) ...
-            np.multiply(A[:, 1], r[2], out=Jb[:, 0])
-            Jb[:, 0] -= A[:, 2] * r[1]
-            Jb[:, 0] -= RC[:, 0]
-            np.multiply(A[:, 2], r[0], out=Jb[:, 1])
-            Jb[:, 1] -= A[:, 0] * r[2]
-            Jb[:, 1] -= RC[:, 1]
-            np.multiply(A[:, 0], r[1], out=Jb[:, 2])
-            Jb[:, 2] -= A[:, 1] * r[0]
-            Jb[:, 2] -= RC[:, 2]
+        c_loc = _cross_rows(a_loc, loc[:, :3, 3])  # (m, 3) a_l × o_l
+        G = anchors[plan.anchor_of[steps]]  # (m, 3, 4, n) each step's anchor frame
+        A = G[:, :, 0] * a_loc[:, None, 0, None]  # (m, 3, n) world axes
+        A += G[:, :, 1] * a_loc[:, None, 1, None]
+        A += G[:, :, 2] * a_loc[:, None, 2, None]
+        RC = G[:, :, 0] * c_loc[:, None, 0, None]  # (m, 3, n) R (a_l × o_l)
+        RC += G[:, :, 1] * c_loc[:, None, 1, None]
+        RC += G[:, :, 2] * c_loc[:, None, 2, None]
+        r = F[None, :, 3] - G[:, :, 3]  # (m, 3, n) tool point from the anchor origin
+        J = np.empty((m, rows, n))
+        np.multiply(A[:, 1], r[:, 2], out=J[:, 0])
+        J[:, 0] -= A[:, 2] * r[:, 1]
+        np.multiply(A[:, 2], r[:, 0], out=J[:, 1])
+        J[:, 1] -= A[:, 0] * r[:, 2]
+        np.multiply(A[:, 0], r[:, 1], out=J[:, 2])
+        J[:, 2] -= A[:, 1] * r[:, 0]
+        J[:, :3] -= RC
+        if orientation:
+            J[:, 3:] = A
+        translation = ~plan.step_rot[steps]
+        if translation.any():
+            J[translation, :3] = A[translation]
             if orientation:
-                Jb[:, 3:] = A
-            # ... then the few translation columns: dp = a, dω = 0
-            for c in np.flatnonzero(~rot[lo:hi]):
-                Jb[c, :3] = A[c]
-                if orientation:
-                    Jb[c, 3:] = 0.0
+                J[translation, 3:] = 0.0
         if tilt:
-            return F, J, self._tilt_columns(F, anchors, perturbations, orientation)
+            return F, J, self._tilt_columns(F, anchors[1:], perturbations, orientation)
         return F, J
 
     def _tilt_columns(
-        self, F: Array, anchors: list[Array], perturbations: Array | None, orientation: bool
+        self, F: Array, anchors: Array, perturbations: Array | None, orientation: bool
     ) -> Array:
         """Exact derivatives of the tool pose wrt the joint tilts δα, δβ, ``(dof, 2, rows, n)``.
 
@@ -775,6 +819,16 @@ class Model:
 
 
 _EYE4 = np.eye(4)
+
+
+def _cross_rows(a: Array, b: Array) -> Array:
+    """Row-wise cross products of ``(m, 3)`` arrays (``np.cross`` costs more in set-up
+    than in arithmetic for the few dozen rows of a chain)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def _rotate_rows(F: Array, axis: int, c: Array, s: Array) -> None:
