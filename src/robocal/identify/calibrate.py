@@ -98,9 +98,14 @@ def initial_frame_and_tool(
     fit_tool: bool,
     T_device_base: Array | None = None,
     rounds: int = 4,
+    T_flange: Array | None = None,
 ) -> tuple[Array, Array]:
-    """Alternate closed-form fits of the device frame and the tool (both 4x4)."""
-    T_flange = robot.fk(data.q)
+    """Alternate closed-form fits of the device frame and the tool (both 4x4).
+
+    ``T_flange``: the robot's end frames ``(n, 4, 4)`` at the data's joint values, when
+    the caller has them (default: computed)."""
+    if T_flange is None:
+        T_flange = robot.fk(data.q)
     T_tool = np.eye(4) if tool is None else np.asarray(tool, dtype=float)
     T_frame = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
     y = data.position
@@ -456,9 +461,18 @@ def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
     Jn = J / norms
-    sv = np.linalg.svd(Jn, compute_uv=False)
-    cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
-    cov = s2 * np.linalg.pinv(Jn.T @ Jn) / np.outer(norms, norms)
+    A = Jn.T @ Jn
+    lam, V = np.linalg.eigh(A)
+    if len(lam) and lam[0] > 1e-12 * lam[-1]:
+        # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvectors give
+        # the inverse and the condition number at once
+        cond = math.sqrt(lam[-1] / lam[0])
+        inverse = (V / lam) @ V.T
+    else:  # nearly singular: singular values of Jn itself
+        sv = np.linalg.svd(Jn, compute_uv=False)
+        cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
+        inverse = np.linalg.pinv(A)
+    cov = s2 * inverse / np.outer(norms, norms)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
@@ -570,9 +584,9 @@ def _effect_plan(
     return _EffectPlan("identify", kinds, None)
 
 
-def _robot_size(robot: Model, q: Array) -> float:
-    T = robot.fk(q[: min(len(q), 50)])
-    return max(float(np.abs(T[:, :3, 3]).max()), 0.1)
+def _robot_size(T_flange: Array) -> float:
+    """The robot's size (m) from its end frames ``(n, 4, 4)``: the largest coordinate."""
+    return max(float(np.abs(T_flange[:, :3, 3]).max()), 0.1)
 
 
 def _check_load_model(load_model: Model, model: Model) -> Model:
@@ -766,14 +780,15 @@ def calibrate(
     if tool is not None and not isinstance(tool, str):
         g = np.asarray(tool, dtype=float)
         T_tool0 = g if g.shape == (4, 4) else spatial.homogeneous(p=g)
+    T_flange = model.fk(data.q)
     T_frame, T_tool = initial_frame_and_tool(
-        model, data, measure, T_tool0, fit_frame, fit_tool and tool is not None, T_known
+        model, data, measure, T_tool0, fit_frame, fit_tool and tool is not None, T_known, T_flange=T_flange
     )
 
     chain = measurement_chain(model, T_frame, None if tool is None else T_tool, measure, fit_frame)
     if tool is not None and not fit_tool:
         chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
-    length = _robot_size(model, data.q)
+    length = _robot_size(T_flange)
     rows = 3 if measure == "position" else 6
     w = np.ones((n, rows))
     if weights == "sigma" and data.sigma is not None:
@@ -903,11 +918,8 @@ def calibrate(
     calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
     frame_names = [s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))]
     T_device_base = np.eye(4)
-    if frame_names:
-        sub = dataclasses.replace(
-            calibrated_chain, steps=tuple(s for s in calibrated_chain.steps if s.name in frame_names)
-        )
-        T_device_base = sub.fk(np.zeros(0))
+    for step in calibrated_chain.steps[: len(frame_names)]:  # the frame steps come first
+        T_device_base = T_device_base @ spatial.elementary(step.motion, step.value)
     robot_steps = [s for s in calibrated_chain.steps if s.name not in set(frame_names)]
     free_before = {s.name: s.free for s in given_model.steps}
     robot_steps = [

@@ -22,7 +22,6 @@ usable data.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Sequence
 from typing import Any, Literal
@@ -89,17 +88,35 @@ def _identifiable(
     return set(selection.kept), selection
 
 
-@functools.lru_cache(maxsize=32)
-def _generic(chain: Model, model: Model, measure: str, n: int, seed: int) -> tuple[frozenset[str], float]:
+def _transform_key(x: Any) -> Any:
+    """A hashable stand-in for a frame or tool argument (a string, None or an array)."""
+    if x is None or isinstance(x, str):
+        return x
+    a = np.asarray(x, dtype=float)
+    return (a.shape, a.tobytes())
+
+
+_GENERIC: dict[Any, tuple[frozenset[str], float]] = {}  # the last few _generic answers
+
+
+def _generic(
+    model: Model, measure: str, frame: Any, tool: Any, tool_guess: Any, n: int, seed: int
+) -> tuple[frozenset[str], float]:
     """Parameters identifiable from ``n`` random poses (seeded), and the robot's size (m).
 
     Cached: a model's identifiable set does not depend on the data."""
-    from robocal.measure.ik import random_configurations
+    key = (model, measure, _transform_key(frame), _transform_key(tool), _transform_key(tool_guess), n, seed)
+    if key not in _GENERIC:
+        from robocal.measure.ik import random_configurations
 
-    q = random_configurations(model, n, np.random.default_rng(seed))
-    length = max(float(np.abs(model.fk(q)[:, :3, 3]).max()), 0.1)
-    kept, _ = _identifiable(chain, q, measure, length)
-    return frozenset(kept), length
+        chain = _measurement_chain(model, measure, frame, tool, tool_guess)
+        q = random_configurations(model, n, np.random.default_rng(seed))
+        length = max(float(np.abs(model.fk(q)[:, :3, 3]).max()), 0.1)
+        kept, _ = _identifiable(chain, q, measure, length)
+        if len(_GENERIC) >= 32:
+            _GENERIC.pop(next(iter(_GENERIC)))
+        _GENERIC[key] = (frozenset(kept), length)
+    return _GENERIC[key]
 
 
 def check_problem(
@@ -206,9 +223,8 @@ def check_rank(
     test on the same Jacobian, so it is not computed twice) among its ``candidates``
     (its free parameters); by default both are computed here.
     """
-    chain = _measurement_chain(model, measure, frame, tool, tool_guess)
     rows = 3 if measure == "position" else 6
-    generic, length = _generic(chain, model, measure, reference_poses, seed)
+    generic, length = _generic(model, measure, frame, tool, tool_guess, reference_poses, seed)
     distinct = np.unique(data.q, axis=0)
     if rows * len(distinct) < len(generic):
         raise CalibrationGuardError(
@@ -217,6 +233,9 @@ def check_rank(
             f"included): measure at least {math.ceil(len(generic) / rows)} distinct poses, better "
             f"{3 * math.ceil(len(generic) / rows)} or more"
         )
+    chain = None if kept is not None and candidates is not None else _measurement_chain(
+        model, measure, frame, tool, tool_guess
+    )
     if kept is None:
         kept_set, _ = _identifiable(chain, distinct, measure, length)
     else:
@@ -227,6 +246,7 @@ def check_rank(
         return []
     # confirmed by this guard's own rank test (the caller's may differ at the margin: its
     # start values, weights and joint-effect columns are not the reference's)
+    chain = chain or _measurement_chain(model, measure, frame, tool, tool_guess)
     kept_set, selection = _identifiable(chain, distinct, measure, length, explain=True)
     lost = [n for n in pool if n in generic and n not in kept_set]
     if not lost:

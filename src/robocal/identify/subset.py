@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
 __all__ = ["Dropped", "Selection", "select_columns"]
@@ -117,15 +118,34 @@ def _rank_test(J: NDArray[np.float64], tolerance: float) -> tuple[NDArray[np.boo
     diag = np.abs(np.diag(np.linalg.qr(J, mode="r")))
     keep = np.zeros(J.shape[1], dtype=bool)
     keep[: len(diag)] = diag > tolerance * norms[: len(diag)]
-    for _ in range(2):
-        K, D = J[:, keep], J[:, ~keep]
-        coefs = np.zeros((K.shape[1], D.shape[1]))
-        if K.shape[1] and D.shape[1]:
-            coefs = np.linalg.lstsq(K, D, rcond=None)[0]
-        if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance * norms[~keep]):
-            break
+    coefs = _absorbing(J, keep, tolerance, norms)
+    if coefs is None:
         keep = _gram_schmidt(J, tolerance, norms)
+        coefs = _absorbing(J, keep, tolerance, norms)
     return keep, coefs
+
+
+def _absorbing(
+    J: NDArray[np.float64], keep: NDArray[np.bool_], tolerance: float, norms: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """Coefficients of the dropped columns in the kept ones, or None if some dropped
+    column is not in their span.  Normal equations first (a fraction of the cost of an
+    SVD least-squares fit; fine unless the kept columns are badly conditioned, which the
+    check of the fit then catches), the SVD fit otherwise."""
+    K, D = J[:, keep], J[:, ~keep]
+    if not D.shape[1]:
+        return np.zeros((K.shape[1], 0))
+    if not K.shape[1]:
+        return None
+    limit = tolerance * norms[~keep]
+    try:
+        coefs = scipy.linalg.cho_solve(scipy.linalg.cho_factor(K.T @ K), K.T @ D)
+        if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= limit):
+            return coefs
+    except np.linalg.LinAlgError:
+        pass
+    coefs = np.linalg.lstsq(K, D, rcond=None)[0]
+    return coefs if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= limit) else None
 
 
 def _gram_schmidt(J: NDArray[np.float64], tolerance: float, norms: NDArray[np.float64]) -> NDArray[np.bool_]:

@@ -123,9 +123,16 @@ class Step:
         value = float(value)
         if not math.isfinite(value):
             raise ValueError(f"parameter {self.name!r}: value {value!r} is not finite")
+        return self._copy_with("value", value)
+
+    def _with_free(self, free: bool) -> Step:
+        """This step freed or fixed (a checked copy, as :meth:`_with_value`)."""
+        return self._copy_with("free", bool(free))
+
+    def _copy_with(self, field_name: str, value: object) -> Step:
         step = object.__new__(Step)
         step.__dict__.update(self.__dict__)
-        step.__dict__["value"] = value
+        step.__dict__[field_name] = value
         return step
 
     @property
@@ -414,7 +421,7 @@ class Model:
         unknown = selected - set(self.names)
         if unknown:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
-        steps = tuple(dataclasses.replace(s, free=free) if s.name in selected else s for s in self.steps)
+        steps = tuple(s._with_free(free) if s.name in selected else s for s in self.steps)
         return dataclasses.replace(self, steps=steps)
 
     def fixed(self, names: Iterable[str]) -> Model:
