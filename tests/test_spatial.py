@@ -104,3 +104,23 @@ def test_transl_and_homogeneous_broadcast():
     np.testing.assert_array_equal(T[1, :3, 3], [2, 0, 3])
     np.testing.assert_array_equal(spatial.homogeneous(), np.eye(4))
     np.testing.assert_allclose(spatial.skew([1, 2, 3]) @ [4, 5, 6], np.cross([1, 2, 3], [4, 5, 6]))
+
+
+@pytest.mark.parametrize("ry", [0.3, -1.2, np.pi / 2, -np.pi / 2, np.pi / 2 - 1e-6, np.pi / 2 - 2e-3])
+@pytest.mark.parametrize(("rz", "rx"), [(0.4, -2.5), (-3.0, 0.0), (0.0, 1.0)])
+def test_zyx_angles_rebuild_the_rotation(rz, ry, rx):
+    R = spatial.euler_to_matrix([rz, ry, rx], "ZYX")
+    angles = spatial.zyx_angles(R)
+    assert np.allclose(spatial.euler_to_matrix(np.array(angles), "ZYX"), R, atol=1e-9)
+    if abs(abs(ry) - np.pi / 2) > 1e-2:  # away from gimbal lock the angles themselves come back
+        assert np.allclose(angles, [rz, ry, rx], atol=1e-12)
+
+
+def test_chain_product_is_the_product_of_elementaries():
+    motions = ["Tx", "Rz", "Ty", "Rx", "Tz", "Ry", "Rz"]
+    values = np.random.default_rng(3).normal(size=len(motions))
+    expected = spatial.compose(*[spatial.elementary(m, v) for m, v in zip(motions, values, strict=True)])
+    assert np.allclose(spatial.chain_product(motions, values), expected, atol=1e-15)
+    assert np.array_equal(spatial.chain_product([], []), np.eye(4))
+    with pytest.raises(ValueError, match="motion 'Qx'"):
+        spatial.chain_product(["Qx"], [1.0])

@@ -19,12 +19,16 @@ Conventions
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 __all__ = [
     "MOTIONS",
+    "chain_product",
     "compose",
     "elementary",
     "euler_to_matrix",
@@ -43,6 +47,7 @@ __all__ = [
     "rotz",
     "skew",
     "transl",
+    "zyx_angles",
 ]
 
 #: The six elementary motions a kinematic chain is made of.
@@ -125,6 +130,38 @@ def elementary(motion: str, value: ArrayLike) -> Array:
     p = np.zeros((*value.shape, 3))
     p[..., k] = value
     return homogeneous(p=p)
+
+
+def chain_product(motions: Sequence[str], values: ArrayLike) -> Array:
+    """The 4x4 product of elementary transforms ``motions[0](values[0]) @ ...`` (identity
+    when empty): the frame of a short chain of constant steps."""
+    T = np.eye(4)
+    for motion, value in zip(motions, np.asarray(values, dtype=float).tolist(), strict=True):
+        if motion not in MOTIONS:
+            raise ValueError(f"motion {motion!r} is not one of {MOTIONS}")
+        k = "xyz".index(motion[1])
+        if motion[0] == "T":
+            T[:3, 3] += T[:3, k] * value
+        else:  # columns i, j of R turn about axis k
+            i, j = (k + 1) % 3, (k + 2) % 3
+            c, s = math.cos(value), math.sin(value)
+            Ti, Tj = T[:3, i].copy(), T[:3, j].copy()
+            T[:3, i], T[:3, j] = c * Ti + s * Tj, c * Tj - s * Ti
+    return T
+
+
+def zyx_angles(R: ArrayLike) -> tuple[float, float, float]:
+    """Intrinsic Z-Y-X angles ``(rz, ry, rx)`` (rad) with ``R = Rz(rz) Ry(ry) Rx(rx)``, in
+    closed form (the same as ``matrix_to_euler(R, "ZYX")``, a fraction of its cost for
+    one matrix; within 0.06° of gimbal lock, ``|ry| = 90°``, it is that function)."""
+    R = np.asarray(R, dtype=float)
+    cy = math.hypot(R[0, 0], R[1, 0])  # |cos ry|
+    if cy > 1e-3:
+        return math.atan2(R[1, 0], R[0, 0]), math.atan2(-R[2, 0], cy), math.atan2(R[2, 1], R[2, 2])
+    # near gimbal lock the elements above all shrink with cos ry: scipy's algorithm
+    # (Bernardes & Viollet 2022) keeps full accuracy there
+    rz, ry, rx = matrix_to_euler(R, "ZYX")
+    return float(rz), float(ry), float(rx)
 
 
 def compose(*transforms: ArrayLike) -> Array:

@@ -123,7 +123,7 @@ def initial_frame_and_tool(
             if measure == "pose":
                 R_f = T_frame[:3, :3] @ T_flange[:, :3, :3]
                 T_tool[:3, :3] = _project_rotation(np.einsum("nji,njk->ik", R_f, data.orientation))
-            elif np.linalg.norm(T_tool[:3, 3] - previous) < 1e-7:  # settled: the frame fits it already
+            elif np.linalg.norm(T_tool[:3, 3] - previous) < 1e-6:  # settled to 1 µm: LM does the rest
                 break
     return T_frame, T_tool
 
@@ -917,9 +917,8 @@ def calibrate(
     values = problem.values(x)
     calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
     frame_names = [s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))]
-    T_device_base = np.eye(4)
-    for step in calibrated_chain.steps[: len(frame_names)]:  # the frame steps come first
-        T_device_base = T_device_base @ spatial.elementary(step.motion, step.value)
+    frame_steps_ = calibrated_chain.steps[: len(frame_names)]  # the frame steps come first
+    T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
     robot_steps = [s for s in calibrated_chain.steps if s.name not in set(frame_names)]
     free_before = {s.name: s.free for s in given_model.steps}
     robot_steps = [

@@ -42,7 +42,7 @@ TOOL_PREFIX = "tcp_"
 
 def frame_steps(T: Array, prefix: str, free: bool) -> list[Step]:
     """A rigid transform as six steps Tx Ty Tz Rz Ry Rx (intrinsic ZYX angles)."""
-    rz, ry, rx = spatial.matrix_to_euler(T[:3, :3], "ZYX")
+    rz, ry, rx = spatial.zyx_angles(T[:3, :3])
     return frame6(prefix, *T[:3, 3], rz, ry, rx, free=free)
 
 

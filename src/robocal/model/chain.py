@@ -362,7 +362,7 @@ class Model:
                 out[j] = joint.limits
         return out
 
-    @property
+    @cached_property
     def names(self) -> tuple[str, ...]:
         """Names of all parameters, in chain order."""
         return tuple(s.name for s in self.steps)
@@ -376,7 +376,7 @@ class Model:
     def free_mask(self) -> NDArray[np.bool_]:
         return np.array([s.free for s in self.steps], dtype=bool)
 
-    @property
+    @cached_property
     def free_names(self) -> tuple[str, ...]:
         """Names of the free parameters, in chain order (the Jacobian's columns)."""
         return tuple(s.name for s in self.steps if s.free)
