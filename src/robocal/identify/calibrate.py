@@ -110,7 +110,6 @@ def initial_frame_and_tool(
     T_frame = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
     y = data.position
     for _ in range(rounds if (fit_frame and fit_tool) else 1):
-        previous = T_tool[:3, 3].copy()
         if fit_frame:
             p_base = T_flange[:, :3, :3] @ T_tool[:3, 3] + T_flange[:, :3, 3]
             T_frame = spatial.fit_rigid_transform(p_base, y)
@@ -123,8 +122,6 @@ def initial_frame_and_tool(
             if measure == "pose":
                 R_f = T_frame[:3, :3] @ T_flange[:, :3, :3]
                 T_tool[:3, :3] = _project_rotation(np.einsum("nji,njk->ik", R_f, data.orientation))
-            elif np.linalg.norm(T_tool[:3, 3] - previous) < 1e-6:  # settled to 1 µm: LM does the rest
-                break
     return T_frame, T_tool
 
 
