@@ -622,6 +622,7 @@ class Model:
         orientation: bool = True,
         values: Array | None = None,
         tilt: bool = False,
+        segments: tuple[Array, Array] | None = None,
     ) -> tuple[Array, ...]:
         """Derivative columns of the tool pose wrt the values of ``steps`` (chain order).
 
@@ -641,37 +642,52 @@ class Model:
         """
         plan = self._plan
         steps = np.asarray(steps, dtype=np.intp)
-        segments = self._segments if values is None else self._segment_data(values)
+        if segments is None:
+            segments = self._segments if values is None else self._segment_data(values)
+        n = q.shape[0]
         local = segments[1]
         F, anchors = self._forward(q, perturbations, keep_anchors=True, values=values, segments=segments)
-        n, m = q.shape[0], len(steps)
+        m = len(steps)
         rows = 6 if orientation else 3
         loc = local[steps]
         a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3) axis in the anchor frame
         c_loc = _cross_rows(a_loc, loc[:, :3, 3])  # (m, 3) a_l × o_l
-        G = anchors[plan.anchor_of[steps]]  # (m, 3, 4, n) each step's anchor frame
-        A = G[:, :, 0] * a_loc[:, None, 0, None]  # (m, 3, n) world axes
-        A += G[:, :, 1] * a_loc[:, None, 1, None]
-        A += G[:, :, 2] * a_loc[:, None, 2, None]
-        RC = G[:, :, 0] * c_loc[:, None, 0, None]  # (m, 3, n) R (a_l × o_l)
-        RC += G[:, :, 1] * c_loc[:, None, 1, None]
-        RC += G[:, :, 2] * c_loc[:, None, 2, None]
-        r = F[None, :, 3] - G[:, :, 3]  # (m, 3, n) tool point from the anchor origin
+        step_anchor = plan.anchor_of[steps]
+        A = np.empty((m, 3, n))  # world axes R a_l
+        RC = np.empty((m, 3, n))  # R (a_l × o_l)
+        bounds = np.flatnonzero(np.diff(step_anchor)) + 1
+        for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True) if m else ():
+            # the steps of one anchor are contiguous: one product each for their a and R c,
+            # written in place ((3, k, n) views: the rows of R times the vectors)
+            R = anchors[step_anchor[lo], :, :3]
+            np.matmul(a_loc[lo:hi], R, out=A[lo:hi].transpose(1, 0, 2))
+            np.matmul(c_loc[lo:hi], R, out=RC[lo:hi].transpose(1, 0, 2))
+        # r = p − p_a, the tool point from each step's anchor origin: for few poses gathered
+        # for all steps (one block, fewest numpy calls); for many, one (3, n) vector per
+        # anchor broadcast over its steps (least memory traffic)
+        if m * n <= _SMALL_BATCH:
+            blocks = [(0, m, F[None, :, 3] - anchors[step_anchor, :, 3])]
+        else:
+            blocks = [
+                (lo, hi, (F[:, 3] - anchors[step_anchor[lo], :, 3])[None])
+                for lo, hi in zip(np.r_[0, bounds], np.r_[bounds, m], strict=True)
+            ]
         J = np.empty((m, rows, n))
-        np.multiply(A[:, 1], r[:, 2], out=J[:, 0])
-        J[:, 0] -= A[:, 2] * r[:, 1]
-        np.multiply(A[:, 2], r[:, 0], out=J[:, 1])
-        J[:, 1] -= A[:, 0] * r[:, 2]
-        np.multiply(A[:, 0], r[:, 1], out=J[:, 2])
-        J[:, 2] -= A[:, 1] * r[:, 0]
+        for lo, hi, r in blocks:  # a × r, then − R (a_l × o_l) below
+            Ab, Jb = A[lo:hi], J[lo:hi]
+            np.multiply(Ab[:, 1], r[:, 2], out=Jb[:, 0])
+            Jb[:, 0] -= Ab[:, 2] * r[:, 1]
+            np.multiply(Ab[:, 2], r[:, 0], out=Jb[:, 1])
+            Jb[:, 1] -= Ab[:, 0] * r[:, 2]
+            np.multiply(Ab[:, 0], r[:, 1], out=Jb[:, 2])
+            Jb[:, 2] -= Ab[:, 1] * r[:, 0]
         J[:, :3] -= RC
         if orientation:
             J[:, 3:] = A
-        translation = ~plan.step_rot[steps]
-        if translation.any():
-            J[translation, :3] = A[translation]
+        for c in np.flatnonzero(~plan.step_rot[steps]):  # slices: a boolean mask would copy
+            J[c, :3] = A[c]
             if orientation:
-                J[translation, 3:] = 0.0
+                J[c, 3:] = 0.0
         if tilt:
             return F, J, self._tilt_columns(F, anchors[1:], perturbations, orientation)
         return F, J
@@ -826,6 +842,7 @@ class Model:
 
 
 _EYE4 = np.eye(4)
+_SMALL_BATCH = 20_000  # steps x poses below which the Jacobian's cross products run over all steps at once
 
 
 def _cross_rows(a: Array, b: Array) -> Array:
