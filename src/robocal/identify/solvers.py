@@ -78,7 +78,11 @@ def _lm(
             max_nfev=max_iterations,
         )
         return SolveResult(res.x, bool(res.status > 0), res.message, int(res.njev or res.nfev), int(res.nfev))
-    return levenberg_marquardt(problem, x0, max_iterations=max_iterations, tolerance=tolerance)
+    # a nearly unidentifiable parameter (pruned afterwards) can make the first fit creep
+    # along a flat valley for a few hundred steps: MINPACK's budget, 200 (p + 1) evaluations
+    return levenberg_marquardt(
+        problem, x0, max_iterations=max_iterations * (len(x0) + 1), tolerance=tolerance
+    )
 
 
 def levenberg_marquardt(
@@ -102,7 +106,8 @@ def levenberg_marquardt(
 
     Stops when the predicted decrease of the next step is below ``tolerance`` times the
     cost, or the step is below ``tolerance`` relative to the scaled parameters, or after
-    ``max_iterations`` evaluations.
+    ``max_iterations`` evaluations (``method="lm"`` allows ``max_iterations · (p + 1)``,
+    the evaluation budget MINPACK would have with a finite-difference Jacobian).
     """
     x = np.array(x0, dtype=float)
     r, J = problem.residual(x), problem.jacobian(x)
