@@ -772,6 +772,7 @@ def calibrate_batch(
         ValueError: no positions, orientation-only data, different pose counts or a
             joint count that does not fit the model.
     """
+    from robocal.identify.calibrate import screen_unidentifiable
     from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, measurement_chain
 
     if not data:
@@ -817,7 +818,7 @@ def calibrate_batch(
 
     # identifiable set from the scaled Jacobian at the start
     full = _Group(chain, V, qs, ys, w, free)
-    _, J0 = full.evaluate(V[:, free])
+    r0, J0 = full.evaluate(V[:, free])
     scale = np.where(rot[free][None, :], length[:, None], 1.0)  # (K, p)
     kept, zero = _gram_schmidt_select(J0 * scale[:, None, :], order)
 
@@ -830,9 +831,13 @@ def calibrate_batch(
         for k in range(K)
     ]
     masks = kept.copy()  # (K, p_free) current unknowns per robot
+    for k in range(K):  # the hopeless ones before the first fit, as rc.calibrate
+        cols = np.flatnonzero(masks[k])
+        for c, _sigma in screen_unidentifiable(r0[k], J0[k][:, cols], scale[k, cols], max_std):
+            masks[k, cols[c]] = False
+            dropped[k].append((free_names[cols[c]], "poorly identifiable"))
     out: list[BatchFit | None] = [None] * K
     x_start = V[:, free]  # start values of every candidate
-    x_current = x_start.copy()
     pending = np.arange(K)
     while len(pending):
         # robots with the same unknowns are solved together
@@ -849,7 +854,7 @@ def calibrate_batch(
                 rot[cols][None, :], length[idx][:, None], 1.0
             )  # (k, p) tool displacement per unit
             tol = 1e-11 / size.max(axis=0)
-            x, ok, evals = _lm_batch(g, x_current[idx][:, mask], max_iterations, tol)
+            x, ok, evals = _lm_batch(g, x_start[idx][:, mask], max_iterations, tol)
             r, J = g.evaluate(x)
             std, cond = _uncertainty_batch(r, J)
             r_plain = (r / g.w.reshape(len(idx), -1)).reshape(len(idx), n, 3)
@@ -861,9 +866,7 @@ def calibrate_batch(
                     c = np.flatnonzero(mask)[worst]
                     masks[k, c] = False
                     dropped[k].append((free_names[c], "poorly identifiable"))
-                    x_current[k, mask] = x[i]
-                    x_current[k, c] = x_start[k, c]  # kept at its start value
-                    pending_next.append(int(k))
+                    pending_next.append(int(k))  # refitted from the start values, as rc.calibrate
                     continue
                 values = V[k].copy()
                 values[cols] = x[i]

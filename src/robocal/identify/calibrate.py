@@ -476,6 +476,59 @@ def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array
     return s2, cov, std, corr, cond
 
 
+def _screen(
+    problem: Problem, x0: Array, max_std: float, max_std_ratio: float
+) -> list[tuple[str, float]]:
+    """:func:`screen_unidentifiable` of ``problem`` at its start values ``x0``, by name."""
+    r, J = problem.residual(x0), problem.jacobian(x0)
+    found = screen_unidentifiable(r, J, problem.free_scale, max_std, max_std_ratio)
+    return [(problem.free_names[c], sigma) for c, sigma in found]
+
+
+def screen_unidentifiable(
+    r: Array,
+    J: Array,
+    scale: Array,
+    max_std: float = 5e-4,
+    max_std_ratio: float = 3.0,
+    margin: float = 10.0,
+) -> list[tuple[int, float]]:
+    """Unknowns the measurements leave far beyond the pruning thresholds, found before
+    any fit: their column indices and σ as tool displacement (m), worst first.
+
+    The σ of the problem linearised at the start values — weighted residuals ``r``
+    ``(m,)`` and Jacobian ``J`` ``(m, p)``, residual variance from one Gauss-Newton step,
+    ``scale`` ``(p,)`` tool displacement per unit of each unknown — predict those of the
+    fit.  An unknown whose σ exceeds ``margin`` times the pruning threshold
+    (``max(max_std, max_std_ratio × median σ)``) would be pruned after the fit anyway, but
+    could first drag the fit along a nearly flat valley for hundreds of iterations (real
+    UR10 data, plain DH: θ5, α5 at σ ≈ 0.3-0.5 m).  Worst first, re-evaluated after each
+    (correlated unknowns often become determined once their partner is fixed);
+    borderline cases are left to the pruning after the fit.
+    """
+    keep = np.ones(J.shape[1], dtype=bool)
+    out: list[tuple[int, float]] = []
+    while keep.sum() > 1:
+        Jk = J[:, keep]
+        norms = np.linalg.norm(Jk, axis=0)
+        norms[norms == 0] = 1.0
+        Jn = Jk / norms
+        lam, V = np.linalg.eigh(Jn.T @ Jn)
+        if lam[0] <= 1e-14 * lam[-1]:  # numerically singular: the fit and its checks decide
+            break
+        inverse = (V / lam) @ V.T
+        e = r - Jn @ (inverse @ (Jn.T @ r))  # the residual after one Gauss-Newton step
+        s2 = float(e @ e) / max(len(r) - int(keep.sum()), 1)
+        move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[keep]
+        worst = int(np.argmax(move))
+        if move[worst] <= margin * max(max_std, max_std_ratio * float(np.median(move))):
+            break
+        column = int(np.flatnonzero(keep)[worst])
+        out.append((column, float(move[worst])))
+        keep[column] = False
+    return out
+
+
 COMPLIANCE_PREFIX = "compliance_"
 _EFFECT_UNITS = {  # coefficient prefix -> (SI unit, display factor, display unit)
     "radial_compliance_": ("rad/(N·m)", 1e6, "µrad/N·m"),
@@ -785,7 +838,7 @@ def calibrate(
     chain = measurement_chain(model, T_frame, None if tool is None else T_tool, measure, fit_frame)
     if tool is not None and not fit_tool:
         chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
-    length = _robot_size(T_flange)
+    length = _robot_size(T_flange[:50])  # as the batched engine of robocal.study
     rows = 3 if measure == "position" else 6
     w = np.ones((n, rows))
     if weights == "sigma" and data.sigma is not None:
@@ -873,11 +926,17 @@ def calibrate(
             if lo.shape != x0.shape or hi.shape != x0.shape:
                 raise ValueError(f"bounds must be two arrays over the {len(x0)} estimated parameters {names}")
         options["bounds"] = (lo, hi)
+    dropped = list(selection.dropped)
+    if method != "bounded":  # the hopeless ones before the first fit (they are pruned anyway)
+        screened = _screen(problem, x0, max_std, max_std_ratio)
+        if screened:
+            dropped += [Dropped(name, "poorly identifiable", sigma=sigma) for name, sigma in screened]
+            problem = problem.fix([name for name, _ in screened])
+            names, x0 = problem.free_names, problem.x0
     t_solve = time.perf_counter()
     result: SolveResult = solve(problem, x0, method, **options)
     solve_seconds = time.perf_counter() - t_solve
     x = result.x
-    dropped = list(selection.dropped)
     _, cov, std, corr, cond = _uncertainty(problem, x)
     # drop what these measurements cannot determine, worst first, and refit
     # an unconverged fit says nothing about σ; a bounded fit keeps every parameter within
