@@ -8,8 +8,9 @@ and tool point fitted) and validated on 200 held-out poses.  Two models:
 * ``built``: the complete, minimal model robocal builds from the UR10's joint geometry
   (examples/geometry/ur10.yaml, seed 000), the model of examples/study_ur10.yaml;
 * ``dh``: the catalog's plain DH UR10, whose wrist parameters θ5/α5 50 random poses
-  leave poorly identifiable: rc.calibrate fits three times (pruning them one by one),
-  and ~10 % of the robots need 50-100 Levenberg-Marquardt iterations on the first fit.
+  leave poorly identifiable: both engines screen them out before the first fit (their
+  linearised σ is far beyond the pruning threshold), so it costs about what ``built``
+  costs.
 
 Rows (same machine, same run, interleaved rounds, the best of ``--rounds``):
 
