@@ -57,3 +57,19 @@ def test_bad_urdf_files_are_rejected(tmp_path, text, message):
     with pytest.raises(URDFError, match=message) as info:
         build_from_urdf(path)
     assert str(path) in str(info.value)
+
+
+def test_continuous_joint_with_an_oblique_axis(tmp_path):
+    """Pinocchio models it as JointModelRevoluteUnboundedUnaligned, which has no ``axis``
+    attribute: the axis comes from the joint's motion subspace (found by fuzzing)."""
+    path = tmp_path / "oblique.urdf"
+    path.write_text(
+        '<robot name="r"><link name="a"/><link name="b"/><link name="c"/>'
+        '<joint name="j1" type="continuous"><parent link="a"/><child link="b"/>'
+        '<origin xyz="0.1 0 0.2"/><axis xyz="0 0.6 0.8"/></joint>'
+        '<joint name="j2" type="fixed"><parent link="b"/><child link="c"/><origin xyz="0.3 0 0"/></joint>'
+        "</robot>"
+    )
+    _, joints, _ = geometry_from_urdf(path, tip="c")
+    assert len(joints) == 1 and joints[0].type == "revolute"
+    np.testing.assert_allclose(joints[0].axis, [0.0, 0.6, 0.8], atol=1e-12)

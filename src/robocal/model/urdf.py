@@ -182,13 +182,26 @@ def _joint_axis(joint_model) -> tuple[str, np.ndarray]:
         kind = "prismatic"
     if kind is None or joint_model.nv != 1:
         raise URDFError(f"joint type {name} is not a 1-DOF revolute or prismatic joint")
-    if name.endswith("Unaligned"):  # the generic JointModel wraps it: extract() has the axis
-        axis = np.asarray(joint_model.extract().axis, dtype=float)
+    if name.endswith("Unaligned"):  # the generic JointModel wraps it
+        axis = _unaligned_axis(joint_model, kind)
         if not (np.all(np.isfinite(axis)) and np.linalg.norm(axis) > 0):
             raise URDFError(f"joint axis {axis.tolist()} is not a direction")
         return kind, axis
     letter = name[-1]  # RX, RY, RZ, PX ... ; RUBX etc. are continuous joints
     return kind, np.array(_AXES[letter])
+
+
+def _unaligned_axis(joint_model, kind: str) -> np.ndarray:
+    """The axis of an unaligned joint: ``extract().axis`` where Pinocchio exposes it, else
+    the joint's motion subspace at its neutral configuration (angular part for a revolute
+    joint, linear part for a prismatic one; continuous unaligned joints have no ``axis``)."""
+    specific = joint_model.extract()
+    if hasattr(specific, "axis"):
+        return np.asarray(specific.axis, dtype=float)
+    data = joint_model.createData()
+    joint_model.calc(data, np.asarray(joint_model.lieGroup().neutral, dtype=float))
+    S = np.asarray(data.S, dtype=float).reshape(6)
+    return S[3:] if kind == "revolute" else S[:3]
 
 
 def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, list[JointGeometry], Tcp]:
