@@ -17,7 +17,7 @@ measuring a probe at an unknown tool offset with 20 µm noise, 100 random poses.
   them.
 
 FIGAROH, which pins its own dependencies, runs in its own environment on its own shipped
-TIAGo data in ``benchmarks/bench_peers.py`` (robocal 11 ms against FIGAROH's 89 ms for
+TIAGo data in ``benchmarks/bench_peers.py`` (robocal 4 ms against FIGAROH's 82 ms for
 the same joint-offset calibration, README "Peers").
 
 Run: ``python benchmarks/bench_calibrate.py [--repeats 7] [--poses 100]``.
