@@ -378,3 +378,18 @@ def test_example_study_of_1000_ur10s_on_two_workers(tmp_path):
     run = run_study(config, tmp_path / "ur10", workers=2)
     assert run.computed == 4000 and run.errors == 0
     assert all(g["ok"] == 1000 for g in run.summary["groups"])
+
+
+def test_batched_engine_prunes_like_rc_calibrate_with_noisy_data(ur10):
+    """1 mm noise: every σ is large, so the absolute threshold alone would prune
+    parameters that rc.calibrate keeps (its threshold is relative to the median σ too)."""
+    q = random_poses(ur10, 50, seed=21)
+    device = LaserTracker(p_tool_target=TOOL, sigma=1e-3)
+    data = [
+        simulate(VirtualRobot(ur10, draw_true_model(ur10, seed=400 + k), device), q, seed=500 + k)
+        for k in range(3)
+    ]
+    for d, fit in zip(data, calibrate_batch(ur10, data, tool_guess=TOOL), strict=True):
+        ref = rc.calibrate(ur10, d, tool_guess=TOOL)
+        assert {n for n, _ in fit.dropped} == {x.name for x in ref.dropped}
+        assert np.max(np.abs(fit.estimates - ref.estimates) / ref.std) < 1e-3

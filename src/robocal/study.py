@@ -746,6 +746,7 @@ def calibrate_batch(
     *,
     tool_guess: ArrayLike | None = None,
     max_std: float = 5e-4,
+    max_std_ratio: float = 5.0,
     max_iterations: int = 200,
 ) -> list[BatchFit]:
     """Calibrate many robots of the same model at once (position measurements).
@@ -762,7 +763,8 @@ def calibrate_batch(
         data: K measurement sets with positions ``(n_k, 3)`` (m) in the device frame and
             the same pose count ``n`` (their joint values may differ).
         tool_guess: start of the tool point (m, flange frame), ``(3,)``.
-        max_std: pruning threshold (m as tool displacement), as in ``rc.calibrate``.
+        max_std, max_std_ratio: pruning thresholds (m as tool displacement, and times the
+            median σ), as in ``rc.calibrate``.
         max_iterations: Levenberg–Marquardt iterations per fit.
 
     Returns:
@@ -833,7 +835,8 @@ def calibrate_batch(
     masks = kept.copy()  # (K, p_free) current unknowns per robot
     for k in range(K):  # the hopeless ones before the first fit, as rc.calibrate
         cols = np.flatnonzero(masks[k])
-        for c, _sigma in screen_unidentifiable(r0[k], J0[k][:, cols], scale[k, cols], max_std):
+        found = screen_unidentifiable(r0[k], J0[k][:, cols], scale[k, cols], max_std, max_std_ratio)
+        for c, _sigma in found:
             masks[k, cols[c]] = False
             dropped[k].append((free_names[cols[c]], "poorly identifiable"))
     out: list[BatchFit | None] = [None] * K
@@ -862,7 +865,8 @@ def calibrate_batch(
             move = std * size
             for i, k in enumerate(idx):
                 worst = int(np.argmax(move[i])) if move.shape[1] else 0
-                if ok[i] and move.shape[1] and move[i, worst] > max_std:
+                threshold = max(max_std, max_std_ratio * float(np.median(move[i]))) if move.shape[1] else 0.0
+                if ok[i] and move.shape[1] and move[i, worst] > threshold:
                     c = np.flatnonzero(mask)[worst]
                     masks[k, c] = False
                     dropped[k].append((free_names[c], "poorly identifiable"))
