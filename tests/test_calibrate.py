@@ -290,3 +290,55 @@ def test_plain_dh_ur10_drops_the_wrist_pair_without_wandering():
     assert {"theta5", "alpha5"} & set(poor)
     assert result.success and result.iterations <= 10
     assert result.rms_after < 0.04e-3  # 20 µm per axis: about 35 µm in 3D
+
+
+def test_predicted_uncertainty_includes_the_joint_compliances():
+    """Compliance calibrations: held-out MSE = trace(J Cov Jᵀ) with the compliance
+    coefficients' columns in J (Monte Carlo over 25 virtual UR10s), within 15 %."""
+    from robocal.model.dynamics import gravity_torques
+
+    model = rc.robot("ur10")
+    c_true = {"shoulder_lift": 2e-6, "elbow": 4e-6, "wrist_1": 1e-5}
+
+    def sag(true_model, q):
+        tau = gravity_torques(model, q)
+        pert = np.zeros((len(q), model.dof, 3))
+        for name, c in c_true.items():
+            pert[:, model.joint_names.index(name), 2] = -c * tau[:, model.joint_names.index(name)]
+        return pert
+
+    actual, predicted = [], []
+    for seed in range(25):
+        robot = virtual(model, seed=500 + seed, effects=sag)
+        data = simulate(robot, poses(model, 60, seed=600 + seed), seed=700 + seed)
+        result = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=list(c_true))
+        assert {"compliance_" + n for n in c_true} <= set(result.names)
+        q_test = poses(model, 200, seed=800 + seed)
+        err = result.predict(q_test)[:, :3, 3] - true_positions(robot, q_test)
+        actual.append(np.mean(np.sum(err**2, axis=1)))
+        predicted.append(np.mean(np.trace(result.position_covariance(q_test), axis1=1, axis2=2)))
+    assert abs(np.mean(actual) / np.mean(predicted) - 1) < 0.15, (np.mean(actual), np.mean(predicted))
+
+
+def test_compliance_columns_of_the_prediction_match_finite_differences():
+    """The joint-effect columns of position_covariance's J: d predicted position / d
+    compliance, against changing the calibrated robot's compliance and predicting again."""
+    model = rc.robot("ur10")
+    data = simulate(virtual(model, seed=5), poses(model, 60, seed=6), seed=7)
+    result = rc.calibrate(
+        model, data, tool_guess=[0, 0, 0.1], compliance=["shoulder_lift", "elbow", "wrist_1"]
+    )
+    names = [n for n in result.names if n.startswith("compliance_")]
+    assert len(names) == 3
+    q = poses(model, 20, seed=8)
+    columns = result._effect_columns(result.measurement_chain, q, result.joint_perturbations(q), names)
+    h = 1e-7  # rad/(N·m): a few µm at the tool
+    for k, name in enumerate(names):
+        joint = name.removeprefix("compliance_")
+        effects = tuple(
+            dataclasses.replace(e, compliance=e.compliance + h) if e.joint == joint else e
+            for e in result.model.joint_effects
+        )
+        shifted = dataclasses.replace(result, model=dataclasses.replace(result.model, joint_effects=effects))
+        fd = (shifted.predict(q)[:, :3, 3] - result.predict(q)[:, :3, 3]) / h
+        np.testing.assert_allclose(columns[:, :, k], fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max())

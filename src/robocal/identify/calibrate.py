@@ -252,10 +252,10 @@ class CalibrationResult:
         """Covariance ``(n, 3, 3)`` (m²) of the predicted tool position at joint values ``q``.
 
         ``frame="device"`` (default): the prediction of a measurement, in the device
-        frame, with the uncertainty of every estimated geometric parameter including
-        the device frame's.  ``frame="base"``: the position in the robot's base frame,
-        from the robot and tool parameters only.  Joint-effect coefficients are not
-        included.
+        frame, with the uncertainty of every estimated parameter — geometric ones
+        including the device frame's, and identified joint-effect coefficients (their
+        patterns at ``q`` under the calibration's gravity and payload).  ``frame="base"``:
+        the position in the robot's base frame, without the device frame's parameters.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         chain = self.measurement_chain if frame == "device" else self.model
@@ -266,11 +266,33 @@ class CalibrationResult:
             for n in self.names
             if n in set(chain.names) and not (frame == "base" and n.startswith(FRAME_PREFIX))
         ]
-        idx = [self.names.index(n) for n in names]
+        effects = [n for n in self.names if _effect_prefix(n) is not None]
+        perturbations = self.joint_perturbations(q)
         model = chain.with_free(None, free=False).with_free(names)
-        J = model.jacobian(q).reshape(len(q), 3, -1)[:, :, [model.free_names.index(n) for n in names]]
+        J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
+        J = J[:, :, [model.free_names.index(n) for n in names]]
+        if effects:  # d position / d coefficient = (d position / d joint perturbation) · pattern
+            J = np.concatenate([J, self._effect_columns(chain, q, perturbations, effects)], axis=2)
+        idx = [self.names.index(n) for n in names + effects]
         C = self.covariance[np.ix_(idx, idx)]
         return np.einsum("nik,kl,njl->nij", J, C, J)
+
+    def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
+        """``(n, 3, m)`` derivatives of the tool position wrt the joint-effect coefficients
+        ``names`` at ``q`` (the patterns the calibration identified them with)."""
+        from robocal.model.joints import EFFECT_PREFIXES, effect_basis
+
+        kinds = [k for k in EFFECT_PREFIXES if any(_effect_kind(n) == k for n in names)]
+        robot = self.model  # the loads: without the measured tool steps (as joint_perturbations)
+        steps = tuple(s for s in robot.steps if not s.name.startswith(TOOL_PREFIX))
+        if len(steps) != len(robot.steps):
+            robot = dataclasses.replace(robot, steps=steps)
+        B, basis_names, _ = effect_basis(
+            robot, q, kinds=kinds, gravity=np.asarray(self.gravity), payload=self.payload
+        )
+        B = B[[basis_names.index(n) for n in names]]  # (m, n, dof, 3)
+        P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
+        return np.einsum("nrjc,knjc->nrk", P, B)
 
     def position_uncertainty(self, q: ArrayLike, frame: Literal["device", "base"] = "device") -> Array:
         """1-σ radial position uncertainty ``sqrt(trace(cov))`` (m) at each pose, ``(n,)``."""
@@ -476,9 +498,7 @@ def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array
     return s2, cov, std, corr, cond
 
 
-def _screen(
-    problem: Problem, x0: Array, max_std: float, max_std_ratio: float
-) -> list[tuple[str, float]]:
+def _screen(problem: Problem, x0: Array, max_std: float, max_std_ratio: float) -> list[tuple[str, float]]:
     """:func:`screen_unidentifiable` of ``problem`` at its start values ``x0``, by name."""
     r, J = problem.residual(x0), problem.jacobian(x0)
     found = screen_unidentifiable(r, J, problem.free_scale, max_std, max_std_ratio)
@@ -540,6 +560,14 @@ _EFFECT_UNITS = {  # coefficient prefix -> (SI unit, display factor, display uni
 
 def _effect_prefix(name: str) -> str | None:
     return next((p for p in _EFFECT_UNITS if name.startswith(p)), None)
+
+
+def _effect_kind(name: str) -> str | None:
+    """The joint-effect kind of a coefficient name (``compliance_q2`` -> ``compliance``)."""
+    from robocal.model.joints import EFFECT_PREFIXES
+
+    prefix = _effect_prefix(name)
+    return next((k for k, (p, _) in EFFECT_PREFIXES.items() if p == prefix), None)
 
 
 def _unit(name: str, rotation: bool) -> str:
