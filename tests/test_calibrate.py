@@ -180,22 +180,26 @@ def test_per_row_sigma_weights_the_fit(irb2400):
     )
 
 
-def test_joint_compliance_is_identified():
-    """A UR10 whose joints give way under gravity: c_j τ_j(q), recovered from positions."""
+def gravity_sag(model, compliances):
+    """A virtual robot's joint effect: joint j gives way by c_j τ_j(q) under its gravity load."""
     from robocal.model.dynamics import gravity_torques
-
-    model = rc.robot("ur10")
-    c_true = {"shoulder_lift": 2e-6, "elbow": 4e-6, "wrist_1": 1e-5}
 
     def sag(true_model, q):
         tau = gravity_torques(model, q)
         pert = np.zeros((len(q), model.dof, 3))
-        for name, c in c_true.items():
+        for name, c in compliances.items():
             j = model.joint_names.index(name)
-            pert[:, j, 2] = -c * tau[:, j]  # the joint gives way under the gravity load
+            pert[:, j, 2] = -c * tau[:, j]
         return pert
 
-    robot = virtual(model, seed=41, noise=10e-6, effects=sag)
+    return sag
+
+
+def test_joint_compliance_is_identified():
+    """A UR10 whose joints give way under gravity: c_j τ_j(q), recovered from positions."""
+    model = rc.robot("ur10")
+    c_true = {"shoulder_lift": 2e-6, "elbow": 4e-6, "wrist_1": 1e-5}
+    robot = virtual(model, seed=41, noise=10e-6, effects=gravity_sag(model, c_true))
     data = simulate(robot, poses(model, 150, seed=42), seed=43)
     result = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=list(c_true))
     for name, c in c_true.items():
@@ -295,21 +299,11 @@ def test_plain_dh_ur10_drops_the_wrist_pair_without_wandering():
 def test_predicted_uncertainty_includes_the_joint_compliances():
     """Compliance calibrations: held-out MSE = trace(J Cov Jᵀ) with the compliance
     coefficients' columns in J (Monte Carlo over 25 virtual UR10s), within 15 %."""
-    from robocal.model.dynamics import gravity_torques
-
     model = rc.robot("ur10")
     c_true = {"shoulder_lift": 2e-6, "elbow": 4e-6, "wrist_1": 1e-5}
-
-    def sag(true_model, q):
-        tau = gravity_torques(model, q)
-        pert = np.zeros((len(q), model.dof, 3))
-        for name, c in c_true.items():
-            pert[:, model.joint_names.index(name), 2] = -c * tau[:, model.joint_names.index(name)]
-        return pert
-
     actual, predicted = [], []
     for seed in range(25):
-        robot = virtual(model, seed=500 + seed, effects=sag)
+        robot = virtual(model, seed=500 + seed, effects=gravity_sag(model, c_true))
         data = simulate(robot, poses(model, 60, seed=600 + seed), seed=700 + seed)
         result = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=list(c_true))
         assert {"compliance_" + n for n in c_true} <= set(result.names)
