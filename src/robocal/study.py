@@ -63,7 +63,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from robocal import spatial
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Joint, Model, Step
-from robocal.model.files import atomic_write_text, format_validation_error
+from robocal.model.files import Count, Number, atomic_write_text, format_validation_error
 
 __all__ = [
     "FLEET_COLUMNS",
@@ -140,7 +140,7 @@ class StudyError(ValueError):
 
 # =============================================================== configuration
 _Config = ConfigDict(extra="forbid", allow_inf_nan=False, str_strip_whitespace=True)
-Quantity = float | str
+Quantity = Number | str
 
 
 class _Errors(BaseModel):
@@ -159,9 +159,9 @@ class PoseSetSpec(BaseModel):
     model_config = _Config
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_.+-]+$")
     kind: Literal["random", "optimal", "file"] = "random"
-    n: int | None = Field(default=None, ge=1, le=100_000)
-    seed: int | None = None
-    pool: int = Field(default=1000, ge=1, le=1_000_000)
+    n: Count | None = Field(default=None, ge=1, le=100_000)
+    seed: Count | None = None
+    pool: Count = Field(default=1000, ge=1, le=1_000_000)
     index: Literal["O1", "O2", "O3", "O4", "O5"] = "O1"
     path: str | None = None
     per_robot: bool = False  # random: a new draw for every robot
@@ -180,8 +180,8 @@ class DeviceSpec(BaseModel):
 
 class _Validation(BaseModel):
     model_config = _Config
-    n: int = Field(default=200, ge=1, le=1_000_000)
-    seed: int | None = None
+    n: Count = Field(default=200, ge=1, le=1_000_000)
+    seed: Count | None = None
 
 
 class StudyConfig(BaseModel):
@@ -210,10 +210,10 @@ class StudyConfig(BaseModel):
     name: str = Field(default="study", min_length=1)
     robot: str | None = Field(default=None, min_length=1)
     geometry: str | None = Field(default=None, min_length=1)
-    robots: int = Field(ge=1, le=10_000_000)
-    seed: int = 0
+    robots: Count = Field(ge=1, le=10_000_000)
+    seed: Count = 0
     errors: _Errors = _Errors()
-    tool: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    tool: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
     pose_sets: list[PoseSetSpec] = Field(min_length=1)
     devices: list[DeviceSpec] = Field(
         default_factory=lambda: [DeviceSpec(name="laser-tracker")], min_length=1
@@ -222,7 +222,7 @@ class StudyConfig(BaseModel):
     method: Literal["lm", "pinv", "bounded", "influence"] = "lm"
     max_std: Quantity = "0.5mm"
     engine: Literal["auto", "batched", "calibrate"] = "auto"
-    chunk: int = Field(default=50, ge=1, le=100_000)
+    chunk: Count = Field(default=50, ge=1, le=100_000)
 
     @model_validator(mode="after")
     def _one_robot(self) -> StudyConfig:

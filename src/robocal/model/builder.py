@@ -44,6 +44,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from robocal import spatial
 from robocal.model.chain import Joint, Model, Step
 from robocal.model.conventions import SCHROER_SETS
+from robocal.model.files import Number
 
 __all__ = [
     "BuildResult",
@@ -549,17 +550,17 @@ _Config = ConfigDict(extra="forbid", allow_inf_nan=False)
 class _JointSpec(BaseModel):
     model_config = _Config
     type: Literal["revolute", "prismatic"]
-    position: tuple[float, float, float]
-    axis: tuple[float, float, float]
+    position: tuple[Number, Number, Number]
+    axis: tuple[Number, Number, Number]
     name: str | None = Field(default=None, min_length=1)
-    limits: tuple[float, float] | None = None
+    limits: tuple[Number, Number] | None = None
 
 
 class _TcpSpec(BaseModel):
     model_config = _Config
-    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rpy: tuple[float, float, float] | None = None  # Rz(yaw) Ry(pitch) Rx(roll), angle unit
-    quaternion: tuple[float, float, float, float] | None = None  # w, x, y, z
+    position: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
+    rpy: tuple[Number, Number, Number] | None = None  # Rz(yaw) Ry(pitch) Rx(roll), angle unit
+    quaternion: tuple[Number, Number, Number, Number] | None = None  # w, x, y, z
 
 
 class _GeometryFile(BaseModel):
@@ -570,7 +571,7 @@ class _GeometryFile(BaseModel):
     unit: Literal["m", "mm"] = "m"
     angle_unit: Literal["rad", "deg"] = "deg"
     measure: Literal["position", "pose"] = "pose"
-    parallel_tolerance: float | None = None  # angle unit
+    parallel_tolerance: Number | None = None  # angle unit
     joints: list[_JointSpec] = Field(min_length=1)
     tcp: _TcpSpec = _TcpSpec()
 

@@ -54,7 +54,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, model_validator
 
 from robocal.model import conventions
 from robocal.model.chain import Body, Joint, JointEffects, Model, Step
@@ -76,7 +76,12 @@ class ModelFileError(ValueError):
 
 
 _Config = ConfigDict(extra="forbid", allow_inf_nan=False, str_strip_whitespace=True)
-Pair = tuple[float, float]
+#: A number in a file: an int or a float, never a YAML yes/no/true/false (which pydantic
+#: would otherwise take as 1.0 / 0.0) nor a quoted string
+Number = Annotated[float, Strict()]
+#: A whole number in a file, never a yes/no
+Count = Annotated[int, Strict()]
+Pair = tuple[Number, Number]
 Name = Annotated[str, Field(min_length=1)]
 
 
@@ -95,7 +100,7 @@ class _StepSpec(BaseModel):
     model_config = _Config
     motion: Literal["Tx", "Ty", "Tz", "Rx", "Ry", "Rz"]
     param: Name
-    value: float = 0.0
+    value: Number = 0.0
     free: bool = True
     bounds: Pair | None = None
     joint: Name | None = None
@@ -110,11 +115,11 @@ class _StepSpec(BaseModel):
 
 class _LinkRow(BaseModel):
     model_config = _Config
-    theta: float = 0.0
-    d: float | None = None
-    a: float = 0.0
-    alpha: float = 0.0
-    beta: float | None = None
+    theta: Number = 0.0
+    d: Number | None = None
+    a: Number = 0.0
+    alpha: Number = 0.0
+    beta: Number | None = None
     type: Literal["revolute", "prismatic"] = "revolute"
     joint: Name | None = None
     limits: Pair | None = None
@@ -126,21 +131,21 @@ class _BodySpec(BaseModel):
     model_config = _Config
     name: Name
     frame: Name
-    mass: Annotated[float, Field(ge=0)]
-    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    inertia: tuple[float, float, float, float, float, float] | None = None
+    mass: Annotated[Number, Field(ge=0)]
+    com: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
+    inertia: tuple[Number, Number, Number, Number, Number, Number] | None = None
 
 
 class _JointEffectsSpec(BaseModel):
     model_config = _Config
     joint: Name
-    clearance_tilt: float = 0.0
-    backlash: float = 0.0
-    stiffness: Annotated[float, Field(gt=0)] | None = None
-    compliance: float | None = None
-    radial_stiffness: Annotated[float, Field(gt=0)] | None = None
-    radial_compliance: float | None = None
-    shaft_length: Annotated[float, Field(gt=0)] | None = None
+    clearance_tilt: Number = 0.0
+    backlash: Number = 0.0
+    stiffness: Annotated[Number, Field(gt=0)] | None = None
+    compliance: Number | None = None
+    radial_stiffness: Annotated[Number, Field(gt=0)] | None = None
+    radial_compliance: Number | None = None
+    shaft_length: Annotated[Number, Field(gt=0)] | None = None
 
     @model_validator(mode="after")
     def _stiffness_or_compliance(self) -> _JointEffectsSpec:
@@ -313,6 +318,25 @@ class _NoAliasLoader(yaml.SafeLoader):
                 None, None, "YAML aliases (*name) are not allowed in model files", event.start_mark
             )
         return super().compose_node(parent, index)
+
+    def construct_mapping(self, node, deep=False):  # type: ignore[override]
+        # YAML lets a later key silently replace an earlier one: a typo'd copy-paste would
+        # then change a model without a word, so a repeated key is an error here
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                first = seen.setdefault(key, key_node.start_mark)
+            except TypeError:  # an unhashable key: the base class reports it
+                continue
+            if first is not key_node.start_mark:
+                raise yaml.constructor.ConstructorError(
+                    None,
+                    None,
+                    f"key {key!r} appears twice (first on line {first.line + 1})",
+                    key_node.start_mark,
+                )
+        return super().construct_mapping(node, deep=deep)
 
 
 def read_yaml(path: str | os.PathLike[str], kind: str, error: type[Exception] = ModelFileError) -> Any:
