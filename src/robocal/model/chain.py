@@ -313,9 +313,9 @@ class Model:
                 raise ValueError(f"model {self.name!r}: parameter name {step.name!r} is used twice")
             seen.add(step.name)
         joint_names = [s.joint.name for s in steps if s.joint is not None]
-        for name in joint_names:
-            if joint_names.count(name) > 1:
-                raise ValueError(f"model {self.name!r}: joint name {name!r} is used twice")
+        if len(set(joint_names)) < len(joint_names):
+            twice = next(n for i, n in enumerate(joint_names) if n in joint_names[:i])
+            raise ValueError(f"model {self.name!r}: joint name {twice!r} is used twice")
         for body in self.bodies:
             if body.frame not in seen:
                 raise ValueError(

@@ -63,8 +63,8 @@ __all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "
 
 FORMAT_VERSION = 1
 MAX_FILE_BYTES = 5_000_000
-#: Elementary steps a model file may describe (a 6-DOF arm has about 30; the checks of a
-#: chain grow with the square of its length).
+#: Elementary steps a model file may describe (a 6-DOF arm has about 30; the limit keeps
+#: a hostile file from costing minutes of checks).
 MAX_STEPS = 1000
 
 LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
