@@ -84,9 +84,7 @@ def test_extrinsic_xyz_is_seed000_eq1(alpha, beta, gamma):
 
 def test_pose_error_position_and_small_angle():
     rng = np.random.default_rng(1)
-    T_ref = spatial.homogeneous(
-        spatial.rotvec_to_matrix(rng.normal(size=(4, 3))), rng.normal(size=(4, 3))
-    )
+    T_ref = spatial.homogeneous(spatial.rotvec_to_matrix(rng.normal(size=(4, 3))), rng.normal(size=(4, 3)))
     w = rng.normal(scale=1e-4, size=(4, 3))
     dp = rng.normal(scale=1e-3, size=(4, 3))
     T_act = T_ref.copy()

@@ -233,8 +233,10 @@ def check_rank(
             f"included): measure at least {math.ceil(len(generic) / rows)} distinct poses, better "
             f"{3 * math.ceil(len(generic) / rows)} or more"
         )
-    chain = None if kept is not None and candidates is not None else _measurement_chain(
-        model, measure, frame, tool, tool_guess
+    chain = (
+        None
+        if kept is not None and candidates is not None
+        else _measurement_chain(model, measure, frame, tool, tool_guess)
     )
     if kept is None:
         kept_set, _ = _identifiable(chain, distinct, measure, length)

@@ -134,11 +134,23 @@ def levenberg_marquardt(
         predicted = -float(step @ (2.0 * g + A @ step))  # cost − |r + J_s δ_s|²
         small_step = np.linalg.norm(step) <= tolerance * (np.linalg.norm(D * x) + tolerance)
         if predicted <= tolerance * cost or small_step or cost == 0.0:
-            return SolveResult(x, True, "converged: the next step would not improve the fit", len(history),
-                               evaluations, history)
+            return SolveResult(
+                x,
+                True,
+                "converged: the next step would not improve the fit",
+                len(history),
+                evaluations,
+                history,
+            )
         if evaluations >= max_iterations:
-            return SolveResult(x, False, f"no convergence in {max_iterations} evaluations", len(history),
-                               evaluations, history)
+            return SolveResult(
+                x,
+                False,
+                f"no convergence in {max_iterations} evaluations",
+                len(history),
+                evaluations,
+                history,
+            )
         x_new = x + step / D
         r_new = problem.residual(x_new)
         evaluations += 1
@@ -207,8 +219,16 @@ def _bounded(
             return problem.jacobian(z) * np.repeat(w, width)[:, None]
 
         return least_squares(
-            fun, x, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-            ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_iterations,
+            fun,
+            x,
+            jac=jac,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale="jac",
+            ftol=1e-10,
+            xtol=1e-10,
+            gtol=1e-10,
+            max_nfev=max_iterations,
         )
 
     fit = weighted_fit(np.clip(x0, lo, hi), np.ones(len(problem.q)))  # bounded least squares
