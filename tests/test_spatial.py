@@ -123,3 +123,20 @@ def test_chain_product_is_the_product_of_elementaries():
     assert np.array_equal(spatial.chain_product([], []), np.eye(4))
     with pytest.raises(ValueError, match="motion 'Qx'"):
         spatial.chain_product(["Qx"], [1.0])
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-10, 1e-4, 0.3, 2.0, 3.0, np.pi - 1e-3, np.pi - 1e-8, np.pi])
+def test_matrix_to_rotvec_matches_scipy_from_zero_to_pi(angle):
+    """The closed form (and its fallback beyond ~172°) against scipy's quaternion route."""
+    from scipy.spatial.transform import Rotation
+
+    axes = np.random.default_rng(7).normal(size=(50, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    R = Rotation.from_rotvec(axes * angle).as_matrix()
+    ours, ref = spatial.matrix_to_rotvec(R), Rotation.from_matrix(R).as_rotvec()
+    same = np.abs(ours - ref).max(axis=1)
+    flipped = np.abs(ours + ref).max(axis=1)  # at exactly π, v and -v are the same rotation
+    assert np.all(np.minimum(same, flipped if angle == np.pi else same) < 1e-12)
+    assert spatial.matrix_to_rotvec(R[0]).shape == (3,)
+    with pytest.raises(ValueError, match=r"\(\.\.\., 3, 3\)"):
+        spatial.matrix_to_rotvec(np.eye(4))

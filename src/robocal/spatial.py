@@ -204,9 +204,29 @@ def rotvec_to_matrix(rotvec: ArrayLike) -> Array:
 
 
 def matrix_to_rotvec(R: ArrayLike) -> Array:
-    """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``."""
-    rotation, batch = _as_rotation(R)
-    return rotation.as_rotvec().reshape((*batch, 3))
+    """Rotation vectors ``(..., 3)`` (rad) of rotation matrices ``(..., 3, 3)``.
+
+    Closed form ``θ / (2 sin θ) · (R − Rᵀ)^∨`` with ``θ = atan2(sin θ, cos θ)`` (exact to
+    first order at θ → 0), a few vector operations instead of scipy's per-call set-up:
+    the IK and the pose residuals call it in their inner loops.  Beyond about 172°, where
+    the antisymmetric part loses precision, scipy's quaternion route takes over.
+    """
+    R = np.asarray(R, dtype=float)
+    if R.ndim < 2 or R.shape[-2:] != (3, 3):
+        raise ValueError(f"rotation matrices must be shaped (..., 3, 3), got {R.shape}")
+    batch = R.shape[:-2]
+    M = R.reshape(-1, 3, 3)
+    v = np.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0], M[:, 1, 0] - M[:, 0, 1]], axis=1)
+    c = 0.5 * (M[:, 0, 0] + M[:, 1, 1] + M[:, 2, 2] - 1.0)  # cos θ
+    s = 0.5 * np.linalg.norm(v, axis=1)  # sin θ
+    theta = np.arctan2(s, c)
+    tiny = s <= 1e-12
+    factor = np.where(tiny, 1.0, theta / np.where(tiny, 1.0, s))  # θ / sin θ -> 1 at θ -> 0
+    out = 0.5 * factor[:, None] * v
+    near_pi = c < -0.99
+    if near_pi.any():
+        out[near_pi] = Rotation.from_matrix(M[near_pi]).as_rotvec()
+    return out.reshape((*batch, 3))
 
 
 def quaternion_to_matrix(quat: ArrayLike) -> Array:
