@@ -202,12 +202,8 @@ class CalibrationResult:
         if self.model.joint_effects:
             from robocal.model.joints import joint_perturbations
 
-            robot = self.model  # the loads: without the measured tool steps (payload: at the robot's end)
-            steps = tuple(s for s in robot.steps if not s.name.startswith(TOOL_PREFIX))
-            if len(steps) != len(robot.steps):
-                robot = dataclasses.replace(robot, steps=steps)
             return joint_perturbations(
-                robot, q, qd, qdd, gravity=np.asarray(self.gravity), payload=self.payload
+                self._load_robot(), q, qd, qdd, gravity=np.asarray(self.gravity), payload=self.payload
             )
         if not self.compliance:
             return None
@@ -219,6 +215,14 @@ class CalibrationResult:
             j = self.model.joint_names.index(name)
             pert[:, j, 2] = -c * tau[:, j]
         return pert
+
+    def _load_robot(self) -> Model:
+        """The calibrated robot without the measured tool steps: the geometry whose joint
+        loads drive the joint effects (a payload sits at the robot's end)."""
+        steps = tuple(s for s in self.model.steps if not s.name.startswith(TOOL_PREFIX))
+        if len(steps) == len(self.model.steps):
+            return self.model
+        return dataclasses.replace(self.model, steps=steps)
 
     def predict(
         self,
@@ -280,15 +284,10 @@ class CalibrationResult:
     def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
         """``(n, 3, m)`` derivatives of the tool position wrt the joint-effect coefficients
         ``names`` at ``q`` (the patterns the calibration identified them with)."""
-        from robocal.model.joints import EFFECT_PREFIXES, effect_basis
+        from robocal.model.joints import EFFECT_KINDS, effect_basis
 
-        kinds = [k for k in EFFECT_PREFIXES if any(_effect_kind(n) == k for n in names)]
-        robot = self.model  # the loads: without the measured tool steps (as joint_perturbations)
-        steps = tuple(s for s in robot.steps if not s.name.startswith(TOOL_PREFIX))
-        if len(steps) != len(robot.steps):
-            robot = dataclasses.replace(robot, steps=steps)
         B, basis_names, _ = effect_basis(
-            robot, q, kinds=kinds, gravity=np.asarray(self.gravity), payload=self.payload
+            self._load_robot(), q, kinds=EFFECT_KINDS, gravity=np.asarray(self.gravity), payload=self.payload
         )
         B = B[[basis_names.index(n) for n in names]]  # (m, n, dof, 3)
         P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
@@ -477,25 +476,33 @@ def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array
     r = problem.residual(x)
     J = problem.jacobian(x)
     s2 = float(r @ r) / max(len(r) - len(x), 1)
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    Jn = J / norms
-    A = Jn.T @ Jn
-    lam, V = np.linalg.eigh(A)
+    Jn, norms, lam, inverse = _normal_inverse(J)
     if len(lam) and lam[0] > 1e-12 * lam[-1]:
-        # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvectors give
-        # the inverse and the condition number at once
+        # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvalues give
+        # the condition number
         cond = math.sqrt(lam[-1] / lam[0])
-        inverse = (V / lam) @ V.T
     else:  # nearly singular: singular values of Jn itself
         sv = np.linalg.svd(Jn, compute_uv=False)
         cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
-        inverse = np.linalg.pinv(A)
+        inverse = np.linalg.pinv(Jn.T @ Jn)
     cov = s2 * inverse / np.outer(norms, norms)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
     return s2, cov, std, corr, cond
+
+
+def _normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
+    """``J`` with unit-norm columns, the column norms, and the eigenvalues and inverse of
+    the normalised normal matrix ``JnᵀJn`` (from one symmetric eigendecomposition; the
+    inverse is meaningful only when the smallest eigenvalue is well above round-off)."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    Jn = J / norms
+    lam, V = np.linalg.eigh(Jn.T @ Jn)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = (V / lam) @ V.T
+    return Jn, norms, lam, inverse
 
 
 def _screen(problem: Problem, x0: Array, max_std: float, max_std_ratio: float) -> list[tuple[str, float]]:
@@ -529,14 +536,9 @@ def screen_unidentifiable(
     keep = np.ones(J.shape[1], dtype=bool)
     out: list[tuple[int, float]] = []
     while keep.sum() > 1:
-        Jk = J[:, keep]
-        norms = np.linalg.norm(Jk, axis=0)
-        norms[norms == 0] = 1.0
-        Jn = Jk / norms
-        lam, V = np.linalg.eigh(Jn.T @ Jn)
+        Jn, norms, lam, inverse = _normal_inverse(J[:, keep])
         if lam[0] <= 1e-14 * lam[-1]:  # numerically singular: the fit and its checks decide
             break
-        inverse = (V / lam) @ V.T
         e = r - Jn @ (inverse @ (Jn.T @ r))  # the residual after one Gauss-Newton step
         s2 = float(e @ e) / max(len(r) - int(keep.sum()), 1)
         move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[keep]
@@ -560,14 +562,6 @@ _EFFECT_UNITS = {  # coefficient prefix -> (SI unit, display factor, display uni
 
 def _effect_prefix(name: str) -> str | None:
     return next((p for p in _EFFECT_UNITS if name.startswith(p)), None)
-
-
-def _effect_kind(name: str) -> str | None:
-    """The joint-effect kind of a coefficient name (``compliance_q2`` -> ``compliance``)."""
-    from robocal.model.joints import EFFECT_PREFIXES
-
-    prefix = _effect_prefix(name)
-    return next((k for k, (p, _) in EFFECT_PREFIXES.items() if p == prefix), None)
 
 
 def _unit(name: str, rotation: bool) -> str:
@@ -986,8 +980,6 @@ def calibrate(
         problem = problem.fix([names[worst]])
         names = problem.free_names
         x0 = x0[keep]
-        if method == "bounded":
-            options["bounds"] = (options["bounds"][0][keep], options["bounds"][1][keep])
         t_solve = time.perf_counter()
         # from the start values: the dropped parameter may have dragged others along a
         # nearly flat valley of the first fit (real UR10 data, plain DH: a5 +143 mm)
