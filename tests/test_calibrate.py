@@ -296,6 +296,21 @@ def test_plain_dh_ur10_drops_the_wrist_pair_without_wandering():
     assert result.rms_after < 0.04e-3  # 20 µm per axis: about 35 µm in 3D
 
 
+def test_saved_result_explains_what_was_dropped(tmp_path):
+    ur10 = rc.robot("ur10")
+    q = rc.measure.poses.random_poses(ur10, 50, seed=3)
+    device = LaserTracker(p_tool_target=np.array([0.0, 0.0, 0.109]), sigma=20e-6)
+    data = simulate(VirtualRobot(ur10, draw_true_model(ur10, seed=3), device), q, seed=4)
+    result = rc.calibrate(ur10, data, tool_guess=[0, 0, 0.109])
+    result.save(tmp_path / "out")
+    again = CalibrationResult.load(tmp_path / "out")
+    assert [str(d) for d in again.dropped] == [str(d) for d in result.dropped]
+    poor = [d for d in again.dropped if d.reason == "poorly identifiable"]
+    assert poor and all(d.sigma > 5e-4 for d in poor) and "mm as tool displacement" in str(poor[0])
+    redundant = [d for d in again.dropped if d.reason == "redundant"]
+    assert redundant and all(d.absorbed_by for d in redundant)
+
+
 def test_predicted_uncertainty_includes_the_joint_compliances():
     """Compliance calibrations: held-out MSE = trace(J Cov Jᵀ) with the compliance
     coefficients' columns in J (Monte Carlo over 25 virtual UR10s), within 15 %."""

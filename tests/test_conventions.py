@@ -144,9 +144,7 @@ def test_modified_dh_matches_craig_closed_form_and_names():
     model = model_from_steps("mdh", steps)
     assert model.names == ("alpha0", "a0", "theta1", "d1", "alpha1", "a1", "theta2", "d2")
     for q in np.random.default_rng(1).uniform(-3, 3, (5, 2)):
-        expected = mdh_matrix(0.0, 0.0, 0.2 + q[0], 0.1) @ mdh_matrix(
-            -np.pi / 2, 0.05, -0.3 + q[1], 0.02
-        )
+        expected = mdh_matrix(0.0, 0.0, 0.2 + q[0], 0.1) @ mdh_matrix(-np.pi / 2, 0.05, -0.3 + q[1], 0.02)
         np.testing.assert_allclose(model.fk(q), expected, atol=1e-14)
 
 

@@ -105,13 +105,11 @@ def test_units_are_converted_at_the_edge(tmp_path):
             r"limits .* lower <= upper",
         ),
         (
-            "name: arm\nchain:\n  - {motion: Tx, param: a}\n"
-            "bodies:\n  - {name: b, frame: zz, mass: 1}\n",
+            "name: arm\nchain:\n  - {motion: Tx, param: a}\nbodies:\n  - {name: b, frame: zz, mass: 1}\n",
             "frame 'zz'",
         ),
         (
-            "name: arm\nchain:\n  - {motion: Tx, param: a}\n"
-            "bodies:\n  - {name: b, frame: a, mass: -1}\n",
+            "name: arm\nchain:\n  - {motion: Tx, param: a}\nbodies:\n  - {name: b, frame: a, mass: -1}\n",
             r"bodies\[0\]\.mass",
         ),
         ("- just\n- a list\n", "must be a mapping, got list"),

@@ -88,6 +88,39 @@ def test_qr_subset_reports_a_redundant_base_translation(ur10_pool):
     assert "d1" in pref.dropped_names and dict(pref.absorbers_of("d1")) == pytest.approx({"base_z": 1.0})
 
 
+def test_preference_order_keeps_the_preferred_of_two_redundant_parameters(ur10_pool):
+    ur10 = rc.robot("ur10")
+    extra = Model("ur10_base_z", (Step("Tz", "base_z", 0.0), *ur10.steps))
+    J = extra.jacobian(ur10_pool[:60])
+    names = extra.free_names
+    first = identifiable_subset(J, names, order="preference")  # column order: base_z before d1
+    later = identifiable_subset(J, names, order="preference", prefer=["d1"])
+    pivoted = identifiable_subset(J, names)
+    assert first.rank == later.rank == pivoted.rank == 18
+    assert "base_z" in first.kept and dict(first.absorbers_of("d1")) == pytest.approx({"base_z": 1.0})
+    assert "d1" in later.kept and dict(later.absorbers_of("base_z")) == pytest.approx({"d1": 1.0})
+    assert first.pivots[0] == "base_z" and later.pivots[0] == "d1"
+    assert {d.reason for d in first.dropped} == {"no effect", "redundant"}
+
+
+def test_sequential_rank_test_matches_gram_schmidt_on_random_deficient_matrices():
+    from robocal.identify.observability import _gram_schmidt, _sequential_rank_test
+
+    rng = np.random.default_rng(3)
+    for trial in range(300):
+        rows, rank = int(rng.integers(4, 40)), int(rng.integers(1, 12))
+        cols = int(rng.integers(rank, rank + 8))
+        B = rng.normal(size=(rows, min(rank, rows)))
+        A = B @ rng.normal(size=(B.shape[1], cols))
+        if trial % 3 == 0:  # some exact copies and zero-ish mixes, as in kinematic Jacobians
+            A[:, -1] = A[:, 0]
+        A /= np.linalg.norm(A, axis=0)
+        keep, coefs, _ = _sequential_rank_test(A, 1e-7)
+        np.testing.assert_array_equal(keep, _gram_schmidt(A, 1e-7), err_msg=f"trial {trial}")
+        np.testing.assert_allclose(A[:, keep] @ coefs, A[:, ~keep], atol=1e-6)
+        assert keep.sum() == np.linalg.matrix_rank(A)
+
+
 def test_select_poses_beats_random_poses(ur10_pool):
     model = rc.robot("ur10")
     params = identifiable_parameters(model, ur10_pool).kept

@@ -21,9 +21,7 @@ def seed001_0A4(t1: float, t2: float, t3: float) -> np.ndarray:
     return A1 @ A2 @ A3 @ A4
 
 
-@pytest.mark.parametrize(
-    "q_deg", [(0, 0, 0), (30, -20, 45), (-90, 60, -30), (145, 10, 100), (12.5, -77, 3)]
-)
+@pytest.mark.parametrize("q_deg", [(0, 0, 0), (30, -20, 45), (-90, 60, -30), (145, 10, 100), (12.5, -77, 3)])
 def test_seed001_arm_equals_its_appendix_matrices(q_deg):
     q = np.array(q_deg) * D
     T = rc.robot("li2016_3dof").fk(q)
@@ -58,9 +56,7 @@ def test_katana_zero_pose():
 
 def test_katana_equals_thesis_equations():
     model = rc.robot("katana450")
-    q = np.random.default_rng(7).uniform(
-        model.joint_limits[:, 0], model.joint_limits[:, 1], (50, 5)
-    )
+    q = np.random.default_rng(7).uniform(model.joint_limits[:, 0], model.joint_limits[:, 1], (50, 5))
     for qk, T in zip(q, model.fk(q), strict=True):
         np.testing.assert_allclose(T, katana_thesis(qk), atol=1e-15)
     assert model.dof == 5

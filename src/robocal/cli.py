@@ -33,8 +33,6 @@ robots_app = typer.Typer(help="The robot catalog.", invoke_without_command=True)
 app.add_typer(robots_app, name="robots")
 
 
-
-
 def resolve_model(name_or_path: str) -> Model:
     """A catalog robot by name, or a model file by path (``.yaml``/``.yml``)."""
     path = Path(name_or_path)
@@ -68,9 +66,7 @@ def robots_list(ctx: typer.Context) -> None:
     for name in robots():
         m = robot(name)
         types = "".join("R" if t == "revolute" else "P" for t in m.joint_types)
-        table.add_row(
-            name, m.title, f"{m.dof} ({types})", str(len(m.steps)), "yes" if m.bodies else "-"
-        )
+        table.add_row(name, m.title, f"{m.dof} ({types})", str(len(m.steps)), "yes" if m.bodies else "-")
     console.print(table)
 
 
@@ -117,13 +113,10 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError:
-        raise fail(
-            f"--q {text!r}: joint values must be numbers separated by commas or spaces"
-        ) from None
+        raise fail(f"--q {text!r}: joint values must be numbers separated by commas or spaces") from None
     if len(values) != m.dof:
         raise fail(
-            f"--q has {len(values)} values but {m.name} has {m.dof} joints "
-            f"({', '.join(m.joint_names)})"
+            f"--q has {len(values)} values but {m.name} has {m.dof} joints ({', '.join(m.joint_names)})"
         )
     q = np.array(values)
     if deg:
@@ -135,12 +128,8 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
 def fk(
     name: Annotated[str, typer.Argument(help="catalog name or model file")],
     q: Annotated[str, typer.Option("--q", help='joint values, e.g. "0, -90, 90, 0, 90, 0"')],
-    deg: Annotated[
-        bool, typer.Option("--deg", help="joint values in degrees (prismatic in mm)")
-    ] = False,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="print JSON (m, rad) instead of a table")
-    ] = False,
+    deg: Annotated[bool, typer.Option("--deg", help="joint values in degrees (prismatic in mm)")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="print JSON (m, rad) instead of a table")] = False,
 ) -> None:
     """Tool pose of a robot at the given joint values (rad and m unless --deg)."""
     m = resolve_model(name)
@@ -186,9 +175,7 @@ def fk(
         highlight=False,
     )
     if outside:
-        err_console.print(
-            f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False
-        )
+        err_console.print(f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False)
 
 
 # Command groups of the other calibration steps register themselves here, one line

@@ -31,7 +31,7 @@ Two calibration engines compute the same thing:
   step as a joint variable (a step's value becomes a per-row input) and one call of
   :meth:`~robocal.model.chain.Model.evaluate` gives the tool positions and all the
   derivative columns of all robots × poses at once; identifiable set (the same
-  sequential rank test as :func:`robocal.identify.subset.select_columns`),
+  sequential rank test as :func:`robocal.identify.observability.identifiable_subset`),
   Levenberg–Marquardt, covariance, pruning of poorly identifiable parameters and
   validation run batched over robots.  Estimates agree with ``rc.calibrate`` to
   solver precision (tests/test_study.py).
@@ -583,7 +583,7 @@ def _frame_values(T: Array) -> Array:
 
 
 def _gram_schmidt_select(J: Array, order: Sequence[int], tolerance: float = 1e-7) -> tuple[Array, Array]:
-    """Batched sequential rank test of :func:`robocal.identify.subset.select_columns`.
+    """Batched sequential rank test of :func:`robocal.identify.observability.identifiable_subset`.
 
     Args:
         J: ``(K, m, p)`` scaled Jacobians.

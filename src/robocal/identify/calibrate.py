@@ -40,9 +40,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.guards import check_data, check_rank, check_solution
+from robocal.identify.observability import Dropped, identifiable_subset
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
-from robocal.identify.subset import Dropped, select_columns
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
@@ -376,7 +376,12 @@ class CalibrationResult:
             ],
             "covariance": self.covariance.tolist(),
             "dropped": [
-                {"name": d.name, "reason": d.reason, "absorbed_by": [list(a) for a in d.absorbed_by]}
+                {
+                    "name": d.name,
+                    "reason": d.reason,
+                    "absorbed_by": [list(a) for a in d.absorbed_by],
+                    **({"sigma_mm": d.sigma * 1e3} if d.sigma is not None else {}),
+                }
                 for d in self.dropped
             ],
             "high_correlations": [list(c) for c in self.high_correlations],
@@ -422,7 +427,12 @@ class CalibrationResult:
             covariance=cov,
             correlation=corr,
             dropped=tuple(
-                Dropped(d["name"], d["reason"], tuple(tuple(a) for a in d["absorbed_by"]))
+                Dropped(
+                    d["name"],
+                    d["reason"],
+                    tuple(tuple(a) for a in d["absorbed_by"]),
+                    sigma=d["sigma_mm"] / 1e3 if "sigma_mm" in d else None,
+                )
                 for d in data["dropped"]
             ),
             residual_std=data["residual_std_mm"] / 1e3,
@@ -917,7 +927,7 @@ def calibrate(
     names = problem.free_names
     order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
     order += [x for x in names if x not in set(order)]
-    selection = select_columns(J0, names, order)
+    selection = identifiable_subset(J0, names, order="preference", prefer=order)
     problem_warnings += check_rank(
         given_model,
         data,

@@ -15,8 +15,6 @@ from robocal.console import console, fail
 __all__ = ["register"]
 
 
-
-
 LengthUnit = Annotated[str, typer.Option("--length-unit", help="m | mm | um: positions in the file")]
 AngleUnit = Annotated[str, typer.Option("--angle-unit", help="rad | deg: joint angles in the file")]
 Columns = Annotated[
@@ -117,9 +115,7 @@ def calibrate_command(
     train, test = data, None
     if train_n is not None:
         if not 0 < train_n < data.n:
-            raise fail(
-                f"--train-n {train_n} must be between 1 and {data.n - 1} (the file has {data.n} rows)"
-            )
+            raise fail(f"--train-n {train_n} must be between 1 and {data.n - 1} (the file has {data.n} rows)")
         split = data.with_split(train_n, seed=seed)
         train, test = split.split_rows("train"), split.split_rows("test")
     elif data.split is not None and "test" in set(data.split.tolist()):

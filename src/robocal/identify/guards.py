@@ -8,7 +8,7 @@ Two checks around :func:`robocal.calibrate`:
   which richer poses would determine (rank-deficient data: a joint that never moves,
   poses all in one plane...).  The last one compares the identifiable set of the
   measured poses with that of random poses over the joint ranges, with the same
-  sequential rank test as the calibration (:func:`robocal.identify.subset.select_columns`),
+  sequential rank test as the calibration (:func:`robocal.identify.observability.identifiable_subset`),
   and names the parameters lost and the joints that do not move.
 * :func:`check_solution` after the fit — the fit did not work: not converged,
   diverged (the error after calibration larger than before), non-finite estimates or
@@ -71,8 +71,8 @@ def _identifiable(
     chain: Model, q: Array, measure: str, length: float, explain: bool = False
 ) -> tuple[set[str], Any]:
     """Identifiable free parameters of ``chain`` at poses ``q`` (the calibration's rank test)."""
+    from robocal.identify.observability import identifiable_subset
     from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
-    from robocal.identify.subset import select_columns
 
     J = chain.jacobian(q, rows=measure)
     rot = np.array([s.is_rotation for s in chain.steps if s.free])
@@ -84,7 +84,7 @@ def _identifiable(
     names = chain.free_names
     order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
     order += [x for x in names if x not in set(order)]
-    selection = select_columns(J, names, order, explain=explain)
+    selection = identifiable_subset(J, names, order="preference", prefer=order, explain=explain)
     return set(selection.kept), selection
 
 

@@ -47,7 +47,6 @@ __all__ = ["register"]
 data_app = typer.Typer(help="Measurement files: check them before a calibration.", no_args_is_help=True)
 
 
-
 def _model(name: str | None):
     if name is None:
         return None

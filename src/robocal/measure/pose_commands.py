@@ -29,13 +29,11 @@ from robocal.console import console, err_console, fail, refuse_overwrite
 __all__ = ["register"]
 
 
-
 class Method(StrEnum):
     random = "random"
     optimal = "optimal"
     iso9283 = "iso9283"
     diagonal = "diagonal"
-
 
 
 def _region(text: str | None) -> np.ndarray | None:

@@ -440,9 +440,12 @@ def select_identifiable(
         J = J.reshape(len(q), 6, -1)
         J[:, 3:] *= size
         J = J.reshape(len(q) * 6, -1)
-    from robocal.identify.subset import select_columns  # identify builds on model: import late
+    # identify builds on model: import late
+    from robocal.identify.observability import identifiable_subset
 
-    selection = select_columns(J, full.names, order, tolerance, explain=False)
+    selection = identifiable_subset(
+        J, full.names, order="preference", prefer=order, rtol=tolerance, explain=False
+    )
     kept_set = set(selection.kept)
     kept = selection.kept
     return full.with_free(None, free=False).with_free(kept_set), len(kept)

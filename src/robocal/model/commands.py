@@ -16,7 +16,6 @@ __all__ = ["register"]
 model_app = typer.Typer(help="Build, view and check calibration models.", no_args_is_help=True)
 
 
-
 @model_app.command("build")
 def build_command(
     geometry: Annotated[Path, typer.Argument(help="joint-geometry YAML file or a URDF file")],

@@ -412,8 +412,11 @@ class JointTilting:
             effects=None if effects is None else tuple(JointEffects(**e) for e in effects),
             kinds=tuple(data.get("kinds", EFFECT_KINDS)),
             gravity=tuple(data.get("gravity", (0.0, 0.0, -9.81))),
-            payload=None if payload is None else Payload(
-                payload["mass"], tuple(payload.get("com", (0.0, 0.0, 0.0))),
+            payload=None
+            if payload is None
+            else Payload(
+                payload["mass"],
+                tuple(payload.get("com", (0.0, 0.0, 0.0))),
                 None if payload.get("inertia") is None else tuple(payload["inertia"]),
             ),
             rule=data.get("rule", "thesis"),
