@@ -30,6 +30,7 @@ import os
 import platform
 import sys
 import time
+import timeit
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small problems: threads only add noise
@@ -94,10 +95,14 @@ def rtb_ets(steps, values):
     return rtb.ETS(elements)
 
 
-def baseline(result, data, fk: str = "robocal"):
-    """scipy least_squares (MINPACK LM, 2-point finite differences) on the same unknowns
-    and start values; the forward kinematics from ``fk``: robocal's kernel (a new model
-    per evaluation), plain numpy, or Robotics Toolbox's C ``ETS.eval``."""
+def baseline(result, data, fk: str = "robocal", solver: str = "lm"):
+    """scipy least_squares with 2-point finite differences on the same unknowns and start
+    values: ``solver`` ``"lm"`` (MINPACK, tolerances 1e-12, Jacobian scaling) or
+    ``"trf"`` (scipy's defaults); the forward kinematics from ``fk``: robocal's kernel (a
+    new model per evaluation), plain numpy, or Robotics Toolbox's C ``ETS.eval``.
+
+    Returns the solve's wall time (s), the RMS residual (m), the number of residual
+    evaluations and the time of one evaluation (s, the best of 20)."""
     chain = result.measurement_chain
     names = [n for n in result.names if n in chain.names]
     start = chain.with_values(dict(zip(names, result.nominal, strict=True))).with_free(None, False)
@@ -114,19 +119,24 @@ def baseline(result, data, fk: str = "robocal"):
             return numpy_fk(steps, values, data.q)
         return rtb_ets(steps, values).eval(data.q)[:, :3, 3]
 
+    calls = [0]
+
     def residual(x):
+        calls[0] += 1
         return (positions(x) - data.position).ravel()
 
     x0 = start.free_values
     gap = float(np.abs(positions(x0) - start.fk(data.q)[:, :3, 3]).max())
     assert gap < 1e-12, f"the {fk} forward kinematics differs from robocal's by {gap:.3g} m"
+    options = {"method": "lm", "x_scale": "jac", "ftol": 1e-12, "xtol": 1e-12, "gtol": 1e-12}
+    calls[0] = 0
     t = time.perf_counter()
-    res = least_squares(
-        residual, x0, jac="2-point", method="lm", x_scale="jac", ftol=1e-12, xtol=1e-12, gtol=1e-12
-    )
+    res = least_squares(residual, x0, jac="2-point", **(options if solver == "lm" else {}))
     seconds = time.perf_counter() - t
+    n_calls = calls[0]
     rms = float(np.sqrt(np.mean(np.sum(residual(res.x).reshape(-1, 3) ** 2, axis=1))))
-    return seconds, rms, res.nfev
+    one = min(timeit.repeat(lambda: residual(res.x), number=1, repeat=20))
+    return seconds, rms, n_calls, one
 
 
 def main(argv=None) -> int:
@@ -154,17 +164,20 @@ def main(argv=None) -> int:
         backends.append(("rtb", "Robotics Toolbox `ETS.eval` (C), ETS rebuilt per evaluation"))
     except Exception as exc:  # an optional peer: report and go on
         print(f"  (Robotics Toolbox not available: {exc})")
+    runs = [("robocal", "lm"), ("robocal", "trf")] + [(key, "lm") for key, _ in backends[1:]]
+    labels = dict(backends)
+    solver_label = {"lm": "MINPACK LM", "trf": "defaults (TRF)"}
     ours, solves = [], []
-    theirs: dict[str, list[float]] = {key: [] for key, _ in backends}
-    rms_fd: dict[str, float] = {}
+    theirs: dict[tuple[str, str], list[float]] = {run: [] for run in runs}
+    fd: dict[tuple[str, str], tuple[float, int, float]] = {}
     for _ in range(args.repeats):
         t = time.perf_counter()
         result = rc.calibrate(model, data)
         ours.append(time.perf_counter() - t)
         solves.append(result.metadata["solve_seconds"])
-        for key, _ in backends:
-            seconds, rms_fd[key], _nfev = baseline(result, data, fk=key)
-            theirs[key].append(seconds)
+        for run in runs:
+            seconds, *fd[run] = baseline(result, data, fk=run[0], solver=run[1])
+            theirs[run].append(seconds)
     t_ours, t_solve = min(ours), min(solves)
     print()
     print(f"| method | wall time (min of {args.repeats}) | RMS residual | ratio to robocal |")
@@ -174,20 +187,51 @@ def main(argv=None) -> int:
         f"{result.rms_after * 1e3:.4f} mm | 1 |"
     )
     print(f"| robocal, the Levenberg-Marquardt solve inside it | {t_solve * 1e3:.1f} ms | | |")
-    for key, label in backends:
-        t_fd = min(theirs[key])
+    for run in runs:
+        t_fd = min(theirs[run])
         print(
-            f"| scipy `least_squares` LM, 2-point finite differences on {label}, solve only | "
-            f"{t_fd * 1e3:.1f} ms | {rms_fd[key] * 1e3:.4f} mm | {t_fd / t_ours:.1f}× end to end, "
-            f"{t_fd / t_solve:.1f}× solve to solve |"
+            f"| scipy `least_squares` {solver_label[run[1]]}, 2-point finite differences on "
+            f"{labels[run[0]]}, solve only | {t_fd * 1e3:.1f} ms | {fd[run][0] * 1e3:.4f} mm | "
+            f"{t_fd / t_ours:.1f}× end to end, {t_fd / t_solve:.1f}× solve to solve |"
         )
     print()
-    for key, _ in backends:
-        t_fd = min(theirs[key])
+    for run in runs:
+        t_fd = min(theirs[run])
         print(
-            f"speed-up vs finite differences on {key} FK: {t_fd / t_ours:.1f}x end to end, "
+            f"speed-up vs finite differences ({run[1]}) on {run[0]} FK: {t_fd / t_ours:.1f}x end to end, "
             f"{t_fd / t_solve:.1f}x solve to solve (target: 20x)"
         )
+
+    # how far an analytic Jacobian can get against the fastest finite-difference baseline:
+    # its cost is its residual evaluations; robocal's solve needs `passes` fused passes
+    fastest = min(runs[:2], key=lambda run: min(theirs[run]))
+    t_fd = min(theirs[fastest])
+    _, calls, t_eval = fd[fastest]
+    problem_chain = result.measurement_chain
+    t_pass = min(
+        timeit.repeat(
+            lambda: problem_chain.evaluate(data.q, problem_chain.values, rows="position", jacobian=True),
+            number=1,
+            repeat=20,
+        )
+    )
+    passes = result.metadata["evaluations"]
+    print()
+    print(f"Where the limit is (fastest baseline: {solver_label[fastest[1]]} on robocal's FK):")
+    print(
+        f"  baseline: {calls} residual evaluations x {t_eval * 1e6:.0f} µs = {calls * t_eval * 1e3:.1f} ms "
+        f"of its {t_fd * 1e3:.1f} ms"
+    )
+    print(
+        f"  robocal:  {passes} fused residual+Jacobian passes x {t_pass * 1e6:.0f} µs = "
+        f"{passes * t_pass * 1e3:.2f} ms ({t_pass / t_eval:.1f} evaluations each)"
+    )
+    print(
+        f"  with no other work at all robocal would be {t_fd / (passes * t_pass):.0f}x faster; "
+        f"20x end to end leaves {max(t_fd / 20 - passes * t_pass, 0) * 1e3:.2f} ms for everything "
+        f"else (start values, rank test, screening, covariance, result), which takes "
+        f"{(t_ours - passes * t_pass) * 1e3:.2f} ms now"
+    )
     return 0
 
 

@@ -310,18 +310,11 @@ def fit_rigid_transform(P: ArrayLike, Q: ArrayLike, weights: ArrayLike | None = 
     if not (np.all(np.isfinite(P)) and np.all(np.isfinite(Q))):
         raise ValueError("point sets contain NaN or inf")
     batch = np.broadcast_shapes(P.shape[:-2], Q.shape[:-2])
-    if weights is None:
-        w = np.ones((*batch, m))
+    if weights is None and not batch:  # one unweighted fit (the calibration's start): plain matmuls
+        p0, q0 = P.mean(axis=0), Q.mean(axis=0)
+        H = (P - p0).T @ (Q - q0) / m
     else:
-        w = np.broadcast_to(np.asarray(weights, dtype=float), (*batch, m))
-        if np.any(~np.isfinite(w)) or np.any(w < 0) or np.any(w.sum(axis=-1) <= 0):
-            raise ValueError("weights must be finite, >= 0 and not all zero")
-    wn = w / w.sum(axis=-1, keepdims=True)
-    p0 = np.einsum("...k,...ki->...i", wn, np.broadcast_to(P, (*batch, m, 3)))
-    q0 = np.einsum("...k,...ki->...i", wn, np.broadcast_to(Q, (*batch, m, 3)))
-    Pc = P - p0[..., None, :]
-    Qc = Q - q0[..., None, :]
-    H = np.einsum("...k,...ki,...kj->...ij", wn, Pc, Qc)  # (..., 3, 3) = sum w p q^T
+        H, p0, q0 = _weighted_cross_covariance(P, Q, weights, batch, m)
     U, s, Vt = np.linalg.svd(H)
     degenerate = s[..., 1] <= 1e-12 * np.maximum(s[..., 0], 1e-300)
     if np.any(degenerate):
@@ -336,3 +329,23 @@ def fit_rigid_transform(P: ArrayLike, Q: ArrayLike, weights: ArrayLike | None = 
     R = V @ np.swapaxes(U, -1, -2)
     t = q0 - np.einsum("...ij,...j->...i", R, p0)
     return homogeneous(R, t)
+
+
+def _weighted_cross_covariance(
+    P: Array, Q: Array, weights: ArrayLike | None, batch: tuple[int, ...], m: int
+) -> tuple[Array, Array, Array]:
+    """``H = Σ w p qᵀ`` of the centred point sets ``(..., 3, 3)`` and the weighted
+    centroids ``(..., 3)`` of ``P`` and ``Q`` (weights normalised to sum 1)."""
+    if weights is None:
+        w = np.ones((*batch, m))
+    else:
+        w = np.broadcast_to(np.asarray(weights, dtype=float), (*batch, m))
+        if np.any(~np.isfinite(w)) or np.any(w < 0) or np.any(w.sum(axis=-1) <= 0):
+            raise ValueError("weights must be finite, >= 0 and not all zero")
+    wn = w / w.sum(axis=-1, keepdims=True)
+    p0 = np.einsum("...k,...ki->...i", wn, np.broadcast_to(P, (*batch, m, 3)))
+    q0 = np.einsum("...k,...ki->...i", wn, np.broadcast_to(Q, (*batch, m, 3)))
+    Pc = P - p0[..., None, :]
+    Qc = Q - q0[..., None, :]
+    H = np.einsum("...k,...ki,...kj->...ij", wn, Pc, Qc)  # (..., 3, 3) = sum w p q^T
+    return H, p0, q0

@@ -971,6 +971,7 @@ def calibrate(
     t_solve = time.perf_counter()
     result: SolveResult = solve(problem, x0, method, **options)
     solve_seconds = time.perf_counter() - t_solve
+    evaluations = result.evaluations
     x = result.x
     _, cov, std, corr, cond = _uncertainty(problem, x)
     # drop what these measurements cannot determine, worst first, and refit
@@ -995,6 +996,7 @@ def calibrate(
         # nearly flat valley of the first fit (real UR10 data, plain DH: a5 +143 mm)
         result = solve(problem, x0, method, **options)
         solve_seconds += time.perf_counter() - t_solve
+        evaluations += result.evaluations
         x = result.x
         _, cov, std, corr, cond = _uncertainty(problem, x)
 
@@ -1062,6 +1064,8 @@ def calibrate(
         gravity=tuple(float(g) for g in np.asarray(gravity, dtype=float)),
         metadata={
             "solve_seconds": solve_seconds,
+            # residual (and, for lm, fused residual-and-Jacobian) evaluations of all fits
+            "evaluations": evaluations,
             # per pose, predicted minus measured (device frame) at the solution
             "residuals_mm": np.round(r_plain * 1e3, 6).tolist(),
             "level": level_number if level_number is not None else (3 if plan.mode != "none" else 2),
