@@ -428,17 +428,17 @@ def identifiable_subset(
         K = Js[:, kept_cols]
         if explain and coef is None:
             coef = np.linalg.lstsq(K, Js[:, red_cols], rcond=None)[0] if kept_cols else None
-        for j, c in enumerate(red_cols):
-            if not explain or coef is None:
-                dropped[c] = Dropped(names[c], "redundant")
-                continue
-            res = float(np.linalg.norm(Js[:, c] - K @ coef[:, j]))
-            big = np.flatnonzero(np.abs(coef[:, j]) > threshold)
-            big = big[np.argsort(-np.abs(coef[big, j]))]
-            absorbers = tuple(
-                (names[kept_cols[k]], float(coef[k, j] * norm[c] / norm[kept_cols[k]])) for k in big
-            )
-            dropped[c] = Dropped(names[c], "redundant", absorbers, res)
+        if not explain or coef is None:
+            dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
+        else:
+            residuals = np.linalg.norm(Js[:, red_cols] - K @ coef, axis=0).tolist()
+            # in the Jacobian's units; listed: scaled |coefficient| above the threshold, largest first
+            units = coef * norm[red_cols] / norm[kept_cols][:, None]
+            ranked = np.argsort(-np.abs(coef), axis=0, kind="stable").T.tolist()
+            listed, units = (np.abs(coef) > threshold).T.tolist(), units.T.tolist()
+            for j, c in enumerate(red_cols):
+                absorbers = tuple((names[kept_cols[k]], units[j][k]) for k in ranked[j] if listed[j][k])
+                dropped[c] = Dropped(names[c], "redundant", absorbers, residuals[j])
     kept = tuple(names[k] for k in sorted(kept_cols))
     pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
     r_diag = np.r_[rel, np.zeros(int(zero.sum()))]
