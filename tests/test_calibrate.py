@@ -351,3 +351,43 @@ def test_compliance_columns_of_the_prediction_match_finite_differences():
         shifted = dataclasses.replace(result, model=dataclasses.replace(result.model, joint_effects=effects))
         fd = (shifted.predict(q)[:, :3, 3] - result.predict(q)[:, :3, 3]) / h
         np.testing.assert_allclose(columns[:, :, k], fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max())
+
+
+def test_fit_to_noise_of_gaussian_residuals_and_of_an_unmodelled_error():
+    from robocal.identify.guards import fit_to_noise
+
+    rng = np.random.default_rng(8)
+    sigma = np.full((400, 3), 2e-5)
+    clean = fit_to_noise(rng.normal(scale=2e-5, size=(400, 3)), sigma, 0)
+    assert 0.95 < clean.ratio < 1.05 and clean.p_value > 1e-3 and clean.warning() is None
+    assert clean.noise_rms == pytest.approx(2e-5 * np.sqrt(3))
+    # a 0.1 mm error per axis the model did not represent
+    offset = rng.choice([-1.0, 1.0], size=(400, 3)) * 1e-4
+    bad = fit_to_noise(rng.normal(scale=2e-5, size=(400, 3)) + offset, sigma, 0)
+    assert bad.warning() is not None and "does not represent" in bad.warning()
+    assert bad.unmodelled_rms == pytest.approx(1e-4 * np.sqrt(3), rel=0.05)
+    # residuals far below the stated noise: sigma overstated
+    low = fit_to_noise(rng.normal(scale=5e-6, size=(400, 3)), sigma, 0)
+    assert low.warning() is not None and "too large" in low.warning()
+    # parameters spent on the residuals reduce the degrees of freedom
+    assert fit_to_noise(rng.normal(scale=2e-5, size=(400, 3)), sigma, 30).dof == 1170
+
+
+def test_calibration_tells_when_the_model_does_not_explain_the_data():
+    """Joints that give way under gravity, calibrated without compliance: the residuals
+    are far above the 20 µm noise and the unexplained error estimated from them is close
+    to the held-out error against the truth; with compliance the model explains them."""
+    model = rc.robot("ur10")
+    c_true = {"shoulder_lift": 4e-6, "elbow": 8e-6}
+    robot = virtual(model, seed=31, effects=gravity_sag(model, c_true))
+    data = simulate(robot, poses(model, 100, seed=32), seed=33)
+    geometric = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])
+    noise = geometric.fit_to_noise
+    assert noise.ratio > 3 and any("does not represent" in w for w in geometric.metadata["warnings"])
+    q_test = poses(model, 2000, seed=34)
+    held_out = np.sqrt(np.mean(held_out_error(geometric, robot, q_test) ** 2))
+    assert 0.7 * held_out < noise.unmodelled_rms < held_out
+    assert "does not represent" in geometric.summary()
+    compliant = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=list(c_true))
+    assert compliant.fit_to_noise.warning() is None and compliant.fit_to_noise.ratio < 1.2
+    assert "down to the measurement noise" in compliant.summary()

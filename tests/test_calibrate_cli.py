@@ -105,3 +105,20 @@ def test_calibrate_errors_are_clear(measured, tmp_path):
     assert result.exit_code == 2 and "Traceback" not in result.output
     result = runner.invoke(app, ["validate", str(tmp_path), "--data", str(path)])
     assert result.exit_code == 2 and "no calibration result" in result.output
+
+
+def test_noise_option_tests_the_fit_against_the_device_noise(measured, tmp_path):
+    """The file has 10 µm noise per axis: stated as 0.01 mm the model explains it; stated
+    as 0.001 mm the residuals are ten times the noise and the output says so."""
+    path, _ = measured
+    base = ["calibrate", "--robot", "ur10", "--data", str(path), "--length-unit", "mm", "--tool", "0,0,109"]
+    right = runner.invoke(app, [*base, "--noise", "0.01", "--out", str(tmp_path / "a")])
+    assert right.exit_code == 0, right.output
+    assert "explains the data down to the measurement noise" in " ".join(right.output.split())
+    saved = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert 0.8 < saved["fit_to_noise"]["ratio"] < 1.2
+    wrong = runner.invoke(app, [*base, "--noise", "0.001", "--out", str(tmp_path / "b")])
+    assert wrong.exit_code == 0, wrong.output
+    assert "does not represent" in " ".join(wrong.output.split()) and "warning" in wrong.output
+    bad = runner.invoke(app, [*base, "--noise", "-1", "--out", str(tmp_path / "c")])
+    assert bad.exit_code == 2 and "--noise -1" in bad.output

@@ -1267,6 +1267,9 @@ def build_report(
         ["calibration time", f"{result.seconds * 1e3:.1f} ms"],
         ["residual σ", f"{result.residual_std * 1e3:.4f} mm"],
     ]
+    if result.fit_to_noise is not None:
+        rows.append(["residuals against the stated noise", result.fit_to_noise.summary()])
+    rows += [["warning", w] for w in result.metadata.get("warnings", [])]
     for key in ("data_file", "data_sha256", "train_n", "seed", "source"):
         if key in result.metadata:
             rows.append([key.replace("_", " "), result.metadata[key]])

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.identify.guards import check_data, check_rank, check_solution
+from robocal.identify.guards import FitToNoise, check_data, check_rank, check_solution, fit_to_noise
 from robocal.identify.observability import Dropped, identifiable_subset
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
@@ -307,6 +307,7 @@ class CalibrationResult:
             f"{self.rms_after * 1e3:.4f} mm",
             f"  residual standard deviation {self.residual_std * 1e3:.4f} mm, "
             f"condition number {self.condition_number:.3g}",
+            *([f"  {noise.summary()}"] if (noise := self.fit_to_noise) is not None else []),
             "  parameter                nominal       estimate          delta           sigma",
         ]
         rot = {s.name: s.is_rotation for s in (self.measurement_chain or self.model).steps}
@@ -326,7 +327,15 @@ class CalibrationResult:
             lines += [f"    {d}" for d in self.dropped]
         for a, b, rho in self.high_correlations:
             lines.append(f"  warning: {a} and {b} are correlated ({rho:+.3f})")
+        lines += [f"  warning: {w}" for w in self.metadata.get("warnings", [])]
         return "\n".join(lines)
+
+    @property
+    def fit_to_noise(self) -> FitToNoise | None:
+        """The residuals against the stated measurement noise (None when the data gave
+        no noise level)."""
+        d = self.metadata.get("fit_to_noise")
+        return None if d is None else FitToNoise.from_dict(d)
 
     def effect_estimates(self) -> dict[str, dict[str, tuple[float, float | None]]]:
         """Every joint effect of the calibrated robot, ``{joint: {field: (value, σ)}}``
@@ -1073,5 +1082,12 @@ def calibrate(
         },
         payload=payload,
     )
+    if weights == "sigma" and data.sigma is not None:
+        # does the model explain the data down to the noise? (position rows; for pose
+        # measurements their share of the estimated parameters)
+        noise = fit_to_noise(r_plain[:, :3], data.sigma, len(x) * 3 / rows)
+        calibration.metadata["fit_to_noise"] = noise.to_dict()
+        if noise.warning() is not None:
+            problem_warnings.append(noise.warning())
     calibration.metadata["warnings"] = problem_warnings + check_solution(calibration)
     return calibration

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -98,6 +100,14 @@ def calibrate_command(
     sep: Sep = None,
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
+    noise: Annotated[
+        float | None,
+        typer.Option(
+            "--noise",
+            help="the device's position noise, 1σ per axis in mm, for a file without sigma columns: "
+            "tests whether the model explains the data down to it",
+        ),
+    ] = None,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing result in --out")] = False,
     report: Annotated[bool, typer.Option("--report", help="also write DIR/report.html")] = False,
 ) -> None:
@@ -112,6 +122,12 @@ def calibrate_command(
     if (out / "result.json").exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     data = _read(data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation)
+    if noise is not None:
+        if not (math.isfinite(noise) and noise > 0):
+            raise fail(f"--noise {noise}: a positive standard deviation in mm")
+        if data.sigma is not None:
+            raise fail(f"--noise: {data_path} has its own sigma columns; leave --noise out")
+        data = dataclasses.replace(data, sigma=np.full((data.n, 3), noise * 1e-3))
     train, test = data, None
     if train_n is not None:
         if not 0 < train_n < data.n:
@@ -200,6 +216,10 @@ def _print_result(result) -> None:
         console.print(f"  [dim]not identified:[/] {d}", highlight=False)
     for a, b, rho in result.high_correlations:
         console.print(f"  [yellow]warning:[/] {a} and {b} are correlated ({rho:+.3f})", highlight=False)
+    if result.fit_to_noise is not None and result.fit_to_noise.warning() is None:  # else in the warnings
+        console.print(result.fit_to_noise.summary(), highlight=False)
+    for w in result.metadata.get("warnings", []):
+        console.print(f"[yellow]warning:[/] {w}", highlight=False)
 
 
 def validate_command(
