@@ -391,3 +391,22 @@ def test_calibration_tells_when_the_model_does_not_explain_the_data():
     compliant = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=list(c_true))
     assert compliant.fit_to_noise.warning() is None and compliant.fit_to_noise.ratio < 1.2
     assert "down to the measurement noise" in compliant.summary()
+
+
+def test_orientations_read_with_the_wrong_euler_convention_are_named(irb2400):
+    """Pose data whose rotations were converted with extrinsic instead of intrinsic Euler
+    angles: the calibration says the orientation convention is the likely cause."""
+    from robocal.measure.devices import OpticalCMM
+
+    robot = VirtualRobot(irb2400, draw_true_model(irb2400, seed=71), OpticalCMM())
+    data = simulate(robot, poses(irb2400, 60, seed=72), seed=73)
+    assert data.orientation is not None
+    angles = rc.spatial.matrix_to_euler(data.orientation, "XYZ")
+    wrong = dataclasses.replace(data, orientation=rc.spatial.euler_to_matrix(angles, "xyz"))
+    try:
+        messages = rc.calibrate(irb2400, wrong).metadata["warnings"]
+    except ValueError as err:  # the fit may also give up on such data
+        messages = [str(err)]
+    assert any("orientation convention" in m for m in messages), messages
+    right = rc.calibrate(irb2400, data)
+    assert not any("orientation convention" in m for m in right.metadata["warnings"])

@@ -1,5 +1,6 @@
 """``robocal calibrate`` and ``robocal validate`` through the CLI."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -112,13 +113,181 @@ def test_noise_option_tests_the_fit_against_the_device_noise(measured, tmp_path)
     as 0.001 mm the residuals are ten times the noise and the output says so."""
     path, _ = measured
     base = ["calibrate", "--robot", "ur10", "--data", str(path), "--length-unit", "mm", "--tool", "0,0,109"]
-    right = runner.invoke(app, [*base, "--noise", "0.01", "--out", str(tmp_path / "a")])
+    right = runner.invoke(app, [*base, "--noise", "0.01mm", "--out", str(tmp_path / "a")])
     assert right.exit_code == 0, right.output
     assert "explains the data down to the measurement noise" in " ".join(right.output.split())
     saved = json.loads((tmp_path / "a" / "result.json").read_text())
     assert 0.8 < saved["fit_to_noise"]["ratio"] < 1.2
-    wrong = runner.invoke(app, [*base, "--noise", "0.001", "--out", str(tmp_path / "b")])
+    wrong = runner.invoke(app, [*base, "--noise", "1um", "--out", str(tmp_path / "b")])
     assert wrong.exit_code == 0, wrong.output
     assert "does not represent" in " ".join(wrong.output.split()) and "warning" in wrong.output
-    bad = runner.invoke(app, [*base, "--noise", "-1", "--out", str(tmp_path / "c")])
-    assert bad.exit_code == 2 and "--noise -1" in bad.output
+    bad = runner.invoke(app, [*base, "--noise", "-1mm", "--out", str(tmp_path / "c")])
+    assert bad.exit_code == 2 and "--noise -1mm" in bad.output
+    bare = runner.invoke(app, [*base, "--noise", "0.01", "--out", str(tmp_path / "c")])
+    assert bare.exit_code == 2 and "give the unit, e.g. 0.01mm" in bare.output
+
+
+def _write_mm(data, path):
+    """Write measurements read in m back in mm, as the fixture's file."""
+    return write_measurements(dataclasses.replace(data, position=data.position * 1000.0), path)
+
+
+def test_validate_and_calibrate_corner_cases(measured, tmp_path):
+    path, _ = measured
+    base = ["--length-unit", "mm", "--tool", "0,0,109"]
+    out = tmp_path / "cal"
+    result = runner.invoke(
+        app, ["calibrate", "--robot", "ur10", "--data", str(path), *base, "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    # --out naming a file: refused before the fit
+    (tmp_path / "afile").write_text("x")
+    result = runner.invoke(
+        app, ["calibrate", "--robot", "ur10", "--data", str(path), *base, "--out", str(tmp_path / "afile")]
+    )
+    assert result.exit_code == 2 and "is a file" in result.output
+    # the calibrated model.yaml is a start model: its tool becomes the tool's start value
+    again = tmp_path / "again"
+    result = runner.invoke(
+        app,
+        [
+            "calibrate",
+            "--model",
+            str(out / "model.yaml"),
+            "--data",
+            str(path),
+            "--length-unit",
+            "mm",
+            "--out",
+            str(again),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    first, second = (json.loads((d / "result.json").read_text()) for d in (out, again))
+    assert second["rms_after_mm"] == pytest.approx(first["rms_after_mm"], rel=1e-3)
+    measurement_model = runner.invoke(
+        app,
+        [
+            "calibrate",
+            "--model",
+            str(out / "measurement_model.yaml"),
+            "--data",
+            str(path),
+            "--length-unit",
+            "mm",
+            "--out",
+            str(tmp_path / "m"),
+        ],
+    )
+    assert measurement_model.exit_code == 2 and "calibrate from the model.yaml" in " ".join(
+        measurement_model.output.split()
+    )
+    # too few rows to refit the frame: an error line, not a traceback
+    data = rc.measure.read_measurements(path, length_unit="mm")
+    two = _write_mm(data.subset(np.arange(2)), tmp_path / "two.csv")
+    result = runner.invoke(
+        app, ["validate", str(out), "--data", str(two), "--length-unit", "mm", "--refit-frame"]
+    )
+    assert result.exit_code == 2 and result.output.startswith("error: ") and "3 points" in result.output
+    # the device moved: the output says what to try
+    moved = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.0, 0.0, 0.3]), [0.2, 0.0, 0.0])
+    shifted = dataclasses.replace(data, position=data.position @ moved[:3, :3].T + moved[:3, 3])
+    moved_path = _write_mm(shifted, tmp_path / "moved.csv")
+    result = runner.invoke(
+        app, ["validate", str(out), "--data", str(moved_path), "--length-unit", "mm", "--json"]
+    )
+    stats = json.loads(result.output)
+    assert stats["mean_mm"] > 50 and "--refit-frame" in stats["warning"]
+    result = runner.invoke(
+        app,
+        ["validate", str(out), "--data", str(moved_path), "--length-unit", "mm", "--refit-frame", "--json"],
+    )
+    assert "warning" not in json.loads(result.output)
+
+
+def test_validate_uses_the_rows_marked_test(measured, tmp_path):
+    path, _ = measured
+    data = rc.measure.read_measurements(path, length_unit="mm")
+    split = data.with_split(100, seed=1)
+    split_path = _write_mm(split, tmp_path / "split.csv")
+    out = tmp_path / "cal"
+    result = runner.invoke(
+        app,
+        [
+            "calibrate",
+            "--robot",
+            "ur10",
+            "--data",
+            str(split_path),
+            "--length-unit",
+            "mm",
+            "--tool",
+            "0,0,109",
+            "--out",
+            str(out),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert "held-out validation (60 poses)" in result.output
+    held_out = json.loads(
+        runner.invoke(
+            app, ["validate", str(out), "--data", str(split_path), "--length-unit", "mm", "--json"]
+        ).output
+    )
+    assert held_out["n"] == 60 and held_out["rows"] == "test"
+    every = json.loads(
+        runner.invoke(
+            app,
+            ["validate", str(out), "--data", str(split_path), "--length-unit", "mm", "--json", "--all-rows"],
+        ).output
+    )
+    assert every["n"] == 160 and "rows" not in every
+
+
+def test_space_separated_files_and_separator_names(measured, tmp_path):
+    path, _ = measured
+    text = path.read_text()
+    spaced = tmp_path / "spaced.txt"
+    spaced.write_text(text.replace(",", "   "))
+    tabbed = tmp_path / "tabbed.csv"
+    tabbed.write_text(text.replace(",", "\t"))
+    reference = rc.measure.read_measurements(path, length_unit="mm")
+    np.testing.assert_array_equal(rc.measure.read_measurements(spaced, length_unit="mm").q, reference.q)
+    np.testing.assert_array_equal(
+        rc.measure.read_measurements(tabbed, length_unit="mm", sep="tab").q, reference.q
+    )
+    result = runner.invoke(
+        app,
+        [
+            "calibrate",
+            "--robot",
+            "ur10",
+            "--data",
+            str(tabbed),
+            "--sep",
+            "\\t",
+            "--length-unit",
+            "mm",
+            "--tool",
+            "0,0,109",
+            "--out",
+            str(tmp_path / "o"),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+
+
+def test_reader_messages_name_the_command_line_options():
+    from robocal.identify.commands import as_cli_text
+
+    assert (
+        as_cli_text("looks like a decimal comma: pass decimal=','")
+        == 'looks like a decimal comma: pass --decimal ","'
+    )
+    assert as_cli_text("pass angle_unit='deg'") == "pass --angle-unit deg"
+    assert as_cli_text("pass orientation='euler:XYZ:deg'") == "pass --orientation euler:XYZ:deg"
+    assert (
+        as_cli_text("rename with e.g. columns={'q1': '<file column>'}")
+        == "rename with e.g. --columns 'q1=<file column>'"
+    )
+    assert as_cli_text("(given for 'q1' in columns=)") == "(given for 'q1' in --columns)"

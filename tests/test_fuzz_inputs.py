@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
+from robocal.identify.commands import as_cli_text
 from robocal.identify.guards import CalibrationGuardError, check_problem, check_solution
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure import dataset as dataset_module
@@ -174,7 +175,8 @@ def test_broken_file_on_the_command_line_is_one_error_line(name, tmp_path):
     assert result.exit_code == 2, (result.output, result.exception)
     assert result.exception is None or isinstance(result.exception, SystemExit)
     assert "Traceback" not in result.output
-    assert result.output.startswith(f"error: {path}") and CORPUS[name] in result.output, result.output
+    expected = as_cli_text(CORPUS[name])  # the reader's keyword arguments as command-line options
+    assert result.output.startswith(f"error: {path}") and expected in result.output, result.output
     assert not (tmp_path / "model.yaml").exists() and not (tmp_path / "cal").exists()
 
 

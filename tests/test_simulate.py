@@ -287,3 +287,17 @@ def test_cli_simulate_reports_errors_cleanly(tmp_path, ur10):
     bad.write_text("q1,q2\n0.1,0.2\n")
     result = runner.invoke(app, ["simulate", "ur10", "--poses", str(bad), "-o", str(tmp_path / "y.csv")])
     assert result.exit_code == 2 and "missing joint column(s) q3 (elbow)" in result.output
+
+
+def test_cli_simulate_wants_units_on_its_quantities(tmp_path, ur10):
+    poses, _ = _poses(tmp_path, ur10)
+    base = ["simulate", "ur10", "--poses", str(poses), "-o", str(tmp_path / "m.csv")]
+    for extra, text in [
+        (["--noise", "0.02"], "--noise 0.02: give the unit, e.g. 0.02mm"),
+        (["--length-tol", "0.5"], "--length-tol 0.5: give the unit, e.g. 0.5mm"),
+        (["--angle-tol", "0.05"], "--angle-tol 0.05: give the unit, e.g. 0.05deg"),
+        (["--tol", "theta2=0.2"], "--tol theta2=0.2: give the unit"),
+    ]:
+        result = runner.invoke(app, [*base, *extra])
+        assert result.exit_code == 2 and text in result.output, result.output
+        assert not (tmp_path / "m.csv").exists()

@@ -39,7 +39,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.identify.guards import FitToNoise, check_data, check_rank, check_solution, fit_to_noise
+from robocal.identify.guards import (
+    CalibrationGuardError,
+    FitToNoise,
+    check_data,
+    check_rank,
+    check_solution,
+    fit_to_noise,
+)
 from robocal.identify.observability import Dropped, identifiable_subset
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
@@ -123,6 +130,19 @@ def initial_frame_and_tool(
                 R_f = T_frame[:3, :3] @ T_flange[:, :3, :3]
                 T_tool[:3, :3] = _project_rotation(np.einsum("nji,njk->ik", R_f, data.orientation))
     return T_frame, T_tool
+
+
+def _without_measured_tool(model: Model) -> tuple[Model, Array | None]:
+    """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
+    its end, and their transform (4x4; None when there are none)."""
+    k = len(model.steps)
+    while k and model.steps[k - 1].name.startswith(TOOL_PREFIX) and model.steps[k - 1].joint is None:
+        k -= 1
+    if k == len(model.steps):
+        return model, None
+    tool = model.steps[k:]
+    T = spatial.chain_product([s.motion for s in tool], [s.value for s in tool])
+    return dataclasses.replace(model, steps=model.steps[:k]), T
 
 
 def default_bounds(
@@ -843,6 +863,11 @@ def calibrate(
         measure = "pose" if data.orientation is not None else "position"
     if measure == "pose" and data.orientation is None:
         raise ValueError("measure='pose' needs measured orientations")
+    # a calibrated model (model.yaml of an earlier calibration) carries its measured tool:
+    # it becomes the tool's start value
+    model, carried_tool = _without_measured_tool(model)
+    if carried_tool is not None and tool_guess is None:
+        tool_guess = carried_tool
     n = data.n
     # stop with an explanation when the data cannot determine the model (identical
     # poses, joints that never move, too few poses...) rather than fit a silent bad model
@@ -930,6 +955,24 @@ def calibrate(
         known,
         start,
     )
+
+    orientation_hint = ""
+    if rows == 6:
+        # with the device frame and the tool fitted, a real robot's orientations agree with
+        # its model to a degree or so; far more means the file's rotations are read wrongly
+        angle = np.degrees(
+            np.median(
+                np.linalg.norm(problem.residual(problem.x0, weighted=False).reshape(n, 6)[:, 3:], axis=1)
+            )
+        )
+        if angle > 5.0:
+            orientation_hint = (
+                f"the measured orientations differ from the model's by {angle:.3g}° (median) after the "
+                "device frame and the tool were fitted: check the orientation convention of the data "
+                "(orientation='euler:XYZ:deg' / --orientation: intrinsic XYZ is upper case, extrinsic "
+                "xyz lower case), or calibrate positions only (measure='position')"
+            )
+            problem_warnings.append(orientation_hint)
 
     # identifiable set, preferring the frame, then the tool, then the robot in chain order
     J0 = problem.scaled_jacobian(problem.x0)
@@ -1089,5 +1132,8 @@ def calibrate(
         calibration.metadata["fit_to_noise"] = noise.to_dict()
         if noise.warning() is not None:
             problem_warnings.append(noise.warning())
-    calibration.metadata["warnings"] = problem_warnings + check_solution(calibration)
+    try:
+        calibration.metadata["warnings"] = problem_warnings + check_solution(calibration)
+    except CalibrationGuardError as err:
+        raise CalibrationGuardError(f"{err}; {orientation_hint}" if orientation_hint else str(err)) from None
     return calibration

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
+import re
 from pathlib import Path
 from typing import Annotated
 
@@ -29,9 +29,27 @@ Orientation = Annotated[
 ]
 
 
+_API_OPTION = re.compile(r"\b(decimal|angle_unit|length_unit|orientation|sep|limits)=('[^']*')")
+_API_COLUMNS = re.compile(r"columns=\{'(\w+)': '([^']*)'\}")
+
+
+def _shell_word(text: str) -> str:
+    return text if re.fullmatch(r"[\w.:+-]+", text) else f'"{text}"'
+
+
+def as_cli_text(message: str) -> str:
+    """A reader's message with its keyword arguments (``decimal=','``, ``columns={'q1':
+    'j1'}``) written as the command-line options that do the same."""
+    message = _API_OPTION.sub(lambda m: f"--{m[1].replace('_', '-')} {_shell_word(m[2][1:-1])}", message)
+    message = _API_COLUMNS.sub(lambda m: f"--columns '{m[1]}={m[2]}'", message)
+    return message.replace(" in columns=)", " in --columns)")
+
+
 def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, orientation):
     from robocal.measure.dataset import MeasurementFileError, read_measurements
 
+    if path.is_dir():
+        raise fail(f"{path} is a directory; --data takes a measurement file")
     if not path.is_file():
         raise fail(f"{path} does not exist")
     try:
@@ -46,7 +64,7 @@ def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, ori
             orientation=orientation,
         )
     except (MeasurementFileError, ValueError) as err:
-        raise fail(str(err)) from None
+        raise fail(as_cli_text(str(err))) from None
 
 
 def _stats_table(title: str, stats) -> Table:
@@ -101,11 +119,11 @@ def calibrate_command(
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
     noise: Annotated[
-        float | None,
+        str | None,
         typer.Option(
             "--noise",
-            help="the device's position noise, 1σ per axis in mm, for a file without sigma columns: "
-            "tests whether the model explains the data down to it",
+            help="the device's position noise, 1σ per axis with a unit (e.g. 0.03mm), for a file without "
+            "sigma columns: tests whether the model explains the data down to it",
         ),
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing result in --out")] = False,
@@ -119,15 +137,23 @@ def calibrate_command(
     if (robot_name is None) == (model_path is None):
         raise fail("give exactly one of --robot NAME or --model FILE")
     model = resolve_model(robot_name if robot_name is not None else str(model_path))
+    if out.exists() and not out.is_dir():
+        raise fail(f"--out {out} is a file; give a directory for model.yaml and result.json")
     if (out / "result.json").exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     data = _read(data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation)
     if noise is not None:
-        if not (math.isfinite(noise) and noise > 0):
-            raise fail(f"--noise {noise}: a positive standard deviation in mm")
+        from robocal.measure.simulate import parse_quantity_option
+
+        try:
+            sigma = parse_quantity_option(noise, "length", "--noise")
+        except ValueError as err:
+            raise fail(str(err)) from None
+        if not sigma > 0:
+            raise fail(f"--noise {noise}: a positive standard deviation, e.g. 0.03mm")
         if data.sigma is not None:
             raise fail(f"--noise: {data_path} has its own sigma columns; leave --noise out")
-        data = dataclasses.replace(data, sigma=np.full((data.n, 3), noise * 1e-3))
+        data = dataclasses.replace(data, sigma=np.full((data.n, 3), sigma))
     train, test = data, None
     if train_n is not None:
         if not 0 < train_n < data.n:
@@ -235,6 +261,9 @@ def validate_command(
     sep: Sep = None,
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
+    all_rows: Annotated[
+        bool, typer.Option("--all-rows", help="validate every row, also those marked train in a set column")
+    ] = False,
 ) -> None:
     """Error statistics of a calibrated model on (held-out) measurements."""
     import robocal as rc
@@ -247,16 +276,34 @@ def validate_command(
     except (OSError, ValueError, KeyError) as err:
         raise fail(f"{directory}: cannot read the result: {err}") from None
     data = _read(data_path, result.model, length_unit, angle_unit, columns, sep, decimal, orientation)
-    stats = rc.validate(result, data, refit_frame=refit_frame)
+    notes, extra = [], {}
+    if data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
+        data = data.split_rows("test")
+        notes.append(f"the {data.n} rows marked test in the file's set column (--all-rows: every row)")
+        extra["rows"] = "test"
+    try:
+        stats = rc.validate(result, data, refit_frame=refit_frame)
+    except ValueError as err:
+        raise fail(f"{data_path}: {as_cli_text(str(err))}") from None
+    notes.append(
+        {
+            "calibrated": "the device frame identified by the calibration was used as it is",
+            "refit": "the device frame was refitted to this data (--refit-frame)",
+        }.get(stats.frame, "")
+    )
+    if stats.mean > max(20 * result.rms_after, 5e-3):
+        extra["warning"] = (
+            f"the mean error is {stats.mean / max(result.rms_after, 1e-12):.0f}x the calibration's own "
+            f"RMS residual ({result.rms_after * 1e3:.3g} mm)"
+            + (": if the device was moved since, add --refit-frame;" if stats.frame == "calibrated" else ":")
+            + " otherwise check the robot, the units and the column mapping"
+        )
+        notes.append(f"[yellow]warning:[/] {extra['warning']}")
     if as_json:
-        print(json.dumps(stats.to_dict()))
+        print(json.dumps(stats.to_dict() | extra))
         return
     console.print(_stats_table(f"{result.model.name} on {data_path.name}", stats))
-    note = {
-        "calibrated": "the device frame identified by the calibration was used as it is",
-        "refit": "the device frame was refitted to this data (--refit-frame)",
-    }.get(stats.frame, "")
-    if note:
+    for note in filter(None, notes):
         console.print(note, highlight=False)
 
 

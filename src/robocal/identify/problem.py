@@ -64,7 +64,11 @@ def measurement_chain(
             after += sequence(("Tx", "Ty", "Tz"), T_tool[:3, 3], [f"{TOOL_PREFIX}{c}" for c in "xyz"])
     clash = {s.name for s in before + after} & set(robot.names)
     if clash:
-        raise ValueError(f"model {robot.name!r} already uses the reserved parameter name(s) {sorted(clash)}")
+        raise ValueError(
+            f"model {robot.name!r} already uses the reserved parameter name(s) {sorted(clash)}: frame_* and "
+            "frame0_* name the measuring device's frame, tcp_* the tool.  A measurement_model.yaml holds "
+            "the device frame: calibrate from the model.yaml next to it; otherwise rename those steps"
+        )
     steps = (*before, *robot.steps, *after)
     name = robot.name + "+measurement"
     return dataclasses.replace(robot, name=name, steps=steps, bodies=(), joint_effects=())

@@ -13,6 +13,7 @@ Commands:
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from collections import defaultdict
 from pathlib import Path
@@ -36,7 +37,7 @@ from robocal.measure.devices import DEVICES, make_device
 from robocal.measure.simulate import (
     VirtualRobot,
     draw_true_model,
-    parse_quantity,
+    parse_quantity_option,
     save_simulation,
     simulate,
 )
@@ -243,7 +244,7 @@ def simulate_command(
     try:
         dev = make_device(device, **kwargs)
         if noise is not None:
-            dev = dev.with_noise(parse_quantity(noise, "length"))
+            dev = dev.with_noise(parse_quantity_option(noise, "length", "--noise"))
         q = read_measurements(poses, model=model)
         if q.position is not None:
             err_console.print(
@@ -251,11 +252,16 @@ def simulate_command(
                 highlight=False,
             )
         model_rng = np.random.default_rng(None if seed is None else [seed, 1])
+        length = parse_quantity_option(length_tol, "length", "--length-tol")
+        angle = parse_quantity_option(angle_tol, "angle", "--angle-tol")
+        for name, value in tolerances.items():
+            if not re.search(r"[A-Za-zµμ°]\s*$", value) and float(value or "nan") != 0.0:
+                raise ValueError(f"--tol {name}={value}: give the unit, e.g. {name}={value}mm or {value}deg")
         true = draw_true_model(
             model,
             tolerances,
-            length=length_tol,
-            angle=angle_tol,
+            length=length,
+            angle=angle,
             distribution=distribution,  # type: ignore[arg-type]
             seed=model_rng,
         )
@@ -268,8 +274,8 @@ def simulate_command(
         info = {
             "command": "robocal simulate",
             "poses": str(poses),
-            "length_tol": parse_quantity(length_tol, "length"),
-            "angle_tol": parse_quantity(angle_tol, "angle"),
+            "length_tol": length,
+            "angle_tol": angle,
             "tolerances": {k: str(v) for k, v in tolerances.items()},
             "distribution": distribution,
             "model_seed": "none" if seed is None else f"[{seed}, 1]",

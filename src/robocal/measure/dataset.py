@@ -402,6 +402,15 @@ def _short(cell: str, limit: int = 40) -> str:
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 
 
+#: Names a separator may be given by (on a command line a tab is hard to type).
+SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "semicolon": ";", "comma": ","}
+
+
+def _csv_rows(lines: Sequence[str], sep: str):
+    """csv rows of ``lines``; a space separator means runs of spaces."""
+    return csv.reader(lines, delimiter=sep, skipinitialspace=sep == " ")
+
+
 class _Reader:
     """One pass over a file that collects every problem instead of stopping at the first."""
 
@@ -426,6 +435,7 @@ class _Reader:
             raise ValueError(f"angle_unit must be one of {sorted(ANGLE_UNITS)}, got {angle_unit!r}")
         if decimal not in (".", ","):
             raise ValueError(f"decimal must be '.' or ',', got {decimal!r}")
+        sep = SEPARATOR_NAMES.get(sep, sep) if sep is not None else None
         if sep is not None and (len(sep) != 1 or sep == decimal or sep in "\"'"):
             raise ValueError(f"sep must be one character other than the decimal mark, got {sep!r}")
         if limits not in ("error", "warn", "ignore"):
@@ -493,8 +503,10 @@ class _Reader:
             sep = max((";", "\t", ","), key=header_text.count)
             if sep == self.decimal:
                 sep = ";"
+            if not header_text.count(sep) and len(header_text.split()) > 1:
+                sep = " "  # columns separated by runs of spaces
         try:
-            header = [h.strip() for h in next(csv.reader([lines[first]], delimiter=sep))]
+            header = [h.strip() for h in next(_csv_rows([lines[first].strip()], sep))]
         except csv.Error as err:
             self.error("header", f"the header cannot be read as CSV: {err}", self.header_line)
             return None
@@ -594,9 +606,9 @@ class _Reader:
         """One row of cells per line; a line the csv module cannot read (a cell over its
         field limit) is reported and left out.  A quote opened on one line does not
         swallow the next lines: every line is its own row."""
-        lines = [ln for _, ln in body]
+        lines = [ln.strip() if sep == " " else ln for _, ln in body]
         try:
-            rows = list(csv.reader(lines, delimiter=sep))
+            rows = list(_csv_rows(lines, sep))
             if len(rows) == len(lines):
                 return rows, []
         except csv.Error:
@@ -604,7 +616,7 @@ class _Reader:
         rows, unreadable = [], []
         for i, (no, ln) in enumerate(body):
             try:
-                rows.append(next(csv.reader([ln], delimiter=sep), []))
+                rows.append(next(_csv_rows([ln.strip() if sep == " " else ln], sep), []))
             except csv.Error as err:
                 rows.append([])
                 unreadable.append(i)
@@ -657,7 +669,7 @@ class _Reader:
                     "missing-joint",
                     f"missing joint column(s) {', '.join(missing)}: model {model.name!r} has "
                     f"{model.dof} joints ({', '.join(model.joint_names)}); rename with e.g. "
-                    f"columns={{'q1': '<file column>'}}",
+                    f"columns={{'q1': '<file column>'}}; header is {self._header_text()}",
                     hl,
                 )
             dof = model.dof
@@ -839,6 +851,12 @@ class _Reader:
         fix = "angle_unit='deg'"
         if kind.startswith("euler"):
             fix = f"orientation={kind.rsplit(':', 1)[0] + ':deg'!r}"
+        elif kind == "rotvec":  # read as a rotation vector by default: Euler angles in degrees?
+            fix = (
+                "orientation='euler:SEQ:deg' if they are Euler angles (e.g. 'euler:XYZ:deg', intrinsic; "
+                "lower case for extrinsic), angle_unit='deg' if they are a rotation vector in degrees "
+                "(joints in degrees too), or orientation='none' to ignore them"
+            )
         for c in np.flatnonzero(big > 2 * math.pi + 1e-6):
             self.error(
                 "angle-unit",

@@ -47,6 +47,7 @@ __all__ = [
     "draw_true_model",
     "load_truth",
     "parse_quantity",
+    "parse_quantity_option",
     "save_simulation",
     "simulate",
     "truth_path",
@@ -61,6 +62,20 @@ JointEffect = Callable[[Model, Array], Array]
 _LENGTH = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6}
 _ANGLE = {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180.0, "°": math.pi / 180.0, "urad": 1e-6}
 _QUANTITY = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-zµμ°]*)\s*$")
+
+
+def parse_quantity_option(value: str, kind: Literal["length", "angle"], option: str) -> float:
+    """A command-line length (m) or angle (rad): text that must carry its unit
+    (``0.02mm``, ``0.05deg``); a bare number is an error, since on a command line it is
+    as likely meant in mm or degrees as in SI units."""
+    m = _QUANTITY.match(value)
+    if m is not None and not m.group(2) and float(m.group(1)) != 0.0:
+        example = f"{value}mm" if kind == "length" else f"{value}deg"
+        raise ValueError(f"{option} {value}: give the unit, e.g. {example}")
+    try:
+        return parse_quantity(value, kind)
+    except ValueError as err:
+        raise ValueError(f"{option}: {err}") from None
 
 
 def parse_quantity(value: str | float, kind: Literal["length", "angle"]) -> float:
