@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -291,3 +292,29 @@ def test_reader_messages_name_the_command_line_options():
         == "rename with e.g. --columns 'q1=<file column>'"
     )
     assert as_cli_text("(given for 'q1' in columns=)") == "(given for 'q1' in --columns)"
+
+
+def test_calibrate_explains_what_to_change(measured, tmp_path):
+    path, _ = measured
+    root = Path(__file__).resolve().parents[1]
+
+    def run(*args):
+        result = runner.invoke(app, ["calibrate", *args, "--out", str(tmp_path / "o")])
+        return result.exit_code, " ".join(result.output.split())
+
+    base = ["--data", str(path), "--length-unit", "mm"]
+    code, text = run("--model", str(root / "examples" / "geometry" / "ur10.yaml"), *base)
+    assert code == 2 and "joint-geometry file" in text and "robocal model build" in text
+    code, text = run("--robot", "ur10", *base, "--measure", "bogus")
+    assert code == 2 and "--measure 'bogus'" in text
+    code, text = run("--robot", "ur10", *base, "--measure", "pose")
+    assert code == 2 and "--measure pose needs measured orientations" in text
+    joints_only = write_measurements(
+        Measurements(q=np.zeros((3, 6)) + np.arange(3)[:, None]), tmp_path / "q.csv"
+    )
+    code, text = run("--robot", "ur10", "--data", str(joints_only))
+    assert code == 2 and "no measured positions" in text and "--columns" in text
+    code, text = run("--robot", "irb120", *base)
+    assert code == 2 and "outside the limits" in text and "--limits warn" in text
+    code, text = run("--robot", "UR10", *base, "--tool", "0,0,109")  # catalog names in any case
+    assert code == 0, text

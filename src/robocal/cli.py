@@ -36,14 +36,33 @@ app.add_typer(robots_app, name="robots")
 def resolve_model(name_or_path: str) -> Model:
     """A catalog robot by name, or a model file by path (``.yaml``/``.yml``)."""
     path = Path(name_or_path)
+    if not name_or_path.strip():
+        raise fail("no robot given: a catalog name (robocal robots) or a model file")
     try:
         if path.suffix in (".yaml", ".yml") or path.exists():
             if not path.is_file():
                 raise fail(f"model file {path} does not exist")
+            if _is_geometry_file(path):
+                raise fail(
+                    f"{path} is a joint-geometry file: build a model from it first, "
+                    f"e.g. robocal model build {path} -o model.yaml"
+                )
             return load_model(path)
         return robot(name_or_path)
     except (KeyError, ModelFileError) as err:
         raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+
+
+def _is_geometry_file(path: Path) -> bool:
+    """Whether a YAML file holds joint geometry for the builder (``joints:``) rather than a
+    model (``steps:``)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, RecursionError, yaml.YAMLError):
+        return False  # the model loader reports it
+    return isinstance(data, dict) and "joints" in data and "steps" not in data
 
 
 def _fmt(value: float, digits: int = 4) -> str:

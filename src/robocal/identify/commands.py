@@ -27,9 +27,12 @@ Decimal = Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ",
 Orientation = Annotated[
     str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
 ]
+Limits = Annotated[
+    str, typer.Option("--limits", help="joint values beyond the model's limits: error | warn | ignore")
+]
 
 
-_API_OPTION = re.compile(r"\b(decimal|angle_unit|length_unit|orientation|sep|limits)=('[^']*')")
+_API_OPTION = re.compile(r"\b(decimal|angle_unit|length_unit|orientation|sep|limits|measure)=('[^']*')")
 _API_COLUMNS = re.compile(r"columns=\{'(\w+)': '([^']*)'\}")
 
 
@@ -45,7 +48,7 @@ def as_cli_text(message: str) -> str:
     return message.replace(" in columns=)", " in --columns)")
 
 
-def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, orientation):
+def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits="error"):
     from robocal.measure.dataset import MeasurementFileError, read_measurements
 
     if path.is_dir():
@@ -62,6 +65,7 @@ def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, ori
             decimal=decimal,
             model=model,
             orientation=orientation,
+            limits=limits,
         )
     except (MeasurementFileError, ValueError) as err:
         raise fail(as_cli_text(str(err))) from None
@@ -118,6 +122,7 @@ def calibrate_command(
     sep: Sep = None,
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
+    limits: Limits = "error",
     noise: Annotated[
         str | None,
         typer.Option(
@@ -141,7 +146,14 @@ def calibrate_command(
         raise fail(f"--out {out} is a file; give a directory for model.yaml and result.json")
     if (out / "result.json").exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
-    data = _read(data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation)
+    if measure not in (None, "position", "pose"):
+        raise fail(f"--measure {measure!r}: position or pose")
+    data = _read(data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits)
+    if data.position is None:
+        raise fail(
+            f"{data_path}: no measured positions (columns x, y, z) to calibrate against; map the file's "
+            "columns with e.g. --columns 'x=meas_x,y=meas_y,z=meas_z'"
+        )
     if noise is not None:
         from robocal.measure.simulate import parse_quantity_option
 
@@ -186,7 +198,7 @@ def calibrate_command(
                 effects=effect_option,
             )
     except ValueError as err:
-        raise fail(str(err)) from None
+        raise fail(as_cli_text(str(err))) from None
     result.metadata |= {
         "data_file": str(data_path),
         "data_sha256": file_hash(data_path),
@@ -261,6 +273,7 @@ def validate_command(
     sep: Sep = None,
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
+    limits: Limits = "error",
     all_rows: Annotated[
         bool, typer.Option("--all-rows", help="validate every row, also those marked train in a set column")
     ] = False,
@@ -275,7 +288,7 @@ def validate_command(
         result = CalibrationResult.load(directory)
     except (OSError, ValueError, KeyError) as err:
         raise fail(f"{directory}: cannot read the result: {err}") from None
-    data = _read(data_path, result.model, length_unit, angle_unit, columns, sep, decimal, orientation)
+    data = _read(data_path, result.model, length_unit, angle_unit, columns, sep, decimal, orientation, limits)
     notes, extra = [], {}
     if data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
         data = data.split_rows("test")

@@ -930,7 +930,8 @@ class _Reader:
             report(
                 "limits",
                 f"joint {model.joint_names[j]} = {q[i, j] / scale:.6g} {unit} is outside the limits "
-                f"[{lo:.6g}, {hi:.6g}] {unit} of model {model.name!r}",
+                f"[{lo:.6g}, {hi:.6g}] {unit} of model {model.name!r} (a different robot, joint order or "
+                "unit? if the robot really goes there, pass limits='warn')",
                 int(self.line_no[i]),
                 names[j],
             )

@@ -28,6 +28,8 @@ def robot(name: str) -> Model:
     Models are immutable, so the cached instance is shared safely.
     """
     names = robots()
+    if name not in names and name.lower() in names:  # "UR10" is the ur10
+        name = name.lower()
     if name not in names:
         close = difflib.get_close_matches(name.lower(), names, n=3)
         hint = f" Did you mean {', '.join(close)}?" if close else ""
