@@ -444,3 +444,21 @@ def test_ur10_goal_rpy_is_extrinsic_xyz_and_agrees_with_the_measurement():
     assert np.median(intrinsic) > 0.5  # the other reading of the goal angles does not fit
     _, _, measured = fit_two_sided(data.orientation, R_goal)
     assert np.median(measured) < 0.15
+
+
+def test_incomplete_rows_are_an_error_or_left_out(tmp_path):
+    text = GOOD + "40,,270,70,450\n5,120,nan,0,120\n6,130,300\n-5,140,305,1,140\n"
+    path = write(tmp_path, text)
+    with pytest.raises(MeasurementFileError, match="leaves such rows out") as err:
+        read_measurements(path, length_unit="mm", angle_unit="deg", model=arm())
+    assert {p.code for p in err.value.problems} == {"empty", "not-finite", "ragged"}
+    with pytest.warns(MeasurementWarning, match="row left out"):
+        data = read_measurements(path, length_unit="mm", angle_unit="deg", model=arm(), incomplete="drop")
+    assert data.n == 4 and data.metadata["rows_left_out"] == "3"
+    np.testing.assert_allclose(np.degrees(data.q[:, 0]), [10, -20, 30, -5])
+    np.testing.assert_allclose(data.position[-1], [0.305, 0.001, 0.14])
+    everything_bad = write(tmp_path, "q1,q2,x,y,z\n1,,3,4,5\n", "bad.csv")
+    with pytest.raises(MeasurementFileError, match="every data row"):
+        read_measurements(everything_bad, model=arm(), incomplete="drop")
+    with pytest.raises(ValueError, match="incomplete must be"):
+        read_measurements(path, incomplete="skip")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import re
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -12,7 +13,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, fail
+from robocal.console import console, err_console, fail
 
 __all__ = ["register"]
 
@@ -27,12 +28,20 @@ Decimal = Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ",
 Orientation = Annotated[
     str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
 ]
+Incomplete = Annotated[
+    str,
+    typer.Option(
+        "--incomplete", help="rows with an empty or bad cell: error | drop (left out, with a warning)"
+    ),
+]
 Limits = Annotated[
     str, typer.Option("--limits", help="joint values beyond the model's limits: error | warn | ignore")
 ]
 
 
-_API_OPTION = re.compile(r"\b(decimal|angle_unit|length_unit|orientation|sep|limits|measure)=('[^']*')")
+_API_OPTION = re.compile(
+    r"\b(decimal|angle_unit|length_unit|orientation|sep|limits|measure|incomplete)=('[^']*')"
+)
 _API_COLUMNS = re.compile(r"columns=\{'(\w+)': '([^']*)'\}")
 
 
@@ -48,27 +57,50 @@ def as_cli_text(message: str) -> str:
     return message.replace(" in columns=)", " in --columns)")
 
 
-def _read(path: Path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits="error"):
-    from robocal.measure.dataset import MeasurementFileError, read_measurements
+def _read(
+    path: Path,
+    model,
+    length_unit,
+    angle_unit,
+    columns,
+    sep,
+    decimal,
+    orientation,
+    limits="error",
+    incomplete="error",
+):
+    from robocal.measure.dataset import MeasurementFileError, MeasurementWarning, read_measurements
 
     if path.is_dir():
         raise fail(f"{path} is a directory; --data takes a measurement file")
     if not path.is_file():
         raise fail(f"{path} does not exist")
     try:
-        return read_measurements(
-            path,
-            length_unit=length_unit,
-            angle_unit=angle_unit,
-            columns=columns,
-            sep=sep,
-            decimal=decimal,
-            model=model,
-            orientation=orientation,
-            limits=limits,
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MeasurementWarning)
+            data = read_measurements(
+                path,
+                length_unit=length_unit,
+                angle_unit=angle_unit,
+                columns=columns,
+                sep=sep,
+                decimal=decimal,
+                model=model,
+                orientation=orientation,
+                limits=limits,
+                incomplete=incomplete,
+            )
     except (MeasurementFileError, ValueError) as err:
         raise fail(as_cli_text(str(err))) from None
+    for w in caught:
+        if isinstance(w.message, MeasurementWarning):
+            err_console.print(f"[yellow]warning:[/] {as_cli_text(str(w.message))}", highlight=False)
+    if "rows_left_out" in data.metadata:
+        err_console.print(
+            f"{data.metadata['rows_left_out']} incomplete row(s) of {path.name} left out (--incomplete drop)",
+            highlight=False,
+        )
+    return data
 
 
 def _stats_table(title: str, stats) -> Table:
@@ -123,6 +155,7 @@ def calibrate_command(
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
     limits: Limits = "error",
+    incomplete: Incomplete = "error",
     noise: Annotated[
         str | None,
         typer.Option(
@@ -148,7 +181,9 @@ def calibrate_command(
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
-    data = _read(data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits)
+    data = _read(
+        data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete
+    )
     if data.position is None:
         raise fail(
             f"{data_path}: no measured positions (columns x, y, z) to calibrate against; map the file's "
@@ -274,6 +309,7 @@ def validate_command(
     decimal: Decimal = ".",
     orientation: Orientation = "auto",
     limits: Limits = "error",
+    incomplete: Incomplete = "error",
     all_rows: Annotated[
         bool, typer.Option("--all-rows", help="validate every row, also those marked train in a set column")
     ] = False,
@@ -288,7 +324,18 @@ def validate_command(
         result = CalibrationResult.load(directory)
     except (OSError, ValueError, KeyError) as err:
         raise fail(f"{directory}: cannot read the result: {err}") from None
-    data = _read(data_path, result.model, length_unit, angle_unit, columns, sep, decimal, orientation, limits)
+    data = _read(
+        data_path,
+        result.model,
+        length_unit,
+        angle_unit,
+        columns,
+        sep,
+        decimal,
+        orientation,
+        limits,
+        incomplete,
+    )
     notes, extra = [], {}
     if data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
         data = data.split_rows("test")

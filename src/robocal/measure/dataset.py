@@ -402,6 +402,10 @@ def _short(cell: str, limit: int = 40) -> str:
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 
 
+#: Problems that make a row incomplete: with ``incomplete="drop"`` the row is left out.
+INCOMPLETE_CODES = frozenset({"empty", "not-a-number", "not-finite", "ragged"})
+IncompleteMode = Literal["error", "drop"]
+
 #: Names a separator may be given by (on a command line a tab is hard to type).
 SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "semicolon": ";", "comma": ","}
 
@@ -428,6 +432,7 @@ class _Reader:
         limits: LimitsMode,
         orientation: str,
         extra: Sequence[str],
+        incomplete: IncompleteMode = "error",
     ) -> None:
         if length_unit not in LENGTH_UNITS:
             raise ValueError(f"length_unit must be one of {sorted(LENGTH_UNITS)}, got {length_unit!r}")
@@ -440,6 +445,8 @@ class _Reader:
             raise ValueError(f"sep must be one character other than the decimal mark, got {sep!r}")
         if limits not in ("error", "warn", "ignore"):
             raise ValueError(f"limits must be 'error', 'warn' or 'ignore', got {limits!r}")
+        if incomplete not in ("error", "drop"):
+            raise ValueError(f"incomplete must be 'error' or 'drop', got {incomplete!r}")
         if model is not None and dof is not None and dof != model.dof:
             raise ValueError(f"dof={dof} contradicts model {model.name!r} with {model.dof} joints")
         self.path = path
@@ -451,10 +458,18 @@ class _Reader:
         self.dof, self.model, self.limits = dof, model, limits
         self.orientation = _parse_orientation(orientation)
         self.extra_names = list(extra)
+        self.incomplete = incomplete
+        self.dropped_lines: set[int] = set()
         self.problems: list[Problem] = []
 
     # -- problem helpers
     def error(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
+        if self.incomplete == "drop" and code in INCOMPLETE_CODES and row is not None:
+            self.dropped_lines.add(row)
+            self.warn(code, f"{message}; row left out (incomplete='drop')", row, column)
+            return
+        if code in INCOMPLETE_CODES and row is not None:
+            message += " (incomplete='drop' leaves such rows out)"
         self.problems.append(Problem("error", code, message, str(self.path), row, column))
 
     def warn(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
@@ -583,6 +598,17 @@ class _Reader:
 
         if not self.ok:
             return None
+        if self.dropped_lines:  # incomplete='drop': the rows with a missing or bad value go
+            keep = ~np.isin(self.line_no, sorted(self.dropped_lines))
+            if not keep.any():
+                self.error("no-data", "every data row has a missing or bad value")
+                return None
+            q, position, sigma, split, temperature = (
+                None if a is None else a[keep] for a in (q, position, sigma, split, temperature)
+            )
+            orientation = None if orientation is None else orientation[keep]
+            extra = {name: values[keep] for name, values in extra.items()}
+            metadata["rows_left_out"] = str(len(self.dropped_lines))
         joint_names = tuple(metadata.pop("joints", "").split())
         if len(joint_names) != len(joint_cols):
             joint_names = tuple(joint_cols)
@@ -985,8 +1011,10 @@ def _options(
     limits: LimitsMode = "error",
     orientation: str = "auto",
     extra: Sequence[str] = (),
+    incomplete: IncompleteMode = "error",
 ) -> dict:
     return dict(
+        incomplete=incomplete,
         length_unit=length_unit,
         angle_unit=angle_unit,
         columns=columns,
@@ -1013,8 +1041,9 @@ def read_measurements(
     limits: LimitsMode = "error",
     orientation: str = "auto",
     extra: Sequence[str] = (),
+    incomplete: IncompleteMode = "error",
 ) -> Measurements:
-    """Read a measurement (or poses) CSV file; all or nothing.
+    """Read a measurement (or poses) CSV file; all or nothing (or the complete rows).
 
     Args:
         path: the file.
@@ -1040,6 +1069,10 @@ def read_measurements(
             ``"euler:SEQ"`` or ``"euler:SEQ:UNIT"`` (module docstring).
         extra: further numeric columns to keep, by their names in the file, in
             :attr:`Measurements.extra` (unconverted).
+        incomplete: a row with an empty, non-numeric or non-finite cell or the wrong
+            number of cells is an error (``"error"``) or is left out with a warning
+            (``"drop"``: a tracker that lost the beam leaves such rows); the number left
+            out is in ``metadata["rows_left_out"]``.
 
     Returns:
         :class:`Measurements` in SI units; ``metadata`` has the ``# key: value`` lines
@@ -1057,7 +1090,9 @@ def read_measurements(
             pose is how repeatability is measured.
         ValueError: on invalid options.
     """
-    opts = _options(length_unit, angle_unit, columns, sep, decimal, dof, model, limits, orientation, extra)
+    opts = _options(
+        length_unit, angle_unit, columns, sep, decimal, dof, model, limits, orientation, extra, incomplete
+    )
     data, problems = _collect(path, opts)
     errors = [p for p in problems if p.severity == "error"]
     if errors or data is None:
