@@ -417,6 +417,11 @@ def run_demo(
         with steps.step(next(names)):
             result = rc.calibrate(nominal, train, tool_guess=tool, compliance=True)
             geometric = rc.calibrate(nominal, train, tool_guess=tool)
+            # what each model leaves unexplained, from its residuals against the tracker noise
+            ev["fit_to_noise"] = {
+                "geometric calibration": geometric.metadata.get("fit_to_noise"),
+                "geometry + joint compliance": result.metadata.get("fit_to_noise"),
+            }
 
         with steps.step(next(names)):
             from robocal.evaluate.report import before_validation
@@ -532,6 +537,7 @@ def _summary_numbers(result, before, after, after_geo, ev, seconds, report_path)
             "after": after.to_dict(),
         },
         "condition_number": result.condition_number,
+        "fit_to_noise": ev.get("fit_to_noise"),
         "identified": len(result.names),
         "dropped": len(result.dropped),
     }
@@ -558,6 +564,7 @@ def _print_summary(numbers: Mapping[str, Any]) -> None:
     from rich.table import Table
 
     from robocal.console import console
+    from robocal.identify.guards import FitToNoise
 
     held = numbers["held_out"]
     table = Table(title=f"robocal demo — {numbers['robot']}: held-out poses", title_justify="left")
@@ -574,6 +581,9 @@ def _print_summary(numbers: Mapping[str, Any]) -> None:
                 name, f"{s['mean_mm']:.3f}", f"{s['rms_mm']:.3f}", f"{s['p95_mm']:.3f}", f"{s['max_mm']:.3f}"
             )
     console.print(table)
+    for name, fit in (numbers.get("fit_to_noise") or {}).items():
+        if fit:
+            console.print(f"{name}: {FitToNoise.from_dict(fit).summary()}", highlight=False)
     imp = numbers.get("held_out_improvement")
     if imp:
         console.print(

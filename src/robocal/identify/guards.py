@@ -405,7 +405,7 @@ class FitToNoise:
 
     def summary(self) -> str:
         """One line: the residuals against the noise, and what is left unexplained."""
-        head = f"residuals {self.ratio:.3g}x the stated noise ({self.p_text})"
+        head = f"residuals {self.ratio:.2f}x the stated noise ({self.p_text})"
         if self.warning() is None:
             return f"{head}: the model explains the data down to the measurement noise"
         if self.ratio > 1.0:
@@ -417,7 +417,7 @@ class FitToNoise:
         (χ² test at ``significance``) or far below it (σ overstated), else None."""
         if self.p_value < significance and self.ratio > 1.0:
             return (
-                f"the residuals are {self.ratio:.3g}x the stated measurement noise (χ² test, "
+                f"the residuals are {self.ratio:.2f}x the stated measurement noise (χ² test, "
                 f"{self.p_text}): about {self.unmodelled_rms * 1e3:.3g} mm RMS of error that the "
                 "model does not represent remains (joint effects, temperature, a moving device, or a "
                 "noise level stated too small); the uncertainties are scaled to the residuals, and "
