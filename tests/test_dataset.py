@@ -462,3 +462,34 @@ def test_incomplete_rows_are_an_error_or_left_out(tmp_path):
         read_measurements(everything_bad, model=arm(), incomplete="drop")
     with pytest.raises(ValueError, match="incomplete must be"):
         read_measurements(path, incomplete="skip")
+
+
+def test_unused_columns_are_named(tmp_path):
+    path = write(
+        tmp_path,
+        "id,q1,q2,x,y,z,note\n" + "".join(f"{k},{line},n\n" for k, line in enumerate(GOOD.splitlines()[1:])),
+    )
+    data = read_measurements(path, length_unit="mm", angle_unit="deg", model=arm())
+    assert data.metadata["unused_columns"] == "id, note"
+    result = runner.invoke(
+        app,
+        [
+            "data",
+            "check",
+            str(path),
+            "--robot",
+            str(_arm_file(tmp_path)),
+            "--length-unit",
+            "mm",
+            "--angle-unit",
+            "deg",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert "not used: id, note" in result.output
+
+
+def _arm_file(tmp_path):
+    from robocal.model.files import save_model
+
+    return save_model(arm(), tmp_path / "arm.yaml")

@@ -130,6 +130,10 @@ def _summary(data: Measurements, path: Path, model, length_unit: str, angle_unit
         facts.append(f"split: {n_train} train, {data.n - n_train} test")
     if model is not None:
         facts.append(f"robot: {model.name} ({model.dof} joints), all joint values within its limits")
+    if "unused_columns" in data.metadata:
+        facts.append(f"not used: {data.metadata['unused_columns']} (map columns with --columns)")
+    if "rows_left_out" in data.metadata:
+        facts.append(f"left out: {data.metadata['rows_left_out']} incomplete row(s) (--incomplete drop)")
     return facts
 
 
@@ -152,6 +156,9 @@ def data_check(
     limits: Annotated[
         str, typer.Option(help="joint values outside the limits: error, warn, ignore")
     ] = "error",
+    incomplete: Annotated[
+        str, typer.Option(help="rows with an empty or bad cell: error, drop (left out, with a warning)")
+    ] = "error",
 ) -> None:
     """List every problem of a measurement file, or summarise it if it is clean."""
     model = _model(robot)
@@ -163,6 +170,7 @@ def data_check(
         columns=columns,
         orientation=orientation,
         limits=limits,
+        incomplete=incomplete,
     )
     try:
         problems = check_measurements(file, model, **options)

@@ -614,6 +614,11 @@ class _Reader:
             joint_names = tuple(joint_cols)
         metadata.setdefault("file", str(path))
         metadata["read_units"] = f"{self.length_unit}, {self.angle_unit}"
+        used = {c for key in ("joints", "position", "sigma", "orientation", "temperature", "extra", "set")
+                for c in (cols.get(key) or [])}  # fmt: skip
+        unused = [h for h in self.header if h and h not in used]
+        if unused:
+            metadata["unused_columns"] = ", ".join(unused)
         if orientation is not None:
             metadata["read_orientation"] = cols["orientation_kind"]
         return Measurements(
