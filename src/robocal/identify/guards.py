@@ -445,7 +445,7 @@ def fit_to_noise(residuals: ArrayLike, sigma: ArrayLike, n_estimated: float) -> 
     is then ``mean(Σ σ²) (3n - p) / 3n``; whatever the mean squared residual exceeds
     that by is error the model does not represent.
     """
-    import scipy.stats
+    import scipy.special
 
     r = np.asarray(residuals, dtype=float).reshape(-1, 3)
     s = np.asarray(sigma, dtype=float).reshape(-1, 3)
@@ -456,7 +456,7 @@ def fit_to_noise(residuals: ArrayLike, sigma: ArrayLike, n_estimated: float) -> 
     ms = float(np.mean(np.sum(r**2, axis=1)))
     return FitToNoise(
         ratio=math.sqrt(chi2 / dof),
-        p_value=float(scipy.stats.chi2.sf(chi2, dof)),
+        p_value=float(scipy.special.chdtrc(dof, chi2)),  # the χ² survival function
         dof=dof,
         noise_rms=math.sqrt(noise_ms),
         unmodelled_rms=math.sqrt(max(ms - noise_ms, 0.0)),
