@@ -388,6 +388,9 @@ def test_calibration_tells_when_the_model_does_not_explain_the_data():
     held_out = np.sqrt(np.mean(held_out_error(geometric, robot, q_test) ** 2))
     assert 0.7 * held_out < noise.unmodelled_rms < held_out
     assert "does not represent" in geometric.summary()
+    # validation expects that unexplained error too: measured data of the same robot
+    stats = rc.validate(geometric, simulate(robot, q_test, seed=35))
+    assert stats.scatter == "sigma+unmodelled" and 0.8 < stats.rms / stats.expected_rms < 1.3
     compliant = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=list(c_true))
     assert compliant.fit_to_noise.warning() is None and compliant.fit_to_noise.ratio < 1.2
     assert "down to the measurement noise" in compliant.summary()
@@ -410,3 +413,24 @@ def test_orientations_read_with_the_wrong_euler_convention_are_named(irb2400):
     assert any("orientation convention" in m for m in messages), messages
     right = rc.calibrate(irb2400, data)
     assert not any("orientation convention" in m for m in right.metadata["warnings"])
+
+
+def test_validation_states_the_error_the_calibration_expected(irb2400):
+    """Held-out RMS against the calibration's expectation (propagated parameter covariance
+    plus the data's noise): equal on average when the model explains the data, well
+    below the error when the robot has changed since."""
+    ratios = []
+    for seed in range(4):
+        robot = virtual(irb2400, seed=900 + seed)
+        data = simulate(robot, poses(irb2400, 60, seed=910 + seed), seed=920 + seed)
+        test = simulate(robot, poses(irb2400, 1000, seed=930 + seed), seed=940 + seed)
+        result = rc.calibrate(irb2400, data, tool_guess=[0, 0, 0.1])
+        stats = rc.validate(result, test)
+        cov = result.position_covariance(test.q)
+        assert stats.parameter_rms == pytest.approx(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
+        assert stats.scatter == "sigma" and not stats.worse_than_expected
+        ratios.append(stats.rms / stats.expected_rms)
+    assert 0.9 < np.mean(ratios) < 1.1, ratios
+    changed = virtual(irb2400, seed=999)  # another robot's errors, same device
+    stats = rc.validate(result, simulate(changed, poses(irb2400, 500, seed=950), seed=951))
+    assert stats.worse_than_expected and stats.to_dict()["expected_rms_mm"] < 0.5 * stats.rms * 1e3

@@ -248,6 +248,10 @@ def calibrate_command(
     _print_result(result)
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
+        for note in filter(
+            None, _validation_notes(validation, result)[0][1:]
+        ):  # the frame is the calibrated one
+            console.print(note, highlight=False)
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
     if report:
         from robocal.evaluate.report import write_report
@@ -293,6 +297,44 @@ def _print_result(result) -> None:
         console.print(result.fit_to_noise.summary(), highlight=False)
     for w in result.metadata.get("warnings", []):
         console.print(f"[yellow]warning:[/] {w}", highlight=False)
+
+
+def _validation_notes(stats, result) -> tuple[list[str], str | None]:
+    """Lines under a validation table (how the device frame was obtained, the error the
+    calibration expected) and a warning when the error is far from what it should be."""
+    notes = [
+        {
+            "calibrated": "the device frame identified by the calibration was used as it is",
+            "refit": "the device frame was refitted to this data (--refit-frame)",
+        }.get(stats.frame, "")
+    ]
+    if stats.expected_rms is not None:
+        notes.append(
+            f"the calibration expected an RMS error of {stats.expected_rms * 1e3:.4g} mm here "
+            f"({stats.parameter_rms * 1e3:.3g} mm from its parameter uncertainty, the rest "
+            + {
+                "sigma": "the data's stated noise",
+                "sigma+unmodelled": "the data's stated noise and the error its residuals showed beyond noise",
+            }.get(stats.scatter or "", "the scatter of its own residuals")
+            + f"); measured {stats.rms * 1e3:.4g} mm"
+        )
+    warning = None
+    if stats.mean > max(20 * result.rms_after, 5e-3):
+        warning = (
+            f"the mean error is {stats.mean / max(result.rms_after, 1e-12):.0f}x the calibration's own "
+            f"RMS residual ({result.rms_after * 1e3:.3g} mm)"
+            + (": if the device was moved since, add --refit-frame;" if stats.frame == "calibrated" else ":")
+            + " otherwise check the robot, the units and the column mapping"
+        )
+    elif stats.worse_than_expected:
+        warning = (
+            f"the error is {stats.rms / stats.expected_rms:.3g}x what the calibration expected: a robot "
+            "or device that changed since, or errors the model does not represent in poses unlike the "
+            "calibration's"
+        )
+    if warning:
+        notes.append(f"[yellow]warning:[/] {warning}")
+    return notes, warning
 
 
 def validate_command(
@@ -345,20 +387,10 @@ def validate_command(
         stats = rc.validate(result, data, refit_frame=refit_frame)
     except ValueError as err:
         raise fail(f"{data_path}: {as_cli_text(str(err))}") from None
-    notes.append(
-        {
-            "calibrated": "the device frame identified by the calibration was used as it is",
-            "refit": "the device frame was refitted to this data (--refit-frame)",
-        }.get(stats.frame, "")
-    )
-    if stats.mean > max(20 * result.rms_after, 5e-3):
-        extra["warning"] = (
-            f"the mean error is {stats.mean / max(result.rms_after, 1e-12):.0f}x the calibration's own "
-            f"RMS residual ({result.rms_after * 1e3:.3g} mm)"
-            + (": if the device was moved since, add --refit-frame;" if stats.frame == "calibrated" else ":")
-            + " otherwise check the robot, the units and the column mapping"
-        )
-        notes.append(f"[yellow]warning:[/] {extra['warning']}")
+    more_notes, warning = _validation_notes(stats, result)
+    notes += more_notes
+    if warning:
+        extra["warning"] = warning
     if as_json:
         print(json.dumps(stats.to_dict() | extra))
         return

@@ -13,6 +13,8 @@ without a frame is validated with a refitted frame.  The result says which was d
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,6 +47,13 @@ class ValidationStats:
     error_vectors: Array = field(repr=False)  # (n, 3) predicted - measured, device frame
     orientation_mean: float | None = None  # rad
     orientation_max: float | None = None
+    # what the calibration expected (a CalibrationResult validated): RMS position error (m)
+    # from its parameter uncertainty alone, and with the measurement scatter added
+    parameter_rms: float | None = None
+    expected_rms: float | None = None
+    # where the rest came from: "sigma" (the data's noise), "sigma+unmodelled" (and the error
+    # the calibration's residuals showed beyond its noise) or "residuals" (their scatter)
+    scatter: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -60,7 +69,17 @@ class ValidationStats:
         if self.orientation_mean is not None:
             out["orientation_mean_deg"] = float(np.degrees(self.orientation_mean))
             out["orientation_max_deg"] = float(np.degrees(self.orientation_max))
+        if self.expected_rms is not None:
+            out["expected_rms_mm"] = self.expected_rms * 1e3
+            out["parameter_rms_mm"] = self.parameter_rms * 1e3
         return out
+
+    @property
+    def worse_than_expected(self) -> bool:
+        """The RMS error is well above what the calibration expected (more than 1.5x): a
+        robot or device that changed, or errors the model does not represent that the
+        calibration's poses did not show."""
+        return self.expected_rms is not None and self.rms > 1.5 * self.expected_rms
 
     def __str__(self) -> str:
         text = (
@@ -90,6 +109,7 @@ def validate(
         raise ValueError("the validation data has no measured positions")
     label = "given"
     perturbations = None
+    result = None
     if isinstance(model, CalibrationResult):
         result, model = model, model.model
         if frame is None:
@@ -110,7 +130,36 @@ def validate(
         label = "refit"
     else:
         T_frame = np.asarray(frame, dtype=float)
-    return validation_statistics(T_frame @ T, data, label)
+    stats = validation_statistics(T_frame @ T, data, label)
+    if result is not None and label in ("calibrated", "refit") and result.measurement_chain is not None:
+        stats = _with_expectation(stats, result, data, label)
+    return stats
+
+
+def _with_expectation(
+    stats: ValidationStats, result: CalibrationResult, data: Measurements, label: str
+) -> ValidationStats:
+    """``stats`` with the RMS error the calibration expected at these poses: the
+    propagated parameter covariance (Cramér–Rao: mean trace of J Cov Jᵀ; with a refitted
+    device frame, that of the robot's parameters alone) plus the scatter: the data's σ and
+    the error the calibration's residuals showed beyond its own noise, or, when the data
+    has no σ, the calibration's residual σ per axis."""
+    cov = result.position_covariance(data.q, frame="device" if label == "calibrated" else "base")
+    parameter_ms = float(np.mean(np.trace(cov, axis1=1, axis2=2)))
+    fit = result.fit_to_noise
+    if data.sigma is not None:
+        # this data's noise, and the error the model left unexplained in the calibration
+        scatter_ms, scatter = float(np.mean(np.sum(data.sigma**2, axis=1))), "sigma"
+        if fit is not None and fit.ratio > 1 and fit.warning() is not None:  # significant only
+            scatter_ms, scatter = scatter_ms + fit.unmodelled_rms**2, "sigma+unmodelled"
+    else:
+        scatter_ms, scatter = 3.0 * result.residual_std**2, "residuals"
+    return dataclasses.replace(
+        stats,
+        parameter_rms=math.sqrt(parameter_ms),
+        expected_rms=math.sqrt(parameter_ms + scatter_ms),
+        scatter=scatter,
+    )
 
 
 def validation_statistics(predicted: Array, data: Measurements, frame: str = "given") -> ValidationStats:
