@@ -1044,6 +1044,20 @@ def build_report(
             rows,
             caption=f"position error on {test_after.n} held-out poses (not used by the calibration)",
         )
+        if test_after.expected_rms is not None:
+            verdict = (
+                "more than 1.5× the expectation: the robot or device changed, or the model misses "
+                "errors the calibration poses did not show"
+                if test_after.worse_than_expected
+                else "as expected"
+            )
+            body += (
+                "<p class='note'>The calibration expected an RMS error of "
+                f"{_f(test_after.expected_rms * 1e3, 4)} mm "
+                f"on these poses ({_f(test_after.parameter_rms * 1e3, 4)} mm from the uncertainty of its "
+                f"parameters, propagated through the Jacobian; the rest measurement noise and any error "
+                f"its residuals showed beyond it); measured {_f(test_after.rms * 1e3, 4)} mm: {verdict}.</p>"
+            )
         body += figs.html(
             _fig_hist_pair(
                 test_before.errors if test_before is not None else None,
