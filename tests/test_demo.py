@@ -89,6 +89,7 @@ def test_demo_command_runs_end_to_end(tmp_path):
     page = (out / "report.html").read_text(encoding="utf-8")
     for ident in ("iso9283", "joint-effects", "compensation"):
         assert f"<section id='{ident}'>" in page
+    assert "The calibration expected an RMS error of" in page and ": as expected.</p>" in page
     res = runner.invoke(app, ["report", str(out), "-o", str(tmp_path / "again.html")])
     assert res.exit_code == 0, res.output
     assert "<section id='iso9283'>" in (tmp_path / "again.html").read_text(encoding="utf-8")
