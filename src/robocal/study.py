@@ -582,6 +582,14 @@ def _frame_values(T: Array) -> Array:
     return np.concatenate([T[:, :3, 3], e], axis=1)
 
 
+def _effect_scale(J: Array, w: Array) -> Array:
+    """``(k, p)`` RMS tool displacement per unit of each unknown over the poses
+    (:meth:`robocal.identify.problem.Problem.effect_scale`), from weighted Jacobians
+    ``(k, 3n, p)`` and their weights ``(k, n, 3)``."""
+    unweighted = J / w.reshape(len(w), -1)[:, :, None]
+    return np.sqrt(np.sum(unweighted**2, axis=1) / w.shape[1])
+
+
 def _gram_schmidt_select(J: Array, order: Sequence[int], tolerance: float = 1e-7) -> tuple[Array, Array]:
     """Batched sequential rank test of :func:`robocal.identify.observability.identifiable_subset`.
 
@@ -833,9 +841,10 @@ def calibrate_batch(
         for k in range(K)
     ]
     masks = kept.copy()  # (K, p_free) current unknowns per robot
+    effect0 = _effect_scale(J0, w)  # (K, p) RMS tool displacement per unit, as rc.calibrate
     for k in range(K):  # the hopeless ones before the first fit, as rc.calibrate
         cols = np.flatnonzero(masks[k])
-        found = screen_unidentifiable(r0[k], J0[k][:, cols], scale[k, cols], max_std, max_std_ratio)
+        found = screen_unidentifiable(r0[k], J0[k][:, cols], effect0[k, cols], max_std, max_std_ratio)
         for c, _sigma in found:
             masks[k, cols[c]] = False
             dropped[k].append((free_names[cols[c]], "poorly identifiable"))
@@ -862,7 +871,7 @@ def calibrate_batch(
             std, cond = _uncertainty_batch(r, J)
             r_plain = (r / g.w.reshape(len(idx), -1)).reshape(len(idx), n, 3)
             r_start, _ = g.evaluate(x_start[idx][:, mask], weighted=False)
-            move = std * size
+            move = std * _effect_scale(J, g.w)  # σ as RMS tool displacement, as rc.calibrate
             for i, k in enumerate(idx):
                 worst = int(np.argmax(move[i])) if move.shape[1] else 0
                 threshold = max(max_std, max_std_ratio * float(np.median(move[i]))) if move.shape[1] else 0.0

@@ -547,7 +547,7 @@ def _normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
 def _screen(problem: Problem, x0: Array, max_std: float, max_std_ratio: float) -> list[tuple[str, float]]:
     """:func:`screen_unidentifiable` of ``problem`` at its start values ``x0``, by name."""
     r, J = problem.residual(x0), problem.jacobian(x0)
-    found = screen_unidentifiable(r, J, problem.free_scale, max_std, max_std_ratio)
+    found = screen_unidentifiable(r, J, problem.effect_scale(x0), max_std, max_std_ratio)
     return [(problem.free_names[c], sigma) for c, sigma in found]
 
 
@@ -807,9 +807,13 @@ def calibrate(
             ``(lower, upper)`` arrays over the free robot parameters' values.
         resolution: measurement resolution (m): the ``pinv``/``influence`` stop criterion.
         relaxation: C < 1 of the ``influence`` method.
-        max_std: a parameter whose standard deviation, as a displacement of the tool (m;
-            rotations times the robot's size), exceeds this is fixed at its start value
-            and the fit repeated: it is not identifiable from these measurements.
+        max_std: a parameter whose standard deviation, as a displacement of the tool (m:
+            σ times the largest displacement of the measured point per unit of the
+            parameter over the measured poses; for joint-effect coefficients σ times the
+            robot's size and the pattern's peak, see
+            :meth:`~robocal.identify.problem.Problem.effect_scale`), exceeds this is fixed
+            at its start value and the fit repeated: it is not identifiable from these
+            measurements.
         max_std_ratio: ... and exceeds this many times the median standard deviation of
             all estimated parameters (as tool displacement): with noisy measurements
             every σ is large, which is not a reason to drop a parameter.  The default 5
@@ -1031,7 +1035,7 @@ def calibrate(
     # its bounds, so a poorly determined one cannot run away and is better kept
     prune = result.success and method != "bounded"
     for _ in range(len(x) - 1 if prune else 0):
-        move = std * problem.free_scale
+        move = std * problem.effect_scale(x)  # σ as RMS tool displacement at the measured poses
         threshold = max(max_std, max_std_ratio * float(np.median(move)))
         worst = int(np.argmax(move))
         # poorly identifiable: beyond the absolute threshold and far beyond the other
