@@ -460,3 +460,45 @@ def test_wrist_rotations_near_the_probe_are_kept_and_nothing_is_biased():
         rows = zip(result.names, result.estimates, result.std, strict=True)
         z = {n: (e - expected[n]) / s for n, e, s in rows if n in truth}
         assert len(z) >= 15 and max(np.abs(list(z.values()))) < 3.5, z
+
+
+def test_residual_variance_uses_the_stated_noise_unless_the_residuals_reject_it():
+    from robocal.identify.guards import residual_variance
+
+    assert residual_variance(3.0, 2, known=True) == 1.0  # two degrees of freedom say little
+    assert residual_variance(3.0, 2, known=False) == 1.5
+    assert residual_variance(2000.0, 300, known=True) == pytest.approx(2000 / 300)  # rejected: too large
+    assert residual_variance(100.0, 300, known=True) == pytest.approx(100 / 300)  # rejected: too small
+    np.testing.assert_allclose(residual_variance([290.0, 900.0], 300, [True, True]), [1.0, 3.0])
+
+
+def test_pose_measurements_get_an_honest_covariance():
+    """Orientation rows weighted by a choice (0.1 m/rad), not by their noise: each group of
+    rows gets its own variance, and the predicted held-out error matches the actual one
+    (one pooled variance predicted twice the error)."""
+    from robocal.measure.devices import OpticalCMM
+
+    model = rc.robot("ur10")
+    actual, predicted = [], []
+    for seed in range(6):
+        device = OpticalCMM(p_tool_target=[0.02, -0.01, 0.1])
+        robot = VirtualRobot(model, draw_true_model(model, seed=seed), device)
+        data = simulate(robot, poses(model, 100, seed=10 + seed), seed=20 + seed)
+        q_test = poses(model, 500, seed=30 + seed)
+        result = rc.calibrate(model, data)
+        truth = VirtualRobot(model, robot.true, device.with_noise(0.0))
+        test = simulate(truth, q_test, seed=40 + seed)
+        actual.append(np.mean(np.sum((result.predict(q_test)[:, :3, 3] - test.position) ** 2, axis=1)))
+        predicted.append(np.mean(np.trace(result.position_covariance(q_test), axis1=1, axis2=2)))
+    assert 0.7 < np.sqrt(np.mean(actual) / np.mean(predicted)) < 1.2
+
+
+def test_few_poses_for_many_unknowns_are_warned_about(irb2400):
+    robot = virtual(irb2400, seed=81)
+    data = simulate(robot, poses(irb2400, 12, seed=82), seed=83)
+    result = rc.calibrate(irb2400, data, tool_guess=[0, 0, 0.1])
+    assert any("so little redundancy" in w for w in result.metadata["warnings"])
+    many = rc.calibrate(
+        irb2400, simulate(robot, poses(irb2400, 40, seed=84), seed=85), tool_guess=[0, 0, 0.1]
+    )
+    assert not any("so little redundancy" in w for w in many.metadata["warnings"])

@@ -733,10 +733,13 @@ def _lm_batch(
     return x, converged, evaluations
 
 
-def _uncertainty_batch(r: Array, J: Array) -> tuple[Array, Array]:
-    """Standard deviations ``(K, p)`` (σ̂²(JᵀJ)⁻¹, as rc.calibrate) and condition numbers ``(K,)``."""
+def _uncertainty_batch(r: Array, J: Array, known: Array) -> tuple[Array, Array]:
+    """Standard deviations ``(K, p)`` (σ̂²(JᵀJ)⁻¹ with σ̂² as rc.calibrate: 1 for a stated
+    noise the residuals agree with, ``known`` ``(K,)``) and condition numbers ``(K,)``."""
+    from robocal.identify.guards import residual_variance
+
     _, m, p = J.shape
-    s2 = np.einsum("km,km->k", r, r) / max(m - p, 1)
+    s2 = residual_variance(np.einsum("km,km->k", r, r), m - p, known)
     norms = np.linalg.norm(J, axis=1)
     norms[norms == 0] = 1.0
     Jn = J / norms[:, None, :]
@@ -808,6 +811,7 @@ def calibrate_batch(
     V[:, f0] = _frame_values(T_frame)
     V[:, [index[f"{TOOL_PREFIX}{c}"] for c in "xyz"]] = t_tool
     w = np.ones((K, n, 3))
+    known = np.array([d.sigma is not None for d in data])  # a stated noise: weights 1/σ
     for k, d in enumerate(data):
         if d.sigma is not None:
             w[k] = 1.0 / np.maximum(d.sigma, 1e-12)
@@ -868,7 +872,7 @@ def calibrate_batch(
             tol = 1e-11 / size.max(axis=0)
             x, ok, evals = _lm_batch(g, x_start[idx][:, mask], max_iterations, tol)
             r, J = g.evaluate(x)
-            std, cond = _uncertainty_batch(r, J)
+            std, cond = _uncertainty_batch(r, J, known[idx])
             r_plain = (r / g.w.reshape(len(idx), -1)).reshape(len(idx), n, 3)
             r_start, _ = g.evaluate(x_start[idx][:, mask], weighted=False)
             move = std * _effect_scale(J, g.w)  # σ as RMS tool displacement, as rc.calibrate

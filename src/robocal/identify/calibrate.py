@@ -46,6 +46,7 @@ from robocal.identify.guards import (
     check_rank,
     check_solution,
     fit_to_noise,
+    residual_variance,
 )
 from robocal.identify.observability import Dropped, identifiable_subset
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
@@ -510,11 +511,28 @@ def file_hash(path: str | Path) -> str:
 
 
 # ---------------------------------------------------------------------- pipeline
-def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array, float]:
-    """σ̂², covariance σ̂²(JᵀWJ)⁻¹, standard deviations, correlations, condition number."""
+def _uncertainty(
+    problem: Problem, x: Array, known_noise: bool = False
+) -> tuple[float, Array, Array, Array, float]:
+    """σ̂², covariance, standard deviations, correlations, condition number.
+
+    The covariance is σ̂²(JᵀWJ)⁻¹ with σ̂² from :func:`residual_variance` (1 when the
+    weights come from a stated noise the residuals agree with).  Pose measurements have
+    two groups of rows whose relative weight is a choice (``orientation_weight``), not a
+    noise ratio: each group gets its own σ̂² (its share of the degrees of freedom) and
+    the covariance is the sandwich (JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹ of the weighted rows,
+    which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
+    UR10 with an optical CMM twice)."""
     r = problem.residual(x)
     J = problem.jacobian(x)
-    s2 = float(r @ r) / max(len(r) - len(x), 1)
+    m, p = J.shape
+    position = np.tile(np.arange(problem.rows) < 3, m // problem.rows)
+    row_s2 = np.empty(m)
+    for rows, known in ((position, known_noise), (~position, False)):
+        if rows.any():
+            dof = rows.sum() - p * rows.sum() / m
+            row_s2[rows] = residual_variance(float(r[rows] @ r[rows]), dof, known)
+    s2 = float(row_s2[0])
     Jn, norms, lam, inverse = _normal_inverse(J)
     if len(lam) and lam[0] > 1e-12 * lam[-1]:
         # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvalues give
@@ -524,7 +542,11 @@ def _uncertainty(problem: Problem, x: Array) -> tuple[float, Array, Array, Array
         sv = np.linalg.svd(Jn, compute_uv=False)
         cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
         inverse = np.linalg.pinv(Jn.T @ Jn)
-    cov = s2 * inverse / np.outer(norms, norms)
+    if np.all(row_s2 == s2):
+        cov = s2 * inverse / np.outer(norms, norms)
+    else:
+        middle = Jn.T @ (Jn * row_s2[:, None])
+        cov = inverse @ middle @ inverse / np.outer(norms, norms)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
@@ -1029,7 +1051,8 @@ def calibrate(
     solve_seconds = time.perf_counter() - t_solve
     evaluations = result.evaluations
     x = result.x
-    _, cov, std, corr, cond = _uncertainty(problem, x)
+    known_noise = weights == "sigma" and data.sigma is not None
+    _, cov, std, corr, cond = _uncertainty(problem, x, known_noise)
     # drop what these measurements cannot determine, worst first, and refit
     # an unconverged fit says nothing about σ; a bounded fit keeps every parameter within
     # its bounds, so a poorly determined one cannot run away and is better kept
@@ -1054,7 +1077,7 @@ def calibrate(
         solve_seconds += time.perf_counter() - t_solve
         evaluations += result.evaluations
         x = result.x
-        _, cov, std, corr, cond = _uncertainty(problem, x)
+        _, cov, std, corr, cond = _uncertainty(problem, x, known_noise)
 
     r_plain = problem.residual(x, weighted=False).reshape(n, rows)
     rms_after = float(np.sqrt(np.mean(np.sum(r_plain[:, :3] ** 2, axis=1))))
@@ -1129,6 +1152,14 @@ def calibrate(
         },
         payload=payload,
     )
+    equations = n * rows
+    if equations < 2 * len(x):
+        needed = -(-2 * len(x) // rows)  # poses for twice as many equations as unknowns
+        problem_warnings.append(
+            f"{n} poses give {equations} equations for {len(x)} unknowns: so little redundancy "
+            "makes the estimates sensitive to every measurement and their uncertainty itself "
+            f"uncertain; measure at least {needed} poses"
+        )
     if weights == "sigma" and data.sigma is not None:
         # does the model explain the data down to the noise? (position rows; for pose
         # measurements their share of the estimated parameters)
