@@ -502,3 +502,25 @@ def test_few_poses_for_many_unknowns_are_warned_about(irb2400):
         irb2400, simulate(robot, poses(irb2400, 40, seed=84), seed=85), tool_guess=[0, 0, 0.1]
     )
     assert not any("so little redundancy" in w for w in many.metadata["warnings"])
+
+
+def test_bounded_fit_widens_the_bounds_of_absorbing_parameters_and_says_when_one_binds():
+    """UR10, 5 mm / 2° errors: d2 carries d3 and d4 as well and needs more than ±5 mm;
+    seed 001's bounds on the kept parameters grow by those of what they absorb."""
+    model = rc.robot("ur10")
+    frame = rc.spatial.inverse(rc.spatial.homogeneous(rc.spatial.rotz(2.0), [1.5, -2.0, 0.4]))
+    device = LaserTracker(T_device_base=frame, p_tool_target=[0.02, -0.01, 0.1])
+    true = draw_true_model(model, length=5e-3, angle=math.radians(2), seed=5)
+    data = simulate(
+        VirtualRobot(model, true, device), rc.measure.poses.random_poses(model, 100, seed=1), seed=2
+    )
+    q_test = rc.measure.poses.random_poses(model, 300, seed=3)
+    test = simulate(VirtualRobot(model, true, device.with_noise(0.0)), q_test, seed=4)
+    result = rc.calibrate(model, data, method="bounded")
+    d2 = result.names.index("d2")
+    assert abs(result.estimates[d2] - result.nominal[d2]) > 5e-3  # beyond the parameter's own ±5 mm
+    assert rc.validate(result, test).rms < 30e-6
+    assert not any("bound" in w for w in result.metadata["warnings"])
+    x0 = result.nominal
+    tight = rc.calibrate(model, data, method="bounded", bounds=(x0 - 1e-4, x0 + 1e-4))
+    assert any("ended at their bounds" in w for w in tight.metadata["warnings"])

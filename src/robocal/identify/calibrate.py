@@ -146,6 +146,37 @@ def _without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     return dataclasses.replace(model, steps=model.steps[:k]), T
 
 
+def _widen_for_absorbed(
+    lo: Array,
+    hi: Array,
+    names: Sequence[str],
+    dropped: Sequence[Dropped],
+    chain: Model,
+    length: float,
+    robot: set[str],
+    length_bound: float = 5e-3,
+    angle_bound: float = math.radians(2.0),
+) -> tuple[Array, Array]:
+    """Seed 001's bounds of the kept parameters widened by those of the redundant
+    parameters they absorb: with d3 dropped, d2 carries d2 + d3 and may need ±10 mm
+    (the coefficients of ``absorbed_by`` are in tool-displacement units, rotations times
+    the robot's ``length``)."""
+    rotation = {s.name: s.is_rotation for s in chain.steps}
+    scale = {n: length if rotation.get(n, False) else 1.0 for n in rotation}
+    index = {n: k for k, n in enumerate(names)}
+    lo, hi = lo.copy(), hi.copy()
+    for d in dropped:
+        if d.reason != "redundant" or d.name not in robot:
+            continue
+        width = (angle_bound if rotation.get(d.name, False) else length_bound) * scale[d.name]
+        for name, coefficient in d.absorbed_by:
+            k = index.get(name)
+            if k is not None and name in robot and np.isfinite(lo[k]):
+                extra = abs(coefficient) * width / scale[name]
+                lo[k], hi[k] = lo[k] - extra, hi[k] + extra
+    return lo, hi
+
+
 def default_bounds(
     names: Sequence[str],
     rotation: Sequence[bool],
@@ -1034,6 +1065,9 @@ def calibrate(
         elif isinstance(bounds, str):
             rot = [s.is_rotation for s in problem.chain.steps if s.free] + [False] * problem.n_effects
             lo, hi = default_bounds(names, rot, x0, robot=set(model.names))
+            lo, hi = _widen_for_absorbed(
+                lo, hi, names, selection.dropped, problem.chain, length, set(model.names)
+            )
         else:
             lo, hi = (np.asarray(b, dtype=float) for b in bounds)
             if lo.shape != x0.shape or hi.shape != x0.shape:
@@ -1152,6 +1186,18 @@ def calibrate(
         },
         payload=payload,
     )
+    if method == "bounded" and "bounds" in options:
+        lo, hi = options["bounds"]
+        at = [
+            name
+            for name, v, a, b in zip(names, x, lo, hi, strict=True)
+            if np.isfinite(b - a) and min(v - a, b - v) <= 1e-9 * (b - a)
+        ]
+        if at:
+            problem_warnings.append(
+                f"{', '.join(at)} ended at {'its bound' if len(at) == 1 else 'their bounds'}: the bound, not "
+                "the data, decided the value and the fit may be poor; widen the bounds or use method='lm'"
+            )
     equations = n * rows
     if equations < 2 * len(x):
         needed = -(-2 * len(x) // rows)  # poses for twice as many equations as unknowns
