@@ -524,3 +524,13 @@ def test_bounded_fit_widens_the_bounds_of_absorbing_parameters_and_says_when_one
     x0 = result.nominal
     tight = rc.calibrate(model, data, method="bounded", bounds=(x0 - 1e-4, x0 + 1e-4))
     assert any("ended at their bounds" in w for w in tight.metadata["warnings"])
+
+
+def test_joint_effects_taken_from_the_model_are_named():
+    model = rc.robot("katana450")  # carries seed 003's Table 5.2 clearance and backlash
+    data = simulate(virtual(model, seed=1), poses(model, 60, seed=2), seed=3)
+    result = rc.calibrate(model, data, tool_guess=[0, 0, 0.1], compliance=True)
+    named = [w for w in result.metadata["warnings"] if "predicted as known, not identified" in w]
+    assert named and "clearance (q1" in named[0] and "backlash (q1" in named[0] and "--level 3" in named[0]
+    geometric = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])  # no joint effects at all
+    assert not any("predicted as known" in w for w in geometric.metadata["warnings"])

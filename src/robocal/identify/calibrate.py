@@ -1000,6 +1000,16 @@ def calibrate(
             known = predict_effects(model, data.q, effects=rest, loads=loads)
             if not np.any(known):
                 known = None
+            else:  # say so: a robot whose joints differ from its model's would be mis-corrected
+                predicted = {
+                    k: [e.joint for e in rest if getattr(e, EFFECT_PREFIXES[k][1])] for k in EFFECT_KINDS
+                }
+                listed = "; ".join(f"{k} ({', '.join(j)})" for k, j in predicted.items() if j)
+                problem_warnings.append(
+                    f"joint effects of model {model.name!r} predicted as known, not identified: {listed}; "
+                    "if this robot's differ, identify them too (level=3 / --level 3) or calibrate a "
+                    "model without them"
+                )
     problem = Problem(
         chain,
         data.q,
