@@ -275,12 +275,16 @@ def _influence(
     rot = np.array([s.is_rotation for s in problem.chain.steps if s.free], dtype=bool)
     step = np.concatenate([np.where(rot, angular_step, linear_step), linear_step / move_scale[n_geo:]])
     history = []
+    # rows weighted as in the other methods (1/σ; orientation rows by orientation_weight),
+    # so that metres and radians of pose measurements are not mixed; the per-pose stop test
+    # is on the unweighted position error
+    w = problem.weights.reshape(-1, width)
     for it in range(1, max_iterations + 1):
-        r = problem.residual(x, weighted=False).reshape(-1, width)  # ΔP per pose (model - measured)
-        J = problem.jacobian(x, weighted=False).reshape(r.shape[0], width, -1)  # (n, w, p)
-        history.append(float(np.sqrt(np.mean(r * r))))
+        r = problem.residual(x).reshape(-1, width)  # weighted ΔP per pose (model - measured)
+        J = problem.jacobian(x).reshape(r.shape[0], width, -1)  # (n, w, p)
+        history.append(float(np.sqrt(np.mean((r / w) ** 2))))
         # influence of each parameter at each pose: tool displacement for its test step
-        influence = np.linalg.norm(J[:, :3], axis=1) * step  # (n, p)
+        influence = np.linalg.norm(J[:, :3] / w[:, :3, None], axis=1) * step  # (n, p), metres
         k = influence / np.maximum(influence.max(axis=1, keepdims=True), 1e-300)
         # per pose, iterate ΔE = C k∘Jᵀ(JJᵀ)⁻¹ΔP in the linearised model until |ΔP| < resolution
         # unknowns as tool displacements (rotations times the robot's size), so that the
@@ -291,7 +295,7 @@ def _influence(
         e = np.zeros((r.shape[0], len(x)))
         remaining = -r.copy()
         for _ in range(inner_iterations):
-            if np.all(np.linalg.norm(remaining[:, :3], axis=1) < resolution):
+            if np.all(np.linalg.norm(remaining[:, :3] / w[:, :3], axis=1) < resolution):
                 break
             step_e = relaxation * k * np.einsum("nwp,nwv,nv->np", Js, JJt_inv, remaining)
             e += step_e
