@@ -377,7 +377,8 @@ class FitToNoise:
         dof: degrees of freedom of the position residuals.
         noise_rms: the RMS 3D position residual that noise alone would leave (m).
         unmodelled_rms: RMS 3D position error beyond the noise (m): the part of the
-            data the model does not represent; 0 when the residuals are within noise.
+            data the model does not represent; 0 unless the χ² test (at ``significance``
+            in :func:`fit_to_noise`) tells the residuals from noise.
     """
 
     ratio: float
@@ -432,7 +433,9 @@ class FitToNoise:
         return None
 
 
-def fit_to_noise(residuals: ArrayLike, sigma: ArrayLike, n_estimated: float) -> FitToNoise:
+def fit_to_noise(
+    residuals: ArrayLike, sigma: ArrayLike, n_estimated: float, significance: float = 1e-3
+) -> FitToNoise:
     """Compare position residuals with their stated standard deviations.
 
     Args:
@@ -455,12 +458,15 @@ def fit_to_noise(residuals: ArrayLike, sigma: ArrayLike, n_estimated: float) -> 
     chi2 = float(np.sum((r / np.maximum(s, 1e-300)) ** 2))
     noise_ms = float(np.mean(np.sum(s**2, axis=1))) * dof / m
     ms = float(np.mean(np.sum(r**2, axis=1)))
+    p_value = float(scipy.special.chdtrc(dof, chi2))  # the χ² survival function
     return FitToNoise(
         ratio=math.sqrt(chi2 / dof),
-        p_value=float(scipy.special.chdtrc(dof, chi2)),  # the χ² survival function
+        p_value=p_value,
         dof=dof,
         noise_rms=math.sqrt(noise_ms),
-        unmodelled_rms=math.sqrt(max(ms - noise_ms, 0.0)),
+        # only what the χ² test tells from noise (a model that explains the data leaves
+        # residuals a little above their expectation half of the time)
+        unmodelled_rms=math.sqrt(max(ms - noise_ms, 0.0)) if p_value < significance else 0.0,
     )
 
 
