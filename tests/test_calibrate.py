@@ -551,3 +551,24 @@ def test_influence_method_weighs_pose_rows_like_the_others():
     lm = rc.validate(rc.calibrate(model, data), test).rms
     influence = rc.validate(rc.calibrate(model, data, method="influence"), test).rms
     assert influence < 2 * lm, (influence, lm)
+
+
+def test_glitches_are_named_and_a_robust_loss_down_weights_them(irb2400):
+    robot = virtual(irb2400, seed=91)
+    clean = simulate(robot, poses(irb2400, 80, seed=92), seed=93)
+    result = rc.calibrate(irb2400, clean, tool_guess=[0, 0, 0.1])
+    assert result.metadata["outlier_poses"] == [] and not any(
+        "glitches" in w for w in result.metadata["warnings"]
+    )
+    position = clean.position.copy()
+    position[[7, 40]] += [3e-3, -2e-3, 1e-3]  # two tracker glitches of ~3.7 mm
+    glitchy = dataclasses.replace(clean, position=position)
+    result = rc.calibrate(irb2400, glitchy, tool_guess=[0, 0, 0.1])
+    assert result.metadata["outlier_poses"] == [7, 40]
+    assert any(
+        "2 pose(s) with residuals far beyond" in w and "--loss soft_l1" in w
+        for w in result.metadata["warnings"]
+    )
+    robust = rc.calibrate(irb2400, glitchy, tool_guess=[0, 0, 0.1], loss="soft_l1", f_scale=1e-4)
+    q_test = poses(irb2400, 500, seed=94)
+    assert held_out_error(robust, robot, q_test).mean() < 0.5 * held_out_error(result, robot, q_test).mean()

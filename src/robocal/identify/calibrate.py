@@ -133,6 +133,17 @@ def initial_frame_and_tool(
     return T_frame, T_tool
 
 
+def _outlier_poses(errors: Array, sigma: Array | None, factor: float = 5.0) -> list[int]:
+    """Indices of the poses whose position residual ``errors`` ``(n,)`` (m) exceeds
+    ``factor`` times the median residual (and ``factor`` times the 3D noise when the data
+    states it): a residual of a well fitted pose is rarely over 3x the median (3D
+    Gaussian), so these are measurement glitches or poses the model cannot reach."""
+    limit = factor * float(np.median(errors))
+    if sigma is not None:
+        limit = max(limit, factor * float(np.sqrt(np.mean(np.sum(sigma**2, axis=1)))))
+    return [int(i) for i in np.flatnonzero(errors > limit)] if len(errors) >= 10 else []
+
+
 def _without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
     its end, and their transform (4x4; None when there are none)."""
@@ -1125,6 +1136,7 @@ def calibrate(
 
     r_plain = problem.residual(x, weighted=False).reshape(n, rows)
     rms_after = float(np.sqrt(np.mean(np.sum(r_plain[:, :3] ** 2, axis=1))))
+    outliers = _outlier_poses(np.linalg.norm(r_plain[:, :3], axis=1), data.sigma)
     rms_before = float(
         np.sqrt(np.mean(np.sum(problem.residual(x0, weighted=False).reshape(n, rows)[:, :3] ** 2, axis=1)))
     )
@@ -1192,6 +1204,7 @@ def calibrate(
             # per pose, predicted minus measured (device frame) at the solution
             "residuals_mm": np.round(r_plain * 1e3, 6).tolist(),
             "level": level_number if level_number is not None else (3 if plan.mode != "none" else 2),
+            "outlier_poses": outliers,
             "effects": plan.mode,
         },
         payload=payload,
@@ -1208,6 +1221,23 @@ def calibrate(
                 f"{', '.join(at)} ended at {'its bound' if len(at) == 1 else 'their bounds'}: the bound, not "
                 "the data, decided the value and the fit may be poor; widen the bounds or use method='lm'"
             )
+    if outliers:
+        worst = sorted(outliers, key=lambda i: -np.linalg.norm(r_plain[i, :3]))[:5]
+        shown = ", ".join(
+            f"{i} ({np.linalg.norm(r_plain[i, :3]) * 1e3:.3g} mm at q = "
+            f"[{', '.join(f'{v:.4g}' for v in data.q[i])}])"
+            for i in worst
+        )
+        problem_warnings.append(
+            f"{len(outliers)} pose(s) with residuals far beyond the others (more than 5x their median"
+            + (" and 5x the noise" if data.sigma is not None else "")
+            + f"): {shown}{' ...' if len(outliers) > 5 else ''}; measurement glitches? "
+            + (
+                "a robust loss (loss='soft_l1' / --loss soft_l1) down-weights them"
+                if loss == "linear"
+                else ""
+            )
+        )
     equations = n * rows
     if equations < 2 * len(x):
         needed = -(-2 * len(x) // rows)  # poses for twice as many equations as unknowns

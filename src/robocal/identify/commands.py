@@ -156,6 +156,13 @@ def calibrate_command(
     orientation: Orientation = "auto",
     limits: Limits = "error",
     incomplete: Incomplete = "error",
+    loss: Annotated[
+        str,
+        typer.Option(
+            "--loss",
+            help="linear (least squares) or a robust loss that down-weights glitches: soft_l1, huber, cauchy",
+        ),
+    ] = "linear",
     noise: Annotated[
         str | None,
         typer.Option(
@@ -181,6 +188,10 @@ def calibrate_command(
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
+    if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
+        raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
+    if loss != "linear" and method != "lm":
+        raise fail(f"--loss {loss} needs --method lm")
     data = _read(
         data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete
     )
@@ -231,6 +242,7 @@ def calibrate_command(
                 compliance=compliance,
                 level=level,
                 effects=effect_option,
+                loss=loss,
             )
     except ValueError as err:
         raise fail(as_cli_text(str(err))) from None
