@@ -848,7 +848,9 @@ def calibrate_batch(
     effect0 = _effect_scale(J0, w)  # (K, p) RMS tool displacement per unit, as rc.calibrate
     for k in range(K):  # the hopeless ones before the first fit, as rc.calibrate
         cols = np.flatnonzero(masks[k])
-        found = screen_unidentifiable(r0[k], J0[k][:, cols], effect0[k, cols], max_std, max_std_ratio)
+        found = screen_unidentifiable(
+            r0[k], J0[k][:, cols], effect0[k, cols], max_std, max_std_ratio, known_noise=bool(known[k])
+        )
         for c, _sigma in found:
             masks[k, cols[c]] = False
             dropped[k].append((free_names[cols[c]], "poorly identifiable"))
