@@ -279,7 +279,7 @@ def test_space_separated_files_and_separator_names(measured, tmp_path):
 
 
 def test_reader_messages_name_the_command_line_options():
-    from robocal.identify.commands import as_cli_text
+    from robocal.measure.commands import as_cli_text
 
     assert (
         as_cli_text("looks like a decimal comma: pass decimal=','")

@@ -325,6 +325,11 @@ def test_cli_data_check_reports_problems_and_exit_code(tmp_path):
     )  # fmt: skip
     assert result.exit_code == 1, result.output
     assert "limits" in result.output and "not-finite" in result.output and "2 error(s)" in result.output
+    # the reader's advice in command-line spelling
+    comma = write(tmp_path, 'q1,q2,x,y,z\n10,100,300,0,100\n20,"1,5",300,0,100\n', "comma.csv")
+    result = runner.invoke(app, ["data", "check", str(comma), "--length-unit", "mm"])
+    text = " ".join(result.output.split())
+    assert result.exit_code == 1 and "pass --angle-unit deg" in text and "pass --decimal" in text, text
 
 
 def test_cli_data_check_summary_when_clean(tmp_path):

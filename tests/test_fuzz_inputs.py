@@ -21,10 +21,10 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
-from robocal.identify.commands import as_cli_text
 from robocal.identify.guards import CalibrationGuardError, check_problem, check_solution
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure import dataset as dataset_module
+from robocal.measure.commands import as_cli_text
 from robocal.measure.dataset import MeasurementFileError, read_measurements
 from robocal.measure.poses import random_poses
 from robocal.model.builder import GeometryError, load_geometry

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import re
 import warnings
 from pathlib import Path
 from typing import Annotated
@@ -14,47 +13,19 @@ import typer
 from rich.table import Table
 
 from robocal.console import console, err_console, fail
+from robocal.measure.commands import (
+    AngleUnit,
+    Columns,
+    Decimal,
+    Incomplete,
+    LengthUnit,
+    Limits,
+    Orientation,
+    Sep,
+    as_cli_text,
+)
 
 __all__ = ["register"]
-
-
-LengthUnit = Annotated[str, typer.Option("--length-unit", help="m | mm | um: positions in the file")]
-AngleUnit = Annotated[str, typer.Option("--angle-unit", help="rad | deg: joint angles in the file")]
-Columns = Annotated[
-    str | None, typer.Option("--columns", help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
-]
-Sep = Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")]
-Decimal = Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')]
-Orientation = Annotated[
-    str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
-]
-Incomplete = Annotated[
-    str,
-    typer.Option(
-        "--incomplete", help="rows with an empty or bad cell: error | drop (left out, with a warning)"
-    ),
-]
-Limits = Annotated[
-    str, typer.Option("--limits", help="joint values beyond the model's limits: error | warn | ignore")
-]
-
-
-_API_OPTION = re.compile(
-    r"\b(decimal|angle_unit|length_unit|orientation|sep|limits|measure|incomplete)=('[^']*')"
-)
-_API_COLUMNS = re.compile(r"columns=\{'(\w+)': '([^']*)'\}")
-
-
-def _shell_word(text: str) -> str:
-    return text if re.fullmatch(r"[\w.:+-]+", text) else f'"{text}"'
-
-
-def as_cli_text(message: str) -> str:
-    """A reader's message with its keyword arguments (``decimal=','``, ``columns={'q1':
-    'j1'}``) written as the command-line options that do the same."""
-    message = _API_OPTION.sub(lambda m: f"--{m[1].replace('_', '-')} {_shell_word(m[2][1:-1])}", message)
-    message = _API_COLUMNS.sub(lambda m: f"--columns '{m[1]}={m[2]}'", message)
-    return message.replace(" in columns=)", " in --columns)")
 
 
 def _read(

@@ -44,6 +44,53 @@ from robocal.measure.simulate import (
 
 __all__ = ["register"]
 
+# The reader's options on every command that reads measurements, and its messages in
+# their command-line spelling.
+LengthUnit = Annotated[
+    str,
+    typer.Option(
+        "--length-unit", help="m | mm | um: positions, standard deviations and prismatic joints in the file"
+    ),
+]
+AngleUnit = Annotated[
+    str, typer.Option("--angle-unit", help="rad | deg: revolute joints and orientation angles in the file")
+]
+Columns = Annotated[
+    str | None, typer.Option("--columns", help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
+]
+Sep = Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")]
+Decimal = Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')]
+Orientation = Annotated[
+    str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
+]
+Incomplete = Annotated[
+    str,
+    typer.Option(
+        "--incomplete", help="rows with an empty or bad cell: error | drop (left out, with a warning)"
+    ),
+]
+Limits = Annotated[
+    str, typer.Option("--limits", help="joint values beyond the model's limits: error | warn | ignore")
+]
+
+
+_API_OPTION = re.compile(
+    r"\b(decimal|angle_unit|length_unit|orientation|sep|limits|measure|incomplete)=('[^']*')"
+)
+_API_COLUMNS = re.compile(r"columns=\{'(\w+)': '([^']*)'\}")
+
+
+def _shell_word(text: str) -> str:
+    return text if re.fullmatch(r"[\w.:+-]+", text) else f'"{text}"'
+
+
+def as_cli_text(message: str) -> str:
+    """A reader's message with its keyword arguments (``decimal=','``, ``columns={'q1':
+    'j1'}``) written as the command-line options that do the same."""
+    message = _API_OPTION.sub(lambda m: f"--{m[1].replace('_', '-')} {_shell_word(m[2][1:-1])}", message)
+    message = _API_COLUMNS.sub(lambda m: f"--columns '{m[1]}={m[2]}'", message)
+    return message.replace(" in columns=)", " in --columns)")
+
 
 data_app = typer.Typer(help="Measurement files: check them before a calibration.", no_args_is_help=True)
 
@@ -92,7 +139,7 @@ def _problem_table(problems: list[Problem], title: str) -> Table:
             f"{code}\n[dim]{PROBLEM_CODES.get(code, '')}[/]",
             column or "-",
             _rows_text([p.row for p in items]),
-            items[0].message,
+            as_cli_text(items[0].message),
         )
     return table
 
@@ -143,22 +190,14 @@ def data_check(
     robot: Annotated[
         str | None, typer.Option("--robot", help="catalog name or model file (joint count, types, limits)")
     ] = None,
-    length_unit: Annotated[str, typer.Option(help="m, mm or um (positions, sigmas, prismatic joints)")] = "m",
-    angle_unit: Annotated[str, typer.Option(help="rad or deg (revolute joints, orientation)")] = "rad",
-    sep: Annotated[str | None, typer.Option(help="column separator (default: sniffed)")] = None,
-    decimal: Annotated[str, typer.Option(help="decimal mark, '.' or ','")] = ".",
-    columns: Annotated[
-        str | None, typer.Option(help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
-    ] = None,
-    orientation: Annotated[
-        str, typer.Option(help="auto, none, quaternion, rotvec, euler:SEQ or euler:SEQ:deg")
-    ] = "auto",
-    limits: Annotated[
-        str, typer.Option(help="joint values outside the limits: error, warn, ignore")
-    ] = "error",
-    incomplete: Annotated[
-        str, typer.Option(help="rows with an empty or bad cell: error, drop (left out, with a warning)")
-    ] = "error",
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    columns: Columns = None,
+    orientation: Orientation = "auto",
+    limits: Limits = "error",
+    incomplete: Incomplete = "error",
 ) -> None:
     """List every problem of a measurement file, or summarise it if it is clean."""
     model = _model(robot)
@@ -175,14 +214,15 @@ def data_check(
     try:
         problems = check_measurements(file, model, **options)
     except (ValueError, KeyError) as err:
-        raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+        raise fail(as_cli_text(str(err.args[0] if isinstance(err, KeyError) else err))) from None
     errors = [p for p in problems if p.severity == "error"]
     warns = [p for p in problems if p.severity == "warning"]
     if problems:
         console.print(_problem_table(problems, f"{file}: {len(errors)} error(s), {len(warns)} warning(s)"))
     if errors:
         console.print(
-            f"[bold red]{len(errors)} error(s)[/]: the file cannot be used as read; first: {errors[0]}",
+            f"[bold red]{len(errors)} error(s)[/]: the file cannot be used as read; first: "
+            f"{as_cli_text(str(errors[0]))}",
             highlight=False,
             soft_wrap=True,
         )
