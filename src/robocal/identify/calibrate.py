@@ -133,6 +133,11 @@ def initial_frame_and_tool(
     return T_frame, T_tool
 
 
+#: Seed 001's bounds around the nominal robot parameters: ±5 mm on lengths, ±2° on angles.
+SEED001_LENGTH_BOUND = 5e-3
+SEED001_ANGLE_BOUND = math.radians(2.0)
+
+
 def _outlier_poses(errors: Array, sigma: Array | None, factor: float = 5.0) -> list[int]:
     """Indices of the poses whose position residual ``errors`` ``(n,)`` (m) exceeds
     ``factor`` times the median residual (and ``factor`` times the 3D noise when the data
@@ -165,8 +170,8 @@ def _widen_for_absorbed(
     chain: Model,
     length: float,
     robot: set[str],
-    length_bound: float = 5e-3,
-    angle_bound: float = math.radians(2.0),
+    length_bound: float = SEED001_LENGTH_BOUND,
+    angle_bound: float = SEED001_ANGLE_BOUND,
 ) -> tuple[Array, Array]:
     """Seed 001's bounds of the kept parameters widened by those of the redundant
     parameters they absorb: with d3 dropped, d2 carries d2 + d3 and may need ±10 mm
@@ -192,8 +197,8 @@ def default_bounds(
     names: Sequence[str],
     rotation: Sequence[bool],
     nominal: Array,
-    length: float = 5e-3,
-    angle: float = math.radians(2.0),
+    length: float = SEED001_LENGTH_BOUND,
+    angle: float = SEED001_ANGLE_BOUND,
     robot: set[str] | None = None,
 ) -> tuple[Array, Array]:
     """Seed 001's bounds: ±5 mm on lengths and ±2° on angles around the nominal robot
@@ -342,9 +347,8 @@ class CalibrationResult:
             J = np.concatenate([J, self._effect_columns(chain, q, perturbations, effects)], axis=2)
         idx = [self.names.index(n) for n in names + effects]
         C = self.covariance[np.ix_(idx, idx)]
-        return (J @ C) @ np.swapaxes(
-            J, 1, 2
-        )  # J C Jᵀ per pose (matmuls: an einsum over both sums is 40x slower)
+        # J C Jᵀ per pose, by matmuls (an einsum over both sums is 40x slower)
+        return (J @ C) @ np.swapaxes(J, 1, 2)
 
     def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
         """``(n, 3, m)`` derivatives of the tool position wrt the joint-effect coefficients
@@ -989,7 +993,8 @@ def calibrate(
     length = _robot_size(T_flange[:50])  # as the batched engine of robocal.study
     rows = 3 if measure == "position" else 6
     w = np.ones((n, rows))
-    if weights == "sigma" and data.sigma is not None:
+    known_noise = weights == "sigma" and data.sigma is not None  # weights 1/σ of a stated noise
+    if known_noise:
         w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
     if rows == 6:
         w[:, 3:] = orientation_weight * (w[:, :3].mean(axis=1, keepdims=True))
@@ -1107,7 +1112,7 @@ def calibrate(
         options["bounds"] = (lo, hi)
     dropped = list(selection.dropped)
     if method != "bounded":  # the hopeless ones before the first fit (they are pruned anyway)
-        screened = _screen(problem, x0, max_std, max_std_ratio, weights == "sigma" and data.sigma is not None)
+        screened = _screen(problem, x0, max_std, max_std_ratio, known_noise)
         if screened:
             dropped += [Dropped(name, "poorly identifiable", sigma=sigma) for name, sigma in screened]
             problem = problem.fix([name for name, _ in screened])
@@ -1117,14 +1122,13 @@ def calibrate(
     solve_seconds = time.perf_counter() - t_solve
     evaluations = result.evaluations
     x = result.x
-    known_noise = weights == "sigma" and data.sigma is not None
     _, cov, std, corr, cond = _uncertainty(problem, x, known_noise)
     # drop what these measurements cannot determine, worst first, and refit
     # an unconverged fit says nothing about σ; a bounded fit keeps every parameter within
     # its bounds, so a poorly determined one cannot run away and is better kept
     prune = result.success and method != "bounded"
     for _ in range(len(x) - 1 if prune else 0):
-        move = std * problem.effect_scale(x)  # σ as RMS tool displacement at the measured poses
+        move = std * problem.effect_scale(x)  # σ as tool displacement at the measured poses
         threshold = max(max_std, max_std_ratio * float(np.median(move)))
         worst = int(np.argmax(move))
         # poorly identifiable: beyond the absolute threshold and far beyond the other
@@ -1147,7 +1151,8 @@ def calibrate(
 
     r_plain = problem.residual(x, weighted=False).reshape(n, rows)
     rms_after = float(np.sqrt(np.mean(np.sum(r_plain[:, :3] ** 2, axis=1))))
-    outliers = _outlier_poses(np.linalg.norm(r_plain[:, :3], axis=1), data.sigma)
+    pose_errors = np.linalg.norm(r_plain[:, :3], axis=1)  # (n,) m
+    outliers = _outlier_poses(pose_errors, data.sigma)
     rms_before = float(
         np.sqrt(np.mean(np.sum(problem.residual(x0, weighted=False).reshape(n, rows)[:, :3] ** 2, axis=1)))
     )
@@ -1233,10 +1238,9 @@ def calibrate(
                 "the data, decided the value and the fit may be poor; widen the bounds or use method='lm'"
             )
     if outliers:
-        worst = sorted(outliers, key=lambda i: -np.linalg.norm(r_plain[i, :3]))[:5]
+        worst = sorted(outliers, key=lambda i: -pose_errors[i])[:5]
         shown = ", ".join(
-            f"{i} ({np.linalg.norm(r_plain[i, :3]) * 1e3:.3g} mm at q = "
-            f"[{', '.join(f'{v:.4g}' for v in data.q[i])}])"
+            f"{i} ({pose_errors[i] * 1e3:.3g} mm at q = [{', '.join(f'{v:.4g}' for v in data.q[i])}])"
             for i in worst
         )
         problem_warnings.append(
@@ -1257,13 +1261,13 @@ def calibrate(
             "makes the estimates sensitive to every measurement and their uncertainty itself "
             f"uncertain; measure at least {needed} poses"
         )
-    if weights == "sigma" and data.sigma is not None:
+    if known_noise:
         # does the model explain the data down to the noise? (position rows; for pose
         # measurements their share of the estimated parameters)
         noise = fit_to_noise(r_plain[:, :3], data.sigma, len(x) * 3 / rows)
         calibration.metadata["fit_to_noise"] = noise.to_dict()
-        if noise.warning() is not None:
-            problem_warnings.append(noise.warning())
+        if (noise_warning := noise.warning()) is not None:
+            problem_warnings.append(noise_warning)
     try:
         calibration.metadata["warnings"] = problem_warnings + check_solution(calibration)
     except CalibrationGuardError as err:
