@@ -231,9 +231,7 @@ def calibrate_command(
     _print_result(result)
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
-        for note in filter(
-            None, _validation_notes(validation, result)[0][1:]
-        ):  # the frame is the calibrated one
+        for note in _validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
             console.print(note, highlight=False)
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
     if report:
@@ -282,15 +280,15 @@ def _print_result(result) -> None:
         console.print(f"[yellow]warning:[/] {w}", highlight=False)
 
 
-def _validation_notes(stats, result) -> tuple[list[str], str | None]:
-    """Lines under a validation table (how the device frame was obtained, the error the
-    calibration expected) and a warning when the error is far from what it should be."""
-    notes = [
-        {
-            "calibrated": "the device frame identified by the calibration was used as it is",
-            "refit": "the device frame was refitted to this data (--refit-frame)",
-        }.get(stats.frame, "")
-    ]
+def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
+    """Lines under a validation table (how the device frame was obtained unless
+    ``frame_note`` is False, the error the calibration expected) and a warning when the
+    error is far from what it should be."""
+    frames = {
+        "calibrated": "the device frame identified by the calibration was used as it is",
+        "refit": "the device frame was refitted to this data (--refit-frame)",
+    }
+    notes = [frames.get(stats.frame, "")] if frame_note else []
     if stats.expected_rms is not None:
         notes.append(
             f"the calibration expected an RMS error of {stats.expected_rms * 1e3:.4g} mm here "
