@@ -56,10 +56,12 @@ from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
 from robocal.model.files import atomic_write_text, load_model, save_model
 
-__all__ = ["LEVELS", "CalibrationResult", "calibrate", "default_bounds", "parse_level"]
+__all__ = ["LEVELS", "RESIDUAL_CHOICES", "CalibrationResult", "calibrate", "calibrate_physics", "default_bounds", "parse_level"]
 
 Array = NDArray[np.float64]
 Method = Literal["lm", "pinv", "bounded", "influence"]
+ResidualChoice = Literal["none", "auto", "joint_fourier"]
+RESIDUAL_CHOICES: tuple[str, ...] = ("none", "auto", "joint_fourier")
 
 #: calibration levels by name (seed 003 §1.2)
 LEVELS: dict[str, int] = {
@@ -267,6 +269,18 @@ class CalibrationResult:
         (``(n, dof)``, rad/s, rad/s²) add the inertial loads of a motion.  None for a
         geometric calibration."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
+        physical = self.physical_perturbations(q, qd, qdd)
+        if self.model.residual is None:
+            return physical
+        learned = self.model.residual.perturbations(q, self.model.dof)
+        return learned if physical is None else physical + learned
+
+    def physical_perturbations(
+        self, q: ArrayLike, qd: ArrayLike | None = None, qdd: ArrayLike | None = None
+    ) -> Array | None:
+        """The joint perturbations ``(n, dof, 3)`` of the physical joint effects alone
+        (:meth:`joint_perturbations` without the learned residual); None when there are none."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
         if self.model.joint_effects:
             from robocal.model.joints import joint_perturbations
 
@@ -348,7 +362,11 @@ class CalibrationResult:
         idx = [self.names.index(n) for n in names + effects]
         C = self.covariance[np.ix_(idx, idx)]
         # J C Jᵀ per pose, by matmuls (an einsum over both sums is 40x slower)
-        return (J @ C) @ np.swapaxes(J, 1, 2)
+        cov = (J @ C) @ np.swapaxes(J, 1, 2)
+        if self.model.residual is not None:  # the learned residual's posterior, independent
+            P = chain.perturbation_jacobian(q, "position", perturbations)
+            cov = cov + self.model.residual.position_covariance(q, P)
+        return cov
 
     def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
         """``(n, 3, m)`` derivatives of the tool position wrt the joint-effect coefficients
@@ -817,7 +835,7 @@ def _with_load_passes(call: dict[str, Any]) -> CalibrationResult:
     passes = int(call["load_passes"])
     geometry = call["load_model"] or model
     signs = _load_signs(geometry, call)
-    result = calibrate(**{**call, "load_passes": 1, "load_model": geometry})
+    result = calibrate_physics(**{**call, "load_passes": 1, "load_model": geometry})
     done = 1
     while done < passes:
         geometry = _geometry_of(result, model)
@@ -825,7 +843,7 @@ def _with_load_passes(call: dict[str, Any]) -> CalibrationResult:
         if np.array_equal(new_signs, signs):
             break
         signs = new_signs
-        result = calibrate(**{**call, "load_passes": 1, "load_model": geometry})
+        result = calibrate_physics(**{**call, "load_passes": 1, "load_model": geometry})
         done += 1
     result.seconds = time.perf_counter() - t0
     result.metadata["load_passes"] = done
@@ -833,6 +851,52 @@ def _with_load_passes(call: dict[str, Any]) -> CalibrationResult:
 
 
 def calibrate(
+    model: Model,
+    data: Measurements,
+    method: Method = "lm",
+    *,
+    residual: ResidualChoice = "none",
+    residual_harmonics: int | Sequence[int] | None = None,
+    cv_folds: int = 5,
+    **options: Any,
+) -> CalibrationResult:
+    """Identify the robot's parameters from measurements: the physical model (see
+    :func:`calibrate_physics` for ``method`` and every option of the physical fit) and,
+    optionally, a learned residual on top of it.
+
+    Args:
+        model: the robot model; its free parameters are the candidates.  A catalog robot's
+            complete model is :func:`robocal.calibration_model`.
+        data: joint values and measured positions (and orientations) in the device frame.
+        method: ``"lm"`` (default), ``"pinv"``, ``"bounded"`` or ``"influence"``.
+        residual: ``"none"`` (the physical model only, the default of the API),
+            ``"auto"`` (k-fold cross-validation on ``data`` chooses among the physical
+            model, the physical model with joint compliance when the model has masses and
+            no joint effects were asked for, and each with the learned joint angle errors
+            of :mod:`robocal.model.residual` with each number of harmonics; the default of
+            ``robocal calibrate``) or ``"joint_fourier"`` (always the learned residual; CV
+            chooses the harmonics only).
+        residual_harmonics: the numbers of harmonics CV chooses from (default
+            :data:`robocal.identify.residual.DEFAULT_HARMONICS`).
+        cv_folds: folds of the cross-validation.
+        **options: the physical fit's options (:func:`calibrate_physics`); an unknown
+            one is an error.
+    """
+    if residual not in RESIDUAL_CHOICES:
+        raise ValueError(f"residual must be one of {', '.join(RESIDUAL_CHOICES)}, got {residual!r}")
+    if model.residual is not None:  # a calibrated model calibrated again: its residual is refitted
+        model = dataclasses.replace(model, residual=None)
+    if residual == "none":
+        return calibrate_physics(model, data, method, **options)
+    from robocal.identify.residual import calibrate_with_residual
+
+    return calibrate_with_residual(
+        calibrate_physics, model, data, method, options,
+        kind=residual, harmonics=residual_harmonics, folds=cv_folds,
+    )  # fmt: skip
+
+
+def calibrate_physics(
     model: Model,
     data: Measurements,
     method: Method = "lm",
@@ -862,7 +926,8 @@ def calibrate(
     load_passes: int = 3,
     load_model: Model | None = None,
 ) -> CalibrationResult:
-    """Identify the robot's parameters from measurements.
+    """Identify the physical robot's parameters from measurements (geometry and joint
+    effects; :func:`calibrate` adds the learned residual).
 
     Args:
         model: the robot model; its free parameters are the candidates.

@@ -41,7 +41,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -295,6 +295,8 @@ class Model:
     source: str = ""
     notes: str = field(default="", compare=True)
     joint_effects: tuple[JointEffects, ...] = ()
+    # the learned residual (robocal.model.residual.JointAngleResidual) or None
+    residual: Any = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         _check_name("model", self.name)

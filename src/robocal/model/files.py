@@ -47,6 +47,7 @@ Lengths and angles are in ``units`` (default m and rad).  Files written by
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import tempfile
@@ -171,6 +172,7 @@ class _ModelFile(BaseModel):
     tool: list[_StepSpec] = []
     bodies: list[_BodySpec] = []
     joint_effects: list[_JointEffectsSpec] = []
+    residual: dict[str, Any] | None = None
 
     @model_validator(mode="after")
     def _one_form(self) -> _ModelFile:
@@ -295,7 +297,7 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
         steps += [_step(s, units) for s in spec.tool]
         L = LENGTH_SCALE[units.length]
         bodies = [Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia) for b in spec.bodies]
-        return Model(
+        model = Model(
             name=spec.name,
             steps=tuple(steps),
             bodies=tuple(bodies),
@@ -304,6 +306,15 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
             notes=spec.notes.strip(),
             joint_effects=tuple(_joint_effects(spec.joint_effects, steps, units)),
         )
+        if spec.residual is not None:
+            from robocal.model.residual import JointAngleResidual
+
+            try:
+                residual = JointAngleResidual.from_dict(spec.residual, model.joint_names)
+            except KeyError as err:
+                raise ValueError(f"residual: missing {err.args[0]!r}") from None
+            model = dataclasses.replace(model, residual=residual)
+        return model
     except (ValueError, TypeError) as err:
         raise ModelFileError(f"{origin}: {err}") from None
 
@@ -413,6 +424,8 @@ def model_to_dict(model: Model) -> dict[str, Any]:
         ]
     if model.joint_effects:
         data["joint_effects"] = [_effects_to_dict(e) for e in model.joint_effects]
+    if model.residual is not None:
+        data["residual"] = model.residual.to_dict()
     return data
 
 

@@ -1,0 +1,424 @@
+"""Fitting the learned residual, and choosing it by cross-validation on the training poses.
+
+The residual model (:class:`robocal.model.residual.JointAngleResidual`) is linear in its
+coefficients ``c``: the position residual of the physical fit is ``r ≈ A(q) c`` with
+``A = ∂p/∂δθ_j · [cos h q_j, sin h q_j]`` (the perturbation Jacobian times the Fourier
+basis).  With the prior ``c ~ N(0, S)``, ``S = diag(a_j² exp(-(h ℓ)²/2))`` — a stationary
+Gaussian process on each joint's circle — and noise ``σ²``, the posterior is Gaussian
+(Bayesian linear regression) and the hyperparameters ``a_j, ℓ, σ`` maximise the
+evidence (type-II maximum likelihood).  Everything is in the *whitened* coordinates
+``c = S^½ v`` so that the matrix factored, ``S^½ G S^½ / σ² + I``, is positive definite
+whatever the prior; the evidence's gradient is analytic (MacKay 1992: ``∂(−log E)/∂log s_k
+= ½(1 − Σ_kk/s_k − μ_k²/s_k)``, ``∂(−log E)/∂log σ² = ½(N − γ − |r − Aμ|²/σ²)``).
+
+Memory: the design is never held whole; ``G = AᵀA`` and ``Aᵀr`` are accumulated over
+chunks of poses, so memory is ``O(m²)`` plus one chunk whatever the number of poses
+(m = joints · 2H ≤ 384 by default: 1.2 MB).
+
+Model choice (:func:`cross_validate_residual`): k folds of the *training* poses; in each
+fold the physical model is calibrated again on the other folds, and each candidate —
+physics only, and the residual with each number of harmonics — predicts the held-out
+fold.  The hyperparameters of each candidate are those of the evidence on all training
+poses (re-optimising them per fold would multiply the cost by k for little change);
+the candidate with the lowest mean cross-validated error wins.  Held-out data never
+enters.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import cho_solve, cholesky, solve_triangular
+from scipy.optimize import minimize
+
+from robocal.model.residual import JointAngleResidual
+
+__all__ = [
+    "CVCandidate",
+    "CVTable",
+    "DEFAULT_HARMONICS",
+    "Hyper",
+    "calibrate_with_residual",
+    "cross_validate_residual",
+    "fit_joint_fourier",
+]
+
+Array = NDArray[np.float64]
+
+#: the numbers of harmonics cross-validation chooses from (per revolution)
+DEFAULT_HARMONICS: tuple[int, ...] = (4, 12, 32)
+_CHUNK = 2048  # poses per chunk of the design matrix
+MAX_AMPLITUDE = 2e-3  # rad, the largest prior RMS of a joint's angle error
+
+
+@dataclass(frozen=True)
+class Hyper:
+    """Prior amplitude per joint (rad), spectral length scale ℓ (rad) and noise σ (m)."""
+
+    amplitudes: tuple[float, ...]
+    length_scale: float
+    noise: float
+
+
+def _gram(q: Array, r: Array, P: Array, template: JointAngleResidual) -> tuple[Array, Array, float, int]:
+    """``G = AᵀA`` ``(m, m)``, ``b = Aᵀr`` ``(m,)``, ``rᵀr`` and the number of equations,
+    accumulated over chunks of poses."""
+    m = template.size
+    G, b, rr = np.zeros((m, m)), np.zeros(m), 0.0
+    for s in range(0, len(q), _CHUNK):
+        A = template.design(q[s : s + _CHUNK], P[s : s + _CHUNK]).reshape(-1, m)
+        y = r[s : s + _CHUNK].reshape(-1)
+        G += A.T @ A
+        b += A.T @ y
+        rr += float(y @ y)
+    return G, b, rr, r.size
+
+
+def _spectrum(log_ell: float, freq: Array) -> tuple[Array, Array]:
+    """log of the normalised spectral weights per coefficient (they sum to 1 over one
+    joint's coefficients, so that ``a_j`` is the RMS of the joint's angle error) and their
+    derivative wrt ``log ℓ``."""
+    u = -0.5 * (freq * np.exp(log_ell)) ** 2
+    du = -((freq * np.exp(log_ell)) ** 2)
+    h, first = np.unique(freq, return_index=True)
+    w = np.exp(u[first] - u[first].max())
+    log_z = np.log(2.0 * w.sum()) + u[first].max()
+    dlog_z = float(np.sum(w * du[first]) / w.sum())
+    return u - log_z, du - dlog_z
+
+
+def _prior(theta: Array, groups: Array, freq: Array) -> Array:
+    """log prior variance per coefficient from ``theta = [log a_j..., log ℓ, log σ]``."""
+    k = len(theta) - 2
+    return 2.0 * theta[:k][groups] + _spectrum(theta[k], freq)[0]
+
+
+def _posterior(G: Array, b: Array, log_s: Array, noise2: float) -> tuple[Array, Array, Array]:
+    """Whitened Cholesky factor ``L``, mean ``μ`` and ``v = μ / s^½`` of the coefficients."""
+    d = np.exp(0.5 * log_s)
+    K = (d[:, None] * G * d[None, :]) / noise2
+    K[np.diag_indices_from(K)] += 1.0
+    L = cholesky(K, lower=True, check_finite=False)
+    v = cho_solve((L, True), d * b / noise2, check_finite=False)
+    return L, d * v, v
+
+
+def _nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: Array, freq: Array):
+    k = len(theta) - 2
+    log_s = _prior(theta, groups, freq)
+    noise2 = float(np.exp(2.0 * theta[-1]))
+    L, mu, v = _posterior(G, b, log_s, noise2)
+    z = solve_triangular(L, np.exp(0.5 * log_s) * b / noise2, lower=True, check_finite=False)
+    nll = 0.5 * (rr / noise2 - z @ z + 2.0 * np.log(np.diag(L)).sum() + N * np.log(noise2))
+    Linv = solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+    kinv_diag = np.einsum("ij,ij->j", Linv, Linv)  # diag of K⁻¹ = Σ_kk / s_k
+    g_s = 0.5 * (1.0 - kinv_diag - v**2)  # ∂nll/∂log s_k
+    gamma = float(np.sum(1.0 - kinv_diag))
+    misfit = rr - 2.0 * mu @ b + mu @ G @ mu
+    grad = np.empty_like(theta)
+    grad[:k] = 2.0 * np.bincount(groups, weights=g_s, minlength=k)
+    grad[k] = float(np.sum(g_s * _spectrum(theta[k], freq)[1]))
+    grad[-1] = 2.0 * 0.5 * (N - gamma - misfit / noise2)  # ∂/∂log σ = 2 ∂/∂log σ²
+    return float(nll), grad
+
+
+def _layout(template: JointAngleResidual) -> tuple[Array, Array]:
+    H = template.harmonics
+    groups = np.repeat(np.arange(len(template.joints)), 2 * H)
+    freq = np.tile(np.repeat(np.arange(1, H + 1), 2), len(template.joints)).astype(float)
+    return groups, freq
+
+
+def _template(joint_names: Sequence[str], joint_index: Sequence[int], harmonics: int) -> JointAngleResidual:
+    m = len(joint_names) * 2 * harmonics
+    return JointAngleResidual(
+        tuple(joint_names), tuple(joint_index), harmonics, np.zeros(m), np.zeros((m, m)), 0.0,
+        (0.0,) * len(joint_names), 0.0,
+    )  # fmt: skip
+
+
+def fit_joint_fourier(
+    q: Array,
+    residuals: Array,
+    P: Array,
+    joint_names: Sequence[str],
+    joint_index: Sequence[int],
+    harmonics: int,
+    hyper: Hyper | None = None,
+) -> tuple[JointAngleResidual, Hyper]:
+    """Fit per-joint Fourier angle errors to position residuals.
+
+    Args:
+        q: ``(n, dof)`` joint values (rad).
+        residuals: ``(n, 3)`` measured minus predicted position (m) of the physical model.
+        P: ``(n, 3, dof, 3)`` perturbation Jacobian of the physical model at ``q``, in the
+            same frame as ``residuals``.
+        joint_names, joint_index: the joints whose angle errors are modelled.
+        harmonics: H.
+        hyper: fixed hyperparameters (skip the evidence maximisation), e.g. in CV folds.
+
+    Returns the residual model and its hyperparameters.
+    """
+    template = _template(joint_names, joint_index, harmonics)
+    G, b, rr, N = _gram(q, residuals, P, template)
+    groups, freq = _layout(template)
+    k = len(joint_names)
+    if hyper is None:
+        noise0 = max(float(np.sqrt(rr / N)), 1e-7)
+        theta0 = np.r_[np.full(k, np.log(2e-4)), np.log(0.02), np.log(noise0)]
+        # a joint's angle error is physically small: transmission errors of robot gears are
+        # arcminutes (0.3 mrad); 2 mrad bounds the prior well above that and keeps the evidence
+        # out of the degenerate optimum where huge coefficients cancel (seen at H = 12)
+        bounds = [(np.log(1e-9), np.log(MAX_AMPLITUDE))] * k + [(np.log(1e-4), np.log(2.0)), (np.log(1e-7), np.log(1e-2))]
+        opt = minimize(
+            _nll_and_grad, theta0, args=(G, b, rr, N, groups, freq), jac=True, method="L-BFGS-B",
+            bounds=bounds, options={"maxiter": 200},
+        )  # fmt: skip
+        theta = opt.x
+        hyper = Hyper(tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1])))
+    theta = np.r_[np.log(hyper.amplitudes), np.log(hyper.length_scale), np.log(hyper.noise)]
+    log_s = _prior(theta, groups, freq)
+    L, mu, _ = _posterior(G, b, log_s, hyper.noise**2)
+    d = np.exp(0.5 * log_s)
+    Linv = solve_triangular(L, np.eye(len(L)), lower=True, check_finite=False)
+    cov = (d[:, None] * (Linv.T @ Linv)) * d[None, :]
+    model = JointAngleResidual(
+        tuple(joint_names), tuple(joint_index), harmonics, mu, 0.5 * (cov + cov.T), hyper.noise,
+        hyper.amplitudes, hyper.length_scale,
+    )  # fmt: skip
+    return model, hyper
+
+
+# ---------------------------------------------------------------------- model choice
+@dataclass(frozen=True)
+class CVCandidate:
+    """One row of the cross-validation table: mean and RMS position error (m) over the
+    held-out folds of the training poses, and the time of one fit on all of them (s)."""
+
+    name: str
+    physics: str
+    harmonics: int | None
+    cv_mean: float
+    cv_rms: float
+    fit_seconds: float
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "name": self.name,
+            "physics": self.physics,
+            "harmonics": self.harmonics,
+            "cv_mean_mm": self.cv_mean * 1e3,
+            "cv_rms_mm": self.cv_rms * 1e3,
+            "fit_seconds": self.fit_seconds,
+        }
+
+
+@dataclass(frozen=True)
+class CVTable:
+    """The candidates compared and the one chosen (by the lowest CV mean error)."""
+
+    folds: int
+    candidates: tuple[CVCandidate, ...]
+    chosen: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {"folds": self.folds, "chosen": self.chosen, "candidates": [c.to_dict() for c in self.candidates]}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CVTable:
+        rows = tuple(
+            CVCandidate(
+                c["name"], c["physics"], c["harmonics"], c["cv_mean_mm"] / 1e3, c["cv_rms_mm"] / 1e3,
+                c["fit_seconds"],
+            )  # fmt: skip
+            for c in data["candidates"]
+        )
+        return cls(int(data["folds"]), rows, str(data["chosen"]))
+
+    def lines(self) -> list[str]:
+        """The table as text lines (mm, ms)."""
+        out = [f"model choice by {self.folds}-fold cross-validation on the calibration poses:"]
+        for c in self.candidates:
+            mark = "  <- chosen" if c.name == self.chosen else ""
+            out.append(
+                f"  {c.name:<34} CV mean {c.cv_mean * 1e3:7.4f} mm  RMS {c.cv_rms * 1e3:7.4f} mm  "
+                f"fit {c.fit_seconds * 1e3:7.1f} ms{mark}"
+            )
+        return out
+
+
+#: a physical fit: (train indices) -> (predict(q) -> ((n, 3) positions in the device frame,
+#: (n, 3, dof, 3) perturbation Jacobian), residuals (n_train, 3), perturbation Jacobian
+#: (n_train, 3, dof, 3), seconds the fit took)
+PhysicsFit = Callable[[Array], tuple[Callable[[Array], tuple[Array, Array]], Array, Array, float]]
+
+
+def cross_validate_residual(
+    q: Array,
+    position: Array,
+    physics: dict[str, PhysicsFit],
+    joint_names: Sequence[str],
+    joint_index: Sequence[int],
+    harmonics: Sequence[int] = DEFAULT_HARMONICS,
+    folds: int = 5,
+    seed: int = 0,
+    include_none: bool = True,
+) -> tuple[CVTable, dict[str, Hyper]]:
+    """k-fold CV over physical variants × (no residual, Fourier residual with H harmonics).
+
+    ``physics[name](train_indices)`` calibrates that physical variant on those training
+    poses and returns ``(predict, residuals, P)``: ``predict(q)`` gives positions and the
+    perturbation Jacobian at ``q``.  Returns the table and the hyperparameters found for
+    each residual candidate on all poses.
+    """
+    n = len(q)
+    order = np.random.default_rng(seed).permutation(n)
+    parts = np.array_split(order, folds)
+    everything = np.arange(n)
+    rows: list[CVCandidate] = []
+    hypers: dict[str, Hyper] = {}
+    for pname, fit in physics.items():
+        _, r_all, P_all, t_phys = fit(everything)
+        names = [f"{pname}"] if include_none else []
+        specs: list[tuple[str, int | None]] = [(pname, None)] if include_none else []
+        fixed: dict[int, Hyper] = {}
+        fit_time: dict[str, float] = {pname: t_phys}
+        for H in harmonics:
+            t1 = time.perf_counter()
+            _, hyper = fit_joint_fourier(q, r_all, P_all, joint_names, joint_index, H)
+            name = f"{pname} + joint angle errors H={H}"
+            fixed[H], hypers[name] = hyper, hyper
+            fit_time[name] = t_phys + time.perf_counter() - t1
+            specs.append((name, H))
+            names.append(name)
+        errors = {name: np.empty(n) for name, _ in specs}
+        for held in parts:
+            train = np.setdiff1d(everything, held)
+            predict, r_train, P_train, _ = fit(train)
+            p_held, P_held = predict(q[held])
+            base = position[held] - p_held
+            for name, H in specs:
+                if H is None:
+                    e = base
+                else:
+                    model, _ = fit_joint_fourier(q[train], r_train, P_train, joint_names, joint_index, H, fixed[H])
+                    e = base - np.einsum("nrm,m->nr", model.design(q[held], P_held), model.coefficients)
+                errors[name][held] = np.linalg.norm(e, axis=1)
+        for name, H in specs:
+            e = errors[name]
+            rows.append(
+                CVCandidate(name, pname, H, float(e.mean()), float(np.sqrt(np.mean(e**2))), fit_time[name])
+            )
+    best = min(rows, key=lambda c: c.cv_mean)
+    return CVTable(folds, tuple(rows), best.name), hypers
+
+
+# ---------------------------------------------------------------------- the stage
+MIN_CV_POSES = 20  # fewer poses than this: too few folds of useful size, physics only
+_COMPLIANCE_VARIANT = "geometry + joint compliance"
+
+
+def _physics_name(options: dict[str, Any]) -> str:
+    if options.get("compliance"):
+        return _COMPLIANCE_VARIANT
+    effects, level = options.get("effects"), options.get("level")
+    if effects not in (None, "none") or str(level) in ("3", "non-geometric"):
+        return f"geometry + joint effects ({effects or 'identify'})"
+    return "geometry"
+
+
+def calibrate_with_residual(
+    calibrate_physics: Callable[..., Any],
+    model: Any,
+    data: Any,
+    method: str,
+    options: dict[str, Any],
+    kind: str = "auto",
+    harmonics: int | Sequence[int] | None = None,
+    folds: int = 5,
+) -> Any:
+    """The physical calibration plus the learned residual chosen by cross-validation on
+    ``data`` (see the module docstring); returns a
+    :class:`~robocal.identify.calibrate.CalibrationResult` whose ``model.residual`` is the
+    residual (None when CV chose the physics alone) and whose ``metadata["cv"]`` is the table."""
+    t0 = time.perf_counter()
+    grid = DEFAULT_HARMONICS if harmonics is None else tuple(np.atleast_1d(harmonics).astype(int).tolist())
+    if not grid or min(grid) < 1:
+        raise ValueError(f"residual_harmonics must be positive integers, got {harmonics!r}")
+    if not 2 <= folds <= 20:
+        raise ValueError(f"cv_folds must lie between 2 and 20, got {folds}")
+    base = calibrate_physics(model, data, method, **options)
+    if data.n < max(MIN_CV_POSES, 2 * folds):
+        base.metadata.setdefault("warnings", []).append(
+            f"{data.n} poses are too few to choose a learned residual by {folds}-fold cross-validation "
+            f"(at least {MIN_CV_POSES}): the physical model alone"
+        )
+        return base
+    variants = {_physics_name(options): options}
+    joint_effects_asked = any(options.get(k) not in (None, False, "none") for k in ("compliance", "effects", "level"))
+    if kind == "auto" and model.bodies and not joint_effects_asked:
+        variants[_COMPLIANCE_VARIANT] = {**options, "compliance": True}
+
+    fits: dict[tuple[str, bytes], Any] = {}
+
+    def physics(name: str) -> PhysicsFit:
+        def fit(train: Array):
+            key = (name, train.tobytes())
+            if key not in fits:
+                everything = len(train) == data.n
+                if everything and name == _physics_name(options):
+                    result = base
+                else:
+                    result = calibrate_physics(model, data if everything else data.subset(train), method, **variants[name])
+                fits[key] = result
+            result = fits[key]
+
+            def predict(q: Array) -> tuple[Array, Array]:
+                pert = result.joint_perturbations(q)
+                p = result.predict(q)[:, :3, 3]
+                return p, result.measurement_chain.perturbation_jacobian(q, "position", pert)
+
+            p_train, P_train = predict(data.q[train])
+            return predict, data.position[train] - p_train, P_train, result.seconds
+
+        return fit
+
+    robust: dict[str, PhysicsFit] = {}
+    for name in variants:
+        try:  # a variant that cannot be calibrated on these poses is left out of the choice
+            physics(name)(np.arange(data.n))
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        robust[name] = physics(name)
+    # revolute joints only: the angle errors of a joint as a function of its own angle
+    revolute = [s.is_rotation for s in model.steps if s.joint is not None]
+    joints = [j for j, rot in enumerate(revolute) if rot]
+    if not joints:
+        return base
+    names = [model.joint_names[j] for j in joints]
+    table, hypers = cross_validate_residual(
+        data.q, data.position, robust, names, joints, grid, folds, include_none=kind == "auto"
+    )
+    chosen = next(c for c in table.candidates if c.name == table.chosen)
+    result = fits[(chosen.physics, np.arange(data.n).tobytes())]
+    if chosen.harmonics is not None:
+        _, r, P, _ = robust[chosen.physics](np.arange(data.n))
+        learned, _ = fit_joint_fourier(data.q, r, P, names, joints, chosen.harmonics, hypers[chosen.name])
+        result = dataclasses.replace(
+            result,
+            model=dataclasses.replace(result.model, residual=learned),
+            metadata=dict(result.metadata),
+        )
+        e = r - np.einsum("nrm,m->nr", learned.design(data.q, P), learned.coefficients)
+        result.metadata["residual_rms_after_mm"] = float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) * 1e3
+    else:
+        result = dataclasses.replace(result, metadata=dict(result.metadata))
+    result.metadata["cv"] = table.to_dict()
+    result.seconds = time.perf_counter() - t0
+    return result

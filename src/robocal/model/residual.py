@@ -1,0 +1,176 @@
+"""The learned residual of a calibrated model: joint angle errors as functions of the joint angles.
+
+After the physical model (complete geometry + seed 003's joint effects) a real robot
+keeps a repeatable, configuration-dependent error.  On the real UR10 of
+``shared/data/ur10_laser_tracker`` it is about 0.38 mm and, measured, almost all of it is
+a sum of *per-joint angle errors that depend on that joint's own angle* (the kinematic
+error of the gearbox and the encoder's eccentricity: a transmission error with many
+harmonics per revolution).  robocal represents it so, as a residual of the joints::
+
+    δθ_j(q_j) = Σ_{h=1..H} a_jh cos(h q_j) + b_jh sin(h q_j)          (rad)
+
+added to the joint perturbations ``(δα, δβ, δθ)`` that every part of robocal already
+passes to the chain (FK, Jacobians, IK, compensation, paths, the report).  The
+coefficients carry a Gaussian posterior (mean and covariance, from Bayesian linear
+regression with a prior that is a stationary Gaussian process on each joint's circle:
+amplitude per joint, one spectral length scale; :mod:`robocal.identify.residual`), so
+every prediction has a variance.
+
+The candidates compared, the numbers behind this choice and the cross-validated choice
+of H are in ``benchmarks/bench_real_accuracy.py`` and the README.
+
+Units: angles in rad, coefficients in rad, covariances in rad².
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["JointAngleResidual", "fourier_basis"]
+
+Array = NDArray[np.float64]
+
+
+def fourier_basis(angles: ArrayLike, harmonics: int) -> Array:
+    """``[cos(h q), sin(h q)]`` for ``h = 1..harmonics``: ``(n, k, 2 H)`` for angles ``(n, k)``
+    (rad); column ``2(h-1)`` is ``cos(h q)``, ``2(h-1)+1`` is ``sin(h q)``."""
+    q = np.asarray(angles, dtype=float)
+    hq = q[..., None] * np.arange(1, harmonics + 1)  # (n, k, H)
+    out = np.empty((*q.shape, 2 * harmonics))
+    np.cos(hq, out=out[..., 0::2])
+    np.sin(hq, out=out[..., 1::2])
+    return out
+
+
+@dataclass(frozen=True)
+class JointAngleResidual:
+    """Learned angle errors ``δθ_j(q_j)`` of some joints of a chain (see the module docstring).
+
+    Attributes:
+        joints: names of the joints whose angle errors are modelled, in chain order.
+        joint_index: their indices among the chain's joints (0-based).
+        harmonics: H, harmonics per revolution.
+        coefficients: ``(m,)`` posterior mean (rad), ``m = len(joints) * 2 H``, ordered
+            joint by joint, then ``cos 1, sin 1, cos 2, ...``.
+        covariance: ``(m, m)`` posterior covariance (rad²).
+        noise_std: σ (m) per axis of what remains: the measurement noise and the error
+            neither the physics nor this residual represents (the evidence's estimate).
+        amplitudes: prior standard deviation per joint (rad), the fitted hyperparameters.
+        length_scale: the prior's spectral length scale (rad): harmonic ``h`` has prior
+            variance ``amplitude² exp(-(h ℓ)²/2)``.
+    """
+
+    joints: tuple[str, ...]
+    joint_index: tuple[int, ...]
+    harmonics: int
+    coefficients: Array = field(repr=False)
+    covariance: Array = field(repr=False)
+    noise_std: float
+    amplitudes: tuple[float, ...]
+    length_scale: float
+
+    kind = "joint_fourier"
+
+    def __post_init__(self) -> None:
+        m = len(self.joints) * 2 * self.harmonics
+        c = np.asarray(self.coefficients, dtype=float).reshape(-1)
+        C = np.asarray(self.covariance, dtype=float)
+        if len(self.joint_index) != len(self.joints) or len(self.amplitudes) != len(self.joints):
+            raise ValueError("residual: joints, joint_index and amplitudes must have the same length")
+        if c.shape != (m,) or C.shape != (m, m):
+            raise ValueError(
+                f"residual: {len(self.joints)} joints x {self.harmonics} harmonics need {m} coefficients and "
+                f"a {m}x{m} covariance, got {c.shape} and {C.shape}"
+            )
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(C))):
+            raise ValueError("residual: coefficients and covariance must be finite")
+        if not (self.harmonics >= 1 and np.isfinite(self.noise_std) and self.noise_std >= 0):
+            raise ValueError("residual: harmonics must be >= 1 and noise_std finite and >= 0")
+        c.setflags(write=False)
+        C = C.copy()
+        C.setflags(write=False)
+        object.__setattr__(self, "coefficients", c)
+        object.__setattr__(self, "covariance", C)
+
+    @property
+    def size(self) -> int:
+        return len(self.coefficients)
+
+    def basis(self, q: ArrayLike) -> Array:
+        """``(n, k, 2 H)`` basis values at joint values ``q`` ``(n, dof)``."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return fourier_basis(q[:, list(self.joint_index)], self.harmonics)
+
+    def angle_errors(self, q: ArrayLike) -> Array:
+        """``(n, k)`` angle errors δθ (rad) of the modelled joints at ``q`` ``(n, dof)``."""
+        B = self.basis(q)
+        return np.einsum("nkh,kh->nk", B, self.coefficients.reshape(len(self.joints), -1))
+
+    def perturbations(self, q: ArrayLike, dof: int | None = None) -> Array:
+        """Joint perturbations ``(n, dof, 3)`` (δα, δβ, δθ; only δθ is non-zero) at ``q``."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        out = np.zeros((len(q), q.shape[1] if dof is None else dof, 3))
+        out[:, list(self.joint_index), 2] = self.angle_errors(q)
+        return out
+
+    def design(self, q: ArrayLike, P: Array) -> Array:
+        """``(n, r, m)`` derivative of the tool position (``r = 3``) or pose (``r = 6``) wrt the
+        coefficients, from the perturbation Jacobian ``P`` ``(n, r, dof, 3)`` at ``q``."""
+        B = self.basis(q)  # (n, k, 2H)
+        cols = P[:, :, list(self.joint_index), 2]  # (n, r, k)
+        return (cols[:, :, :, None] * B[:, None, :, :]).reshape(len(B), P.shape[1], -1)
+
+    def position_covariance(self, q: ArrayLike, P: Array) -> Array:
+        """``(n, 3, 3)`` covariance (m²) of the residual's position prediction at ``q``
+        (the coefficients' posterior; the noise ``noise_std`` is not included)."""
+        A = self.design(q, P[:, :3])
+        return (A @ self.covariance) @ np.swapaxes(A, 1, 2)
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict[str, Any]:
+        """Plain lists and numbers (SI) for a model file; exact float round trip."""
+        return {
+            "kind": self.kind,
+            "joints": list(self.joints),
+            "harmonics": self.harmonics,
+            "noise_std": float(self.noise_std),
+            "amplitudes": [float(a) for a in self.amplitudes],
+            "length_scale": float(self.length_scale),
+            "coefficients": [float(v) for v in self.coefficients],
+            # the upper triangle, row by row (the matrix is symmetric)
+            "covariance_upper": [float(v) for v in self.covariance[np.triu_indices(self.size)]],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], joint_names: tuple[str, ...] | list[str]) -> JointAngleResidual:
+        """The inverse of :meth:`to_dict` for a chain with joints ``joint_names``; raises
+        ``ValueError`` naming what is wrong."""
+        if data.get("kind", cls.kind) != cls.kind:
+            raise ValueError(f"residual: unknown kind {data.get('kind')!r} (known: {cls.kind})")
+        joints = tuple(str(j) for j in data["joints"])
+        unknown = [j for j in joints if j not in joint_names]
+        if unknown:
+            raise ValueError(f"residual: joints {unknown} are not joints of the chain ({', '.join(joint_names)})")
+        coefficients = np.asarray(data["coefficients"], dtype=float)
+        m = len(coefficients)
+        upper = np.asarray(data["covariance_upper"], dtype=float)
+        if len(upper) != m * (m + 1) // 2:
+            raise ValueError(f"residual: covariance_upper needs {m * (m + 1) // 2} values, got {len(upper)}")
+        C = np.zeros((m, m))
+        C[np.triu_indices(m)] = upper
+        C = C + np.triu(C, 1).T
+        return cls(
+            joints=joints,
+            joint_index=tuple(list(joint_names).index(j) for j in joints),
+            harmonics=int(data["harmonics"]),
+            coefficients=coefficients,
+            covariance=C,
+            noise_std=float(data["noise_std"]),
+            amplitudes=tuple(float(a) for a in data["amplitudes"]),
+            length_scale=float(data["length_scale"]),
+        )
