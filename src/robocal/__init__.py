@@ -1,7 +1,8 @@
 """robocal — calibration of serial robot arms.
 
 >>> import robocal as rc
->>> model = rc.robot("ur10")
+>>> model = rc.robot("ur10")                  # the catalog's chain (UR's DH table)
+>>> calib = rc.calibration_model("ur10")     # the complete model to calibrate it with
 >>> T = model.fk([[0, -1.57, 1.57, 0, 1.57, 0]])   # (1, 4, 4) tool frame, m
 """
 
@@ -18,6 +19,7 @@ from robocal.model import (
     Model,
     ModelFileError,
     Step,
+    calibration_model,
     load_model,
     robot,
     robots,
@@ -42,6 +44,7 @@ __all__ = [
     "__version__",
     "build_model",
     "calibrate",
+    "calibration_model",
     "compensate",
     "cross_validate",
     "load_model",

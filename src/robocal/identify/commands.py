@@ -96,6 +96,16 @@ def calibrate_command(
     out: Annotated[Path, typer.Option("--out", help="directory for model.yaml and result.json")],
     robot_name: Annotated[str | None, typer.Option("--robot", help="catalog robot")] = None,
     model_path: Annotated[Path | None, typer.Option("--model", help="model YAML file")] = None,
+    chain: Annotated[
+        str | None,
+        typer.Option(
+            "--chain",
+            help="complete (default with --robot): the complete, minimal, continuous model built from the "
+            "robot's joint geometry (rc.calibration_model); catalog: the catalog's chain as published (e.g. "
+            "plain DH, singular for parallel axes). With --model the file's chain is calibrated unless "
+            "--chain complete",
+        ),
+    ] = None,
     measure: Annotated[str | None, typer.Option("--measure", help="position | pose")] = None,
     method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
     train_n: Annotated[
@@ -152,6 +162,10 @@ def calibrate_command(
 
     if (robot_name is None) == (model_path is None):
         raise fail("give exactly one of --robot NAME or --model FILE")
+    if chain not in (None, "complete", "catalog"):
+        raise fail(f"--chain {chain!r}: complete or catalog")
+    if model_path is not None and chain == "catalog":
+        raise fail("--chain catalog is for --robot NAME; --model FILE calibrates the file's chain as it is")
     model = resolve_model(robot_name if robot_name is not None else str(model_path))
     if out.exists() and not out.is_dir():
         raise fail(f"--out {out} is a file; give a directory for model.yaml and result.json")
@@ -191,6 +205,7 @@ def calibrate_command(
         train, test = split.split_rows("train"), split.split_rows("test")
     elif data.split is not None and "test" in set(data.split.tolist()):
         train, test = data.split_rows("train"), data.split_rows("test")
+    model = _chain_to_calibrate(model, robot_name, chain, measure, data)
     guess = None
     if tool is not None:
         try:
@@ -240,6 +255,36 @@ def calibrate_command(
         with console.status("writing the report ..."):
             path = write_report(result, out / "report.html", data=train, test_data=test)
         console.print(f"report: {path}", highlight=False)
+
+
+def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measure: str | None, data):
+    """The model the command calibrates, announced in one line: for ``--robot`` the complete
+    model built from the catalog robot's geometry (``--chain catalog``: the catalog's chain),
+    for ``--model`` the file's chain (``--chain complete``: the complete model built from
+    it); a chain calibrated as it is gets the parameterisation warnings on stderr."""
+    from robocal.model.complete import calibration_model
+    from robocal.model.singularity import parameterisation_warnings
+
+    effective = measure or ("pose" if data.orientation is not None else "position")
+    complete = chain == "complete" or (chain is None and robot_name is not None)
+    if complete:
+        try:
+            built = calibration_model(model, effective)
+        except ValueError as err:
+            raise fail(f"no complete model of {model.name}: {err}") from None
+        option = "" if robot_name is not None and chain is None else " (--chain complete)"
+        plain = " (--chain catalog: the catalog's chain)" if robot_name is not None else ""
+        console.print(
+            f"model: {built.name}, the complete model built from {model.name}'s joint geometry for "
+            f"{effective} measurements{option}{plain}",
+            highlight=False,
+        )
+        return built
+    what = "the catalog's chain (--chain catalog)" if robot_name is not None else "the model file's chain"
+    console.print(f"model: {model.name}, {what} as it is", highlight=False)
+    for w in parameterisation_warnings(model, effective):
+        err_console.print(f"[yellow]warning:[/] {w}", highlight=False)
+    return model
 
 
 def _print_result(result) -> None:

@@ -2,6 +2,7 @@
 
 from robocal.model.catalog import robot, robots
 from robocal.model.chain import Body, Joint, JointEffects, Model, Step
+from robocal.model.complete import calibration_model
 from robocal.model.files import ModelFileError, load_model, save_model
 
 __all__ = [
@@ -11,6 +12,7 @@ __all__ = [
     "Model",
     "ModelFileError",
     "Step",
+    "calibration_model",
     "load_model",
     "robot",
     "robots",

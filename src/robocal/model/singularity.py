@@ -31,7 +31,7 @@ import numpy as np
 
 from robocal.model.chain import Model
 
-__all__ = ["ContinuityCheck", "LinkCheck", "ModelCheck", "check_model"]
+__all__ = ["ContinuityCheck", "LinkCheck", "ModelCheck", "check_model", "parameterisation_warnings"]
 
 Verdict = Literal["ok", "near-singular", "singular"]
 
@@ -274,3 +274,75 @@ def check_model(
         rank, cond = 0, float("nan")
     continuity = _continuity(model, measure, scale, perturbation)
     return ModelCheck(model.name, tuple(links), rank, p, cond, tuple(continuity))
+
+
+def _as_calibrated(model: Model, measure: str) -> Model:
+    """The chain as a calibration sees it: a free device frame before the base and a free
+    tool after the end (what :func:`robocal.calibrate` adds), so that only the robot's own
+    parameterisation is judged, not the missing base and tool parameters of a chain that
+    starts at joint 1 or ends at the flange."""
+    from robocal.model.chain import Step
+
+    taken = set(model.names)
+
+    def fresh(name: str) -> str:
+        while name in taken:
+            name += "_"
+        taken.add(name)
+        return name
+
+    base = [Step(m, fresh(f"_check_base_{m}"), 0.0) for m in ("Tx", "Ty", "Tz", "Rz", "Ry", "Rx")]
+    tool_motions = ("Tx", "Ty", "Tz", "Rz", "Ry", "Rx") if measure == "pose" else ("Tx", "Ty", "Tz")
+    tool = [Step(m, fresh(f"_check_tool_{m}"), 0.0) for m in tool_motions]
+    return Model(name=model.name, steps=(*base, *model.steps, *tool))
+
+
+def parameterisation_warnings(model: Model, measure: Literal["position", "pose"] = "position") -> list[str]:
+    """Why ``model`` is a poor chain to calibrate, as one warning (or ``[]`` when it is fine).
+
+    Judges the chain at its nominal values as a calibration uses it (with a free device
+    frame and a free tool added, as :func:`robocal.calibrate` does): the links whose
+    parameters cannot describe every nearby position of the next joint axis (singular or
+    near-singular, e.g. DH for parallel axes) and the joints whose small tilt the chain
+    cannot follow continuously (:func:`check_model`'s link verdicts and continuity check;
+    no identification Jacobian, so it takes a few milliseconds).  The warning names them
+    and the fix: the complete model built from the robot's geometry.
+    """
+    if model.dof == 0:
+        return []
+    chain = _as_calibrated(model, measure)
+    scale = _size(chain)
+    links = [c for c in _link_checks(chain, measure, scale, 1e-2) if c.verdict != "ok"]
+    broken = [c for c in _continuity(chain, measure, scale, 1e-6) if not c.continuous]
+    if not links and not broken:
+        return []
+    names = model.joint_names
+
+    def link_label(check: LinkCheck) -> str:
+        own = [p for p in check.parameters if not p.startswith("_check_")]
+        if check.index == 0:
+            where = f"base → {names[0]}"
+        elif check.index < model.dof:
+            where = f"{names[check.index - 1]} → {names[check.index]}"
+        else:
+            where = f"{names[-1]} → tool"
+        return f"link {check.index} ({where}: {', '.join(own)}) is {check.verdict}"
+
+    parts = [link_label(c) for c in links]
+    if broken:
+        parts.append(
+            "a small tilt of joint " + ", ".join(c.joint for c in broken) + " has no small parameter change"
+        )
+    from robocal.model.catalog import robots
+
+    catalog = model.name if model.name in robots() else None
+    target = repr(catalog) if catalog else "model"
+    fixes = [f"rc.calibration_model({target}, {measure!r})"]
+    if catalog:
+        fixes.append(f"robocal calibrate --robot {catalog} (its default, --chain complete)")
+    fixes.append("robocal model build GEOMETRY.yaml")
+    return [
+        f"the {model.name} chain cannot describe every small deviation of the real robot at its nominal "
+        f"values ({measure} measurements): {'; '.join(parts)}. Calibrate the complete model built from the "
+        f"robot's joint geometry instead: {' / '.join(fixes)}"
+    ]
