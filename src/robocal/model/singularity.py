@@ -197,6 +197,47 @@ def _elem(motion: str, value: float) -> np.ndarray:
     return elementary(motion, value)
 
 
+def _geometry_jacobian(model: Model, measure: str, scale: float) -> np.ndarray:
+    """d :func:`_geometry` / d(values), analytically at the nominal values: a rotation step
+    turns everything after it about its axis line, a translation step shifts it along its
+    axis (the identification Jacobian's rule, applied to the joint lines and the tool)."""
+    from robocal.spatial import elementary
+
+    frames, before = [], []
+    T = np.eye(4)
+    for s in model.steps:
+        before.append(T)
+        T = T @ elementary(s.motion, s.value)
+        frames.append(T)
+    joint_idx = [i for i, s in enumerate(model.steps) if s.joint is not None]
+    columns = []
+    for k, s in enumerate(model.steps):
+        w = before[k][:3, s.axis]
+        o_k = before[k][:3, 3]
+        parts = []
+        for i in joint_idx:
+            F = frames[i]
+            u, o = F[:3, model.steps[i].axis], F[:3, 3]
+            if k > i:
+                du, do = np.zeros(3), np.zeros(3)
+            elif s.is_rotation:
+                du, do = np.cross(w, u), np.cross(w, o - o_k)
+            else:
+                du, do = np.zeros(3), w.copy()
+            if model.steps[i].is_rotation:
+                parts.append(np.concatenate([du, (np.cross(do, u) + np.cross(o, du)) / scale]))
+            else:
+                parts.append(du)
+        p = T[:3, 3]
+        dp = np.cross(w, p - o_k) if s.is_rotation else w
+        parts.append(dp / scale)
+        if measure == "pose":
+            dR = np.cross(w, T[:3, :3], axis=0) if s.is_rotation else np.zeros((3, 3))
+            parts.append(dR.ravel())
+        columns.append(np.concatenate(parts))
+    return np.stack(columns, axis=1)
+
+
 def _continuity(model: Model, measure: str, scale: float, eps: float) -> list[ContinuityCheck]:
     x0 = model.values
     angular = np.array([s.is_rotation for s in model.steps])
@@ -206,7 +247,7 @@ def _continuity(model: Model, measure: str, scale: float, eps: float) -> list[Co
     def g(xn):
         return _geometry(model, xn * xs, measure, scale)
 
-    J = _numeric_jacobian(g, x0 / xs)
+    J = _geometry_jacobian(model, measure, scale) * xs  # per dimensionless parameter
     G0 = g(x0 / xs)
     out = []
     if model.dof == 0:
