@@ -13,14 +13,12 @@ Run: ``python examples/ur10_real_data.py [--data PATH] [--seeds 5]``.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 
 import robocal as rc
-from robocal.model.builder import load_geometry
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "ur10_laser_tracker" / "measurements_grid.csv"
@@ -37,13 +35,9 @@ def read(path: Path):
 
 
 def complete_ur10() -> rc.Model:
-    """The UR10 built from joint geometry, with the catalog's masses on its links."""
-    built = load_geometry(ROOT / "examples" / "geometry" / "ur10.yaml").build("position").model
-    catalog = rc.robot("ur10")
-    # the catalog's link frames (after alpha_i) are the built model's frames after p_{i+1}
-    frame = {f"alpha{i}": f"p{i + 1}" for i in range(1, 6)} | {"alpha6": "tool_z"}
-    bodies = tuple(dataclasses.replace(b, frame=frame[b.frame]) for b in catalog.bodies)
-    return dataclasses.replace(built, bodies=bodies)
+    """The UR10's complete calibration model (built from the catalog's joint geometry,
+    Hayati on the parallel joints 2-4), with the catalog's masses carried over."""
+    return rc.calibration_model("ur10", "position")
 
 
 def main(argv=None) -> None:

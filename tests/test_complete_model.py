@@ -14,12 +14,18 @@ from robocal.cli import app
 from robocal.measure.dataset import write_measurements
 from robocal.measure.devices import LaserTracker
 from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
-from robocal.model.complete import geometry_from_model, step_frames
+from robocal.model.complete import geometry_from_model
 from robocal.model.dynamics import gravity_torques
 from robocal.model.singularity import check_model, parameterisation_warnings
+from robocal.model.view import step_frames
 
 TRACKER = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.2, -0.1, 2.5]), [2.2, -1.1, 0.4])
 PROBE = np.array([0.0, 0.0, 0.109])  # the T-Mac probe, 109 mm from the flange
+
+
+def flat(text):
+    """Output without Rich's line wrapping."""
+    return " ".join(text.split())
 
 
 def poses(model, n, seed):
@@ -86,7 +92,8 @@ def test_bodies_are_re_expressed_with_their_inertia():
     assert carried.frame != "alpha3" and carried.frame in model.names
     q = poses(model, 3, seed=5)
     for qk in q:
-        F_old, F_new = step_frames(catalog, qk)["alpha3"], step_frames(model, qk)[carried.frame]
+        F_old = step_frames(catalog, qk)[1 + catalog.names.index("alpha3")]
+        F_new = step_frames(model, qk)[1 + model.names.index(carried.frame)]
 
         def world(b, F):
             Ixx, Iyy, Izz, Ixy, Ixz, Iyz = b.inertia
@@ -212,13 +219,13 @@ def test_tilted_parallel_axes_through_the_cli(tmp_path):
         result = runner.invoke(app, args)
         assert result.exit_code == 0, result.output
         if chain == "complete":
-            assert (
-                "model: ur10_complete, the complete model built from ur10's joint geometry" in result.output
+            assert "model: ur10_complete, the complete model built from ur10's joint geometry" in flat(
+                result.output
             )
-            assert "warning: the ur10 chain" not in result.output
+            assert "warning: the ur10 chain" not in flat(result.output)
         else:
-            assert "model: ur10, the catalog's chain (--chain catalog)" in result.output
-            assert "link 2 (shoulder_lift → elbow" in result.stderr
+            assert "model: ur10, the catalog's chain (--chain catalog)" in flat(result.output)
+            assert "link 2 (shoulder_lift → elbow" in flat(result.stderr)
         saved = rc.load_model(out / "model.yaml")
         assert saved.name == ("ur10_complete" if chain == "complete" else "ur10")
         result = runner.invoke(app, ["validate", str(out), "--data", str(tmp_path / "test.csv"), "--json"])
@@ -228,3 +235,50 @@ def test_tilted_parallel_axes_through_the_cli(tmp_path):
         if chain == "complete":
             assert stats["rms_mm"] <= 1.15 * stats["expected_rms_mm"], stats
     assert rms["catalog"] > 5 * rms["complete"], rms
+
+
+def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
+    """Orientations in the file: the complete model for pose measurements (unless
+    --measure position); a model file is calibrated as it is, with the warnings, or its
+    complete model with --chain complete; --chain catalog is refused with --model."""
+    import dataclasses
+
+    from robocal.measure.dataset import Measurements
+
+    robot = tilted_ur10(1)
+    q = poses(robot.nominal, 60, 7)
+    T = robot.T_base_tool(q)
+    position = (T[:, :3, :3] @ PROBE + T[:, :3, 3]) @ TRACKER[:3, :3].T + TRACKER[:3, 3]
+    orientation = TRACKER[:3, :3] @ T[:, :3, :3]
+    data = write_measurements(
+        Measurements(q=q, position=position, orientation=orientation), tmp_path / "p.csv"
+    )
+    runner = CliRunner()
+    base = ["calibrate", "--data", str(data), "--tool", "0,0,109"]
+    result = runner.invoke(app, [*base, "--robot", "ur10", "--out", str(tmp_path / "a")])
+    assert result.exit_code == 0, result.output
+    assert "model: ur10_complete, the complete model built from ur10's joint geometry for pose" in flat(
+        result.output
+    )
+    result = runner.invoke(
+        app, [*base, "--robot", "ur10", "--measure", "position", "--out", str(tmp_path / "b")]
+    )
+    assert result.exit_code == 0, result.output
+    assert "for position measurements" in flat(result.output)
+    path = rc.save_model(dataclasses.replace(rc.robot("ur10"), name="my_ur10"), tmp_path / "my_ur10.yaml")
+    result = runner.invoke(app, [*base, "--model", str(path), "--out", str(tmp_path / "c")])
+    assert result.exit_code == 0, result.output
+    assert "model: my_ur10, the model file's chain as it is" in flat(result.output)
+    assert "warning: the my_ur10 chain cannot describe" in flat(result.stderr)
+    assert "rc.calibration_model(model, 'pose')" in flat(result.stderr)
+    result = runner.invoke(
+        app, [*base, "--model", str(path), "--chain", "complete", "--out", str(tmp_path / "d")]
+    )
+    assert result.exit_code == 0, result.output
+    assert "model: my_ur10_complete" in flat(result.output) and "warning: the" not in flat(result.stderr)
+    result = runner.invoke(
+        app, [*base, "--model", str(path), "--chain", "catalog", "--out", str(tmp_path / "e")]
+    )
+    assert result.exit_code != 0 and "--chain catalog is for --robot NAME" in flat(result.output)
+    result = runner.invoke(app, [*base, "--robot", "ur10", "--chain", "dh", "--out", str(tmp_path / "f")])
+    assert result.exit_code != 0 and "complete or catalog" in flat(result.output)

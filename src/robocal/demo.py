@@ -57,93 +57,30 @@ SMR_OFFSET = (0.0, 0.0, 0.1)
 
 # ------------------------------------------------------------------ models
 def geometry_of(model: Model) -> tuple[list, Any]:
-    """Joint geometry of a chain at its zero configuration, as the builder takes it.
+    """Joint geometry of a chain at its zero configuration, as the builder takes it
+    (:func:`robocal.model.complete.geometry_from_model`)."""
+    from robocal.model.complete import geometry_from_model
 
-    Returns ``(joints, tcp)``: one :class:`~robocal.model.builder.JointGeometry` per
-    joint (origin on the joint axis relative to the previous joint's origin, axis
-    direction, base coordinates, m) and the :class:`~robocal.model.builder.Tcp`
-    (the chain's end frame relative to the last joint's origin).
-    """
-    from robocal.model.builder import JointGeometry, Tcp
-
-    q0 = np.zeros((1, model.dof))
-    frames = model.joint_frames(q0)[0]  # (dof, 4, 4)
-    axes = [s.axis for s in model.steps if s.joint is not None]
-    limits = model.joint_limits
-    joints = []
-    previous = np.zeros(3)
-    for j in range(model.dof):
-        origin = frames[j, :3, 3]
-        lim = None if not np.all(np.isfinite(limits[j])) else (float(limits[j, 0]), float(limits[j, 1]))
-        joints.append(
-            JointGeometry(
-                model.joint_types[j],
-                tuple((origin - previous).tolist()),
-                tuple(frames[j, :3, axes[j]].tolist()),
-                model.joint_names[j],
-                lim,
-            )
-        )
-        previous = origin
-    T = model.fk(q0)[0]
-    tcp = Tcp(tuple((T[:3, 3] - previous).tolist()), tuple(map(tuple, T[:3, :3].tolist())))
-    return joints, tcp
-
-
-def _transfer_bodies(source: Model, target: Model) -> tuple[Body, ...]:
-    """``source``'s bodies re-expressed in ``target``'s joint frames (same kinematics)."""
-    from robocal.model.view import step_frames
-
-    F_src = step_frames(source)[1:]  # frame after each step at q = 0
-    F_tgt = step_frames(target)[1:]
-    src_index = {s.name: k for k, s in enumerate(source.steps)}
-    joint_steps_src = [k for k, s in enumerate(source.steps) if s.joint is not None]
-    joint_steps_tgt = [k for k, s in enumerate(target.steps) if s.joint is not None]
-    out = []
-    for body in source.bodies:
-        k = src_index[body.frame]
-        moving = [j for j, ks in enumerate(joint_steps_src) if ks <= k]
-        if not moving:
-            continue  # fixed to the base: no joint torque
-        j = moving[-1]
-        kt = joint_steps_tgt[j]
-        T_rel = spatial.inverse(F_tgt[kt]) @ F_src[k]
-        R, p = T_rel[:3, :3], T_rel[:3, 3]
-        com = R @ np.asarray(body.com) + p
-        inertia = body.inertia
-        if inertia is not None:
-            Ixx, Iyy, Izz, Ixy, Ixz, Iyz = inertia
-            J = R @ np.array([[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]]) @ R.T
-            inertia = (J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2])
-        out.append(dataclasses.replace(body, frame=target.steps[kt].name, com=tuple(com), inertia=inertia))
-    return tuple(out)
+    return geometry_from_model(model)
 
 
 def complete_model(robot: str | Model, measure: str = "position", payload: float = 5.0) -> Model:
-    """The complete, minimal, singularity-free calibration model of a robot (seed 000).
-
-    The robot's joint geometry at zero (:func:`geometry_of`) goes through the builder,
-    and its link masses are carried over to the built model's joint frames.  A robot
-    without mass properties gets a point payload of ``payload`` kg at its tool, so that
-    gravity loads its joints.
+    """The complete, minimal, singularity-free calibration model of a robot (seed 000):
+    :func:`robocal.calibration_model`, its link masses carried over.  A robot without mass
+    properties gets a point payload of ``payload`` kg at its tool, so that gravity loads
+    its joints.
 
     Args:
         robot: a catalog name or a model.
         measure: ``"position"`` or ``"pose"`` measurement (decides the tool link).
         payload: kg, used only when the robot has no masses.
     """
-    from robocal.model.builder import build
-    from robocal.model.catalog import robot as catalog_robot
+    from robocal.model.complete import calibration_model
 
-    model = catalog_robot(robot) if isinstance(robot, str) else robot
-    joints, tcp = geometry_of(model)
-    built = build(
-        joints, tcp, measure, name=f"{model.name}_complete", title=model.title, source=model.source
-    ).model  # type: ignore[arg-type]
-    bodies = _transfer_bodies(model, built) if model.bodies else ()
-    if not bodies and payload > 0:
-        bodies = (Body("payload", built.steps[-1].name, float(payload)),)
-    return dataclasses.replace(built, bodies=bodies)
+    built = calibration_model(robot, measure)  # type: ignore[arg-type]
+    if not built.bodies and payload > 0:
+        built = dataclasses.replace(built, bodies=(Body("payload", built.steps[-1].name, float(payload)),))
+    return built
 
 
 @dataclass(frozen=True)

@@ -21,30 +21,12 @@ from typing import Literal
 
 import numpy as np
 
-from robocal import spatial
 from robocal.model.builder import JointGeometry, Tcp, build
 from robocal.model.chain import Body, Model
 
-__all__ = ["calibration_model", "geometry_from_model", "step_frames"]
+__all__ = ["calibration_model", "geometry_from_model"]
 
 Measure = Literal["position", "pose"]
-
-
-def step_frames(model: Model, q: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """The frame ``(4, 4)`` after every step of ``model`` at joint values ``q`` (default
-    zero), in the base frame, by step name."""
-    q = np.zeros(model.dof) if q is None else np.asarray(q, dtype=float)
-    frames = {}
-    T = np.eye(4)
-    j = 0
-    for step in model.steps:
-        value = step.value
-        if step.joint is not None:
-            value += q[j]
-            j += 1
-        T = T @ spatial.elementary(step.motion, value)
-        frames[step.name] = T
-    return frames
 
 
 def geometry_from_model(model: Model) -> tuple[list[JointGeometry], Tcp]:
@@ -107,7 +89,10 @@ def _carry_bodies(source: Model, target: Model) -> tuple[Body, ...]:
     """``source``'s bodies re-expressed in frames of ``target`` attached to the same links."""
     if not source.bodies:
         return ()
-    old_frames, new_frames = step_frames(source), step_frames(target)
+    from robocal.model.view import step_frames  # frames after every step at q = 0
+
+    old_frames = dict(zip(source.names, step_frames(source)[1:], strict=True))
+    new_frames = dict(zip(target.names, step_frames(target)[1:], strict=True))
     old_link, chosen = _link_of_steps(source), _body_frames(target)
     bodies = []
     for body in source.bodies:
