@@ -139,7 +139,9 @@ def _setup(
         nom = nominal_model(calibrated) if nominal is None else nominal
         has_nominal = True
     elif isinstance(calibrated, Model):
-        real, effects, frame = calibrated, None, None
+        real, frame = calibrated, None
+        # a bare calibrated model still carries its learned residual (joint angle errors)
+        effects = None if calibrated.residual is None else calibrated.residual.perturbations
         nom = calibrated if nominal is None else nominal
         has_nominal = nominal is not None
     else:

@@ -259,6 +259,9 @@ class CalibrationResult:
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     metadata: dict[str, Any] = field(default_factory=dict)
     payload: Payload | None = None
+    # (p, m) covariance of the estimated parameters with the learned residual's coefficients
+    # (model.residual), from their joint fit; None without a residual
+    residual_cross_covariance: Array | None = field(default=None, repr=False)
 
     def joint_perturbations(
         self, q: ArrayLike, qd: ArrayLike | None = None, qdd: ArrayLike | None = None
@@ -363,9 +366,13 @@ class CalibrationResult:
         C = self.covariance[np.ix_(idx, idx)]
         # J C Jᵀ per pose, by matmuls (an einsum over both sums is 40x slower)
         cov = (J @ C) @ np.swapaxes(J, 1, 2)
-        if self.model.residual is not None:  # the learned residual's posterior, independent
+        if self.model.residual is not None:  # the learned residual, fitted jointly with the parameters
             P = chain.perturbation_jacobian(q, "position", perturbations)
             cov = cov + self.model.residual.position_covariance(q, P)
+            if self.residual_cross_covariance is not None:
+                A = self.model.residual.design(q, P[:, :3])
+                cross = (J @ self.residual_cross_covariance[idx]) @ np.swapaxes(A, 1, 2)
+                cov = cov + cross + np.swapaxes(cross, 1, 2)
         return cov
 
     def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
@@ -379,6 +386,24 @@ class CalibrationResult:
         B = B[[basis_names.index(n) for n in names]]  # (m, n, dof, 3)
         P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
         return np.einsum("nrjc,knjc->nrk", P, B)
+
+    def position_columns(self, q: ArrayLike) -> Array:
+        """``(n, 3, p)`` derivatives of the predicted measurement (device frame, m) wrt the
+        estimated parameters (:attr:`names`, SI) at ``q``."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        chain = self.measurement_chain
+        if chain is None:
+            raise ValueError("this result has no measurement chain (saved by an older robocal?)")
+        perturbations = self.joint_perturbations(q)
+        geometric = [n for n in self.names if n in set(chain.names)]
+        effects = [n for n in self.names if _effect_prefix(n) is not None]
+        model = chain.with_free(None, free=False).with_free(geometric)
+        J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
+        J = J[:, :, [model.free_names.index(n) for n in geometric]]
+        if effects:
+            J = np.concatenate([J, self._effect_columns(chain, q, perturbations, effects)], axis=2)
+        order = [(geometric + effects).index(n) for n in self.names]
+        return J[:, :, order]
 
     def position_uncertainty(self, q: ArrayLike, frame: Literal["device", "base"] = "device") -> Array:
         """1-σ radial position uncertainty ``sqrt(trace(cov))`` (m) at each pose, ``(n,)``."""
@@ -395,6 +420,7 @@ class CalibrationResult:
             f"  residual standard deviation {self.residual_std * 1e3:.4f} mm, "
             f"condition number {self.condition_number:.3g}",
             *([f"  {noise.summary()}"] if (noise := self.fit_to_noise) is not None else []),
+            *[f"  {line}" for line in self.residual_lines()],
             "  parameter                nominal       estimate          delta           sigma",
         ]
         rot = {s.name: s.is_rotation for s in (self.measurement_chain or self.model).steps}
@@ -416,6 +442,28 @@ class CalibrationResult:
             lines.append(f"  warning: {a} and {b} are correlated ({rho:+.3f})")
         lines += [f"  warning: {w}" for w in self.metadata.get("warnings", [])]
         return "\n".join(lines)
+
+    def residual_lines(self) -> list[str]:
+        """The model choice (CV table) and the learned residual, as text lines (empty when
+        the calibration did not consider one)."""
+        if "cv" not in self.metadata:
+            return []
+        from robocal.identify.residual import CVTable
+
+        lines = CVTable.from_dict(self.metadata["cv"]).lines()
+        learned = self.model.residual
+        if learned is None:
+            return [*lines, "learned residual: none (the physical model alone predicts best)"]
+        amplitudes = ", ".join(
+            f"{j} {a * 1e6:.0f}" for j, a in zip(learned.joints, learned.amplitudes, strict=True)
+        )
+        return [
+            *lines,
+            f"learned residual: joint angle errors, {learned.harmonics} harmonics per revolution on "
+            f"{len(learned.joints)} joints (prior RMS µrad: {amplitudes}); RMS error on the calibration "
+            f"poses {self.metadata.get('residual_rms_after_mm', float('nan')):.4f} mm, remaining σ "
+            f"{learned.noise_std * 1e3:.4f} mm per axis",
+        ]
 
     @property
     def fit_to_noise(self) -> FitToNoise | None:
@@ -484,6 +532,11 @@ class CalibrationResult:
             "compliance_rad_per_Nm": self.compliance,
             "gravity": list(self.gravity),
             **({"payload": _payload_dict(self.payload)} if self.payload is not None else {}),
+            **(
+                {"residual_cross_covariance": self.residual_cross_covariance.tolist()}
+                if self.residual_cross_covariance is not None
+                else {}
+            ),
             **self.metadata,
         }
 
@@ -545,11 +598,17 @@ class CalibrationResult:
             gravity=tuple(data.get("gravity", (0.0, 0.0, -9.81))),
             metadata=extra,
             payload=Payload(**data["payload"]) if data.get("payload") else None,
+            residual_cross_covariance=(
+                np.array(data["residual_cross_covariance"], dtype=float)
+                if data.get("residual_cross_covariance") is not None
+                else None
+            ),
         )
 
 
 _DICT_ONLY = {
     "robocal_version",
+    "residual_cross_covariance",
     "payload",
     "model",
     "rms_before_mm",
@@ -1102,6 +1161,9 @@ def calibrate_physics(
                     "if this robot's differ, identify them too (level=3 / --level 3) or calibrate a "
                     "model without them"
                 )
+    if model.residual is not None:  # a learned residual given with the model is known: applied, not fitted
+        learned = model.residual.perturbations(data.q, model.dof)
+        known = learned if known is None else known + learned
     problem = Problem(
         chain,
         data.q,

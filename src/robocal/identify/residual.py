@@ -18,10 +18,13 @@ chunks of poses, so memory is ``O(m²)`` plus one chunk whatever the number of p
 Model choice (:func:`cross_validate_residual`): k folds of the *training* poses; in each
 fold the physical model is calibrated again on the other folds, and each candidate —
 physics only, and the residual with each number of harmonics — predicts the held-out
-fold.  The hyperparameters of each candidate are those of the evidence on all training
-poses (re-optimising them per fold would multiply the cost by k for little change);
-the candidate with the lowest mean cross-validated error wins.  Held-out data never
-enters.
+fold.  The residual is fitted jointly with the physical parameters (their columns are
+projected out of its design; in the folds their linear response is added to the
+prediction, and the final model is calibrated again with the residual known).  The
+hyperparameters of each candidate are those of the evidence on all training poses
+(re-optimising them per fold would multiply the cost by k for little change).  The
+simplest candidate within 1 % of the lowest mean cross-validated error wins.  Held-out
+data never enters.
 """
 
 from __future__ import annotations
@@ -52,7 +55,7 @@ __all__ = [
 Array = NDArray[np.float64]
 
 #: the numbers of harmonics cross-validation chooses from (per revolution)
-DEFAULT_HARMONICS: tuple[int, ...] = (4, 12, 32)
+DEFAULT_HARMONICS: tuple[int, ...] = (8, 24, 48)
 _CHUNK = 2048  # poses per chunk of the design matrix
 MAX_AMPLITUDE = 2e-3  # rad, the largest prior RMS of a joint's angle error
 
@@ -66,18 +69,33 @@ class Hyper:
     noise: float
 
 
-def _gram(q: Array, r: Array, P: Array, template: JointAngleResidual) -> tuple[Array, Array, float, int]:
+def _gram(
+    q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None = None
+) -> tuple[Array, Array, float, int]:
     """``G = AᵀA`` ``(m, m)``, ``b = Aᵀr`` ``(m,)``, ``rᵀr`` and the number of equations,
-    accumulated over chunks of poses."""
+    accumulated over chunks of poses.  With the physical model's columns ``J`` ``(n, 3, p)``
+    they are taken in the complement of ``J``'s column space (``A ← (I − QQᵀ) A``): the
+    residual is fitted *jointly* with the physical parameters, which take back whatever
+    part of the angle errors they can represent (a flat prior on them)."""
     m = template.size
     G, b, rr = np.zeros((m, m)), np.zeros(m), 0.0
+    Q = None if J is None else np.linalg.qr(J.reshape(-1, J.shape[-1]))[0]
+    QA, Qr = (None, None) if Q is None else (np.zeros((Q.shape[1], m)), Q.T @ r.reshape(-1))
     for s in range(0, len(q), _CHUNK):
         A = template.design(q[s : s + _CHUNK], P[s : s + _CHUNK]).reshape(-1, m)
         y = r[s : s + _CHUNK].reshape(-1)
         G += A.T @ A
         b += A.T @ y
         rr += float(y @ y)
-    return G, b, rr, r.size
+        if Q is not None:
+            QA += Q[3 * s : 3 * s + len(y)].T @ A
+    N = r.size
+    if Q is not None:
+        G -= QA.T @ QA
+        b -= QA.T @ Qr
+        rr -= float(Qr @ Qr)
+        N -= Q.shape[1]
+    return G, b, rr, N
 
 
 def _spectrum(log_ell: float, freq: Array) -> tuple[Array, Array]:
@@ -151,6 +169,7 @@ def fit_joint_fourier(
     joint_index: Sequence[int],
     harmonics: int,
     hyper: Hyper | None = None,
+    J: Array | None = None,
 ) -> tuple[JointAngleResidual, Hyper]:
     """Fit per-joint Fourier angle errors to position residuals.
 
@@ -162,11 +181,13 @@ def fit_joint_fourier(
         joint_names, joint_index: the joints whose angle errors are modelled.
         harmonics: H.
         hyper: fixed hyperparameters (skip the evidence maximisation), e.g. in CV folds.
+        J: ``(n, 3, p)`` the physical model's columns at ``q`` (its derivatives wrt its
+            estimated parameters): fit jointly with them (see :func:`_gram`).
 
     Returns the residual model and its hyperparameters.
     """
     template = _template(joint_names, joint_index, harmonics)
-    G, b, rr, N = _gram(q, residuals, P, template)
+    G, b, rr, N = _gram(q, residuals, P, template, J)
     groups, freq = _layout(template)
     k = len(joint_names)
     if hyper is None:
@@ -253,16 +274,26 @@ class CVTable:
         return out
 
 
-#: a physical fit: (train indices) -> (predict(q) -> ((n, 3) positions in the device frame,
-#: (n, 3, dof, 3) perturbation Jacobian), residuals (n_train, 3), perturbation Jacobian
-#: (n_train, 3, dof, 3), seconds the fit took)
-PhysicsFit = Callable[[Array], tuple[Callable[[Array], tuple[Array, Array]], Array, Array, float]]
+@dataclass(frozen=True)
+class PhysicalFit:
+    """A physical calibration on some training poses, as the residual stage needs it."""
+
+    result: Any  # the CalibrationResult
+    residuals: Array  # (n_train, 3) measured − predicted, device frame (m)
+    P: Array  # (n_train, 3, dof, 3) perturbation Jacobian
+    J: Array  # (n_train, 3, p) derivatives wrt the estimated physical parameters
+
+    def predict(self, q: Array) -> tuple[Array, Array, Array]:
+        """Positions ``(n, 3)``, perturbation Jacobian and parameter columns at ``q``."""
+        r = self.result
+        P = r.measurement_chain.perturbation_jacobian(q, "position", r.joint_perturbations(q))
+        return r.predict(q)[:, :3, 3], P, r.position_columns(q)
 
 
 def cross_validate_residual(
     q: Array,
     position: Array,
-    physics: dict[str, PhysicsFit],
+    physics: dict[str, Callable[[Array], PhysicalFit]],
     joint_names: Sequence[str],
     joint_index: Sequence[int],
     harmonics: Sequence[int] = DEFAULT_HARMONICS,
@@ -273,9 +304,8 @@ def cross_validate_residual(
     """k-fold CV over physical variants × (no residual, Fourier residual with H harmonics).
 
     ``physics[name](train_indices)`` calibrates that physical variant on those training
-    poses and returns ``(predict, residuals, P)``: ``predict(q)`` gives positions and the
-    perturbation Jacobian at ``q``.  Returns the table and the hyperparameters found for
-    each residual candidate on all poses.
+    poses.  Returns the table and the hyperparameters found for each residual candidate on
+    all poses.
     """
     n = len(q)
     order = np.random.default_rng(seed).permutation(n)
@@ -283,39 +313,49 @@ def cross_validate_residual(
     everything = np.arange(n)
     rows: list[CVCandidate] = []
     hypers: dict[str, Hyper] = {}
-    for pname, fit in physics.items():
-        _, r_all, P_all, t_phys = fit(everything)
-        names = [f"{pname}"] if include_none else []
+    for pname, physics_fit in physics.items():
+        full = physics_fit(everything)
         specs: list[tuple[str, int | None]] = [(pname, None)] if include_none else []
-        fixed: dict[int, Hyper] = {}
-        fit_time: dict[str, float] = {pname: t_phys}
+        fit_time: dict[str, float] = {pname: full.result.seconds}
         for H in harmonics:
             t1 = time.perf_counter()
-            _, hyper = fit_joint_fourier(q, r_all, P_all, joint_names, joint_index, H)
+            _, hyper = fit_joint_fourier(q, full.residuals, full.P, joint_names, joint_index, H, J=full.J)
             name = f"{pname} + joint angle errors H={H}"
-            fixed[H], hypers[name] = hyper, hyper
-            fit_time[name] = t_phys + time.perf_counter() - t1
+            hypers[name] = hyper
+            fit_time[name] = full.result.seconds + time.perf_counter() - t1
             specs.append((name, H))
-            names.append(name)
         errors = {name: np.empty(n) for name, _ in specs}
         for held in parts:
             train = np.setdiff1d(everything, held)
-            predict, r_train, P_train, _ = fit(train)
-            p_held, P_held = predict(q[held])
+            fold = physics_fit(train)
+            p_held, P_held, J_held = fold.predict(q[held])
             base = position[held] - p_held
+            # least squares of the physical parameters over the fold's training poses
+            J2 = fold.J.reshape(-1, fold.J.shape[-1])
             for name, H in specs:
                 if H is None:
                     e = base
                 else:
-                    model, _ = fit_joint_fourier(q[train], r_train, P_train, joint_names, joint_index, H, fixed[H])
-                    e = base - np.einsum("nrm,m->nr", model.design(q[held], P_held), model.coefficients)
+                    learned, _ = fit_joint_fourier(
+                        q[train], fold.residuals, fold.P, joint_names, joint_index, H, hypers[name], J=fold.J
+                    )
+                    Ac = np.einsum("nrm,m->nr", learned.design(q[train], fold.P), learned.coefficients)
+                    dg = -np.linalg.lstsq(J2, Ac.reshape(-1), rcond=None)[0]
+                    moved = J_held @ dg + np.einsum("nrm,m->nr", learned.design(q[held], P_held), learned.coefficients)
+                    e = base - moved
                 errors[name][held] = np.linalg.norm(e, axis=1)
         for name, H in specs:
             e = errors[name]
             rows.append(
                 CVCandidate(name, pname, H, float(e.mean()), float(np.sqrt(np.mean(e**2))), fit_time[name])
             )
-    best = min(rows, key=lambda c: c.cv_mean)
+    # the simplest candidate (physics before residual, fewer harmonics) whose CV error is
+    # within 1 % of the lowest: a tie is no reason for more parameters
+    lowest = min(c.cv_mean for c in rows)
+    best = min(
+        (c for c in rows if c.cv_mean <= 1.01 * lowest),
+        key=lambda c: (c.harmonics or 0, c.physics != next(iter(physics))),
+    )
     return CVTable(folds, tuple(rows), best.name), hypers
 
 
@@ -354,71 +394,107 @@ def calibrate_with_residual(
     if not 2 <= folds <= 20:
         raise ValueError(f"cv_folds must lie between 2 and 20, got {folds}")
     base = calibrate_physics(model, data, method, **options)
-    if data.n < max(MIN_CV_POSES, 2 * folds):
-        base.metadata.setdefault("warnings", []).append(
-            f"{data.n} poses are too few to choose a learned residual by {folds}-fold cross-validation "
-            f"(at least {MIN_CV_POSES}): the physical model alone"
-        )
-        return base
-    variants = {_physics_name(options): options}
-    joint_effects_asked = any(options.get(k) not in (None, False, "none") for k in ("compliance", "effects", "level"))
-    if kind == "auto" and model.bodies and not joint_effects_asked:
-        variants[_COMPLIANCE_VARIANT] = {**options, "compliance": True}
-
-    fits: dict[tuple[str, bytes], Any] = {}
-
-    def physics(name: str) -> PhysicsFit:
-        def fit(train: Array):
-            key = (name, train.tobytes())
-            if key not in fits:
-                everything = len(train) == data.n
-                if everything and name == _physics_name(options):
-                    result = base
-                else:
-                    result = calibrate_physics(model, data if everything else data.subset(train), method, **variants[name])
-                fits[key] = result
-            result = fits[key]
-
-            def predict(q: Array) -> tuple[Array, Array]:
-                pert = result.joint_perturbations(q)
-                p = result.predict(q)[:, :3, 3]
-                return p, result.measurement_chain.perturbation_jacobian(q, "position", pert)
-
-            p_train, P_train = predict(data.q[train])
-            return predict, data.position[train] - p_train, P_train, result.seconds
-
-        return fit
-
-    robust: dict[str, PhysicsFit] = {}
-    for name in variants:
-        try:  # a variant that cannot be calibrated on these poses is left out of the choice
-            physics(name)(np.arange(data.n))
-        except (ValueError, np.linalg.LinAlgError):
-            continue
-        robust[name] = physics(name)
     # revolute joints only: the angle errors of a joint as a function of its own angle
     revolute = [s.is_rotation for s in model.steps if s.joint is not None]
     joints = [j for j, rot in enumerate(revolute) if rot]
-    if not joints:
+    if data.n < max(MIN_CV_POSES, 2 * folds) or not joints:
+        base.metadata.setdefault("warnings", []).append(
+            f"{data.n} poses are too few to choose a learned residual by {folds}-fold cross-validation "
+            f"(at least {max(MIN_CV_POSES, 2 * folds)}): the physical model alone"
+        )
         return base
     names = [model.joint_names[j] for j in joints]
+    variants = {_physics_name(options): options}
+    asked = any(options.get(k) not in (None, False, "none") for k in ("compliance", "effects", "level"))
+    if kind == "auto" and model.bodies and not asked:
+        variants[_COMPLIANCE_VARIANT] = {**options, "compliance": True}
+
+    def physics(name: str) -> Callable[[Array], PhysicalFit]:
+        def fit(train: Array) -> PhysicalFit:
+            everything = len(train) == data.n
+            if everything and name == _physics_name(options):
+                result = base
+            else:
+                result = calibrate_physics(model, data if everything else data.subset(train), method, **variants[name])
+            q = data.q[train]
+            p, P, J = PhysicalFit(result, np.empty(0), np.empty(0), np.empty(0)).predict(q)
+            return PhysicalFit(result, data.position[train] - p, P, J)
+
+        return fit
+
+    usable: dict[str, Callable[[Array], PhysicalFit]] = {}
+    full: dict[str, PhysicalFit] = {}
+    for name in variants:
+        try:  # a variant that cannot be calibrated on these poses is left out of the choice
+            full[name] = physics(name)(np.arange(data.n))
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        usable[name] = _memo(physics(name), full[name], data.n)
     table, hypers = cross_validate_residual(
-        data.q, data.position, robust, names, joints, grid, folds, include_none=kind == "auto"
+        data.q, data.position, usable, names, joints, grid, folds, include_none=kind == "auto"
     )
     chosen = next(c for c in table.candidates if c.name == table.chosen)
-    result = fits[(chosen.physics, np.arange(data.n).tobytes())]
+    fit = full[chosen.physics]
+    result = fit.result
     if chosen.harmonics is not None:
-        _, r, P, _ = robust[chosen.physics](np.arange(data.n))
-        learned, _ = fit_joint_fourier(data.q, r, P, names, joints, chosen.harmonics, hypers[chosen.name])
-        result = dataclasses.replace(
-            result,
-            model=dataclasses.replace(result.model, residual=learned),
-            metadata=dict(result.metadata),
+        learned, _ = fit_joint_fourier(
+            data.q, fit.residuals, fit.P, names, joints, chosen.harmonics, hypers[chosen.name], J=fit.J
         )
-        e = r - np.einsum("nrm,m->nr", learned.design(data.q, P), learned.coefficients)
+        # the physical parameters refitted with the learned angle errors known (the joint fit's
+        # exact version of what the CV did linearly)
+        result = calibrate_physics(
+            dataclasses.replace(model, residual=learned), data, method, **variants[chosen.physics]
+        )
+        result = _joint_uncertainty(result, data.q)
+        e = data.position - result.predict(data.q)[:, :3, 3]
         result.metadata["residual_rms_after_mm"] = float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) * 1e3
     else:
         result = dataclasses.replace(result, metadata=dict(result.metadata))
     result.metadata["cv"] = table.to_dict()
     result.seconds = time.perf_counter() - t0
     return result
+
+
+def _memo(fit: Callable[[Array], PhysicalFit], whole: PhysicalFit, n: int) -> Callable[[Array], PhysicalFit]:
+    """``fit`` that returns ``whole`` for all ``n`` poses instead of calibrating again."""
+    return lambda train: whole if len(train) == n else fit(train)
+
+
+def _joint_uncertainty(result: Any, q: Array) -> Any:
+    """``result`` with the covariance of its parameters and of the residual's coefficients
+    from their *joint* fit (Fisher matrix of both, the residual's prior included, noise σ
+    from the evidence): directions of the residual that the physical parameters can absorb
+    are uncertain in both but cancel in predictions, which the cross-covariance carries.
+    In whitened coordinates ``c = S^½ v`` so that the matrix inverted is well conditioned."""
+    learned: JointAngleResidual = result.model.residual
+    chain = result.measurement_chain
+    P = chain.perturbation_jacobian(q, "position", result.joint_perturbations(q))
+    J = result.position_columns(q).reshape(-1, len(result.names))
+    A = learned.design(q, P).reshape(-1, learned.size)
+    groups, freq = _layout(learned)
+    theta = np.r_[np.log(learned.amplitudes), np.log(learned.length_scale), np.log(max(learned.noise_std, 1e-12))]
+    d = np.exp(0.5 * _prior(theta, groups, freq))
+    Ad = A * d
+    p = J.shape[1]
+    F = np.block([[J.T @ J, J.T @ Ad], [Ad.T @ J, Ad.T @ Ad + learned.noise_std**2 * np.eye(learned.size)]])
+    scale = np.sqrt(np.maximum(np.diag(F), 1e-300))  # columns scaled: J's units differ widely
+    try:
+        cov = np.linalg.inv(F / np.outer(scale, scale)) / np.outer(scale, scale) * learned.noise_std**2
+    except np.linalg.LinAlgError:
+        return result
+    cov = 0.5 * (cov + cov.T)
+    cov_g = cov[:p, :p]
+    cov_c = d[:, None] * cov[p:, p:] * d[None, :]
+    std = np.sqrt(np.maximum(np.diag(cov_g), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov_g / np.outer(std, std)
+    joint = dataclasses.replace(learned, covariance=cov_c)
+    return dataclasses.replace(
+        result,
+        model=dataclasses.replace(result.model, residual=joint),
+        covariance=cov_g,
+        std=std,
+        correlation=corr,
+        residual_cross_covariance=cov[:p, p:] * d[None, :],
+        metadata=dict(result.metadata),
+    )

@@ -52,7 +52,8 @@ class ValidationStats:
     parameter_rms: float | None = None
     expected_rms: float | None = None
     # where the rest came from: "sigma" (the data's noise), "sigma+unmodelled" (and the error
-    # the calibration's residuals showed beyond its noise) or "residuals" (their scatter)
+    # the calibration's residuals showed beyond its noise), "residuals" (their scatter) or
+    # "residual model" (what the learned residual's evidence left unexplained)
     scatter: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -147,7 +148,12 @@ def _with_expectation(
     cov = result.position_covariance(data.q, frame="device" if label == "calibrated" else "base")
     parameter_ms = float(np.mean(np.trace(cov, axis1=1, axis2=2)))
     fit = result.fit_to_noise
-    if data.sigma is not None:
+    learned = result.model.residual
+    if learned is not None:
+        # the learned residual's evidence estimated what remains per axis: the noise and the
+        # error neither the physics nor the residual represents
+        scatter_ms, scatter = 3.0 * learned.noise_std**2, "residual model"
+    elif data.sigma is not None:
         # this data's noise, and the error the model left unexplained in the calibration
         scatter_ms, scatter = float(np.mean(np.sum(data.sigma**2, axis=1))), "sigma"
         if fit is not None and fit.ratio > 1 and fit.warning() is not None:  # significant only
