@@ -15,7 +15,7 @@ import pytest
 
 import robocal as rc
 from robocal import spatial
-from robocal.identify.residual import Hyper, _gram, _layout, _nll_and_grad, _template, fit_joint_fourier
+from robocal.identify.residual import _gram, _layout, _nll_and_grad, _template, fit_joint_fourier
 from robocal.model.builder import load_geometry
 from robocal.model.residual import JointAngleResidual, fourier_basis
 
@@ -74,7 +74,9 @@ def test_fourier_basis_columns():
     q = np.array([[0.3, -1.2]])
     B = fourier_basis(q, 3)
     assert B.shape == (1, 2, 6)
-    np.testing.assert_allclose(B[0, 1], [np.cos(-1.2), np.sin(-1.2), np.cos(-2.4), np.sin(-2.4), np.cos(-3.6), np.sin(-3.6)])
+    np.testing.assert_allclose(
+        B[0, 1], [np.cos(-1.2), np.sin(-1.2), np.cos(-2.4), np.sin(-2.4), np.cos(-3.6), np.sin(-3.6)]
+    )
 
 
 def test_evidence_gradient_matches_finite_differences():
@@ -89,7 +91,10 @@ def test_evidence_gradient_matches_finite_differences():
     _, grad = _nll_and_grad(theta, G, b, rr, N, groups, freq)
     h = 1e-6
     numeric = [
-        (_nll_and_grad(theta + e, G, b, rr, N, groups, freq)[0] - _nll_and_grad(theta - e, G, b, rr, N, groups, freq)[0])
+        (
+            _nll_and_grad(theta + e, G, b, rr, N, groups, freq)[0]
+            - _nll_and_grad(theta - e, G, b, rr, N, groups, freq)[0]
+        )
         / (2 * h)
         for e in np.eye(len(theta)) * h
     ]

@@ -56,7 +56,15 @@ from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
 from robocal.model.files import atomic_write_text, load_model, save_model
 
-__all__ = ["LEVELS", "RESIDUAL_CHOICES", "CalibrationResult", "calibrate", "calibrate_physics", "default_bounds", "parse_level"]
+__all__ = [
+    "LEVELS",
+    "RESIDUAL_CHOICES",
+    "CalibrationResult",
+    "calibrate",
+    "calibrate_physics",
+    "default_bounds",
+    "parse_level",
+]
 
 Array = NDArray[np.float64]
 Method = Literal["lm", "pinv", "bounded", "influence"]

@@ -152,6 +152,15 @@ def calibrate_command(
             "sigma columns: tests whether the model explains the data down to it",
         ),
     ] = None,
+    residual: Annotated[
+        str,
+        typer.Option(
+            "--residual",
+            help="auto (default): k-fold cross-validation on the calibration poses chooses the physical "
+            "model alone, with joint compliance (when the model has masses) and with learned joint angle "
+            "errors; joint_fourier: always the learned residual; none: the physical model only",
+        ),
+    ] = "auto",
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing result in --out")] = False,
     report: Annotated[bool, typer.Option("--report", help="also write DIR/report.html")] = False,
 ) -> None:
@@ -173,6 +182,8 @@ def calibrate_command(
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
+    if residual not in ("auto", "none", "joint_fourier"):
+        raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
     if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
         raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
     if loss != "linear" and method != "lm":
@@ -218,7 +229,11 @@ def calibrate_command(
     if effects is not None and effects not in ("none", "predict", "identify"):
         effect_option = [k.strip() for k in effects.split(",") if k.strip()]
     try:
-        with console.status(f"calibrating {model.name} on {train.n} poses ({method}) ..."):
+        with console.status(
+            f"calibrating {model.name} on {train.n} poses ({method}"
+            + (", choosing the model by cross-validation" if residual != "none" else "")
+            + ") ..."
+        ):
             result = rc.calibrate(
                 model,
                 train,
@@ -229,6 +244,7 @@ def calibrate_command(
                 level=level,
                 effects=effect_option,
                 loss=loss,
+                residual=residual,
             )
     except ValueError as err:
         raise fail(as_cli_text(str(err))) from None
@@ -321,6 +337,8 @@ def _print_result(result) -> None:
         console.print(f"  [yellow]warning:[/] {a} and {b} are correlated ({rho:+.3f})", highlight=False)
     if result.fit_to_noise is not None and result.fit_to_noise.warning() is None:  # else in the warnings
         console.print(result.fit_to_noise.summary(), highlight=False)
+    for line in result.residual_lines():
+        console.print(line, highlight=False, markup=False)
     for w in result.metadata.get("warnings", []):
         console.print(f"[yellow]warning:[/] {w}", highlight=False)
 
@@ -337,10 +355,13 @@ def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str]
     if stats.expected_rms is not None:
         notes.append(
             f"the calibration expected an RMS error of {stats.expected_rms * 1e3:.4g} mm here "
-            f"({stats.parameter_rms * 1e3:.3g} mm from its parameter uncertainty, the rest "
+            f"({stats.parameter_rms * 1e3:.3g} mm from its parameter"
+            + (" and learned-residual" if result.model.residual is not None else "")
+            + " uncertainty, the rest "
             + {
                 "sigma": "the data's stated noise",
                 "sigma+unmodelled": "the data's stated noise and the error its residuals showed beyond noise",
+                "residual model": "the noise and error the learned residual left unexplained",
             }.get(stats.scatter or "", "the scatter of its own residuals")
             + f"); measured {stats.rms * 1e3:.4g} mm"
         )

@@ -43,9 +43,9 @@ from scipy.optimize import minimize
 from robocal.model.residual import JointAngleResidual
 
 __all__ = [
+    "DEFAULT_HARMONICS",
     "CVCandidate",
     "CVTable",
-    "DEFAULT_HARMONICS",
     "Hyper",
     "calibrate_with_residual",
     "cross_validate_residual",
@@ -104,7 +104,7 @@ def _spectrum(log_ell: float, freq: Array) -> tuple[Array, Array]:
     derivative wrt ``log ℓ``."""
     u = -0.5 * (freq * np.exp(log_ell)) ** 2
     du = -((freq * np.exp(log_ell)) ** 2)
-    h, first = np.unique(freq, return_index=True)
+    _, first = np.unique(freq, return_index=True)
     w = np.exp(u[first] - u[first].max())
     log_z = np.log(2.0 * w.sum()) + u[first].max()
     dlog_z = float(np.sum(w * du[first]) / w.sum())
@@ -196,13 +196,18 @@ def fit_joint_fourier(
         # a joint's angle error is physically small: transmission errors of robot gears are
         # arcminutes (0.3 mrad); 2 mrad bounds the prior well above that and keeps the evidence
         # out of the degenerate optimum where huge coefficients cancel (seen at H = 12)
-        bounds = [(np.log(1e-9), np.log(MAX_AMPLITUDE))] * k + [(np.log(1e-4), np.log(2.0)), (np.log(1e-7), np.log(1e-2))]
+        bounds = [(np.log(1e-9), np.log(MAX_AMPLITUDE))] * k + [
+            (np.log(1e-4), np.log(2.0)),
+            (np.log(1e-7), np.log(1e-2)),
+        ]
         opt = minimize(
             _nll_and_grad, theta0, args=(G, b, rr, N, groups, freq), jac=True, method="L-BFGS-B",
             bounds=bounds, options={"maxiter": 200},
         )  # fmt: skip
         theta = opt.x
-        hyper = Hyper(tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1])))
+        hyper = Hyper(
+            tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1]))
+        )
     theta = np.r_[np.log(hyper.amplitudes), np.log(hyper.length_scale), np.log(hyper.noise)]
     log_s = _prior(theta, groups, freq)
     L, mu, _ = _posterior(G, b, log_s, hyper.noise**2)
@@ -249,28 +254,37 @@ class CVTable:
     chosen: str
 
     def to_dict(self) -> dict[str, object]:
-        return {"folds": self.folds, "chosen": self.chosen, "candidates": [c.to_dict() for c in self.candidates]}
+        return {
+            "folds": self.folds,
+            "chosen": self.chosen,
+            "candidates": [c.to_dict() for c in self.candidates],
+        }
 
     @classmethod
     def from_dict(cls, data: dict) -> CVTable:
         rows = tuple(
             CVCandidate(
-                c["name"], c["physics"], c["harmonics"], c["cv_mean_mm"] / 1e3, c["cv_rms_mm"] / 1e3,
+                c["name"],
+                c["physics"],
+                c["harmonics"],
+                c["cv_mean_mm"] / 1e3,
+                c["cv_rms_mm"] / 1e3,
                 c["fit_seconds"],
-            )  # fmt: skip
+            )
             for c in data["candidates"]
         )
         return cls(int(data["folds"]), rows, str(data["chosen"]))
 
     def lines(self) -> list[str]:
         """The table as text lines (mm, ms)."""
-        out = [f"model choice by {self.folds}-fold cross-validation on the calibration poses:"]
+        out = [
+            f"model choice by {self.folds}-fold cross-validation on the calibration poses:",
+            f"  {'candidate':<38} {'mean':>6} {'RMS':>6} {'fit':>6}   (CV error mm, fit ms)",
+        ]
         for c in self.candidates:
             mark = "  <- chosen" if c.name == self.chosen else ""
-            out.append(
-                f"  {c.name:<34} CV mean {c.cv_mean * 1e3:7.4f} mm  RMS {c.cv_rms * 1e3:7.4f} mm  "
-                f"fit {c.fit_seconds * 1e3:7.1f} ms{mark}"
-            )
+            cv = f"{c.cv_mean * 1e3:6.4f} {c.cv_rms * 1e3:6.4f}"
+            out.append(f"  {c.name:<38} {cv} {c.fit_seconds * 1e3:6.0f}{mark}")
         return out
 
 
@@ -320,7 +334,7 @@ def cross_validate_residual(
         for H in harmonics:
             t1 = time.perf_counter()
             _, hyper = fit_joint_fourier(q, full.residuals, full.P, joint_names, joint_index, H, J=full.J)
-            name = f"{pname} + joint angle errors H={H}"
+            name = f"{pname} + angle errors H={H}"
             hypers[name] = hyper
             fit_time[name] = full.result.seconds + time.perf_counter() - t1
             specs.append((name, H))
@@ -341,7 +355,9 @@ def cross_validate_residual(
                     )
                     Ac = np.einsum("nrm,m->nr", learned.design(q[train], fold.P), learned.coefficients)
                     dg = -np.linalg.lstsq(J2, Ac.reshape(-1), rcond=None)[0]
-                    moved = J_held @ dg + np.einsum("nrm,m->nr", learned.design(q[held], P_held), learned.coefficients)
+                    moved = J_held @ dg + np.einsum(
+                        "nrm,m->nr", learned.design(q[held], P_held), learned.coefficients
+                    )
                     e = base - moved
                 errors[name][held] = np.linalg.norm(e, axis=1)
         for name, H in specs:
@@ -361,7 +377,7 @@ def cross_validate_residual(
 
 # ---------------------------------------------------------------------- the stage
 MIN_CV_POSES = 20  # fewer poses than this: too few folds of useful size, physics only
-_COMPLIANCE_VARIANT = "geometry + joint compliance"
+_COMPLIANCE_VARIANT = "geometry + compliance"
 
 
 def _physics_name(options: dict[str, Any]) -> str:
@@ -415,7 +431,9 @@ def calibrate_with_residual(
             if everything and name == _physics_name(options):
                 result = base
             else:
-                result = calibrate_physics(model, data if everything else data.subset(train), method, **variants[name])
+                result = calibrate_physics(
+                    model, data if everything else data.subset(train), method, **variants[name]
+                )
             q = data.q[train]
             p, P, J = PhysicalFit(result, np.empty(0), np.empty(0), np.empty(0)).predict(q)
             return PhysicalFit(result, data.position[train] - p, P, J)
@@ -472,7 +490,9 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
     J = result.position_columns(q).reshape(-1, len(result.names))
     A = learned.design(q, P).reshape(-1, learned.size)
     groups, freq = _layout(learned)
-    theta = np.r_[np.log(learned.amplitudes), np.log(learned.length_scale), np.log(max(learned.noise_std, 1e-12))]
+    theta = np.r_[
+        np.log(learned.amplitudes), np.log(learned.length_scale), np.log(max(learned.noise_std, 1e-12))
+    ]
     d = np.exp(0.5 * _prior(theta, groups, freq))
     Ad = A * d
     p = J.shape[1]

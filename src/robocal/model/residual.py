@@ -147,7 +147,9 @@ class JointAngleResidual:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], joint_names: tuple[str, ...] | list[str]) -> JointAngleResidual:
+    def from_dict(
+        cls, data: Mapping[str, Any], joint_names: tuple[str, ...] | list[str]
+    ) -> JointAngleResidual:
         """The inverse of :meth:`to_dict` for a chain with joints ``joint_names``; raises
         ``ValueError`` naming what is wrong."""
         if data.get("kind", cls.kind) != cls.kind:
@@ -155,7 +157,9 @@ class JointAngleResidual:
         joints = tuple(str(j) for j in data["joints"])
         unknown = [j for j in joints if j not in joint_names]
         if unknown:
-            raise ValueError(f"residual: joints {unknown} are not joints of the chain ({', '.join(joint_names)})")
+            raise ValueError(
+                f"residual: joints {unknown} are not joints of the chain ({', '.join(joint_names)})"
+            )
         coefficients = np.asarray(data["coefficients"], dtype=float)
         m = len(coefficients)
         upper = np.asarray(data["covariance_upper"], dtype=float)
