@@ -282,3 +282,20 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     assert result.exit_code != 0 and "--chain catalog is for --robot NAME" in flat(result.output)
     result = runner.invoke(app, [*base, "--robot", "ur10", "--chain", "dh", "--out", str(tmp_path / "f")])
     assert result.exit_code != 0 and "complete or catalog" in flat(result.output)
+
+
+def test_fleet_calibrates_the_complete_model_by_default(tmp_path):
+    robot = tilted_ur10(2)
+    folder = tmp_path / "fleet"
+    folder.mkdir()
+    for k in range(2):
+        write_measurements(simulate(robot, poses(robot.nominal, 40, 10 + k), seed=k), folder / f"r{k}.csv")
+    runner = CliRunner()
+    base = ["fleet", str(folder), "--robot", "ur10", "--workers", "0", "--tool", "0,0,109", "--no-progress"]
+    result = runner.invoke(app, [*base, "--out", str(tmp_path / "complete")])
+    assert result.exit_code == 0, result.output
+    assert "the complete model built from ur10's joint geometry" in flat(result.output)
+    assert rc.load_model(tmp_path / "complete" / "r1" / "model.yaml").name == "ur10_complete"
+    result = runner.invoke(app, [*base, "--chain", "catalog", "--out", str(tmp_path / "catalog")])
+    assert result.exit_code == 0, result.output
+    assert rc.load_model(tmp_path / "catalog" / "r1" / "model.yaml").name == "ur10"

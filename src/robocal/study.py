@@ -1515,6 +1515,7 @@ class _FleetItem:
     model: Model
     read_options: Mapping[str, Any]
     calibrate_options: Mapping[str, Any]
+    complete: bool = False
 
 
 def _sha256(path: Path) -> str:
@@ -1540,7 +1541,15 @@ def _fleet_task(item: _FleetItem) -> tuple[dict[str, Any], Any]:
         train, test = data, None
         if data.split is not None and "test" in set(data.split.tolist()):
             train, test = data.split_rows("train"), data.split_rows("test")
-        result = calibrate(item.model, train, **item.calibrate_options)
+        model = item.model
+        if item.complete:
+            from robocal.model.complete import calibration_model
+
+            measure = item.calibrate_options.get("measure") or (
+                "pose" if data.orientation is not None else "position"
+            )
+            model = calibration_model(model, measure)
+        result = calibrate(model, train, **item.calibrate_options)
         result.metadata |= {"data_file": str(item.path), "data_sha256": row["sha256"], "train_n": train.n}
         _fill_fit(row, result, train.n, 0.0)
         row.pop("iterations", None)
@@ -1589,6 +1598,7 @@ def run_fleet(
     force: bool = False,
     progress: Callable[[int, int], None] | None = None,
     client: Any = None,
+    complete: bool = False,
 ) -> FleetRun:
     """Calibrate one robot per measurement file of ``directory`` (files matching ``pattern``).
 
@@ -1608,6 +1618,10 @@ def run_fleet(
         out: output folder (default ``directory/calibrated``).
         workers, scheduler, client: where to run, as :func:`run_study`.
         progress: called with ``(done, total)`` after every file.
+        complete: calibrate every file with ``model``'s complete model
+            (:func:`robocal.calibration_model`, for pose measurements when the file has
+            orientations and ``calibrate_options`` do not say ``measure="position"``)
+            instead of ``model`` as it is.
     """
     directory = Path(directory)
     if not directory.is_dir():
@@ -1642,7 +1656,8 @@ def run_fleet(
         else:
             skipped.append(names[p])
     items = [
-        _FleetItem(p, names[p], model, dict(read_options or {}), dict(calibrate_options or {})) for p in todo
+        _FleetItem(p, names[p], model, dict(read_options or {}), dict(calibrate_options or {}), complete)
+        for p in todo
     ]
     executor = _Executor(workers, scheduler) if client is None else _Executor(0, None)
     if client is not None:

@@ -136,6 +136,14 @@ def fleet_command(
     directory: Annotated[Path, typer.Argument(help="folder of measurement files, one per robot")],
     robot_name: Annotated[str | None, typer.Option("--robot", help="catalog robot")] = None,
     model_path: Annotated[Path | None, typer.Option("--model", help="model YAML file")] = None,
+    chain: Annotated[
+        str | None,
+        typer.Option(
+            "--chain",
+            help="complete (default with --robot): each robot's complete model (rc.calibration_model); "
+            "catalog: the catalog's chain as published (e.g. plain DH)",
+        ),
+    ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="output folder (default DIR/calibrated)")] = None,
     pattern: Annotated[str, typer.Option("--pattern", help="which files of DIR")] = "*.csv",
     method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
@@ -162,7 +170,18 @@ def fleet_command(
 
     if (robot_name is None) == (model_path is None):
         raise fail("give exactly one of --robot NAME or --model FILE")
+    if chain not in (None, "complete", "catalog"):
+        raise fail(f"--chain {chain!r}: complete or catalog")
+    if model_path is not None and chain == "catalog":
+        raise fail("--chain catalog is for --robot NAME; --model FILE calibrates the file's chain as it is")
     model = resolve_model(robot_name if robot_name is not None else str(model_path))
+    complete = chain == "complete" or (chain is None and robot_name is not None)
+    if complete:
+        console.print(
+            f"model: the complete model built from {model.name}'s joint geometry (rc.calibration_model; "
+            "--chain catalog: the catalog's chain)",
+            highlight=False,
+        )
     calibrate_options: dict = {"method": method, "compliance": compliance}
     if tool is not None:
         try:
@@ -195,6 +214,7 @@ def fleet_command(
             scheduler=scheduler,
             force=force,
             progress=update,
+            complete=complete,
         )
     except StudyError as err:
         raise fail(str(err)) from None

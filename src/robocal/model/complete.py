@@ -16,7 +16,7 @@ same robot: same FK, same gravity torques.
 from __future__ import annotations
 
 import dataclasses
-from functools import cache
+from functools import cache, lru_cache
 from typing import Literal
 
 import numpy as np
@@ -162,4 +162,10 @@ def calibration_model(model_or_name: Model | str, measure: Measure = "position")
         return _catalog_calibration_model(robot(model_or_name).name, measure)
     if not isinstance(model_or_name, Model):
         raise TypeError(f"calibration_model takes a Model or a catalog robot's name, got {model_or_name!r}")
-    return _complete(model_or_name, measure, f"the model {model_or_name.name!r}")
+    return _model_calibration_model(model_or_name, measure)
+
+
+@lru_cache(maxsize=16)
+def _model_calibration_model(model: Model, measure: Measure) -> Model:
+    """Models are immutable (and hashable), so a fleet of files of one robot builds once."""
+    return _complete(model, measure, f"the model {model.name!r}")
