@@ -541,8 +541,13 @@ class CalibrationResult:
             "gravity": list(self.gravity),
             **({"payload": _payload_dict(self.payload)} if self.payload is not None else {}),
             **(
-                {"residual_cross_covariance": self.residual_cross_covariance.tolist()}
-                if self.residual_cross_covariance is not None
+                {
+                    "residual_covariance_upper": self.model.residual.covariance_upper(),
+                    "residual_cross_covariance": [
+                        [float(f"{v:.9g}") for v in row] for row in self.residual_cross_covariance
+                    ],
+                }
+                if self.residual_cross_covariance is not None and self.model.residual is not None
                 else {}
             ),
             **self.metadata,
@@ -572,6 +577,10 @@ class CalibrationResult:
             corr = cov / np.outer(std, std)
         known = {f.name for f in dataclasses.fields(cls)}
         extra = {k: v for k, v in data.items() if k not in known and k not in _DICT_ONLY}
+        if model.residual is not None and data.get("residual_covariance_upper") is not None:
+            model = dataclasses.replace(
+                model, residual=model.residual.with_covariance_upper(data["residual_covariance_upper"])
+            )
         return cls(
             model=model,
             frame=np.array(data["frame"]["T_device_base"], dtype=float),
@@ -617,6 +626,7 @@ class CalibrationResult:
 _DICT_ONLY = {
     "robocal_version",
     "residual_cross_covariance",
+    "residual_covariance_upper",
     "payload",
     "model",
     "rms_before_mm",

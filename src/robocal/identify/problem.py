@@ -71,7 +71,7 @@ def measurement_chain(
         )
     steps = (*before, *robot.steps, *after)
     name = robot.name + "+measurement"
-    return dataclasses.replace(robot, name=name, steps=steps, bodies=(), joint_effects=())
+    return dataclasses.replace(robot, name=name, steps=steps, bodies=(), joint_effects=(), residual=None)
 
 
 @dataclass

@@ -24,6 +24,7 @@ Units: angles in rad, coefficients in rad, covariances in rad².
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,7 +58,8 @@ class JointAngleResidual:
         harmonics: H, harmonics per revolution.
         coefficients: ``(m,)`` posterior mean (rad), ``m = len(joints) * 2 H``, ordered
             joint by joint, then ``cos 1, sin 1, cos 2, ...``.
-        covariance: ``(m, m)`` posterior covariance (rad²).
+        covariance: ``(m, m)`` posterior covariance (rad²); zeros when unknown (a model
+            file alone does not carry it: ``result.json`` does).
         noise_std: σ (m) per axis of what remains: the measurement noise and the error
             neither the physics nor this residual represents (the evidence's estimate).
         amplitudes: prior standard deviation per joint (rad), the fitted hyperparameters.
@@ -132,9 +134,12 @@ class JointAngleResidual:
         return (A @ self.covariance) @ np.swapaxes(A, 1, 2)
 
     # ------------------------------------------------------------------ files
-    def to_dict(self) -> dict[str, Any]:
-        """Plain lists and numbers (SI) for a model file; exact float round trip."""
-        return {
+    def to_dict(self, covariance: bool = False) -> dict[str, Any]:
+        """Plain lists and numbers (SI) for a model file; exact float round trip of what
+        predictions use.  The coefficients' covariance (``covariance=True``: its upper
+        triangle to 9 significant digits) is large (m(m+1)/2 numbers) and belongs with the
+        calibration's other covariances in ``result.json``; a model file leaves it out."""
+        out = {
             "kind": self.kind,
             "joints": list(self.joints),
             "harmonics": self.harmonics,
@@ -142,9 +147,24 @@ class JointAngleResidual:
             "amplitudes": [float(a) for a in self.amplitudes],
             "length_scale": float(self.length_scale),
             "coefficients": [float(v) for v in self.coefficients],
-            # the upper triangle, row by row (the matrix is symmetric)
-            "covariance_upper": [float(v) for v in self.covariance[np.triu_indices(self.size)]],
         }
+        if covariance:  # the upper triangle, row by row (the matrix is symmetric)
+            out["covariance_upper"] = self.covariance_upper()
+        return out
+
+    def covariance_upper(self) -> list[float]:
+        """The covariance's upper triangle, row by row, to 9 significant digits."""
+        return [float(f"{v:.9g}") for v in self.covariance[np.triu_indices(self.size)]]
+
+    def with_covariance_upper(self, upper: ArrayLike) -> JointAngleResidual:
+        """This residual with the covariance given by its upper triangle (row by row)."""
+        m = self.size
+        upper = np.asarray(upper, dtype=float).reshape(-1)
+        if len(upper) != m * (m + 1) // 2:
+            raise ValueError(f"residual: the covariance needs {m * (m + 1) // 2} values, got {len(upper)}")
+        C = np.zeros((m, m))
+        C[np.triu_indices(m)] = upper
+        return dataclasses.replace(self, covariance=C + np.triu(C, 1).T)
 
     @classmethod
     def from_dict(
@@ -162,19 +182,15 @@ class JointAngleResidual:
             )
         coefficients = np.asarray(data["coefficients"], dtype=float)
         m = len(coefficients)
-        upper = np.asarray(data["covariance_upper"], dtype=float)
-        if len(upper) != m * (m + 1) // 2:
-            raise ValueError(f"residual: covariance_upper needs {m * (m + 1) // 2} values, got {len(upper)}")
-        C = np.zeros((m, m))
-        C[np.triu_indices(m)] = upper
-        C = C + np.triu(C, 1).T
-        return cls(
+        learned = cls(
             joints=joints,
             joint_index=tuple(list(joint_names).index(j) for j in joints),
             harmonics=int(data["harmonics"]),
             coefficients=coefficients,
-            covariance=C,
+            covariance=np.zeros((m, m)),
             noise_std=float(data["noise_std"]),
             amplitudes=tuple(float(a) for a in data["amplitudes"]),
             length_scale=float(data["length_scale"]),
         )
+        upper = data.get("covariance_upper")
+        return learned if upper is None else learned.with_covariance_upper(upper)

@@ -1,0 +1,171 @@
+"""Accuracy on the real UR10 (series A): physical models, the learned residual and GP peers.
+
+Data: ``../shared/data/ur10_laser_tracker/measurements_grid.csv`` (11,910 poses, Leica
+laser tracker, T-Mac probe about 109 mm from the flange; see its README).  For each
+training size (100, 300, 1,000 random rows) and seed (0-4) every model is calibrated on
+the training rows only and validated on all the other rows (10,910-11,810 held-out
+poses).  Models:
+
+* plain DH            — the catalog's DH chain (``rc.robot("ur10")``), geometry only;
+* complete            — seed 000's complete model (``rc.calibration_model``), geometry only;
+* complete + compliance — plus joint compliance under gravity (catalog masses);
+* robocal default     — what ``robocal calibrate --robot ur10`` does: k-fold
+  cross-validation on the training rows chooses among the above physics and the learned
+  per-joint angle errors (``residual="auto"``);
+* + GP (ARD, exact)   — peer: complete + compliance, then a Gaussian process on the
+  position residual (base frame) with an ARD Matérn-3/2 kernel on (sin q, cos q) of all
+  six joints, hyperparameters by marginal likelihood (scikit-learn);
+* + GP (sparse, 300)  — the same with 300 inducing points (subset of regressors; the
+  hyperparameters from a 300-pose subset): the form that scales to thousands of poses.
+
+``--pose`` adds the default path calibrated on pose data (the probe's measured
+orientation, XYZ Euler degrees, in the identification) to show whether orientation
+helps.  Times are the fit on this machine (BLAS single-threaded); the held-out columns
+are means over the seeds.  Run: ``python benchmarks/bench_real_accuracy.py [--seeds 5]
+[--sizes 100,300,1000] [--no-gp] [--pose]`` (about 5 minutes with the GP peers).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+import warnings
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only add noise
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+
+import robocal as rc
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data" / "ur10_laser_tracker" / "measurements_grid.csv"
+JOINTS = "q1=shoulder_pan_joint,q2=shoulder_lift_joint,q3=elbow_joint,q4=wrist_1_joint,q5=wrist_2_joint,q6=wrist_3_joint"
+POSITION = "x=measurement_x,y=measurement_y,z=measurement_z"
+ROTATION = "rx=measurement_rx,ry=measurement_ry,rz=measurement_rz"
+PROBE = [0.0, 0.0, 0.109]
+
+
+def read(path: Path, pose: bool = False) -> rc.Measurements:
+    columns = f"{JOINTS},{POSITION}" + (f",{ROTATION}" if pose else "")
+    return rc.read_measurements(
+        path, length_unit="mm", decimal=",", sep=";", columns=columns,
+        orientation="euler:XYZ:deg" if pose else "none",
+    )  # fmt: skip
+
+
+def _features(q: np.ndarray) -> np.ndarray:
+    return np.hstack([np.sin(q), np.cos(q)])
+
+
+def gp_peer(result: rc.CalibrationResult, train: rc.Measurements, inducing: int | None):
+    """A scikit-learn GP on the position residual of ``result``; returns predict(q) -> (n, 3)
+    device-frame positions.  ``inducing``: subset-of-regressors with that many points."""
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
+
+    X = _features(train.q)
+    r = (train.position - result.predict(train.q)[:, :3, 3]) * 1e3  # mm
+    kernel = ConstantKernel(0.1, (1e-4, 10.0)) * Matern(np.ones(X.shape[1]), (1e-2, 1e3), nu=1.5) + WhiteKernel(
+        1e-3, (1e-6, 1.0)
+    )
+    rng = np.random.default_rng(0)
+    subset = np.arange(len(X)) if inducing is None else rng.choice(len(X), min(inducing, len(X)), replace=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=0).fit(X[subset], r[subset])
+    if inducing is None:
+        return lambda q: result.predict(q)[:, :3, 3] + gp.predict(_features(q)) * 1e-3
+    k_signal, noise = gp.kernel_.k1, gp.kernel_.k2.noise_level
+    Z = X[subset]
+    Kmn = k_signal(Z, X)  # (m, n): memory O(m n), never n x n
+    A = noise * k_signal(Z) + Kmn @ Kmn.T
+    w = np.linalg.solve(A + 1e-9 * np.trace(A) / len(A) * np.eye(len(A)), Kmn @ r)
+    return lambda q: result.predict(q)[:, :3, 3] + (k_signal(_features(q), Z) @ w) * 1e-3
+
+
+def _stats(predicted: np.ndarray, test: rc.Measurements) -> tuple[float, float, float, float]:
+    e = np.linalg.norm(predicted - test.position, axis=1)
+    return float(e.mean()), float(np.sqrt(np.mean(e**2))), float(np.percentile(e, 95)), float(e.max())
+
+
+def run(sizes: list[int], seeds: int, gp: bool, pose: bool) -> dict[tuple[str, int], list[tuple]]:
+    data = read(DATA)
+    data_pose = read(DATA, pose=True) if pose else None
+    dh, complete = rc.robot("ur10"), rc.calibration_model("ur10", "position")
+    rows: dict[tuple[str, int], list[tuple]] = {}
+
+    def add(name: str, n: int, predicted: np.ndarray, test: rc.Measurements, seconds: float) -> None:
+        rows.setdefault((name, n), []).append((*_stats(predicted, test), seconds))
+
+    for n in sizes:
+        for seed in range(seeds):
+            split = data.with_split(n, seed=seed)
+            train, test = split.split_rows("train"), split.split_rows("test")
+            fits = {
+                "plain DH": (dh, {"residual": "none"}),
+                "complete": (complete, {"residual": "none"}),
+                "complete + compliance": (complete, {"residual": "none", "compliance": True}),
+                "robocal default (CV: physics + learned angle errors)": (complete, {"residual": "auto"}),
+            }
+            results = {}
+            for name, (model, options) in fits.items():
+                t = time.perf_counter()
+                result = rc.calibrate(model, train, tool_guess=PROBE, **options)
+                seconds = time.perf_counter() - t
+                results[name] = (result, seconds)
+                add(name, n, result.predict(test.q)[:, :3, 3], test, seconds)
+            if gp:
+                physics, t_physics = results["complete + compliance"]
+                for name, inducing in (("complete + compliance + GP (ARD, exact)", None),
+                                       ("complete + compliance + GP (sparse, 300 inducing)", 300)):  # fmt: skip
+                    if inducing is not None and n <= inducing:
+                        continue
+                    t = time.perf_counter()
+                    predict = gp_peer(physics, train, inducing)
+                    add(name, n, predict(test.q), test, t_physics + time.perf_counter() - t)
+            if data_pose is not None:
+                split = data_pose.with_split(n, seed=seed)
+                train, test = split.split_rows("train"), split.split_rows("test")
+                t = time.perf_counter()
+                result = rc.calibrate(rc.calibration_model("ur10", "pose"), train, tool_guess=PROBE, residual="auto")
+                seconds = time.perf_counter() - t
+                add("robocal default, pose data (orientation used)", n, result.predict(test.q)[:, :3, 3], test, seconds)
+            print(f"  {n} poses, seed {seed} done", flush=True)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--sizes", default="100,300,1000")
+    parser.add_argument("--no-gp", action="store_true", help="leave out the scikit-learn GP peers")
+    parser.add_argument("--pose", action="store_true", help="also calibrate with the measured orientations")
+    args = parser.parse_args(argv)
+    sizes = [int(s) for s in args.sizes.split(",")]
+    print(
+        f"real UR10, series A; {args.seeds} seeds; {platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}, "
+        f"BLAS threads {os.environ['OPENBLAS_NUM_THREADS']}"
+    )
+    rows = run(sizes, args.seeds, not args.no_gp, args.pose)
+    print("| model | training poses | held-out mean mm | RMS mm | p95 mm | max mm | fit s |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for n in sizes:
+        for (name, size), values in rows.items():
+            if size != n:
+                continue
+            v = np.array(values)
+            mean, rms, p95, worst, seconds = v.mean(axis=0)
+            spread = v[:, 0].std()
+            print(
+                f"| {name} | {n} | {mean * 1e3:.3f} (± {spread * 1e3:.3f}) | {rms * 1e3:.3f} | {p95 * 1e3:.3f} | "
+                f"{worst * 1e3:.3f} | {seconds:.2f} |"
+            )
+
+
+if __name__ == "__main__":
+    main()
