@@ -43,7 +43,10 @@ import robocal as rc
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "ur10_laser_tracker" / "measurements_grid.csv"
-JOINTS = "q1=shoulder_pan_joint,q2=shoulder_lift_joint,q3=elbow_joint,q4=wrist_1_joint,q5=wrist_2_joint,q6=wrist_3_joint"
+JOINTS = (
+    "q1=shoulder_pan_joint,q2=shoulder_lift_joint,q3=elbow_joint,"
+    "q4=wrist_1_joint,q5=wrist_2_joint,q6=wrist_3_joint"
+)
 POSITION = "x=measurement_x,y=measurement_y,z=measurement_z"
 ROTATION = "rx=measurement_rx,ry=measurement_ry,rz=measurement_rz"
 PROBE = [0.0, 0.0, 0.109]
@@ -69,11 +72,13 @@ def gp_peer(result: rc.CalibrationResult, train: rc.Measurements, inducing: int 
 
     X = _features(train.q)
     r = (train.position - result.predict(train.q)[:, :3, 3]) * 1e3  # mm
-    kernel = ConstantKernel(0.1, (1e-4, 10.0)) * Matern(np.ones(X.shape[1]), (1e-2, 1e3), nu=1.5) + WhiteKernel(
-        1e-3, (1e-6, 1.0)
-    )
+    kernel = ConstantKernel(0.1, (1e-4, 10.0)) * Matern(
+        np.ones(X.shape[1]), (1e-2, 1e3), nu=1.5
+    ) + WhiteKernel(1e-3, (1e-6, 1.0))
     rng = np.random.default_rng(0)
-    subset = np.arange(len(X)) if inducing is None else rng.choice(len(X), min(inducing, len(X)), replace=False)
+    subset = (
+        np.arange(len(X)) if inducing is None else rng.choice(len(X), min(inducing, len(X)), replace=False)
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=0).fit(X[subset], r[subset])
@@ -120,8 +125,9 @@ def run(sizes: list[int], seeds: int, gp: bool, pose: bool) -> dict[tuple[str, i
                 add(name, n, result.predict(test.q)[:, :3, 3], test, seconds)
             if gp:
                 physics, t_physics = results["complete + compliance"]
-                for name, inducing in (("complete + compliance + GP (ARD, exact)", None),
-                                       ("complete + compliance + GP (sparse, 300 inducing)", 300)):  # fmt: skip
+                peers = (("+ GP (ARD, exact)", None), ("+ GP (sparse, 300 inducing)", 300))
+                for suffix, inducing in peers:
+                    name = f"complete + compliance {suffix}"
                     if inducing is not None and n <= inducing:
                         continue
                     t = time.perf_counter()
@@ -131,9 +137,17 @@ def run(sizes: list[int], seeds: int, gp: bool, pose: bool) -> dict[tuple[str, i
                 split = data_pose.with_split(n, seed=seed)
                 train, test = split.split_rows("train"), split.split_rows("test")
                 t = time.perf_counter()
-                result = rc.calibrate(rc.calibration_model("ur10", "pose"), train, tool_guess=PROBE, residual="auto")
+                result = rc.calibrate(
+                    rc.calibration_model("ur10", "pose"), train, tool_guess=PROBE, residual="auto"
+                )
                 seconds = time.perf_counter() - t
-                add("robocal default, pose data (orientation used)", n, result.predict(test.q)[:, :3, 3], test, seconds)
+                add(
+                    "robocal default, pose data (orientation used)",
+                    n,
+                    result.predict(test.q)[:, :3, 3],
+                    test,
+                    seconds,
+                )
             print(f"  {n} poses, seed {seed} done", flush=True)
     return rows
 
@@ -162,8 +176,8 @@ def main(argv: list[str] | None = None) -> None:
             mean, rms, p95, worst, seconds = v.mean(axis=0)
             spread = v[:, 0].std()
             print(
-                f"| {name} | {n} | {mean * 1e3:.3f} (± {spread * 1e3:.3f}) | {rms * 1e3:.3f} | {p95 * 1e3:.3f} | "
-                f"{worst * 1e3:.3f} | {seconds:.2f} |"
+                f"| {name} | {n} | {mean * 1e3:.3f} (± {spread * 1e3:.3f}) | {rms * 1e3:.3f} | "
+                f"{p95 * 1e3:.3f} | {worst * 1e3:.3f} | {seconds:.2f} |"
             )
 
 

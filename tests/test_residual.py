@@ -180,9 +180,13 @@ def test_model_file_round_trip_keeps_predictions(with_errors, tmp_path):
     assert loaded.model.residual is not None
     np.testing.assert_allclose(loaded.predict(test.q), hybrid.predict(test.q), rtol=0, atol=1e-12)
     # the coefficients' covariance lives in result.json (9 significant digits)
-    np.testing.assert_allclose(loaded.model.residual.covariance, hybrid.model.residual.covariance, rtol=1e-8, atol=0)
+    np.testing.assert_allclose(
+        loaded.model.residual.covariance, hybrid.model.residual.covariance, rtol=1e-8, atol=0
+    )
     # σ to 4 digits: the 9-digit covariances partly cancel (directions the geometry absorbs)
-    np.testing.assert_allclose(loaded.position_uncertainty(test.q), hybrid.position_uncertainty(test.q), rtol=1e-4)
+    np.testing.assert_allclose(
+        loaded.position_uncertainty(test.q), hybrid.position_uncertainty(test.q), rtol=1e-4
+    )
     again = rc.load_model(tmp_path / "cal" / "model.yaml")
     np.testing.assert_array_equal(again.residual.coefficients, hybrid.model.residual.coefficients)
 

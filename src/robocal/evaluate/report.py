@@ -547,7 +547,9 @@ def _model_choice_section(result: CalibrationResult, figs: Any) -> str:
             q = np.zeros((400, result.model.dof))
             q[:, j] = np.linspace(lo, hi, 400)
             fig.add_trace(
-                go.Scatter(x=np.degrees(q[:, j]), y=learned.angle_errors(q)[:, k] * 1e6, name=name, mode="lines")
+                go.Scatter(
+                    x=np.degrees(q[:, j]), y=learned.angle_errors(q)[:, k] * 1e6, name=name, mode="lines"
+                )
             )
         fig.update_layout(
             xaxis_title="joint angle (°)", yaxis_title="learned angle error δθ (µrad)", margin={"t": 30}
