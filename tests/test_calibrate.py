@@ -279,7 +279,7 @@ def test_screening_finds_a_hopeless_unknown_before_the_fit():
     assert len(found) == 1 and found[0][0] in (0, 5) and found[0][1] > 10 * 5e-4
     # well above the threshold but not ten times: left to the pruning after the fit
     J6 = np.column_stack([J, J[:, 0] + 0.1 * rng.normal(size=300)])
-    assert screen_unidentifiable(r, J6, np.full(6, 1e-1)) == []
+    assert screen_unidentifiable(r, J6, np.full(6, 1e-1), max_std_ratio=5.0) == []
 
 
 def test_plain_dh_ur10_drops_the_wrist_pair_without_wandering():

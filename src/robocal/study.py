@@ -757,7 +757,7 @@ def calibrate_batch(
     *,
     tool_guess: ArrayLike | None = None,
     max_std: float = 5e-4,
-    max_std_ratio: float = 5.0,
+    max_std_ratio: float = 3.0,
     max_iterations: int = 200,
 ) -> list[BatchFit]:
     """Calibrate many robots of the same model at once (position measurements).
