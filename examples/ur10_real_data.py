@@ -5,7 +5,9 @@
 * frames only   — the nominal UR10, only the tracker frame and the probe point fitted;
 * plain DH      — every UR DH parameter free (the baseline of the issue: 0.42 mm);
 * complete      — the model built from joint geometry (Hayati on the parallel joints 2-4);
-* + compliance  — the complete model plus joint compliance under gravity.
+* + compliance  — the complete model plus joint compliance under gravity;
+* robocal default — cross-validation on the training rows chooses among these physics and
+  the learned per-joint angle errors (``residual="auto"``, what the CLI does).
 
 Run: ``python examples/ur10_real_data.py [--data PATH] [--seeds 5]``.
 """
@@ -54,6 +56,9 @@ def main(argv=None) -> None:
         "plain DH": (dh, {}),
         "complete (built)": (complete, {}),
         "complete + compliance": (complete, {"compliance": True}),
+        # what `robocal calibrate --robot ur10` does: CV on the training poses chooses the
+        # physics and the learned per-joint angle errors
+        "robocal default (CV + learned residual)": (complete, {"residual": "auto"}),
     }
     rows: dict[str, list] = {name: [] for name in variants}
     for seed in range(args.seeds):

@@ -149,6 +149,14 @@ def fleet_command(
     method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
     tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
     compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
+    residual: Annotated[
+        str,
+        typer.Option(
+            "--residual",
+            help="auto (default): cross-validation on each file's calibration poses chooses the physics and "
+            "the learned joint angle errors, as robocal calibrate does; joint_fourier; none",
+        ),
+    ] = "auto",
     length_unit: Annotated[str, typer.Option("--length-unit", help="m | mm | um")] = "m",
     angle_unit: Annotated[str, typer.Option("--angle-unit", help="rad | deg")] = "rad",
     columns: Annotated[str | None, typer.Option("--columns", help='renames, "q1=a,x=b"')] = None,
@@ -182,7 +190,9 @@ def fleet_command(
             "--chain catalog: the catalog's chain)",
             highlight=False,
         )
-    calibrate_options: dict = {"method": method, "compliance": compliance}
+    if residual not in ("auto", "none", "joint_fourier"):
+        raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
+    calibrate_options: dict = {"method": method, "compliance": compliance, "residual": residual}
     if tool is not None:
         try:
             guess = np.array([float(v) for v in tool.replace(",", " ").split()]) * 1e-3
