@@ -341,7 +341,12 @@ def cross_validate_residual(
         errors = {name: np.empty(n) for name, _ in specs}
         for held in parts:
             train = np.setdiff1d(everything, held)
-            fold = physics_fit(train)
+            try:
+                fold = physics_fit(train)
+            except (ValueError, np.linalg.LinAlgError):  # this variant fails on a fold: not a candidate
+                for name, _ in specs:
+                    errors[name][:] = np.inf
+                break
             p_held, P_held, J_held = fold.predict(q[held])
             base = position[held] - p_held
             # least squares of the physical parameters over the fold's training poses
@@ -362,9 +367,13 @@ def cross_validate_residual(
                 errors[name][held] = np.linalg.norm(e, axis=1)
         for name, H in specs:
             e = errors[name]
+            if not np.all(np.isfinite(e)):
+                continue
             rows.append(
                 CVCandidate(name, pname, H, float(e.mean()), float(np.sqrt(np.mean(e**2))), fit_time[name])
             )
+    if not rows:
+        raise ValueError("no candidate model could be calibrated on every cross-validation fold")
     # the simplest candidate (physics before residual, fewer harmonics) whose CV error is
     # within 1 % of the lowest: a tie is no reason for more parameters
     lowest = min(c.cv_mean for c in rows)
@@ -377,6 +386,7 @@ def cross_validate_residual(
 
 # ---------------------------------------------------------------------- the stage
 MIN_CV_POSES = 20  # fewer poses than this: too few folds of useful size, physics only
+MAX_HARMONICS = 128  # per revolution: m = joints x 2H coefficients, an (m, m) matrix to factor
 _COMPLIANCE_VARIANT = "geometry + compliance"
 
 
@@ -405,8 +415,8 @@ def calibrate_with_residual(
     residual (None when CV chose the physics alone) and whose ``metadata["cv"]`` is the table."""
     t0 = time.perf_counter()
     grid = DEFAULT_HARMONICS if harmonics is None else tuple(np.atleast_1d(harmonics).astype(int).tolist())
-    if not grid or min(grid) < 1:
-        raise ValueError(f"residual_harmonics must be positive integers, got {harmonics!r}")
+    if not grid or min(grid) < 1 or max(grid) > MAX_HARMONICS:
+        raise ValueError(f"residual_harmonics must be integers from 1 to {MAX_HARMONICS}, got {harmonics!r}")
     if not 2 <= folds <= 20:
         raise ValueError(f"cv_folds must lie between 2 and 20, got {folds}")
     base = calibrate_physics(model, data, method, **options)
@@ -448,9 +458,13 @@ def calibrate_with_residual(
         except (ValueError, np.linalg.LinAlgError):
             continue
         usable[name] = _memo(physics(name), full[name], data.n)
-    table, hypers = cross_validate_residual(
-        data.q, data.position, usable, names, joints, grid, folds, include_none=kind == "auto"
-    )
+    try:
+        table, hypers = cross_validate_residual(
+            data.q, data.position, usable, names, joints, grid, folds, include_none=kind == "auto"
+        )
+    except ValueError as err:
+        base.metadata.setdefault("warnings", []).append(f"{err}: the physical model alone")
+        return base
     chosen = next(c for c in table.candidates if c.name == table.chosen)
     fit = full[chosen.physics]
     result = fit.result

@@ -1,0 +1,97 @@
+"""Speed and memory of the hybrid model (physics + learned joint angle errors) on the real UR10.
+
+* fit: ``rc.calibrate(calibration_model("ur10"), train, residual="auto")`` on 1,000 random
+  rows of series A (5-fold CV over 2 physical variants x 4 candidates, the final joint
+  fit and the joint covariance), median of ``--repeats``; the physical fit alone
+  (complete + compliance) measured in the same run as the reference;
+* prediction: ``result.predict(q)`` for 10,000 poses, per pose, against the physical
+  model's own ``predict`` in the same run;
+* memory: the peak of Python's allocations (``tracemalloc``; numpy reports its buffers to
+  it) while calibrating on 10,000 training poses, and per pose.  The residual's design
+  matrix is never held whole (its Gram matrix is accumulated over chunks of 2,048 poses,
+  ``robocal.identify.residual``), so the residual adds O(m²) + one chunk; the physical
+  fit's Jacobians are O(n p).
+
+Run: ``python benchmarks/bench_residual.py [--repeats 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+
+import robocal as rc
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_real_accuracy import DATA, PROBE, read
+
+
+def _median_time(fn, repeats: int):
+    times, out = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args(argv)
+    data = read(DATA)
+    model = rc.calibration_model("ur10", "position")
+    train = data.with_split(1000, seed=0).split_rows("train")
+    print(
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, numpy {np.__version__}, BLAS threads {os.environ['OPENBLAS_NUM_THREADS']}"
+    )
+    t_phys, physics = _median_time(
+        lambda: rc.calibrate(model, train, tool_guess=PROBE, compliance=True), args.repeats
+    )
+    t_hybrid, hybrid = _median_time(lambda: rc.calibrate(model, train, tool_guess=PROBE, residual="auto"), args.repeats)
+    learned = hybrid.model.residual
+    print(
+        f"fit, 1,000 poses: physics (complete + compliance) {t_phys:.3f} s; default hybrid path {t_hybrid:.2f} s "
+        f"({t_hybrid / t_phys:.0f}x the physics; chosen: {hybrid.metadata['cv']['chosen']})"
+    )
+    q = data.q[:10000]
+    hybrid.predict(q[:10])
+    t_pred, _ = _median_time(lambda: hybrid.predict(q), args.repeats)
+    t_pred_phys, _ = _median_time(lambda: physics.predict(q), args.repeats)
+    print(
+        f"prediction, 10,000 poses: hybrid {t_pred / len(q) * 1e6:.2f} µs/pose, physics "
+        f"{t_pred_phys / len(q) * 1e6:.2f} µs/pose ({t_pred / t_pred_phys:.2f}x); residual size m = "
+        f"{0 if learned is None else learned.size}"
+    )
+    big = data.with_split(10000, seed=0).split_rows("train")
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    result = rc.calibrate(model, big, tool_guess=PROBE, residual="auto")
+    seconds = time.perf_counter() - t0
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    tracemalloc.start()
+    rc.calibrate(model, big, tool_guess=PROBE, compliance=True)
+    _, peak_phys = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    print(
+        f"10,000 training poses: hybrid fit {seconds:.1f} s, peak memory {peak / 1e6:.0f} MB "
+        f"({peak / big.n / 1e3:.1f} kB per pose); the physical fit alone {peak_phys / 1e6:.0f} MB; "
+        f"chosen: {result.metadata['cv']['chosen']}"
+    )
+
+
+if __name__ == "__main__":
+    main()
