@@ -301,3 +301,21 @@ def test_fleet_calibrates_the_complete_model_by_default(tmp_path):
     result = runner.invoke(app, [*base, "--chain", "catalog", "--out", str(tmp_path / "catalog")])
     assert result.exit_code == 0, result.output
     assert rc.load_model(tmp_path / "catalog" / "r1" / "model.yaml").name == "ur10"
+
+
+def test_model_build_takes_a_catalog_name_or_a_model_file(tmp_path):
+    runner = CliRunner()
+    result = runner.invoke(
+        app, ["model", "build", "ur10", "--measure", "position", "-o", str(tmp_path / "a.yaml")]
+    )
+    assert result.exit_code == 0, result.output
+    assert "R∥R (seed 000 eq. 17, Hayati)" in result.output
+    assert rc.load_model(tmp_path / "a.yaml") == rc.calibration_model("ur10", "position")
+    path = rc.save_model(rc.robot("puma560"), tmp_path / "puma.yaml")
+    result = runner.invoke(app, ["model", "build", str(path), "-o", str(tmp_path / "b.yaml")])
+    assert result.exit_code == 0, result.output
+    built = rc.load_model(tmp_path / "b.yaml")
+    assert built.name == "puma560_complete" and len(built.free_names) == 30
+    assert built.bodies == rc.calibration_model(rc.robot("puma560"), "pose").bodies
+    result = runner.invoke(app, ["model", "build", "no_such_robot", "-o", str(tmp_path / "c.yaml")])
+    assert result.exit_code != 0 and "nor is it a catalog robot" in flat(result.output)

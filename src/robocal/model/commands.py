@@ -18,7 +18,13 @@ model_app = typer.Typer(help="Build, view and check calibration models.", no_arg
 
 @model_app.command("build")
 def build_command(
-    geometry: Annotated[Path, typer.Argument(help="joint-geometry YAML file or a URDF file")],
+    geometry: Annotated[
+        Path,
+        typer.Argument(
+            help="joint-geometry YAML file, URDF file, or a model (catalog name or model YAML file) whose "
+            "joint geometry is read from its chain (rc.calibration_model)"
+        ),
+    ],
     output: Annotated[Path, typer.Option("-o", "--output", help="model file to write (YAML)")],
     measure: Annotated[
         str | None, typer.Option("--measure", help="position | pose (default: the file's, else pose)")
@@ -35,14 +41,24 @@ def build_command(
 
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
-    if not geometry.is_file():
-        raise fail(f"{geometry} does not exist")
+    from robocal.cli import _is_geometry_file, resolve_model
+    from robocal.model.catalog import robots
+
+    catalog = not geometry.is_file() and str(geometry).lower() in robots()
+    if not geometry.is_file() and not catalog:
+        raise fail(f"{geometry} does not exist (nor is it a catalog robot: robocal robots)")
     try:
         if geometry.suffix.lower() == ".urdf":
             result = build_from_urdf(geometry, measure or "pose", tip)
+        elif catalog or not _is_geometry_file(geometry):  # a chain: build from its joint geometry
+            from robocal.model.complete import build_complete
+
+            chain = resolve_model(str(geometry))
+            origin = f"the catalog model {chain.name!r}" if catalog else None
+            result = build_complete(chain, measure or "pose", origin)
         else:
             result = load_geometry(geometry).build(measure)
-    except (GeometryError, URDFError) as err:
+    except (GeometryError, URDFError, ValueError) as err:
         raise fail(str(err)) from None
     model = result.model
     table = Table(title=f"{model.name}: links", title_justify="left")

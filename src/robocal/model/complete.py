@@ -21,10 +21,10 @@ from typing import Literal
 
 import numpy as np
 
-from robocal.model.builder import JointGeometry, Tcp, build
+from robocal.model.builder import BuildResult, JointGeometry, Tcp, build
 from robocal.model.chain import Body, Model
 
-__all__ = ["calibration_model", "geometry_from_model"]
+__all__ = ["build_complete", "calibration_model", "geometry_from_model"]
 
 Measure = Literal["position", "pose"]
 
@@ -118,7 +118,11 @@ def _catalog_calibration_model(name: str, measure: Measure) -> Model:
     return _complete(robot(name), measure, f"the catalog model {name!r}")
 
 
-def _complete(model: Model, measure: Measure, origin: str) -> Model:
+def build_complete(model: Model, measure: Measure = "pose", origin: str | None = None) -> BuildResult:
+    """:func:`robocal.model.builder.build` on ``model``'s joint geometry, with the model's
+    bodies (re-expressed) and joint effects on the built model; the links and rank as
+    the builder reports them (:func:`calibration_model` returns its ``model``)."""
+    origin = origin or f"the model {model.name!r}"
     joints, tcp = geometry_from_model(model)
     note = f"built by seed 000's rules from the joint geometry of {origin}"
     title = f"{model.title or model.name} — complete model ({measure})"
@@ -126,11 +130,16 @@ def _complete(model: Model, measure: Measure, origin: str) -> Model:
     built = build(joints, tcp, measure, name=f"{model.name}_complete", title=title, source=source)
     # built.warnings: a chain that ends on its last joint axis (at the flange) measured in
     # position only leaves that joint's offset to the tool calibrate adds; nothing to do here
-    return dataclasses.replace(
+    complete = dataclasses.replace(
         built.model,
         bodies=_carry_bodies(model, built.model),
         joint_effects=model.joint_effects,
     )
+    return dataclasses.replace(built, model=complete)
+
+
+def _complete(model: Model, measure: Measure, origin: str) -> Model:
+    return build_complete(model, measure, origin).model
 
 
 def calibration_model(model_or_name: Model | str, measure: Measure = "position") -> Model:
