@@ -6,8 +6,9 @@
   (complete + compliance) measured in the same run as the reference;
 * prediction: ``result.predict(q)`` for 10,000 poses, per pose, against the physical
   model's own ``predict`` in the same run;
-* memory: the peak of Python's allocations (``tracemalloc``; numpy reports its buffers to
-  it) while calibrating on 10,000 training poses, and per pose.  The residual's design
+* memory: the peak resident memory of a fresh process that reads the data and calibrates on
+  10,000 training poses (physics alone, then the default hybrid path), against one that
+  only reads the data.  The residual's design
   matrix is never held whole (its Gram matrix is accumulated over chunks of 2,048 poses,
   ``robocal.identify.residual``), so the residual adds O(m²) + one chunk; the physical
   fit's Jacobians are O(n p).
@@ -23,7 +24,6 @@ import platform
 import statistics
 import sys
 import time
-import tracemalloc
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -55,15 +55,19 @@ def main(argv: list[str] | None = None) -> None:
     train = data.with_split(1000, seed=0).split_rows("train")
     print(
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
-        f"{platform.python_version()}, numpy {np.__version__}, BLAS threads {os.environ['OPENBLAS_NUM_THREADS']}"
+        f"{platform.python_version()}, numpy {np.__version__}, "
+        f"BLAS threads {os.environ['OPENBLAS_NUM_THREADS']}"
     )
     t_phys, physics = _median_time(
         lambda: rc.calibrate(model, train, tool_guess=PROBE, compliance=True), args.repeats
     )
-    t_hybrid, hybrid = _median_time(lambda: rc.calibrate(model, train, tool_guess=PROBE, residual="auto"), args.repeats)
+    t_hybrid, hybrid = _median_time(
+        lambda: rc.calibrate(model, train, tool_guess=PROBE, residual="auto"), args.repeats
+    )
     learned = hybrid.model.residual
     print(
-        f"fit, 1,000 poses: physics (complete + compliance) {t_phys:.3f} s; default hybrid path {t_hybrid:.2f} s "
+        f"fit, 1,000 poses: physics (complete + compliance) {t_phys:.3f} s; "
+        f"default hybrid path {t_hybrid:.2f} s "
         f"({t_hybrid / t_phys:.0f}x the physics; chosen: {hybrid.metadata['cv']['chosen']})"
     )
     q = data.q[:10000]
@@ -75,22 +79,39 @@ def main(argv: list[str] | None = None) -> None:
         f"{t_pred_phys / len(q) * 1e6:.2f} µs/pose ({t_pred / t_pred_phys:.2f}x); residual size m = "
         f"{0 if learned is None else learned.size}"
     )
+    for label, residual in (("data only", None), ("physical fit (complete + compliance)", "none"),
+                            ("hybrid fit (default path)", "auto")):  # fmt: skip
+        seconds, rss = _child_peak(residual)
+        print(f"10,000 training poses, {label}: {seconds:.1f} s, peak resident memory {rss / 1e6:.0f} MB")
+
+
+def _child(residual: str | None) -> None:
+    """In a fresh process: read series A and (unless None) calibrate on 10,000 rows."""
+    data = read(DATA)
     big = data.with_split(10000, seed=0).split_rows("train")
-    tracemalloc.start()
     t0 = time.perf_counter()
-    result = rc.calibrate(model, big, tool_guess=PROBE, residual="auto")
-    seconds = time.perf_counter() - t0
-    _, peak = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    tracemalloc.start()
-    rc.calibrate(model, big, tool_guess=PROBE, compliance=True)
-    _, peak_phys = tracemalloc.get_traced_memory()
-    tracemalloc.stop()
-    print(
-        f"10,000 training poses: hybrid fit {seconds:.1f} s, peak memory {peak / 1e6:.0f} MB "
-        f"({peak / big.n / 1e3:.1f} kB per pose); the physical fit alone {peak_phys / 1e6:.0f} MB; "
-        f"chosen: {result.metadata['cv']['chosen']}"
+    if residual is not None:
+        options = {"compliance": True} if residual == "none" else {}
+        rc.calibrate(
+            rc.calibration_model("ur10", "position"), big, tool_guess=PROBE, residual=residual, **options
+        )
+    print(time.perf_counter() - t0)
+
+
+def _child_peak(residual: str | None) -> tuple[float, float]:
+    """Seconds and peak resident memory (bytes) of :func:`_child` in its own process."""
+    import subprocess
+
+    code = (
+        f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import bench_residual as b; "
+        f"b._child({residual!r}); import resource; print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
     )
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    seconds, kb = out.stdout.split()[-2:]
+    return float(seconds), float(kb) * 1e3
 
 
 if __name__ == "__main__":

@@ -111,6 +111,15 @@ def _spectrum(log_ell: float, freq: Array) -> tuple[Array, Array]:
     return u - log_z, du - dlog_z
 
 
+def _apply(learned: JointAngleResidual, q: Array, P: Array) -> Array:
+    """``A(q) c`` ``(n, 3)``: the residual's position correction, over chunks of poses."""
+    out = np.empty((len(q), P.shape[1]))
+    for s in range(0, len(q), _CHUNK):
+        A = learned.design(q[s : s + _CHUNK], P[s : s + _CHUNK])
+        out[s : s + _CHUNK] = A @ learned.coefficients
+    return out
+
+
 def _prior(theta: Array, groups: Array, freq: Array) -> Array:
     """log prior variance per coefficient from ``theta = [log a_j..., log ℓ, log σ]``."""
     k = len(theta) - 2
@@ -358,11 +367,9 @@ def cross_validate_residual(
                     learned, _ = fit_joint_fourier(
                         q[train], fold.residuals, fold.P, joint_names, joint_index, H, hypers[name], J=fold.J
                     )
-                    Ac = np.einsum("nrm,m->nr", learned.design(q[train], fold.P), learned.coefficients)
+                    Ac = _apply(learned, q[train], fold.P)
                     dg = -np.linalg.lstsq(J2, Ac.reshape(-1), rcond=None)[0]
-                    moved = J_held @ dg + np.einsum(
-                        "nrm,m->nr", learned.design(q[held], P_held), learned.coefficients
-                    )
+                    moved = J_held @ dg + _apply(learned, q[held], P_held)
                     e = base - moved
                 errors[name][held] = np.linalg.norm(e, axis=1)
         for name, H in specs:
@@ -500,17 +507,19 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
     In whitened coordinates ``c = S^½ v`` so that the matrix inverted is well conditioned."""
     learned: JointAngleResidual = result.model.residual
     chain = result.measurement_chain
-    P = chain.perturbation_jacobian(q, "position", result.joint_perturbations(q))
-    J = result.position_columns(q).reshape(-1, len(result.names))
-    A = learned.design(q, P).reshape(-1, learned.size)
     groups, freq = _layout(learned)
     theta = np.r_[
         np.log(learned.amplitudes), np.log(learned.length_scale), np.log(max(learned.noise_std, 1e-12))
     ]
     d = np.exp(0.5 * _prior(theta, groups, freq))
-    Ad = A * d
-    p = J.shape[1]
-    F = np.block([[J.T @ J, J.T @ Ad], [Ad.T @ J, Ad.T @ Ad + learned.noise_std**2 * np.eye(learned.size)]])
+    p, m = len(result.names), learned.size
+    F = np.zeros((p + m, p + m))
+    for s in range(0, len(q), _CHUNK):  # the Fisher matrix over chunks of poses: O((p + m)²) memory
+        qs = q[s : s + _CHUNK]
+        P = chain.perturbation_jacobian(qs, "position", result.joint_perturbations(qs))
+        B = np.hstack([result.position_columns(qs).reshape(-1, p), learned.design(qs, P).reshape(-1, m) * d])
+        F += B.T @ B
+    F[p:, p:] += learned.noise_std**2 * np.eye(m)
     scale = np.sqrt(np.maximum(np.diag(F), 1e-300))  # columns scaled: J's units differ widely
     try:
         cov = np.linalg.inv(F / np.outer(scale, scale)) / np.outer(scale, scale) * learned.noise_std**2

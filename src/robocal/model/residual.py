@@ -41,11 +41,16 @@ def fourier_basis(angles: ArrayLike, harmonics: int) -> Array:
     """``[cos(h q), sin(h q)]`` for ``h = 1..harmonics``: ``(n, k, 2 H)`` for angles ``(n, k)``
     (rad); column ``2(h-1)`` is ``cos(h q)``, ``2(h-1)+1`` is ``sin(h q)``."""
     q = np.asarray(angles, dtype=float)
-    hq = q[..., None] * np.arange(1, harmonics + 1)  # (n, k, H)
-    out = np.empty((*q.shape, 2 * harmonics))
-    np.cos(hq, out=out[..., 0::2])
-    np.sin(hq, out=out[..., 1::2])
-    return out
+    cs = np.empty((harmonics, 2, *q.shape))  # contiguous per harmonic, reordered at the end
+    c1, s1 = np.cos(q), np.sin(q)
+    cs[0, 0], cs[0, 1] = c1, s1
+    # the angle-addition recurrence: 4 multiplications per harmonic instead of a cos and a
+    # sin; its rounding error grows like h·1e-16, negligible
+    for h in range(1, harmonics):
+        c, s = cs[h - 1, 0], cs[h - 1, 1]
+        np.subtract(c * c1, s * s1, out=cs[h, 0])
+        np.add(s * c1, c * s1, out=cs[h, 1])
+    return np.moveaxis(cs, (0, 1), (-2, -1)).reshape(*q.shape, 2 * harmonics)
 
 
 @dataclass(frozen=True)
