@@ -1,6 +1,6 @@
 """Accuracy on the real UR10 (series A): physical models, the learned residual and GP peers.
 
-Data: ``../shared/data/ur10_laser_tracker/measurements_grid.csv`` (11,910 poses, Leica
+Data: ``../shared/data/ur10_laser_tracker/measurements_grid.csv`` (11,911 poses, Leica
 laser tracker, T-Mac probe about 109 mm from the flange; see its README).  For each
 training size (100, 300, 1,000 random rows) and seed (0-4) every model is calibrated on
 the training rows only and validated on all the other rows (10,910-11,810 held-out
@@ -20,7 +20,8 @@ poses).  Models:
 
 ``--pose`` adds the default path calibrated on pose data (the probe's measured
 orientation, XYZ Euler degrees, in the identification) to show whether orientation
-helps.  Times are the fit on this machine (BLAS single-threaded); the held-out columns
+helps; ``--probe`` only prints which joints the physics' remaining error follows.
+Times are the fit on this machine (BLAS single-threaded); the held-out columns
 are means over the seeds.  Run: ``python benchmarks/bench_real_accuracy.py [--seeds 5]
 [--sizes 100,300,1000] [--no-gp] [--pose]`` (about 5 minutes with the GP peers).
 """
@@ -152,13 +153,37 @@ def run(sizes: list[int], seeds: int, gp: bool, pose: bool) -> dict[tuple[str, i
     return rows
 
 
+def probe(folds: int = 5) -> None:
+    """Which joints the physics' remaining error follows: a nearest-neighbour regression of
+    the residual of complete + compliance (fitted on all poses) on subsets of the joint
+    angles, k-fold over all poses; mean error of each (mm)."""
+    from sklearn.model_selection import KFold, cross_val_predict
+    from sklearn.neighbors import KNeighborsRegressor
+
+    data = read(DATA)
+    result = rc.calibrate(rc.calibration_model("ur10", "position"), data, tool_guess=PROBE, compliance=True)
+    r = data.position - result.predict(data.q)[:, :3, 3]
+    mean = np.linalg.norm(r, axis=1).mean()
+    print(f"complete + compliance on all {data.n} poses: residual mean {mean * 1e3:.3f} mm")
+    for joints in ((0, 1, 2, 3, 4, 5), (1, 2, 3, 4, 5), (3, 4, 5), (1, 2), (0, 1, 2)):
+        X = np.hstack([np.sin(data.q[:, joints]), np.cos(data.q[:, joints])])
+        split = KFold(folds, shuffle=True, random_state=0)
+        predicted = cross_val_predict(KNeighborsRegressor(5, weights="distance"), X, r, cv=split)
+        e = np.linalg.norm(r - predicted, axis=1).mean()
+        print(f"  5 nearest neighbours in joints {[j + 1 for j in joints]}: {e * 1e3:.3f} mm")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--sizes", default="100,300,1000")
     parser.add_argument("--no-gp", action="store_true", help="leave out the scikit-learn GP peers")
     parser.add_argument("--pose", action="store_true", help="also calibrate with the measured orientations")
+    parser.add_argument("--probe", action="store_true", help="only: which joints the remaining error follows")
     args = parser.parse_args(argv)
+    if args.probe:
+        probe()
+        return
     sizes = [int(s) for s in args.sizes.split(",")]
     print(
         f"real UR10, series A; {args.seeds} seeds; {platform.processor() or platform.machine()}, "

@@ -288,12 +288,12 @@ class CVTable:
         """The table as text lines (mm, ms)."""
         out = [
             f"model choice by {self.folds}-fold cross-validation on the calibration poses:",
-            f"  {'candidate':<38} {'mean':>6} {'RMS':>6} {'fit':>6}   (CV error mm, fit ms)",
+            f"  {'candidate':<42} {'mean':>6} {'RMS':>6} {'fit':>6}   (CV error mm, fit ms)",
         ]
         for c in self.candidates:
             mark = "  <- chosen" if c.name == self.chosen else ""
             cv = f"{c.cv_mean * 1e3:6.4f} {c.cv_rms * 1e3:6.4f}"
-            out.append(f"  {c.name:<38} {cv} {c.fit_seconds * 1e3:6.0f}{mark}")
+            out.append(f"  {c.name:<42} {cv} {c.fit_seconds * 1e3:6.0f}{mark}")
         return out
 
 
