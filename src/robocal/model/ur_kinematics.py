@@ -46,7 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.model.builder import GeometryError, JointGeometry, Tcp, build
+from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
 from robocal.model.chain import Model
 from robocal.model.urdf_export import TOOL_PREFIX, rpy_from_matrix, urdf_origin
 
@@ -55,6 +55,7 @@ __all__ = [
     "UR_SEGMENTS",
     "URKinematics",
     "URKinematicsError",
+    "build_from_ur_kinematics",
     "read_ur_kinematics",
     "ur_kinematics",
     "ur_kinematics_fk",
@@ -172,6 +173,17 @@ def read_ur_kinematics(
     name: str | None = None,
     limits: Mapping[str, tuple[float, float]] | None = None,
 ) -> Model:
+    """The model of :func:`build_from_ur_kinematics`."""
+    return build_from_ur_kinematics(path, measure=measure, name=name, limits=limits).model
+
+
+def build_from_ur_kinematics(
+    path: str | Path,
+    *,
+    measure: str = "pose",
+    name: str | None = None,
+    limits: Mapping[str, tuple[float, float]] | None = None,
+) -> BuildResult:
     """A calibration model from a UR kinematics YAML (a factory calibration or the
     description's default), built by seed 000's rules from the joint axes the file puts
     at the zero configuration; its base frame is the UR base frame, its tool the flange
@@ -229,6 +241,6 @@ def read_ur_kinematics(
             measure,
             name=name or "ur_calibrated",
             source=f"UR kinematics {path.name} ({label})",
-        ).model
+        )
     except GeometryError as err:
         raise URKinematicsError(f"{path}: {err}") from None

@@ -27,7 +27,9 @@ axis).  Then ``L_j(q) = L_j(q_j=0) · Rot(axis_j, q_j)`` and the new ``<origin>`
 ``j`` is ``W_parent⁻¹ W_child`` of the calibrated link frames at zero; the fixed joints
 between two movable joints keep their origins.  The flange (the model's last robot
 frame, before the measured tool ``tcp_*``) is reached by rewriting the origin of the
-first fixed joint after the last movable joint.
+first fixed joint after the last movable joint; where the model does not hold the
+flange's orientation (a model for position measurement), the tip keeps the URDF's
+orientation relative to the flange.
 
 What a URDF cannot carry — joint effects (compliance, clearance, backlash: pose- and
 load-dependent), a learned residual — is stated in an XML comment after ``<robot>``
@@ -382,22 +384,23 @@ def _export_source(
         k += 1
     # the flange: the first fixed joint after the last movable joint carries the correction
     after = chain[[j.name for j in chain].index(names[-1]) + 1 :]
-    nominal_gap = spatial.inverse(W_urdf) @ nom.T_base_flange0  # the URDF tip vs the nominal flange
-    if (
-        np.linalg.norm(nominal_gap[:3, 3]) > MATCH_TOL
-        or np.linalg.norm(spatial.matrix_to_rotvec(nominal_gap[:3, :3])) > MATCH_TOL
-    ):
+    # the URDF's tip in the nominal model's flange frame: a rotation when the model does not
+    # hold the flange orientation (position measurement); it rides on the calibrated flange
+    G = spatial.inverse(nom.T_base_flange0) @ W_urdf
+    if np.linalg.norm(G[:3, 3]) > MATCH_TOL:
         raise URDFError(
-            f"{path}: link {tip_link!r} is {np.linalg.norm(nominal_gap[:3, 3]) * 1e3:.4g} mm from the "
-            "nominal model's flange: give the link the model ends at (tip)"
+            f"{path}: link {tip_link!r} is {np.linalg.norm(G[:3, 3]) * 1e3:.4g} mm from the nominal "
+            "model's flange: give the link the model ends at (tip)"
         )
+    G[:3, 3] = 0.0
+    T_base_tip = cal.T_base_flange0 @ G
     if after:
         rest = np.eye(4)
         for j in after[1:]:
             rest = rest @ _origin_of(j)
-        new_origin[after[0].name] = spatial.inverse(W_last) @ cal.T_base_flange0 @ spatial.inverse(rest)
+        new_origin[after[0].name] = spatial.inverse(W_last) @ T_base_tip @ spatial.inverse(rest)
     else:
-        gap = spatial.inverse(W_last) @ cal.T_base_flange0
+        gap = spatial.inverse(W_last) @ T_base_tip
         if (
             np.linalg.norm(gap[:3, 3]) > 1e-12
             or np.linalg.norm(spatial.matrix_to_rotvec(gap[:3, :3])) > 1e-12
@@ -408,8 +411,11 @@ def _export_source(
             )
     # edit the bytes, last edit first
     edits: list[tuple[int, int, bytes]] = []
-    for name, T in new_origin.items():
+    for name, T in list(new_origin.items()):
         j = joints[name]
+        if np.abs(T - _origin_of(j)).max() < 1e-14:  # unchanged: keep the text as written
+            del new_origin[name]
+            continue
         rpy = rpy_from_matrix(T[:3, :3])
         values = {"xyz": _triple(T[:3, 3]), "rpy": _triple(rpy)}
         if j.origin is not None:
@@ -434,7 +440,8 @@ def _export_source(
         additions.append(_fixed_pair(device_link, root, np.asarray(T_device_base, dtype=float), links))
         new_root = device_link
     if tool_link is not None:
-        additions.append(_fixed_pair(tool_link, tip_link, cal.T_flange_tool, links, parent_is_new=False))
+        T_tip_tool = spatial.inverse(G) @ cal.T_flange_tool
+        additions.append(_fixed_pair(tool_link, tip_link, T_tip_tool, links, parent_is_new=False))
     end_robot = data.rfind(b"</robot>")
     if additions:
         block = "\n  " + "\n  ".join(additions) + "\n"
