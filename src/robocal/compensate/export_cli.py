@@ -3,6 +3,7 @@
     robocal export urdf DIR [--urdf ORIGINAL.urdf] [--tip LINK] [--device-link NAME]
                             [--tool-link NAME] -o OUT.urdf
     robocal export ur-kinematics DIR [--base-rz-pi] -o calibration.yaml
+    robocal filter PROGRAM --calibration DIR [--tool x,y,z,rx,ry,rz] [--probe x,y,z] [--strict] -o OUT
 
 ``DIR`` is a calibration directory (``model.yaml`` + ``result.json``) or a model file.
 ``export urdf`` rewrites the joint origins of ``--urdf`` (the URDF the model was built
@@ -113,6 +114,123 @@ def ur_kinematics_command(
         err_console.print(f"[yellow]note:[/] {m.note}", highlight=False)
 
 
+def _frame_option(text: str | None, what: str):
+    """``"x,y,z,rx,ry,rz"`` (m, rotation vector in rad) -> a 4x4 transform."""
+    if text is None:
+        return None
+    from robocal import spatial
+
+    try:
+        v = [float(s) for s in text.replace(",", " ").split()]
+    except ValueError:
+        v = []
+    if len(v) != 6:
+        raise fail(f"{what} {text!r}: give x,y,z,rx,ry,rz (m, rotation vector in rad)")
+    return spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
+
+
+def _probe_option(text: str | None):
+    if text is None:
+        return None
+    try:
+        v = [float(s) for s in text.replace(",", " ").split()]
+    except ValueError:
+        v = []
+    if len(v) == 3:
+        return v
+    return _frame_option(text, "--probe")
+
+
+def filter_command(
+    program: Annotated[Path, typer.Argument(help="robot program: .script, .src (+ .dat), .mod, .csv")],
+    calibration: Annotated[
+        Path, typer.Option("--calibration", help="calibration directory (result.json) or model .yaml")
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="the filtered program (KRL: and its .dat)")],
+    tool: Annotated[
+        str | None, typer.Option("--tool", help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)")
+    ] = None,
+    base: Annotated[
+        str | None, typer.Option("--base", help="the targets' frame in the robot base: x,y,z,rx,ry,rz")
+    ] = None,
+    probe: Annotated[
+        str | None,
+        typer.Option("--probe", help="the calibration's measured tool as built: x,y,z (m) on the flange"),
+    ] = None,
+    nominal: Annotated[
+        str | None, typer.Option("--nominal", help="the controller's model: catalog name or .yaml")
+    ] = None,
+    length_unit: Annotated[str, typer.Option("--length-unit", help="CSV programs: m | mm")] = "m",
+    angle_unit: Annotated[str, typer.Option("--angle-unit", help="CSV programs: rad | deg")] = "rad",
+    strict: Annotated[
+        bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
+    ] = False,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+) -> None:
+    """Correct every target of a robot program through a calibration; everything else stays byte-identical."""
+    refuse_overwrite(out, force, "program")
+    import numpy as np
+
+    from robocal.compensate.cli import _load
+    from robocal.compensate.programs import ProgramError, filter_program_file, language_of
+
+    if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
+        raise fail(
+            f"units: --length-unit m|mm|um and --angle-unit rad|deg, got {length_unit!r}, {angle_unit!r}"
+        )
+    try:
+        language = language_of(program)
+    except ProgramError as err:
+        raise fail(str(err)) from None
+    if language_of(out) != language and not (language == "krl" and out.suffix.lower() == ".src"):
+        raise fail(f"-o {out}: write a {language} program with the suffix of {program.name}")
+    calibrated = _load(calibration)
+    nominal_model = None
+    if nominal is not None:
+        from robocal.cli import resolve_model
+
+        nominal_model = resolve_model(nominal)
+    try:
+        result = filter_program_file(
+            program,
+            calibrated,
+            out,
+            nominal=nominal_model,
+            tool=_frame_option(tool, "--tool"),
+            base=_frame_option(base, "--base"),
+            probe=_probe_option(probe),
+            length_unit=length_unit,
+            angle_unit=angle_unit,
+        )
+    except ProgramError as err:
+        raise fail(str(err)) from None
+    except ValueError as err:
+        raise fail(f"{program}: {err}") from None
+    n = len(result.targets)
+    ok = np.isfinite(result.error_after_mm) & result.reachable
+    console.print(
+        f"{program.name}: {n} targets ({language}), {int(result.changed.sum())} corrected; "
+        + (
+            f"predicted error {np.nanmax(result.error_before_mm[ok]):.3f} mm before, "
+            f"{np.nanmax(result.error_after_mm[ok]):.4f} mm after (max)"
+            if ok.any() and np.isfinite(result.error_before_mm[ok]).any()
+            else "no predicted errors"
+        ),
+        highlight=False,
+    )
+    written = [out] + ([out.with_suffix(".dat")] if len(result.texts) > 1 else [])
+    console.print(f"wrote {', '.join(map(str, written))}", highlight=False)
+    for u in result.unsupported:
+        err_console.print(
+            f"[yellow]untouched:[/] {u.file}: line {u.line}: {u.text} ({u.reason})", highlight=False
+        )
+    for p in result.problems:
+        err_console.print(f"[yellow]warning:[/] {p}", highlight=False)
+    if strict and result.problems:
+        raise typer.Exit(code=1)
+
+
 def register(app: typer.Typer) -> None:
-    """Add ``export`` to the ``robocal`` app."""
+    """Add ``export`` and ``filter`` to the ``robocal`` app."""
     app.add_typer(export_app, name="export")
+    app.command("filter")(filter_command)

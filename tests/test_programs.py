@@ -1,0 +1,196 @@
+"""Robot programs filtered through a calibration in their own language: byte identity,
+the closed loop on a virtual robot, malformed input."""
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import robocal as rc
+from robocal import spatial
+from robocal.cli import app
+from robocal.compensate.commands import nominal_model
+from robocal.compensate.programs import ProgramError, filter_program_file, filter_program_text
+from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
+from robocal.measure.ik import solve_ik
+
+EXAMPLES = Path(__file__).parents[1] / "examples" / "programs"
+runner = CliRunner()
+PROBE = np.array([0.0, 0.0, 0.1])
+
+
+@pytest.mark.parametrize(
+    ("program", "robot", "options"),
+    [
+        ("pick.script", "ur10", {}),
+        ("pick.src", "kr16", {}),
+        ("pick.mod", "irb120", {}),
+        ("targets.csv", "ur10", {"length_unit": "mm"}),
+    ],
+)
+def test_nominal_calibration_leaves_every_language_byte_identical(tmp_path, program, robot, options):
+    out = tmp_path / program
+    result = filter_program_file(EXAMPLES / program, rc.robot(robot), out, **options)
+    assert out.read_bytes() == (EXAMPLES / program).read_bytes()
+    if program.endswith(".src"):
+        assert out.with_suffix(".dat").read_bytes() == (EXAMPLES / "pick.dat").read_bytes()
+    assert len(result.targets) >= 3 and not result.changed.any()
+    assert result.reachable.all(), result.problems
+
+
+def test_unsupported_statements_are_listed_and_untouched():
+    kinds = {}
+    for program, robot in (("pick.script", "ur10"), ("pick.src", "kr16"), ("pick.mod", "irb120")):
+        res = filter_program_file(EXAMPLES / program, rc.robot(robot))
+        kinds[program] = [(Path(u.file).name, u.line) for u in res.unsupported]
+    assert kinds == {
+        "pick.script": [("pick.script", 15)],
+        "pick.src": [("pick.src", 17), ("pick.src", 16)],
+        "pick.mod": [("pick.mod", 17)],
+    }
+
+
+@pytest.fixture(scope="module")
+def cell():
+    """A UR10 with known errors, calibrated on simulated laser-tracker data, and its
+    held-out error."""
+    nominal = rc.robot("ur10")
+    true = draw_true_model(nominal, length=2e-3, angle=np.radians(0.2), seed=3)
+    robot = VirtualRobot(nominal, true, LaserTracker(p_tool_target=PROBE))
+    data = simulate(robot, random_poses(nominal, 150, seed=1), seed=1)
+    result = rc.calibrate(nominal, data.subset(np.arange(100)), tool_guess=PROBE)
+    held_out = rc.validate(result, data.subset(np.arange(100, 150)))
+    return nominal, robot, result, held_out
+
+
+def _program(q_joint, T_pose, q_before_pose=None):
+    """URScript: movej to each joint target, then for each pose a movej to the
+    configuration it is approached from (the branch) and a movel to a named pose."""
+    lines = [
+        "def prog():",
+        "  # generated for the closed-loop test",
+        f"  set_tcp(p[0, 0, {PROBE[2]}, 0, 0, 0])",
+    ]
+    for k, q in enumerate(q_joint):
+        lines.append(f"  movej([{', '.join(f'{v:.9f}' for v in q)}], a=1.4, v=1.05)  # J{k}")
+    for k, T in enumerate(T_pose):
+        if q_before_pose is not None:
+            lines.append(f"  movej([{', '.join(f'{v:.9f}' for v in q_before_pose[k])}], a=1.4, v=1.05)")
+        rv = spatial.matrix_to_rotvec(T[:3, :3])
+        values = [*T[:3, 3], *rv]
+        lines.append(f"  target_{k} = p[{', '.join(f'{v:.9f}' for v in values)}]")
+        lines.append(f"  movel(target_{k}, a=0.5, v=0.1)")
+    return "\n".join(lines) + "\nend\n"
+
+
+def test_closed_loop_filtered_program_lands_on_its_targets(cell, tmp_path):
+    """Targets in the robot base frame as the calibration located it in the cell; the
+    program's tool is the tracker's probe, so the tracker sees where the targets land."""
+    from robocal.compensate.programs import _parse_urscript
+
+    nominal, robot, result, held_out = cell
+    T_probe = spatial.transl(*PROBE)
+    q = random_poses(nominal, 40, seed=11)
+    q = q[np.linalg.svd(nominal.joint_jacobian(q), compute_uv=False)[:, -1] > 0.05][:16]
+    q_joint, q_pose = np.r_[q[:8], q[8:]], q[8:]
+    T_pose = nominal.fk(q_pose) @ T_probe  # probe poses in the base frame
+    goal_joint = (result.frame @ nominal.fk(q_joint) @ T_probe)[:, :3, 3]  # in the cell
+    goal_pose = (result.frame @ T_pose)[:, :3, 3]
+    path = tmp_path / "prog.script"
+    path.write_text(_program(q[:8], T_pose, q_before_pose=q_pose))
+    out = tmp_path / "filtered.script"
+    res = filter_program_file(path, result, out, probe=PROBE)
+    assert res.reachable.all() and res.branch_kept.all(), res.problems
+    # what the controller is told, run on the true robot (the controller's IK: nominal model)
+    targets, _, tool = _parse_urscript(out.read_text(), 6, "filtered")
+    targets = sorted(targets, key=lambda t: (t.kind, t.line))  # 8 movej, then the approach movej
+    np.testing.assert_allclose(tool, T_probe)
+    got_joint = np.array([[t.value for t in tg.tokens] for tg in targets if tg.kind == "joint"])
+    got_pose = np.array([[t.value for t in tg.tokens] for tg in targets if tg.kind == "pose"])
+    P_cmd = spatial.homogeneous(spatial.rotvec_to_matrix(got_pose[:, 3:]), got_pose[:, :3])
+    controller = nominal  # the controller believes the nominal model
+    q_ctrl = solve_ik(
+        controller, P_cmd @ spatial.inverse(T_probe), kind="pose", q0=q_pose, restarts=0, tol=1e-11
+    ).q
+
+    def landed(qc):
+        return robot.device.predict(robot.true.fk(qc)).position
+
+    after = np.r_[
+        np.linalg.norm(landed(got_joint) - goal_joint, axis=1),
+        np.linalg.norm(landed(q_ctrl) - goal_pose, axis=1),
+    ]
+    before = np.r_[
+        np.linalg.norm(landed(q_joint) - goal_joint, axis=1),
+        np.linalg.norm(landed(q_pose) - goal_pose, axis=1),
+    ]
+    print(
+        f"closed loop: before mean {before.mean() * 1e3:.3f} max {before.max() * 1e3:.3f} mm, after mean "
+        f"{after.mean() * 1e3:.4f} max {after.max() * 1e3:.4f} mm; held-out RMS {held_out.rms * 1e3:.4f} "
+        f"max {held_out.max * 1e3:.4f} mm"
+    )
+    assert after.max() <= held_out.max
+    assert before.mean() >= 5 * after.mean()
+
+
+def test_nominal_result_leaves_the_program_identical(cell, tmp_path):
+    nominal, _, result, _ = cell
+    nominal_result = dataclasses.replace(result, model=nominal_model(result))
+    q = random_poses(nominal, 10, seed=4)
+    text = _program(q[:4], nominal.fk(q[4:]))
+    res = filter_program_text({"p.script": text}, "urscript", nominal_result)
+    assert res.texts["p.script"] == text
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "message"),
+    [
+        (
+            "bad.script",
+            "def p():\n  movel(p[0.1, 0.2, 0.3, 0, 0], a=1)\nend\n",
+            r"bad\.script: line 2: a pose p\[\.\.\.\] needs 6",
+        ),
+        (
+            "bad.mod",
+            "MODULE M\n  CONST robtarget p1:=[[1,2,3],[1,0,0]];\nENDMODULE\n",
+            r"bad\.mod: line 2: robtarget p1",
+        ),
+        ("bad.csv", "name,x,y,z\nA,1,2,zz\n", r"bad\.csv: line 2, column 'z'"),
+        ("bad.src", "DEF bad()\nPTP {A1 0, A2 1\nEND\n", r"bad\.src: line 2"),
+    ],
+)
+def test_malformed_programs_name_file_and_line_and_write_nothing(tmp_path, name, text, message):
+    path = tmp_path / name
+    path.write_text(text)
+    out = tmp_path / ("out" + path.suffix)
+    with pytest.raises(ProgramError, match=message):
+        filter_program_file(path, rc.robot("ur10"), out)
+    assert not out.exists()
+    res = runner.invoke(
+        app, ["filter", str(path), "--calibration", str(_model_file(tmp_path)), "-o", str(out)]
+    )
+    assert res.exit_code == 2 and not out.exists()
+
+
+def _model_file(folder):
+    path = folder / "ur10.yaml"
+    if not path.exists():
+        rc.save_model(rc.robot("ur10"), path)
+    return path
+
+
+def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
+    _, _, result, _ = cell
+    folder = tmp_path / "cal"
+    result.save(folder)
+    out = tmp_path / "pick.script"
+    res = runner.invoke(
+        app, ["filter", str(EXAMPLES / "pick.script"), "--calibration", str(folder), "-o", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "7 targets (urscript)" in text and "untouched" in text
+    new, old = out.read_text().splitlines(), (EXAMPLES / "pick.script").read_text().splitlines()
+    assert len(new) == len(old) and sum(a != b for a, b in zip(new, old, strict=True)) == 6
