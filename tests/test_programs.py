@@ -194,3 +194,104 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
     assert "7 targets (urscript)" in text and "untouched" in text
     new, old = out.read_text().splitlines(), (EXAMPLES / "pick.script").read_text().splitlines()
     assert len(new) == len(old) and sum(a != b for a, b in zip(new, old, strict=True)) == 6
+
+
+def _krl(q_joint, T_pose, q_before_pose):
+    """A KRL .src and .dat: PTP to E6AXIS, then PTP to the approach axes and LIN to an E6POS."""
+    src, dat = ["DEF prog( )", "; generated for the closed-loop test"], ["DEFDAT prog", "; targets"]
+    for k, q in enumerate(np.r_[q_joint, q_before_pose]):
+        axes = ",".join(f"A{j + 1} {np.degrees(v):.6f}" for j, v in enumerate(q))
+        dat.append(f"DECL E6AXIS XJ{k}={{{axes},E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}}")
+    for k in range(len(q_joint)):
+        src.append(f"PTP XJ{k}")
+    for k, T in enumerate(T_pose):
+        a, b, c = np.degrees(spatial.zyx_angles(T[:3, :3]))
+        x, y, z = T[:3, 3] * 1e3
+        dat.append(
+            f"DECL E6POS XP{k}={{X {x:.4f},Y {y:.4f},Z {z:.4f},A {a:.5f},B {b:.5f},C {c:.5f},S 2,T 35,E1 0.0}}"
+        )
+        src += [f"PTP XJ{len(q_joint) + k}", f"LIN XP{k} C_DIS"]
+    return {"prog.src": "\n".join(src + ["END"]) + "\n", "prog.dat": "\n".join(dat + ["ENDDAT"]) + "\n"}
+
+
+def _rapid(q_joint, T_pose, q_before_pose):
+    lines = ["MODULE Prog", "    ! generated for the closed-loop test"]
+    lines.append(
+        f"    PERS tooldata probe:=[TRUE,[[0,0,{PROBE[2] * 1e3:.1f}],[1,0,0,0]],[0.1,[0,0,1],[1,0,0,0],0,0,0]];"
+    )
+    for k, q in enumerate(np.r_[q_joint, q_before_pose]):
+        lines.append(
+            f"    CONST jointtarget j{k}:=[[{','.join(f'{np.degrees(v):.6f}' for v in q)}],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+        )
+    for k, T in enumerate(T_pose):
+        qu = spatial.matrix_to_quaternion(T[:3, :3])
+        lines.append(
+            f"    CONST robtarget p{k}:=[[{','.join(f'{v * 1e3:.4f}' for v in T[:3, 3])}],"
+            f"[{','.join(f'{v:.9f}' for v in qu)}],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+        )
+    lines.append("    PROC main()")
+    lines += [f"        MoveAbsJ j{k}, v1000, fine, probe;" for k in range(len(q_joint))]
+    for k in range(len(T_pose)):
+        lines += [
+            f"        MoveAbsJ j{len(q_joint) + k}, v1000, fine, probe;",
+            f"        MoveL p{k}, v100, fine, probe;",
+        ]
+    return {"prog.mod": "\n".join(lines + ["    ENDPROC", "ENDMODULE"]) + "\n"}
+
+
+@pytest.mark.parametrize(("language", "robot_name"), [("krl", "kr16"), ("rapid", "irb120")])
+def test_closed_loop_krl_and_rapid(tmp_path, language, robot_name):
+    from robocal.compensate import programs as pg
+
+    nominal = rc.robot(robot_name)
+    true = draw_true_model(nominal, length=1e-3, angle=np.radians(0.1), seed=5)
+    robot = VirtualRobot(nominal, true, LaserTracker(p_tool_target=PROBE))
+    data = simulate(robot, random_poses(nominal, 150, seed=2), seed=2)
+    result = rc.calibrate(nominal, data.subset(np.arange(100)), tool_guess=PROBE)
+    held_out = rc.validate(result, data.subset(np.arange(100, 150)))
+    T_probe = spatial.transl(*PROBE)
+    q = random_poses(nominal, 60, seed=12)
+    q = q[np.linalg.svd(nominal.joint_jacobian(q), compute_uv=False)[:, -1] > 0.05][:12]
+    q_joint, q_pose = q[:6], q[6:]
+    T_pose = nominal.fk(q_pose) @ T_probe
+    texts = (_krl if language == "krl" else _rapid)(q_joint, T_pose, q_pose)
+    tool = T_probe if language == "krl" else None
+    res = filter_program_text(texts, language, result, tool=tool, probe=PROBE)
+    assert res.reachable.all() and res.branch_kept.all(), res.problems
+    assert not res.unsupported
+    # read back what the controller gets, run it on the true robot
+    units = pg._UNITS[language]
+    got = {}
+    for label, text in res.texts.items():
+        parsed = pg._parse_krl(text, 6, label)[0] if language == "krl" else pg._parse_rapid(text, 6, label)[0]
+        for t in parsed:
+            got[t.name] = pg._read_value(t, units, nominal.joint_types, False)
+    n_j = len(q_joint)
+    prefix_j, prefix_p = ("XJ", "XP") if language == "krl" else ("j", "p")
+    got_joint = np.array([got[f"{prefix_j}{k}"] for k in range(n_j)])
+    P_cmd = np.array([got[f"{prefix_p}{k}"] for k in range(len(q_pose))])
+    q_ctrl = solve_ik(
+        nominal, P_cmd @ spatial.inverse(T_probe), kind="pose", q0=q_pose, restarts=0, tol=1e-11
+    ).q
+
+    def landed(qc):
+        return robot.device.predict(true.fk(qc)).position
+
+    goal_joint = (result.frame @ nominal.fk(q_joint) @ T_probe)[:, :3, 3]
+    goal_pose = (result.frame @ T_pose)[:, :3, 3]
+    after = np.r_[
+        np.linalg.norm(landed(got_joint) - goal_joint, axis=1),
+        np.linalg.norm(landed(q_ctrl) - goal_pose, axis=1),
+    ]
+    before = np.r_[
+        np.linalg.norm(landed(q_joint) - goal_joint, axis=1),
+        np.linalg.norm(landed(q_pose) - goal_pose, axis=1),
+    ]
+    print(
+        f"{language}: before mean {before.mean() * 1e3:.3f} mm, after mean {after.mean() * 1e3:.4f} max "
+        f"{after.max() * 1e3:.4f} mm; held-out max {held_out.max * 1e3:.4f} mm"
+    )
+    assert after.max() <= held_out.max
+    assert before.mean() >= 5 * after.mean()
+    # and a nominal calibration leaves both byte-identical
+    assert filter_program_text(texts, language, nominal, tool=tool).texts == texts

@@ -13,8 +13,9 @@ Corrections (:mod:`robocal.compensate.commands`):
 * a **Cartesian target** ``P`` becomes ``P' = nominal.fk(q')`` with ``q'`` the joint
   values at which the real robot reaches ``P`` (:func:`~robocal.compensate.commands.compensate`):
   the controller, commanded ``P'``, solves its nominal IK to ``q'`` and the real robot
-  lands on ``P``.  The IK branch is the one of the nearest joint target before it in
-  the program (the robot moves from there), else of the robot's zero configuration.
+  lands on ``P``.  The IK branch is that of the configuration the robot comes from:
+  the previous target in execution order (motions to named targets count where they
+  run, e.g. a KRL ``.src`` ``LIN XP1`` and not its ``.dat`` declaration).
 
 The robot is the calibrated model without the measured tool (``tcp_*``) — but with
 how far the identified tool is from the probe as built (``probe``; robot geometry the
@@ -216,7 +217,7 @@ def _ur_literal(text: str, i: int, dof: int, what: str, path: str) -> tuple[str,
 
 
 def _parse_urscript(
-    text: str, dof: int, path: str
+    text: str, dof: int, path: str, uses: list | None = None
 ) -> tuple[list[ProgramTarget], list[Unsupported], Array | None]:
     targets: list[ProgramTarget] = []
     unsupported: list[Unsupported] = []
@@ -249,7 +250,8 @@ def _parse_urscript(
                 kind, toks, _ = lit
                 targets.append(ProgramTarget(f"line {line}", line, kind, path, tuple(toks), "urscript"))
             elif re.fullmatch(r"[A-Za-z_]\w*", stripped) and stripped in names:
-                continue  # corrected where it is assigned
+                if uses is not None:  # corrected where it is assigned; executed here
+                    uses.append((a_start, stripped))
             else:
                 reason = f"target {stripped!r} is not a literal nor a variable assigned a literal"
                 unsupported.append(Unsupported(path, line, _line_text(text, m.start()), reason))
@@ -311,7 +313,7 @@ def _krl_target(text: str, start: int, end: int, dof: int, name: str, path: str)
 
 
 def _parse_krl(
-    text: str, dof: int, path: str
+    text: str, dof: int, path: str, uses: list | None = None
 ) -> tuple[list[ProgramTarget], list[Unsupported], list[tuple[str, int, str]]]:
     targets: list[ProgramTarget] = []
     unsupported: list[Unsupported] = []
@@ -361,6 +363,8 @@ def _parse_krl(
             )
         else:
             used.append((first.split(":")[0].rstrip(","), line, m.group(0).strip()))
+            if uses is not None:
+                uses.append((m.start(), first.split(":")[0].rstrip(",")))
     targets.sort(key=lambda t: t.tokens[0].start)
     return targets, unsupported, used
 
@@ -407,7 +411,7 @@ def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) 
 
 
 def _parse_rapid(
-    text: str, dof: int, path: str
+    text: str, dof: int, path: str, uses: list | None = None
 ) -> tuple[list[ProgramTarget], list[Unsupported], Array | None]:
     targets: list[ProgramTarget] = []
     unsupported: list[Unsupported] = []
@@ -452,6 +456,8 @@ def _parse_rapid(
                     )
                     break
                 k = len(args) - len(arg_text) + first.end()
+                if uses is not None:
+                    uses.append((pos, first.group()))
             count += 1
             comma = args.find(",", k)
             if comma < 0:
@@ -680,20 +686,23 @@ def filter_program_text(
     unsupported: list[Unsupported] = []
     found_tool = None
     krl_used: list[tuple[str, str, int, str]] = []
-    for label, text in texts.items():
+    events: list[tuple[int, int, str]] = []  # (file, position, name) of motions to named targets
+    for f, (label, text) in enumerate(texts.items()):
+        uses: list[tuple[int, str]] = []
         if language == "urscript":
-            t, u, found_tool = _parse_urscript(text, dof, label)
+            t, u, found_tool = _parse_urscript(text, dof, label, uses)
         elif language == "krl":
-            t, u, used = _parse_krl(text, dof, label)
+            t, u, used = _parse_krl(text, dof, label, uses)
             krl_used += [(label, *x) for x in used]
         elif language == "rapid":
-            t, u, found_tool = _parse_rapid(text, dof, label)
+            t, u, found_tool = _parse_rapid(text, dof, label, uses)
         elif language == "csv":
             t, u = _parse_csv(text, dof, label), []
         else:
             raise ValueError(f"unknown language {language!r}")
         targets += t
         unsupported += u
+        events += [(f, pos, name) for pos, name in uses]
     declared = {t.name.upper() for t in targets}
     for label, name, line, statement in krl_used:
         if name.upper() not in declared:
@@ -725,28 +734,43 @@ def filter_program_text(
         before[joint_idx], after[joint_idx] = res.error_before * 1e3, res.error_after * 1e3
         reach[joint_idx], kept[joint_idx] = res.reachable, res.branch_kept
     if pose_idx:
-        # the branch: the nearest joint target before, else the zero configuration
-        q0 = []
-        for i in pose_idx:
-            prev = [j for j in joint_idx if j < i]
-            q0.append(values[prev[-1]] if prev else np.zeros(dof))
-        frames = np.array([B @ values[i] for i in pose_idx])
-        position_only = [len(targets[i].tokens) == 3 for i in pose_idx]
-        T_list = frames if not any(position_only) else None
-        if T_list is not None:
+        # execution order: motions to named targets where they run, literal targets where
+        # they stand, declared targets never moved to at the end (file order)
+        files = {label: f for f, label in enumerate(texts)}
+        by_name = {t.name.upper(): i for i, t in enumerate(targets)}
+        used_names = {name.upper() for _, _, name in events}
+        order = sorted(
+            [(f, pos, by_name[name.upper()]) for f, pos, name in events if name.upper() in by_name]
+            + [
+                (files[t.file], t.tokens[0].start, i)
+                for i, t in enumerate(targets)
+                if t.name.upper() not in used_names
+            ]
+        )
+        sequence = list(dict.fromkeys(i for _, _, i in order))
+        # the branch of each Cartesian target: the configuration the robot comes from
+        q_prev = values[joint_idx[0]] if joint_idx else np.zeros(dof)
+        for i in sequence:
+            if targets[i].kind == "joint":
+                q_prev = values[i]
+                continue
+            T = B @ values[i]
+            position_only = len(targets[i].tokens) == 3
             res = compensate(
-                real, frames, nom, kind="pose", q0=np.array(q0), joint_effects=effects, tol=tol, tol_angle=tol
+                real,
+                T[:3, 3][None] if position_only else T[None],
+                nom,
+                kind="position" if position_only else "pose",
+                q0=q_prev,
+                joint_effects=effects,
+                tol=tol,
+                tol_angle=tol,
             )
-            corrected = spatial.inverse(B) @ nom.fk(res.q)
-        else:
-            res = compensate(
-                real, frames[:, :3, 3], nom, kind="position", q0=np.array(q0), joint_effects=effects, tol=tol
-            )
-            corrected = spatial.inverse(B) @ nom.fk(res.q)
-        for k, i in enumerate(pose_idx):
-            new_values[i] = corrected[k] if res.reachable[k] else values[i]
-        before[pose_idx], after[pose_idx] = res.error_before * 1e3, res.error_after * 1e3
-        reach[pose_idx], kept[pose_idx] = res.reachable, res.branch_kept
+            q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
+            corrected = spatial.inverse(B) @ nom.fk(res.q)[0]
+            new_values[i] = corrected if res.reachable[0] else values[i]
+            before[i], after[i] = res.error_before[0] * 1e3, res.error_after[0] * 1e3
+            reach[i], kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0])
     # write: the numbers that moved, file by file, last first
     changed = np.zeros(n, dtype=bool)
     edits: dict[str, list[tuple[int, int, str]]] = {label: [] for label in texts}
