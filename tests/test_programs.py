@@ -208,7 +208,8 @@ def _krl(q_joint, T_pose, q_before_pose):
         a, b, c = np.degrees(spatial.zyx_angles(T[:3, :3]))
         x, y, z = T[:3, 3] * 1e3
         dat.append(
-            f"DECL E6POS XP{k}={{X {x:.4f},Y {y:.4f},Z {z:.4f},A {a:.5f},B {b:.5f},C {c:.5f},S 2,T 35,E1 0.0}}"
+            f"DECL E6POS XP{k}={{X {x:.4f},Y {y:.4f},Z {z:.4f},A {a:.5f},B {b:.5f},C {c:.5f},"
+            "S 2,T 35,E1 0.0}"
         )
         src += [f"PTP XJ{len(q_joint) + k}", f"LIN XP{k} C_DIS"]
     return {"prog.src": "\n".join(src + ["END"]) + "\n", "prog.dat": "\n".join(dat + ["ENDDAT"]) + "\n"}
@@ -217,11 +218,13 @@ def _krl(q_joint, T_pose, q_before_pose):
 def _rapid(q_joint, T_pose, q_before_pose):
     lines = ["MODULE Prog", "    ! generated for the closed-loop test"]
     lines.append(
-        f"    PERS tooldata probe:=[TRUE,[[0,0,{PROBE[2] * 1e3:.1f}],[1,0,0,0]],[0.1,[0,0,1],[1,0,0,0],0,0,0]];"
+        f"    PERS tooldata probe:=[TRUE,[[0,0,{PROBE[2] * 1e3:.1f}],[1,0,0,0]],"
+        "[0.1,[0,0,1],[1,0,0,0],0,0,0]];"
     )
     for k, q in enumerate(np.r_[q_joint, q_before_pose]):
         lines.append(
-            f"    CONST jointtarget j{k}:=[[{','.join(f'{np.degrees(v):.6f}' for v in q)}],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            f"    CONST jointtarget j{k}:=[[{','.join(f'{np.degrees(v):.6f}' for v in q)}],"
+            "[9E9,9E9,9E9,9E9,9E9,9E9]];"
         )
     for k, T in enumerate(T_pose):
         qu = spatial.matrix_to_quaternion(T[:3, :3])
