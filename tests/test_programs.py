@@ -298,3 +298,30 @@ def test_closed_loop_krl_and_rapid(tmp_path, language, robot_name):
     assert before.mean() >= 5 * after.mean()
     # and a nominal calibration leaves both byte-identical
     assert filter_program_text(texts, language, nominal, tool=tool).texts == texts
+
+
+def test_krl_crlf_latin1_kept_and_angles_within_180(tmp_path):
+    src = (
+        (EXAMPLES / "pick.src")
+        .read_bytes()
+        .replace(b"\n", b"\r\n")
+        .replace(b"; a small", "; Ä small".encode("latin-1"))
+    )
+    dat = (EXAMPLES / "pick.dat").read_bytes().replace(b"\n", b"\r\n")
+    (tmp_path / "p.src").write_bytes(src)
+    (tmp_path / "p.dat").write_bytes(dat)
+    nominal = rc.robot("kr16")
+    filter_program_file(tmp_path / "p.src", nominal, tmp_path / "out" / "p.src")
+    assert (tmp_path / "out" / "p.src").read_bytes() == src
+    assert (tmp_path / "out" / "p.dat").read_bytes() == dat
+    moved = nominal.with_free_values(nominal.free_values + 1e-3)
+    res = filter_program_file(tmp_path / "p.src", moved, tmp_path / "out2" / "p.src", nominal=nominal)
+    assert res.changed.sum() == 7 and not res.problems
+    new = (tmp_path / "out2" / "p.dat").read_bytes()
+    assert new.count(b"\r\n") == dat.count(b"\r\n")
+    new_src = (tmp_path / "out2" / "p.src").read_bytes()
+    assert new_src.count(b"\r\n") == src.count(b"\r\n") and "; Ä small".encode("latin-1") in new_src
+    import re
+
+    for name, value in re.findall(rb"\b([ABC]) (-?\d+\.\d+)", new + new_src):
+        assert abs(float(value)) <= 180.0, (name, value)

@@ -220,6 +220,18 @@ def filter_command(
     )
     written = [out] + ([out.with_suffix(".dat")] if len(result.texts) > 1 else [])
     console.print(f"wrote {', '.join(map(str, written))}", highlight=False)
+    if language == "krl" and tool is None:
+        err_console.print(
+            "[yellow]note:[/] KRL tool data live in $config.dat, which is not read: the targets are taken "
+            "as flange poses; give the program's tool with --tool",
+            highlight=False,
+        )
+    if language == "rapid" and base is None and any("\\WObj" in t for t in result.texts.values()):
+        err_console.print(
+            "[yellow]note:[/] work objects (\\WObj) are not read: the targets are taken in the robot's "
+            "base frame; give the work object with --base",
+            highlight=False,
+        )
     for u in result.unsupported:
         err_console.print(
             f"[yellow]untouched:[/] {u.file}: line {u.line}: {u.text} ({u.reason})", highlight=False

@@ -244,7 +244,12 @@ def _parse_urscript(
                 lit = _ur_literal(text, first, dof, m.group(1), path)
                 if lit is None:
                     unsupported.append(
-                        Unsupported(path, line, _line_text(text, m.start()), "target not numbers")
+                        Unsupported(
+                            path,
+                            line,
+                            _line_text(text, m.start()),
+                            f"target is not a pose p[...] nor {dof} joint values",
+                        )
                     )
                     continue
                 kind, toks, _ = lit
@@ -571,6 +576,9 @@ def _write_values(
         rz, ry, rx = spatial.zyx_angles(T[:3, :3])
         angles = np.degrees([rz, ry, rx])
         angles = old[3:6] + (angles - old[3:6] + 180.0) % 360.0 - 180.0  # nearest to the written angle
+        # KRL wants -180..180; what rounds to ±180 at the written resolution stays as written
+        beyond = np.abs(angles) > 180.0 + 0.5 * 10.0**-u.angle_decimals
+        angles = np.where(beyond, angles - 360.0 * np.sign(angles), angles)
         out += [(float(c), u.angle_decimals) for c in angles]
     else:
         qv = spatial.matrix_to_quaternion(T[:3, :3])
