@@ -164,6 +164,25 @@ def test_arm7_world_link_and_axis_of_non_z_joints(tmp_path):
     assert ex.root == "world"
 
 
+def test_chain_ending_at_a_moving_link_gets_a_calibrated_flange_link(tmp_path):
+    text = ARM7_URDF.read_text()
+    start = text.index('  <joint name="flange_fixed"')
+    text = text[:start] + text[text.index("</joint>", start) + len("</joint>\n") :]
+    text = text.replace('  <link name="flange"/>\n', "")
+    source = tmp_path / "arm7_no_flange.urdf"
+    source.write_text(text)
+    nominal = build_from_urdf(source).model
+    model = _calibrated(nominal, 21)
+    ex = calibrated_urdf(model, source, nominal=nominal, tool_link="tcp")
+    assert ex.tip == "link7_calibrated"
+    out = tmp_path / "out.urdf"
+    out.write_text(ex.text)
+    q = np.random.default_rng(9).uniform(-2, 2, (20, 7))
+    _agree(_pin_fk(out, "tcp", q), model.fk(q))
+    robot = dataclasses.replace(model, steps=model.steps[: -len(TOOL_STEPS)])
+    _agree(_pin_fk(out, "link7_calibrated", q), robot.fk(q))
+
+
 @pytest.mark.parametrize("name", ["puma560", "ur10", "irb2400", "katana450"])
 def test_catalog_robot_gets_a_kinematic_urdf_of_its_own(tmp_path, name):
     model = _calibrated(rc.robot(name), 7)

@@ -59,7 +59,7 @@ def urdf_command(
     if device_link is not None and not isinstance(calibrated, CalibrationResult):
         raise fail(f"--device-link needs a calibration directory (its device frame); {source} is a model")
     try:
-        ex, missing = export_urdf(calibrated, urdf, tip=tip, device_link=device_link, tool_link=tool_link)
+        ex, _ = export_urdf(calibrated, urdf, tip=tip, device_link=device_link, tool_link=tool_link)
     except FileNotFoundError as err:
         raise fail(str(err)) from None
     except (URDFError, ValueError) as err:
@@ -69,8 +69,8 @@ def urdf_command(
     console.print(f"wrote {out}: {what}; root {ex.root}, flange {ex.tip}", highlight=False)
     if ex.tool_link:
         console.print(f"measured tool: link {ex.tool_link}", highlight=False)
-    for m in missing:
-        err_console.print(f"[yellow]note:[/] {m.note}", highlight=False)
+    for note in ex.notes:  # what the URDF leaves out (with sizes), and where the flange went
+        err_console.print(f"[yellow]note:[/] {note}", highlight=False)
 
 
 @export_app.command("ur-kinematics")

@@ -394,6 +394,8 @@ def _export_source(
         )
     G[:3, 3] = 0.0
     T_base_tip = cal.T_base_flange0 @ G
+    flange_link: str | None = None
+    flange_pair: str | None = None
     if after:
         rest = np.eye(4)
         for j in after[1:]:
@@ -405,10 +407,14 @@ def _export_source(
             np.linalg.norm(gap[:3, 3]) > 1e-12
             or np.linalg.norm(spatial.matrix_to_rotvec(gap[:3, :3])) > 1e-12
         ):
-            raise URDFError(
-                f"{path}: no fixed joint after {names[-1]!r} to carry the calibrated flange; add a fixed "
-                f"joint to a flange link (e.g. tool0) to the URDF"
-            )
+            # no fixed joint to carry the calibrated flange: a new flange link on the tip
+            flange_link = f"{tip_link}_calibrated"
+            flange_pair = _fixed_pair(flange_link, tip_link, gap, links, parent_is_new=False)
+            notes = [
+                *notes,
+                f"the calibrated flange is link {flange_link} (the chain ended at {tip_link}, "
+                "which has no fixed joint to carry it)",
+            ]
     # edit the bytes, last edit first
     edits: list[tuple[int, int, bytes]] = []
     for name, T in list(new_origin.items()):
@@ -432,7 +438,7 @@ def _export_source(
             edits.append((j.axis.start, j.axis.end, _set_attrs(tag, values)))
         else:
             edits.append((j.element.end, j.element.end, f'<axis xyz="{values["xyz"]}"/>'.encode()))
-    additions: list[str] = []
+    additions: list[str] = [] if flange_pair is None else [flange_pair]
     new_root = root
     if device_link is not None:
         if T_device_base is None:
@@ -441,7 +447,8 @@ def _export_source(
         new_root = device_link
     if tool_link is not None:
         T_tip_tool = spatial.inverse(G) @ cal.T_flange_tool
-        additions.append(_fixed_pair(tool_link, tip_link, T_tip_tool, links, parent_is_new=False))
+        parent = tip_link if flange_link is None else flange_link
+        additions.append(_fixed_pair(tool_link, parent, T_tip_tool, links, parent_is_new=False))
     end_robot = data.rfind(b"</robot>")
     if additions:
         block = "\n  " + "\n  ".join(additions) + "\n"
@@ -454,7 +461,7 @@ def _export_source(
     return URDFExport(
         text=out.decode("utf-8"),
         root=new_root,
-        tip=tip_link,
+        tip=tip_link if flange_link is None else flange_link,
         tool_link=tool_link,
         changed=tuple(sorted(set(new_origin) | set(new_axis), key=list(joints).index)),
         notes=tuple(notes),
