@@ -325,3 +325,31 @@ def test_krl_crlf_latin1_kept_and_angles_within_180(tmp_path):
 
     for name, value in re.findall(rb"\b([ABC]) (-?\d+\.\d+)", new + new_src):
         assert abs(float(value)) <= 180.0, (name, value)
+
+
+def test_mutated_programs_raise_only_program_errors():
+    """Seeded random damage to every example: a ProgramError (file and line) or a result."""
+    import random
+
+    rng = random.Random(0)
+    cases = [
+        ("pick.script", "urscript", "ur10"),
+        ("pick.src", "krl", "kr16"),
+        ("pick.mod", "rapid", "irb120"),
+    ]
+    cases.append(("targets.csv", "csv", "ur10"))
+    models = {name: rc.robot(name) for name in ("ur10", "kr16", "irb120")}
+    pieces = ["[", "]", "{", "}", ",", "p[", "1e400", "nan", "-", ".", "(", ")", ";", "\n", "9E9", "0,0,0,0"]
+    for _ in range(80):
+        name, language, robot = rng.choice(cases)
+        text = (EXAMPLES / name).read_text()
+        for _ in range(rng.randint(1, 4)):
+            i = rng.randrange(len(text))
+            if rng.random() < 0.4:
+                text = text[:i] + text[i + rng.randint(1, 5) :]
+            else:
+                text = text[:i] + rng.choice(pieces) + text[i:]
+        try:
+            filter_program_text({name: text}, language, models[robot])
+        except ProgramError as err:
+            assert str(err).startswith(name) and "\n" not in str(err)

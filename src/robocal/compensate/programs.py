@@ -266,6 +266,8 @@ def _parse_urscript(
         lit = _ur_literal(text, m.end() - 2, dof, "set_tcp", path)
         if lit is not None:
             v = [t.value for t in lit[1]]
+            if not all(map(math.isfinite, v)):
+                raise ProgramError(f"{path}: line {_line_of(text, m.start())}: set_tcp: not finite numbers")
             tool = spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
     targets.sort(key=lambda t: t.tokens[0].start)
     return targets, unsupported, tool
@@ -432,7 +434,12 @@ def _parse_rapid(
                     p = [t.value for t in _tokens(text, *inner[0])]
                     qv = [t.value for t in _tokens(text, *inner[1])]
                     if len(p) == 3 and len(qv) == 4:
-                        R = spatial.quaternion_to_matrix(np.array(qv) / np.linalg.norm(qv))
+                        norm = float(np.linalg.norm(qv))
+                        if not (math.isfinite(norm) and norm > 1e-9 and all(map(math.isfinite, p))):
+                            raise ProgramError(
+                                f"{path}: line {_line_of(text, b)}: tooldata {name}: tframe is not a frame"
+                            )
+                        R = spatial.quaternion_to_matrix(np.array(qv) / norm)
                         tool = spatial.homogeneous(R, np.array(p) * 1e-3)
             continue
         t, _ = _rapid_target(text, b, kind, dof, name, path)
@@ -487,6 +494,9 @@ def _parse_csv(text: str, dof: int, path: str) -> list[ProgramTarget]:
         if header is None:
             sep = max([",", ";", "\t"], key=body.count)
             header = [h.strip().lower() for h in body.split(sep)]
+            quat = [c in header for c in ("qw", "qx", "qy", "qz")]
+            if any(quat) and not all(quat):
+                raise ProgramError(f"{path}: line {k + 1}: orientation needs all of qw, qx, qy, qz")
             continue
         cells, offs, c = body.split(sep), [], start
         for cell in cells:
@@ -536,6 +546,9 @@ _UNITS = {
 
 def _read_value(t: ProgramTarget, u: _Units, joint_types: Sequence[str], csv_pose_quat: bool) -> Array:
     v = np.array([k.value for k in t.tokens])
+    bad = [k.text for k in t.tokens if not math.isfinite(k.value)]
+    if bad:
+        raise ProgramError(f"{t.file}: line {t.line}: target {t.name}: {bad[0]} is not a finite number")
     if t.kind == "joint":
         return v * np.array([u.angle if jt == "revolute" else u.length for jt in joint_types])
     p = v[:3] * u.length
