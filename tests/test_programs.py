@@ -353,3 +353,17 @@ def test_mutated_programs_raise_only_program_errors():
             filter_program_text({name: text}, language, models[robot])
         except ProgramError as err:
             assert str(err).startswith(name) and "\n" not in str(err)
+
+
+def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
+    _, _, result, _ = cell
+    folder = tmp_path / "cal"
+    result.save(folder)
+    path = tmp_path / "far.script"
+    path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
+    args = ["filter", str(path), "--calibration", str(folder), "-o"]
+    res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
+    assert res.exit_code == 0
+    assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())
+    assert (tmp_path / "a.script").read_text() == path.read_text()  # left as written
+    assert runner.invoke(app, [*args, str(tmp_path / "b.script"), "--strict"]).exit_code == 1
