@@ -196,7 +196,17 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
     assert len(new) == len(old) and sum(a != b for a, b in zip(new, old, strict=True)) == 6
 
 
-def _krl(q_joint, T_pose, q_before_pose):
+def _turn(q):
+    """KUKA's turn T: bit j set when axis j + 1 is negative."""
+    return sum(1 << j for j in range(6) if q[j] < 0)
+
+
+def _cf(q):
+    """ABB's cf1, cf4, cf6 (quadrants of axes 1, 4, 6) and cfx 0."""
+    return ",".join(str(int(np.floor(np.degrees(q[j]) / 90))) for j in (0, 3, 5)) + ",0"
+
+
+def _krl(q_joint, T_pose, q_before_pose, q_config=None):
     """A KRL .src and .dat: PTP to E6AXIS, then PTP to the approach axes and LIN to an E6POS."""
     src, dat = ["DEF prog( )", "; generated for the closed-loop test"], ["DEFDAT prog", "; targets"]
     for k, q in enumerate(np.r_[q_joint, q_before_pose]):
@@ -209,13 +219,13 @@ def _krl(q_joint, T_pose, q_before_pose):
         x, y, z = T[:3, 3] * 1e3
         dat.append(
             f"DECL E6POS XP{k}={{X {x:.4f},Y {y:.4f},Z {z:.4f},A {a:.5f},B {b:.5f},C {c:.5f},"
-            "S 2,T 35,E1 0.0}"
+            f"S 2,T {_turn((q_before_pose if q_config is None else q_config)[k])},E1 0.0}}"
         )
         src += [f"PTP XJ{len(q_joint) + k}", f"LIN XP{k} C_DIS"]
     return {"prog.src": "\n".join(src + ["END"]) + "\n", "prog.dat": "\n".join(dat + ["ENDDAT"]) + "\n"}
 
 
-def _rapid(q_joint, T_pose, q_before_pose):
+def _rapid(q_joint, T_pose, q_before_pose, q_config=None):
     lines = ["MODULE Prog", "    ! generated for the closed-loop test"]
     lines.append(
         f"    PERS tooldata probe:=[TRUE,[[0,0,{PROBE[2] * 1e3:.1f}],[1,0,0,0]],"
@@ -226,11 +236,12 @@ def _rapid(q_joint, T_pose, q_before_pose):
             f"    CONST jointtarget j{k}:=[[{','.join(f'{np.degrees(v):.6f}' for v in q)}],"
             "[9E9,9E9,9E9,9E9,9E9,9E9]];"
         )
+    q_config = q_before_pose if q_config is None else q_config
     for k, T in enumerate(T_pose):
         qu = spatial.matrix_to_quaternion(T[:3, :3])
         lines.append(
             f"    CONST robtarget p{k}:=[[{','.join(f'{v * 1e3:.4f}' for v in T[:3, 3])}],"
-            f"[{','.join(f'{v:.9f}' for v in qu)}],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            f"[{','.join(f'{v:.9f}' for v in qu)}],[{_cf(q_config[k])}],[9E9,9E9,9E9,9E9,9E9,9E9]];"
         )
     lines.append("    PROC main()")
     lines += [f"        MoveAbsJ j{k}, v1000, fine, probe;" for k in range(len(q_joint))]
@@ -260,7 +271,7 @@ def test_closed_loop_krl_and_rapid(tmp_path, language, robot_name):
     texts = (_krl if language == "krl" else _rapid)(q_joint, T_pose, q_pose)
     tool = T_probe if language == "krl" else None
     res = filter_program_text(texts, language, result, tool=tool, probe=PROBE)
-    assert res.reachable.all() and res.branch_kept.all(), res.problems
+    assert res.reachable.all() and res.branch_kept.all() and not res.problems, res.problems
     assert not res.unsupported
     # read back what the controller gets, run it on the true robot
     units = pg._UNITS[language]
@@ -340,7 +351,7 @@ def test_mutated_programs_raise_only_program_errors():
     cases.append(("targets.csv", "csv", "ur10"))
     models = {name: rc.robot(name) for name in ("ur10", "kr16", "irb120")}
     pieces = ["[", "]", "{", "}", ",", "p[", "1e400", "nan", "-", ".", "(", ")", ";", "\n", "9E9", "0,0,0,0"]
-    for _ in range(80):
+    for _ in range(40):
         name, language, robot = rng.choice(cases)
         text = (EXAMPLES / name).read_text()
         for _ in range(rng.randint(1, 4)):
@@ -367,3 +378,41 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())
     assert (tmp_path / "a.script").read_text() == path.read_text()  # left as written
     assert runner.invoke(app, [*args, str(tmp_path / "b.script"), "--strict"]).exit_code == 1
+
+
+@pytest.mark.parametrize("language", ["krl", "rapid"])
+def test_written_configuration_chooses_the_branch(language):
+    """The same Cartesian target in two configurations (A5/axis 4 and 6 flipped): each
+    corrected in its own branch; the approach configuration is the other one."""
+    from robocal.compensate import programs as pg
+
+    robot = "kr16" if language == "krl" else "irb120"
+    nominal = rc.robot(robot)
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    q_a = np.radians([10.0, -70.0, 80.0, 30.0, 40.0, 20.0] if language == "krl" else [10, 10, 10, 30, 40, 20])
+    q_b = q_a + np.radians([0, 0, 0, -180, 0, -180])
+    q_b[4] = -q_a[4]  # the wrist flip
+    T_probe = spatial.transl(*PROBE)
+    T = nominal.fk(q_a) @ T_probe
+    np.testing.assert_allclose(nominal.fk(q_b) @ T_probe, T, atol=1e-9)  # the wrist flip: same pose
+    # written in branch b (T / cf), approached from branch a
+    texts = (_krl if language == "krl" else _rapid)(q_a[None], T[None], q_a[None], q_config=q_b[None])
+    res = filter_program_text(texts, language, moved, nominal, tool=T_probe)
+    assert not res.problems, res.problems
+    pose = next(t for t in res.targets if t.kind == "pose")
+    units = pg._UNITS[language]
+    label = pose.file
+    parsed = (
+        pg._parse_krl(res.texts[label], 6, label)[0]
+        if language == "krl"
+        else pg._parse_rapid(res.texts[label], 6, label)[0]
+    )
+    P = pg._read_value(next(t for t in parsed if t.kind == "pose"), units, nominal.joint_types, False)
+    # the controller solves it in branch b (where it was written): the real robot lands on T
+    from robocal.measure.ik import solve_ik
+
+    q_ctrl = solve_ik(
+        nominal, P[None] @ spatial.inverse(T_probe), kind="pose", q0=q_b, restarts=0, tol=1e-12
+    ).q[0]
+    assert pg._config_ok(pose, q_ctrl) and np.abs(q_ctrl - q_b).max() < 0.05
+    assert np.linalg.norm((moved.fk(q_ctrl) @ T_probe)[:3, 3] - T[:3, 3]) < 1e-6  # the written resolution

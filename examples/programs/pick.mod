@@ -12,7 +12,7 @@ MODULE Pick
         MoveL pPick, v100, fine, gripper;
         SetDO do1, 1;
         MoveL pApproach, v100, z10, gripper;
-        MoveL [[296.47,-87.76,517.93],[0.302252,-0.084369,0.933325,-0.174442],[-1,0,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v200, z10, gripper;
+        MoveL [[296.47,-87.76,517.93],[0.302252,-0.084369,0.933325,-0.174442],[-1,-1,-1,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v200, z10, gripper;
         MoveC pVia, [[364.35,0.0,594.0],[0.5,0,0.866025,0],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]], v100, z10, gripper;
         MoveL Offs(pPick,0,0,50), v100, fine, gripper;
         MoveAbsJ [[20,10,10,10,30,10],[9E9,9E9,9E9,9E9,9E9,9E9]], v1000, fine, gripper;

@@ -36,11 +36,13 @@ listed in :attr:`FilteredProgram.unsupported`):
   declarations and of ``PTP/LIN/CIRC`` statements (Cartesian; ``A, B, C`` =
   ``Rz(A) Ry(B) Rx(C)``), ``{A1 .., ..., A6 .. [, E1 ..]}`` of ``DECL E6AXIS|AXIS``
   and ``PTP`` (joint).  ``FRAME`` declarations (bases, tools) are data, not targets.
-  Status/turn (``S``, ``T``) and external axes are kept as written.
+  Status/turn (``S``, ``T``) and external axes are kept as written; ``T`` chooses the
+  IK branch (``S`` is not checked).
 * **ABB RAPID** (``.mod``, ``.modx``, ``.prg``; mm, degrees): ``robtarget`` literals
   ``[[x,y,z],[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],[eax..]]`` (quaternion scalar first) in
   declarations and in ``MoveJ/MoveL/MoveC`` statements, ``jointtarget`` literals
-  ``[[j1..j6],[eax..]]`` in declarations and ``MoveAbsJ``; ``cf``/``cfx`` kept.
+  ``[[j1..j6],[eax..]]`` in declarations and ``MoveAbsJ``; ``cf``/``cfx`` kept,
+  ``cf1, cf4, cf6`` choose the IK branch (``cfx`` is not checked).
 * **robocal target CSV** (``.csv``): ``name,x,y,z[,qw,qx,qy,qz]`` (Cartesian, in
   ``length_unit``) or ``[name,]q1..qN`` (joint, in ``angle_unit``); ``#`` lines kept.
 
@@ -108,7 +110,10 @@ class ProgramTarget:
         file: which file of the program (``.src`` or ``.dat`` for KRL).
         tokens: the number tokens, in the order the format gives them.
         style: how the numbers map to SI (``"urscript"``, ``"krl"``, ``"rapid"``,
-            ``"csv_m"``...).
+            ``"csv"``).
+        config: the written configuration the IK must meet: KUKA ``(T,)`` (turn: bit
+            ``j`` set when axis ``j + 1`` is negative), ABB ``(cf1, cf4, cf6)`` (the
+            quadrants ``floor(axis / 90°)`` of axes 1, 4, 6); ``None`` when not given.
     """
 
     name: str
@@ -117,6 +122,7 @@ class ProgramTarget:
     file: str
     tokens: tuple[_Token, ...]
     style: str
+    config: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -312,7 +318,11 @@ def _krl_target(text: str, start: int, end: int, dof: int, name: str, path: str)
     f = _krl_fields(text, start, end)
     line = _line_of(text, start)
     if all(k in f for k in _KRL_POSE_KEYS):
-        return ProgramTarget(name, line, "pose", path, tuple(f[k] for k in _KRL_POSE_KEYS), "krl")
+        turn = f.get("T")
+        config = None
+        if turn is not None and turn.value == int(turn.value) and 0 <= turn.value < 64:
+            config = (int(turn.value),)
+        return ProgramTarget(name, line, "pose", path, tuple(f[k] for k in _KRL_POSE_KEYS), "krl", config)
     axes = [f"A{j + 1}" for j in range(dof)]
     if all(k in f for k in axes):
         return ProgramTarget(name, line, "joint", path, tuple(f[k] for k in axes), "krl")
@@ -406,7 +416,12 @@ def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) 
         toks = _tokens(text, *groups[0]) + _tokens(text, *groups[1])
         if len(toks) != 7:
             raise ProgramError(f"{path}: line {line}: robtarget {name}: trans and rot need 3 + 4 numbers")
-        return ProgramTarget(name, line, "pose", path, tuple(toks), "rapid"), end
+        config = None
+        if len(groups) >= 3:
+            cf = [t.value for t in _tokens(text, *groups[2])]
+            if len(cf) == 4 and all(v == int(v) for v in cf):
+                config = (int(cf[0]), int(cf[1]), int(cf[2]))
+        return ProgramTarget(name, line, "pose", path, tuple(toks), "rapid", config), end
     if not groups:
         raise ProgramError(f"{path}: line {line}: jointtarget {name} needs [[j1..j6],[eax..]]")
     toks = _tokens(text, *groups[0])
@@ -612,6 +627,38 @@ def _format(value: float, token: str, decimals: int) -> str:
     return text
 
 
+# ---------------------------------------------------------------------- configurations
+def _config_ok(t: ProgramTarget, q: Array) -> bool:
+    """Whether joint values ``q`` (rad) meet the target's written configuration."""
+    if t.config is None or len(q) < 6:
+        return True
+    deg = np.degrees(q[:6])
+    eps = 1e-6  # degrees: an axis at a boundary (0, ±90 ...) meets either side
+    if t.style == "krl":
+        return all(abs(deg[j]) < eps or (deg[j] < 0) == bool(t.config[0] >> j & 1) for j in range(6))
+    return all(
+        math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0)
+        for j, cf in zip((0, 3, 5), t.config, strict=True)
+    )
+
+
+def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: int) -> Array:
+    """``(n, dof)`` starting configurations within the limits that meet the configuration."""
+    lim = model.joint_limits
+    lo, hi = np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi)
+    q = rng.uniform(lo, hi, (n, model.dof))
+    if t.config is None:
+        return q
+    if t.style == "krl":
+        for j in range(min(6, model.dof)):
+            negative = bool(t.config[0] >> j & 1)
+            q[:, j] = np.where(negative, -np.abs(q[:, j]), np.abs(q[:, j]))
+    else:
+        for j, cf in zip((0, 3, 5), t.config, strict=True):
+            q[:, j] = np.radians(90.0 * (cf + rng.uniform(0.1, 0.9, n)))
+    return np.clip(q, lim[:, 0], lim[:, 1])
+
+
 # ---------------------------------------------------------------------- the filter
 def language_of(path: str | Path) -> Language:
     """The language of a program file by its suffix."""
@@ -739,6 +786,7 @@ def filter_program_text(
     B = np.eye(4) if base is None else np.asarray(base, dtype=float)
     types = model.joint_types
     n = len(targets)
+    problems: list[str] = []
     values = [_read_value(t, units, types, False) for t in targets]
     new_values: list[Array] = list(values)
     before = np.full(n, np.nan)
@@ -771,22 +819,32 @@ def filter_program_text(
         sequence = list(dict.fromkeys(i for _, _, i in order))
         # the branch of each Cartesian target: the configuration the robot comes from
         q_prev = values[joint_idx[0]] if joint_idx else np.zeros(dof)
+        rng = np.random.default_rng(0)
         for i in sequence:
             if targets[i].kind == "joint":
                 q_prev = values[i]
                 continue
             T = B @ values[i]
             position_only = len(targets[i].tokens) == 3
-            res = compensate(
-                real,
-                T[:3, 3][None] if position_only else T[None],
-                nom,
-                kind="position" if position_only else "pose",
-                q0=q_prev,
-                joint_effects=effects,
-                tol=tol,
-                tol_angle=tol,
-            )
+            goal = T[:3, 3][None] if position_only else T[None]
+            kind = "position" if position_only else "pose"
+            opts = {"joint_effects": effects, "tol": tol, "tol_angle": tol}
+            res = compensate(real, goal, nom, kind=kind, q0=q_prev, **opts)
+            if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0])):
+                # the written configuration (KUKA T, ABB cf) chooses the branch: starts within it
+                starts = _config_starts(targets[i], nom, rng, 16)
+                for q_start in starts:
+                    trial = compensate(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
+                    if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0]):
+                        res = trial
+                        break
+                else:
+                    t = targets[i]
+                    if t.config is not None:
+                        problems.append(
+                            f"{t.file}: line {t.line}: target {t.name}: no solution in the written "
+                            f"configuration {t.config}; the branch of the previous target is used"
+                        )
             q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
             corrected = spatial.inverse(B) @ nom.fk(res.q)[0]
             new_values[i] = corrected if res.reachable[0] else values[i]
@@ -808,7 +866,6 @@ def filter_program_text(
         for s, e, new in sorted(edits[label], reverse=True):
             text = text[:s] + new + text[e:]
         out[label] = text
-    problems = []
     for i, t in enumerate(targets):
         if not reach[i]:
             problems.append(
