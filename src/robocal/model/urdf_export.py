@@ -458,8 +458,13 @@ def _export_source(
     out = data
     for start, end, new in sorted(edits, key=lambda e: e[0], reverse=True):
         out = out[:start] + new + out[end:]
+    try:
+        text = out.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = out[: err.start].count(b"\n") + 1
+        raise URDFError(f"{path}: line {line}: not UTF-8 text") from None
     return URDFExport(
-        text=out.decode("utf-8"),
+        text=text,
         root=new_root,
         tip=tip_link if flange_link is None else flange_link,
         tool_link=tool_link,
