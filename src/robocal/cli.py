@@ -218,6 +218,9 @@ _experiment_commands.register(app)
 from robocal.compensate import cli as _compensate_commands  # noqa: E402
 
 _compensate_commands.register(app)
+from robocal.compensate import export_cli as _export_commands  # noqa: E402
+
+_export_commands.register(app)
 from robocal.evaluate import commands as _evaluate_commands  # noqa: E402
 
 _evaluate_commands.register(app)

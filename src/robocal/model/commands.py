@@ -13,6 +13,17 @@ from robocal.console import console, err_console, fail, refuse_overwrite
 __all__ = ["register"]
 
 
+def _is_ur_kinematics(path: Path) -> bool:
+    """Whether a YAML file is a UR kinematics file (a top-level ``kinematics:`` mapping)."""
+    import yaml
+
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, RecursionError, yaml.YAMLError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("kinematics"), dict)
+
+
 model_app = typer.Typer(help="Build, view and check calibration models.", no_args_is_help=True)
 
 
@@ -50,6 +61,13 @@ def build_command(
     try:
         if geometry.suffix.lower() == ".urdf":
             result = build_from_urdf(geometry, measure or "pose", tip)
+        elif not catalog and _is_ur_kinematics(geometry):  # a UR factory calibration (kinematics YAML)
+            from robocal.model.ur_kinematics import URKinematicsError, build_from_ur_kinematics
+
+            try:
+                result = build_from_ur_kinematics(geometry, measure=measure or "pose")
+            except URKinematicsError as err:
+                raise fail(str(err)) from None
         elif catalog or not _is_geometry_file(geometry):  # a chain: build from its joint geometry
             from robocal.model.complete import build_complete
 

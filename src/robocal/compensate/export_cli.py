@@ -1,0 +1,248 @@
+"""``robocal export``: the calibrated robot in the formats the robot's software reads.
+
+    robocal export urdf DIR [--urdf ORIGINAL.urdf] [--tip LINK] [--device-link NAME]
+                            [--tool-link NAME] -o OUT.urdf
+    robocal export ur-kinematics DIR [--base-rz-pi] -o calibration.yaml
+    robocal filter PROGRAM --calibration DIR [--tool x,y,z,rx,ry,rz] [--probe x,y,z] [--strict] -o OUT
+
+``DIR`` is a calibration directory (``model.yaml`` + ``result.json``) or a model file.
+``export urdf`` rewrites the joint origins of ``--urdf`` (the URDF the model was built
+from) and keeps everything else; without ``--urdf`` it writes a kinematic URDF of its
+own.  What the file cannot carry (joint effects, a learned residual) is printed with its
+size and stated in an XML comment.  ``export ur-kinematics`` writes the UR ROS
+description's ``default_kinematics.yaml`` format.  Exit status 2 on bad input (nothing
+written).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from robocal.console import console, err_console, fail, refuse_overwrite
+
+__all__ = ["register"]
+
+export_app = typer.Typer(help="Export a calibration: calibrated URDF, UR kinematics.", no_args_is_help=True)
+
+
+@export_app.command("urdf")
+def urdf_command(
+    source: Annotated[Path, typer.Argument(help="calibration directory (result.json) or model .yaml")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="the URDF to write")],
+    urdf: Annotated[
+        Path | None, typer.Option("--urdf", help="the URDF the model was built from (kept but for origins)")
+    ] = None,
+    tip: Annotated[
+        str | None, typer.Option("--tip", help="link at the model's flange (default: last)")
+    ] = None,
+    device_link: Annotated[
+        str | None, typer.Option("--device-link", help="add the device frame as a new root link of this name")
+    ] = None,
+    tool_link: Annotated[
+        str | None, typer.Option("--tool-link", help="add the measured tool as a link of this name")
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+) -> None:
+    """A URDF whose forward kinematics are the calibrated model's (joint offsets folded into origins)."""
+    refuse_overwrite(out, force, "URDF")
+    from robocal.compensate.cli import _load
+    from robocal.compensate.export import export_urdf
+    from robocal.identify.calibrate import CalibrationResult
+    from robocal.model.files import atomic_write_text
+    from robocal.model.urdf import URDFError
+
+    calibrated = _load(source)
+    if device_link is not None and not isinstance(calibrated, CalibrationResult):
+        raise fail(f"--device-link needs a calibration directory (its device frame); {source} is a model")
+    try:
+        ex, _ = export_urdf(calibrated, urdf, tip=tip, device_link=device_link, tool_link=tool_link)
+    except FileNotFoundError as err:
+        raise fail(str(err)) from None
+    except (URDFError, ValueError) as err:
+        raise fail(str(err)) from None
+    atomic_write_text(out, ex.text)
+    what = f"{urdf.name} with {len(ex.changed)} joint origins calibrated" if urdf else "a kinematic URDF"
+    console.print(f"wrote {out}: {what}; root {ex.root}, flange {ex.tip}", highlight=False)
+    if ex.tool_link:
+        console.print(f"measured tool: link {ex.tool_link}", highlight=False)
+    for note in ex.notes:  # what the URDF leaves out (with sizes), and where the flange went
+        err_console.print(f"[yellow]note:[/] {note}", highlight=False)
+
+
+@export_app.command("ur-kinematics")
+def ur_kinematics_command(
+    source: Annotated[Path, typer.Argument(help="calibration directory (result.json) or model .yaml")],
+    out: Annotated[Path, typer.Option("-o", "--out", help="the YAML to write")],
+    base_rz_pi: Annotated[
+        bool,
+        typer.Option(
+            "--base-rz-pi", help="the model's base is a ROS base_link (the UR base turned by 180 deg about z)"
+        ),
+    ] = False,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+) -> None:
+    """The calibrated kinematics as a UR description default_kinematics.yaml."""
+    refuse_overwrite(out, force, "kinematics file")
+    from robocal import spatial
+    from robocal.compensate.cli import _load
+    from robocal.compensate.export import export_ur_kinematics, left_out
+
+    calibrated = _load(source)
+    base = spatial.homogeneous(spatial.rotz(math.pi)) if base_rz_pi else None
+    try:
+        kin = export_ur_kinematics(calibrated, None, T_base_urbase=base)
+    except ValueError as err:
+        raise fail(f"{source}: {err}") from None
+    from robocal.model.files import atomic_write_text
+
+    atomic_write_text(out, kin.to_yaml())
+    console.print(
+        f"wrote {out}: UR kinematics (ur_description default_kinematics.yaml format)", highlight=False
+    )
+    mm, deg = kin.flange_rest_mm_deg
+    if mm > 1e-6 or deg > 1e-6:
+        err_console.print(
+            f"[yellow]note:[/] the calibrated flange is {mm:.4f} mm / {deg:.5f} deg from the format's "
+            "wrist_3 frame, which the format cannot hold: add it to the controller's TCP",
+            highlight=False,
+        )
+    for m in left_out(calibrated):
+        err_console.print(f"[yellow]note:[/] {m.note}", highlight=False)
+
+
+def _frame_option(text: str | None, what: str):
+    """``"x,y,z,rx,ry,rz"`` (m, rotation vector in rad) -> a 4x4 transform."""
+    if text is None:
+        return None
+    from robocal import spatial
+
+    try:
+        v = [float(s) for s in text.replace(",", " ").split()]
+    except ValueError:
+        v = []
+    if len(v) != 6:
+        raise fail(f"{what} {text!r}: give x,y,z,rx,ry,rz (m, rotation vector in rad)")
+    return spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
+
+
+def _probe_option(text: str | None):
+    if text is None:
+        return None
+    try:
+        v = [float(s) for s in text.replace(",", " ").split()]
+    except ValueError:
+        v = []
+    if len(v) == 3:
+        return v
+    return _frame_option(text, "--probe")
+
+
+def filter_command(
+    program: Annotated[Path, typer.Argument(help="robot program: .script, .src (+ .dat), .mod, .csv")],
+    calibration: Annotated[
+        Path, typer.Option("--calibration", help="calibration directory (result.json) or model .yaml")
+    ],
+    out: Annotated[Path, typer.Option("-o", "--out", help="the filtered program (KRL: and its .dat)")],
+    tool: Annotated[
+        str | None, typer.Option("--tool", help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)")
+    ] = None,
+    base: Annotated[
+        str | None, typer.Option("--base", help="the targets' frame in the robot base: x,y,z,rx,ry,rz")
+    ] = None,
+    probe: Annotated[
+        str | None,
+        typer.Option("--probe", help="the calibration's measured tool as built: x,y,z (m) on the flange"),
+    ] = None,
+    nominal: Annotated[
+        str | None, typer.Option("--nominal", help="the controller's model: catalog name or .yaml")
+    ] = None,
+    length_unit: Annotated[str, typer.Option("--length-unit", help="CSV programs: m | mm")] = "m",
+    angle_unit: Annotated[str, typer.Option("--angle-unit", help="CSV programs: rad | deg")] = "rad",
+    strict: Annotated[
+        bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
+    ] = False,
+    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+) -> None:
+    """Correct every target of a robot program through a calibration; everything else stays byte-identical."""
+    refuse_overwrite(out, force, "program")
+    import numpy as np
+
+    from robocal.compensate.cli import _load
+    from robocal.compensate.programs import ProgramError, filter_program_file, language_of
+
+    if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
+        raise fail(
+            f"units: --length-unit m|mm|um and --angle-unit rad|deg, got {length_unit!r}, {angle_unit!r}"
+        )
+    try:
+        language = language_of(program)
+    except ProgramError as err:
+        raise fail(str(err)) from None
+    if language_of(out) != language and not (language == "krl" and out.suffix.lower() == ".src"):
+        raise fail(f"-o {out}: write a {language} program with the suffix of {program.name}")
+    calibrated = _load(calibration)
+    nominal_model = None
+    if nominal is not None:
+        from robocal.cli import resolve_model
+
+        nominal_model = resolve_model(nominal)
+    try:
+        result = filter_program_file(
+            program,
+            calibrated,
+            out,
+            nominal=nominal_model,
+            tool=_frame_option(tool, "--tool"),
+            base=_frame_option(base, "--base"),
+            probe=_probe_option(probe),
+            length_unit=length_unit,
+            angle_unit=angle_unit,
+        )
+    except ProgramError as err:
+        raise fail(str(err)) from None
+    except ValueError as err:
+        raise fail(f"{program}: {err}") from None
+    n = len(result.targets)
+    ok = np.isfinite(result.error_after_mm) & result.reachable
+    console.print(
+        f"{program.name}: {n} targets ({language}), {int(result.changed.sum())} corrected; "
+        + (
+            f"predicted error {np.nanmax(result.error_before_mm[ok]):.3f} mm before, "
+            f"{np.nanmax(result.error_after_mm[ok]):.4f} mm after (max)"
+            if ok.any() and np.isfinite(result.error_before_mm[ok]).any()
+            else "no predicted errors"
+        ),
+        highlight=False,
+    )
+    written = [out] + ([out.with_suffix(".dat")] if len(result.texts) > 1 else [])
+    console.print(f"wrote {', '.join(map(str, written))}", highlight=False)
+    if language == "krl" and tool is None:
+        err_console.print(
+            "[yellow]note:[/] KRL tool data live in $config.dat, which is not read: the targets are taken "
+            "as flange poses; give the program's tool with --tool",
+            highlight=False,
+        )
+    if language == "rapid" and base is None and any("\\WObj" in t for t in result.texts.values()):
+        err_console.print(
+            "[yellow]note:[/] work objects (\\WObj) are not read: the targets are taken in the robot's "
+            "base frame; give the work object with --base",
+            highlight=False,
+        )
+    for u in result.unsupported:
+        err_console.print(
+            f"[yellow]untouched:[/] {u.file}: line {u.line}: {u.text} ({u.reason})", highlight=False
+        )
+    for p in result.problems:
+        err_console.print(f"[yellow]warning:[/] {p}", highlight=False)
+    if strict and result.problems:
+        raise typer.Exit(code=1)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``export`` and ``filter`` to the ``robocal`` app."""
+    app.add_typer(export_app, name="export")
+    app.command("filter")(filter_command)
