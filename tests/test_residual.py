@@ -252,3 +252,15 @@ def test_residual_file_errors_name_the_problem(tmp_path):
     path.write_text(text.replace("joints: [elbow]", "joints: [no_such_joint]"))
     with pytest.raises(rc.ModelFileError, match="no_such_joint"):
         rc.load_model(path)
+
+
+def test_exports_state_the_size_of_the_learned_residual(with_errors):
+    """A URDF cannot carry the learned angle errors: the export says how much they move the tool."""
+    from robocal.compensate.export import left_out
+
+    _, _, _, hybrid = with_errors
+    parts = {p.what.split(" (")[0]: p for p in left_out(hybrid)}
+    learned = parts["the learned residual"]
+    # the true angle errors move the probe by tenths of a millimetre
+    assert 0.1 < learned.max_mm < 5.0 and 0 < learned.rms_mm < learned.max_mm
+    assert "contributes up to" in learned.note

@@ -74,32 +74,36 @@ def left_out(calibrated: CalibrationResult | Model, n: int = 200, seed: int = 0)
     q = random_configurations(model, n, np.random.default_rng(seed))
     d = None
     if isinstance(calibrated, CalibrationResult):
-        d = calibrated.joint_perturbations(q)
+        d = calibrated.physical_perturbations(q)
     elif model.joint_effects and model.bodies:
         from robocal.model.joints import joint_perturbations
 
         d = joint_perturbations(model, q)
     if d is not None:
-        T0, T1 = model.fk(q), model.fk(q, d)
-        dist = np.linalg.norm(T1[:, :3, 3] - T0[:, :3, 3], axis=1) * 1e3
-        R = np.einsum("nij,nkj->nik", T1[:, :3, :3], T0[:, :3, :3])
-        angle = np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1, 1)))
         kinds = sorted({k for e in model.joint_effects for k in _effect_kinds(e)}) or ["compliance"]
-        out.append(
-            LeftOut(
-                f"joint effects ({', '.join(kinds)}; pose- and load-dependent)",
-                float(dist.max()),
-                float(np.sqrt(np.mean(dist**2))),
-                float(angle.max()),
-                n,
-            )
+        out.append(_size(f"joint effects ({', '.join(kinds)}; pose- and load-dependent)", model, q, d))
+    if model.residual is not None:
+        learned = model.residual.perturbations(q, model.dof)
+        d_all = learned if d is None else d + learned
+        learned_model = model.residual
+        what = (
+            f"the learned residual (angle errors of {len(learned_model.joints)} joints, "
+            f"{learned_model.harmonics} harmonics)"
         )
-    residual = getattr(model, "residual", None)
-    if residual is not None:
-        out.append(
-            LeftOut("a learned residual (configuration-dependent error)", math.nan, math.nan, math.nan, n)
-        )
+        out.append(_size(what, model, q, d_all, d))
     return tuple(out)
+
+
+def _size(
+    what: str, model: Model, q: np.ndarray, d: np.ndarray, without: np.ndarray | None = None
+) -> LeftOut:
+    """How far the perturbations ``d`` move the tool from where ``without`` (default none)
+    puts it, at the configurations ``q``."""
+    T0, T1 = model.fk(q, without), model.fk(q, d)
+    dist = np.linalg.norm(T1[:, :3, 3] - T0[:, :3, 3], axis=1) * 1e3
+    R = np.einsum("nij,nkj->nik", T1[:, :3, :3], T0[:, :3, :3])
+    angle = np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    return LeftOut(what, float(dist.max()), float(np.sqrt(np.mean(dist**2))), float(angle.max()), len(q))
 
 
 def _effect_kinds(effects) -> list[str]:
