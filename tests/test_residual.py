@@ -167,9 +167,10 @@ def test_cv_table_in_result_and_summary(with_errors):
     assert "geometry" in names and table["chosen"] in names
     chosen = next(c for c in table["candidates"] if c["name"] == table["chosen"])
     lowest = min(c["cv_mean_mm"] for c in table["candidates"])
-    assert chosen["cv_mean_mm"] <= 1.01 * lowest  # the simplest within 1 % of the lowest
-    simpler = [c for c in table["candidates"] if (c["harmonics"] or 0) < (chosen["harmonics"] or 0)]
-    assert all(c["cv_mean_mm"] > 1.01 * lowest for c in simpler)
+    assert chosen["cv_mean_mm"] <= 1.1 * lowest  # within a few standard errors of the lowest
+    # a more complex candidate is chosen only when it beats the physics alone clearly
+    physics = next(c for c in table["candidates"] if c["harmonics"] is None)
+    assert chosen["cv_mean_mm"] < 0.5 * physics["cv_mean_mm"]
     assert "cross-validation" in hybrid.summary() and "<- chosen" in hybrid.summary()
 
 
@@ -261,6 +262,47 @@ def test_exports_state_the_size_of_the_learned_residual(with_errors):
     _, _, _, hybrid = with_errors
     parts = {p.what.split(" (")[0]: p for p in left_out(hybrid)}
     learned = parts["the learned residual"]
-    # the true angle errors move the probe by tenths of a millimetre
-    assert 0.1 < learned.max_mm < 5.0 and 0 < learned.rms_mm < learned.max_mm
+    # the true angle errors move the probe by tenths of a millimetre (outside the calibrated
+    # angle ranges the residual fades out)
+    assert 0.1 < learned.max_mm < 3.0 and 0 < learned.rms_mm < learned.max_mm
     assert "contributes up to" in learned.note
+
+
+def test_default_path_keeps_the_cramer_rao_bound_without_unmodelled_errors():
+    """The issue's simulated UR10 (0.05° Hayati β on joints 2 and 3, unknown tracker frame,
+    109 mm probe, 0.02 mm noise, 60 poses), calibrated the way ``robocal calibrate --robot
+    ur10`` does (complete model, ``residual="auto"``): CV keeps the physics, and the held-out
+    RMS against the truth stays within 1.15x the Cramér–Rao bound over 5 twins."""
+    import math
+
+    from tests.test_complete_model import poses, probe_positions, simulate, tilted_ur10
+
+    squares, bound = [], []
+    for seed in range(5):
+        robot = tilted_ur10(seed)
+        train = simulate(robot, poses(robot.nominal, 60, 100 + seed), seed=200 + seed)
+        q = poses(robot.nominal, 500, 300 + seed)
+        model = rc.calibration_model("ur10", "position")
+        result = rc.calibrate(model, train, tool_guess=[0, 0, 0.109], residual="auto")
+        squares.append(
+            np.mean(np.linalg.norm(result.predict(q)[:, :3, 3] - probe_positions(robot, q), axis=1) ** 2)
+        )
+        physics = rc.calibrate(model, train, tool_guess=[0, 0, 0.109])
+        bound.append(np.mean(physics.position_uncertainty(q) ** 2))
+    ratio = math.sqrt(np.mean(squares) / np.mean(bound))
+    assert ratio <= 1.15, ratio
+
+
+def test_residual_fades_out_beyond_the_calibrated_angles():
+    """Beyond the angles the calibration saw, a joint's learned error fades to zero within
+    0.1 rad (the Fourier series would go on oscillating with nothing to support it)."""
+    m = 2 * 4
+    learned = JointAngleResidual(
+        ("elbow",), (2,), 4, np.full(m, 1e-4), np.zeros((m, m)), 1e-5, (1e-4,), 0.1, ((-1.0, 1.0),)
+    )
+    q = np.zeros((4, 6))
+    q[:, 2] = [0.5, 1.0, 1.05, 1.2]
+    errors = learned.angle_errors(q)[:, 0]
+    plain = fourier_basis(q[:, [2]], 4)[:, 0] @ learned.coefficients
+    np.testing.assert_allclose(errors[:2], plain[:2])  # inside: the series itself
+    assert abs(errors[2]) < abs(plain[2]) and abs(errors[3]) < 1e-30

@@ -32,9 +32,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["JointAngleResidual", "fourier_basis"]
+__all__ = ["FADE", "JointAngleResidual", "fourier_basis"]
 
 Array = NDArray[np.float64]
+FADE = 0.1  # rad: outside its calibrated range a joint's learned angle error fades out over this
 
 
 def fourier_basis(angles: ArrayLike, harmonics: int) -> Array:
@@ -69,7 +70,12 @@ class JointAngleResidual:
             neither the physics nor this residual represents (the evidence's estimate).
         amplitudes: prior standard deviation per joint (rad), the fitted hyperparameters.
         length_scale: the prior's spectral length scale (rad): harmonic ``h`` has prior
-            variance ``amplitude² exp(-(h ℓ)²/2)``.
+            variance proportional to ``exp(-(h ℓ)²/2)`` (normalised so that the amplitude is
+            the RMS of the joint's angle error).
+        angle_range: ``((lo, hi), ...)`` per joint (rad): the angles the calibration poses
+            covered.  Outside them the data says nothing and a Fourier series would go on
+            oscillating, so each joint's angle error fades to zero over ``FADE`` rad beyond
+            its range (cos² taper); None: no fading.
     """
 
     joints: tuple[str, ...]
@@ -80,6 +86,7 @@ class JointAngleResidual:
     noise_std: float
     amplitudes: tuple[float, ...]
     length_scale: float
+    angle_range: tuple[tuple[float, float], ...] | None = None
 
     kind = "joint_fourier"
 
@@ -98,6 +105,13 @@ class JointAngleResidual:
             raise ValueError("residual: coefficients and covariance must be finite")
         if not (self.harmonics >= 1 and np.isfinite(self.noise_std) and self.noise_std >= 0):
             raise ValueError("residual: harmonics must be >= 1 and noise_std finite and >= 0")
+        if self.angle_range is not None:
+            rng = tuple((float(lo), float(hi)) for lo, hi in self.angle_range)
+            if len(rng) != len(self.joints) or not all(
+                np.isfinite(v).all() and v[0] <= v[1] for v in map(np.array, rng)
+            ):
+                raise ValueError("residual: angle_range needs a finite (lo <= hi) pair per joint")
+            object.__setattr__(self, "angle_range", rng)
         c.setflags(write=False)
         C = C.copy()
         C.setflags(write=False)
@@ -109,9 +123,16 @@ class JointAngleResidual:
         return len(self.coefficients)
 
     def basis(self, q: ArrayLike) -> Array:
-        """``(n, k, 2 H)`` basis values at joint values ``q`` ``(n, dof)``."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        return fourier_basis(q[:, list(self.joint_index)], self.harmonics)
+        """``(n, k, 2 H)`` basis values at joint values ``q`` ``(n, dof)``, faded outside the
+        calibrated angle ranges."""
+        angles = np.atleast_2d(np.asarray(q, dtype=float))[:, list(self.joint_index)]
+        B = fourier_basis(angles, self.harmonics)
+        if self.angle_range is None:
+            return B
+        lo, hi = np.array(self.angle_range).T
+        outside = np.maximum(lo - angles, 0.0) + np.maximum(angles - hi, 0.0)  # rad beyond the range
+        fade = np.cos(0.5 * np.pi * np.minimum(outside / FADE, 1.0)) ** 2
+        return B * fade[:, :, None]
 
     def angle_errors(self, q: ArrayLike) -> Array:
         """``(n, k)`` angle errors δθ (rad) of the modelled joints at ``q`` ``(n, dof)``."""
@@ -153,6 +174,8 @@ class JointAngleResidual:
             "length_scale": float(self.length_scale),
             "coefficients": [float(v) for v in self.coefficients],
         }
+        if self.angle_range is not None:
+            out["angle_range"] = [[lo, hi] for lo, hi in self.angle_range]
         if covariance:  # the upper triangle, row by row (the matrix is symmetric)
             out["covariance_upper"] = self.covariance_upper()
         return out
@@ -196,6 +219,7 @@ class JointAngleResidual:
             noise_std=float(data["noise_std"]),
             amplitudes=tuple(float(a) for a in data["amplitudes"]),
             length_scale=float(data["length_scale"]),
+            angle_range=None if data.get("angle_range") is None else tuple(map(tuple, data["angle_range"])),
         )
         upper = data.get("covariance_upper")
         return learned if upper is None else learned.with_covariance_upper(upper)
