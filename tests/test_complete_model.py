@@ -226,7 +226,7 @@ def test_tilted_parallel_axes_through_the_cli(tmp_path):
             assert "warning: the ur10 chain" not in flat(result.output)
         else:
             assert "model: ur10, the catalog's chain (--chain catalog)" in flat(result.output)
-            assert "link 2 (shoulder_lift → elbow" in flat(result.stderr)
+            assert "link 2 (shoulder_lift → elbow" in flat(result.stdout)
         saved = rc.load_model(out / "model.yaml")
         assert saved.name == ("ur10_complete" if chain == "complete" else "ur10")
         result = runner.invoke(app, ["validate", str(out), "--data", str(tmp_path / "test.csv"), "--json"])
@@ -270,13 +270,13 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     result = runner.invoke(app, [*base, "--model", str(path), "--out", str(tmp_path / "c")])
     assert result.exit_code == 0, result.output
     assert "model: my_ur10, the model file's chain as it is" in flat(result.output)
-    assert "warning: the my_ur10 chain cannot describe" in flat(result.stderr)
-    assert "rc.calibration_model(model, 'pose')" in flat(result.stderr)
+    assert "warning: the my_ur10 chain cannot describe" in flat(result.stdout)
+    assert "rc.calibration_model(model, 'pose')" in flat(result.stdout)
     result = runner.invoke(
         app, [*base, "--model", str(path), "--chain", "complete", "--out", str(tmp_path / "d")]
     )
     assert result.exit_code == 0, result.output
-    assert "model: my_ur10_complete" in flat(result.output) and "warning: the" not in flat(result.stderr)
+    assert "model: my_ur10_complete" in flat(result.output) and "warning: the" not in flat(result.output)
     result = runner.invoke(
         app, [*base, "--model", str(path), "--chain", "catalog", "--out", str(tmp_path / "e")]
     )

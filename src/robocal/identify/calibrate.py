@@ -26,6 +26,7 @@ and axial compliance of every joint, where observable).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -869,6 +870,25 @@ def _effect_plan(
     return _EffectPlan("identify", kinds, None)
 
 
+@functools.lru_cache(maxsize=64)
+def _cached_parameterisation_warnings(model: Model, measure: str) -> tuple[str, ...]:
+    from robocal.model.singularity import parameterisation_warnings
+
+    return tuple(parameterisation_warnings(model, measure))
+
+
+def _parameterisation_warnings(model: Model, measure: str) -> list[str]:
+    """Why ``model`` is a poor chain to calibrate (singular or discontinuous at its nominal
+    values: e.g. plain DH for parallel axes), with the fix; ``[]`` for a complete model.
+    15-25 ms per chain, so cached per model (models are immutable and hashable)."""
+    try:
+        return list(_cached_parameterisation_warnings(model, measure))
+    except TypeError:  # pragma: no cover - an unhashable model: check it every time
+        from robocal.model.singularity import parameterisation_warnings
+
+        return parameterisation_warnings(model, measure)
+
+
 def _robot_size(T_flange: Array) -> float:
     """The robot's size (m) from its end frames ``(n, 4, 4)``: the largest coordinate."""
     return max(float(np.abs(T_flange[:, :3, 3]).max()), 0.1)
@@ -1097,7 +1117,9 @@ def calibrate_physics(
     n = data.n
     # stop with an explanation when the data cannot determine the model (identical
     # poses, joints that never move, too few poses...) rather than fit a silent bad model
-    problem_warnings = check_data(model, data)
+    problem_warnings = check_data(model, data) + _parameterisation_warnings(
+        model, measure if measure is not None else ("pose" if data.orientation is not None else "position")
+    )
     if (3 if measure == "position" else 6) * data.n < len(model.free_names) + 12:
         # so few poses that there may be fewer equations than unknowns: say so before fitting
         # (otherwise the rank check below, which reuses the fit's own rank test, decides)

@@ -277,10 +277,8 @@ def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measur
     """The model the command calibrates, announced in one line: for ``--robot`` the complete
     model built from the catalog robot's geometry (``--chain catalog``: the catalog's chain),
     for ``--model`` the file's chain (``--chain complete``: the complete model built from
-    it); a chain calibrated as it is gets the parameterisation warnings on stderr."""
+    it); a chain calibrated as it is gets the parameterisation warnings of rc.calibrate."""
     from robocal.model.complete import calibration_model
-    from robocal.model.singularity import parameterisation_warnings
-
     effective = measure or ("pose" if data.orientation is not None else "position")
     complete = chain == "complete" or (chain is None and robot_name is not None)
     if complete:
@@ -298,8 +296,7 @@ def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measur
         return built
     what = "the catalog's chain (--chain catalog)" if robot_name is not None else "the model file's chain"
     console.print(f"model: {model.name}, {what} as it is", highlight=False)
-    for w in parameterisation_warnings(model, effective):
-        err_console.print(f"[yellow]warning:[/] {w}", highlight=False)
+    # its parameterisation warnings come with the calibration's (rc.calibrate checks every chain)
     return model
 
 
