@@ -142,6 +142,22 @@ def test_study_engines_agree(tmp_path):
             assert float(r[col]) == pytest.approx(float(other[col]), rel=1e-6), col
 
 
+def test_study_with_the_learned_residual_runs_rc_calibrate(tmp_path):
+    """residual: auto runs the calibrate engine with the CV model choice; virtual robots
+    without unmodelled errors keep the physics, so the rows equal the physical ones."""
+    physics = _rows(
+        run_study(_config(robots=2, engine="calibrate"), tmp_path / "p", workers=0).out / "results.csv"
+    )
+    run = run_study(_config(robots=2, residual="auto"), tmp_path / "h", workers=0)
+    assert run.engine == "calibrate"
+    hybrid = {r["case"]: r for r in _rows(run.out / "results.csv")}
+    assert all(r["status"] == "ok" for r in hybrid.values())
+    for r in physics:
+        assert float(hybrid[r["case"]]["true_rms_mm"]) == pytest.approx(float(r["true_rms_mm"]), rel=0.05)
+    with pytest.raises(StudyError, match="residual 'none'"):
+        run_study(_config(robots=2, residual="auto", engine="batched"), tmp_path / "b", workers=0)
+
+
 def test_truncated_table_is_repaired_on_resume(tmp_path):
     out = tmp_path / "s"
     run_study(_config(robots=2), out, workers=0)

@@ -202,6 +202,7 @@ class StudyConfig(BaseModel):
         validation: {n: 200}        # held-out poses per robot
         method: lm                  # rc.calibrate method
         engine: auto                # auto | batched | calibrate
+        residual: none              # none | auto | joint_fourier (rc.calibrate's; not none: engine calibrate)
         chunk: 50                   # robots per task
     """
 
@@ -222,6 +223,7 @@ class StudyConfig(BaseModel):
     method: Literal["lm", "pinv", "bounded", "influence"] = "lm"
     max_std: Quantity = "0.5mm"
     engine: Literal["auto", "batched", "calibrate"] = "auto"
+    residual: Literal["none", "auto", "joint_fourier"] = "none"
     chunk: Count = Field(default=50, ge=1, le=100_000)
 
     @model_validator(mode="after")
@@ -435,14 +437,18 @@ def _prepare(config: StudyConfig) -> _Prepared:
     for name in config.errors.tolerances:
         if name not in nominal.names:
             raise StudyError(f"errors.tolerances: model {nominal.name!r} has no parameter {name!r}")
-    batched_ok = config.method == "lm" and all(d.measures == "position" for d in devices.values())
+    batched_ok = (
+        config.method == "lm"
+        and config.residual == "none"  # the batched engine fits the physical model only
+        and all(d.measures == "position" for d in devices.values())
+    )
     engine = config.engine
     if engine == "auto":
         engine = "batched" if batched_ok else "calibrate"
     elif engine == "batched" and not batched_ok:
         raise StudyError(
-            "engine 'batched' needs method 'lm' and position-measuring devices (laser-tracker); "
-            "use engine 'calibrate' or 'auto'"
+            "engine 'batched' needs method 'lm', residual 'none' and position-measuring devices "
+            "(laser-tracker); use engine 'calibrate' or 'auto'"
         )
     return _Prepared(
         config=config,
@@ -1042,7 +1048,12 @@ def _calibrate_row(chunk: _Chunk, case: Case, data, test, truth, t_sim: float) -
 
     prep = chunk.prepared
     result = calibrate(
-        prep.nominal, data, method=prep.config.method, tool_guess=prep.tool_guess, max_std=prep.max_std
+        prep.nominal,
+        data,
+        method=prep.config.method,
+        tool_guess=prep.tool_guess,
+        max_std=prep.max_std,
+        residual=prep.config.residual,
     )
     stats = validate(result, test)
     row = _empty_row(case, "calibrate")
