@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -34,16 +33,8 @@ import numpy as np
 import robocal as rc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_peers import _median_time
 from bench_real_accuracy import DATA, PROBE, read
-
-
-def _median_time(fn, repeats: int):
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), out
 
 
 def main(argv: list[str] | None = None) -> None:

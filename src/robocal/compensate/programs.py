@@ -903,21 +903,9 @@ def _read(path: Path) -> tuple[str, str]:
 
 def _write_atomic(path: Path, data: bytes) -> None:
     """``data`` to ``path`` through a temporary file and a rename (never half-written)."""
-    import os
-    import tempfile
+    from robocal.model.files import atomic_write_bytes
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write_bytes(path, data)
 
 
 def filter_program_file(
