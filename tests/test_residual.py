@@ -17,7 +17,7 @@ import robocal as rc
 from robocal import spatial
 from robocal.identify.residual import _gram, _layout, _nll_and_grad, _template, fit_joint_fourier
 from robocal.model.builder import load_geometry
-from robocal.model.residual import JointAngleResidual, fourier_basis
+from robocal.model.residual import JointAngleResidual, covered_intervals, fourier_basis
 
 ROOT = Path(__file__).resolve().parents[1]
 NOISE = 15e-6  # m per axis
@@ -298,7 +298,7 @@ def test_residual_fades_out_beyond_the_calibrated_angles():
     0.1 rad (the Fourier series would go on oscillating with nothing to support it)."""
     m = 2 * 4
     learned = JointAngleResidual(
-        ("elbow",), (2,), 4, np.full(m, 1e-4), np.zeros((m, m)), 1e-5, (1e-4,), 0.1, ((-1.0, 1.0),)
+        ("elbow",), (2,), 4, np.full(m, 1e-4), np.zeros((m, m)), 1e-5, (1e-4,), 0.1, (((-1.0, 1.0),),)
     )
     q = np.zeros((4, 6))
     q[:, 2] = [0.5, 1.0, 1.05, 1.2]
@@ -306,3 +306,9 @@ def test_residual_fades_out_beyond_the_calibrated_angles():
     plain = fourier_basis(q[:, [2]], 4)[:, 0] @ learned.coefficients
     np.testing.assert_allclose(errors[:2], plain[:2])  # inside: the series itself
     assert abs(errors[2]) < abs(plain[2]) and abs(errors[3]) < 1e-30
+    # a gap inside the range fades too: covered intervals from the calibration's angles
+    assert covered_intervals([-1.0, -0.9, -0.2, 0.3]) == ((-1.0, -0.9), (-0.2, -0.2), (0.3, 0.3))
+    gapped = dataclasses.replace(learned, coverage=(((-1.0, -0.5), (0.5, 1.0)),))
+    q[:, 2] = [-0.45, 0.0, 0.55, 0.9]
+    errors = gapped.angle_errors(q)[:, 0]
+    assert abs(errors[1]) < 1e-30 and abs(errors[0]) > 0 and abs(errors[3]) > 0

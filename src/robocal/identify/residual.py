@@ -41,7 +41,7 @@ from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.linalg.lapack import dtrtri
 from scipy.optimize import minimize
 
-from robocal.model.residual import JointAngleResidual
+from robocal.model.residual import FADE, JointAngleResidual, covered_intervals
 
 __all__ = [
     "DEFAULT_HARMONICS",
@@ -176,9 +176,9 @@ def _layout(template: JointAngleResidual) -> tuple[Array, Array]:
 def _template(
     joint_names: Sequence[str], joint_index: Sequence[int], harmonics: int, q: Array | None = None
 ) -> JointAngleResidual:
-    """An empty residual of this layout; with ``q`` its angle ranges are those of ``q``."""
+    """An empty residual of this layout; with ``q`` it covers the angles of ``q``."""
     m = len(joint_names) * 2 * harmonics
-    ranges = None if q is None else tuple((float(q[:, j].min()), float(q[:, j].max())) for j in joint_index)
+    ranges = None if q is None else tuple(covered_intervals(q[:, j], 2 * FADE) for j in joint_index)
     return JointAngleResidual(
         tuple(joint_names), tuple(joint_index), harmonics, np.zeros(m), np.zeros((m, m)), 0.0,
         (0.0,) * len(joint_names), 0.0, ranges,
@@ -245,9 +245,10 @@ def fit_joint_fourier(
     cov = (d[:, None] * (Linv.T @ Linv)) * d[None, :]
     model = JointAngleResidual(
         tuple(joint_names), tuple(joint_index), harmonics, mu, 0.5 * (cov + cov.T), hyper.noise,
-        hyper.amplitudes, hyper.length_scale, template.angle_range,
+        hyper.amplitudes, hyper.length_scale, template.coverage,
     )  # fmt: skip
-    return model, hyper
+    rms = np.sqrt(np.mean(model.angle_errors(q) ** 2, axis=0))
+    return dataclasses.replace(model, angle_rms=tuple(float(v) for v in rms)), hyper
 
 
 # ---------------------------------------------------------------------- model choice

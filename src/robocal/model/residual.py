@@ -25,6 +25,7 @@ Units: angles in rad, coefficients in rad, covariances in rad².
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,10 +33,25 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FADE", "JointAngleResidual", "fourier_basis"]
+__all__ = ["FADE", "JointAngleResidual", "covered_intervals", "fourier_basis"]
 
 Array = NDArray[np.float64]
 FADE = 0.1  # rad: outside its calibrated range a joint's learned angle error fades out over this
+
+
+def covered_intervals(angles: ArrayLike, gap: float = 0.2) -> tuple[tuple[float, float], ...]:
+    """The intervals ``((lo, hi), ...)`` (rad) that ``angles`` ``(n,)`` cover: sorted angles
+    closer than ``gap`` are joined."""
+    a = np.sort(np.asarray(angles, dtype=float).reshape(-1))
+    breaks = np.flatnonzero(np.diff(a) > gap)
+    starts, ends = np.r_[0, breaks + 1], np.r_[breaks, len(a) - 1]
+    return tuple((float(a[i]), float(a[j])) for i, j in zip(starts, ends, strict=True))
+
+
+def _distance(angles: Array, intervals: tuple[tuple[float, float], ...]) -> Array:
+    """``(n,)`` distance (rad) of each angle to the nearest of the intervals (0 inside)."""
+    lo, hi = np.array(intervals).T
+    return np.min(np.maximum(lo - angles[:, None], 0.0) + np.maximum(angles[:, None] - hi, 0.0), axis=1)
 
 
 def fourier_basis(angles: ArrayLike, harmonics: int) -> Array:
@@ -72,10 +88,15 @@ class JointAngleResidual:
         length_scale: the prior's spectral length scale (rad): harmonic ``h`` has prior
             variance proportional to ``exp(-(h ℓ)²/2)`` (normalised so that the amplitude is
             the RMS of the joint's angle error).
-        angle_range: ``((lo, hi), ...)`` per joint (rad): the angles the calibration poses
-            covered.  Outside them the data says nothing and a Fourier series would go on
-            oscillating, so each joint's angle error fades to zero over ``FADE`` rad beyond
-            its range (cos² taper); None: no fading.
+        coverage: per joint, the angle intervals ``((lo, hi), ...)`` (rad) the calibration
+            poses covered (angles closer than ``2 FADE`` joined).  Where the data says
+            nothing — beyond the range or in a gap — a Fourier series would go on
+            oscillating (a UR10 with a 0.28 rad gap in its shoulder angles: 5 mrad, 8 mm at
+            the tool), so each joint's angle error fades to zero within ``FADE`` rad of its
+            covered intervals (cos² taper); None: no fading.
+        angle_rms: per joint, the RMS (rad) of the learned angle error over the calibration
+            poses: where the residual fades out, an error of about this size is what it no
+            longer predicts (its share of the predicted uncertainty there).
     """
 
     joints: tuple[str, ...]
@@ -86,7 +107,8 @@ class JointAngleResidual:
     noise_std: float
     amplitudes: tuple[float, ...]
     length_scale: float
-    angle_range: tuple[tuple[float, float], ...] | None = None
+    coverage: tuple[tuple[tuple[float, float], ...], ...] | None = None
+    angle_rms: tuple[float, ...] | None = None
 
     kind = "joint_fourier"
 
@@ -105,13 +127,15 @@ class JointAngleResidual:
             raise ValueError("residual: coefficients and covariance must be finite")
         if not (self.harmonics >= 1 and np.isfinite(self.noise_std) and self.noise_std >= 0):
             raise ValueError("residual: harmonics must be >= 1 and noise_std finite and >= 0")
-        if self.angle_range is not None:
-            rng = tuple((float(lo), float(hi)) for lo, hi in self.angle_range)
-            if len(rng) != len(self.joints) or not all(
-                np.isfinite(v).all() and v[0] <= v[1] for v in map(np.array, rng)
-            ):
-                raise ValueError("residual: angle_range needs a finite (lo <= hi) pair per joint")
-            object.__setattr__(self, "angle_range", rng)
+        if self.coverage is not None:
+            cover = tuple(tuple((float(lo), float(hi)) for lo, hi in joint) for joint in self.coverage)
+            ok = len(cover) == len(self.joints) and all(
+                joint and all(math.isfinite(lo) and math.isfinite(hi) and lo <= hi for lo, hi in joint)
+                for joint in cover
+            )
+            if not ok:
+                raise ValueError("residual: coverage needs finite (lo <= hi) intervals for every joint")
+            object.__setattr__(self, "coverage", cover)
         c.setflags(write=False)
         C = C.copy()
         C.setflags(write=False)
@@ -127,12 +151,9 @@ class JointAngleResidual:
         calibrated angle ranges."""
         angles = np.atleast_2d(np.asarray(q, dtype=float))[:, list(self.joint_index)]
         B = fourier_basis(angles, self.harmonics)
-        if self.angle_range is None:
+        if self.coverage is None:
             return B
-        lo, hi = np.array(self.angle_range).T
-        outside = np.maximum(lo - angles, 0.0) + np.maximum(angles - hi, 0.0)  # rad beyond the range
-        fade = np.cos(0.5 * np.pi * np.minimum(outside / FADE, 1.0)) ** 2
-        return B * fade[:, :, None]
+        return B * self.fade(q)[:, :, None]
 
     def angle_errors(self, q: ArrayLike) -> Array:
         """``(n, k)`` angle errors δθ (rad) of the modelled joints at ``q`` ``(n, dof)``."""
@@ -154,10 +175,29 @@ class JointAngleResidual:
         return (cols[:, :, :, None] * B[:, None, :, :]).reshape(len(B), P.shape[1], -1)
 
     def position_covariance(self, q: ArrayLike, P: Array) -> Array:
-        """``(n, 3, 3)`` covariance (m²) of the residual's position prediction at ``q``
-        (the coefficients' posterior; the noise ``noise_std`` is not included)."""
+        """``(n, 3, 3)`` covariance (m²) of the residual's position prediction at ``q``: the
+        coefficients' posterior, and where the residual fades out (outside the covered
+        angles) the angle errors it no longer predicts, at their size on the calibration
+        poses (``angle_rms``) (the noise ``noise_std`` is not included)."""
         A = self.design(q, P[:, :3])
-        return (A @ self.covariance) @ np.swapaxes(A, 1, 2)
+        cov = (A @ self.covariance) @ np.swapaxes(A, 1, 2)
+        if self.coverage is not None:
+            q = np.atleast_2d(np.asarray(q, dtype=float))
+            fade = self.fade(q)  # (n, k)
+            cols = P[:, :3, list(self.joint_index), 2]  # (n, 3, k): position per rad of each joint
+            rms = np.asarray(self.amplitudes if self.angle_rms is None else self.angle_rms)
+            missing = (1.0 - fade**2) * rms**2  # (n, k) rad²
+            cov = cov + np.einsum("nrk,nk,nsk->nrs", cols, missing, cols)
+        return cov
+
+    def fade(self, q: ArrayLike) -> Array:
+        """``(n, k)`` weight of each joint's learned angle error at ``q``: 1 on the covered
+        angles, 0 from ``FADE`` rad away (all ones without coverage)."""
+        angles = np.atleast_2d(np.asarray(q, dtype=float))[:, list(self.joint_index)]
+        if self.coverage is None:
+            return np.ones_like(angles)
+        outside = np.stack([_distance(angles[:, k], joint) for k, joint in enumerate(self.coverage)], axis=1)
+        return np.cos(0.5 * np.pi * np.minimum(outside / FADE, 1.0)) ** 2
 
     # ------------------------------------------------------------------ files
     def to_dict(self, covariance: bool = False) -> dict[str, Any]:
@@ -174,8 +214,10 @@ class JointAngleResidual:
             "length_scale": float(self.length_scale),
             "coefficients": [float(v) for v in self.coefficients],
         }
-        if self.angle_range is not None:
-            out["angle_range"] = [[lo, hi] for lo, hi in self.angle_range]
+        if self.coverage is not None:
+            out["coverage"] = [[[lo, hi] for lo, hi in joint] for joint in self.coverage]
+        if self.angle_rms is not None:
+            out["angle_rms"] = [float(v) for v in self.angle_rms]
         if covariance:  # the upper triangle, row by row (the matrix is symmetric)
             out["covariance_upper"] = self.covariance_upper()
         return out
@@ -219,7 +261,10 @@ class JointAngleResidual:
             noise_std=float(data["noise_std"]),
             amplitudes=tuple(float(a) for a in data["amplitudes"]),
             length_scale=float(data["length_scale"]),
-            angle_range=None if data.get("angle_range") is None else tuple(map(tuple, data["angle_range"])),
+            coverage=None
+            if data.get("coverage") is None
+            else tuple(tuple(tuple(pair) for pair in joint) for joint in data["coverage"]),
+            angle_rms=None if data.get("angle_rms") is None else tuple(float(v) for v in data["angle_rms"]),
         )
         upper = data.get("covariance_upper")
         return learned if upper is None else learned.with_covariance_upper(upper)
