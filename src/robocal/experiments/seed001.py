@@ -324,6 +324,24 @@ def _improvements(boards: dict[str, Any], key: str) -> dict[str, float]:
     return {b: boards[b][key]["improvement_pct"] for b in BOARDS if not _failed(boards[b])}
 
 
+def _bounds_difference(variants: list[dict[str, Any]]) -> str:
+    """Which parameters the seed's bounds stopped, in how many of the table arm's fits."""
+    fits = [v["boards"][b]["calibration"] for v in variants for b in BOARDS if not _failed(v["boards"][b])]
+    counts: dict[str, int] = {}
+    for fit in fits:
+        for name in fit["at_bounds"]:
+            counts[name] = counts.get(name, 0) + 1
+    listed = ", ".join(f"{n} in {k}" for n, k in sorted(counts.items(), key=lambda item: -item[1]))
+    return (
+        "Bounds: every identified parameter stays within the seed's ±5 mm / ±2° of its nominal value; "
+        f"of the table arm's {len(fits)} calibrations, parameters ended at a bound: {listed or 'none'}.  "
+        "d2 also carries the deviations of the parameters that cannot be identified apart from it "
+        "(d3), which can take it beyond ±5 mm: rc.calibrate(..., method='bounded', bounds='widened') "
+        "widens the bounds of such parameters (for the table arm d2 to ±13.9 mm), with a warning; the "
+        "run keeps the seed's bounds."
+    )
+
+
 def _differences(numbers: dict[str, Any]) -> list[str]:
     variants = numbers["variants"]
     clean, worst = variants[0]["boards"], variants[-1]
@@ -374,6 +392,7 @@ def _differences(numbers: dict[str, Any]) -> list[str]:
             "its joints on the pitched board is not known)."
         )
     )
+    out.append(_bounds_difference(variants))
     out += [
         f"{', '.join(dropped) or 'No parameter'} cannot be told apart from the other DH deviations "
         "with a point-like tip on a 3-DOF arm: robocal reports them as not identified and keeps them "
