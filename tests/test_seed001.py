@@ -163,3 +163,17 @@ def test_a_failed_fit_is_one_line_in_the_table_and_the_run_carries_on(monkeypatc
     assert text.count("fit failed │") == 8  # two tilted boards, two plays, two tables
     assert "fit failed: table arm, pitch board, 1° play: CalibrationGuardError: the fit diverged" in text
     assert "Traceback" not in text
+
+
+def test_reproduce_reports_a_failed_calibration_in_one_line(monkeypatch):
+    import robocal.experiments
+    from robocal.identify.guards import CalibrationGuardError
+
+    def run(**_):
+        raise CalibrationGuardError("the fit diverged: made up for the test")
+
+    monkeypatch.setattr(robocal.experiments, "get", lambda name: run)
+    result = CliRunner().invoke(app, ["reproduce", "seed001", "--quick"])
+    assert result.exit_code != 0 and isinstance(result.exception, SystemExit)  # fail(), no traceback
+    assert "seed001: a calibration failed: the fit diverged: made up for the test" in result.output
+    assert "Traceback" not in result.output

@@ -259,13 +259,14 @@ def _board_run(
     """Calibrate on one board and verify at the points and along the spline; a fit that
     fails is recorded as ``{"failed": message}`` (one line), not raised."""
     P, S = verification_points(), spline_targets()
-    data = calibration_data(true, board, backlash, seeds[0])
     try:
+        data = calibration_data(true, board, backlash, seeds[0])
         result = calibrate(nominal, data, method="bounded", frame=board.T_device_base, tool=None)
-    except (CalibrationGuardError, ValueError, np.linalg.LinAlgError) as err:
+        points = compensate(result, P, nominal, q0=q_points_nominal)
+        spline = compensate_cartesian_path(result, S, nominal, q0=Q_BRANCH, kind="position")
+    except (CalibrationGuardError, ValueError, RuntimeError, np.linalg.LinAlgError) as err:
+        # CalibrationGuardError is a ValueError: named for the reader
         return {"failed": f"{type(err).__name__}: {err}".splitlines()[0]}
-    points = compensate(result, P, nominal, q0=q_points_nominal)
-    spline = compensate_cartesian_path(result, S, nominal, q0=Q_BRANCH, kind="position")
     return {
         "calibration": {
             "points": data.n,

@@ -14,7 +14,8 @@ Two checks around :func:`robocal.calibrate`:
   does not explain the data: residuals significantly larger than the noise (χ² test)
   mean errors the model does not represent, whose size it estimates.
 * :func:`check_solution` after the fit — the fit did not work: not converged,
-  diverged (the error after calibration larger than before), non-finite estimates or
+  diverged (what the method minimises larger after calibration than before: the RMS
+  error, or the sum of distances for ``method="bounded"``), non-finite estimates or
   uncertainties, or parameters moved further from their start than any manufacturing
   error (a sign of data from another robot, wrong units or a wrong joint order).
 
