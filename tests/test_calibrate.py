@@ -504,9 +504,10 @@ def test_few_poses_for_many_unknowns_are_warned_about(irb2400):
     assert not any("so little redundancy" in w for w in many.metadata["warnings"])
 
 
-def test_bounded_fit_widens_the_bounds_of_absorbing_parameters_and_says_when_one_binds():
-    """UR10, 5 mm / 2° errors: d2 carries d3 and d4 as well and needs more than ±5 mm;
-    seed 001's bounds on the kept parameters grow by those of what they absorb."""
+@pytest.fixture(scope="module")
+def ur10_bounded_case():
+    """UR10 with 5 mm / 2° errors: d2 carries d3 and d4 as well and needs more than its
+    own ±5 mm."""
     model = rc.robot("ur10")
     frame = rc.spatial.inverse(rc.spatial.homogeneous(rc.spatial.rotz(2.0), [1.5, -2.0, 0.4]))
     device = LaserTracker(T_device_base=frame, p_tool_target=[0.02, -0.01, 0.1])
@@ -516,14 +517,63 @@ def test_bounded_fit_widens_the_bounds_of_absorbing_parameters_and_says_when_one
     )
     q_test = rc.measure.poses.random_poses(model, 300, seed=3)
     test = simulate(VirtualRobot(model, true, device.with_noise(0.0)), q_test, seed=4)
+    return model, data, test
+
+
+def _bound_width(result, name):
+    rot = {s.name: s.is_rotation for s in result.model.steps}
+    return math.radians(2.0) if rot[name] else 5e-3
+
+
+def _named_at_bounds(warnings):
+    """The parameters the at-bound warning names (none without the warning)."""
+    text = [w for w in warnings if "ended at" in w]
+    assert len(text) <= 1
+    return set(text[0].split(" ended at")[0].split(", ")) if text else set()
+
+
+def test_bounded_fit_keeps_every_parameter_within_seed001s_bounds_by_default(ur10_bounded_case):
+    """Seed 001: |δd|, |δL| ≤ 5 mm and |δθ|, |δα| ≤ 2° on every identified robot parameter;
+    exactly the parameters at a bound are listed (metadata and warning), none is beyond."""
+    model, data, _ = ur10_bounded_case
     result = rc.calibrate(model, data, method="bounded")
+    assert not any(w.startswith("bounds='widened'") for w in result.metadata["warnings"])
+    at = result.metadata["at_bounds"]
+    assert "d2" in at  # it would need more than ±5 mm
+    for name, x, x0 in zip(result.names, result.estimates, result.nominal, strict=True):
+        if name not in model.names:
+            continue
+        width = _bound_width(result, name)
+        assert abs(x - x0) <= width, name  # never beyond
+        at_bound = width - abs(x - x0) <= 1e-6 * 2 * width
+        assert at_bound == (name in at), (name, (x - x0), width)
+    assert _named_at_bounds(result.metadata["warnings"]) == set(at)
+
+
+def test_bounded_fit_widens_bounds_of_absorbing_parameters_only_when_asked(ur10_bounded_case):
+    model, data, test = ur10_bounded_case
+    result = rc.calibrate(model, data, method="bounded", bounds="widened")
     d2 = result.names.index("d2")
     assert abs(result.estimates[d2] - result.nominal[d2]) > 5e-3  # beyond the parameter's own ±5 mm
     assert rc.validate(result, test).rms < 30e-6
-    assert not any("bound" in w for w in result.metadata["warnings"])
+    widened = [w for w in result.metadata["warnings"] if w.startswith("bounds='widened'")]
+    assert len(widened) == 1 and "d2 ±" in widened[0]
+    assert result.metadata["at_bounds"] == [] and _named_at_bounds(result.metadata["warnings"]) == set()
     x0 = result.nominal
     tight = rc.calibrate(model, data, method="bounded", bounds=(x0 - 1e-4, x0 + 1e-4))
-    assert any("ended at their bounds" in w for w in tight.metadata["warnings"])
+    assert _named_at_bounds(tight.metadata["warnings"]) == set(tight.metadata["at_bounds"]) != set()
+    with pytest.raises(ValueError, match="bounds must be one of default, widened"):
+        rc.calibrate(model, data, method="bounded", bounds="wide")
+
+
+def test_parameters_at_bounds_lists_exactly_those_at_a_bound():
+    from robocal.identify.calibrate import parameters_at_bounds
+
+    names = ["at_lower", "at_upper", "inside", "beyond", "one_sided", "free"]
+    lo = np.array([-1.0, -1.0, -1.0, -1.0, 0.0, -np.inf])
+    hi = np.array([1.0, 1.0, 1.0, 1.0, np.inf, np.inf])
+    x = np.array([-1.0, 1.0 - 1e-7, 1.0 - 1e-4, 1.5, 1e-9, 0.0])
+    assert parameters_at_bounds(names, x, lo, hi) == ["at_lower", "at_upper", "beyond", "one_sided"]
 
 
 def test_joint_effects_taken_from_the_model_are_named():

@@ -318,3 +318,19 @@ def test_calibrate_explains_what_to_change(measured, tmp_path):
     assert code == 2 and "outside the limits" in text and "--limits warn" in text
     code, text = run("--robot", "UR10", *base, "--tool", "0,0,109")  # catalog names in any case
     assert code == 0, text
+
+
+def test_bounds_option_is_explicit_and_printed(measured, tmp_path):
+    path, _ = measured
+    base = ["calibrate", "--robot", "ur10", "--chain", "catalog", "--data", str(path), "--length-unit", "mm"]
+    base += ["--tool", "0,0,109", "--residual", "none", "--method", "bounded"]
+    result = runner.invoke(app, [*base, "--bounds", "widened", "--out", str(tmp_path / "w")])
+    assert result.exit_code == 0, result.output
+    assert "bounds='widened'" in " ".join(result.output.split())
+    plain = runner.invoke(app, [*base, "--out", str(tmp_path / "d")])
+    assert plain.exit_code == 0, plain.output
+    assert "bounds='widened':" not in " ".join(plain.output.split())
+    wrong = runner.invoke(app, [*base, "--bounds", "wide", "--out", str(tmp_path / "x")])
+    assert wrong.exit_code != 0 and "--bounds 'wide': default or widened" in wrong.output
+    lm = runner.invoke(app, [*base[:-2], "--bounds", "widened", "--out", str(tmp_path / "y")])
+    assert lm.exit_code != 0 and "needs --method bounded" in lm.output

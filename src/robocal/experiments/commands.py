@@ -24,12 +24,16 @@ def reproduce_command(
     if out is not None:
         refuse_overwrite(out, force, "folder")
     from robocal.experiments import get
+    from robocal.identify.guards import CalibrationGuardError
 
     try:
         run = get(name)
     except (KeyError, NotImplementedError) as err:
         raise fail(str(err.args[0])) from None
-    numbers = run(out=out, quick=quick, verbose=not as_json)
+    try:
+        numbers = run(out=out, quick=quick, verbose=not as_json)
+    except CalibrationGuardError as err:  # a seed whose run cannot carry on without the fit
+        raise fail(f"{name}: a calibration failed: {err}") from None
     if as_json:
         print(json.dumps(numbers))
 

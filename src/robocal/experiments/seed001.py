@@ -53,7 +53,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.compensate import compensate, compensate_cartesian_path
-from robocal.identify.calibrate import CalibrationResult, calibrate
+from robocal.identify.calibrate import calibrate
+from robocal.identify.guards import CalibrationGuardError
 from robocal.measure.dataset import Measurements
 from robocal.measure.devices import CalibrationPlate, Camera
 from robocal.measure.ik import solve_ik
@@ -245,14 +246,44 @@ def _compare(before: Array, after: Array) -> dict[str, Any]:
     }
 
 
-def _at_bounds(result: CalibrationResult) -> list[str]:
-    rot = {s.name: s.is_rotation for s in result.model.steps}
-    out = []
-    for name, x, x0 in zip(result.names, result.estimates, result.nominal, strict=True):
-        w = math.radians(2.0) if rot.get(name) else 5e-3
-        if abs(x - x0) > w * (1 - 1e-6):
-            out.append(name)
-    return out
+def _board_run(
+    nominal: Model,
+    true: Model,
+    executed: VirtualRobot,
+    board: CalibrationPlate,
+    backlash: DirectionalBacklash | None,
+    before: tuple[Array, Array],
+    q_points_nominal: Array,
+    seeds: tuple[int, int, int],
+) -> dict[str, Any]:
+    """Calibrate on one board and verify at the points and along the spline; a fit that
+    fails is recorded as ``{"failed": message}`` (one line), not raised."""
+    P, S = verification_points(), spline_targets()
+    try:
+        data = calibration_data(true, board, backlash, seeds[0])
+        result = calibrate(nominal, data, method="bounded", frame=board.T_device_base, tool=None)
+        points = compensate(result, P, nominal, q0=q_points_nominal)
+        spline = compensate_cartesian_path(result, S, nominal, q0=Q_BRANCH, kind="position")
+    except (CalibrationGuardError, ValueError, RuntimeError, np.linalg.LinAlgError) as err:
+        # CalibrationGuardError is a ValueError: named for the reader
+        return {"failed": f"{type(err).__name__}: {err}".splitlines()[0]}
+    return {
+        "calibration": {
+            "points": data.n,
+            "rms_before_mm": result.rms_before * 1e3,
+            "rms_after_mm": result.rms_after * 1e3,
+            "mean_distance_before_mm": result.metadata["objective"]["mean_distance_before"] * 1e3,
+            "mean_distance_after_mm": result.metadata["objective"]["mean_distance_after"] * 1e3,
+            "converged": bool(result.success),
+            "solver_message": result.message,
+            "not_identified": [d.name for d in result.dropped],
+            "at_bounds": list(result.metadata["at_bounds"]),
+        },
+        "points": _compare(before[0], _run_commands(executed, points.q, P, seeds[1])),
+        "trajectory": _compare(before[1], _run_commands(executed, spline.q, S, seeds[2])),
+        "trajectory_smooth": bool(spline.smooth),
+        "commands_reached": bool(points.success and spline.success),
+    }
 
 
 def experiment(arm_seed: int, play_deg: float, noise_seed: int = 0) -> dict[str, Any]:
@@ -272,25 +303,10 @@ def experiment(arm_seed: int, play_deg: float, noise_seed: int = 0) -> dict[str,
     boards: dict[str, Any] = {}
     for k, (name, (roll, pitch)) in enumerate(BOARDS.items()):
         board = CalibrationPlate.tilted(BOARD_CENTER, roll=math.radians(roll), pitch=math.radians(pitch))
-        data = calibration_data(true, board, backlash, noise_seed + k)
-        result = calibrate(nominal, data, method="bounded", frame=board.T_device_base, tool=None)
-        points = compensate(result, P, nominal, q0=q_points_nominal)
-        spline = compensate_cartesian_path(result, S, nominal, q0=Q_BRANCH, kind="position")
-        boards[name] = {
-            "calibration": {
-                "points": data.n,
-                "rms_before_mm": result.rms_before * 1e3,
-                "rms_after_mm": result.rms_after * 1e3,
-                "converged": bool(result.success),
-                "solver_message": result.message,
-                "not_identified": [d.name for d in result.dropped],
-                "at_bounds": _at_bounds(result),
-            },
-            "points": _compare(points_before, _run_commands(executed, points.q, P, noise_seed + 103 + k)),
-            "trajectory": _compare(spline_before, _run_commands(executed, spline.q, S, noise_seed + 106 + k)),
-            "trajectory_smooth": bool(spline.smooth),
-            "commands_reached": bool(points.success and spline.success),
-        }
+        seeds = (noise_seed + k, noise_seed + 103 + k, noise_seed + 106 + k)
+        boards[name] = _board_run(
+            nominal, true, executed, board, backlash, (points_before, spline_before), q_points_nominal, seeds
+        )
     return {"arm_seed": arm_seed, "backlash_play_deg": play_deg, "boards": boards}
 
 
@@ -299,20 +315,53 @@ def _span(values: list[float]) -> str:
     return f"{min(values):.1f}-{max(values):.1f} %"
 
 
+def _failed(board: dict[str, Any]) -> bool:
+    """Whether a board's calibration failed (its record is ``{"failed": message}``)."""
+    return "failed" in board
+
+
+def _improvements(boards: dict[str, Any], key: str) -> dict[str, float]:
+    """Improvement (%) by board, of the boards whose calibration succeeded."""
+    return {b: boards[b][key]["improvement_pct"] for b in BOARDS if not _failed(boards[b])}
+
+
+def _bounds_difference(variants: list[dict[str, Any]]) -> str:
+    """Which parameters the seed's bounds stopped, in how many of the table arm's fits."""
+    fits = [v["boards"][b]["calibration"] for v in variants for b in BOARDS if not _failed(v["boards"][b])]
+    counts: dict[str, int] = {}
+    for fit in fits:
+        for name in fit["at_bounds"]:
+            counts[name] = counts.get(name, 0) + 1
+    listed = ", ".join(f"{n} in {k}" for n, k in sorted(counts.items(), key=lambda item: -item[1]))
+    return (
+        "Bounds: every identified parameter stays within the seed's ±5 mm / ±2° of its nominal value; "
+        f"of the table arm's {len(fits)} calibrations, parameters ended at a bound: {listed or 'none'}.  "
+        "d2 also carries the deviations of the parameters that cannot be identified apart from it "
+        "(d3), which can take it beyond ±5 mm: rc.calibrate(..., method='bounded', bounds='widened') "
+        "widens the bounds of such parameters (for the table arm d2 to ±13.9 mm), with a warning; the "
+        "run keeps the seed's bounds."
+    )
+
+
 def _differences(numbers: dict[str, Any]) -> list[str]:
     variants = numbers["variants"]
     clean, worst = variants[0]["boards"], variants[-1]
-    no_bl = [clean[b]["points"]["improvement_pct"] for b in BOARDS]
-    no_bl_traj = [clean[b]["trajectory"]["improvement_pct"] for b in BOARDS]
-    bl = {b: worst["boards"][b]["points"]["improvement_pct"] for b in BOARDS}
-    bl_traj = [worst["boards"][b]["trajectory"]["improvement_pct"] for b in BOARDS]
+    no_bl = list(_improvements(clean, "points").values()) or [math.nan]
+    clean_traj = _improvements(clean, "trajectory")
+    no_bl_traj = list(clean_traj.values()) or [math.nan]
+    bl = _improvements(worst["boards"], "points") or {b: math.nan for b in BOARDS}
+    bl_traj = list(_improvements(worst["boards"], "trajectory").values()) or [math.nan]
     dropped = sorted(
-        {n for v in variants for b in BOARDS for n in v["boards"][b]["calibration"]["not_identified"]}
+        {
+            n
+            for v in variants
+            for b in BOARDS
+            if not _failed(v["boards"][b])
+            for n in v["boards"][b]["calibration"]["not_identified"]
+        }
     )
-    flat = clean["normal"]["trajectory"]["improvement_pct"]
-    tilted = min(
-        clean["roll"]["trajectory"]["improvement_pct"], clean["pitch"]["trajectory"]["improvement_pct"]
-    )
+    flat = clean_traj.get("normal", math.nan)
+    tilted = min(clean_traj.get("roll", math.nan), clean_traj.get("pitch", math.nan))
     out = [
         "The seed publishes neither the board layout, nor the verification points, nor the spline "
         "waypoints (photographs only): robocal's are assumptions (module docstring), so only the "
@@ -330,7 +379,7 @@ def _differences(numbers: dict[str, Any]) -> list[str]:
             f"against {tilted:.1f} % or more for a tilted board: the point of the seed's tilting "
             "mechanism (calibration points in three-dimensional space)."
         )
-    pitch_worst = bl["pitch"] < min(bl["normal"], bl["roll"]) - 5
+    pitch_worst = bl.get("pitch", math.nan) < min(bl.get("normal", math.nan), bl.get("roll", math.nan)) - 5
     out.append(
         f"With a {worst['backlash_play_deg']:g}° play on the two pitch joints the improvement at the "
         f"points falls to {_span(list(bl.values()))} and on the trajectory to {_span(bl_traj)}: the "
@@ -344,6 +393,7 @@ def _differences(numbers: dict[str, Any]) -> list[str]:
             "its joints on the pitched board is not known)."
         )
     )
+    out.append(_bounds_difference(variants))
     out += [
         f"{', '.join(dropped) or 'No parameter'} cannot be told apart from the other DH deviations "
         "with a point-like tip on a 3-DOF arm: robocal reports them as not identified and keeps them "
@@ -352,11 +402,54 @@ def _differences(numbers: dict[str, Any]) -> list[str]:
         "Identification: iteratively reweighted least squares (Weiszfeld's scheme for sums of "
         "distances, each round solved by scipy's bounded trust-region reflective least squares) "
         "stands for MATLAB's fmincon on the same L1 objective and bounds; the constraint E ≤ k·a of "
-        "eq. 4 is not imposed (it only bounds the optimum).",
+        "eq. 4 is not imposed (it only bounds the optimum).  With a large play the calibration poses "
+        "split by the direction of the last motion; the sum of distances then fits the larger group "
+        "and leaves the other with the whole play, so the RMS error on the calibration points can "
+        "end above the nominal model's while the sum of distances falls (arm 7 at 2°).",
         "Noise: Vicon 0.28 mm (1σ per axis) on the cavity positions and 0.28 mm across / 0.84 mm "
         "along the line of sight for the verification camera (the depth factor 3 is assumed).",
     ]
     return out
+
+
+def _sweep_row(play: float, runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean and sd of the improvements (%) over the arms whose fit succeeded, by board,
+    and the failed fits (arm seed and message)."""
+    row: dict[str, Any] = {"backlash_play_deg": play}
+    for name in BOARDS:
+        ok = [r["boards"][name] for r in runs if not _failed(r["boards"][name])]
+        row[name] = {
+            key: [
+                float(np.mean([b[key]["improvement_pct"] for b in ok])) if ok else math.nan,
+                float(np.std([b[key]["improvement_pct"] for b in ok], ddof=1)) if len(ok) > 1 else math.nan,
+            ]
+            for key in ("points", "trajectory")
+        }
+        row[name]["failed"] = [
+            {"arm_seed": r["arm_seed"], "message": r["boards"][name]["failed"]}
+            for r in runs
+            if _failed(r["boards"][name])
+        ]
+    return row
+
+
+def _failure_lines(numbers: dict[str, Any]) -> list[str]:
+    """One line per failed fit (table arm and sweep)."""
+    lines = [
+        f"fit failed: table arm, {name} board, {v['backlash_play_deg']:g}° play: "
+        f"{v['boards'][name]['failed']}"
+        for v in numbers["variants"]
+        for name in BOARDS
+        if _failed(v["boards"][name])
+    ]
+    for row in numbers.get("sweep", {}).get("rows", []):
+        for name in BOARDS:
+            lines += [
+                f"fit failed: arm {f['arm_seed']}, {name} board, {row['backlash_play_deg']:g}° play: "
+                f"{f['message']}"
+                for f in row[name]["failed"]
+            ]
+    return lines
 
 
 def _print(numbers: dict[str, Any]) -> None:
@@ -397,29 +490,34 @@ def _print(numbers: dict[str, Any]) -> None:
                 lo, hi = pub["table6"]["normal_and_roll_improvement_pct"]
                 seed_text = "no effect" if name == "pitch" else f"{lo:.1f}-{hi:.1f} %"
             for v in numbers["variants"]:
-                b = v["boards"][name][key]
-                table.add_row(
-                    name,
-                    seed_text,
-                    f"{v['backlash_play_deg']:g}°",
-                    fmt(b["before"]),
-                    fmt(b["after"]),
-                    f"{b['improvement_pct']:.1f} %",
-                )
+                b = v["boards"][name]
+                play = f"{v['backlash_play_deg']:g}°"
+                if _failed(b):
+                    table.add_row(name, seed_text, play, "—", "fit failed", "—")
+                else:
+                    b = b[key]
+                    better = f"{b['improvement_pct']:.1f} %"
+                    table.add_row(name, seed_text, play, fmt(b["before"]), fmt(b["after"]), better)
                 seed_text = ""
         console.print(table)
+    for line in _failure_lines(numbers):
+        console.print(f"  {line}", highlight=False)
     if "sweep" in numbers:
         table = Table(
             title=f"backlash play vs improvement, mean ± sd over {numbers['sweep']['arms']} arms (%)",
             title_justify="left",
         )
-        for col in ("play", "board", "points 1-6", "trajectory"):
+        for col in ("play", "board", "points 1-6", "trajectory", "fits failed"):
             table.add_column(col, justify="left" if col in ("play", "board") else "right", no_wrap=True)
         for row in numbers["sweep"]["rows"]:
             for name in BOARDS:
                 (mp, sp), (mt, st) = row[name]["points"], row[name]["trajectory"]
                 table.add_row(
-                    f"{row['backlash_play_deg']:g}°", name, f"{mp:.1f} ± {sp:.1f}", f"{mt:.1f} ± {st:.1f}"
+                    f"{row['backlash_play_deg']:g}°",
+                    name,
+                    f"{mp:.1f} ± {sp:.1f}",
+                    f"{mt:.1f} ± {st:.1f}",
+                    f"{len(row[name]['failed'])}",
                 )
         console.print(table)
     console.print("[bold]where the simulation differs from the seed, and why[/]")
@@ -444,6 +542,9 @@ def _report(numbers: dict[str, Any]) -> str:
         ]
         for name in BOARDS:
             for v in numbers["variants"]:
+                if _failed(v["boards"][name]):
+                    lines.append(f"| {name} | {v['backlash_play_deg']:g}° | — | fit failed | — |")
+                    continue
                 b = v["boards"][name][key]
                 before = f"{b['before']['mean_mm']:.3f} ± {b['before']['ci95_mm']:.3f}"
                 after = f"{b['after']['mean_mm']:.3f} ± {b['after']['ci95_mm']:.3f}"
@@ -454,16 +555,18 @@ def _report(numbers: dict[str, Any]) -> str:
         lines += [
             f"## Backlash play vs improvement (mean ± sd over {numbers['sweep']['arms']} arms, %)",
             "",
-            "| play | board | points 1-6 | trajectory |",
-            "|---:|---|---:|---:|",
+            "| play | board | points 1-6 | trajectory | fits failed |",
+            "|---:|---|---:|---:|---:|",
         ]
         for row in numbers["sweep"]["rows"]:
             for name in BOARDS:
                 (mp, sp), (mt, st) = row[name]["points"], row[name]["trajectory"]
-                lines.append(
-                    f"| {row['backlash_play_deg']:g}° | {name} | {mp:.1f} ± {sp:.1f} | {mt:.1f} ± {st:.1f} |"
-                )
+                failed = len(row[name]["failed"])
+                play = f"{row['backlash_play_deg']:g}°"
+                cells = [play, name, f"{mp:.1f} ± {sp:.1f}", f"{mt:.1f} ± {st:.1f}", str(failed)]
+                lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
+    lines += [f"- {line}" for line in _failure_lines(numbers)]
     lines += ["## Where the simulation differs", ""] + [f"- {d}" for d in numbers["differences"]] + [""]
     return "\n".join(lines)
 
@@ -480,9 +583,10 @@ def _plot(numbers: dict[str, Any], path: Path) -> None:
     fig, axes = plt.subplots(1, len(variants), figsize=(5.5 * len(variants), 3.8), sharey=True)
     axes = np.atleast_1d(axes)
     for ax, v in zip(axes, variants, strict=True):
-        first = v["boards"][next(iter(BOARDS))]["trajectory"]
-        ax.plot(first["errors_before_mm"], "k-", label="nominal commands")
-        for name in BOARDS:
+        done = [name for name in BOARDS if not _failed(v["boards"][name])]
+        if done:
+            ax.plot(v["boards"][done[0]]["trajectory"]["errors_before_mm"], "k-", label="nominal commands")
+        for name in done:
             ax.plot(v["boards"][name]["trajectory"]["errors_after_mm"], label=f"compensated ({name} board)")
         ax.set_xlabel("spline sample")
         ax.set_ylabel("position error (mm)")
@@ -522,16 +626,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         rows = []
         for play in SWEEP_DEG:
             runs = [experiment(s, play, noise_seed=s) for s in range(N_ARMS)]
-            row: dict[str, Any] = {"backlash_play_deg": play}
-            for name in BOARDS:
-                row[name] = {
-                    key: [
-                        float(np.mean([r["boards"][name][key]["improvement_pct"] for r in runs])),
-                        float(np.std([r["boards"][name][key]["improvement_pct"] for r in runs], ddof=1)),
-                    ]
-                    for key in ("points", "trajectory")
-                }
-            rows.append(row)
+            rows.append(_sweep_row(play, runs))
         numbers["sweep"] = {"arms": N_ARMS, "rows": rows}
     numbers["differences"] = _differences(numbers)
     if verbose:

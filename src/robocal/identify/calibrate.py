@@ -58,12 +58,14 @@ from robocal.model.dynamics import Payload
 from robocal.model.files import atomic_write_text, load_model, save_model
 
 __all__ = [
+    "BOUNDS_CHOICES",
     "LEVELS",
     "RESIDUAL_CHOICES",
     "CalibrationResult",
     "calibrate",
     "calibrate_physics",
     "default_bounds",
+    "parameters_at_bounds",
     "parse_level",
 ]
 
@@ -71,6 +73,11 @@ Array = NDArray[np.float64]
 Method = Literal["lm", "pinv", "bounded", "influence"]
 ResidualChoice = Literal["none", "auto", "joint_fourier"]
 RESIDUAL_CHOICES: tuple[str, ...] = ("none", "auto", "joint_fourier")
+#: ``bounds=`` of ``method="bounded"`` by name: seed 001's ±5 mm / ±2° on every robot
+#: parameter, or those bounds widened for the parameters that absorb redundant ones
+BOUNDS_CHOICES: tuple[str, ...] = ("default", "widened")
+#: a parameter is at a bound when it is within this fraction of the bounds' width of it
+AT_BOUND_TOLERANCE = 1e-6
 
 #: calibration levels by name (seed 003 §1.2)
 LEVELS: dict[str, int] = {
@@ -222,6 +229,61 @@ def default_bounds(
         w = angle if rot else length
         lo[k], hi[k] = nominal[k] - w, nominal[k] + w
     return lo, hi
+
+
+def parameters_at_bounds(
+    names: Sequence[str], x: Array, lo: Array, hi: Array, tolerance: float = AT_BOUND_TOLERANCE
+) -> list[str]:
+    """The parameters at a bound: within ``tolerance`` times the bounds' width (or times
+    1 m or 1 rad for a one-sided bound) of their lower or upper bound.  A value beyond its
+    bound counts as at it (the bounded solver clips its result, so none is); one strictly
+    inside by more than the tolerance does not."""
+    out = []
+    for name, v, a, b in zip(names, x, lo, hi, strict=True):
+        width = b - a if np.isfinite(b - a) else 1.0
+        near = tolerance * width
+        if (np.isfinite(a) and v - a <= near) or (np.isfinite(b) and b - v <= near):
+            out.append(name)
+    return out
+
+
+def _bounded_method_bounds(
+    bounds: tuple[ArrayLike, ArrayLike] | str | None,
+    problem: Problem,
+    dropped: Sequence[Dropped],
+    length: float,
+    robot: set[str],
+) -> tuple[Array, Array, str | None]:
+    """``(lower, upper)`` over the free parameters of ``problem`` for ``method="bounded"``
+    (SI), and a note when they were widened (:data:`BOUNDS_CHOICES`)."""
+    names, x0 = problem.free_names, problem.x0
+    if bounds is None:
+        return np.full(len(x0), -np.inf), np.full(len(x0), np.inf), None
+    if isinstance(bounds, str):
+        rot = [s.is_rotation for s in problem.chain.steps if s.free] + [False] * problem.n_effects
+        lo, hi = default_bounds(names, rot, x0, robot=robot)
+        if bounds == "default":
+            return lo, hi, None
+        wide_lo, wide_hi = _widen_for_absorbed(lo, hi, names, dropped, problem.chain, length, robot)
+        changed = [
+            f"{n} ±{_bound_text(n, h - v, r)}"
+            for n, v, h, h0, r in zip(names, x0, wide_hi, hi, rot, strict=True)
+            if h != h0
+        ]
+        note = (
+            "bounds='widened': seed 001's ±5 mm / ±2° widened for the parameters that absorb redundant "
+            f"ones: {', '.join(changed) or 'none absorbs any'}"
+        )
+        return wide_lo, wide_hi, note
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    if lo.shape != x0.shape or hi.shape != x0.shape:
+        raise ValueError(f"bounds must be two arrays over the {len(x0)} estimated parameters {names}")
+    return lo, hi, None
+
+
+def _bound_text(name: str, half_width: float, rotation: bool) -> str:
+    """A bound's half width in mm or degrees."""
+    return f"{math.degrees(half_width):.3g}°" if rotation else f"{half_width * 1e3:.3g} mm"
 
 
 # ---------------------------------------------------------------------- result
@@ -889,6 +951,42 @@ def _parameterisation_warnings(model: Model, measure: str) -> list[str]:
         return parameterisation_warnings(model, measure)
 
 
+def _distance_objective(problem: Problem, x0: Array, x: Array) -> dict[str, Any]:
+    """Seed 001's objective, the sum of the poses' weighted error distances (what
+    ``method="bounded"`` minimises; 1 per σ), at the start values and at the solution,
+    with the plain mean distances (m) for display."""
+
+    def sums(z: Array) -> tuple[float, float]:
+        weighted = problem.residual(z).reshape(-1, problem.rows)
+        plain = problem.residual(z, weighted=False).reshape(-1, problem.rows)
+        return float(np.linalg.norm(weighted, axis=1).sum()), float(np.linalg.norm(plain, axis=1).mean())
+
+    (before, mean_before), (after, mean_after) = sums(x0), sums(x)
+    return {
+        "name": "sum of distances",
+        "before": before,
+        "after": after,
+        "mean_distance_before": mean_before,
+        "mean_distance_after": mean_after,
+    }
+
+
+def _rms_rose(result: CalibrationResult, pose_errors: Array) -> str | None:
+    """A warning when a sum-of-distances fit raised the RMS error (legitimately: it fits
+    most poses and leaves a minority with large errors), or ``None``."""
+    if result.rms_after <= result.rms_before:
+        return None
+    large = int(np.sum(pose_errors > 3.0 * float(np.median(pose_errors))))
+    mean = result.metadata["objective"]
+    return (
+        f"the RMS error rose from {result.rms_before * 1e3:.4g} to {result.rms_after * 1e3:.4g} mm while the "
+        f"mean distance fell from {mean['mean_distance_before'] * 1e3:.4g} to "
+        f"{mean['mean_distance_after'] * 1e3:.4g} mm: the sum of distances (seed 001) fits most poses and "
+        f"leaves {large} of {len(pose_errors)} with errors over 3x the median, an error the model does not "
+        "describe (backlash? a second robot configuration?); method='lm' minimises the RMS error instead"
+    )
+
+
 def _robot_size(T_flange: Array) -> float:
     """The robot's size (m) from its end frames ``(n, 4, 4)``: the largest coordinate."""
     return max(float(np.abs(T_flange[:, :3, 3]).max()), 0.1)
@@ -1006,7 +1104,7 @@ def calibrate_physics(
     orientation_weight: float = 0.1,
     loss: str = "linear",
     f_scale: float = 1e-4,
-    bounds: tuple[ArrayLike, ArrayLike] | Literal["default"] | None = "default",
+    bounds: tuple[ArrayLike, ArrayLike] | Literal["default", "widened"] | None = "default",
     resolution: float = 1e-5,
     relaxation: float = 0.5,
     max_iterations: int = 200,
@@ -1044,8 +1142,13 @@ def calibrate_physics(
             relative to position residuals for pose measurements.
         loss: ``"linear"`` or a robust loss of scipy (``"soft_l1"``, ``"huber"``...) for
             ``lm``; ``f_scale`` (m) is where it starts to down-weight.
-        bounds: ``method="bounded"`` only: ``"default"`` (seed 001: ±5 mm, ±2°) or
-            ``(lower, upper)`` arrays over the free robot parameters' values.
+        bounds: ``method="bounded"`` only: ``"default"`` (seed 001: every identified robot
+            parameter within ±5 mm, ±2° of its start value), ``"widened"`` (those bounds
+            widened for the parameters that absorb redundant ones — with d3 dropped, d2
+            carries d2 + d3 and may move ±10 mm; a warning lists the widened bounds),
+            ``(lower, upper)`` arrays over the free parameters' values, or ``None``
+            (unbounded).  The parameters that end at a bound are listed in
+            ``result.metadata["at_bounds"]`` and in a warning.
         resolution: measurement resolution (m): the ``pinv``/``influence`` stop criterion.
         relaxation: C < 1 of the ``influence`` method.
         max_std: a parameter whose standard deviation, as a displacement of the tool (m:
@@ -1099,6 +1202,9 @@ def calibrate_physics(
     t_start = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if isinstance(bounds, str) and bounds not in BOUNDS_CHOICES:
+        choices = ", ".join(BOUNDS_CHOICES)
+        raise ValueError(f"bounds must be one of {choices}, two arrays or None, got {bounds!r}")
     if data.position is None:
         raise ValueError("the measurements have no positions to calibrate against")
     if data.dof != model.dof:
@@ -1265,18 +1371,9 @@ def calibrate_physics(
         if method == "influence":
             options["relaxation"] = relaxation
     elif method == "bounded":
-        if bounds is None:
-            lo, hi = np.full(len(x0), -np.inf), np.full(len(x0), np.inf)
-        elif isinstance(bounds, str):
-            rot = [s.is_rotation for s in problem.chain.steps if s.free] + [False] * problem.n_effects
-            lo, hi = default_bounds(names, rot, x0, robot=set(model.names))
-            lo, hi = _widen_for_absorbed(
-                lo, hi, names, selection.dropped, problem.chain, length, set(model.names)
-            )
-        else:
-            lo, hi = (np.asarray(b, dtype=float) for b in bounds)
-            if lo.shape != x0.shape or hi.shape != x0.shape:
-                raise ValueError(f"bounds must be two arrays over the {len(x0)} estimated parameters {names}")
+        lo, hi, widened = _bounded_method_bounds(bounds, problem, selection.dropped, length, set(model.names))
+        if widened is not None:
+            problem_warnings.append(widened)
         options["bounds"] = (lo, hi)
     dropped = list(selection.dropped)
     if method != "bounded":  # the hopeless ones before the first fit (they are pruned anyway)
@@ -1393,17 +1490,18 @@ def calibrate_physics(
         },
         payload=payload,
     )
-    if method == "bounded" and "bounds" in options:
+    if method == "bounded":
         lo, hi = options["bounds"]
-        at = [
-            name
-            for name, v, a, b in zip(names, x, lo, hi, strict=True)
-            if np.isfinite(b - a) and min(v - a, b - v) <= 1e-9 * (b - a)
-        ]
+        at = parameters_at_bounds(names, x, lo, hi)
+        calibration.metadata["at_bounds"] = at
+        calibration.metadata["objective"] = _distance_objective(problem, x0, x)
+        if (rose := _rms_rose(calibration, pose_errors)) is not None:
+            problem_warnings.append(rose)
         if at:
             problem_warnings.append(
                 f"{', '.join(at)} ended at {'its bound' if len(at) == 1 else 'their bounds'}: the bound, not "
-                "the data, decided the value and the fit may be poor; widen the bounds or use method='lm'"
+                "the data, decided the value and the fit may be poor; widen the bounds (bounds='widened' for "
+                "parameters that absorb redundant ones, or your own arrays) or use method='lm'"
             )
     if outliers:
         worst = sorted(outliers, key=lambda i: -pose_errors[i])[:5]

@@ -108,6 +108,14 @@ def calibrate_command(
     ] = None,
     measure: Annotated[str | None, typer.Option("--measure", help="position | pose")] = None,
     method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
+    bounds: Annotated[
+        str | None,
+        typer.Option(
+            "--bounds",
+            help="with --method bounded: default (seed 001: every robot parameter within ±5 mm, ±2° of its "
+            "nominal) | widened (wider for parameters that absorb redundant ones; warned)",
+        ),
+    ] = None,
     train_n: Annotated[
         int | None, typer.Option("--train-n", help="calibrate on N random rows, validate on the rest")
     ] = None,
@@ -188,6 +196,12 @@ def calibrate_command(
         raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
     if loss != "linear" and method != "lm":
         raise fail(f"--loss {loss} needs --method lm")
+    from robocal.identify.calibrate import BOUNDS_CHOICES
+
+    if bounds is not None and bounds not in BOUNDS_CHOICES:
+        raise fail(f"--bounds {bounds!r}: {' or '.join(BOUNDS_CHOICES)}")
+    if bounds is not None and method != "bounded":
+        raise fail(f"--bounds {bounds} needs --method bounded")
     data = _read(
         data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete
     )
@@ -245,6 +259,7 @@ def calibrate_command(
                 effects=effect_option,
                 loss=loss,
                 residual=residual,
+                **({"bounds": bounds} if bounds is not None else {}),
             )
     except ValueError as err:
         raise fail(as_cli_text(str(err))) from None

@@ -14,7 +14,8 @@ Two checks around :func:`robocal.calibrate`:
   does not explain the data: residuals significantly larger than the noise (χ² test)
   mean errors the model does not represent, whose size it estimates.
 * :func:`check_solution` after the fit — the fit did not work: not converged,
-  diverged (the error after calibration larger than before), non-finite estimates or
+  diverged (what the method minimises larger after calibration than before: the RMS
+  error, or the sum of distances for ``method="bounded"``), non-finite estimates or
   uncertainties, or parameters moved further from their start than any manufacturing
   error (a sign of data from another robot, wrong units or a wrong joint order).
 
@@ -290,6 +291,23 @@ def check_rank(
     return [text]
 
 
+def _diverged(result: Any) -> str | None:
+    """What grew during the fit, or ``None``: the method's own objective when it records
+    one (``metadata["objective"]``: ``method="bounded"`` minimises the sum of distances,
+    which may legitimately raise the RMS error), else the RMS position error."""
+    objective = getattr(result, "metadata", {}).get("objective")
+    if objective is not None:
+        if objective["after"] > objective["before"] * (1 + 1e-9) + 1e-12:
+            return (
+                f"{objective['name']} grew; mean distance {objective['mean_distance_before'] * 1e3:.4g} mm "
+                f"before, {objective['mean_distance_after'] * 1e3:.4g} mm after"
+            )
+        return None
+    if result.rms_after > result.rms_before * (1 + 1e-9) + 1e-12:
+        return f"RMS error {result.rms_before * 1e3:.4g} mm before, {result.rms_after * 1e3:.4g} mm after"
+    return None
+
+
 def check_solution(
     result: Any,
     *,
@@ -337,10 +355,9 @@ def check_solution(
     if not np.all(np.isfinite(result.std)):
         bad = [n for n, v in zip(result.names, result.std, strict=True) if not math.isfinite(v)]
         raise CalibrationGuardError(f"the uncertainty of {', '.join(bad)} is not finite: the fit is singular")
-    if result.rms_after > result.rms_before * (1 + 1e-9) + 1e-12:
+    if (diverged := _diverged(result)) is not None:
         raise CalibrationGuardError(
-            f"the fit diverged: RMS error {result.rms_before * 1e3:.4g} mm before, "
-            f"{result.rms_after * 1e3:.4g} mm after; check units, joint order and the start values"
+            f"the fit diverged: {diverged}; check units, joint order and the start values"
         )
     rot = {}
     chain = result.measurement_chain or result.model

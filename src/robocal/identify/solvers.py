@@ -203,7 +203,12 @@ def _bounded(
     distances of the previous round, by scipy's trust-region reflective ``least_squares``;
     a majorise-minimise iteration, so Σ_j |e_j| decreases every round.  It starts from the
     bounded least-squares solution and stops when the sum changes by less than
-    ``tolerance`` (relative).
+    ``tolerance`` (relative).  The result is clipped to the bounds (never beyond them).
+
+    Its objective is not the RMS error: when a minority of poses carries an error the
+    model cannot describe (a backlash that reverses along the measured path), the
+    minimum fits the majority and leaves the minority with the whole error, and the RMS
+    error can end above the start's (the divergence guard checks the sum of distances).
     """
     lo, hi = bounds if bounds is not None else (np.full_like(x0, -np.inf), np.full_like(x0, np.inf))
     width = problem.rows
@@ -245,10 +250,10 @@ def _bounded(
             x, d = fit.x, d_new
         if abs(total - new_total) <= tolerance * total:
             message = f"sum of distances converged ({rounds} reweighting rounds)"
-            return SolveResult(x, True, message, rounds, evaluations)
+            return SolveResult(np.clip(x, lo, hi), True, message, rounds, evaluations)
         total = min(total, new_total)
     message = f"sum of distances still changing after {max_rounds} rounds"
-    return SolveResult(x, False, message, max_rounds, evaluations)
+    return SolveResult(np.clip(x, lo, hi), False, message, max_rounds, evaluations)
 
 
 def _influence(
