@@ -108,15 +108,16 @@ def demo_command(
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Calibrate a virtual robot end to end and write the report (under a minute)."""
-    if out is not None:
-        refuse_overwrite(out, force, "demo folder")
     from robocal.demo import run_demo
     from robocal.model.catalog import robots
 
+    # the options first: a bad one is the error, whatever an earlier demo left in --out
     if robot not in robots():
         raise fail(f"unknown robot {robot!r}; choose one of {', '.join(robots())}")
     if poses < 10:
         raise fail(f"--poses {poses}: a calibration needs at least 10 poses")
+    if out is not None:
+        refuse_overwrite(out, force, "demo folder")
     try:
         numbers = run_demo(robot, out, seed=seed, n_calibration=poses, quick=quick, verbose=not as_json)
     except ValueError as err:
