@@ -201,12 +201,21 @@ def _turn(q):
     return sum(1 << j for j in range(6) if q[j] < 0)
 
 
-def _cf(q):
-    """ABB's cf1, cf4, cf6 (quadrants of axes 1, 4, 6) and cfx 0."""
-    return ",".join(str(int(np.floor(np.degrees(q[j]) / 90))) for j in (0, 3, 5)) + ",0"
+def _status(q, model):
+    """KUKA's status S (bits 0-2) of joint values ``q``."""
+    from robocal.compensate.programs import _status
+
+    return _status(model or rc.robot("kr16"), q)
 
 
-def _krl(q_joint, T_pose, q_before_pose, q_config=None):
+def _cf(q, model):
+    """ABB's cf1, cf4, cf6 (quadrants of axes 1, 4, 6) and cfx."""
+    from robocal.compensate.programs import _cfx
+
+    return ",".join(str(int(np.floor(np.degrees(q[j]) / 90))) for j in (0, 3, 5)) + f",{_cfx(model, q)}"
+
+
+def _krl(q_joint, T_pose, q_before_pose, q_config=None, model=None):
     """A KRL .src and .dat: PTP to E6AXIS, then PTP to the approach axes and LIN to an E6POS."""
     src, dat = ["DEF prog( )", "; generated for the closed-loop test"], ["DEFDAT prog", "; targets"]
     for k, q in enumerate(np.r_[q_joint, q_before_pose]):
@@ -214,18 +223,19 @@ def _krl(q_joint, T_pose, q_before_pose, q_config=None):
         dat.append(f"DECL E6AXIS XJ{k}={{{axes},E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}}")
     for k in range(len(q_joint)):
         src.append(f"PTP XJ{k}")
+    q_c = q_before_pose if q_config is None else q_config
     for k, T in enumerate(T_pose):
         a, b, c = np.degrees(spatial.zyx_angles(T[:3, :3]))
         x, y, z = T[:3, 3] * 1e3
         dat.append(
             f"DECL E6POS XP{k}={{X {x:.4f},Y {y:.4f},Z {z:.4f},A {a:.5f},B {b:.5f},C {c:.5f},"
-            f"S 2,T {_turn((q_before_pose if q_config is None else q_config)[k])},E1 0.0}}"
+            f"S {_status(q_c[k], model)},T {_turn(q_c[k])},E1 0.0}}"
         )
         src += [f"PTP XJ{len(q_joint) + k}", f"LIN XP{k} C_DIS"]
     return {"prog.src": "\n".join(src + ["END"]) + "\n", "prog.dat": "\n".join(dat + ["ENDDAT"]) + "\n"}
 
 
-def _rapid(q_joint, T_pose, q_before_pose, q_config=None):
+def _rapid(q_joint, T_pose, q_before_pose, q_config=None, model=None):
     lines = ["MODULE Prog", "    ! generated for the closed-loop test"]
     lines.append(
         f"    PERS tooldata probe:=[TRUE,[[0,0,{PROBE[2] * 1e3:.1f}],[1,0,0,0]],"
@@ -241,7 +251,8 @@ def _rapid(q_joint, T_pose, q_before_pose, q_config=None):
         qu = spatial.matrix_to_quaternion(T[:3, :3])
         lines.append(
             f"    CONST robtarget p{k}:=[[{','.join(f'{v * 1e3:.4f}' for v in T[:3, 3])}],"
-            f"[{','.join(f'{v:.9f}' for v in qu)}],[{_cf(q_config[k])}],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            f"[{','.join(f'{v:.9f}' for v in qu)}],[{_cf(q_config[k], model or rc.robot('irb120'))}],"
+            "[9E9,9E9,9E9,9E9,9E9,9E9]];"
         )
     lines.append("    PROC main()")
     lines += [f"        MoveAbsJ j{k}, v1000, fine, probe;" for k in range(len(q_joint))]
@@ -416,3 +427,37 @@ def test_written_configuration_chooses_the_branch(language):
     ).q[0]
     assert pg._config_ok(pose, q_ctrl) and np.abs(q_ctrl - q_b).max() < 0.05
     assert np.linalg.norm((moved.fk(q_ctrl) @ T_probe)[:3, 3] - T[:3, 3]) < 1e-6  # the written resolution
+
+
+@pytest.mark.parametrize("language", ["krl", "rapid"])
+def test_written_status_or_cfx_not_reachable_is_reported_and_left_as_written(language):
+    """A target written 'overhead' (KUKA S bit 0, ABB cfx digit 4) while T / cf1 pins
+    axis 1 in front: no solution in that configuration; reported with file, line, name
+    and the bit, left as written; a nominal calibration leaves it byte-identical."""
+    from robocal.compensate import programs as pg
+
+    robot = "kr16" if language == "krl" else "irb120"
+    nominal = rc.robot(robot)
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    q_a = np.radians([10.0, -70.0, 80.0, 30.0, 40.0, 20.0] if language == "krl" else [10, 10, 10, 30, 40, 20])
+    T_probe = spatial.transl(*PROBE)
+    T = nominal.fk(q_a) @ T_probe
+    texts = (_krl if language == "krl" else _rapid)(q_a[None], T[None], q_a[None])
+    label = "prog.dat" if language == "krl" else "prog.mod"
+    if language == "krl":
+        s = pg._status(nominal, q_a)
+        texts[label] = texts[label].replace(f"S {s},", f"S {s ^ 1},")
+        name, what = "XP0", "S bit 0 (overhead) 1 -> 0"
+    else:
+        c = pg._cfx(nominal, q_a)
+        texts[label] = texts[label].replace(f",{c}],[9E9", f",{c ^ 4}],[9E9")
+        name, what = "p0", f"cfx {c ^ 4} -> {c}"
+    line = next(k + 1 for k, s in enumerate(texts[label].splitlines()) if name + "=" in s or name + ":=" in s)
+    res = filter_program_text(texts, language, moved, nominal, tool=T_probe)
+    expected = f"{label}: line {line}: target {name}: reachable only in another configuration ({what}"
+    assert any(p.startswith(expected) for p in res.problems), res.problems
+    assert len(res.problems) == 1 and not res.ok
+    pose = next(i for i, t in enumerate(res.targets) if t.kind == "pose")
+    assert not res.changed[pose]
+    assert res.changed.any()  # the joint targets are corrected
+    assert filter_program_text(texts, language, nominal, tool=T_probe).texts == texts

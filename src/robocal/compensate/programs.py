@@ -36,13 +36,14 @@ listed in :attr:`FilteredProgram.unsupported`):
   declarations and of ``PTP/LIN/CIRC`` statements (Cartesian; ``A, B, C`` =
   ``Rz(A) Ry(B) Rx(C)``), ``{A1 .., ..., A6 .. [, E1 ..]}`` of ``DECL E6AXIS|AXIS``
   and ``PTP`` (joint).  ``FRAME`` declarations (bases, tools) are data, not targets.
-  Status/turn (``S``, ``T``) and external axes are kept as written; ``T`` chooses the
-  IK branch (``S`` is not checked).
+  Status/turn (``S``, ``T``) and external axes are kept as written and met by the
+  correction (:func:`_status_bits`; a target reachable only in another configuration
+  is reported and left as written).
 * **ABB RAPID** (``.mod``, ``.modx``, ``.prg``; mm, degrees): ``robtarget`` literals
   ``[[x,y,z],[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],[eax..]]`` (quaternion scalar first) in
   declarations and in ``MoveJ/MoveL/MoveC`` statements, ``jointtarget`` literals
-  ``[[j1..j6],[eax..]]`` in declarations and ``MoveAbsJ``; ``cf``/``cfx`` kept,
-  ``cf1, cf4, cf6`` choose the IK branch (``cfx`` is not checked).
+  ``[[j1..j6],[eax..]]`` in declarations and ``MoveAbsJ``; ``cf1, cf4, cf6, cfx`` kept
+  and met by the correction (:func:`_cfx_bits`).
 * **robocal target CSV** (``.csv``): ``name,x,y,z[,qw,qx,qy,qz]`` (Cartesian, in
   ``length_unit``) or ``[name,]q1..qN`` (joint, in ``angle_unit``); ``#`` lines kept.
 
@@ -111,9 +112,11 @@ class ProgramTarget:
         tokens: the number tokens, in the order the format gives them.
         style: how the numbers map to SI (``"urscript"``, ``"krl"``, ``"rapid"``,
             ``"csv"``).
-        config: the written configuration the IK must meet: KUKA ``(T,)`` (turn: bit
-            ``j`` set when axis ``j + 1`` is negative), ABB ``(cf1, cf4, cf6)`` (the
-            quadrants ``floor(axis / 90°)`` of axes 1, 4, 6); ``None`` when not given.
+        config: the written configuration the IK must meet: KUKA ``(T, S)`` (turn: bit
+            ``j`` set when axis ``j + 1`` is negative; status: see :func:`_status`;
+            either ``None`` when not written), ABB ``(cf1, cf4, cf6, cfx)`` (the
+            quadrants ``floor(axis / 90°)`` of axes 1, 4, 6; ``cfx`` see :func:`_cfx`);
+            ``None`` when not given.
     """
 
     name: str
@@ -122,7 +125,7 @@ class ProgramTarget:
     file: str
     tokens: tuple[_Token, ...]
     style: str
-    config: tuple[int, ...] | None = None
+    config: tuple[int | None, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -314,14 +317,19 @@ def _krl_fields(text: str, start: int, end: int) -> dict[str, _Token]:
     return fields
 
 
+def _krl_bits(token: _Token | None, limit: int) -> int | None:
+    """A KRL status or turn as written (``None`` when absent or not an integer in range)."""
+    if token is None or token.value != int(token.value) or not 0 <= token.value < limit:
+        return None
+    return int(token.value)
+
+
 def _krl_target(text: str, start: int, end: int, dof: int, name: str, path: str) -> ProgramTarget | None:
     f = _krl_fields(text, start, end)
     line = _line_of(text, start)
     if all(k in f for k in _KRL_POSE_KEYS):
-        turn = f.get("T")
-        config = None
-        if turn is not None and turn.value == int(turn.value) and 0 <= turn.value < 64:
-            config = (int(turn.value),)
+        turn, status = (_krl_bits(f.get(k), 64) for k in ("T", "S"))
+        config = None if turn is None and status is None else (turn, status)
         return ProgramTarget(name, line, "pose", path, tuple(f[k] for k in _KRL_POSE_KEYS), "krl", config)
     axes = [f"A{j + 1}" for j in range(dof)]
     if all(k in f for k in axes):
@@ -420,7 +428,7 @@ def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) 
         if len(groups) >= 3:
             cf = [t.value for t in _tokens(text, *groups[2])]
             if len(cf) == 4 and all(v == int(v) for v in cf):
-                config = (int(cf[0]), int(cf[1]), int(cf[2]))
+                config = tuple(int(v) for v in cf)
         return ProgramTarget(name, line, "pose", path, tuple(toks), "rapid", config), end
     if not groups:
         raise ProgramError(f"{path}: line {line}: jointtarget {name} needs [[j1..j6],[eax..]]")
@@ -628,18 +636,121 @@ def _format(value: float, token: str, decimals: int) -> str:
 
 
 # ---------------------------------------------------------------------- configurations
-def _config_ok(t: ProgramTarget, q: Array) -> bool:
-    """Whether joint values ``q`` (rad) meet the target's written configuration."""
+_EPS_DEG = 1e-6  # degrees: an axis at a boundary (0, ±90 ...) meets either side
+_EPS_M = 1e-6  # m: a wrist centre on a boundary (axis 1, the lower arm's line) meets either side
+
+
+def _axis_line(F: Array, model: Model, j: int) -> tuple[Array, Array]:
+    """A point (m) and the unit direction of joint ``j``'s axis in the base frame."""
+    axis = [s for s in model.steps if s.joint is not None][j].axis
+    return F[j][:3, 3], F[j][:3, axis]
+
+
+def _wrist_centre(F: Array, model: Model) -> Array:
+    """The wrist centre (m): the point of axis 5 nearest axis 4 (where they cross)."""
+    p4, a4 = _axis_line(F, model, 3)
+    p5, a5 = _axis_line(F, model, 4)
+    c = float(a4 @ a5)
+    d = p5 - p4
+    if abs(1 - c * c) < 1e-12:
+        return p5
+    t = (c * (a4 @ d) - a5 @ d) / (1 - c * c)
+    return p5 + t * a5
+
+
+def _arm_sides(model: Model, q: Array) -> tuple[float, float]:
+    """Where the wrist centre is, as signed distances (m; ~0 on a boundary).
+
+    ``front``: in front of axis 1 (> 0) or behind it (overhead), measured along the
+    direction the wrist centre has from axis 1 at the zero position, turned with axis 1.
+    ``elbow``: ``((p3 - p2) x (w - p3)) . a3`` — > 0 when axis 3 is beyond the angle that
+    stretches the arm (wrist centre on the line of axes 2 and 3), i.e. elbow up."""
+    F = model.joint_frames(q)
+    F0 = model.joint_frames(np.zeros(model.dof))
+    p1, a1 = _axis_line(F0, model, 0)
+    h0 = _wrist_centre(F0, model) - p1
+    h0 -= (h0 @ a1) * a1
+    front = 0.0
+    w = _wrist_centre(F, model)
+    if np.linalg.norm(h0) > 1e-9:
+        local = F0[0][:3, :3].T @ (h0 / np.linalg.norm(h0))
+        front = float((w - F[0][:3, 3]) @ (F[0][:3, :3] @ local))
+    p2, _ = _axis_line(F, model, 1)
+    p3, a3 = _axis_line(F, model, 2)
+    elbow = float(np.cross(p3 - p2, w - p3) @ a3)
+    return front, elbow
+
+
+def _digit(value: float, eps: float, negative_bit: int) -> set[int]:
+    """The bit values a signed quantity allows: ``negative_bit`` when < 0 (both near 0)."""
+    if abs(value) < eps:
+        return {0, 1}
+    return {negative_bit if value < 0 else 1 - negative_bit}
+
+
+def _status_bits(model: Model, q: Array) -> list[set[int]]:
+    """KUKA status bits 0, 1, 2 that joint values ``q`` (rad) allow: bit 0 set when the
+    wrist centre is behind axis 1 (overhead), bit 1 set when A3 >= phi (the angle that
+    stretches the arm; elbow up), bit 2 set when A5 <= 0."""
+    front, elbow = _arm_sides(model, q)
+    a5 = math.degrees(q[4])
+    return [_digit(front, _EPS_M, 1), _digit(elbow, _EPS_M, 0), _digit(a5, _EPS_DEG, 1)]
+
+
+def _cfx_bits(model: Model, q: Array) -> list[set[int]]:
+    """ABB ``cfx`` = 4 b2 + 2 b1 + b0 for a 6-axis arm: b2 set when the wrist centre is
+    behind axis 1, b1 set when it is behind the lower arm (elbow down), b0 set when axis 5
+    is negative."""
+    front, elbow = _arm_sides(model, q)
+    a5 = math.degrees(q[4])
+    return [_digit(a5, _EPS_DEG, 1), _digit(elbow, _EPS_M, 1), _digit(front, _EPS_M, 1)]
+
+
+def _status(model: Model, q: Array) -> int:
+    """KUKA status ``S`` (bits 0-2, see :func:`_status_bits`) of joint values ``q`` (rad)."""
+    return sum(min(b) << k for k, b in enumerate(_status_bits(model, q)))
+
+
+def _cfx(model: Model, q: Array) -> int:
+    """ABB ``cfx`` (see :func:`_cfx_bits`) of joint values ``q`` (rad)."""
+    return sum(min(b) << k for k, b in enumerate(_cfx_bits(model, q)))
+
+
+def _config_changes(t: ProgramTarget, q: Array, model: Model | None = None) -> list[str]:
+    """How joint values ``q`` (rad) differ from the target's written configuration: one
+    entry per bit or digit (``[]``: they meet it).  Without ``model`` the status / cfx
+    is not checked."""
     if t.config is None or len(q) < 6:
-        return True
+        return []
     deg = np.degrees(q[:6])
-    eps = 1e-6  # degrees: an axis at a boundary (0, ±90 ...) meets either side
+    eps = _EPS_DEG
+    out = []
     if t.style == "krl":
-        return all(abs(deg[j]) < eps or (deg[j] < 0) == bool(t.config[0] >> j & 1) for j in range(6))
-    return all(
-        math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0)
-        for j, cf in zip((0, 3, 5), t.config, strict=True)
-    )
+        turn, status = t.config
+        if turn is not None:
+            for j in range(6):
+                if abs(deg[j]) >= eps and (deg[j] < 0) != bool(turn >> j & 1):
+                    out.append(f"T bit {j} (A{j + 1} {'<' if deg[j] < 0 else '>='} 0)")
+        if status is not None and model is not None:
+            names = ("overhead", "A3 >= phi", "A5 <= 0")
+            for k, allowed in enumerate(_status_bits(model, q)):
+                if status >> k & 1 not in allowed:
+                    out.append(f"S bit {k} ({names[k]}) {status >> k & 1} -> {min(allowed)}")
+        return out
+    for j, cf, name in zip((0, 3, 5), t.config[:3], ("cf1", "cf4", "cf6"), strict=True):
+        if not math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0):
+            out.append(f"{name} {cf} -> {math.floor(deg[j] / 90.0)}")
+    if len(t.config) > 3 and model is not None:
+        cfx = t.config[3]
+        bits = _cfx_bits(model, q)
+        if not 0 <= cfx < 8 or any(cfx >> k & 1 not in b for k, b in enumerate(bits)):
+            out.append(f"cfx {cfx} -> {sum(min(b) << k for k, b in enumerate(bits))}")
+    return out
+
+
+def _config_ok(t: ProgramTarget, q: Array, model: Model | None = None) -> bool:
+    """Whether joint values ``q`` (rad) meet the target's written configuration."""
+    return not _config_changes(t, q, model)
 
 
 def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: int) -> Array:
@@ -647,15 +758,21 @@ def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: 
     lim = model.joint_limits
     lo, hi = np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi)
     q = rng.uniform(lo, hi, (n, model.dof))
-    if t.config is None:
+    if t.config is None or model.dof < 6:
         return q
     if t.style == "krl":
-        for j in range(min(6, model.dof)):
-            negative = bool(t.config[0] >> j & 1)
-            q[:, j] = np.where(negative, -np.abs(q[:, j]), np.abs(q[:, j]))
+        turn, status = t.config
+        for j in range(6):
+            if turn is not None:
+                negative = bool(turn >> j & 1)
+                q[:, j] = np.where(negative, -np.abs(q[:, j]), np.abs(q[:, j]))
+        if status is not None:
+            q[:, 4] = np.where(status >> 2 & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
     else:
-        for j, cf in zip((0, 3, 5), t.config, strict=True):
+        for j, cf in zip((0, 3, 5), t.config[:3], strict=True):
             q[:, j] = np.radians(90.0 * (cf + rng.uniform(0.1, 0.9, n)))
+        if len(t.config) > 3:
+            q[:, 4] = np.where(t.config[3] & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
     return np.clip(q, lim[:, 0], lim[:, 1])
 
 
@@ -787,6 +904,7 @@ def filter_program_text(
     types = model.joint_types
     n = len(targets)
     problems: list[str] = []
+    reported: set[int] = set()  # targets whose configuration change is already reported
     values = [_read_value(t, units, types, False) for t in targets]
     new_values: list[Array] = list(values)
     before = np.full(n, np.nan)
@@ -830,26 +948,31 @@ def filter_program_text(
             kind = "position" if position_only else "pose"
             opts = {"joint_effects": effects, "tol": tol, "tol_angle": tol}
             res = compensate(real, goal, nom, kind=kind, q0=q_prev, **opts)
-            if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0])):
-                # the written configuration (KUKA T, ABB cf) chooses the branch: starts within it
-                starts = _config_starts(targets[i], nom, rng, 16)
+            config_kept = True
+            if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0], nom)):
+                # the written configuration (KUKA S/T, ABB cf/cfx) chooses the branch: starts within it
+                starts = _config_starts(targets[i], nom, rng, 24)
                 for q_start in starts:
                     trial = compensate(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
-                    if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0]):
+                    if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0], nom):
                         res = trial
                         break
                 else:
                     t = targets[i]
-                    if t.config is not None:
+                    if t.config is not None and res.reachable[0]:
+                        config_kept = False
+                        changes = ", ".join(_config_changes(t, res.q_nominal[0], nom))
                         problems.append(
-                            f"{t.file}: line {t.line}: target {t.name}: no solution in the written "
-                            f"configuration {t.config}; the branch of the previous target is used"
+                            f"{t.file}: line {t.line}: target {t.name}: reachable only in another "
+                            f"configuration ({changes}); left as written"
                         )
             q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
             corrected = spatial.inverse(B) @ nom.fk(res.q)[0]
-            new_values[i] = corrected if res.reachable[0] else values[i]
+            new_values[i] = corrected if res.reachable[0] and config_kept else values[i]
             before[i], after[i] = res.error_before[0] * 1e3, res.error_after[0] * 1e3
-            reach[i], kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0])
+            reach[i], kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0]) and config_kept
+            if not config_kept:
+                reported.add(i)
     # write: the numbers that moved, file by file, last first
     changed = np.zeros(n, dtype=bool)
     edits: dict[str, list[tuple[int, int, str]]] = {label: [] for label in texts}
@@ -871,7 +994,7 @@ def filter_program_text(
             problems.append(
                 f"{t.file}: line {t.line}: target {t.name}: not reachable by the calibrated robot"
             )
-        elif not kept[i]:
+        elif not kept[i] and i not in reported:
             problems.append(
                 f"{t.file}: line {t.line}: target {t.name}: the correction changes the configuration"
             )
