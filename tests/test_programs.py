@@ -461,3 +461,66 @@ def test_written_status_or_cfx_not_reachable_is_reported_and_left_as_written(lan
     assert not res.changed[pose]
     assert res.changed.any()  # the joint targets are corrected
     assert filter_program_text(texts, language, nominal, tool=T_probe).texts == texts
+
+
+def _frames_cell(language):
+    """A nominal and a moved robot, a base / work object frame and targets written in it."""
+    robot = "kr16" if language == "krl" else "irb120"
+    nominal = rc.robot(robot)
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    W = spatial.homogeneous(spatial.rotz(np.radians(30.0)), [0.1, -0.2, 0.05])
+    q = random_poses(nominal, 30, seed=4)
+    q = q[np.linalg.svd(nominal.joint_jacobian(q), compute_uv=False)[:, -1] > 0.05][:4]
+    T_probe = spatial.transl(*PROBE)
+    T_pose = spatial.inverse(W) @ nominal.fk(q[2:]) @ T_probe
+    return nominal, moved, W, T_probe, (_krl if language == "krl" else _rapid)(q[:2], T_pose, q[2:])
+
+
+def test_krl_tool_and_base_read_from_config_dat(tmp_path):
+    """$TOOL = TOOL_DATA[3] / $BASE = BASE_DATA[2] resolved from $config.dat (KUKA A, B, C
+    = rotations about Z, Y, X in degrees) give what --tool/--base give."""
+    nominal, moved, W, T_probe, texts = _frames_cell("krl")
+    texts["prog.src"] = texts["prog.src"].replace(
+        "; generated for the closed-loop test", "$BASE = BASE_DATA[2]\n$TOOL = TOOL_DATA[3]"
+    )
+    cfg = (
+        "DEFDAT $CONFIG\n"
+        f"TOOL_DATA[3]={{X 0.0,Y 0.0,Z {PROBE[2] * 1e3:.1f},A 0.0,B 0.0,C 0.0}}\n"
+        "BASE_DATA[2]={X 100.0,Y -200.0,Z 50.0,A 30.0,B 0.0,C 0.0}\nENDDAT\n"
+    )
+    read = filter_program_text(texts, "krl", moved, nominal, config_dat=("$config.dat", cfg))
+    given = filter_program_text(texts, "krl", moved, nominal, tool=T_probe, base=W)
+    assert read.texts == given.texts and not read.problems and read.changed.all()
+    assert filter_program_text(texts, "krl", moved, nominal).texts != read.texts  # the frames matter
+    assert filter_program_text(texts, "krl", nominal, config_dat=("$config.dat", cfg)).texts == texts
+    # from files: $config.dat next to the program; an index it lacks names file and line
+    for name, text in texts.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "$config.dat").write_text(cfg)
+    res = filter_program_file(tmp_path / "prog.src", moved, nominal=nominal)
+    assert res.texts[str(tmp_path / "prog.dat")] == read.texts["prog.dat"]
+    (tmp_path / "other.dat").write_text(cfg.replace("BASE_DATA[2]", "BASE_DATA[5]"))
+    with pytest.raises(ProgramError, match=r"prog.src: line 2: BASE_DATA\[2\] is not in .*other.dat"):
+        filter_program_file(tmp_path / "prog.src", moved, nominal=nominal, config_dat=tmp_path / "other.dat")
+
+
+def test_rapid_tool_and_wobj_read_from_the_module():
+    """Each Move's tooldata and \\WObj (uframe · oframe) declared in the module give what
+    --tool/--base give; tool0/wobj0 are the flange and the base."""
+    nominal, moved, W, T_probe, texts = _frames_cell("rapid")
+    u = spatial.matrix_to_quaternion(spatial.rotz(np.radians(30.0)))
+    text = texts["prog.mod"].replace(
+        "    PROC main()",
+        f'    PERS wobjdata table:=[FALSE,TRUE,"",[[100,-200,40],[{",".join(f"{v:.12f}" for v in u)}]],'
+        "[[0,0,10],[1,0,0,0]]];\n"
+        "    PERS tooldata other:=[TRUE,[[0,0,0],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];\n    PROC main()",
+    )
+    text = text.replace("v100, fine, probe;", "v100, fine, probe \\WObj:=table;")
+    read = filter_program_text({"prog.mod": text}, "rapid", moved, nominal)
+    given = filter_program_text({"prog.mod": text}, "rapid", moved, nominal, tool=T_probe, base=W)
+    assert read.texts == given.texts and not read.problems and read.changed.all()
+    assert filter_program_text({"prog.mod": text}, "rapid", nominal).texts == {"prog.mod": text}
+    unknown = filter_program_text(
+        {"prog.mod": text.replace("\\WObj:=table", "\\WObj:=elsewhere")}, "rapid", moved, nominal
+    )
+    assert any("wobjdata ELSEWHERE is declared outside the module" in p for p in unknown.problems)

@@ -23,6 +23,10 @@ tool absorbed, e.g. ``d6`` under position measurement) —; the program's tool
 (``set_tcp`` in URScript, a RAPID ``tooldata`` of the module, else ``tool`` given) is
 appended as a fixed frame, and targets are taken in the robot's
 base frame (``base`` given: ``T_base_frame`` of a KUKA BASE or a RAPID work object).
+Without ``tool``/``base`` each Cartesian target takes those of the first motion to it:
+a RAPID Move's ``tooldata`` and ``\\WObj`` declared in the module, KRL ``$TOOL``/``$BASE``
+(``TOOL_DATA[n]``/``BASE_DATA[n]``, or an ``FDAT``'s ``TOOL_NO``/``BASE_NO``) from the
+``$config.dat`` given.
 
 Supported grammar (anything else is left untouched; motion statements outside it are
 listed in :attr:`FilteredProgram.unsupported`):
@@ -394,8 +398,59 @@ def _parse_krl(
     return targets, unsupported, used
 
 
+_KRL_SET = re.compile(
+    r"^[ \t]*(?:\$(TOOL|BASE)\s*=\s*(?:TOOL|BASE)_DATA\[(\d+)\]|FDAT_ACT\s*=\s*(\w+))", re.M | re.I
+)
+_KRL_FDAT = re.compile(r"^[ \t]*DECL\s+FDAT\s+(\w+)\s*=\s*\{([^{}]*)\}", re.M | re.I)
+_KRL_DATA = re.compile(r"\b(TOOL|BASE)_DATA\[(\d+)\]\s*=\s*\{([^{}]*)\}", re.I)
+
+
+def _krl_settings(texts: dict[str, str]) -> dict[str, list[tuple[int, int, str, int]]]:
+    """Per file, the tool and base settings in order: ``(position, line, "TOOL"|"BASE", n)``
+    from ``$TOOL = TOOL_DATA[n]``, ``$BASE = BASE_DATA[n]`` and ``FDAT_ACT = F``
+    (``TOOL_NO``/``BASE_NO`` of the ``DECL FDAT F`` of the program)."""
+    fdat = {}
+    for text in texts.values():
+        for m in _KRL_FDAT.finditer(text):
+            fields = {k.upper(): v for k, v in re.findall(r"(\w+)\s+(\d+)", m.group(2))}
+            fdat[m.group(1).upper()] = fields
+    out: dict[str, list[tuple[int, int, str, int]]] = {}
+    for label, text in texts.items():
+        out[label] = []
+        for m in _KRL_SET.finditer(text):
+            line = _line_of(text, m.start())
+            if m.group(1):
+                out[label].append((m.start(), line, m.group(1).upper(), int(m.group(2))))
+            elif m.group(3).upper() in fdat:
+                fields = fdat[m.group(3).upper()]
+                for kind in ("TOOL", "BASE"):
+                    if f"{kind}_NO" in fields:
+                        out[label].append((m.start(), line, kind, int(fields[f"{kind}_NO"])))
+    return out
+
+
+def _krl_frame(fields: dict[str, _Token]) -> Array:
+    """``{X, Y, Z, A, B, C}`` (mm, deg; ``Rz(A) Ry(B) Rx(C)``) as a frame in m."""
+    v = [fields[k].value if k in fields else 0.0 for k in _KRL_POSE_KEYS]
+    R = spatial.rotz(v[3] * DEG) @ spatial.roty(v[4] * DEG) @ spatial.rotx(v[5] * DEG)
+    return spatial.homogeneous(R, np.array(v[:3]) * 1e-3)
+
+
+def _krl_config_frames(text: str, path: str) -> dict[tuple[str, int], Array]:
+    """``TOOL_DATA[n]`` / ``BASE_DATA[n]`` of a ``$config.dat``: ``{("TOOL", n): frame}``."""
+    out = {}
+    for m in _KRL_DATA.finditer(text):
+        fields = _krl_fields(text, m.start(3), m.end(3))
+        if not all(k in fields for k in ("X", "Y", "Z")):
+            raise ProgramError(f"{path}: line {_line_of(text, m.start())}: {m.group(0)[:40]} lacks X, Y, Z")
+        out[(m.group(1).upper(), int(m.group(2)))] = _krl_frame(fields)
+    return out
+
+
 # ---------------------------------------------------------------------- RAPID
-_RAPID_DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata)\s+(\w+)\s*:=\s*\[", re.I)
+_RAPID_DECL = re.compile(
+    r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+(\w+)\s*:=\s*\[", re.I
+)
 _RAPID_MOVE = re.compile(r"^[ \t]*(MoveJ|MoveL|MoveC|MoveAbsJ)\b([^;]*);", re.M | re.I)
 
 
@@ -440,8 +495,37 @@ def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) 
     return ProgramTarget(name, line, "joint", path, tuple(toks[:dof]), "rapid"), end
 
 
+def _rapid_pose(text: str, b: int, path: str, what: str) -> Array | None:
+    """The frame ``[[x,y,z],[q1,q2,q3,q4]]`` (mm, quaternion scalar first) at ``b`` in m."""
+    inner, _ = _rapid_groups(text, b, path)
+    if len(inner) < 2:
+        return None
+    p = [t.value for t in _tokens(text, *inner[0])]
+    qv = [t.value for t in _tokens(text, *inner[1])]
+    if len(p) != 3 or len(qv) != 4:
+        return None
+    norm = float(np.linalg.norm(qv))
+    if not (math.isfinite(norm) and norm > 1e-9 and all(map(math.isfinite, p))):
+        raise ProgramError(f"{path}: line {_line_of(text, b)}: {what} is not a frame")
+    R = spatial.quaternion_to_matrix(np.array(qv) / norm)
+    return spatial.homogeneous(R, np.array(p) * 1e-3)
+
+
+def _rapid_move_frames(text: str, m: re.Match) -> tuple[str | None, str | None]:
+    """The tool and work object (names, upper case) a Move statement names."""
+    args = [text[a:b].strip() for a, b in _split_args(text, m.start(2), m.end(2))]
+    positional = [a for a in args if a and not a.startswith("\\")]
+    k = {"movec": 4}.get(m.group(1).lower(), 3)
+    tool = None
+    if len(positional) > k:
+        word = re.match(r"\w+", positional[k])
+        tool = word.group().upper() if word else None
+    wobj = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.I)
+    return tool, (wobj.group(1).upper() if wobj else None)
+
+
 def _parse_rapid(
-    text: str, dof: int, path: str, uses: list | None = None
+    text: str, dof: int, path: str, uses: list | None = None, data: dict | None = None
 ) -> tuple[list[ProgramTarget], list[Unsupported], Array | None]:
     targets: list[ProgramTarget] = []
     unsupported: list[Unsupported] = []
@@ -451,25 +535,32 @@ def _parse_rapid(
         b = m.end() - 1
         if kind == "tooldata":
             groups, _ = _rapid_groups(text, b, path)
-            if len(groups) >= 1:
-                inner, _ = _rapid_groups(text, groups[0][0], path)
-                if len(inner) >= 2:
-                    p = [t.value for t in _tokens(text, *inner[0])]
-                    qv = [t.value for t in _tokens(text, *inner[1])]
-                    if len(p) == 3 and len(qv) == 4:
-                        norm = float(np.linalg.norm(qv))
-                        if not (math.isfinite(norm) and norm > 1e-9 and all(map(math.isfinite, p))):
-                            raise ProgramError(
-                                f"{path}: line {_line_of(text, b)}: tooldata {name}: tframe is not a frame"
-                            )
-                        R = spatial.quaternion_to_matrix(np.array(qv) / norm)
-                        tool = spatial.homogeneous(R, np.array(p) * 1e-3)
+            if groups:
+                frame = _rapid_pose(text, groups[0][0], path, f"tooldata {name}: tframe")
+                if frame is not None:
+                    tool = frame
+                    if data is not None:
+                        data["tools"][name.upper()] = frame
+            continue
+        if kind == "wobjdata":
+            groups, _ = _rapid_groups(text, b, path)
+            frames = [
+                _rapid_pose(text, g[0], path, f"wobjdata {name}: {w}")
+                for g, w in zip(groups[:2], ("uframe", "oframe"), strict=False)
+            ]
+            if len(frames) != 2 or any(f is None for f in frames):
+                line = _line_of(text, b)
+                raise ProgramError(f"{path}: line {line}: wobjdata {name} needs uframe and oframe")
+            if data is not None:
+                data["wobjs"][name.upper()] = frames[0] @ frames[1]
             continue
         t, _ = _rapid_target(text, b, kind, dof, name, path)
         targets.append(t)
     for m in _RAPID_MOVE.finditer(text):
         cmd = m.group(1)
         line = _line_of(text, m.start())
+        if data is not None:
+            data["moves"].append((m.start(), m.end(), line, *_rapid_move_frames(text, m)))
         args = m.group(2)
         offset = m.start(2)
         k = 0
@@ -832,6 +923,58 @@ def _robot_models(
     return strip(real, absorbed), strip(nom, np.eye(4)), effects
 
 
+def _program_frames(
+    texts: dict[str, str],
+    language: str,
+    rapid_data: dict[str, dict],
+    config_dat: tuple[str, str] | None,
+    problems: list[str],
+) -> Callable[[str, int], tuple[Array | None, Array | None]]:
+    """``frame_at(file, position)``: the program's tool and base frames (m) in force at a
+    motion (``None``: not given by the program)."""
+    if language == "rapid":
+        tools = {k: v for d in rapid_data.values() for k, v in d["tools"].items()}
+        wobjs = {k: v for d in rapid_data.values() for k, v in d["wobjs"].items()}
+        tools.setdefault("TOOL0", np.eye(4))
+        wobjs.setdefault("WOBJ0", np.eye(4))
+        seen: set[str] = set()
+
+        def rapid_at(label: str, pos: int) -> tuple[Array | None, Array | None]:
+            for start, end, line, tool, wobj in rapid_data[label]["moves"]:
+                if start <= pos < end:
+                    for name, table, what in ((tool, tools, "tooldata"), (wobj, wobjs, "wobjdata")):
+                        if name is not None and name not in table and name not in seen:
+                            seen.add(name)
+                            problems.append(
+                                f"{label}: line {line}: {what} {name} is declared outside the module; "
+                                "the default is used (--tool / --base)"
+                            )
+                    return tools.get(tool or "TOOL0"), wobjs.get(wobj or "WOBJ0")
+            return None, None
+
+        return rapid_at
+    if language != "krl" or config_dat is None:
+        return lambda label, pos: (None, None)
+    cfg_label, cfg_text = config_dat
+    data = _krl_config_frames(cfg_text, cfg_label)
+    settings = _krl_settings(texts)
+
+    def krl_at(label: str, pos: int) -> tuple[Array | None, Array | None]:
+        current: dict[str, Array | None] = {"TOOL": None, "BASE": None}
+        for start, line, kind, n in settings.get(label, []):
+            if start >= pos:
+                break
+            if n == 0:
+                current[kind] = np.eye(4)
+            elif (kind, n) in data:
+                current[kind] = data[(kind, n)]
+            else:
+                raise ProgramError(f"{label}: line {line}: {kind}_DATA[{n}] is not in {cfg_label}")
+        return current["TOOL"], current["BASE"]
+
+    return krl_at
+
+
 def filter_program_text(
     texts: dict[str, str],
     language: Language,
@@ -844,6 +987,7 @@ def filter_program_text(
     length_unit: str = "m",
     angle_unit: str = "rad",
     tol: float = 1e-9,
+    config_dat: tuple[str, str] | None = None,
 ) -> FilteredProgram:
     """Filter a program given as texts ``{file label: text}`` (KRL: the ``.src`` and the
     ``.dat``; other languages one file).
@@ -861,6 +1005,12 @@ def filter_program_text(
             the robot.  Default: the identified tool is the probe as built (nothing
             absorbed; right when the program's tool is the probe itself).
         length_unit, angle_unit: units of a CSV program (``m|mm``, ``rad|deg``).
+        config_dat: KRL ``(label, text)`` of the ``$config.dat`` whose ``TOOL_DATA[n]`` and
+            ``BASE_DATA[n]`` the program's ``$TOOL``/``$BASE`` (or ``FDAT`` ``TOOL_NO``,
+            ``BASE_NO``) name; without it those are not read.  RAPID: each Move's tool
+            and ``\\WObj`` (``uframe · oframe``) are read from the module.  Each Cartesian
+            target is taken with the tool and base of the first motion to it; ``tool`` /
+            ``base`` given override them all.
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
     from robocal.compensate.commands import compensate, filter_program
@@ -872,15 +1022,17 @@ def filter_program_text(
     found_tool = None
     krl_used: list[tuple[str, str, int, str]] = []
     events: list[tuple[int, int, str]] = []  # (file, position, name) of motions to named targets
+    rapid_data: dict[str, dict] = {}
     for f, (label, text) in enumerate(texts.items()):
         uses: list[tuple[int, str]] = []
+        rapid_data[label] = {"tools": {}, "wobjs": {}, "moves": []}
         if language == "urscript":
             t, u, found_tool = _parse_urscript(text, dof, label, uses)
         elif language == "krl":
             t, u, used = _parse_krl(text, dof, label, uses)
             krl_used += [(label, *x) for x in used]
         elif language == "rapid":
-            t, u, found_tool = _parse_rapid(text, dof, label, uses)
+            t, u, found_tool = _parse_rapid(text, dof, label, uses, rapid_data[label])
         elif language == "csv":
             t, u = _parse_csv(text, dof, label), []
         else:
@@ -888,6 +1040,7 @@ def filter_program_text(
         targets += t
         unsupported += u
         events += [(f, pos, name) for pos, name in uses]
+    label_of = list(texts)
     declared = {t.name.upper() for t in targets}
     for label, name, line, statement in krl_used:
         if name.upper() not in declared:
@@ -901,9 +1054,24 @@ def filter_program_text(
     T_tool = np.asarray(tool, dtype=float) if tool is not None else found_tool
     real, nom, effects = _robot_models(calibrated, nominal, T_tool, probe)
     B = np.eye(4) if base is None else np.asarray(base, dtype=float)
+    problems: list[str] = []
+    frame_at = _program_frames(texts, language, rapid_data, config_dat, problems)
+    cache: dict[bytes, tuple[Model, Model]] = {}
+
+    def frames_of(i: int) -> tuple[Model, Model, Array]:
+        """The (real, nominal) models with target ``i``'s tool, and its base."""
+        t = targets[i]
+        first = next(((label_of[f], pos) for f, pos, name in events if name.upper() == t.name.upper()), None)
+        T_i, B_i = frame_at(*(first or (t.file, t.tokens[0].start)))
+        T_i = T_tool if tool is not None or T_i is None else T_i
+        B_i = B if base is not None or B_i is None else B_i
+        key = b"" if T_i is None else np.asarray(T_i).tobytes()
+        if key not in cache:
+            cache[key] = _robot_models(calibrated, nominal, T_i, probe)[:2]
+        return (*cache[key], B_i)
+
     types = model.joint_types
     n = len(targets)
-    problems: list[str] = []
     reported: set[int] = set()  # targets whose configuration change is already reported
     values = [_read_value(t, units, types, False) for t in targets]
     new_values: list[Array] = list(values)
@@ -913,13 +1081,17 @@ def filter_program_text(
     kept = np.ones(n, dtype=bool)
     joint_idx = [i for i, t in enumerate(targets) if t.kind == "joint"]
     pose_idx = [i for i, t in enumerate(targets) if t.kind == "pose"]
-    if joint_idx:
-        q = np.array([values[i] for i in joint_idx])
-        res = filter_program(real, q, nom, joint_effects=effects, tol=tol, tol_angle=tol)
-        for k, i in enumerate(joint_idx):
+    groups: dict[int, list[int]] = {}  # joint targets by the tool of their motion
+    for i in joint_idx:
+        groups.setdefault(id(frames_of(i)[0]), []).append(i)
+    for idx in groups.values():
+        real_g, nom_g, _ = frames_of(idx[0])
+        q = np.array([values[i] for i in idx])
+        res = filter_program(real_g, q, nom_g, joint_effects=effects, tol=tol, tol_angle=tol)
+        for k, i in enumerate(idx):
             new_values[i] = res.q[k]
-        before[joint_idx], after[joint_idx] = res.error_before * 1e3, res.error_after * 1e3
-        reach[joint_idx], kept[joint_idx] = res.reachable, res.branch_kept
+        before[idx], after[idx] = res.error_before * 1e3, res.error_after * 1e3
+        reach[idx], kept[idx] = res.reachable, res.branch_kept
     if pose_idx:
         # execution order: motions to named targets where they run, literal targets where
         # they stand, declared targets never moved to at the end (file order)
@@ -942,7 +1114,8 @@ def filter_program_text(
             if targets[i].kind == "joint":
                 q_prev = values[i]
                 continue
-            T = B @ values[i]
+            real, nom, B_i = frames_of(i)
+            T = B_i @ values[i]
             position_only = len(targets[i].tokens) == 3
             goal = T[:3, 3][None] if position_only else T[None]
             kind = "position" if position_only else "pose"
@@ -967,7 +1140,7 @@ def filter_program_text(
                             f"configuration ({changes}); left as written"
                         )
             q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
-            corrected = spatial.inverse(B) @ nom.fk(res.q)[0]
+            corrected = spatial.inverse(B_i) @ nom.fk(res.q)[0]
             new_values[i] = corrected if res.reachable[0] and config_kept else values[i]
             before[i], after[i] = res.error_before[0] * 1e3, res.error_after[0] * 1e3
             reach[i], kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0]) and config_kept
@@ -1037,11 +1210,15 @@ def filter_program_file(
     out: str | Path | None = None,
     *,
     language: Language | None = None,
+    config_dat: str | Path | None = None,
     **options,
 ) -> FilteredProgram:
     """Filter a program file (see :func:`filter_program_text`); written to ``out``
     atomically when given (KRL: ``out`` and the ``.dat`` next to it).  Nothing is
-    written when the program cannot be read."""
+    written when the program cannot be read.
+
+    KRL: ``config_dat`` is the ``$config.dat`` holding ``TOOL_DATA``/``BASE_DATA``
+    (default: the one in the program's folder, when there is one)."""
     path = Path(path)
     if not path.is_file():
         raise ProgramError(f"{path}: no such program file")
@@ -1051,6 +1228,12 @@ def filter_program_file(
     dat = path.with_suffix(".dat")
     if language == "krl" and path.suffix.lower() == ".src" and dat.is_file():
         texts[str(dat)], encodings[str(dat)] = _read(dat)
+    if language == "krl":
+        cfg = Path(config_dat) if config_dat is not None else path.parent / "$config.dat"
+        if config_dat is not None and not cfg.is_file():
+            raise ProgramError(f"{cfg}: no such $config.dat")
+        if cfg.is_file():
+            options["config_dat"] = (str(cfg), _read(cfg)[0])
     result = filter_program_text(texts, language, calibrated, **options)
     if out is not None:
         out = Path(out)
