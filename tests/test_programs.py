@@ -189,6 +189,21 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
     res = runner.invoke(
         app, ["filter", str(EXAMPLES / "pick.script"), "--calibration", str(folder), "-o", str(out)]
     )
+    assert res.exit_code == 2 and "--probe" in res.output and not out.exists()  # position-only calibration
+    assert "pick.script: line" in " ".join(res.output.split())
+    res = runner.invoke(
+        app,
+        [
+            "filter",
+            str(EXAMPLES / "pick.script"),
+            "--calibration",
+            str(folder),
+            "-o",
+            str(out),
+            "--probe",
+            "0,0,0.1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     text = " ".join(res.output.split())
     assert "7 targets (urscript)" in text and "untouched" in text
@@ -383,7 +398,7 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     result.save(folder)
     path = tmp_path / "far.script"
     path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
-    args = ["filter", str(path), "--calibration", str(folder), "-o"]
+    args = ["filter", str(path), "--calibration", str(folder), "--probe", "0,0,0.1", "-o"]
     res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
     assert res.exit_code == 0
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())

@@ -207,6 +207,7 @@ def filter_command(
             length_unit=length_unit,
             angle_unit=angle_unit,
             config_dat=config_dat,
+            require_probe=True,
         )
     except ProgramError as err:
         raise fail(str(err)) from None

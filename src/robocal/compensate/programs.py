@@ -988,6 +988,7 @@ def filter_program_text(
     angle_unit: str = "rad",
     tol: float = 1e-9,
     config_dat: tuple[str, str] | None = None,
+    require_probe: bool = False,
 ) -> FilteredProgram:
     """Filter a program given as texts ``{file label: text}`` (KRL: the ``.src`` and the
     ``.dat``; other languages one file).
@@ -1011,6 +1012,9 @@ def filter_program_text(
             and ``\\WObj`` (``uframe · oframe``) are read from the module.  Each Cartesian
             target is taken with the tool and base of the first motion to it; ``tool`` /
             ``base`` given override them all.
+        require_probe: refuse (:class:`ProgramError`) a calibration that measured
+            positions only, without ``probe``, when the program has Cartesian targets (the
+            identified tool absorbed robot geometry, e.g. ``d6``; about 2 mm can be lost).
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
     from robocal.compensate.commands import compensate, filter_program
@@ -1045,6 +1049,13 @@ def filter_program_text(
     for label, name, line, statement in krl_used:
         if name.upper() not in declared:
             unsupported.append(Unsupported(label, line, statement, f"{name} is declared outside the program"))
+    if require_probe and probe is None and getattr(calibrated, "measure", "") == "position":
+        pose = next((t for t in targets if t.kind == "pose"), None)
+        if pose is not None:
+            raise ProgramError(
+                f"{pose.file}: line {pose.line}: Cartesian target {pose.name} and a calibration that "
+                "measured positions only: give the probe as built with --probe x,y,z (m)"
+            )
     if language == "csv":
         lf = {"m": 1.0, "mm": 1e-3, "um": 1e-6}[length_unit]
         af = {"rad": 1.0, "deg": DEG}[angle_unit]
