@@ -539,3 +539,38 @@ def test_rapid_tool_and_wobj_read_from_the_module():
         {"prog.mod": text.replace("\\WObj:=table", "\\WObj:=elsewhere")}, "rapid", moved, nominal
     )
     assert any("wobjdata ELSEWHERE is declared outside the module" in p for p in unknown.problems)
+
+
+def test_cli_config_dat_and_strict_configuration_change(tmp_path):
+    """--config-dat names the $config.dat (a missing one: one line, exit 2); a target
+    reachable only in another configuration is a warning naming file, line and target,
+    exit 1 with --strict."""
+    from robocal.compensate import programs as pg
+
+    nominal = rc.robot("kr16")
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    rc.save_model(moved, tmp_path / "moved.yaml")
+    q_a = np.radians([10.0, -70.0, 80.0, 30.0, 40.0, 20.0])
+    T = nominal.fk(q_a) @ spatial.transl(*PROBE)
+    texts = _krl(q_a[None], T[None], q_a[None])
+    s = pg._status(nominal, q_a)
+    texts["prog.dat"] = texts["prog.dat"].replace(f"S {s},", f"S {s ^ 1},")
+    texts["prog.src"] = texts["prog.src"].replace(
+        "; generated for the closed-loop test", "$TOOL = TOOL_DATA[1]"
+    )
+    for name, text in texts.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "cfg.dat").write_text(
+        f"TOOL_DATA[1]={{X 0.0,Y 0.0,Z {PROBE[2] * 1e3:.1f},A 0.0,B 0.0,C 0.0}}\n"
+    )
+    args = ["filter", str(tmp_path / "prog.src"), "--calibration", str(tmp_path / "moved.yaml")]
+    args += ["--nominal", "kr16", "-o", str(tmp_path / "out" / "prog.src")]
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "none.dat")])
+    assert res.exit_code == 2 and "none.dat: no such $config.dat" in " ".join(res.output.split())
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat")])
+    assert res.exit_code == 0, res.output
+    assert "prog.dat: line 5: target XP0: reachable only in another configuration (S bit 0" in " ".join(
+        res.output.split()
+    )
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat"), "--strict", "--force"])
+    assert res.exit_code == 1
