@@ -461,7 +461,7 @@ def test_written_status_or_cfx_not_reachable_is_reported_and_left_as_written(lan
     label = "prog.dat" if language == "krl" else "prog.mod"
     if language == "krl":
         s = pg._status(nominal, q_a)
-        texts[label] = texts[label].replace(f"S {s},", f"S {s ^ 1},")
+        texts[label] = texts[label].replace(f"S {s},", f"S 'B{s ^ 1:03b}',")  # KRL binary literal
         name, what = "XP0", "S bit 0 (overhead) 1 -> 0"
     else:
         c = pg._cfx(nominal, q_a)
@@ -538,7 +538,7 @@ def test_rapid_tool_and_wobj_read_from_the_module():
     unknown = filter_program_text(
         {"prog.mod": text.replace("\\WObj:=table", "\\WObj:=elsewhere")}, "rapid", moved, nominal
     )
-    assert any("wobjdata ELSEWHERE is declared outside the module" in p for p in unknown.problems)
+    assert any("wobjdata elsewhere is declared outside the module" in p for p in unknown.problems)
 
 
 def test_cli_config_dat_and_strict_configuration_change(tmp_path):

@@ -333,6 +333,11 @@ def _krl_target(text: str, start: int, end: int, dof: int, name: str, path: str)
     line = _line_of(text, start)
     if all(k in f for k in _KRL_POSE_KEYS):
         turn, status = (_krl_bits(f.get(k), 64) for k in ("T", "S"))
+        for key, bits in re.findall(r"\b([ST])\s+'B([01]{1,6})'", text[start:end], re.I):
+            if key.upper() == "T":
+                turn = int(bits, 2)  # KRL binary literal, e.g. T 'B010010'
+            else:
+                status = int(bits, 2)
         config = None if turn is None and status is None else (turn, status)
         return ProgramTarget(name, line, "pose", path, tuple(f[k] for k in _KRL_POSE_KEYS), "krl", config)
     axes = [f"A{j + 1}" for j in range(dof)]
@@ -519,9 +524,9 @@ def _rapid_move_frames(text: str, m: re.Match) -> tuple[str | None, str | None]:
     tool = None
     if len(positional) > k:
         word = re.match(r"\w+", positional[k])
-        tool = word.group().upper() if word else None
+        tool = word.group() if word else None
     wobj = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.I)
-    return tool, (wobj.group(1).upper() if wobj else None)
+    return tool, (wobj.group(1) if wobj else None)
 
 
 def _parse_rapid(
@@ -943,13 +948,13 @@ def _program_frames(
             for start, end, line, tool, wobj in rapid_data[label]["moves"]:
                 if start <= pos < end:
                     for name, table, what in ((tool, tools, "tooldata"), (wobj, wobjs, "wobjdata")):
-                        if name is not None and name not in table and name not in seen:
-                            seen.add(name)
+                        if name is not None and name.upper() not in table and name.upper() not in seen:
+                            seen.add(name.upper())
                             problems.append(
                                 f"{label}: line {line}: {what} {name} is declared outside the module; "
                                 "the default is used (--tool / --base)"
                             )
-                    return tools.get(tool or "TOOL0"), wobjs.get(wobj or "WOBJ0")
+                    return tools.get((tool or "TOOL0").upper()), wobjs.get((wobj or "WOBJ0").upper())
             return None, None
 
         return rapid_at
