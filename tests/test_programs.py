@@ -539,6 +539,15 @@ def test_rapid_tool_and_wobj_read_from_the_module():
         {"prog.mod": text.replace("\\WObj:=table", "\\WObj:=elsewhere")}, "rapid", moved, nominal
     )
     assert any("wobjdata elsewhere is declared outside the module" in p for p in unknown.problems)
+    # a target moved to under two work objects: corrected for the first, the other reported
+    twice = text.replace("    ENDPROC", "        MoveL p0, v100, fine, probe;\n    ENDPROC")
+    res = filter_program_text({"prog.mod": twice}, "rapid", moved, nominal)
+    line = next(k + 1 for k, s in enumerate(twice.splitlines()) if "p0:=" in s)
+    last = len(twice.splitlines()) - 2
+    assert (
+        f"prog.mod: line {line}: target p0: moved to with another tool or base at prog.mod: line {last}"
+        in (" ".join(res.problems))
+    )
 
 
 def test_cli_config_dat_and_strict_configuration_change(tmp_path):

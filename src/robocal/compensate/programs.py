@@ -980,6 +980,32 @@ def _program_frames(
     return krl_at
 
 
+def _report_other_frames(
+    t: ProgramTarget,
+    runs: list[tuple[str, int]],
+    first: tuple[Array | None, Array | None],
+    frame_at: Callable[[str, int], tuple[Array | None, Array | None]],
+    texts: dict[str, str],
+    problems: list[str],
+) -> None:
+    """A problem when motions to target ``t`` run with other tools or bases than the first."""
+
+    def same(a: Array | None, b: Array | None) -> bool:
+        return (a is None and b is None) or (a is not None and b is not None and np.allclose(a, b))
+
+    lines = [
+        f"{label}: line {_line_of(texts[label], pos)}"
+        for label, pos in runs[1:]
+        if not all(same(x, y) for x, y in zip(frame_at(label, pos), first, strict=True))
+    ]
+    message = (
+        f"{t.file}: line {t.line}: target {t.name}: moved to with another tool or base at "
+        f"{', '.join(lines)}; corrected for the first motion to it"
+    )
+    if lines and message not in problems:
+        problems.append(message)
+
+
 def filter_program_text(
     texts: dict[str, str],
     language: Language,
@@ -1077,8 +1103,10 @@ def filter_program_text(
     def frames_of(i: int) -> tuple[Model, Model, Array]:
         """The (real, nominal) models with target ``i``'s tool, and its base."""
         t = targets[i]
-        first = next(((label_of[f], pos) for f, pos, name in events if name.upper() == t.name.upper()), None)
-        T_i, B_i = frame_at(*(first or (t.file, t.tokens[0].start)))
+        runs = [(label_of[f], pos) for f, pos, name in events if name.upper() == t.name.upper()]
+        T_i, B_i = frame_at(*(runs[0] if runs else (t.file, t.tokens[0].start)))
+        if tool is None or base is None:
+            _report_other_frames(t, runs, (T_i, B_i), frame_at, texts, problems)
         T_i = T_tool if tool is not None or T_i is None else T_i
         B_i = B if base is not None or B_i is None else B_i
         key = b"" if T_i is None else np.asarray(T_i).tobytes()
