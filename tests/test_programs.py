@@ -189,6 +189,21 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
     res = runner.invoke(
         app, ["filter", str(EXAMPLES / "pick.script"), "--calibration", str(folder), "-o", str(out)]
     )
+    assert res.exit_code == 2 and "--probe" in res.output and not out.exists()  # position-only calibration
+    assert "pick.script: line" in " ".join(res.output.split())
+    res = runner.invoke(
+        app,
+        [
+            "filter",
+            str(EXAMPLES / "pick.script"),
+            "--calibration",
+            str(folder),
+            "-o",
+            str(out),
+            "--probe",
+            "0,0,0.1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     text = " ".join(res.output.split())
     assert "7 targets (urscript)" in text and "untouched" in text
@@ -201,12 +216,21 @@ def _turn(q):
     return sum(1 << j for j in range(6) if q[j] < 0)
 
 
-def _cf(q):
-    """ABB's cf1, cf4, cf6 (quadrants of axes 1, 4, 6) and cfx 0."""
-    return ",".join(str(int(np.floor(np.degrees(q[j]) / 90))) for j in (0, 3, 5)) + ",0"
+def _status(q, model):
+    """KUKA's status S (bits 0-2) of joint values ``q``."""
+    from robocal.compensate.programs import _status
+
+    return _status(model or rc.robot("kr16"), q)
 
 
-def _krl(q_joint, T_pose, q_before_pose, q_config=None):
+def _cf(q, model):
+    """ABB's cf1, cf4, cf6 (quadrants of axes 1, 4, 6) and cfx."""
+    from robocal.compensate.programs import _cfx
+
+    return ",".join(str(int(np.floor(np.degrees(q[j]) / 90))) for j in (0, 3, 5)) + f",{_cfx(model, q)}"
+
+
+def _krl(q_joint, T_pose, q_before_pose, q_config=None, model=None):
     """A KRL .src and .dat: PTP to E6AXIS, then PTP to the approach axes and LIN to an E6POS."""
     src, dat = ["DEF prog( )", "; generated for the closed-loop test"], ["DEFDAT prog", "; targets"]
     for k, q in enumerate(np.r_[q_joint, q_before_pose]):
@@ -214,18 +238,19 @@ def _krl(q_joint, T_pose, q_before_pose, q_config=None):
         dat.append(f"DECL E6AXIS XJ{k}={{{axes},E1 0.0,E2 0.0,E3 0.0,E4 0.0,E5 0.0,E6 0.0}}")
     for k in range(len(q_joint)):
         src.append(f"PTP XJ{k}")
+    q_c = q_before_pose if q_config is None else q_config
     for k, T in enumerate(T_pose):
         a, b, c = np.degrees(spatial.zyx_angles(T[:3, :3]))
         x, y, z = T[:3, 3] * 1e3
         dat.append(
             f"DECL E6POS XP{k}={{X {x:.4f},Y {y:.4f},Z {z:.4f},A {a:.5f},B {b:.5f},C {c:.5f},"
-            f"S 2,T {_turn((q_before_pose if q_config is None else q_config)[k])},E1 0.0}}"
+            f"S {_status(q_c[k], model)},T {_turn(q_c[k])},E1 0.0}}"
         )
         src += [f"PTP XJ{len(q_joint) + k}", f"LIN XP{k} C_DIS"]
     return {"prog.src": "\n".join(src + ["END"]) + "\n", "prog.dat": "\n".join(dat + ["ENDDAT"]) + "\n"}
 
 
-def _rapid(q_joint, T_pose, q_before_pose, q_config=None):
+def _rapid(q_joint, T_pose, q_before_pose, q_config=None, model=None):
     lines = ["MODULE Prog", "    ! generated for the closed-loop test"]
     lines.append(
         f"    PERS tooldata probe:=[TRUE,[[0,0,{PROBE[2] * 1e3:.1f}],[1,0,0,0]],"
@@ -241,7 +266,8 @@ def _rapid(q_joint, T_pose, q_before_pose, q_config=None):
         qu = spatial.matrix_to_quaternion(T[:3, :3])
         lines.append(
             f"    CONST robtarget p{k}:=[[{','.join(f'{v * 1e3:.4f}' for v in T[:3, 3])}],"
-            f"[{','.join(f'{v:.9f}' for v in qu)}],[{_cf(q_config[k])}],[9E9,9E9,9E9,9E9,9E9,9E9]];"
+            f"[{','.join(f'{v:.9f}' for v in qu)}],[{_cf(q_config[k], model or rc.robot('irb120'))}],"
+            "[9E9,9E9,9E9,9E9,9E9,9E9]];"
         )
     lines.append("    PROC main()")
     lines += [f"        MoveAbsJ j{k}, v1000, fine, probe;" for k in range(len(q_joint))]
@@ -372,7 +398,7 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     result.save(folder)
     path = tmp_path / "far.script"
     path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
-    args = ["filter", str(path), "--calibration", str(folder), "-o"]
+    args = ["filter", str(path), "--calibration", str(folder), "--probe", "0,0,0.1", "-o"]
     res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
     assert res.exit_code == 0
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())
@@ -416,3 +442,144 @@ def test_written_configuration_chooses_the_branch(language):
     ).q[0]
     assert pg._config_ok(pose, q_ctrl) and np.abs(q_ctrl - q_b).max() < 0.05
     assert np.linalg.norm((moved.fk(q_ctrl) @ T_probe)[:3, 3] - T[:3, 3]) < 1e-6  # the written resolution
+
+
+@pytest.mark.parametrize("language", ["krl", "rapid"])
+def test_written_status_or_cfx_not_reachable_is_reported_and_left_as_written(language):
+    """A target written 'overhead' (KUKA S bit 0, ABB cfx digit 4) while T / cf1 pins
+    axis 1 in front: no solution in that configuration; reported with file, line, name
+    and the bit, left as written; a nominal calibration leaves it byte-identical."""
+    from robocal.compensate import programs as pg
+
+    robot = "kr16" if language == "krl" else "irb120"
+    nominal = rc.robot(robot)
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    q_a = np.radians([10.0, -70.0, 80.0, 30.0, 40.0, 20.0] if language == "krl" else [10, 10, 10, 30, 40, 20])
+    T_probe = spatial.transl(*PROBE)
+    T = nominal.fk(q_a) @ T_probe
+    texts = (_krl if language == "krl" else _rapid)(q_a[None], T[None], q_a[None])
+    label = "prog.dat" if language == "krl" else "prog.mod"
+    if language == "krl":
+        s = pg._status(nominal, q_a)
+        texts[label] = texts[label].replace(f"S {s},", f"S 'B{s ^ 1:03b}',")  # KRL binary literal
+        name, what = "XP0", "S bit 0 (overhead) 1 -> 0"
+    else:
+        c = pg._cfx(nominal, q_a)
+        texts[label] = texts[label].replace(f",{c}],[9E9", f",{c ^ 4}],[9E9")
+        name, what = "p0", f"cfx {c ^ 4} -> {c}"
+    line = next(k + 1 for k, s in enumerate(texts[label].splitlines()) if name + "=" in s or name + ":=" in s)
+    res = filter_program_text(texts, language, moved, nominal, tool=T_probe)
+    expected = f"{label}: line {line}: target {name}: reachable only in another configuration ({what}"
+    assert any(p.startswith(expected) for p in res.problems), res.problems
+    assert len(res.problems) == 1 and not res.ok
+    pose = next(i for i, t in enumerate(res.targets) if t.kind == "pose")
+    assert not res.changed[pose]
+    assert res.changed.any()  # the joint targets are corrected
+    assert filter_program_text(texts, language, nominal, tool=T_probe).texts == texts
+
+
+def _frames_cell(language):
+    """A nominal and a moved robot, a base / work object frame and targets written in it."""
+    robot = "kr16" if language == "krl" else "irb120"
+    nominal = rc.robot(robot)
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    W = spatial.homogeneous(spatial.rotz(np.radians(30.0)), [0.1, -0.2, 0.05])
+    q = random_poses(nominal, 30, seed=4)
+    q = q[np.linalg.svd(nominal.joint_jacobian(q), compute_uv=False)[:, -1] > 0.05][:4]
+    T_probe = spatial.transl(*PROBE)
+    T_pose = spatial.inverse(W) @ nominal.fk(q[2:]) @ T_probe
+    return nominal, moved, W, T_probe, (_krl if language == "krl" else _rapid)(q[:2], T_pose, q[2:])
+
+
+def test_krl_tool_and_base_read_from_config_dat(tmp_path):
+    """$TOOL = TOOL_DATA[3] / $BASE = BASE_DATA[2] resolved from $config.dat (KUKA A, B, C
+    = rotations about Z, Y, X in degrees) give what --tool/--base give."""
+    nominal, moved, W, T_probe, texts = _frames_cell("krl")
+    texts["prog.src"] = texts["prog.src"].replace(
+        "; generated for the closed-loop test", "$BASE = BASE_DATA[2]\n$TOOL = TOOL_DATA[3]"
+    )
+    cfg = (
+        "DEFDAT $CONFIG\n"
+        f"TOOL_DATA[3]={{X 0.0,Y 0.0,Z {PROBE[2] * 1e3:.1f},A 0.0,B 0.0,C 0.0}}\n"
+        "BASE_DATA[2]={X 100.0,Y -200.0,Z 50.0,A 30.0,B 0.0,C 0.0}\nENDDAT\n"
+    )
+    read = filter_program_text(texts, "krl", moved, nominal, config_dat=("$config.dat", cfg))
+    given = filter_program_text(texts, "krl", moved, nominal, tool=T_probe, base=W)
+    assert read.texts == given.texts and not read.problems and read.changed.all()
+    assert filter_program_text(texts, "krl", moved, nominal).texts != read.texts  # the frames matter
+    assert filter_program_text(texts, "krl", nominal, config_dat=("$config.dat", cfg)).texts == texts
+    # from files: $config.dat next to the program; an index it lacks names file and line
+    for name, text in texts.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "$config.dat").write_text(cfg)
+    res = filter_program_file(tmp_path / "prog.src", moved, nominal=nominal)
+    assert res.texts[str(tmp_path / "prog.dat")] == read.texts["prog.dat"]
+    (tmp_path / "other.dat").write_text(cfg.replace("BASE_DATA[2]", "BASE_DATA[5]"))
+    with pytest.raises(ProgramError, match=r"prog.src: line 2: BASE_DATA\[2\] is not in .*other.dat"):
+        filter_program_file(tmp_path / "prog.src", moved, nominal=nominal, config_dat=tmp_path / "other.dat")
+
+
+def test_rapid_tool_and_wobj_read_from_the_module():
+    """Each Move's tooldata and \\WObj (uframe · oframe) declared in the module give what
+    --tool/--base give; tool0/wobj0 are the flange and the base."""
+    nominal, moved, W, T_probe, texts = _frames_cell("rapid")
+    u = spatial.matrix_to_quaternion(spatial.rotz(np.radians(30.0)))
+    text = texts["prog.mod"].replace(
+        "    PROC main()",
+        f'    PERS wobjdata table:=[FALSE,TRUE,"",[[100,-200,40],[{",".join(f"{v:.12f}" for v in u)}]],'
+        "[[0,0,10],[1,0,0,0]]];\n"
+        "    PERS tooldata other:=[TRUE,[[0,0,0],[1,0,0,0]],[1,[0,0,1],[1,0,0,0],0,0,0]];\n    PROC main()",
+    )
+    text = text.replace("v100, fine, probe;", "v100, fine, probe \\WObj:=table;")
+    read = filter_program_text({"prog.mod": text}, "rapid", moved, nominal)
+    given = filter_program_text({"prog.mod": text}, "rapid", moved, nominal, tool=T_probe, base=W)
+    assert read.texts == given.texts and not read.problems and read.changed.all()
+    assert filter_program_text({"prog.mod": text}, "rapid", nominal).texts == {"prog.mod": text}
+    unknown = filter_program_text(
+        {"prog.mod": text.replace("\\WObj:=table", "\\WObj:=elsewhere")}, "rapid", moved, nominal
+    )
+    assert any("wobjdata elsewhere is declared outside the module" in p for p in unknown.problems)
+    # a target moved to under two work objects: corrected for the first, the other reported
+    twice = text.replace("    ENDPROC", "        MoveL p0, v100, fine, probe;\n    ENDPROC")
+    res = filter_program_text({"prog.mod": twice}, "rapid", moved, nominal)
+    line = next(k + 1 for k, s in enumerate(twice.splitlines()) if "p0:=" in s)
+    last = len(twice.splitlines()) - 2
+    assert (
+        f"prog.mod: line {line}: target p0: moved to with another tool or base at prog.mod: line {last}"
+        in (" ".join(res.problems))
+    )
+
+
+def test_cli_config_dat_and_strict_configuration_change(tmp_path):
+    """--config-dat names the $config.dat (a missing one: one line, exit 2); a target
+    reachable only in another configuration is a warning naming file, line and target,
+    exit 1 with --strict."""
+    from robocal.compensate import programs as pg
+
+    nominal = rc.robot("kr16")
+    moved = nominal.with_free_values(nominal.free_values + 5e-4)
+    rc.save_model(moved, tmp_path / "moved.yaml")
+    q_a = np.radians([10.0, -70.0, 80.0, 30.0, 40.0, 20.0])
+    T = nominal.fk(q_a) @ spatial.transl(*PROBE)
+    texts = _krl(q_a[None], T[None], q_a[None])
+    s = pg._status(nominal, q_a)
+    texts["prog.dat"] = texts["prog.dat"].replace(f"S {s},", f"S {s ^ 1},")
+    texts["prog.src"] = texts["prog.src"].replace(
+        "; generated for the closed-loop test", "$TOOL = TOOL_DATA[1]"
+    )
+    for name, text in texts.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "cfg.dat").write_text(
+        f"TOOL_DATA[1]={{X 0.0,Y 0.0,Z {PROBE[2] * 1e3:.1f},A 0.0,B 0.0,C 0.0}}\n"
+    )
+    args = ["filter", str(tmp_path / "prog.src"), "--calibration", str(tmp_path / "moved.yaml")]
+    args += ["--nominal", "kr16", "-o", str(tmp_path / "out" / "prog.src")]
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "none.dat")])
+    assert res.exit_code == 2 and "none.dat: no such $config.dat" in " ".join(res.output.split())
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat")])
+    assert res.exit_code == 0, res.output
+    assert "prog.dat: line 5: target XP0: reachable only in another configuration (S bit 0" in " ".join(
+        res.output.split()
+    )
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat"), "--strict", "--force"])
+    assert res.exit_code == 1

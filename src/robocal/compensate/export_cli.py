@@ -3,7 +3,8 @@
     robocal export urdf DIR [--urdf ORIGINAL.urdf] [--tip LINK] [--device-link NAME]
                             [--tool-link NAME] -o OUT.urdf
     robocal export ur-kinematics DIR [--base-rz-pi] -o calibration.yaml
-    robocal filter PROGRAM --calibration DIR [--tool x,y,z,rx,ry,rz] [--probe x,y,z] [--strict] -o OUT
+    robocal filter PROGRAM --calibration DIR [--tool x,y,z,rx,ry,rz] [--probe x,y,z]
+                           [--config-dat PATH] [--strict] -o OUT
 
 ``DIR`` is a calibration directory (``model.yaml`` + ``result.json``) or a model file.
 ``export urdf`` rewrites the joint origins of ``--urdf`` (the URDF the model was built
@@ -166,6 +167,10 @@ def filter_command(
         bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
     ] = False,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    config_dat: Annotated[
+        Path | None,
+        typer.Option("--config-dat", help="KRL: $config.dat of TOOL_DATA/BASE_DATA (default: next to it)"),
+    ] = None,
 ) -> None:
     """Correct every target of a robot program through a calibration; everything else stays byte-identical."""
     refuse_overwrite(out, force, "program")
@@ -201,6 +206,8 @@ def filter_command(
             probe=_probe_option(probe),
             length_unit=length_unit,
             angle_unit=angle_unit,
+            config_dat=config_dat,
+            require_probe=True,
         )
     except ProgramError as err:
         raise fail(str(err)) from None
@@ -220,16 +227,11 @@ def filter_command(
     )
     written = [out] + ([out.with_suffix(".dat")] if len(result.texts) > 1 else [])
     console.print(f"wrote {', '.join(map(str, written))}", highlight=False)
-    if language == "krl" and tool is None:
+    has_config = config_dat is not None or (program.parent / "$config.dat").is_file()
+    if language == "krl" and tool is None and not has_config:
         err_console.print(
-            "[yellow]note:[/] KRL tool data live in $config.dat, which is not read: the targets are taken "
-            "as flange poses; give the program's tool with --tool",
-            highlight=False,
-        )
-    if language == "rapid" and base is None and any("\\WObj" in t for t in result.texts.values()):
-        err_console.print(
-            "[yellow]note:[/] work objects (\\WObj) are not read: the targets are taken in the robot's "
-            "base frame; give the work object with --base",
+            "[yellow]note:[/] no $config.dat next to the program: TOOL_DATA/BASE_DATA are not read and the "
+            "targets are taken as flange poses in the robot base; give --config-dat or --tool/--base",
             highlight=False,
         )
     for u in result.unsupported:

@@ -23,6 +23,10 @@ tool absorbed, e.g. ``d6`` under position measurement) —; the program's tool
 (``set_tcp`` in URScript, a RAPID ``tooldata`` of the module, else ``tool`` given) is
 appended as a fixed frame, and targets are taken in the robot's
 base frame (``base`` given: ``T_base_frame`` of a KUKA BASE or a RAPID work object).
+Without ``tool``/``base`` each Cartesian target takes those of the first motion to it:
+a RAPID Move's ``tooldata`` and ``\\WObj`` declared in the module, KRL ``$TOOL``/``$BASE``
+(``TOOL_DATA[n]``/``BASE_DATA[n]``, or an ``FDAT``'s ``TOOL_NO``/``BASE_NO``) from the
+``$config.dat`` given.
 
 Supported grammar (anything else is left untouched; motion statements outside it are
 listed in :attr:`FilteredProgram.unsupported`):
@@ -36,13 +40,14 @@ listed in :attr:`FilteredProgram.unsupported`):
   declarations and of ``PTP/LIN/CIRC`` statements (Cartesian; ``A, B, C`` =
   ``Rz(A) Ry(B) Rx(C)``), ``{A1 .., ..., A6 .. [, E1 ..]}`` of ``DECL E6AXIS|AXIS``
   and ``PTP`` (joint).  ``FRAME`` declarations (bases, tools) are data, not targets.
-  Status/turn (``S``, ``T``) and external axes are kept as written; ``T`` chooses the
-  IK branch (``S`` is not checked).
+  Status/turn (``S``, ``T``) and external axes are kept as written and met by the
+  correction (:func:`_status_bits`; a target reachable only in another configuration
+  is reported and left as written).
 * **ABB RAPID** (``.mod``, ``.modx``, ``.prg``; mm, degrees): ``robtarget`` literals
   ``[[x,y,z],[q1,q2,q3,q4],[cf1,cf4,cf6,cfx],[eax..]]`` (quaternion scalar first) in
   declarations and in ``MoveJ/MoveL/MoveC`` statements, ``jointtarget`` literals
-  ``[[j1..j6],[eax..]]`` in declarations and ``MoveAbsJ``; ``cf``/``cfx`` kept,
-  ``cf1, cf4, cf6`` choose the IK branch (``cfx`` is not checked).
+  ``[[j1..j6],[eax..]]`` in declarations and ``MoveAbsJ``; ``cf1, cf4, cf6, cfx`` kept
+  and met by the correction (:func:`_cfx_bits`).
 * **robocal target CSV** (``.csv``): ``name,x,y,z[,qw,qx,qy,qz]`` (Cartesian, in
   ``length_unit``) or ``[name,]q1..qN`` (joint, in ``angle_unit``); ``#`` lines kept.
 
@@ -111,9 +116,11 @@ class ProgramTarget:
         tokens: the number tokens, in the order the format gives them.
         style: how the numbers map to SI (``"urscript"``, ``"krl"``, ``"rapid"``,
             ``"csv"``).
-        config: the written configuration the IK must meet: KUKA ``(T,)`` (turn: bit
-            ``j`` set when axis ``j + 1`` is negative), ABB ``(cf1, cf4, cf6)`` (the
-            quadrants ``floor(axis / 90°)`` of axes 1, 4, 6); ``None`` when not given.
+        config: the written configuration the IK must meet: KUKA ``(T, S)`` (turn: bit
+            ``j`` set when axis ``j + 1`` is negative; status: see :func:`_status`;
+            either ``None`` when not written), ABB ``(cf1, cf4, cf6, cfx)`` (the
+            quadrants ``floor(axis / 90°)`` of axes 1, 4, 6; ``cfx`` see :func:`_cfx`);
+            ``None`` when not given.
     """
 
     name: str
@@ -122,7 +129,7 @@ class ProgramTarget:
     file: str
     tokens: tuple[_Token, ...]
     style: str
-    config: tuple[int, ...] | None = None
+    config: tuple[int | None, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -314,14 +321,24 @@ def _krl_fields(text: str, start: int, end: int) -> dict[str, _Token]:
     return fields
 
 
+def _krl_bits(token: _Token | None, limit: int) -> int | None:
+    """A KRL status or turn as written (``None`` when absent or not an integer in range)."""
+    if token is None or token.value != int(token.value) or not 0 <= token.value < limit:
+        return None
+    return int(token.value)
+
+
 def _krl_target(text: str, start: int, end: int, dof: int, name: str, path: str) -> ProgramTarget | None:
     f = _krl_fields(text, start, end)
     line = _line_of(text, start)
     if all(k in f for k in _KRL_POSE_KEYS):
-        turn = f.get("T")
-        config = None
-        if turn is not None and turn.value == int(turn.value) and 0 <= turn.value < 64:
-            config = (int(turn.value),)
+        turn, status = (_krl_bits(f.get(k), 64) for k in ("T", "S"))
+        for key, bits in re.findall(r"\b([ST])\s+'B([01]{1,6})'", text[start:end], re.I):
+            if key.upper() == "T":
+                turn = int(bits, 2)  # KRL binary literal, e.g. T 'B010010'
+            else:
+                status = int(bits, 2)
+        config = None if turn is None and status is None else (turn, status)
         return ProgramTarget(name, line, "pose", path, tuple(f[k] for k in _KRL_POSE_KEYS), "krl", config)
     axes = [f"A{j + 1}" for j in range(dof)]
     if all(k in f for k in axes):
@@ -386,8 +403,59 @@ def _parse_krl(
     return targets, unsupported, used
 
 
+_KRL_SET = re.compile(
+    r"^[ \t]*(?:\$(TOOL|BASE)\s*=\s*(?:TOOL|BASE)_DATA\[(\d+)\]|FDAT_ACT\s*=\s*(\w+))", re.M | re.I
+)
+_KRL_FDAT = re.compile(r"^[ \t]*DECL\s+FDAT\s+(\w+)\s*=\s*\{([^{}]*)\}", re.M | re.I)
+_KRL_DATA = re.compile(r"\b(TOOL|BASE)_DATA\[(\d+)\]\s*=\s*\{([^{}]*)\}", re.I)
+
+
+def _krl_settings(texts: dict[str, str]) -> dict[str, list[tuple[int, int, str, int]]]:
+    """Per file, the tool and base settings in order: ``(position, line, "TOOL"|"BASE", n)``
+    from ``$TOOL = TOOL_DATA[n]``, ``$BASE = BASE_DATA[n]`` and ``FDAT_ACT = F``
+    (``TOOL_NO``/``BASE_NO`` of the ``DECL FDAT F`` of the program)."""
+    fdat = {}
+    for text in texts.values():
+        for m in _KRL_FDAT.finditer(text):
+            fields = {k.upper(): v for k, v in re.findall(r"(\w+)\s+(\d+)", m.group(2))}
+            fdat[m.group(1).upper()] = fields
+    out: dict[str, list[tuple[int, int, str, int]]] = {}
+    for label, text in texts.items():
+        out[label] = []
+        for m in _KRL_SET.finditer(text):
+            line = _line_of(text, m.start())
+            if m.group(1):
+                out[label].append((m.start(), line, m.group(1).upper(), int(m.group(2))))
+            elif m.group(3).upper() in fdat:
+                fields = fdat[m.group(3).upper()]
+                for kind in ("TOOL", "BASE"):
+                    if f"{kind}_NO" in fields:
+                        out[label].append((m.start(), line, kind, int(fields[f"{kind}_NO"])))
+    return out
+
+
+def _krl_frame(fields: dict[str, _Token]) -> Array:
+    """``{X, Y, Z, A, B, C}`` (mm, deg; ``Rz(A) Ry(B) Rx(C)``) as a frame in m."""
+    v = [fields[k].value if k in fields else 0.0 for k in _KRL_POSE_KEYS]
+    R = spatial.rotz(v[3] * DEG) @ spatial.roty(v[4] * DEG) @ spatial.rotx(v[5] * DEG)
+    return spatial.homogeneous(R, np.array(v[:3]) * 1e-3)
+
+
+def _krl_config_frames(text: str, path: str) -> dict[tuple[str, int], Array]:
+    """``TOOL_DATA[n]`` / ``BASE_DATA[n]`` of a ``$config.dat``: ``{("TOOL", n): frame}``."""
+    out = {}
+    for m in _KRL_DATA.finditer(text):
+        fields = _krl_fields(text, m.start(3), m.end(3))
+        if not all(k in fields for k in ("X", "Y", "Z")):
+            raise ProgramError(f"{path}: line {_line_of(text, m.start())}: {m.group(0)[:40]} lacks X, Y, Z")
+        out[(m.group(1).upper(), int(m.group(2)))] = _krl_frame(fields)
+    return out
+
+
 # ---------------------------------------------------------------------- RAPID
-_RAPID_DECL = re.compile(r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata)\s+(\w+)\s*:=\s*\[", re.I)
+_RAPID_DECL = re.compile(
+    r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+(\w+)\s*:=\s*\[", re.I
+)
 _RAPID_MOVE = re.compile(r"^[ \t]*(MoveJ|MoveL|MoveC|MoveAbsJ)\b([^;]*);", re.M | re.I)
 
 
@@ -420,7 +488,7 @@ def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) 
         if len(groups) >= 3:
             cf = [t.value for t in _tokens(text, *groups[2])]
             if len(cf) == 4 and all(v == int(v) for v in cf):
-                config = (int(cf[0]), int(cf[1]), int(cf[2]))
+                config = tuple(int(v) for v in cf)
         return ProgramTarget(name, line, "pose", path, tuple(toks), "rapid", config), end
     if not groups:
         raise ProgramError(f"{path}: line {line}: jointtarget {name} needs [[j1..j6],[eax..]]")
@@ -432,8 +500,37 @@ def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) 
     return ProgramTarget(name, line, "joint", path, tuple(toks[:dof]), "rapid"), end
 
 
+def _rapid_pose(text: str, b: int, path: str, what: str) -> Array | None:
+    """The frame ``[[x,y,z],[q1,q2,q3,q4]]`` (mm, quaternion scalar first) at ``b`` in m."""
+    inner, _ = _rapid_groups(text, b, path)
+    if len(inner) < 2:
+        return None
+    p = [t.value for t in _tokens(text, *inner[0])]
+    qv = [t.value for t in _tokens(text, *inner[1])]
+    if len(p) != 3 or len(qv) != 4:
+        return None
+    norm = float(np.linalg.norm(qv))
+    if not (math.isfinite(norm) and norm > 1e-9 and all(map(math.isfinite, p))):
+        raise ProgramError(f"{path}: line {_line_of(text, b)}: {what} is not a frame")
+    R = spatial.quaternion_to_matrix(np.array(qv) / norm)
+    return spatial.homogeneous(R, np.array(p) * 1e-3)
+
+
+def _rapid_move_frames(text: str, m: re.Match) -> tuple[str | None, str | None]:
+    """The tool and work object (names, upper case) a Move statement names."""
+    args = [text[a:b].strip() for a, b in _split_args(text, m.start(2), m.end(2))]
+    positional = [a for a in args if a and not a.startswith("\\")]
+    k = {"movec": 4}.get(m.group(1).lower(), 3)
+    tool = None
+    if len(positional) > k:
+        word = re.match(r"\w+", positional[k])
+        tool = word.group() if word else None
+    wobj = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.I)
+    return tool, (wobj.group(1) if wobj else None)
+
+
 def _parse_rapid(
-    text: str, dof: int, path: str, uses: list | None = None
+    text: str, dof: int, path: str, uses: list | None = None, data: dict | None = None
 ) -> tuple[list[ProgramTarget], list[Unsupported], Array | None]:
     targets: list[ProgramTarget] = []
     unsupported: list[Unsupported] = []
@@ -443,25 +540,32 @@ def _parse_rapid(
         b = m.end() - 1
         if kind == "tooldata":
             groups, _ = _rapid_groups(text, b, path)
-            if len(groups) >= 1:
-                inner, _ = _rapid_groups(text, groups[0][0], path)
-                if len(inner) >= 2:
-                    p = [t.value for t in _tokens(text, *inner[0])]
-                    qv = [t.value for t in _tokens(text, *inner[1])]
-                    if len(p) == 3 and len(qv) == 4:
-                        norm = float(np.linalg.norm(qv))
-                        if not (math.isfinite(norm) and norm > 1e-9 and all(map(math.isfinite, p))):
-                            raise ProgramError(
-                                f"{path}: line {_line_of(text, b)}: tooldata {name}: tframe is not a frame"
-                            )
-                        R = spatial.quaternion_to_matrix(np.array(qv) / norm)
-                        tool = spatial.homogeneous(R, np.array(p) * 1e-3)
+            if groups:
+                frame = _rapid_pose(text, groups[0][0], path, f"tooldata {name}: tframe")
+                if frame is not None:
+                    tool = frame
+                    if data is not None:
+                        data["tools"][name.upper()] = frame
+            continue
+        if kind == "wobjdata":
+            groups, _ = _rapid_groups(text, b, path)
+            frames = [
+                _rapid_pose(text, g[0], path, f"wobjdata {name}: {w}")
+                for g, w in zip(groups[:2], ("uframe", "oframe"), strict=False)
+            ]
+            if len(frames) != 2 or any(f is None for f in frames):
+                line = _line_of(text, b)
+                raise ProgramError(f"{path}: line {line}: wobjdata {name} needs uframe and oframe")
+            if data is not None:
+                data["wobjs"][name.upper()] = frames[0] @ frames[1]
             continue
         t, _ = _rapid_target(text, b, kind, dof, name, path)
         targets.append(t)
     for m in _RAPID_MOVE.finditer(text):
         cmd = m.group(1)
         line = _line_of(text, m.start())
+        if data is not None:
+            data["moves"].append((m.start(), m.end(), line, *_rapid_move_frames(text, m)))
         args = m.group(2)
         offset = m.start(2)
         k = 0
@@ -628,18 +732,121 @@ def _format(value: float, token: str, decimals: int) -> str:
 
 
 # ---------------------------------------------------------------------- configurations
-def _config_ok(t: ProgramTarget, q: Array) -> bool:
-    """Whether joint values ``q`` (rad) meet the target's written configuration."""
+_EPS_DEG = 1e-6  # degrees: an axis at a boundary (0, ±90 ...) meets either side
+_EPS_M = 1e-6  # m: a wrist centre on a boundary (axis 1, the lower arm's line) meets either side
+
+
+def _axis_line(F: Array, model: Model, j: int) -> tuple[Array, Array]:
+    """A point (m) and the unit direction of joint ``j``'s axis in the base frame."""
+    axis = [s for s in model.steps if s.joint is not None][j].axis
+    return F[j][:3, 3], F[j][:3, axis]
+
+
+def _wrist_centre(F: Array, model: Model) -> Array:
+    """The wrist centre (m): the point of axis 5 nearest axis 4 (where they cross)."""
+    p4, a4 = _axis_line(F, model, 3)
+    p5, a5 = _axis_line(F, model, 4)
+    c = float(a4 @ a5)
+    d = p5 - p4
+    if abs(1 - c * c) < 1e-12:
+        return p5
+    t = (c * (a4 @ d) - a5 @ d) / (1 - c * c)
+    return p5 + t * a5
+
+
+def _arm_sides(model: Model, q: Array) -> tuple[float, float]:
+    """Where the wrist centre is, as signed distances (m; ~0 on a boundary).
+
+    ``front``: in front of axis 1 (> 0) or behind it (overhead), measured along the
+    direction the wrist centre has from axis 1 at the zero position, turned with axis 1.
+    ``elbow``: ``((p3 - p2) x (w - p3)) . a3`` — > 0 when axis 3 is beyond the angle that
+    stretches the arm (wrist centre on the line of axes 2 and 3), i.e. elbow up."""
+    F = model.joint_frames(q)
+    F0 = model.joint_frames(np.zeros(model.dof))
+    p1, a1 = _axis_line(F0, model, 0)
+    h0 = _wrist_centre(F0, model) - p1
+    h0 -= (h0 @ a1) * a1
+    front = 0.0
+    w = _wrist_centre(F, model)
+    if np.linalg.norm(h0) > 1e-9:
+        local = F0[0][:3, :3].T @ (h0 / np.linalg.norm(h0))
+        front = float((w - F[0][:3, 3]) @ (F[0][:3, :3] @ local))
+    p2, _ = _axis_line(F, model, 1)
+    p3, a3 = _axis_line(F, model, 2)
+    elbow = float(np.cross(p3 - p2, w - p3) @ a3)
+    return front, elbow
+
+
+def _digit(value: float, eps: float, negative_bit: int) -> set[int]:
+    """The bit values a signed quantity allows: ``negative_bit`` when < 0 (both near 0)."""
+    if abs(value) < eps:
+        return {0, 1}
+    return {negative_bit if value < 0 else 1 - negative_bit}
+
+
+def _status_bits(model: Model, q: Array) -> list[set[int]]:
+    """KUKA status bits 0, 1, 2 that joint values ``q`` (rad) allow: bit 0 set when the
+    wrist centre is behind axis 1 (overhead), bit 1 set when A3 >= phi (the angle that
+    stretches the arm; elbow up), bit 2 set when A5 <= 0."""
+    front, elbow = _arm_sides(model, q)
+    a5 = math.degrees(q[4])
+    return [_digit(front, _EPS_M, 1), _digit(elbow, _EPS_M, 0), _digit(a5, _EPS_DEG, 1)]
+
+
+def _cfx_bits(model: Model, q: Array) -> list[set[int]]:
+    """ABB ``cfx`` = 4 b2 + 2 b1 + b0 for a 6-axis arm: b2 set when the wrist centre is
+    behind axis 1, b1 set when it is behind the lower arm (elbow down), b0 set when axis 5
+    is negative."""
+    front, elbow = _arm_sides(model, q)
+    a5 = math.degrees(q[4])
+    return [_digit(a5, _EPS_DEG, 1), _digit(elbow, _EPS_M, 1), _digit(front, _EPS_M, 1)]
+
+
+def _status(model: Model, q: Array) -> int:
+    """KUKA status ``S`` (bits 0-2, see :func:`_status_bits`) of joint values ``q`` (rad)."""
+    return sum(min(b) << k for k, b in enumerate(_status_bits(model, q)))
+
+
+def _cfx(model: Model, q: Array) -> int:
+    """ABB ``cfx`` (see :func:`_cfx_bits`) of joint values ``q`` (rad)."""
+    return sum(min(b) << k for k, b in enumerate(_cfx_bits(model, q)))
+
+
+def _config_changes(t: ProgramTarget, q: Array, model: Model | None = None) -> list[str]:
+    """How joint values ``q`` (rad) differ from the target's written configuration: one
+    entry per bit or digit (``[]``: they meet it).  Without ``model`` the status / cfx
+    is not checked."""
     if t.config is None or len(q) < 6:
-        return True
+        return []
     deg = np.degrees(q[:6])
-    eps = 1e-6  # degrees: an axis at a boundary (0, ±90 ...) meets either side
+    eps = _EPS_DEG
+    out = []
     if t.style == "krl":
-        return all(abs(deg[j]) < eps or (deg[j] < 0) == bool(t.config[0] >> j & 1) for j in range(6))
-    return all(
-        math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0)
-        for j, cf in zip((0, 3, 5), t.config, strict=True)
-    )
+        turn, status = t.config
+        if turn is not None:
+            for j in range(6):
+                if abs(deg[j]) >= eps and (deg[j] < 0) != bool(turn >> j & 1):
+                    out.append(f"T bit {j} (A{j + 1} {'<' if deg[j] < 0 else '>='} 0)")
+        if status is not None and model is not None:
+            names = ("overhead", "A3 >= phi", "A5 <= 0")
+            for k, allowed in enumerate(_status_bits(model, q)):
+                if status >> k & 1 not in allowed:
+                    out.append(f"S bit {k} ({names[k]}) {status >> k & 1} -> {min(allowed)}")
+        return out
+    for j, cf, name in zip((0, 3, 5), t.config[:3], ("cf1", "cf4", "cf6"), strict=True):
+        if not math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0):
+            out.append(f"{name} {cf} -> {math.floor(deg[j] / 90.0)}")
+    if len(t.config) > 3 and model is not None:
+        cfx = t.config[3]
+        bits = _cfx_bits(model, q)
+        if not 0 <= cfx < 8 or any(cfx >> k & 1 not in b for k, b in enumerate(bits)):
+            out.append(f"cfx {cfx} -> {sum(min(b) << k for k, b in enumerate(bits))}")
+    return out
+
+
+def _config_ok(t: ProgramTarget, q: Array, model: Model | None = None) -> bool:
+    """Whether joint values ``q`` (rad) meet the target's written configuration."""
+    return not _config_changes(t, q, model)
 
 
 def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: int) -> Array:
@@ -647,15 +854,21 @@ def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: 
     lim = model.joint_limits
     lo, hi = np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi)
     q = rng.uniform(lo, hi, (n, model.dof))
-    if t.config is None:
+    if t.config is None or model.dof < 6:
         return q
     if t.style == "krl":
-        for j in range(min(6, model.dof)):
-            negative = bool(t.config[0] >> j & 1)
-            q[:, j] = np.where(negative, -np.abs(q[:, j]), np.abs(q[:, j]))
+        turn, status = t.config
+        for j in range(6):
+            if turn is not None:
+                negative = bool(turn >> j & 1)
+                q[:, j] = np.where(negative, -np.abs(q[:, j]), np.abs(q[:, j]))
+        if status is not None:
+            q[:, 4] = np.where(status >> 2 & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
     else:
-        for j, cf in zip((0, 3, 5), t.config, strict=True):
+        for j, cf in zip((0, 3, 5), t.config[:3], strict=True):
             q[:, j] = np.radians(90.0 * (cf + rng.uniform(0.1, 0.9, n)))
+        if len(t.config) > 3:
+            q[:, 4] = np.where(t.config[3] & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
     return np.clip(q, lim[:, 0], lim[:, 1])
 
 
@@ -715,6 +928,84 @@ def _robot_models(
     return strip(real, absorbed), strip(nom, np.eye(4)), effects
 
 
+def _program_frames(
+    texts: dict[str, str],
+    language: str,
+    rapid_data: dict[str, dict],
+    config_dat: tuple[str, str] | None,
+    problems: list[str],
+) -> Callable[[str, int], tuple[Array | None, Array | None]]:
+    """``frame_at(file, position)``: the program's tool and base frames (m) in force at a
+    motion (``None``: not given by the program)."""
+    if language == "rapid":
+        tools = {k: v for d in rapid_data.values() for k, v in d["tools"].items()}
+        wobjs = {k: v for d in rapid_data.values() for k, v in d["wobjs"].items()}
+        tools.setdefault("TOOL0", np.eye(4))
+        wobjs.setdefault("WOBJ0", np.eye(4))
+        seen: set[str] = set()
+
+        def rapid_at(label: str, pos: int) -> tuple[Array | None, Array | None]:
+            for start, end, line, tool, wobj in rapid_data[label]["moves"]:
+                if start <= pos < end:
+                    for name, table, what in ((tool, tools, "tooldata"), (wobj, wobjs, "wobjdata")):
+                        if name is not None and name.upper() not in table and name.upper() not in seen:
+                            seen.add(name.upper())
+                            problems.append(
+                                f"{label}: line {line}: {what} {name} is declared outside the module; "
+                                "the default is used (--tool / --base)"
+                            )
+                    return tools.get((tool or "TOOL0").upper()), wobjs.get((wobj or "WOBJ0").upper())
+            return None, None
+
+        return rapid_at
+    if language != "krl" or config_dat is None:
+        return lambda label, pos: (None, None)
+    cfg_label, cfg_text = config_dat
+    data = _krl_config_frames(cfg_text, cfg_label)
+    settings = _krl_settings(texts)
+
+    def krl_at(label: str, pos: int) -> tuple[Array | None, Array | None]:
+        current: dict[str, Array | None] = {"TOOL": None, "BASE": None}
+        for start, line, kind, n in settings.get(label, []):
+            if start >= pos:
+                break
+            if n == 0:
+                current[kind] = np.eye(4)
+            elif (kind, n) in data:
+                current[kind] = data[(kind, n)]
+            else:
+                raise ProgramError(f"{label}: line {line}: {kind}_DATA[{n}] is not in {cfg_label}")
+        return current["TOOL"], current["BASE"]
+
+    return krl_at
+
+
+def _report_other_frames(
+    t: ProgramTarget,
+    runs: list[tuple[str, int]],
+    first: tuple[Array | None, Array | None],
+    frame_at: Callable[[str, int], tuple[Array | None, Array | None]],
+    texts: dict[str, str],
+    problems: list[str],
+) -> None:
+    """A problem when motions to target ``t`` run with other tools or bases than the first."""
+
+    def same(a: Array | None, b: Array | None) -> bool:
+        return (a is None and b is None) or (a is not None and b is not None and np.allclose(a, b))
+
+    lines = [
+        f"{label}: line {_line_of(texts[label], pos)}"
+        for label, pos in runs[1:]
+        if not all(same(x, y) for x, y in zip(frame_at(label, pos), first, strict=True))
+    ]
+    message = (
+        f"{t.file}: line {t.line}: target {t.name}: moved to with another tool or base at "
+        f"{', '.join(lines)}; corrected for the first motion to it"
+    )
+    if lines and message not in problems:
+        problems.append(message)
+
+
 def filter_program_text(
     texts: dict[str, str],
     language: Language,
@@ -727,6 +1018,8 @@ def filter_program_text(
     length_unit: str = "m",
     angle_unit: str = "rad",
     tol: float = 1e-9,
+    config_dat: tuple[str, str] | None = None,
+    require_probe: bool = False,
 ) -> FilteredProgram:
     """Filter a program given as texts ``{file label: text}`` (KRL: the ``.src`` and the
     ``.dat``; other languages one file).
@@ -744,6 +1037,15 @@ def filter_program_text(
             the robot.  Default: the identified tool is the probe as built (nothing
             absorbed; right when the program's tool is the probe itself).
         length_unit, angle_unit: units of a CSV program (``m|mm``, ``rad|deg``).
+        config_dat: KRL ``(label, text)`` of the ``$config.dat`` whose ``TOOL_DATA[n]`` and
+            ``BASE_DATA[n]`` the program's ``$TOOL``/``$BASE`` (or ``FDAT`` ``TOOL_NO``,
+            ``BASE_NO``) name; without it those are not read.  RAPID: each Move's tool
+            and ``\\WObj`` (``uframe · oframe``) are read from the module.  Each Cartesian
+            target is taken with the tool and base of the first motion to it; ``tool`` /
+            ``base`` given override them all.
+        require_probe: refuse (:class:`ProgramError`) a calibration that measured
+            positions only, without ``probe``, when the program has Cartesian targets (the
+            identified tool absorbed robot geometry, e.g. ``d6``; about 2 mm can be lost).
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
     from robocal.compensate.commands import compensate, filter_program
@@ -755,15 +1057,17 @@ def filter_program_text(
     found_tool = None
     krl_used: list[tuple[str, str, int, str]] = []
     events: list[tuple[int, int, str]] = []  # (file, position, name) of motions to named targets
+    rapid_data: dict[str, dict] = {}
     for f, (label, text) in enumerate(texts.items()):
         uses: list[tuple[int, str]] = []
+        rapid_data[label] = {"tools": {}, "wobjs": {}, "moves": []}
         if language == "urscript":
             t, u, found_tool = _parse_urscript(text, dof, label, uses)
         elif language == "krl":
             t, u, used = _parse_krl(text, dof, label, uses)
             krl_used += [(label, *x) for x in used]
         elif language == "rapid":
-            t, u, found_tool = _parse_rapid(text, dof, label, uses)
+            t, u, found_tool = _parse_rapid(text, dof, label, uses, rapid_data[label])
         elif language == "csv":
             t, u = _parse_csv(text, dof, label), []
         else:
@@ -771,10 +1075,18 @@ def filter_program_text(
         targets += t
         unsupported += u
         events += [(f, pos, name) for pos, name in uses]
+    label_of = list(texts)
     declared = {t.name.upper() for t in targets}
     for label, name, line, statement in krl_used:
         if name.upper() not in declared:
             unsupported.append(Unsupported(label, line, statement, f"{name} is declared outside the program"))
+    if require_probe and probe is None and getattr(calibrated, "measure", "") == "position":
+        pose = next((t for t in targets if t.kind == "pose"), None)
+        if pose is not None:
+            raise ProgramError(
+                f"{pose.file}: line {pose.line}: Cartesian target {pose.name} and a calibration that "
+                "measured positions only: give the probe as built with --probe x,y,z (m)"
+            )
     if language == "csv":
         lf = {"m": 1.0, "mm": 1e-3, "um": 1e-6}[length_unit]
         af = {"rad": 1.0, "deg": DEG}[angle_unit]
@@ -784,9 +1096,27 @@ def filter_program_text(
     T_tool = np.asarray(tool, dtype=float) if tool is not None else found_tool
     real, nom, effects = _robot_models(calibrated, nominal, T_tool, probe)
     B = np.eye(4) if base is None else np.asarray(base, dtype=float)
+    problems: list[str] = []
+    frame_at = _program_frames(texts, language, rapid_data, config_dat, problems)
+    cache: dict[bytes, tuple[Model, Model]] = {}
+
+    def frames_of(i: int) -> tuple[Model, Model, Array]:
+        """The (real, nominal) models with target ``i``'s tool, and its base."""
+        t = targets[i]
+        runs = [(label_of[f], pos) for f, pos, name in events if name.upper() == t.name.upper()]
+        T_i, B_i = frame_at(*(runs[0] if runs else (t.file, t.tokens[0].start)))
+        if tool is None or base is None:
+            _report_other_frames(t, runs, (T_i, B_i), frame_at, texts, problems)
+        T_i = T_tool if tool is not None or T_i is None else T_i
+        B_i = B if base is not None or B_i is None else B_i
+        key = b"" if T_i is None else np.asarray(T_i).tobytes()
+        if key not in cache:
+            cache[key] = _robot_models(calibrated, nominal, T_i, probe)[:2]
+        return (*cache[key], B_i)
+
     types = model.joint_types
     n = len(targets)
-    problems: list[str] = []
+    reported: set[int] = set()  # targets whose configuration change is already reported
     values = [_read_value(t, units, types, False) for t in targets]
     new_values: list[Array] = list(values)
     before = np.full(n, np.nan)
@@ -795,13 +1125,17 @@ def filter_program_text(
     kept = np.ones(n, dtype=bool)
     joint_idx = [i for i, t in enumerate(targets) if t.kind == "joint"]
     pose_idx = [i for i, t in enumerate(targets) if t.kind == "pose"]
-    if joint_idx:
-        q = np.array([values[i] for i in joint_idx])
-        res = filter_program(real, q, nom, joint_effects=effects, tol=tol, tol_angle=tol)
-        for k, i in enumerate(joint_idx):
+    groups: dict[int, list[int]] = {}  # joint targets by the tool of their motion
+    for i in joint_idx:
+        groups.setdefault(id(frames_of(i)[0]), []).append(i)
+    for idx in groups.values():
+        real_g, nom_g, _ = frames_of(idx[0])
+        q = np.array([values[i] for i in idx])
+        res = filter_program(real_g, q, nom_g, joint_effects=effects, tol=tol, tol_angle=tol)
+        for k, i in enumerate(idx):
             new_values[i] = res.q[k]
-        before[joint_idx], after[joint_idx] = res.error_before * 1e3, res.error_after * 1e3
-        reach[joint_idx], kept[joint_idx] = res.reachable, res.branch_kept
+        before[idx], after[idx] = res.error_before * 1e3, res.error_after * 1e3
+        reach[idx], kept[idx] = res.reachable, res.branch_kept
     if pose_idx:
         # execution order: motions to named targets where they run, literal targets where
         # they stand, declared targets never moved to at the end (file order)
@@ -824,32 +1158,38 @@ def filter_program_text(
             if targets[i].kind == "joint":
                 q_prev = values[i]
                 continue
-            T = B @ values[i]
+            real, nom, B_i = frames_of(i)
+            T = B_i @ values[i]
             position_only = len(targets[i].tokens) == 3
             goal = T[:3, 3][None] if position_only else T[None]
             kind = "position" if position_only else "pose"
             opts = {"joint_effects": effects, "tol": tol, "tol_angle": tol}
             res = compensate(real, goal, nom, kind=kind, q0=q_prev, **opts)
-            if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0])):
-                # the written configuration (KUKA T, ABB cf) chooses the branch: starts within it
-                starts = _config_starts(targets[i], nom, rng, 16)
+            config_kept = True
+            if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0], nom)):
+                # the written configuration (KUKA S/T, ABB cf/cfx) chooses the branch: starts within it
+                starts = _config_starts(targets[i], nom, rng, 24)
                 for q_start in starts:
                     trial = compensate(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
-                    if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0]):
+                    if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0], nom):
                         res = trial
                         break
                 else:
                     t = targets[i]
-                    if t.config is not None:
+                    if t.config is not None and res.reachable[0]:
+                        config_kept = False
+                        changes = ", ".join(_config_changes(t, res.q_nominal[0], nom))
                         problems.append(
-                            f"{t.file}: line {t.line}: target {t.name}: no solution in the written "
-                            f"configuration {t.config}; the branch of the previous target is used"
+                            f"{t.file}: line {t.line}: target {t.name}: reachable only in another "
+                            f"configuration ({changes}); left as written"
                         )
             q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
-            corrected = spatial.inverse(B) @ nom.fk(res.q)[0]
-            new_values[i] = corrected if res.reachable[0] else values[i]
+            corrected = spatial.inverse(B_i) @ nom.fk(res.q)[0]
+            new_values[i] = corrected if res.reachable[0] and config_kept else values[i]
             before[i], after[i] = res.error_before[0] * 1e3, res.error_after[0] * 1e3
-            reach[i], kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0])
+            reach[i], kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0]) and config_kept
+            if not config_kept:
+                reported.add(i)
     # write: the numbers that moved, file by file, last first
     changed = np.zeros(n, dtype=bool)
     edits: dict[str, list[tuple[int, int, str]]] = {label: [] for label in texts}
@@ -871,7 +1211,7 @@ def filter_program_text(
             problems.append(
                 f"{t.file}: line {t.line}: target {t.name}: not reachable by the calibrated robot"
             )
-        elif not kept[i]:
+        elif not kept[i] and i not in reported:
             problems.append(
                 f"{t.file}: line {t.line}: target {t.name}: the correction changes the configuration"
             )
@@ -914,11 +1254,15 @@ def filter_program_file(
     out: str | Path | None = None,
     *,
     language: Language | None = None,
+    config_dat: str | Path | None = None,
     **options,
 ) -> FilteredProgram:
     """Filter a program file (see :func:`filter_program_text`); written to ``out``
     atomically when given (KRL: ``out`` and the ``.dat`` next to it).  Nothing is
-    written when the program cannot be read."""
+    written when the program cannot be read.
+
+    KRL: ``config_dat`` is the ``$config.dat`` holding ``TOOL_DATA``/``BASE_DATA``
+    (default: the one in the program's folder, when there is one)."""
     path = Path(path)
     if not path.is_file():
         raise ProgramError(f"{path}: no such program file")
@@ -928,6 +1272,12 @@ def filter_program_file(
     dat = path.with_suffix(".dat")
     if language == "krl" and path.suffix.lower() == ".src" and dat.is_file():
         texts[str(dat)], encodings[str(dat)] = _read(dat)
+    if language == "krl":
+        cfg = Path(config_dat) if config_dat is not None else path.parent / "$config.dat"
+        if config_dat is not None and not cfg.is_file():
+            raise ProgramError(f"{cfg}: no such $config.dat")
+        if cfg.is_file():
+            options["config_dat"] = (str(cfg), _read(cfg)[0])
     result = filter_program_text(texts, language, calibrated, **options)
     if out is not None:
         out = Path(out)
