@@ -348,12 +348,13 @@ def test_write_csv_and_json(tmp_path):
     lines = path.read_text().splitlines()
     assert lines[0] == (
         "name,q1,q2,q3,nominal_q1,nominal_q2,nominal_q3,predicted_error_before_mm,"
-        "predicted_error_after_mm,reachable"
+        "predicted_error_after_mm,expected_error_after_mm,reachable"
     )
     row = lines[1].split(",")
     assert row[0] == "a" and row[-1] == "true"
     np.testing.assert_allclose([float(v) for v in row[1:4]], np.degrees(comp.q[0]), rtol=1e-10)
     assert float(row[7]) == pytest.approx(comp.error_before[0] * 1e3, rel=1e-5)
+    assert row[9] == "nan"  # a bare model carries no uncertainty to expect an error from
     data = json.loads(comp.write(tmp_path / "out.json").read_text())
     assert data["targets"][1]["name"] == "b" and data["units"]["revolute"] == "rad"
     assert data["summary"]["reachable"] == 2

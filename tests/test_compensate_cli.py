@@ -68,6 +68,7 @@ def test_targets_in_the_cell_frame_land_on_target(cell, tmp_path):
         *(f"nominal_q{j}" for j in range(1, 7)),
         "predicted_error_before_mm",
         "predicted_error_after_mm",
+        "expected_error_after_mm",
         "reachable",
     ]
     assert [r["name"] for r in rows] == [f"P{i}" for i in range(1, 9)]
@@ -80,6 +81,13 @@ def test_targets_in_the_cell_frame_land_on_target(cell, tmp_path):
     assert after.max() < 0.1e-3 and before.mean() > 1e-3
     assert all(r["reachable"] == "true" for r in rows)
     np.testing.assert_allclose([float(r["predicted_error_before_mm"]) for r in rows], before * 1e3, atol=0.1)
+    # "after" is the error to expect from the calibration's uncertainty, not the IK's 0.0000 mm:
+    # of the size of what the corrected commands really leave
+    expected = np.array([float(r["expected_error_after_mm"]) for r in rows]) * 1e-3
+    rms_after = np.sqrt(np.mean(after**2))
+    assert 0.3 * rms_after < np.sqrt(np.mean(expected**2)) < 3 * rms_after + 5e-6
+    printed = _text(result)
+    assert "expected from its uncertainty" in printed and " 0.0000 " not in printed
 
 
 def test_json_output_and_degrees(cell, tmp_path):

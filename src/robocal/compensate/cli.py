@@ -10,9 +10,11 @@ predicted errors "before").  ``--targets`` is a CSV of Cartesian targets ``name,
 measurement (cell) frame identified by the calibration; ``--program`` a joint program
 ``[name,]q1..qN`` computed with the nominal model (the calibration-filter use).  The
 output (``-o``, CSV or ``.json``) holds ``name``, the corrected ``q1..qN``, the nominal
-``nominal_q1..nominal_qN``, ``predicted_error_before_mm``, ``predicted_error_after_mm``
-and ``reachable``.  Exit status 1 when a target was not reached (the file is written
-all the same), 2 on bad input.
+``nominal_q1..nominal_qN``, ``predicted_error_before_mm`` (the calibrated model's error
+at the nominal commands), ``predicted_error_after_mm`` (what the IK left against the
+calibrated model), ``expected_error_after_mm`` (the calibration's uncertainty and
+unexplained error at the corrected commands) and ``reachable``.  Exit status 1 when a
+target was not reached (the file is written all the same), 2 on bad input.
 """
 
 from __future__ import annotations
@@ -198,7 +200,7 @@ def _print(result, robot: str, source: Path) -> None:
         highlight=False,
     )
     table = Table(
-        title=f"predicted error of the calibrated robot at the {s['reachable']} reached targets",
+        title=f"position error of the real robot at the {s['reachable']} reached targets",
         title_justify="left",
     )
     for col in (
@@ -212,15 +214,25 @@ def _print(result, robot: str, source: Path) -> None:
     def cell(v) -> str:
         return "-" if v is None else f"{v:.4f}"
 
-    for label, key, akey in (
-        ("nominal (before)", "error_before_mm", "angle_before_deg"),
-        ("compensated (after)", "error_after_mm", "angle_after_deg"),
-    ):
-        row = [label, cell(s[key]["mean"]), cell(s[key]["max"])]
-        if result.kind != "position":
-            row += [cell(s[akey]["mean"]), cell(s[akey]["max"])]
-        table.add_row(*row)
+    before = ["nominal (before), as the calibrated model predicts", *_cells(s, "error_before_mm", cell)]
+    after = ["compensated (after), expected from its uncertainty"]
+    after += _cells(s, "expected_error_after_mm", cell)
+    if result.kind != "position":
+        before += _cells(s, "angle_before_deg", cell)
+        after += ["-", "-"]
+    table.add_row(*before)
+    table.add_row(*after)
     console.print(table)
+    if s["expected_error_after_mm"]["mean"] is None:
+        console.print(
+            "  (a bare model file carries no uncertainty: give the calibration folder for the "
+            "error to expect after compensation)",
+            highlight=False,
+        )
+
+
+def _cells(summary: dict, key: str, cell) -> list[str]:
+    return [cell(summary[key]["mean"]), cell(summary[key]["max"])]
 
 
 def register(app: typer.Typer) -> None:

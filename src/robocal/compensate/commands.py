@@ -127,6 +127,14 @@ class _Setup:
     has_nominal: bool
     effects: PerturbationFunction | None
     T_device_base: Array | None
+    result: CalibrationResult | None = None
+
+    def expected_error(self, q: Array) -> Array:
+        """``(n,)`` RMS position error (m) to expect at commands ``q`` (NaN without a
+        calibration result, whose uncertainty it is)."""
+        if self.result is None or not len(q):
+            return np.full(len(q), np.nan)
+        return self.result.expected_position_error(q)
 
 
 def _setup(
@@ -156,7 +164,8 @@ def _setup(
             f"{real.name!r} has {real.dof}"
         )
     nom = _with_tool(nom, real)
-    return _Setup(real, nom, has_nominal, effects, frame)
+    result = calibrated if isinstance(calibrated, CalibrationResult) else None
+    return _Setup(real, nom, has_nominal, effects, frame, result)
 
 
 def _predict(setup: _Setup, q: Array) -> Array:
@@ -250,6 +259,11 @@ class Compensation:
         names: ``n`` target names.
         joint_names, joint_types: the robot's joints.
         iterations: ``(n,)`` IK iterations of the correction.
+        expected_error_after: ``(n,)`` RMS position error (m) to expect at ``q`` on the real
+            robot: the calibration's uncertainty there and the error its model leaves
+            unexplained (:meth:`CalibrationResult.expected_position_error`); NaN when only a
+            bare model, with no uncertainty, was given.  ``error_after`` is only what the IK
+            left against the calibrated model itself (below ``tol`` when reached).
     """
 
     q: Array
@@ -268,6 +282,7 @@ class Compensation:
     joint_names: tuple[str, ...]
     joint_types: tuple[str, ...]
     iterations: NDArray[np.int64]
+    expected_error_after: Array
 
     @property
     def n(self) -> int:
@@ -308,6 +323,7 @@ class Compensation:
             "branch_kept": int(self.branch_kept.sum()),
             "error_before_mm": stats(self.error_before, 1e3),
             "error_after_mm": stats(self.error_after, 1e3),
+            "expected_error_after_mm": stats(self.expected_error_after, 1e3),
         }
         if self.kind != "position":
             out["angle_before_deg"] = stats(self.angle_before, 180 / math.pi)
@@ -330,6 +346,7 @@ class Compensation:
                 "nominal_q": (self.q_nominal[i] * f).tolist(),
                 "predicted_error_before_mm": _num(self.error_before[i] * 1e3),
                 "predicted_error_after_mm": _num(self.error_after[i] * 1e3),
+                "expected_error_after_mm": _num(self.expected_error_after[i] * 1e3),
                 "reachable": bool(self.reachable[i]),
                 "branch_kept": bool(self.branch_kept[i]),
             }
@@ -352,7 +369,8 @@ class Compensation:
         f = self._joint_factor(angle_unit, length_unit)
         dof = self.q.shape[1]
         header = ["name", *(f"q{j + 1}" for j in range(dof)), *(f"nominal_q{j + 1}" for j in range(dof))]
-        header += ["predicted_error_before_mm", "predicted_error_after_mm", "reachable"]
+        header += ["predicted_error_before_mm", "predicted_error_after_mm", "expected_error_after_mm"]
+        header.append("reachable")
         pose = self.kind != "position"
         if pose:
             header += ["predicted_angle_error_before_deg", "predicted_angle_error_after_deg"]
@@ -362,6 +380,7 @@ class Compensation:
         for i, name in enumerate(self.names):
             row = [name, *(_fmt(v) for v in self.q[i] * f), *(_fmt(v) for v in self.q_nominal[i] * f)]
             row += [_fmt(self.error_before[i] * 1e3, 6), _fmt(self.error_after[i] * 1e3, 6)]
+            row.append(_fmt(self.expected_error_after[i] * 1e3, 6))
             row.append("true" if self.reachable[i] else "false")
             if pose:
                 row += [
@@ -456,6 +475,7 @@ def _correct(
         joint_names=setup.real.joint_names,
         joint_types=setup.real.joint_types,
         iterations=res.iterations,
+        expected_error_after=setup.expected_error(res.q),
     )
 
 
@@ -763,6 +783,7 @@ def compensate_path(
             joint_names=setup.real.joint_names,
             joint_types=setup.real.joint_types,
             iterations=np.full(len(q), int(iterations), dtype=np.int64),
+            expected_error_after=setup.expected_error(q),
         )
     else:
         raise ValueError(f"method must be 'ik' or 'jacobian', got {method!r}")

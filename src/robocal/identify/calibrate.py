@@ -480,6 +480,29 @@ class CalibrationResult:
         """1-σ radial position uncertainty ``sqrt(trace(cov))`` (m) at each pose, ``(n,)``."""
         return np.sqrt(np.trace(self.position_covariance(q, frame), axis1=1, axis2=2))
 
+    def unexplained_rms(self) -> float:
+        """RMS 3D position error of the robot that the calibrated model does not explain (m).
+
+        With stated measurement noise: the part of the residuals beyond that noise (0 when the
+        χ² test cannot tell the residuals from noise).  Without it: the learned residual's
+        estimate of what remains per axis, or the residual σ — both include the device's
+        noise, so they bound the robot's unexplained error from above.
+        """
+        noise = self.fit_to_noise
+        if noise is not None:
+            return noise.unmodelled_rms if noise.ratio > 1 and noise.warning() is not None else 0.0
+        learned = self.model.residual
+        if learned is not None:
+            return math.sqrt(3.0) * float(learned.noise_std)
+        return math.sqrt(3.0) * float(self.residual_std)
+
+    def expected_position_error(self, q: ArrayLike) -> Array:
+        """``(n,)`` RMS 3D position error (m) the calibrated model is expected to leave at
+        commands ``q`` (base frame): its parameters' and learned residual's uncertainty
+        (``position_uncertainty(q, "base")``) and the error it does not explain
+        (:meth:`unexplained_rms`), added in quadrature."""
+        return np.sqrt(self.position_uncertainty(q, "base") ** 2 + self.unexplained_rms() ** 2)
+
     def summary(self) -> str:
         """A plain-text report of the calibration."""
         lines = [
