@@ -218,8 +218,9 @@ def filter_command(
     console.print(
         f"{program.name}: {n} targets ({language}), {int(result.changed.sum())} corrected; "
         + (
-            f"predicted error {np.nanmax(result.error_before_mm[ok]):.3f} mm before, "
-            f"{np.nanmax(result.error_after_mm[ok]):.4f} mm after (max)"
+            f"predicted error {np.nanmax(result.error_before_mm[ok]):.3f} mm (max) before; "
+            f"corrected onto the calibrated model within {np.nanmax(result.error_after_mm[ok]):.1e} mm, "
+            "so expect the calibration's accuracy (robocal validate)"
             if ok.any() and np.isfinite(result.error_before_mm[ok]).any()
             else "no predicted errors"
         ),
