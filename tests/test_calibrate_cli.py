@@ -60,12 +60,25 @@ def test_calibrate_then_validate(measured, tmp_path):
     assert saved["train_n"] == 100 and len(saved["data_sha256"]) == 64
     assert saved["validation"]["mean_mm"] < 0.05
     assert (out / "model.yaml").exists()
-    # validating on the whole file with the calibrated tracker frame
+    # validating on the calibration's own file: its held-out rows only, with the calibrated tracker frame
     result = runner.invoke(app, ["validate", str(out), "--data", str(path), "--length-unit", "mm", "--json"])
     assert result.exit_code == 0, result.output
     stats = json.loads(result.output)
     assert set(stats) >= {"n", "mean_mm", "rms_mm", "max_mm", "p95_mm"}
-    assert stats["n"] == 160 and stats["mean_mm"] < 0.05 and stats["frame"] == "calibrated"
+    assert stats["n"] == 60 and stats["rows"] == "held-out" and stats["frame"] == "calibrated"
+    assert stats["mean_mm"] == pytest.approx(saved["validation"]["mean_mm"], rel=1e-9)
+    # without --data: the recorded file, read with the recorded options (mm), split as calibrated
+    own = json.loads(runner.invoke(app, ["validate", str(out), "--json"]).output)
+    assert own["n"] == 60 and own["mean_mm"] == pytest.approx(stats["mean_mm"], rel=1e-12)
+    every = json.loads(runner.invoke(app, ["validate", str(out), "--all-rows", "--json"]).output)
+    assert every["n"] == 160 and every["rows"] == "all" and every["mean_mm"] < 0.05
+    assert saved["provenance"]["reader"]["length_unit"] == "mm" and saved["provenance"]["train_n"] == 100
+    # the report re-reads the calibration's own data too: 100 calibration poses, 60 held out
+    page_path = tmp_path / "report.html"
+    assert runner.invoke(app, ["report", str(out), "-o", str(page_path)]).exit_code == 0
+    page = page_path.read_text(encoding="utf-8")
+    assert "position error on the 100 calibration poses" in page and "60 held-out poses" in page
+    assert "converged: converged" not in page
     refit = json.loads(
         runner.invoke(
             app, ["validate", str(out), "--data", str(path), "--length-unit", "mm", "--json", "--refit-frame"]
@@ -242,7 +255,7 @@ def test_validate_uses_the_rows_marked_test(measured, tmp_path):
             ["validate", str(out), "--data", str(split_path), "--length-unit", "mm", "--json", "--all-rows"],
         ).output
     )
-    assert every["n"] == 160 and "rows" not in every
+    assert every["n"] == 160 and every["rows"] == "all"
 
 
 def test_space_separated_files_and_separator_names(measured, tmp_path):

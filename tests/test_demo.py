@@ -116,3 +116,13 @@ def test_reproduce_seed000_builds_the_seed_models_and_calibrates_from_15_poses(t
         assert fifteen["built (seed 000)"]["held_out_before_mean_mm"] > 1.0
     assert (tmp_path / "seed000.json").is_file() and (tmp_path / "puma560_report.html").is_file()
     json.loads((tmp_path / "seed000.json").read_text())
+
+
+def test_demo_writes_to_the_home_directory_by_default_never_the_working_directory(tmp_path, monkeypatch):
+    """The README's first command must leave a checkout clean: the default --out is ~/robocal-demo."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    earlier = tmp_path / "robocal-demo"
+    earlier.mkdir()
+    (earlier / "report.html").write_text("an earlier demo")
+    res = runner.invoke(app, ["demo"])
+    assert res.exit_code == 2 and str(earlier) in " ".join(res.output.split()) and "--force" in res.output

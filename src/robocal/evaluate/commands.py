@@ -9,38 +9,51 @@ from typing import Annotated
 import typer
 
 from robocal.console import console, fail, refuse_overwrite
+from robocal.measure.commands import (
+    AngleUnit,
+    Columns,
+    Decimal,
+    Incomplete,
+    LengthUnit,
+    Limits,
+    Orientation,
+    Sep,
+)
 
 __all__ = ["register"]
 
 
 def report_command(
+    ctx: typer.Context,
     directory: Annotated[
         Path, typer.Argument(help="a calibration output directory (result.json, model.yaml)")
     ],
     output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write")] = Path("report.html"),
     data_path: Annotated[
         Path | None,
-        typer.Option("--data", help="calibration measurements (default: DIR/train.csv if present)"),
+        typer.Option(
+            "--data",
+            help="calibration measurements (default: DIR/train.csv if present, else the calibration's own "
+            "file, read with its options and split as calibrated)",
+        ),
     ] = None,
     test_path: Annotated[
         Path | None,
-        typer.Option("--test-data", help="held-out measurements (default: DIR/test.csv if present)"),
+        typer.Option(
+            "--test-data",
+            help="held-out measurements (default: DIR/test.csv if present, else the held-out rows of the "
+            "calibration's own file)",
+        ),
     ] = None,
     title: Annotated[str | None, typer.Option("--title", help="the report's heading")] = None,
-    length_unit: Annotated[
-        str, typer.Option("--length-unit", help="m | mm | um: positions in the files")
-    ] = "m",
-    angle_unit: Annotated[
-        str, typer.Option("--angle-unit", help="rad | deg: joint angles in the files")
-    ] = "rad",
-    columns: Annotated[
-        str | None, typer.Option("--columns", help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
-    ] = None,
-    sep: Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")] = None,
-    decimal: Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')] = ".",
-    orientation: Annotated[
-        str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
-    ] = "auto",
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
+    columns: Columns = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    orientation: Orientation = "auto",
+    limits: Limits = "error",
+    incomplete: Incomplete = "error",
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
 ) -> None:
     """Write the self-contained HTML report of a calibration (works offline)."""
@@ -48,7 +61,7 @@ def report_command(
         refuse_overwrite(output, force, "report")
     from robocal.evaluate.report import write_report
     from robocal.identify.calibrate import CalibrationResult
-    from robocal.measure.dataset import MeasurementFileError, read_measurements
+    from robocal.identify.commands import _read, own_data
 
     if not (directory / "result.json").is_file():
         raise fail(f"{directory} holds no calibration result (result.json)")
@@ -56,31 +69,27 @@ def report_command(
         result = CalibrationResult.load(directory)
     except (OSError, ValueError, KeyError) as err:
         raise fail(f"{directory}: cannot read the result: {err}") from None
+    values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
+    values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
 
     def read(path: Path | None, default: str):
         if path is None:
             path = directory / default
-            if not path.is_file():
-                return None
-            options = {}
-        else:
-            if not path.is_file():
-                raise fail(f"{path} does not exist")
-            options = {
-                "length_unit": length_unit,
-                "angle_unit": angle_unit,
-                "columns": columns,
-                "sep": sep,
-                "decimal": decimal,
-                "orientation": orientation,
-            }
-        try:
-            return read_measurements(path, model=result.model, **options)
-        except (MeasurementFileError, ValueError) as err:
-            raise fail(str(err)) from None
+            return _read(path, result.model) if path.is_file() else None
+        return _read(path, result.model, **values)
 
-    data = read(data_path, "train.csv")
-    test = read(test_path, "test.csv")
+    data = test = None
+    if data_path is not None or not (directory / "train.csv").is_file():
+        has_provenance = "provenance" in result.metadata
+        own = own_data(ctx, directory, result, data_path, values) if has_provenance or data_path else None
+        if own is not None:  # the calibration's own file: its calibration rows and its held-out rows
+            data, test = own[1].train, own[1].test
+        elif data_path is not None:
+            data = read(data_path, "")
+    else:
+        data = read(None, "train.csv")
+    if test_path is not None or test is None:
+        test = read(test_path, "test.csv")
     evaluation = None
     ev_path = directory / "evaluation.json"
     if ev_path.is_file():
@@ -98,9 +107,14 @@ def report_command(
 
 def demo_command(
     robot: Annotated[str, typer.Option("--robot", help="catalog robot of the virtual twin")] = "ur10",
-    out: Annotated[Path, typer.Option("--out", help="directory for the calibration, data and report")] = Path(
-        "robocal-demo"
-    ),
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            help="directory for the calibration, data and report (default: robocal-demo in your home "
+            "directory, never the working directory, which may be a checkout)",
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option("--seed", help="seeds the whole demo")] = 0,
     poses: Annotated[int, typer.Option("--poses", help="calibration poses (chosen O1-optimally)")] = 50,
     quick: Annotated[bool, typer.Option("--quick", help="fewer poses and cycles: a faster run")] = False,
@@ -116,8 +130,9 @@ def demo_command(
         raise fail(f"unknown robot {robot!r}; choose one of {', '.join(robots())}")
     if poses < 10:
         raise fail(f"--poses {poses}: a calibration needs at least 10 poses")
-    if out is not None:
-        refuse_overwrite(out, force, "demo folder")
+    if out is None:
+        out = Path.home() / "robocal-demo"
+    refuse_overwrite(out, force, "demo folder")
     try:
         numbers = run_demo(robot, out, seed=seed, n_calibration=poses, quick=quick, verbose=not as_json)
     except ValueError as err:

@@ -324,10 +324,9 @@ def _fig_singular_values(sigma: Array, names: Sequence[str]):
         )
     )
     fig.update_layout(
-        yaxis_type="log",
-        yaxis_title="singular value (columns scaled to unit norm)",
+        yaxis={"type": "log", "dtick": 1, "title": "singular value (unit-norm columns)"},
         title=f"singular values, {len(names)} parameters",
-        margin={"t": 40},
+        margin={"t": 60, "l": 70},
     )
     return fig
 
@@ -408,7 +407,7 @@ def _fig_per_pose(before: Array | None, after: Array, title: str):
     fig.add_trace(go.Bar(x=x, y=after * 1e3, name="after calibration", marker_color=AFTER))
     fig.update_layout(
         barmode="group",
-        yaxis_type="log",
+        yaxis={"type": "log", "dtick": 1},  # decades only: minor labels read "2, 1, 5"
         xaxis_title="pose",
         yaxis_title="position error mm (log)",
         title=title,
@@ -497,9 +496,9 @@ def _fig_path_errors(paths: Sequence[dict[str, Any]]):
                 col=col,
             )
         fig.update_xaxes(title_text="along the path mm", row=1, col=col)
-    fig.update_yaxes(type="log", title_text="distance mm (log)", row=1, col=1)
+    fig.update_yaxes(type="log", dtick=1, title_text="distance mm (log)", row=1, col=1)
     for col in range(2, len(paths) + 1):
-        fig.update_yaxes(type="log", row=1, col=col)
+        fig.update_yaxes(type="log", dtick=1, row=1, col=col)
     fig.update_layout(
         title="path accuracy along the test paths (barycentre of the cycles, ISO 9283 §8.2)",
         legend=LEGEND_BELOW,
@@ -526,7 +525,7 @@ def _model_choice_section(result: CalibrationResult, figs: Any) -> str:
     """The cross-validation table and, when chosen, the learned joint angle errors."""
     import plotly.graph_objects as go
 
-    from robocal.identify.residual import CVTable
+    from robocal.identify.residual import SELECTION_SE, CVTable
 
     table = CVTable.from_dict(result.metadata["cv"])
     rows = [
@@ -563,9 +562,11 @@ def _model_choice_section(result: CalibrationResult, figs: Any) -> str:
         "model-choice",
         "Model choice",
         body,
-        f"{table.folds}-fold cross-validation on the calibration poses only chose the model: the physical "
-        "model, with joint compliance, and each with learned per-joint angle errors (a Fourier series in "
-        "the joint's own angle, fitted with the geometry under a Gaussian-process prior). Held-out poses "
+        f"{table.folds}-fold cross-validation on the calibration poses compared the physical model "
+        "(geometry, and geometry with joint compliance when the model has masses), alone and with learned "
+        "per-joint angle errors (a Fourier series in the joint's own angle, fitted with the geometry under "
+        f"a Gaussian-process prior). It chose <b>{_e(table.chosen)}</b>: the simplest candidate whose CV "
+        f"error is within {SELECTION_SE:g} standard errors (over the poses) of the lowest. Held-out poses "
         "played no part in the choice.",
     )
 
@@ -836,10 +837,13 @@ def build_report(
         for label, value, sub in cards
     )
     status = "converged" if result.success else "NOT CONVERGED"
+    message = result.message
+    if message.lower().startswith(status.lower() + ":"):  # the solver's message may say it already
+        message = message[len(status) + 1 :].strip()
     summary = f"<div class='cards'>{card_html}</div>"
     summary += (
         f"<p class='note'>{_e(model.name)}: {result.measure} measurements, method {result.method} ({status}: "
-        f"{_e(result.message)}). Before calibration = the nominal "
+        f"{_e(message)}). Before calibration = the nominal "
         "model with the device frame and tool fitted "
         "to the calibration data, the starting point of the identification.</p>"
     )
@@ -847,7 +851,6 @@ def build_report(
 
     # ---- robot and model
     fig = model_figure(model, title=f"{model.name} at zero joint values (calibrated)")
-    fig.update_layout(scene_camera={"eye": {"x": 1.25, "y": -1.25, "z": 0.75}})
     links = [
         n.strip().removesuffix(" calibrated") for n in model.notes.split(";") if n.strip().startswith("link")
     ]

@@ -74,6 +74,49 @@ def _read(
     return data
 
 
+def _given_options(ctx: typer.Context, values: dict) -> dict:
+    """The reader options among ``values`` that were given on the command line."""
+    from click.core import ParameterSource
+
+    given = (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT, ParameterSource.PROMPT)
+    return {k: v for k, v in values.items() if ctx.get_parameter_source(k) in given}
+
+
+def own_data(ctx: typer.Context, directory: Path, result, data_path: Path | None, values: dict):
+    """The calibration's own data, read again with its own reader options and split as it
+    was calibrated: ``(path, SplitRows)``, or None when ``data_path`` is another file or the
+    result recorded no provenance.
+
+    Without ``data_path`` the recorded file is read (it must still have the recorded
+    SHA-256); with the recorded file as ``data_path``, reader options given on the command
+    line replace the recorded ones.
+    """
+    from robocal.identify.calibrate import file_hash
+    from robocal.identify.provenance import Provenance, split_rows
+
+    provenance = Provenance.from_metadata(result.metadata)
+    if provenance is None:
+        if data_path is None:
+            raise fail(f"{directory}: the result does not record its data file (older robocal?); give --data")
+        return None
+    if data_path is None:
+        path = Path(provenance.data_file)
+        if not path.is_file():
+            raise fail(f"{directory}: the calibration's data file {path} is gone; give it with --data")
+        if file_hash(path) != provenance.data_sha256:
+            raise fail(f"{path} changed since the calibration (its SHA-256 differs); give data with --data")
+        reader = provenance.reader
+    else:
+        if not data_path.is_file() or file_hash(data_path) != provenance.data_sha256:
+            return None
+        path, reader = data_path, provenance.reader | _given_options(ctx, values)
+    data = _read(path, result.model, **reader)
+    try:
+        return path, split_rows(data, provenance)
+    except ValueError as err:
+        raise fail(f"{path}: {err}") from None
+
+
 def _stats_table(title: str, stats) -> Table:
     table = Table(title=title, title_justify="left")
     for col in ("poses", "mean mm", "RMS mm", "p95 mm", "max mm", "|x| |y| |z| mean mm", "frame"):
@@ -210,6 +253,7 @@ def calibrate_command(
             f"{data_path}: no measured positions (columns x, y, z) to calibrate against; map the file's "
             "columns with e.g. --columns 'x=meas_x,y=meas_y,z=meas_z'"
         )
+    noise_sigma = None
     if noise is not None:
         from robocal.measure.simulate import parse_quantity_option
 
@@ -222,6 +266,7 @@ def calibrate_command(
         if data.sigma is not None:
             raise fail(f"--noise: {data_path} has its own sigma columns; leave --noise out")
         data = dataclasses.replace(data, sigma=np.full((data.n, 3), sigma))
+        noise_sigma = float(sigma)
     train, test = data, None
     if train_n is not None:
         if not 0 < train_n < data.n:
@@ -263,11 +308,18 @@ def calibrate_command(
             )
     except ValueError as err:
         raise fail(as_cli_text(str(err))) from None
+    from robocal.identify.provenance import Provenance
+
+    sha256 = file_hash(data_path)
+    reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
+    reader |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
+    provenance = Provenance.record(data_path, sha256, reader, noise_sigma, train_n, seed)
     result.metadata |= {
         "data_file": str(data_path),
-        "data_sha256": file_hash(data_path),
+        "data_sha256": sha256,
         "train_n": train.n,
         "seed": seed,
+        "provenance": provenance.to_dict(),
     }
     validation = None
     if test is not None:
@@ -396,9 +448,35 @@ def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str]
     return notes, warning
 
 
+def _own_rows(rows, all_rows: bool, directory: Path, path: Path):
+    """The rows of the calibration's own file that ``validate`` uses: the held-out ones (all
+    with ``--all-rows``), a note saying which, and their label."""
+    if rows.test is None and not all_rows:
+        raise fail(
+            f"{directory}: the calibration used every row of {path.name}: give held-out "
+            "measurements with --data (or --all-rows to see the error on the calibration poses)"
+        )
+    if all_rows:
+        note = f"every row of the calibration's own file ({rows.every.n}), its {rows.train.n} calibration"
+        return rows.every, note + " rows included", "all"
+    note = (
+        f"the {rows.test.n} held-out rows of the calibration's own file (split by {rows.how}; "
+        f"its {rows.train.n} calibration rows left out; --all-rows: every row)"
+    )
+    return rows.test, note, "test" if rows.how == "the file's set column" else "held-out"
+
+
 def validate_command(
+    ctx: typer.Context,
     directory: Annotated[Path, typer.Argument(help="a calibration output directory")],
-    data_path: Annotated[Path, typer.Option("--data", help="measurement CSV file")],
+    data_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--data",
+            help="measurement CSV file (default: the calibration's own file, read with its options; "
+            "its held-out rows)",
+        ),
+    ] = None,
     refit_frame: Annotated[
         bool, typer.Option("--refit-frame", help="the device was moved: refit its frame only")
     ] = False,
@@ -425,20 +503,17 @@ def validate_command(
         result = CalibrationResult.load(directory)
     except (OSError, ValueError, KeyError) as err:
         raise fail(f"{directory}: cannot read the result: {err}") from None
-    data = _read(
-        data_path,
-        result.model,
-        length_unit,
-        angle_unit,
-        columns,
-        sep,
-        decimal,
-        orientation,
-        limits,
-        incomplete,
-    )
+    values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
+    values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     notes, extra = [], {}
-    if data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
+    own = own_data(ctx, directory, result, data_path, values)
+    if own is not None:
+        data_path, rows = own
+        data, note, extra["rows"] = _own_rows(rows, all_rows, directory, data_path)
+        notes.append(note)
+    else:
+        data = _read(data_path, result.model, **values)
+    if own is None and data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
         data = data.split_rows("test")
         notes.append(f"the {data.n} rows marked test in the file's set column (--all-rows: every row)")
         extra["rows"] = "test"
@@ -453,7 +528,7 @@ def validate_command(
     if as_json:
         print(json.dumps(stats.to_dict() | extra))
         return
-    console.print(_stats_table(f"{result.model.name} on {data_path.name}", stats))
+    console.print(_stats_table(f"{result.model.name} on {data_path.name} ({data.n} poses)", stats))
     for note in filter(None, notes):
         console.print(note, highlight=False)
 

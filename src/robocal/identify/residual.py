@@ -278,8 +278,8 @@ class CVCandidate:
 
 @dataclass(frozen=True)
 class CVTable:
-    """The candidates compared and the one chosen (the simplest within two standard errors
-    of the lowest CV mean error)."""
+    """The candidates compared and the one chosen (the simplest within ``SELECTION_SE``
+    standard errors of the lowest CV mean error)."""
 
     folds: int
     candidates: tuple[CVCandidate, ...]

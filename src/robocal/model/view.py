@@ -18,7 +18,7 @@ from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text
 from robocal.spatial import elementary
 
-__all__ = ["model_figure", "step_frames", "write_model_view"]
+__all__ = ["model_figure", "padded_scene", "step_frames", "write_model_view"]
 
 AXIS_COLOURS = ("#d62728", "#2ca02c", "#1f77b4")  # x red, y green, z blue
 
@@ -83,32 +83,56 @@ def model_figure(model: Model, q: np.ndarray | None = None, title: str | None = 
                 hoverinfo="skip",
             )
         )
-    origins = np.array([F[:3, 3] * 1000.0 for _, F in labelled])
+    origins, names = _merged_labels([(name, F[:3, 3] * 1000.0) for name, F in labelled], 0.02 * size)
     fig.add_trace(
         go.Scatter3d(
             x=origins[:, 0],
             y=origins[:, 1],
             z=origins[:, 2],
             mode="text",
-            text=[name for name, _ in labelled],
+            text=names,
             textposition="top center",
             name="frames",
         )
     )
     fig.update_layout(
         title=title or f"{model.name}: {model.title}" if model.title else (title or model.name),
-        scene={
-            "aspectmode": "data",
-            "camera": {"eye": {"x": 1.9, "y": -1.9, "z": 1.1}, "center": {"x": 0, "y": 0, "z": -0.1}},
-            "xaxis_title": "x mm",
-            "yaxis_title": "y mm",
-            "zaxis_title": "z mm",
-        },
+        scene=padded_scene(np.vstack([pts, origins]), pad=0.2 * size)
+        | {"camera": {"eye": {"x": 1.0, "y": -1.0, "z": 0.6}, "center": {"x": 0, "y": 0, "z": -0.05}}},
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
         legend={"orientation": "h"},
         height=640,
     )
     return fig
+
+
+def _merged_labels(labels: list[tuple[str, np.ndarray]], tol_mm: float) -> tuple[np.ndarray, list[str]]:
+    """Frame labels ``(name, origin mm)`` with those at (nearly) the same origin joined into
+    one ("base, shoulder_pan"), so that they do not print over each other."""
+    origins: list[np.ndarray] = []
+    names: list[str] = []
+    for name, o in labels:
+        for k, other in enumerate(origins):
+            if np.linalg.norm(o - other) <= tol_mm:
+                names[k] += f", {name}"
+                break
+        else:
+            origins.append(o)
+            names.append(name)
+    return np.array(origins), names
+
+
+def padded_scene(points_mm: np.ndarray, pad: float) -> dict:
+    """A 3D scene whose axes span ``points_mm`` ``(n, 3)`` plus ``pad`` (mm) on every side,
+    in true proportions: labels next to the outermost points stay inside the scene, where
+    plotly would clip them at the data's edge (``aspectmode="data"`` fits the box tightly)."""
+    lo, hi = points_mm.min(axis=0) - pad, points_mm.max(axis=0) + pad
+    span = hi - lo
+    ratio = span / span.max()
+    scene: dict = {"aspectmode": "manual", "aspectratio": dict(zip("xyz", map(float, ratio), strict=True))}
+    for k, axis in enumerate("xyz"):
+        scene[f"{axis}axis"] = {"range": [float(lo[k]), float(hi[k])], "title": f"{axis} mm"}
+    return scene
 
 
 def _parameter_table(model: Model) -> str:
