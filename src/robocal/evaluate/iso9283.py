@@ -216,8 +216,8 @@ class Stabilisation:
         overshoot: ``OV`` (m): after the position first enters the band, the largest
             distance from the stabilised position if that exceeds the band, else 0.
         stable: ``(3,)`` the stabilised position (m).
-        settled: whether the position ends within the band (False: the visit is too short
-            to tell, and ``time`` is NaN).
+        settled: whether the position ends within the band for at least ``hold`` seconds
+            (False: the record is too short to tell, and ``time`` is NaN).
     """
 
     time: float
@@ -227,7 +227,12 @@ class Stabilisation:
 
 
 def stabilisation(
-    t: ArrayLike, positions: ArrayLike, t_attained: float, band: float, stable: ArrayLike | None = None
+    t: ArrayLike,
+    positions: ArrayLike,
+    t_attained: float,
+    band: float,
+    stable: ArrayLike | None = None,
+    hold: float = 0.05,
 ) -> Stabilisation:
     """Stabilisation time (§7.4) and overshoot (§7.5) of one approach to a pose.
 
@@ -243,7 +248,10 @@ def stabilisation(
       run of samples within ``band`` (0 when that run starts before ``t_attained``);
     * overshoot: ``OV = max D_k`` over the samples after the first one within ``band``,
       if that exceeds ``band``, else 0 (the record may start before ``t_attained``, so
-      that an overshoot while the command is still running counts).
+      that an overshoot while the command is still running counts);
+    * the record shows a settled pose only if its final run within the band lasts at
+      least ``hold`` seconds (a record that merely ends at a zero crossing of an
+      oscillation is not settled).
 
     Args:
         t: ``(k,)`` sample times (s), increasing.
@@ -251,6 +259,7 @@ def stabilisation(
         t_attained: the "attained pose" instant (s).
         band: limit band radius (m), > 0.
         stable: ``(3,)`` stabilised position (m).
+        hold: how long the final run within the band must last (s).
     """
     t = np.asarray(t, dtype=float)
     p = np.asarray(positions, dtype=float)
@@ -263,10 +272,10 @@ def stabilisation(
     ref = p[-1] if stable is None else np.asarray(stable, dtype=float)
     D = np.linalg.norm(p - ref, axis=1)
     inside = band >= D
-    if not inside[-1]:
-        return Stabilisation(float("nan"), float("nan"), ref, False)
     outside = np.flatnonzero(~inside)
     first_in_final = 0 if len(outside) == 0 else int(outside[-1]) + 1
+    if first_in_final >= len(t) or t[-1] - t[first_in_final] < hold:
+        return Stabilisation(float("nan"), float("nan"), ref, False)
     time = max(0.0, float(t[first_in_final] - t_attained))
     first_in = int(np.argmax(inside))
     peak = float(D[first_in:].max())

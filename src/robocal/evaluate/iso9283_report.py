@@ -12,7 +12,8 @@ Reading of the log (``docs/iso9283.md``):
   of its *dwell*, the final stretch in which the commanded pose no longer changes (a
   single-sample run: that sample);
 * the "attained pose" signal of §7.4 is taken as the first sample of the dwell;
-* the commanded path of a path test is the commanded positions of its first cycle.
+* the commanded path of a path test is the commanded positions of its first cycle,
+  thinned to ``path_points`` and without its two end points.
 """
 
 from __future__ import annotations
@@ -438,11 +439,12 @@ def _path_rows(log: Iso9283Log, test: str, opts: EvaluationOptions) -> list[dict
     for name, runs in _paths(log, test).items():
         first = runs[0].index
         keep = first[_dedupe(log.commanded[first])]
-        if len(keep) < 3:
+        if len(keep) < 5:
             continue
         keep = keep[
             np.unique(np.linspace(0, len(keep) - 1, min(opts.path_points, len(keep))).round().astype(int))
         ]
+        keep = keep[1:-1]  # the end points: an attained path that stops short never crosses their planes
         with_angles = test == "reorientation" and log.rotation is not None
         commanded = log.frames(keep, commanded=True) if with_angles else log.commanded[keep]
         attained = [log.frames(r.index) if with_angles else log.position[r.index] for r in runs]
@@ -466,7 +468,7 @@ def _path(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
         return _missing(*args, _no_rows("path"))
     details = _path_rows(log, "path", opts)
     if not details:
-        return _missing(*args, "no path run has three or more distinct commanded points")
+        return _missing(*args, "no path run has five or more distinct commanded points")
     at, ap = _worst(details, "AT_mm", "path")
     rt, rp = _worst(details, "RT_mm", "path")
     return Characteristic(
@@ -486,7 +488,7 @@ def _reorientation(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
         return _missing(*args, "the log has no orientation columns (a_deg ... cmd_c_deg)")
     details = _path_rows(log, "reorientation", opts)
     if not details:
-        return _missing(*args, "no reorientation run has three or more distinct commanded points")
+        return _missing(*args, "no reorientation run has five or more distinct commanded points")
     d = details[0]
     at = ", ".join(f"{x:.3f}" for x in d["AT_abc_deg"])
     rt = ", ".join(f"{x:.3f}" for x in (d["RT_abc_deg"] or [math.nan] * 3))
