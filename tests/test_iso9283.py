@@ -56,11 +56,11 @@ def test_distance_accuracy_and_repeatability():
     p2 = np.column_stack([0.5 + extra, np.zeros(4), np.zeros(4)])
     d = iso.distance_characteristics(p1, p2, c1, c2)
     assert d.D_c == pytest.approx(0.5)
-    assert d.AD == pytest.approx(2e-4, abs=1e-12)
-    assert d.RD == pytest.approx(3 * np.std(extra, ddof=1), abs=1e-12)
+    assert pytest.approx(2e-4, abs=1e-12) == d.AD
+    assert pytest.approx(3 * np.std(extra, ddof=1), abs=1e-12) == d.RD
     assert d.AD_xyz == pytest.approx([2e-4, 0, 0], abs=1e-12)
     short = iso.distance_characteristics(p1, np.column_stack([0.5 - extra, np.zeros((4, 2))]), c1, c2)
-    assert short.AD == pytest.approx(-2e-4, abs=1e-12)  # signed: the robot travels short
+    assert pytest.approx(-2e-4, abs=1e-12) == short.AD  # signed: the robot travels short
 
 
 def _settling_record(A: float, tau: float, hz: float, rate: float, T_move: float = 0.2):
@@ -120,7 +120,7 @@ def test_drift_of_ap_and_rp():
 def test_exchangeability():
     robots = [np.zeros((3, 3)), np.full((3, 3), 1e-4), np.array([[2e-4, 0, 0]] * 3)]
     e = iso.exchangeability(robots)
-    assert e.E == pytest.approx(2e-4, abs=1e-12)  # robots 1 and 3 (robot 2 is sqrt(3)e-4 from both)
+    assert pytest.approx(2e-4, abs=1e-12) == e.E  # robots 1 and 3 (robot 2 is sqrt(3)e-4 from both)
     assert set(e.pair) == {0, 2}
 
 
@@ -142,8 +142,8 @@ def test_cornering_round_off_and_overshoot():
     rho, co = 5e-3, 0.3e-3
     paths = [_corner_path(rho, co, 1e-4), _corner_path(rho, 2 * co, 1e-4)]
     c = iso.cornering(np.zeros(3), [1, 0, 0], [0, 1, 0], 0.1, paths)
-    assert c.CR == pytest.approx([rho * (math.sqrt(2) - 1)] * 2, abs=1e-6)
-    assert c.CO == pytest.approx([co, 2 * co], abs=1e-7)
+    assert pytest.approx([rho * (math.sqrt(2) - 1)] * 2, abs=1e-6) == c.CR
+    assert pytest.approx([co, 2 * co], abs=1e-7) == c.CO
     sharp = iso.cornering(np.zeros(3), [1, 0, 0], [0, 1, 0], 0.1, [_corner_path(1e-9, 0.0, 1e-3)])
     assert sharp.CR[0] == pytest.approx(0.0, abs=1e-9) and sharp.CO[0] == 0.0
 
@@ -155,9 +155,9 @@ def test_path_speeds_and_velocity_characteristics():
     speeds = [np.array([0.24, 0.26, 0.25]), np.array([0.25, 0.25, 0.25]), np.array([0.26, 0.27, 0.25])]
     pv = iso.path_velocity(speeds, 0.25)
     means = np.array([0.25, 0.25, 0.26])
-    assert pv.AV == pytest.approx(100 * (means.mean() - 0.25) / 0.25)
-    assert pv.RV == pytest.approx(3 * means.std(ddof=1))
-    assert pv.FV == pytest.approx(0.02)
+    assert pytest.approx(100 * (means.mean() - 0.25) / 0.25) == pv.AV
+    assert pytest.approx(3 * means.std(ddof=1)) == pv.RV
+    assert pytest.approx(0.02) == pv.FV
     with pytest.raises(ValueError, match="commanded speed"):
         iso.path_velocity(speeds, 0.0)
 
@@ -182,8 +182,8 @@ def test_weaving_stroke_and_frequency_errors():
     att = base + np.outer(5e-3 * 1.03 * np.sin(2 * np.pi * 0.98 * t), across)
     w = iso.weaving(t, cmd, att)
     assert w.stroke_c == pytest.approx(0.01, rel=1e-3)
-    assert w.WS == pytest.approx(3.0, abs=0.1)
-    assert w.WF == pytest.approx(-2.0, abs=0.02)
+    assert pytest.approx(3.0, abs=0.1) == w.WS
+    assert pytest.approx(-2.0, abs=0.02) == w.WF
 
 
 def test_path_accuracy_on_reorientation():
@@ -198,7 +198,7 @@ def test_path_accuracy_on_reorientation():
         spatial.homogeneous(spatial.euler_to_matrix(abc_c + o, "xyz"), pts + [0, 2e-4, 0]) for o in offsets
     ]
     pa = path_accuracy(cmd[::3], attained)
-    assert pa.AT == pytest.approx(2e-4, abs=1e-9)
+    assert pytest.approx(2e-4, abs=1e-9) == pa.AT
     assert pa.AT_abc == pytest.approx([0.001, 0.002, 0.0005], abs=1e-7)
     assert pa.RT_abc == pytest.approx([3 * np.std([1e-4, -1e-4], ddof=1), 0, 0], abs=1e-7)
     assert path_accuracy(pts[::3], [pts]).AT_abc is None  # positions only: unchanged behaviour
@@ -284,11 +284,8 @@ def test_bad_logs_name_file_row_and_column(tmp_path, text, message):
     assert message in str(err.value)
     result = runner.invoke(app, ["iso9283", str(path)])
     assert result.exit_code == 2
-    assert (
-        "Traceback" not in result.output
-        and result.exception is None
-        or isinstance(result.exception, SystemExit)
-    )
+    assert "Traceback" not in result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)  # no traceback
 
 
 def test_missing_log_file(tmp_path):
@@ -355,10 +352,10 @@ def test_simulated_path_characteristics(simulated):
     truth, e = sim.truth, ERRORS
     for d in rows[8].details:
         r = np.array(truth[f"path_{d['path']}_lateral_random_mm"])
-        l = np.abs(r - r.mean())
+        dist = np.abs(r - r.mean())
         assert d["AT_mm"] == pytest.approx(1e3 * (e.path_offset + e.path_wave) + r.mean(), abs=0.005)
         # RT is a maximum over 200 commanded points: it picks up the tracker noise (1 µm per axis)
-        assert d["RT_mm"] == pytest.approx(l.mean() + 3 * l.std(ddof=1), abs=0.01)
+        assert d["RT_mm"] == pytest.approx(dist.mean() + 3 * dist.std(ddof=1), abs=0.01)
     assert rows[9].details[0]["AT_abc_deg"] == pytest.approx(truth["AT_abc_deg_expected"], abs=0.001)
     for d in rows[10].details:
         assert d["CR_mm"] == pytest.approx(truth["CR_mm_expected"], abs=0.025)
