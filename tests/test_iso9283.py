@@ -274,6 +274,12 @@ HEADER = "time_s,test,cycle,target,x_mm,y_mm,z_mm,cmd_x_mm,cmd_y_mm,cmd_z_mm\n"
             "orientation columns come all or none",
         ),
         ("# a: b\n" + HEADER + "0,pose,1,P1,1,2,3,1,2,nan\n", "row 3 column cmd_z_mm"),
+        (HEADER + "0,pose,1,P1,1,2,3,1,2,3,9\n", "row 2: 11 fields, but the header has 10"),
+        ("# a: b\n\n" + HEADER + "\n0,pose,1,P1,1,2\n", "row 5: 6 fields"),
+        ("time_s," + HEADER, "row 1: duplicate column 'time_s'"),
+        (HEADER.replace(",", ";"), "columns must be separated by commas"),
+        (HEADER + '0,pose,1,"P1,1,2,3,1,2,3\n', "not a CSV table"),
+        (HEADER + "0,pose,1,P1,1,2,3,1,2,3\x00\n", "row 2 column cmd_z_mm"),
     ],
 )
 def test_bad_logs_name_file_row_and_column(tmp_path, text, message):
@@ -286,6 +292,13 @@ def test_bad_logs_name_file_row_and_column(tmp_path, text, message):
     assert result.exit_code == 2
     assert "Traceback" not in result.output
     assert result.exception is None or isinstance(result.exception, SystemExit)  # no traceback
+
+
+def test_log_that_is_not_utf8(tmp_path):
+    path = tmp_path / "bin.csv"
+    path.write_bytes(b"\xff\xfe\x00garbage")
+    result = runner.invoke(app, ["iso9283", str(path)])
+    assert result.exit_code == 2 and "not UTF-8" in result.output
 
 
 def test_missing_log_file(tmp_path):
@@ -426,3 +439,13 @@ def test_results_html_escapes_targets():
     log = _static_log({"<b>P1</b>": np.array([0.5, 0.0, 0.4])}, [np.zeros(3), np.full(3, 1e-5)])
     page = results_html(evaluate_log(log))
     assert "<b>P1" not in page and "&lt;b&gt;P1" in page
+
+
+def test_the_documented_example_log_reads(tmp_path):
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[1] / "docs" / "iso9283.md").read_text(encoding="utf-8")
+    block = doc.split("Example (the start of a simulated log")[1].split("```")[1]
+    log = read_iso9283_log(_write(tmp_path, block.lstrip("\n")))
+    assert log.n == 3 and log.conditions["limit_band_mm"] == "0.1"
+    assert log.position[0] == pytest.approx([-0.31864183, -0.995990399, -0.318476028])

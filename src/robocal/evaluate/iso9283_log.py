@@ -30,6 +30,7 @@ A run may hold a single sample (a static measurement) or a time record.
 
 from __future__ import annotations
 
+import csv
 import io
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -208,35 +209,55 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
         raise Iso9283LogError(f"{name}: no such file") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise Iso9283LogError(f"{name}: cannot read the file ({err.__class__.__name__})") from None
+    except UnicodeDecodeError:
+        raise Iso9283LogError(f"{name}: not UTF-8 text (a log is a UTF-8 CSV file)") from None
+    except OSError as err:
+        raise Iso9283LogError(
+            f"{name}: cannot read the file ({err.strerror or err.__class__.__name__})"
+        ) from None
     lines = text.splitlines()
     conditions, skip = _header(lines)
     if skip >= len(lines):
         raise _fail(name, None, None, "no header line (the file is empty or holds only comments)")
+    table: list[list[str]] = []
+    where: list[int] = []  # line number of every record in the file
+    reader = csv.reader(io.StringIO("\n".join(lines[skip:])), strict=True)
     try:
-        df = pd.read_csv(io.StringIO("\n".join(lines[skip:])), dtype=str, keep_default_na=False, comment=None)
-    except (pd.errors.ParserError, ValueError) as err:
-        raise _fail(name, None, None, f"not a CSV table: {str(err).splitlines()[0]}") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    unknown = [c for c in df.columns if c not in COLUMNS]
+        for record in reader:
+            if record:  # blank lines are skipped
+                table.append(record)
+                where.append(skip + reader.line_num)
+    except csv.Error as err:
+        raise _fail(name, skip + reader.line_num, None, f"not a CSV table: {err}") from None
+    header = [c.strip() for c in table[0]] if table else []
+    if len(header) == 1 and (";" in header[0] or "\t" in header[0]):
+        raise _fail(name, where[0], None, "the header has one column: columns must be separated by commas")
+    seen = [c for k, c in enumerate(header) if c in header[:k]]
+    if seen:
+        raise _fail(name, where[0], None, f"duplicate column {_short(seen[0])}")
+    unknown = [c for c in header if c not in COLUMNS]
     if unknown:
         raise _fail(
-            name, skip + 1, None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})"
+            name, where[0], None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})"
         )
-    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
-        raise _fail(name, skip + 1, None, f"missing column(s) {', '.join(missing)}")
+        raise _fail(name, where[0], None, f"missing column(s) {', '.join(missing)}")
     for group_cols, what in ((ORIENTATION_COLUMNS, "orientation"), (FORCE_COLUMNS, "load")):
-        have = [c for c in group_cols if c in df.columns]
+        have = [c for c in group_cols if c in header]
         if have and len(have) != len(group_cols):
-            lacking = [c for c in group_cols if c not in df.columns]
+            lacking = [c for c in group_cols if c not in header]
             raise _fail(
-                name, skip + 1, None, f"{what} columns come all or none: missing {', '.join(lacking)}"
+                name, where[0], None, f"{what} columns come all or none: missing {', '.join(lacking)}"
             )
+    body = table[1:]
+    for k, r in enumerate(body):
+        if len(r) != len(header):
+            raise _fail(name, where[k + 1], None, f"{len(r)} fields, but the header has {len(header)}")
+    df = pd.DataFrame(body, columns=header, dtype=str)
     if len(df) == 0:
         raise _fail(name, None, None, "no data rows")
-    line = np.arange(len(df)) + skip + 2
+    line = np.array(where[1:], dtype=int)
     numeric = [c for c in df.columns if c not in _TEXT]
     values: dict[str, np.ndarray] = {}
     for c in numeric:
