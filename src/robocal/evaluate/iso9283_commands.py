@@ -58,7 +58,7 @@ def iso9283_command(
     if html_out is not None:
         atomic_write_text(html_out, results_html(results, f"ISO 9283 characteristics of {log.name}"))
     if as_json:
-        print(json.dumps(results.to_dict(), indent=1))
+        print(json.dumps(results.to_dict(), indent=1, allow_nan=False))
         return
     table = Table(title=escape(f"ISO 9283 characteristics of {log}"), title_justify="left", show_lines=True)
     for col in ("#", "characteristic", "clause", "result", "cycles"):

@@ -104,24 +104,38 @@ class Iso9283Results:
     rows: tuple[Characteristic, ...]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "source": self.source,
-            "conditions": dict(self.conditions),
-            "limit_band_mm": self.band * 1e3,
-            "characteristics": [
-                {
-                    "number": r.number,
-                    "name": r.name,
-                    "clause": r.clause,
-                    "symbols": r.symbols,
-                    "measured": r.measured,
-                    "summary": r.summary,
-                    "cycles": r.cycles,
-                    "details": r.details,
-                }
-                for r in self.rows
-            ],
-        }
+        """Plain data (mm, deg, s, %); a value that could not be computed is None."""
+        return _finite(
+            {
+                "source": self.source,
+                "conditions": dict(self.conditions),
+                "limit_band_mm": self.band * 1e3,
+                "characteristics": [
+                    {
+                        "number": r.number,
+                        "name": r.name,
+                        "clause": r.clause,
+                        "symbols": r.symbols,
+                        "measured": r.measured,
+                        "summary": r.summary,
+                        "cycles": r.cycles,
+                        "details": r.details,
+                    }
+                    for r in self.rows
+                ],
+            }
+        )
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None (valid JSON)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
 
 
 # ------------------------------------------------------------------ visits
