@@ -449,3 +449,43 @@ def test_the_documented_example_log_reads(tmp_path):
     log = read_iso9283_log(_write(tmp_path, block.lstrip("\n")))
     assert log.n == 3 and log.conditions["limit_band_mm"] == "0.1"
     assert log.position[0] == pytest.approx([-0.31864183, -0.995990399, -0.318476028])
+
+
+def test_degenerate_logs_give_reasons_not_exceptions():
+    """Every test present but each one unusable: straight weaves, stationary paths, a
+    diagonal load, a single approach direction ... -> 14 rows, none measured, each with
+    a reason."""
+    rows = []
+    t = 0.0
+    for test in ("pose", "multidirectional", "distance", "drift", "exchangeability", "positioning"):
+        for j in (1, 2):
+            rows.append((t, test, j, "P1", "", [0.5, 0, 0.4], [0.5, 0, 0.4], [0, 0, 0]))
+            t += 1
+    for test in ("path", "reorientation", "cornering", "velocity", "weaving"):
+        for j in (1, 2):
+            for k in range(20):  # stationary, or a straight line without corners / weave
+                x = 0.0 if test in ("path", "velocity") else 0.001 * k
+                rows.append((t, test, j, "line", "", [x, 0, 0.4], [x, 0, 0.4], [0, 0, 0]))
+                t += 0.01
+    rows.append((t, "compliance", 1, "P1", "", [0.5, 0, 0.4], [0.5, 0, 0.4], [0, 0, 0]))
+    rows.append((t + 1, "compliance", 1, "P1", "", [0.5, 0, 0.4], [0.5, 0, 0.4], [10.0, 10.0, 0]))
+    n = len(rows)
+    log = Iso9283Log(
+        source="<degenerate>",
+        conditions={},
+        time=np.array([r[0] for r in rows]),
+        test=np.array([r[1] for r in rows]),
+        cycle=np.array([r[2] for r in rows]),
+        target=np.array([r[3] for r in rows]),
+        group=np.array([r[4] for r in rows]),
+        position=np.array([r[5] for r in rows], dtype=float),
+        commanded=np.array([r[6] for r in rows], dtype=float),
+        force=np.array([r[7] for r in rows], dtype=float),
+    )
+    assert log.n == n
+    res = evaluate_log(log)
+    assert [r.number for r in res.rows] == list(range(1, 15))
+    not_measured = [r for r in res.rows if not r.measured]
+    assert all(r.summary.startswith("not measured: ") and len(r.summary) > 20 for r in not_measured)
+    assert {r.number for r in not_measured} >= {2, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14}
+    json.dumps(res.to_dict(), allow_nan=False)

@@ -138,6 +138,25 @@ def _finite(value: Any) -> Any:
     return value
 
 
+#: number -> (number, name, clause, symbols), as the rows below spell them
+_NAMES: dict[int, tuple[int, str, str, str]] = {
+    1: (1, "pose accuracy and repeatability", "7.2.1, 7.2.2", "AP, RP"),
+    2: (2, "multi-directional pose accuracy variation", "7.2.3", "vAP"),
+    3: (3, "distance accuracy and repeatability", "7.3", "AD, RD"),
+    4: (4, "pose stabilisation time", "7.4", "t"),
+    5: (5, "pose overshoot", "7.5", "OV"),
+    6: (6, "drift of pose characteristics", "7.6", "dAP, dRP"),
+    7: (7, "exchangeability", "7.7", "E"),
+    8: (8, "path accuracy and repeatability", "8.2, 8.3", "AT, RT"),
+    9: (9, "path accuracy on reorientation", "8.4", "AT_a,b,c, RT_a,b,c"),
+    10: (10, "cornering deviations", "8.5", "CR, CO"),
+    11: (11, "path velocity characteristics", "8.6", "AV, RV, FV"),
+    12: (12, "minimum positioning time", "9", "t_p"),
+    13: (13, "static compliance", "10", "mm/N"),
+    14: (14, "weaving deviations", "11", "WS, WF"),
+}
+
+
 # ------------------------------------------------------------------ visits
 @dataclass(frozen=True)
 class _Visit:
@@ -208,7 +227,7 @@ def _no_rows(test: str) -> str:
 
 # ------------------------------------------------------------------ 1 AP/RP
 def _pose(log: Iso9283Log, visits: list[_Visit]) -> Characteristic:
-    args = (1, "pose accuracy and repeatability", "7.2.1, 7.2.2", "AP, RP")
+    args = _NAMES[1]
     if not visits:
         return _missing(*args, _no_rows("pose"))
     details = []
@@ -236,7 +255,7 @@ def _pose(log: Iso9283Log, visits: list[_Visit]) -> Characteristic:
 
 # ------------------------------------------------------------------ 2 vAP
 def _multidirectional(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (2, "multi-directional pose accuracy variation", "7.2.3", "vAP")
+    args = _NAMES[2]
     visits = _visits(log, "multidirectional", opts)
     if not visits:
         return _missing(*args, _no_rows("multidirectional"))
@@ -267,7 +286,7 @@ def _multidirectional(log: Iso9283Log, opts: EvaluationOptions) -> Characteristi
 
 # ------------------------------------------------------------------ 3 AD/RD
 def _distance(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (3, "distance accuracy and repeatability", "7.3", "AD, RD")
+    args = _NAMES[3]
     visits = _visits(log, "distance", opts)
     if not visits:
         return _missing(*args, _no_rows("distance"))
@@ -309,8 +328,8 @@ def _distance(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
 def _stabilisation_rows(
     log: Iso9283Log, visits: list[_Visit], band: float
 ) -> tuple[Characteristic, Characteristic]:
-    a4 = (4, "pose stabilisation time", "7.4", "t")
-    a5 = (5, "pose overshoot", "7.5", "OV")
+    a4 = _NAMES[4]
+    a5 = _NAMES[5]
     if not visits:
         return _missing(*a4, _no_rows("pose")), _missing(*a5, _no_rows("pose"))
     details = []
@@ -369,7 +388,7 @@ def _stabilisation_rows(
 
 # ------------------------------------------------------------------ 6 drift
 def _drift(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (6, "drift of pose characteristics", "7.6", "dAP, dRP")
+    args = _NAMES[6]
     visits = _visits(log, "drift", opts)
     if not visits:
         return _missing(*args, _no_rows("drift"))
@@ -409,7 +428,7 @@ def _drift(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
 
 # ------------------------------------------------------------------ 7 exchangeability
 def _exchangeability(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (7, "exchangeability", "7.7", "E")
+    args = _NAMES[7]
     visits = _visits(log, "exchangeability", opts)
     if not visits:
         return _missing(*args, _no_rows("exchangeability"))
@@ -477,7 +496,7 @@ def _path_rows(log: Iso9283Log, test: str, opts: EvaluationOptions) -> list[dict
 
 
 def _path(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (8, "path accuracy and repeatability", "8.2, 8.3", "AT, RT")
+    args = _NAMES[8]
     if not log.runs("path"):
         return _missing(*args, _no_rows("path"))
     details = _path_rows(log, "path", opts)
@@ -495,7 +514,7 @@ def _path(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
 
 
 def _reorientation(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (9, "path accuracy on reorientation", "8.4", "AT_a,b,c, RT_a,b,c")
+    args = _NAMES[9]
     if not log.runs("reorientation"):
         return _missing(*args, _no_rows("reorientation"))
     if log.rotation is None:
@@ -543,7 +562,7 @@ def _corners(points: Array, angle_deg: float) -> list[tuple[Array, Array, Array,
 
 
 def _cornering(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (10, "cornering deviations", "8.5", "CR, CO")
+    args = _NAMES[10]
     paths = _paths(log, "cornering")
     if not paths:
         return _missing(*args, _no_rows("cornering"))
@@ -582,7 +601,7 @@ def _cornering(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
 
 # ------------------------------------------------------------------ 11 velocity
 def _velocity(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
-    args = (11, "path velocity characteristics", "8.6", "AV, RV, FV")
+    args = _NAMES[11]
     paths = _paths(log, "velocity")
     if not paths:
         return _missing(*args, _no_rows("velocity"))
@@ -623,7 +642,7 @@ def _velocity(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
 
 # ------------------------------------------------------------------ 12 positioning time
 def _positioning(log: Iso9283Log, opts: EvaluationOptions, band: float) -> Characteristic:
-    args = (12, "minimum positioning time", "9", "t_p")
+    args = _NAMES[12]
     visits = _visits(log, "positioning", opts)
     if not visits:
         return _missing(*args, _no_rows("positioning"))
@@ -652,7 +671,7 @@ def _positioning(log: Iso9283Log, opts: EvaluationOptions, band: float) -> Chara
 
 # ------------------------------------------------------------------ 13 compliance
 def _compliance(log: Iso9283Log) -> Characteristic:
-    args = (13, "static compliance", "10", "mm/N")
+    args = _NAMES[13]
     idx = np.flatnonzero(log.test == "compliance")
     if len(idx) == 0:
         return _missing(*args, _no_rows("compliance"))
@@ -687,7 +706,7 @@ def _compliance(log: Iso9283Log) -> Characteristic:
 
 # ------------------------------------------------------------------ 14 weaving
 def _weaving(log: Iso9283Log) -> Characteristic:
-    args = (14, "weaving deviations", "11", "WS, WF")
+    args = _NAMES[14]
     paths = _paths(log, "weaving")
     if not paths:
         return _missing(*args, _no_rows("weaving"))
@@ -742,23 +761,35 @@ def evaluate_log(log: Iso9283Log, options: EvaluationOptions | None = None) -> I
     listed as not measured, with the reason)."""
     opts = options or EvaluationOptions()
     band = _band(log, opts)
+
+    def guarded(number: int, build: Callable[[], Any]) -> Any:
+        """``build()``, or its rows as not measured when the log's data defeat it."""
+        try:
+            return build()
+        except (ValueError, np.linalg.LinAlgError) as err:
+            count = 2 if number == 4 else 1
+            out = tuple(
+                _missing(*_NAMES[number + k], f"the data do not allow it: {err}") for k in range(count)
+            )
+            return out if count == 2 else out[0]
+
     pose = _visits(log, "pose", opts)
-    stab, over = _stabilisation_rows(log, pose, band)
+    stab, over = guarded(4, lambda: _stabilisation_rows(log, pose, band))
     rows = (
-        _pose(log, pose),
-        _multidirectional(log, opts),
-        _distance(log, opts),
+        guarded(1, lambda: _pose(log, pose)),
+        guarded(2, lambda: _multidirectional(log, opts)),
+        guarded(3, lambda: _distance(log, opts)),
         stab,
         over,
-        _drift(log, opts),
-        _exchangeability(log, opts),
-        _path(log, opts),
-        _reorientation(log, opts),
-        _cornering(log, opts),
-        _velocity(log, opts),
-        _positioning(log, opts, band),
-        _compliance(log),
-        _weaving(log),
+        guarded(6, lambda: _drift(log, opts)),
+        guarded(7, lambda: _exchangeability(log, opts)),
+        guarded(8, lambda: _path(log, opts)),
+        guarded(9, lambda: _reorientation(log, opts)),
+        guarded(10, lambda: _cornering(log, opts)),
+        guarded(11, lambda: _velocity(log, opts)),
+        guarded(12, lambda: _positioning(log, opts, band)),
+        guarded(13, lambda: _compliance(log)),
+        guarded(14, lambda: _weaving(log)),
     )
     return Iso9283Results(log.source, dict(log.conditions), band, rows)
 
