@@ -8,6 +8,8 @@ Commands:
     robocal simulate ROBOT --poses POSES.csv --device laser-tracker --noise 0.02mm --seed 1
                      -o meas.csv
         simulated measurements of a robot with drawn errors, and their truth beside them
+    robocal simulate ROBOT --log LOG.csv [--seed 1] [--noise 0.005mm]
+        a simulated ISO 9283 measurement log and its truth (robocal.evaluate.iso9283_sim)
 """
 
 from __future__ import annotations
