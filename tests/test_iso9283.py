@@ -489,3 +489,25 @@ def test_degenerate_logs_give_reasons_not_exceptions():
     assert all(r.summary.startswith("not measured: ") and len(r.summary) > 20 for r in not_measured)
     assert {r.number for r in not_measured} >= {2, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14}
     json.dumps(res.to_dict(), allow_nan=False)
+
+
+def test_simulate_log_options(tmp_path):
+    both = runner.invoke(app, ["simulate", "ur10", "--log", str(tmp_path / "a.csv"), "--poses", "p.csv"])
+    assert both.exit_code == 2 and "drop --poses" in both.output
+    neither = runner.invoke(app, ["simulate", "ur10"])
+    assert neither.exit_code == 2 and "--log" in neither.output
+    assert not (tmp_path / "a.csv").exists()
+
+
+@pytest.mark.slow
+def test_simulate_log_command_end_to_end(tmp_path):
+    """The README's two commands: every characteristic measured, the truth beside the log."""
+    log = tmp_path / "iso.csv"
+    made = runner.invoke(app, ["simulate", "ur10", "--log", str(log), "--seed", "1"])
+    assert made.exit_code == 0, made.output
+    assert (tmp_path / "iso.truth.yaml").is_file()
+    result = runner.invoke(app, ["iso9283", str(log), "--json"])
+    assert result.exit_code == 0, result.output
+    assert all(c["measured"] for c in json.loads(result.output)["characteristics"])
+    again = runner.invoke(app, ["simulate", "ur10", "--log", str(log)])
+    assert again.exit_code == 2 and "--force" in again.output
