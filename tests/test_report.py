@@ -145,3 +145,37 @@ def test_report_lists_other_joint_effects_when_the_result_has_them(calibration):
     page = build_report(result)
     assert "<section id='joint-effects'>" in page
     assert "backlash" in page and "0.00025" in page and "tilt_alpha" in page
+
+
+def test_report_shows_the_iso9283_characteristics_of_a_log(calibration, tmp_path):
+    from robocal.evaluate.iso9283_log import Iso9283Log, write_iso9283_log
+
+    result = calibration[0]
+    c = np.array([0.5, 0.0, 0.4])
+    off = np.array([[1e-4, 0, 0], [1e-4, 2e-5, 0], [1e-4, 0, 2e-5]])
+    log = Iso9283Log(
+        source="<made>",
+        conditions={"operator": "<b>x</b>"},
+        time=np.arange(3.0),
+        test=np.full(3, "pose"),
+        cycle=np.arange(1, 4),
+        target=np.full(3, "P1"),
+        group=np.full(3, ""),
+        position=c + off,
+        commanded=np.tile(c, (3, 1)),
+    )
+    path = write_iso9283_log(log, tmp_path / "iso<1>.csv")
+    result.save(tmp_path / "cal")
+    out = tmp_path / "report.html"
+    done = runner.invoke(app, ["report", str(tmp_path / "cal"), "-o", str(out), "--iso9283", str(path)])
+    assert done.exit_code == 0, done.output
+    page = out.read_text()
+    assert "<section id='iso9283'>" in page and "iso&lt;1&gt;.csv" in page
+    assert "pose accuracy and repeatability (AP, RP)" in page and "not measured" in page
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,test\n", encoding="utf-8")
+    refused = runner.invoke(
+        app, ["report", str(tmp_path / "cal"), "-o", str(tmp_path / "r2.html"), "--iso9283", str(bad)]
+    )
+    assert refused.exit_code == 2 and "missing column" in refused.output
+    assert not (tmp_path / "r2.html").exists()

@@ -224,6 +224,9 @@ _export_commands.register(app)
 from robocal.evaluate import commands as _evaluate_commands  # noqa: E402
 
 _evaluate_commands.register(app)
+from robocal.evaluate import iso9283_commands as _iso9283_commands  # noqa: E402
+
+_iso9283_commands.register(app)
 from robocal import study_commands as _study_commands  # noqa: E402
 
 _study_commands.register(app)

@@ -55,6 +55,12 @@ def report_command(
     limits: Limits = "error",
     incomplete: Incomplete = "error",
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    iso9283_log: Annotated[
+        Path | None,
+        typer.Option(
+            "--iso9283", help="add the ISO 9283 characteristics of a measurement log (docs/iso9283.md)"
+        ),
+    ] = None,
 ) -> None:
     """Write the self-contained HTML report of a calibration (works offline)."""
     if output is not None:
@@ -97,6 +103,17 @@ def report_command(
             evaluation = json.loads(ev_path.read_text(encoding="utf-8"))
         except json.JSONDecodeError as err:
             raise fail(f"{ev_path}: not valid JSON: {err}") from None
+    if iso9283_log is not None:
+        from rich.markup import escape
+
+        from robocal.evaluate.iso9283_log import read_iso9283_log
+        from robocal.evaluate.iso9283_report import evaluate_log
+
+        try:  # a bad log is an Iso9283LogError, a ValueError naming file, row and column
+            iso = evaluate_log(read_iso9283_log(iso9283_log)).to_dict()
+        except ValueError as err:
+            raise fail(escape(str(err))) from None
+        evaluation = {**(evaluation or {}), "iso9283": iso}
     try:
         with console.status("writing the report ..."):
             path = write_report(result, output, data=data, test_data=test, evaluation=evaluation, title=title)

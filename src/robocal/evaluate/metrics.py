@@ -22,7 +22,10 @@ plane normal to the commanded path at ``c_i`` (the point ``x_ij``), and
 * path accuracy ``AT_P = max_i sqrt((x̄_i − x_ci)² + (ȳ_i − y_ci)² + (z̄_i − z_ci)²)``
   with ``x̄_i = (1/n) Σ_j x_ij`` …;
 * path repeatability ``RT_P = max_i (l̄_i + 3 S_li)`` with ``l_ij`` the distance of
-  ``x_ij`` from the barycentre ``(x̄_i, ȳ_i, z̄_i)``.
+  ``x_ij`` from the barycentre ``(x̄_i, ȳ_i, z̄_i)``;
+* with orientations (§8.4, path accuracy on reorientation): ``AT_a = max_i |ā_i − a_ci|``
+  and ``RT_a = max_i 3 S_ai`` (also b, c), the attained orientation at a crossing
+  interpolated (slerp) between the two samples around it.
 
 Angles: the standard leaves the orientation convention to the robot; here ``a, b, c``
 are extrinsic rotations about the base x, y, z axes (``R = Rz(c) Ry(b) Rx(a)``,
@@ -50,6 +53,7 @@ n − 1 for independent samples).  Mean errors get ``x̄ ± t s/√n``.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -266,6 +270,9 @@ class PathAccuracy:
         crossings: ``(n, m, 3)`` crossing points per cycle (NaN where the attained path
             does not cross the normal plane near the commanded point).
         n_cycles: ``n``.
+        AT_abc: ``(AT_a, AT_b, AT_c)`` (rad), the largest mean orientation deviation at a
+            commanded point (§8.4), or None without orientations.
+        RT_abc: ``(RT_a, RT_b, RT_c)`` (rad), the largest ``3 S_a`` ..., or None.
     """
 
     AT: float
@@ -275,6 +282,8 @@ class PathAccuracy:
     barycentres: Array
     crossings: Array = field(repr=False)
     n_cycles: int = 0
+    AT_abc: Array | None = None
+    RT_abc: Array | None = None
 
 
 def _tangents(c: Array) -> Array:
@@ -291,11 +300,12 @@ def _arc_fraction(points: Array) -> Array:
     return s / s[-1] if s[-1] > 0 else np.linspace(0.0, 1.0, len(points))
 
 
-def _crossings(c: Array, t: Array, path: Array, window: float) -> Array:
-    """Points ``(m, 3)`` where polyline ``path`` ``(k, 3)`` crosses the planes through
-    ``c`` ``(m, 3)`` normal to ``t``: of the crossings on segments within ``window``
-    (fraction of the path's length) of the commanded point's place along its path, the
-    one nearest to ``c_i`` (NaN if none)."""
+def _crossings(c: Array, t: Array, path: Array, window: float) -> tuple[Array, Array, Array]:
+    """Where polyline ``path`` ``(k, 3)`` crosses the planes through ``c`` ``(m, 3)``
+    normal to ``t``: of the crossings on segments within ``window`` (fraction of the
+    path's length) of the commanded point's place along its path, the one nearest to
+    ``c_i``.  Returns the points ``(m, 3)`` (NaN if none), the segment index ``(m,)``
+    and the fraction ``(m,)`` along that segment."""
     s = np.einsum("mi,kmi->mk", t, path[:, None, :] - c[None, :, :])  # (m, k) signed distances
     s0, s1 = s[:, :-1], s[:, 1:]
     cross = ((s0 <= 0) & (s1 > 0)) | ((s0 >= 0) & (s1 < 0))
@@ -308,43 +318,64 @@ def _crossings(c: Array, t: Array, path: Array, window: float) -> Array:
     pts = path[None, :-1, :] + u[..., None] * (path[None, 1:, :] - path[None, :-1, :])  # (m, k-1, 3)
     dist = np.linalg.norm(pts - c[:, None, :], axis=2)
     dist = np.where(cross, dist, np.inf)
+    rows = np.arange(len(c))
     best = np.argmin(dist, axis=1)
-    out = pts[np.arange(len(c)), best]
-    out[~np.isfinite(dist[np.arange(len(c)), best])] = np.nan
+    out = pts[rows, best]
+    out[~np.isfinite(dist[rows, best])] = np.nan
+    return out, best, u[rows, best]
+
+
+def _crossing_angles(R: Array, seg: Array, u: Array, R_c: Array, seq: str) -> Array:
+    """Orientation deviations ``(m, 3)`` (rad) at the crossings: the attained rotation
+    slerped between samples ``seg`` and ``seg + 1`` of ``R`` ``(k, 3, 3)`` by ``u``,
+    as angles minus those of the commanded ``R_c`` ``(m, 3, 3)`` (NaN where no crossing)."""
+    ok = np.isfinite(u)
+    out = np.full((len(seg), 3), np.nan)
+    if ok.any():
+        R0, R1 = R[seg[ok]], R[seg[ok] + 1]
+        step = spatial.matrix_to_rotvec(np.swapaxes(R0, -1, -2) @ R1) * u[ok, None]
+        out[ok] = _angle_deltas(R0 @ spatial.rotvec_to_matrix(step), R_c[ok], seq)
     return out
 
 
 def path_accuracy(
-    commanded: ArrayLike, attained: ArrayLike | Sequence[ArrayLike], window: float = 0.1
+    commanded: ArrayLike,
+    attained: ArrayLike | Sequence[ArrayLike],
+    window: float = 0.1,
+    angles: str = ISO_ANGLES,
 ) -> PathAccuracy:
-    """ISO 9283 path accuracy AT and repeatability RT (positions).
+    """ISO 9283 path accuracy AT and repeatability RT (§8.2, §8.3; with frames also the
+    orientation terms of §8.4).
 
     Args:
-        commanded: ``(m, 3)`` points of the commanded path (m), in order.
-        attained: the attained paths of ``n`` cycles, each ``(k_j, 3)`` points in order
-            (an ``(n, k, 3)`` array or a list), sampled finely enough that the segments
-            between samples are straight.
+        commanded: ``(m, 3)`` points or ``(m, 4, 4)`` frames of the commanded path (m), in order.
+        attained: the attained paths of ``n`` cycles, each ``(k_j, 3)`` points or
+            ``(k_j, 4, 4)`` frames in order (an array or a list), sampled finely enough
+            that the segments between samples are straight.
         window: a crossing counts for commanded point ``c_i`` only on the part of the
             attained path within this fraction of its length of ``c_i``'s place along
             the commanded path (so that a closed or folded path is not cut on its far
             side).
+        angles: Euler sequence of the orientation angles a, b, c (see :func:`pose_accuracy`).
 
     A commanded point whose normal plane no attained path crosses (e.g. an end point
     that every cycle stops short of) gets NaN and is left out of AT and RT; an error is
     raised if that leaves no point.
     """
-    c = np.asarray(commanded, dtype=float)
-    if c.ndim != 2 or c.shape[1] != 3 or len(c) < 2:
+    c, R_c = _split(commanded, "commanded path")
+    if c.ndim != 2 or len(c) < 2:
         raise ValueError(f"commanded path must be (m >= 2, 3) points (m), got shape {c.shape}")
-    paths = [np.asarray(p, dtype=float) for p in attained]
-    if not paths:
+    split = [_split(p, f"attained path {j}") for j, p in enumerate(attained)]
+    if not split:
         raise ValueError("path accuracy needs at least one attained path")
-    for j, p in enumerate(paths):
-        if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2:
+    for j, (p, _) in enumerate(split):
+        if p.ndim != 2 or len(p) < 2:
             raise ValueError(f"attained path {j} must be (k >= 2, 3) points (m), got shape {p.shape}")
+    with_angles = R_c is not None and all(R is not None for _, R in split)
     t = _tangents(c)
-    X = np.array([_crossings(c, t, p, window) for p in paths])  # (n, m, 3); a loop over cycles, not points
-    n = len(paths)
+    found = [_crossings(c, t, p, window) for p, _ in split]  # a loop over cycles, not points
+    X = np.array([f[0] for f in found])  # (n, m, 3)
+    n = len(split)
     with np.errstate(invalid="ignore"):
         count = np.sum(np.isfinite(X[..., 0]), axis=0)
         bary = np.nanmean(np.where(count[None, :, None] > 0, X, 0.0), axis=0)
@@ -358,7 +389,19 @@ def path_accuracy(
     if not np.any(np.isfinite(at)):
         raise ValueError("no attained path crosses the normal plane of any commanded point")
     RT = float(np.nanmax(rt)) if np.any(np.isfinite(rt)) else float("nan")
-    return PathAccuracy(float(np.nanmax(at)), RT, at, rt, bary, X, n)
+    AT_abc = RT_abc = None
+    if with_angles:
+        A = np.array(
+            [_crossing_angles(R, f[1], f[2], R_c, angles) for (_, R), f in zip(split, found, strict=True)]
+        )
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: no crossing there
+            a_mean = np.nanmean(A, axis=0)  # (m, 3)
+            AT_abc = np.nanmax(np.abs(a_mean), axis=0)
+            S_a = np.sqrt(np.nansum((A - a_mean) ** 2, axis=0) / np.maximum(count - 1, 1)[:, None])
+            S_a[count < 2] = np.nan
+            RT_abc = 3.0 * np.nanmax(S_a, axis=0) if n >= 2 else np.full(3, np.nan)
+    return PathAccuracy(float(np.nanmax(at)), RT, at, rt, bary, X, n, AT_abc, RT_abc)
 
 
 # ---------------------------------------------------------------------- seed tables

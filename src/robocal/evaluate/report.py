@@ -37,7 +37,8 @@ The *evaluation* is plain JSON-able data (SI units), as ``robocal demo`` writes 
      "compensation": {"method": str, ...},
      "comparison": [{"model": str, **ValidationStats.to_dict()}],
      "truth": {"parameter_deltas": {name: value}, "compliance_rad_per_Nm": {joint: c}},
-     "timings_s": {step: seconds}}
+     "timings_s": {step: seconds},
+     "iso9283": Iso9283Results.to_dict() of a measurement log (robocal iso9283 --json)}
 
 Positions of ``iso_poses`` and ``paths`` are in the robot's base frame (m).
 """
@@ -1327,6 +1328,10 @@ def build_report(
             )
         )
 
+    # ---- the fourteen ISO 9283 characteristics of a measurement log (robocal iso9283)
+    if ev.get("iso9283"):
+        sections.append(("iso9283", "ISO 9283 log", _iso9283_section(ev["iso9283"])))
+
     # ---- provenance
     rows = [
         ["robocal", __version__],
@@ -1366,6 +1371,20 @@ def build_report(
 <footer>robocal {__version__} — self-contained report: no external resources.</footer>
 </body></html>
 """
+
+
+def _iso9283_section(iso: Mapping[str, Any]) -> str:
+    """The table of ``robocal iso9283 --json`` (``Iso9283Results.to_dict()``)."""
+    rows = [
+        [c["number"], f"{c['name']} ({c['symbols']})", c["clause"], c["summary"], c["cycles"]]
+        for c in iso.get("characteristics", [])
+    ]
+    intro = (
+        f"From the measurement log {_e(iso.get('source', '?'))} (limit band "
+        f"{_e(iso.get('limit_band_mm', '?'))} mm); clauses of ISO 9283:1998, read as docs/iso9283.md states."
+    )
+    body = _table(["#", "characteristic", "clause", "result", "cycles (ISO)"], rows)
+    return _section("iso9283", "ISO 9283 characteristics of a measurement log", body, intro)
 
 
 def _orientation_table(result: CalibrationResult, data: Measurements) -> str:

@@ -8,6 +8,8 @@ Commands:
     robocal simulate ROBOT --poses POSES.csv --device laser-tracker --noise 0.02mm --seed 1
                      -o meas.csv
         simulated measurements of a robot with drawn errors, and their truth beside them
+    robocal simulate ROBOT --log LOG.csv [--seed 1] [--noise 0.005mm]
+        a simulated ISO 9283 measurement log and its truth (robocal.evaluate.iso9283_sim)
 """
 
 from __future__ import annotations
@@ -237,8 +239,10 @@ def data_check(
 # -------------------------------------------------------------------- simulate
 def simulate_command(
     robot: Annotated[str, typer.Argument(help="catalog name or model file (the nominal model)")],
-    poses: Annotated[Path, typer.Option("--poses", help="poses CSV: joint columns q1..qN (rad, m)")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="measurements CSV to write")],
+    poses: Annotated[
+        Path | None, typer.Option("--poses", help="poses CSV: joint columns q1..qN (rad, m)")
+    ] = None,
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="measurements CSV to write")] = None,
     device: Annotated[str, typer.Option(help=f"one of: {', '.join(DEVICES)}")] = "laser-tracker",
     noise: Annotated[
         str | None,
@@ -267,10 +271,21 @@ def simulate_command(
         float | None, typer.Option(help="fraction of rows labelled train (the rest test)")
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    log: Annotated[
+        Path | None,
+        typer.Option("--log", help="instead: write a simulated ISO 9283 log (docs/iso9283.md) to this CSV"),
+    ] = None,
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
-    if output is not None:
-        refuse_overwrite(output, force, "measurement file")
+    if log is not None:
+        if poses is not None or output is not None:
+            raise fail("--log writes an ISO 9283 log of its own test poses: drop --poses and -o")
+        from robocal.evaluate.iso9283_commands import simulate_log_command
+
+        return simulate_log_command(robot, log, seed, noise, force)
+    if poses is None or output is None:
+        raise fail("give --poses POSES.csv and -o OUTPUT.csv (or --log LOG.csv for an ISO 9283 log)")
+    refuse_overwrite(output, force, "measurement file")
     model = _model(robot)
     if device not in DEVICES:
         raise fail(f"unknown device {device!r}; known: {', '.join(DEVICES)}")

@@ -1,0 +1,366 @@
+"""The ISO 9283 measurement log: timestamped tracker samples with the commanded pose.
+
+A log is a CSV file (comma separated, ``.`` decimal mark) whose first lines may be
+``# key: value`` comments holding the test conditions (robot, load, speed, limit band,
+device, ...; ISO 9283 §6 asks for them in the test report), followed by one header line
+and one row per sample.  Units are in the column names: mm, degrees, seconds, newtons.
+See ``docs/iso9283.md`` for the full description and an example.
+
+Columns (required ones first):
+
+``time_s``          sample time (s); must not decrease within a test.
+``test``            which ISO 9283 test the sample belongs to, one of :data:`TESTS`.
+``cycle``           cycle number (integer >= 1).
+``target``          the commanded pose the robot is moving to or standing at (``P1``..),
+                    or the name of the path being followed (``line``, ``circle``, ...).
+``x_mm y_mm z_mm``  measured position of the tool point, robot base frame (mm).
+``cmd_x_mm ...``    commanded (set-point) position at the same instant (mm).
+``group``           optional: the approach direction (``multidirectional``), the
+                    measurement block (``drift``), the robot (``exchangeability``).
+``a_deg b_deg c_deg`` / ``cmd_a_deg cmd_b_deg cmd_c_deg``
+                    optional (all six or none): measured and commanded orientation,
+                    rotations about the base x, y, z axes (``R = Rz(c) Ry(b) Rx(a)``).
+``fx_N fy_N fz_N``  optional (all three or none): load applied to the mechanical
+                    interface (N), for the static-compliance test.
+
+A *run* is a maximal stretch of consecutive rows of one test with the same cycle,
+target and group: one approach to (and stay at) a pose, or one traversal of a path.
+A run may hold a single sample (a static measurement) or a time record.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from robocal import spatial
+
+__all__ = [
+    "COLUMNS",
+    "OPTIONAL_COLUMNS",
+    "REQUIRED_COLUMNS",
+    "TESTS",
+    "Iso9283Log",
+    "Iso9283LogError",
+    "Run",
+    "read_iso9283_log",
+    "write_iso9283_log",
+]
+
+Array = NDArray[np.float64]
+
+#: The tests a row may belong to, in the order of the standard.
+TESTS: tuple[str, ...] = (
+    "pose",  # 7.2 AP/RP, 7.4 stabilisation time, 7.5 overshoot
+    "multidirectional",  # 7.2.3 vAP
+    "distance",  # 7.3 AD/RD
+    "drift",  # 7.6 dAP/dRP
+    "exchangeability",  # 7.7 E
+    "path",  # 8.2/8.3 AT/RT
+    "reorientation",  # 8.4 AT/RT with orientation
+    "cornering",  # 8.5 CR/CO
+    "velocity",  # 8.6 AV/RV/FV
+    "positioning",  # 9 minimum positioning time
+    "compliance",  # 10 static compliance
+    "weaving",  # 11 WS/WF
+)
+REQUIRED_COLUMNS = (
+    "time_s",
+    "test",
+    "cycle",
+    "target",
+    "x_mm",
+    "y_mm",
+    "z_mm",
+    "cmd_x_mm",
+    "cmd_y_mm",
+    "cmd_z_mm",
+)
+ORIENTATION_COLUMNS = ("a_deg", "b_deg", "c_deg", "cmd_a_deg", "cmd_b_deg", "cmd_c_deg")
+FORCE_COLUMNS = ("fx_N", "fy_N", "fz_N")
+OPTIONAL_COLUMNS = ("group", *ORIENTATION_COLUMNS, *FORCE_COLUMNS)
+COLUMNS = (*REQUIRED_COLUMNS, *OPTIONAL_COLUMNS)
+_TEXT = ("test", "target", "group")
+ANGLES = "xyz"  # a, b, c about the base x, y, z axes (scipy "xyz": R = Rz(c) Ry(b) Rx(a))
+
+
+class Iso9283LogError(ValueError):
+    """A log that cannot be read; the message names the file, row and column."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run of a test: consecutive rows with the same cycle, target and group.
+
+    Attributes:
+        test, cycle, target, group: the run's labels.
+        index: ``(k,)`` row indices into the log's arrays, in time order.
+    """
+
+    test: str
+    cycle: int
+    target: str
+    group: str
+    index: NDArray[np.int_]
+
+
+@dataclass(frozen=True)
+class Iso9283Log:
+    """A measurement log in SI units.
+
+    Attributes:
+        source: the file it was read from (for messages).
+        conditions: the header's ``key: value`` test conditions.
+        time: ``(N,)`` s.
+        test, target, group: ``(N,)`` labels.
+        cycle: ``(N,)`` cycle numbers.
+        position, commanded: ``(N, 3)`` measured and commanded positions (m).
+        rotation, commanded_rotation: ``(N, 3, 3)`` or None.
+        force: ``(N, 3)`` applied load (N) or None.
+        line: ``(N,)`` the line number of every row in the file (1-based).
+    """
+
+    source: str
+    conditions: dict[str, str]
+    time: Array
+    test: NDArray[np.str_]
+    cycle: NDArray[np.int_]
+    target: NDArray[np.str_]
+    group: NDArray[np.str_]
+    position: Array
+    commanded: Array
+    rotation: Array | None = None
+    commanded_rotation: Array | None = None
+    force: Array | None = None
+    line: NDArray[np.int_] = field(default_factory=lambda: np.zeros(0, dtype=int), repr=False)
+
+    @property
+    def n(self) -> int:
+        return len(self.time)
+
+    def tests(self) -> list[str]:
+        """The tests present, in :data:`TESTS` order."""
+        present = set(self.test.tolist())
+        return [t for t in TESTS if t in present]
+
+    def runs(self, test: str) -> list[Run]:
+        """The runs of ``test`` in file order."""
+        idx = np.flatnonzero(self.test == test)
+        if len(idx) == 0:
+            return []
+        keys = list(
+            zip(self.cycle[idx].tolist(), self.target[idx].tolist(), self.group[idx].tolist(), strict=True)
+        )
+        out: list[Run] = []
+        start = 0
+        for k in range(1, len(idx) + 1):
+            if k == len(idx) or keys[k] != keys[start] or idx[k] != idx[k - 1] + 1:
+                c, tg, g = keys[start]
+                out.append(Run(test, int(c), tg, g, idx[start:k]))
+                start = k
+        return out
+
+    def frames(self, index: NDArray[np.int_], commanded: bool = False) -> Array | None:
+        """``(k, 4, 4)`` frames of rows ``index`` (m), or None without orientations."""
+        R = self.commanded_rotation if commanded else self.rotation
+        if R is None:
+            return None
+        p = (self.commanded if commanded else self.position)[index]
+        return spatial.homogeneous(R[index], p)
+
+
+def _header(lines: list[str]) -> tuple[dict[str, str], int]:
+    conditions: dict[str, str] = {}
+    k = 0
+    while k < len(lines) and (lines[k].startswith("#") or not lines[k].strip()):
+        text = lines[k].lstrip("#").strip()
+        if ":" in text:
+            key, value = text.split(":", 1)
+            conditions[key.strip()] = value.strip()
+        k += 1
+    return conditions, k
+
+
+def _fail(path: str, line: int | None, column: str | None, message: str) -> Iso9283LogError:
+    where = path + (f" row {line}" if line is not None else "") + (f" column {column}" if column else "")
+    return Iso9283LogError(f"{where}: {message}")
+
+
+def _short(value: object) -> str:
+    text = str(value)
+    return repr(text if len(text) <= 40 else text[:37] + "...")
+
+
+def read_iso9283_log(path: str | Path) -> Iso9283Log:
+    """Read an ISO 9283 log (see the module docstring).
+
+    Raises:
+        Iso9283LogError: one line naming the file, row (line number) and column of the
+            first problem.
+    """
+    name = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise Iso9283LogError(f"{name}: no such file") from None
+    except UnicodeDecodeError:
+        raise Iso9283LogError(f"{name}: not UTF-8 text (a log is a UTF-8 CSV file)") from None
+    except OSError as err:
+        raise Iso9283LogError(
+            f"{name}: cannot read the file ({err.strerror or err.__class__.__name__})"
+        ) from None
+    lines = text.splitlines()
+    conditions, skip = _header(lines)
+    if skip >= len(lines):
+        raise _fail(name, None, None, "no header line (the file is empty or holds only comments)")
+    table: list[list[str]] = []
+    where: list[int] = []  # line number of every record in the file
+    reader = csv.reader(io.StringIO("\n".join(lines[skip:])), strict=True)
+    try:
+        for record in reader:
+            if record:  # blank lines are skipped
+                table.append(record)
+                where.append(skip + reader.line_num)
+    except csv.Error as err:
+        raise _fail(name, skip + reader.line_num, None, f"not a CSV table: {err}") from None
+    header = [c.strip() for c in table[0]] if table else []
+    if len(header) == 1 and (";" in header[0] or "\t" in header[0]):
+        raise _fail(name, where[0], None, "the header has one column: columns must be separated by commas")
+    seen = [c for k, c in enumerate(header) if c in header[:k]]
+    if seen:
+        raise _fail(name, where[0], None, f"duplicate column {_short(seen[0])}")
+    unknown = [c for c in header if c not in COLUMNS]
+    if unknown:
+        raise _fail(
+            name, where[0], None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})"
+        )
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise _fail(name, where[0], None, f"missing column(s) {', '.join(missing)}")
+    for group_cols, what in ((ORIENTATION_COLUMNS, "orientation"), (FORCE_COLUMNS, "load")):
+        have = [c for c in group_cols if c in header]
+        if have and len(have) != len(group_cols):
+            lacking = [c for c in group_cols if c not in header]
+            raise _fail(
+                name, where[0], None, f"{what} columns come all or none: missing {', '.join(lacking)}"
+            )
+    body = table[1:]
+    for k, r in enumerate(body):
+        if len(r) != len(header):
+            raise _fail(name, where[k + 1], None, f"{len(r)} fields, but the header has {len(header)}")
+    df = pd.DataFrame(body, columns=header, dtype=str)
+    if len(df) == 0:
+        raise _fail(name, None, None, "no data rows")
+    line = np.array(where[1:], dtype=int)
+    numeric = [c for c in df.columns if c not in _TEXT]
+    values: dict[str, np.ndarray] = {}
+    for c in numeric:
+        raw = df[c].str.strip()
+        num = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
+        bad = ~np.isfinite(num)
+        if bad.any():
+            i = int(np.argmax(bad))
+            what = "empty" if raw.iloc[i] == "" else f"{_short(raw.iloc[i])} is not a finite number"
+            raise _fail(name, int(line[i]), c, what)
+        values[c] = num
+    texts = {
+        c: df[c].str.strip().to_numpy(dtype=str) if c in df.columns else np.full(len(df), "") for c in _TEXT
+    }
+    for c in ("test", "target"):
+        empty = texts[c] == ""
+        if empty.any():
+            raise _fail(name, int(line[int(np.argmax(empty))]), c, "empty")
+    bad_test = ~np.isin(texts["test"], TESTS)
+    if bad_test.any():
+        i = int(np.argmax(bad_test))
+        raise _fail(
+            name, int(line[i]), "test", f"{_short(texts['test'][i])} is not one of {', '.join(TESTS)}"
+        )
+    cyc = values["cycle"]
+    bad_cycle = (cyc < 1) | (cyc != np.round(cyc))
+    if bad_cycle.any():
+        i = int(np.argmax(bad_cycle))
+        raise _fail(name, int(line[i]), "cycle", f"{cyc[i]:g} is not a whole number >= 1")
+    t = values["time_s"]
+    for test in np.unique(texts["test"]):
+        idx = np.flatnonzero(texts["test"] == test)
+        back = np.flatnonzero(np.diff(t[idx]) < 0)
+        if len(back):
+            i = idx[back[0] + 1]
+            raise _fail(
+                name,
+                int(line[i]),
+                "time_s",
+                f"time goes back within test {test} ({t[i]:g} s after {t[i - 1]:g} s)",
+            )
+    mm = 1e-3
+    pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
+    cmd = np.column_stack([values[c] for c in ("cmd_x_mm", "cmd_y_mm", "cmd_z_mm")]) * mm
+    R = Rc = None
+    if "a_deg" in values:
+        R = spatial.euler_to_matrix(
+            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[:3]])), ANGLES
+        )
+        Rc = spatial.euler_to_matrix(
+            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[3:]])), ANGLES
+        )
+    force = np.column_stack([values[c] for c in FORCE_COLUMNS]) if "fx_N" in values else None
+    return Iso9283Log(
+        source=name,
+        conditions=conditions,
+        time=t,
+        test=texts["test"],
+        cycle=cyc.astype(int),
+        target=texts["target"],
+        group=texts["group"],
+        position=pos,
+        commanded=cmd,
+        rotation=R,
+        commanded_rotation=Rc,
+        force=force,
+        line=line,
+    )
+
+
+def log_text(log: Iso9283Log, decimals: int = 6) -> str:
+    """The CSV text of ``log`` (header comments, then the table; mm, deg, s, N)."""
+    out = io.StringIO()
+    out.write("# robocal ISO 9283 measurement log (docs/iso9283.md)\n")
+    for k, v in log.conditions.items():
+        out.write(f"# {k}: {v}\n".replace("\r", " "))
+    cols: dict[str, object] = {
+        "time_s": np.round(log.time, 6),
+        "test": log.test,
+        "cycle": log.cycle,
+        "target": log.target,
+        "group": log.group,
+    }
+    for k, c in enumerate("xyz"):
+        cols[f"{c}_mm"] = np.round(log.position[:, k] * 1e3, decimals)
+    for k, c in enumerate("xyz"):
+        cols[f"cmd_{c}_mm"] = np.round(log.commanded[:, k] * 1e3, decimals)
+    if log.rotation is not None and log.commanded_rotation is not None:
+        a = np.degrees(spatial.matrix_to_euler(log.rotation, ANGLES))
+        ac = np.degrees(spatial.matrix_to_euler(log.commanded_rotation, ANGLES))
+        for k, c in enumerate("abc"):
+            cols[f"{c}_deg"] = np.round(a[:, k], decimals)
+        for k, c in enumerate("abc"):
+            cols[f"cmd_{c}_deg"] = np.round(ac[:, k], decimals)
+    if log.force is not None:
+        for k, c in enumerate(FORCE_COLUMNS):
+            cols[c] = np.round(log.force[:, k], decimals)
+    pd.DataFrame(cols).to_csv(out, index=False, lineterminator="\n")
+    return out.getvalue()
+
+
+def write_iso9283_log(log: Iso9283Log, path: str | Path) -> Path:
+    """Write ``log`` to ``path`` whole (through a temporary file)."""
+    from robocal.model.files import atomic_write_text
+
+    return atomic_write_text(path, log_text(log))
