@@ -68,6 +68,7 @@ def report_command(
     from robocal.evaluate.report import write_report
     from robocal.identify.calibrate import CalibrationResult
     from robocal.identify.commands import _read, own_data
+    from robocal.identify.provenance import READER_DEFAULTS
 
     if not (directory / "result.json").is_file():
         raise fail(f"{directory} holds no calibration result (result.json)")
@@ -81,7 +82,7 @@ def report_command(
     def read(path: Path | None, default: str):
         if path is None:
             path = directory / default
-            return _read(path, result.model) if path.is_file() else None
+            return _read(path, result.model, **READER_DEFAULTS) if path.is_file() else None
         return _read(path, result.model, **values)
 
     data = test = None
