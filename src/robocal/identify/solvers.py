@@ -32,11 +32,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-__all__ = ["METHODS", "SolveResult", "levenberg_marquardt", "solve"]
+__all__ = [
+    "METHODS",
+    "BatchSolveResult",
+    "SolveResult",
+    "levenberg_marquardt",
+    "levenberg_marquardt_batch",
+    "solve",
+]
 
 Array = NDArray[np.float64]
 
@@ -88,13 +94,95 @@ def _lm(
 def levenberg_marquardt(
     problem, x0: Array, *, max_iterations: int = 200, tolerance: float = 1e-10
 ) -> SolveResult:
-    """Levenberg-Marquardt with Moré's column scaling and Nielsen's damping update.
+    """Levenberg-Marquardt on one problem: :func:`levenberg_marquardt_batch` with a batch of one.
+
+    ``problem`` gives weighted residuals ``problem.residual(x)`` ``(m,)`` and their
+    Jacobian ``problem.jacobian(x)`` ``(m, p)``; ``max_iterations`` counts evaluations."""
+
+    def evaluate(x: Array, _which: NDArray[np.intp]) -> tuple[Array, Array]:
+        return problem.residual(x[0])[None], problem.jacobian(x[0])[None]
+
+    fit = levenberg_marquardt_batch(
+        evaluate, np.asarray(x0, dtype=float)[None], max_evaluations=max_iterations, tolerance=tolerance
+    )
+    return fit.result(0)
+
+
+@dataclass
+class BatchSolveResult:
+    """What :func:`levenberg_marquardt_batch` returns for ``K`` problems.
+
+    Attributes:
+        x: ``(K, p)`` the solutions; r, J: weighted residuals ``(K, m)`` and Jacobians
+            ``(K, m, p)`` there.
+        success: ``(K,)`` converged; iterations: ``(K,)`` accepted steps + 1;
+            evaluations: ``(K,)`` residual-and-Jacobian evaluations.
+        max_evaluations: the budget (for the message of a fit that ran out of it).
+    """
+
+    x: Array
+    r: Array
+    J: Array
+    success: NDArray[np.bool_]
+    iterations: NDArray[np.intp]
+    evaluations: NDArray[np.intp]
+    max_evaluations: int
+    histories: list[list[float]] = field(default_factory=list)
+
+    def message(self, k: int) -> str:
+        if self.success[k]:
+            return "converged: the next step would not improve the fit"
+        return f"no convergence in {self.max_evaluations} evaluations"
+
+    def result(self, k: int) -> SolveResult:
+        """Problem ``k``'s :class:`SolveResult`."""
+        return SolveResult(
+            self.x[k].copy(),
+            bool(self.success[k]),
+            self.message(k),
+            int(self.iterations[k]),
+            int(self.evaluations[k]),
+            self.histories[k],
+        )
+
+
+def _damped_steps(A: Array, g: Array, mu: Array) -> tuple[Array, Array]:
+    """Steps ``δ = −(A + μI)⁻¹ g`` for a stack of normal matrices ``A`` ``(k, p, p)``,
+    raising ``μ`` ``(k,)`` tenfold (at least to 1e-12) where ``A + μI`` does not factor."""
+    eye = np.eye(A.shape[-1])
+    mu = mu.copy()
+    try:
+        L = np.linalg.cholesky(A + mu[:, None, None] * eye)
+    except np.linalg.LinAlgError:  # some do not factor: one at a time (rare)
+        L = np.empty_like(A)
+        for i in range(len(A)):
+            while True:
+                try:
+                    L[i] = np.linalg.cholesky(A[i] + mu[i] * eye)
+                    break
+                except np.linalg.LinAlgError:
+                    mu[i] = max(mu[i] * 10.0, 1e-12)
+    # two triangular solves (numpy's solve: no batched triangular solver in numpy)
+    z = np.linalg.solve(L, -g[..., None])
+    return np.linalg.solve(np.swapaxes(L, -1, -2), z)[..., 0], mu
+
+
+def levenberg_marquardt_batch(
+    evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
+    x0: Array,
+    *,
+    max_evaluations: int = 200,
+    tolerance: float = 1e-10,
+) -> BatchSolveResult:
+    """Levenberg-Marquardt with Moré's column scaling and Nielsen's damping update, for
+    ``K`` independent problems at once (one problem: :func:`levenberg_marquardt`).
 
     Written here rather than calling MINPACK (scipy's ``method="lm"``) because a
     calibration's residuals and Jacobian come out of one kinematic pass: evaluating them
     together at every trial point, and stopping as soon as the *predicted* gain of the
     next step is negligible (without evaluating that step), takes about half the passes
-    MINPACK's separate function and Jacobian calls need (``benchmarks/bench_calibrate.py``).
+    MINPACK's separate function and Jacobian calls need (``benchmarks/bench_calibrate.py``);
+    and because a study evaluates many robots' residuals in one batched pass.
 
     Each iteration solves ``(J_sᵀJ_s + μI) δ_s = −J_sᵀ r`` with ``J_s = J D⁻¹`` (``D``:
     the largest column norms met so far, MINPACK's scaling) by Cholesky; ``μ`` starts at
@@ -102,68 +190,73 @@ def levenberg_marquardt(
     starts from the nominal model) and follows the gain ratio ``ρ`` (actual over
     predicted decrease): ``μ ← μ·max(1/3, 1 − (2ρ − 1)³)`` on success, ``μ ← μ·ν,
     ν ← 2ν`` on failure (Nielsen 1999, "Damping parameter in Marquardt's method",
-    IMM-REP-1999-05).
+    IMM-REP-1999-05).  Every problem follows its own steps and damping; only the
+    evaluations are shared.
 
-    Stops when the predicted decrease of the next step is below ``tolerance`` times the
-    cost, or the step is below ``tolerance`` relative to the scaled parameters, or after
-    ``max_iterations`` evaluations (``method="lm"`` allows ``max_iterations · (p + 1)``,
-    the evaluation budget MINPACK would have with a finite-difference Jacobian).
+    A problem stops when the predicted decrease of its next step is below ``tolerance``
+    times its cost, or the step is below ``tolerance`` relative to the scaled
+    parameters, or after ``max_evaluations`` evaluations.
+
+    Args:
+        evaluate: ``evaluate(x, which)`` → weighted residuals ``(k, m)`` and Jacobians
+            ``(k, m, p)`` of problems ``which`` ``(k,)`` (indices into the batch) at
+            ``x`` ``(k, p)``.
+        x0: ``(K, p)`` start values.
     """
     x = np.array(x0, dtype=float)
-    r, J = problem.residual(x), problem.jacobian(x)
-    cost = float(r @ r)
-    history = [math.sqrt(cost / max(len(r), 1))]
-    D = np.linalg.norm(J, axis=0)
+    K = len(x)
+    everyone = np.arange(K)
+    r, J = evaluate(x, everyone)
+    r, J = np.array(r, dtype=float), np.array(J, dtype=float)
+    cost = _squares(r)
+    histories = [[math.sqrt(c / max(r.shape[1], 1))] for c in cost]
+    D = np.linalg.norm(J, axis=1)
     D[D == 0] = 1.0
-    mu, nu = None, 2.0
-    evaluations = 1
-    eye = np.eye(len(x))
-    while True:
-        D = np.maximum(D, np.linalg.norm(J, axis=0))
-        Js = J / D
-        A = Js.T @ Js
-        g = Js.T @ r
-        if mu is None:
-            mu = 1e-6 * float(np.max(np.diag(A)))
-        while True:  # a damping for which A + μI factors (μ grows on failure)
-            try:
-                step = -scipy.linalg.cho_solve(scipy.linalg.cho_factor(A + mu * eye), g)
-                break
-            except np.linalg.LinAlgError:
-                mu = max(mu * 10.0, 1e-12)
-        predicted = -float(step @ (2.0 * g + A @ step))  # cost − |r + J_s δ_s|²
-        small_step = np.linalg.norm(step) <= tolerance * (np.linalg.norm(D * x) + tolerance)
-        if predicted <= tolerance * cost or small_step or cost == 0.0:
-            return SolveResult(
-                x,
-                True,
-                "converged: the next step would not improve the fit",
-                len(history),
-                evaluations,
-                history,
-            )
-        if evaluations >= max_iterations:
-            return SolveResult(
-                x,
-                False,
-                f"no convergence in {max_iterations} evaluations",
-                len(history),
-                evaluations,
-                history,
-            )
-        x_new = x + step / D
-        r_new = problem.residual(x_new)
-        evaluations += 1
-        cost_new = float(r_new @ r_new)
-        rho = (cost - cost_new) / predicted
-        if rho > 0:
-            x, r, J, cost = x_new, r_new, problem.jacobian(x_new), cost_new
-            history.append(math.sqrt(cost / max(len(r), 1)))
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
-        else:
-            mu *= nu
-            nu *= 2.0
+    mu = np.full(K, np.nan)
+    nu = np.full(K, 2.0)
+    evaluations = np.ones(K, dtype=np.intp)
+    success = np.zeros(K, dtype=bool)
+    active = everyone
+    while len(active):
+        Ja, ra, xa = J[active], r[active], x[active]
+        D[active] = Da = np.maximum(D[active], np.linalg.norm(Ja, axis=1))
+        Js = Ja / Da[:, None, :]
+        A = np.swapaxes(Js, 1, 2) @ Js
+        g = (np.swapaxes(Js, 1, 2) @ ra[:, :, None])[..., 0]
+        fresh = np.isnan(mu[active])
+        mu[active[fresh]] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
+        step, mu[active] = _damped_steps(A, g, mu[active])
+        predicted = -(step[:, None, :] @ (2.0 * g + (A @ step[:, :, None])[..., 0])[:, :, None])[:, 0, 0]
+        small_step = np.linalg.norm(step, axis=1) <= tolerance * (np.linalg.norm(Da * xa, axis=1) + tolerance)
+        ca = cost[active]
+        converged = (predicted <= tolerance * ca) | small_step | (ca == 0.0)
+        success[active[converged]] = True
+        out_of_budget = ~converged & (evaluations[active] >= max_evaluations)
+        going = ~(converged | out_of_budget)
+        active, step, predicted, Da = active[going], step[going], predicted[going], Da[going]
+        if not len(active):
+            break
+        x_new = x[active] + step / Da
+        r_new, J_new = evaluate(x_new, active)
+        evaluations[active] += 1
+        cost_new = _squares(r_new)
+        rho = (cost[active] - cost_new) / predicted
+        better = rho > 0
+        acc, rej = active[better], active[~better]
+        x[acc], r[acc], J[acc], cost[acc] = x_new[better], r_new[better], J_new[better], cost_new[better]
+        for k, c in zip(acc.tolist(), cost_new[better].tolist(), strict=True):
+            histories[k].append(math.sqrt(c / max(r.shape[1], 1)))
+        mu[acc] *= np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho[better] - 1.0) ** 3)
+        nu[acc] = 2.0
+        mu[rej] *= nu[rej]
+        nu[rej] *= 2.0
+    iterations = np.array([len(h) for h in histories], dtype=np.intp)
+    return BatchSolveResult(x, r, J, success, iterations, evaluations, max_evaluations, histories)
+
+
+def _squares(r: Array) -> Array:
+    """``(k,)`` sums of squares of the rows of ``r`` ``(k, m)``."""
+    return (r[:, None, :] @ r[:, :, None])[:, 0, 0]
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100, **_) -> SolveResult:
