@@ -148,23 +148,25 @@ class BatchSolveResult:
 
 def _damped_steps(A: Array, g: Array, mu: Array) -> tuple[Array, Array]:
     """Steps ``δ = −(A + μI)⁻¹ g`` for a stack of normal matrices ``A`` ``(k, p, p)``,
-    raising ``μ`` ``(k,)`` tenfold (at least to 1e-12) where ``A + μI`` does not factor."""
+    raising ``μ`` ``(k,)`` tenfold (at least to 1e-12) where ``A + μI`` is not positive
+    definite (its Cholesky factorisation fails)."""
     eye = np.eye(A.shape[-1])
     mu = mu.copy()
+    damped = A + mu[:, None, None] * eye
     try:
-        L = np.linalg.cholesky(A + mu[:, None, None] * eye)
-    except np.linalg.LinAlgError:  # some do not factor: one at a time (rare)
-        L = np.empty_like(A)
+        np.linalg.cholesky(damped)
+    except np.linalg.LinAlgError:  # some are not positive definite: one at a time (rare)
         for i in range(len(A)):
             while True:
                 try:
-                    L[i] = np.linalg.cholesky(A[i] + mu[i] * eye)
+                    np.linalg.cholesky(damped[i])
                     break
                 except np.linalg.LinAlgError:
                     mu[i] = max(mu[i] * 10.0, 1e-12)
-    # two triangular solves (numpy's solve: no batched triangular solver in numpy)
-    z = np.linalg.solve(L, -g[..., None])
-    return np.linalg.solve(np.swapaxes(L, -1, -2), z)[..., 0], mu
+                    damped[i] = A[i] + mu[i] * eye
+    # numpy has no batched triangular solve: one batched LU solve of the positive definite
+    # matrices (as accurate here, and cheaper than two general solves with the factor)
+    return np.linalg.solve(damped, -g[..., None])[..., 0], mu
 
 
 def levenberg_marquardt_batch(
@@ -205,58 +207,78 @@ def levenberg_marquardt_batch(
     """
     x = np.array(x0, dtype=float)
     K = len(x)
-    everyone = np.arange(K)
-    r, J = evaluate(x, everyone)
+    ids = np.arange(K)  # the problems still running; their state below, compacted as they stop
+    r, J = evaluate(x, ids)
     r, J = np.array(r, dtype=float), np.array(J, dtype=float)
+    m = max(r.shape[1], 1)
     cost = _squares(r)
-    histories = [[math.sqrt(c / max(r.shape[1], 1))] for c in cost]
-    D = np.linalg.norm(J, axis=1)
+    histories = [[math.sqrt(c / m)] for c in cost.tolist()]
+    D = _column_norms(J)
     D[D == 0] = 1.0
     mu = np.full(K, np.nan)
     nu = np.full(K, 2.0)
     evaluations = np.ones(K, dtype=np.intp)
-    success = np.zeros(K, dtype=bool)
-    active = everyone
-    while len(active):
-        Ja, ra, xa = J[active], r[active], x[active]
-        D[active] = Da = np.maximum(D[active], np.linalg.norm(Ja, axis=1))
-        Js = Ja / Da[:, None, :]
-        A = np.swapaxes(Js, 1, 2) @ Js
-        g = (np.swapaxes(Js, 1, 2) @ ra[:, :, None])[..., 0]
-        fresh = np.isnan(mu[active])
-        mu[active[fresh]] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
-        step, mu[active] = _damped_steps(A, g, mu[active])
-        predicted = -(step[:, None, :] @ (2.0 * g + (A @ step[:, :, None])[..., 0])[:, :, None])[:, 0, 0]
-        small_step = np.linalg.norm(step, axis=1) <= tolerance * (np.linalg.norm(Da * xa, axis=1) + tolerance)
-        ca = cost[active]
-        converged = (predicted <= tolerance * ca) | small_step | (ca == 0.0)
-        success[active[converged]] = True
-        out_of_budget = ~converged & (evaluations[active] >= max_evaluations)
-        going = ~(converged | out_of_budget)
-        active, step, predicted, Da = active[going], step[going], predicted[going], Da[going]
-        if not len(active):
-            break
-        x_new = x[active] + step / Da
-        r_new, J_new = evaluate(x_new, active)
-        evaluations[active] += 1
+    done = BatchSolveResult(x.copy(), r.copy(), J.copy(), np.zeros(K, dtype=bool), np.zeros(K, dtype=np.intp),
+                            np.zeros(K, dtype=np.intp), max_evaluations, histories)  # fmt: skip
+    while len(ids):
+        D = np.maximum(D, _column_norms(J))
+        Js = J / D[:, None, :]
+        JsT = Js.transpose(0, 2, 1)
+        A = JsT @ Js
+        g = (JsT @ r[:, :, None])[..., 0]
+        fresh = np.isnan(mu)
+        if fresh.any():
+            mu[fresh] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
+        step, mu = _damped_steps(A, g, mu)
+        predicted = -np.sum(step * (2.0 * g + (A @ step[:, :, None])[..., 0]), axis=1)
+        small_step = _norms(step) <= tolerance * (_norms(D * x) + tolerance)
+        converged = (predicted <= tolerance * cost) | small_step | (cost == 0.0)
+        stop = converged | (evaluations >= max_evaluations)
+        if stop.any():  # record the stopped ones, keep the others
+            f, k = np.flatnonzero(stop), ids[stop]
+            done.x[k], done.r[k], done.J[k] = x[f], r[f], J[f]
+            done.success[k], done.evaluations[k] = converged[f], evaluations[f]
+            going = ~stop
+            ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted = (
+                a[going] for a in (ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted)
+            )
+            if not len(ids):
+                break
+        x_new = x + step / D
+        r_new, J_new = evaluate(x_new, ids)
+        evaluations = evaluations + 1
         cost_new = _squares(r_new)
-        rho = (cost[active] - cost_new) / predicted
+        rho = (cost - cost_new) / predicted
         better = rho > 0
-        acc, rej = active[better], active[~better]
-        x[acc], r[acc], J[acc], cost[acc] = x_new[better], r_new[better], J_new[better], cost_new[better]
-        for k, c in zip(acc.tolist(), cost_new[better].tolist(), strict=True):
-            histories[k].append(math.sqrt(c / max(r.shape[1], 1)))
-        mu[acc] *= np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho[better] - 1.0) ** 3)
-        nu[acc] = 2.0
-        mu[rej] *= nu[rej]
-        nu[rej] *= 2.0
-    iterations = np.array([len(h) for h in histories], dtype=np.intp)
-    return BatchSolveResult(x, r, J, success, iterations, evaluations, max_evaluations, histories)
+        if better.all():
+            x, r, J, cost = x_new, r_new, J_new, cost_new
+        else:
+            x = np.where(better[:, None], x_new, x)
+            r = np.where(better[:, None], r_new, r)
+            J = np.where(better[:, None, None], J_new, J)
+            cost = np.where(better, cost_new, cost)
+        with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
+            mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
+        nu = np.where(better, 2.0, nu * 2.0)
+        for k, c in zip(ids[better].tolist(), cost_new[better].tolist(), strict=True):
+            histories[k].append(math.sqrt(c / m))
+    done.iterations[:] = [len(h) for h in histories]
+    return done
 
 
 def _squares(r: Array) -> Array:
     """``(k,)`` sums of squares of the rows of ``r`` ``(k, m)``."""
-    return (r[:, None, :] @ r[:, :, None])[:, 0, 0]
+    return np.einsum("km,km->k", r, r)
+
+
+def _norms(v: Array) -> Array:
+    """``(k,)`` Euclidean norms of the rows of ``v`` ``(k, p)``."""
+    return np.sqrt(np.einsum("kp,kp->k", v, v))
+
+
+def _column_norms(J: Array) -> Array:
+    """``(k, p)`` Euclidean norms of the columns of a stack of matrices ``J`` ``(k, m, p)``."""
+    return np.sqrt(np.einsum("kmp,kmp->kp", J, J))
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100, **_) -> SolveResult:
