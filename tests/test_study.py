@@ -59,6 +59,7 @@ def _assert_same_calibration(fit, ref, q_test):
         assert a.sigma is None or a.sigma == pytest.approx(b.sigma, rel=1e-6)
     assert fit.success == ref.success and fit.iterations == ref.iterations
     np.testing.assert_allclose(fit.estimates, ref.estimates, rtol=1e-10, atol=1e-12)
+    assert np.max(np.abs(fit.estimates - ref.estimates) / ref.std) < 1e-9  # was 1e-4 σ with two engines
     np.testing.assert_allclose(fit.start, ref.nominal, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(fit.std, ref.std, rtol=1e-10, atol=0)
     np.testing.assert_allclose(fit.covariance, ref.covariance, rtol=1e-10, atol=1e-10 * np.max(ref.std) ** 2)

@@ -257,9 +257,13 @@ def levenberg_marquardt_batch(
             r = np.where(better[:, None], r_new, r)
             J = np.where(better[:, None, None], J_new, J)
             cost = np.where(better, cost_new, cost)
-        with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
-            mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
-        nu = np.where(better, 2.0, nu * 2.0)
+        if better.all():
+            mu = mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = np.full_like(nu, 2.0)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
+                mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
+            nu = np.where(better, 2.0, nu * 2.0)
         for k, c in zip(ids[better].tolist(), cost_new[better].tolist(), strict=True):
             histories[k].append(math.sqrt(c / m))
     done.iterations[:] = [len(h) for h in histories]
