@@ -16,10 +16,12 @@ from typer.testing import CliRunner
 import robocal as rc
 from robocal import study
 from robocal.cli import app
+from robocal.identify.batch import calibrate_batch
 from robocal.identify.calibrate import initial_frame_and_tool
+from robocal.identify.guards import CalibrationGuardError
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure.poses import random_poses
-from robocal.study import StudyConfig, StudyError, calibrate_batch, run_fleet, run_study
+from robocal.study import StudyConfig, StudyError, run_fleet, run_study
 
 TOOL = np.array([0.0, 0.0, 0.109])
 
@@ -42,34 +44,51 @@ def batch(ur10):
     return data, calibrate_batch(ur10, data, tool_guess=TOOL)
 
 
+def _assert_same_calibration(fit, ref, q_test):
+    """The batched engine's fit equals rc.calibrate's to round-off (1e-10)."""
+    assert fit.names == ref.names
+    assert len(fit.dropped) == len(ref.dropped)
+    for a, b in zip(fit.dropped, ref.dropped, strict=True):  # names, reasons, absorbing parameters, σ
+        assert (a.name, a.reason) == (b.name, b.reason)
+        assert [n for n, _ in a.absorbed_by] == [n for n, _ in b.absorbed_by]
+        np.testing.assert_allclose([c for _, c in a.absorbed_by], [c for _, c in b.absorbed_by], atol=1e-10)
+        assert a.residual == pytest.approx(b.residual, abs=1e-10)
+        assert (a.sigma is None) == (b.sigma is None)
+        # σ of a parameter screened out or pruned as poorly identifiable: from a nearly singular
+        # normal matrix (the reason it is dropped), whose round-off it amplifies
+        assert a.sigma is None or a.sigma == pytest.approx(b.sigma, rel=1e-6)
+    assert fit.success == ref.success and fit.iterations == ref.iterations
+    np.testing.assert_allclose(fit.estimates, ref.estimates, rtol=1e-10, atol=1e-12)
+    assert np.max(np.abs(fit.estimates - ref.estimates) / ref.std) < 1e-9  # was 1e-4 σ with two engines
+    np.testing.assert_allclose(fit.start, ref.nominal, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(fit.std, ref.std, rtol=1e-10, atol=0)
+    np.testing.assert_allclose(fit.covariance, ref.covariance, rtol=1e-10, atol=1e-10 * np.max(ref.std) ** 2)
+    for name in ("rms_before", "rms_after", "residual_std", "condition_number"):
+        assert getattr(fit, name) == pytest.approx(getattr(ref, name), rel=1e-10, abs=0), name
+    # predictions at held-out poses: rc.validate's numbers
+    np.testing.assert_allclose(fit.predict(q_test), ref.predict(q_test)[:, :3, 3], rtol=0, atol=1e-12)
+
+
 def test_batched_engine_matches_rc_calibrate(ur10, batch):
     data, fits = batch
+    q_test = random_poses(ur10, 30, seed=5)
     for d, fit in zip(data, fits, strict=True):
         ref = rc.calibrate(ur10, d, tool_guess=TOOL)
-        assert fit.names == ref.names
-        assert {n for n, _ in fit.dropped} == {x.name for x in ref.dropped}
-        assert fit.success and ref.success
-        # the same least-squares solution, to solver precision (in units of its own σ)
-        assert np.max(np.abs(fit.estimates - ref.estimates) / ref.std) < 1e-4
-        np.testing.assert_allclose(fit.std, ref.std, rtol=1e-6)
-        np.testing.assert_allclose(fit.start, ref.nominal, rtol=0, atol=1e-12)
-        assert fit.rms_after == pytest.approx(ref.rms_after, rel=1e-8)
-        assert fit.rms_before == pytest.approx(ref.rms_before, rel=1e-9)
-        assert fit.residual_std == pytest.approx(ref.residual_std, rel=1e-8)
-        assert fit.condition_number == pytest.approx(ref.condition_number, rel=1e-6)
-        # predictions at held-out poses: rc.validate's numbers
-        q_test = random_poses(ur10, 30, seed=5)
-        np.testing.assert_allclose(fit.predict(q_test), ref.predict(q_test)[:, :3, 3], rtol=0, atol=1e-9)
+        assert fit.success
+        _assert_same_calibration(fit, ref, q_test)
 
 
-def test_batched_start_values_match_rc_calibrate(ur10, batch):
+def test_batched_start_values_are_rc_calibrates(ur10, batch):
+    from robocal.identify.stages import initial_frames_and_tools
+
     data, _ = batch
     T0 = rc.spatial.homogeneous(p=TOOL)
-    T_frame, t = study._initial_frames(ur10, [d.q for d in data], [d.position for d in data], T0)
+    T_flange = np.stack([ur10.fk(d.q) for d in data])
+    T_frame, T_tool = initial_frames_and_tools(T_flange, np.stack([d.position for d in data]), T_tool=T0)
     for k, d in enumerate(data):
         F, T = initial_frame_and_tool(ur10, d, "position", T0, True, True)
-        np.testing.assert_allclose(T_frame[k], F, atol=1e-12)
-        np.testing.assert_allclose(t[k], T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(T_frame[k], F, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(T_tool[k], T, rtol=0, atol=1e-15)
 
 
 def test_batch_rejects_mixed_pose_counts_and_wrong_joints(ur10, batch):
@@ -130,16 +149,87 @@ def test_study_resumes_from_its_table_and_is_deterministic(tmp_path):
     assert groups["r30", "t20"]["true_rms_mm"]["mean"] < groups["r15", "t20"]["true_rms_mm"]["mean"]
 
 
+ALL_NUMBERS = (
+    "n_poses",
+    "n_params",
+    "iterations",
+    "rms_before_mm",
+    "rms_after_mm",
+    "residual_std_mm",
+    "condition_number",
+    "val_n",
+    "val_mean_mm",
+    "val_rms_mm",
+    "val_p95_mm",
+    "val_max_mm",
+    "true_rms_mm",
+    "true_max_mm",
+)
+
+
 def test_study_engines_agree(tmp_path):
+    """One engine: the batched rows are rc.calibrate's to 1e-10."""
     a = _rows(run_study(_config(robots=3), tmp_path / "a", workers=0).out / "results.csv")
     b = run_study(_config(robots=3, engine="calibrate"), tmp_path / "b", workers=0)
     assert b.engine == "calibrate"
     by_case = {r["case"]: r for r in _rows(b.out / "results.csv")}
     for r in a:
         other = by_case[r["case"]]
-        assert other["engine"] == "calibrate" and other["dropped"] == r["dropped"]
-        for col in NUMERIC:
-            assert float(r[col]) == pytest.approx(float(other[col]), rel=1e-6), col
+        assert r["engine"] == "batched" and other["engine"] == "calibrate"
+        assert (r["status"], r["dropped"]) == (other["status"], other["dropped"]) == ("ok", other["dropped"])
+        for col in ALL_NUMBERS:
+            assert float(r[col]) == pytest.approx(float(other[col]), rel=1e-10, abs=0), col
+
+
+@pytest.mark.parametrize("engine", ["batched", "calibrate"])
+def test_too_few_poses_fail_with_the_guards_reason(tmp_path, engine):
+    """3 or 6 poses for a UR10 with its device frame and tool: fewer equations than
+    identifiable parameters.  Both engines refuse (status failed, the guard's reason),
+    not status ok with a residual of 1e-13 mm; failed cases are not recomputed on resume."""
+    config = _config(
+        robots=2,
+        engine=engine,
+        pose_sets=[
+            {"name": "p3", "kind": "random", "n": 3},
+            {"name": "p6", "kind": "random", "n": 6},
+            {"name": "p30", "kind": "random", "n": 30},
+        ],
+    )
+    run = run_study(config, tmp_path / "s", workers=0)
+    assert run.engine == engine and run.errors == 0
+    rows = _rows(tmp_path / "s" / "results.csv")
+    for r in rows:
+        if r["pose_set"] == "p30":
+            assert r["status"] == "ok", r["message"]
+            continue
+        n = int(r["pose_set"][1:])
+        assert r["status"] == "failed" and r["engine"] == engine and r["n_poses"] == str(n)
+        assert r["message"].startswith(f"{n} distinct poses give {3 * n} equations for the ")
+        assert "measure at least" in r["message"]
+        assert r["rms_after_mm"] == r["true_rms_mm"] == ""
+    groups = {g["pose_set"]: g for g in run.summary["groups"]}
+    assert (groups["p3"]["failed"], groups["p6"]["failed"], groups["p30"]["failed"]) == (2, 2, 0)
+    assert groups["p3"]["ok"] == 0 and groups["p30"]["ok"] == 2
+    again = run_study(config, tmp_path / "s", workers=0)
+    assert again.computed == 0 and again.resumed == 6
+
+
+def test_rank_deficient_poses_fail_in_the_batched_engine_as_in_rc_calibrate(ur10):
+    """Poses that never move the last joint: rc.calibrate refuses them (rank-deficient),
+    and so does the batched engine, with the same message; the other robots of the batch
+    are calibrated."""
+    q = random_poses(ur10, 30, seed=31)
+    still = q.copy()
+    still[:, 5] = 0.3
+    device = LaserTracker(p_tool_target=TOOL)
+    robots = [VirtualRobot(ur10, draw_true_model(ur10, seed=600 + k), device) for k in range(2)]
+    good, bad = simulate(robots[0], q, seed=1), simulate(robots[1], still, seed=2)
+    with pytest.raises(CalibrationGuardError) as refused:
+        rc.calibrate(ur10, bad, tool_guess=TOOL)
+    fit, failure = calibrate_batch(ur10, [good, bad], tool_guess=TOOL)
+    assert isinstance(failure, CalibrationGuardError) and str(failure) == str(refused.value)
+    assert "rank-deficient" in str(failure)
+    _assert_same_calibration(fit, rc.calibrate(ur10, good, tool_guess=TOOL), q[:5])
 
 
 def test_study_with_the_learned_residual_runs_rc_calibrate(tmp_path):
@@ -405,7 +495,6 @@ def test_batched_engine_prunes_like_rc_calibrate_with_noisy_data(ur10):
         simulate(VirtualRobot(ur10, draw_true_model(ur10, seed=400 + k), device), q, seed=500 + k)
         for k in range(3)
     ]
+    q_test = random_poses(ur10, 30, seed=5)
     for d, fit in zip(data, calibrate_batch(ur10, data, tool_guess=TOOL), strict=True):
-        ref = rc.calibrate(ur10, d, tool_guess=TOOL)
-        assert {n for n, _ in fit.dropped} == {x.name for x in ref.dropped}
-        assert np.max(np.abs(fit.estimates - ref.estimates) / ref.std) < 1e-3
+        _assert_same_calibration(fit, rc.calibrate(ur10, d, tool_guess=TOOL), q_test)

@@ -25,16 +25,15 @@ Two calibration engines compute the same thing:
 
 * ``"calibrate"``: :func:`robocal.calibrate` then :func:`robocal.validate` per case,
   any method and device;
-* ``"batched"`` (:func:`calibrate_batch`, default when it applies: position
-  measurements, ``method: lm``): the chunk's robots are calibrated together.  Their
-  measurement chains share one structure, so the chain is rewritten with *every*
-  step as a joint variable (a step's value becomes a per-row input) and one call of
-  :meth:`~robocal.model.chain.Model.evaluate` gives the tool positions and all the
-  derivative columns of all robots × poses at once; identifiable set (the same
-  sequential rank test as :func:`robocal.identify.observability.identifiable_subset`),
-  Levenberg–Marquardt, covariance, pruning of poorly identifiable parameters and
-  validation run batched over robots.  Estimates agree with ``rc.calibrate`` to
-  solver precision (tests/test_study.py).
+* ``"batched"`` (:func:`robocal.identify.batch.calibrate_batch`, default when it
+  applies: position measurements, ``method: lm``, ``residual: none``): the chunk's
+  robots are calibrated together, with ``rc.calibrate``'s own stage functions, solver
+  and guards (:mod:`robocal.identify.stages`) but their chains evaluated in one batched
+  call; estimates agree with ``rc.calibrate`` to round-off (tests/test_study.py).
+
+A case the calibration's guards refuse (too few poses for the unknowns, poses that
+leave parameters undetermined, a diverged fit) gets ``status=failed`` with the reason
+in ``message``, with either engine; it is not recomputed on resume.
 
 Units: SI inside; the tables use mm (columns ending ``_mm``) and seconds.
 """
@@ -42,7 +41,6 @@ Units: SI inside; the tables use mm (columns ending ``_mm``) and seconds.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import hashlib
 import io
 import json
@@ -57,18 +55,15 @@ from typing import Any, Literal
 
 import numpy as np
 import yaml
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from robocal import spatial
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Joint, Model, Step
+from robocal.model.chain import Model
 from robocal.model.files import Count, Number, atomic_write_text, format_validation_error
 
 __all__ = [
     "FLEET_COLUMNS",
     "RESULT_COLUMNS",
-    "BatchFit",
     "Case",
     "DeviceSpec",
     "FleetRun",
@@ -76,7 +71,6 @@ __all__ = [
     "StudyConfig",
     "StudyError",
     "StudyRun",
-    "calibrate_batch",
     "load_study_config",
     "run_fleet",
     "run_study",
@@ -132,6 +126,16 @@ FLEET_COLUMNS = (
     "seconds",
     "result_dir",
 )
+
+
+def __getattr__(name: str) -> Any:
+    """``robocal.study.calibrate_batch`` and ``BatchFit``: the batched engine, now in
+    :mod:`robocal.identify.batch` (imported when first used)."""
+    if name in ("calibrate_batch", "BatchFit"):
+        from robocal.identify import batch
+
+        return getattr(batch, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class StudyError(ValueError):
@@ -462,460 +466,6 @@ def _prepare(config: StudyConfig) -> _Prepared:
     )
 
 
-# =============================================================== batched calibration
-@dataclass
-class BatchFit:
-    """The calibration of one robot by :func:`calibrate_batch` (SI units).
-
-    Attributes:
-        names: the identified parameters (robot, ``frame_*``, ``tcp_*``), chain order.
-        estimates, start, std: their values, start values and standard deviations.
-        dropped: ``(name, reason)`` of the parameters left out ("no effect",
-            "redundant", "poorly identifiable").
-        values: all values of the measurement chain after calibration ``(P,)``
-            (:attr:`chain` order; ``frame0_*`` are the device frame's start).
-        chain: the measurement chain (structure and start values of robot 0).
-        rms_before, rms_after, residual_std: m.
-    """
-
-    names: tuple[str, ...]
-    estimates: Array
-    start: Array
-    std: Array
-    dropped: tuple[tuple[str, str], ...]
-    values: Array
-    chain: Model = field(repr=False)
-    rms_before: float
-    rms_after: float
-    residual_std: float
-    condition_number: float
-    iterations: int
-    success: bool
-    message: str
-
-    def predict(self, q: ArrayLike) -> Array:
-        """Predicted target positions ``(n, 3)`` (m) in the device frame at joint values ``q``."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        return _positions(self.chain, self.values[None], [q])
-
-
-_AUG_CACHE: dict[tuple, tuple[Model, NDArray[np.intp], NDArray[np.intp], Model]] = {}
-
-
-def _augmented(chain: Model, values: Array | None = None, varying: NDArray[np.bool_] | None = None):
-    """The chain with steps made joint variables (value 0), for batches of robots.
-
-    Row ``u`` of the augmented model's joint values holds the original chain's values
-    of those steps, plus the joint values on the original joint steps: its FK is the
-    original FK at those values, and its joint Jacobian columns are the derivatives
-    with respect to those parameters, for a different parameter vector on every row.
-
-    Args:
-        chain: the chain.
-        values: ``(P,)`` values of the steps that stay constant (default: the chain's).
-        varying: ``(P,)`` steps to turn into joint variables (default: all); the
-            original joint steps always are.
-
-    Returns:
-        The augmented model, the chain indices of its joint variables (in order) and
-        the positions among them of the original joint steps.
-    """
-    P = len(chain.steps)
-    joint = np.array([s.joint is not None for s in chain.steps])
-    mask = np.ones(P, dtype=bool) if varying is None else (np.asarray(varying, dtype=bool) | joint)
-    values = chain.values if values is None else np.asarray(values, dtype=float)
-    key = (id(chain), mask.tobytes(), values[~mask].tobytes())
-    hit = _AUG_CACHE.get(key)
-    if hit is not None and hit[3] is chain:
-        return hit[0], hit[1], hit[2]
-    steps = tuple(
-        Step(s.motion, s.name, 0.0, True, None, Joint("u:" + s.name))
-        if mask[i]
-        else Step(s.motion, s.name, float(values[i]), False)
-        for i, s in enumerate(chain.steps)
-    )
-    aug = dataclasses.replace(chain, name=chain.name + "+batch", steps=steps, bodies=())
-    ucols = np.flatnonzero(mask)
-    joint_pos = np.flatnonzero(joint[ucols])
-    if len(_AUG_CACHE) > 64:
-        _AUG_CACHE.clear()
-    _AUG_CACHE[key] = (aug, ucols, joint_pos, chain)
-    return aug, ucols, joint_pos
-
-
-def _rows(values: Array, qs: Sequence[Array], joint_pos: NDArray[np.intp]) -> Array:
-    """Augmented joint values ``(Σ n_k, p)``: robot k's values ``(K, p)`` on each of its rows,
-    plus its joint values at ``joint_pos``."""
-    counts = [len(q) for q in qs]
-    u = np.repeat(values, counts, axis=0)
-    u[:, joint_pos] += np.concatenate(qs, axis=0)
-    return u
-
-
-def _positions(chain: Model, values: Array, qs: Sequence[Array]) -> Array:
-    """Positions ``(Σ n_k, 3)`` at the end of ``chain`` for robot k's values ``values[k]`` ``(P,)``
-    at its joint values ``qs[k]``, in one batched FK."""
-    aug, ucols, joint_pos = _augmented(chain)
-    return aug.fk(_rows(values[:, ucols], qs, joint_pos))[:, :3, 3]
-
-
-def _initial_frames(
-    nominal: Model, qs: Sequence[Array], ys: Sequence[Array], T_tool0: Array, rounds: int = 4
-) -> tuple[Array, Array]:
-    """Batched :func:`robocal.identify.calibrate.initial_frame_and_tool` for position data:
-    alternating Kabsch fits of ``T_device_base`` and mean fits of the tool point.
-
-    Returns ``(K, 4, 4)`` device frames and ``(K, 3)`` tool points.
-    """
-    K, n = len(qs), len(qs[0])
-    T_flange = nominal.fk(np.concatenate(qs, axis=0)).reshape(K, n, 4, 4)
-    R_f, p_f = T_flange[..., :3, :3], T_flange[..., :3, 3]
-    y = np.stack(ys)
-    t = np.broadcast_to(np.asarray(T_tool0, dtype=float)[:3, 3], (K, 3)).copy()
-    T_frame = np.broadcast_to(np.eye(4), (K, 4, 4)).copy()
-    for _ in range(rounds):
-        p_base = np.einsum("knij,kj->kni", R_f, t) + p_f
-        T_frame = spatial.fit_rigid_transform(p_base, y)
-        R0, t0 = T_frame[:, :3, :3], T_frame[:, :3, 3]
-        b = np.einsum("kni,kij->knj", y - t0[:, None], R0) - p_f
-        t = np.einsum("knji,knj->ki", R_f, b) / n
-    return T_frame, t
-
-
-def _frame_values(T: Array) -> Array:
-    """``(K, 6)`` values ``x y z rz ry rx`` of frames ``(K, 4, 4)`` (as :func:`frame_steps`)."""
-    e = spatial.matrix_to_euler(T[:, :3, :3], "ZYX")
-    return np.concatenate([T[:, :3, 3], e], axis=1)
-
-
-def _effect_scale(J: Array, w: Array) -> Array:
-    """``(k, p)`` RMS tool displacement per unit of each unknown over the poses
-    (:meth:`robocal.identify.problem.Problem.effect_scale`), from weighted Jacobians
-    ``(k, 3n, p)`` and their weights ``(k, n, 3)``."""
-    unweighted = J / w.reshape(len(w), -1)[:, :, None]
-    return np.sqrt(np.sum(unweighted**2, axis=1) / w.shape[1])
-
-
-def _gram_schmidt_select(J: Array, order: Sequence[int], tolerance: float = 1e-7) -> tuple[Array, Array]:
-    """Batched sequential rank test of :func:`robocal.identify.observability.identifiable_subset`.
-
-    Args:
-        J: ``(K, m, p)`` scaled Jacobians.
-        order: column indices in order of preference.
-
-    Returns:
-        ``kept (K, p)`` and ``no_effect (K, p)`` boolean masks.
-    """
-    K, m, p = J.shape
-    scale = np.abs(J).reshape(K, -1).max(axis=1)
-    Q = np.zeros((K, m, p))
-    kept = np.zeros((K, p), dtype=bool)
-    zero = np.zeros((K, p), dtype=bool)
-    for slot, c in enumerate(order):
-        col = J[:, :, c]
-        norm = np.linalg.norm(col, axis=1)
-        is_zero = norm <= 1e-12 * np.maximum(scale, 1e-300)
-        v = col - np.einsum("kmj,kj->km", Q, np.einsum("kmj,km->kj", Q, col))
-        v -= np.einsum("kmj,kj->km", Q, np.einsum("kmj,km->kj", Q, v))
-        res = np.linalg.norm(v, axis=1)
-        keep = ~is_zero & (res > tolerance * norm)
-        Q[:, :, slot] = np.where(keep[:, None], v / np.where(res > 0, res, 1.0)[:, None], 0.0)
-        kept[:, c] = keep
-        zero[:, c] = is_zero
-    return kept, zero
-
-
-class _Group:
-    """Robots of a batch that share the same unknowns: residuals and Jacobians at once.
-
-    The steps that are unknowns, or whose values differ between the robots, become
-    joint variables of one augmented chain (:func:`_augmented`); the others stay
-    constant steps, which keeps the batched evaluation short.
-    """
-
-    def __init__(
-        self, chain: Model, V: Array, qs: Sequence[Array], ys: Array, w: Array, cols: NDArray[np.intp]
-    ) -> None:
-        self.chain = chain
-        self.V = V  # (K, P) start values of every chain parameter
-        self.qs = qs
-        self.ys = ys  # (K, n, 3)
-        self.w = w  # (K, n, 3) weights 1/σ
-        self.cols = cols  # (p,) chain indices of the unknowns
-        varying = np.ptp(V, axis=0) > 0
-        varying[cols] = True
-        self.aug, self.ucols, self.joint_pos = _augmented(chain, V[0], varying)
-        self.dcols = np.searchsorted(self.ucols, cols)
-
-    def subset(self, idx: NDArray[np.intp]) -> _Group:
-        """The group of robots ``idx`` only (same augmented chain)."""
-        g = object.__new__(_Group)
-        g.chain, g.V, g.qs, g.ys, g.w, g.cols = (
-            self.chain,
-            self.V[idx],
-            [self.qs[k] for k in idx],
-            self.ys[idx],
-            self.w[idx],
-            self.cols,
-        )
-        g.aug, g.ucols, g.joint_pos, g.dcols = self.aug, self.ucols, self.joint_pos, self.dcols
-        return g
-
-    def values(self, x: Array) -> Array:
-        V = self.V.copy()
-        V[:, self.cols] = x
-        return V
-
-    def evaluate(self, x: Array, weighted: bool = True) -> tuple[Array, Array]:
-        """Residuals ``(K, 3n)`` and Jacobians ``(K, 3n, p)`` at unknowns ``x`` ``(K, p)``."""
-        K = len(x)
-        u = _rows(self.values(x)[:, self.ucols], self.qs, self.joint_pos)
-        T, _, Jq = self.aug.evaluate(u, jacobian=False, joint_columns=True)
-        n = self.ys.shape[1]
-        r = (T[:, :3, 3].reshape(K, n, 3) - self.ys).reshape(K, -1)
-        J = Jq[:, self.dcols].reshape(K, 3 * n, -1)
-        if weighted:
-            wr = self.w.reshape(K, -1)
-            return r * wr, J * wr[:, :, None]
-        return r, J
-
-
-def _lm_batch(
-    group: _Group, x0: Array, max_iterations: int, step_tolerance: Array
-) -> tuple[Array, NDArray[np.bool_], NDArray[np.intp]]:
-    """Levenberg–Marquardt for every robot of a group at once.
-
-    Per robot: damped Gauss–Newton steps ``min |J δ + r|² + λ |D δ|²`` (D the running
-    maximum of the column norms, as MINPACK's ``x_scale='jac'``), solved by QR of the
-    stacked matrix; a step is kept when it lowers the cost (then λ /= 10) and refused
-    otherwise (λ *= 10).  A robot has converged when its step is below
-    ``step_tolerance`` ``(p,)`` (per unknown) or 1e-12 of the scaled parameters, or the
-    linear model predicts a relative reduction of the cost below 1e-12 (MINPACK's
-    criteria at rc.calibrate's tolerances); it has failed when λ exceeds 1e12 or the
-    iterations run out.
-
-    Returns ``x (K, p)``, converged flags and the number of Jacobian evaluations.
-    """
-    x = x0.copy()
-    K, p = x.shape
-    r, J = group.evaluate(x)
-    cost = np.einsum("km,km->k", r, r)
-    lam = np.full(K, 1e-9)
-    done = np.zeros(K, dtype=bool)
-    converged = np.zeros(K, dtype=bool)
-    evaluations = np.ones(K, dtype=np.intp)
-    D = np.linalg.norm(J, axis=1)
-    D[D == 0] = 1.0
-    eye = np.eye(p)
-    for _ in range(max_iterations):
-        active = np.flatnonzero(~done)
-        if not len(active):
-            break
-        Ja, ra, Da = J[active], r[active], D[active]
-        A = np.concatenate([Ja / Da[:, None, :], np.sqrt(lam[active])[:, None, None] * eye], axis=1)
-        Qm, R = np.linalg.qr(A)
-        rhs = -np.einsum("kmp,km->kp", Qm[:, : ra.shape[1]], ra)
-        z = np.linalg.solve(R, rhs[..., None])[..., 0]
-        dx = z / Da
-        linear = ra + np.einsum("kmp,kp->km", Ja, dx)
-        predicted = cost[active] - np.einsum("km,km->k", linear, linear)
-        nothing_left = predicted <= 1e-12 * np.maximum(cost[active], 1e-300)
-        x_new = x[active] + dx
-        r_new, J_new = group.subset(active).evaluate(x_new)
-        evaluations[active] += 1
-        cost_new = np.einsum("km,km->k", r_new, r_new)
-        better = cost_new <= cost[active]
-        small = np.all(np.abs(dx) <= step_tolerance[None, :], axis=1) | (
-            np.linalg.norm(dx * Da, axis=1) <= 1e-12 * np.linalg.norm(x[active] * Da, axis=1)
-        )
-        acc = active[better]
-        x[acc], r[acc], J[acc], cost[acc] = x_new[better], r_new[better], J_new[better], cost_new[better]
-        D[acc] = np.maximum(D[acc], np.linalg.norm(J_new[better], axis=1))
-        lam[acc] = np.maximum(lam[acc] / 10.0, 1e-12)
-        lam[active[~better]] *= 10.0
-        finished = nothing_left | (better & small)
-        converged[active[finished]] = True
-        done[active[finished | (lam[active] > 1e12)]] = True
-    return x, converged, evaluations
-
-
-def _uncertainty_batch(r: Array, J: Array, known: Array) -> tuple[Array, Array]:
-    """Standard deviations ``(K, p)`` (σ̂²(JᵀJ)⁻¹ with σ̂² as rc.calibrate: 1 for a stated
-    noise the residuals agree with, ``known`` ``(K,)``) and condition numbers ``(K,)``."""
-    from robocal.identify.guards import residual_variance
-
-    _, m, p = J.shape
-    s2 = residual_variance(np.einsum("km,km->k", r, r), m - p, known)
-    norms = np.linalg.norm(J, axis=1)
-    norms[norms == 0] = 1.0
-    Jn = J / norms[:, None, :]
-    sv = np.linalg.svd(Jn, compute_uv=False)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cond = np.where(sv[:, -1] > 0, sv[:, 0] / sv[:, -1], np.inf)
-    cov_diag = np.diagonal(np.linalg.pinv(np.einsum("kmi,kmj->kij", Jn, Jn)), axis1=1, axis2=2)
-    std = np.sqrt(np.clip(s2[:, None] * cov_diag / norms**2, 0.0, None))
-    return std, cond
-
-
-def calibrate_batch(
-    model: Model,
-    data: Sequence[Measurements],
-    *,
-    tool_guess: ArrayLike | None = None,
-    max_std: float = 5e-4,
-    max_std_ratio: float = 3.0,
-    max_iterations: int = 200,
-) -> list[BatchFit]:
-    """Calibrate many robots of the same model at once (position measurements).
-
-    Computes what ``rc.calibrate(model, d, method="lm", tool_guess=tool_guess,
-    max_std=max_std)`` computes for each ``d`` in ``data`` — device frame and tool point
-    fitted, rows weighted by 1/σ, identifiable set preferring the device frame, then
-    the tool, then the robot in chain order, poorly identifiable parameters pruned —
-    but evaluates every robot's chain in one batched call per iteration (module
-    docstring).  Dropped parameters are named without the absorbing combination.
-
-    Args:
-        model: the nominal robot model (free parameters: the candidates).
-        data: K measurement sets with positions ``(n_k, 3)`` (m) in the device frame and
-            the same pose count ``n`` (their joint values may differ).
-        tool_guess: start of the tool point (m, flange frame), ``(3,)``.
-        max_std, max_std_ratio: pruning thresholds (m as tool displacement, and times the
-            median σ), as in ``rc.calibrate``.
-        max_iterations: Levenberg–Marquardt iterations per fit.
-
-    Returns:
-        One :class:`BatchFit` per measurement set.
-
-    Raises:
-        ValueError: no positions, orientation-only data, different pose counts or a
-            joint count that does not fit the model.
-    """
-    from robocal.identify.calibrate import screen_unidentifiable
-    from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, measurement_chain
-
-    if not data:
-        return []
-    n = data[0].n
-    for k, d in enumerate(data):
-        if d.position is None:
-            raise ValueError(f"data[{k}] has no measured positions")
-        if d.dof != model.dof:
-            raise ValueError(f"data[{k}] has {d.dof} joint columns but model {model.name!r} has {model.dof}")
-        if d.n != n:
-            raise ValueError(f"data[{k}] has {d.n} poses; a batch needs the same count ({n}) for all")
-    K = len(data)
-    qs = [d.q for d in data]
-    ys = np.stack([d.position for d in data])
-    T_tool0 = np.eye(4) if tool_guess is None else spatial.homogeneous(p=np.asarray(tool_guess, dtype=float))
-    T_frame, t_tool = _initial_frames(model, qs, list(ys), T_tool0)
-    chain = measurement_chain(model, T_frame[0], spatial.homogeneous(p=t_tool[0]), "position", True)
-    names = chain.names
-    index = {nm: i for i, nm in enumerate(names)}
-    V = np.tile(chain.values, (K, 1))
-    f0 = [index[f"frame0_{c}"] for c in ("x", "y", "z", "rz", "ry", "rx")]
-    V[:, f0] = _frame_values(T_frame)
-    V[:, [index[f"{TOOL_PREFIX}{c}"] for c in "xyz"]] = t_tool
-    w = np.ones((K, n, 3))
-    known = np.array([d.sigma is not None for d in data])  # a stated noise: weights 1/σ
-    for k, d in enumerate(data):
-        if d.sigma is not None:
-            w[k] = 1.0 / np.maximum(d.sigma, 1e-12)
-    # the robot's size, to weigh rotations against lengths (as rc.calibrate)
-    head = [q[: min(len(q), 50)] for q in qs]
-    p_head = np.abs(model.fk(np.concatenate(head))[:, :3, 3]).max(axis=1)
-    ends = np.cumsum([len(h) for h in head])
-    length = np.array(
-        [max(float(p_head[e - len(h) : e].max()), 0.1) for h, e in zip(head, ends, strict=True)]
-    )
-    free = np.flatnonzero(chain.free_mask)
-    rot = np.array([s.is_rotation for s in chain.steps])
-    free_names = [names[i] for i in free]
-    order_names = [x for x in free_names if x.startswith(FRAME_PREFIX)]
-    order_names += [x for x in free_names if x.startswith(TOOL_PREFIX)]
-    order_names += [x for x in free_names if x not in set(order_names)]
-    order = [free_names.index(x) for x in order_names]
-
-    # identifiable set from the scaled Jacobian at the start
-    full = _Group(chain, V, qs, ys, w, free)
-    r0, J0 = full.evaluate(V[:, free])
-    scale = np.where(rot[free][None, :], length[:, None], 1.0)  # (K, p)
-    kept, zero = _gram_schmidt_select(J0 * scale[:, None, :], order)
-
-    dropped: list[list[tuple[str, str]]] = [
-        [
-            (free_names[c], "no effect" if zero[k, c] else "redundant")
-            for c in range(len(free))
-            if not kept[k, c]
-        ]
-        for k in range(K)
-    ]
-    masks = kept.copy()  # (K, p_free) current unknowns per robot
-    effect0 = _effect_scale(J0, w)  # (K, p) RMS tool displacement per unit, as rc.calibrate
-    for k in range(K):  # the hopeless ones before the first fit, as rc.calibrate
-        cols = np.flatnonzero(masks[k])
-        found = screen_unidentifiable(
-            r0[k], J0[k][:, cols], effect0[k, cols], max_std, max_std_ratio, known_noise=bool(known[k])
-        )
-        for c, _sigma in found:
-            masks[k, cols[c]] = False
-            dropped[k].append((free_names[cols[c]], "poorly identifiable"))
-    out: list[BatchFit | None] = [None] * K
-    x_start = V[:, free]  # start values of every candidate
-    pending = np.arange(K)
-    while len(pending):
-        # robots with the same unknowns are solved together
-        groups: dict[bytes, list[int]] = {}
-        for k in pending:
-            groups.setdefault(masks[k].tobytes(), []).append(int(k))
-        pending_next: list[int] = []
-        for members in groups.values():
-            idx = np.array(members, dtype=np.intp)
-            mask = masks[idx[0]].copy()
-            cols = free[mask]
-            g = _Group(chain, V[idx], [qs[k] for k in idx], ys[idx], w[idx], cols)
-            size = np.where(
-                rot[cols][None, :], length[idx][:, None], 1.0
-            )  # (k, p) tool displacement per unit
-            tol = 1e-11 / size.max(axis=0)
-            x, ok, evals = _lm_batch(g, x_start[idx][:, mask], max_iterations, tol)
-            r, J = g.evaluate(x)
-            std, cond = _uncertainty_batch(r, J, known[idx])
-            r_plain = (r / g.w.reshape(len(idx), -1)).reshape(len(idx), n, 3)
-            r_start, _ = g.evaluate(x_start[idx][:, mask], weighted=False)
-            move = std * _effect_scale(J, g.w)  # σ as RMS tool displacement, as rc.calibrate
-            for i, k in enumerate(idx):
-                worst = int(np.argmax(move[i])) if move.shape[1] else 0
-                threshold = max(max_std, max_std_ratio * float(np.median(move[i]))) if move.shape[1] else 0.0
-                if ok[i] and move.shape[1] and move[i, worst] > threshold:
-                    c = np.flatnonzero(mask)[worst]
-                    masks[k, c] = False
-                    dropped[k].append((free_names[c], "poorly identifiable"))
-                    pending_next.append(int(k))  # refitted from the start values, as rc.calibrate
-                    continue
-                values = V[k].copy()
-                values[cols] = x[i]
-                e2 = float(np.sum(r_plain[i] ** 2))
-                out[k] = BatchFit(
-                    names=tuple(names[c] for c in cols),
-                    estimates=x[i].copy(),
-                    start=x_start[k, mask].copy(),
-                    std=std[i].copy(),
-                    dropped=tuple(dropped[k]),
-                    values=values,
-                    chain=chain,
-                    rms_before=float(np.sqrt(np.sum(r_start[i] ** 2) / n)),
-                    rms_after=float(np.sqrt(e2 / n)),
-                    residual_std=float(np.sqrt(e2 / max(3 * n - len(cols), 1))),
-                    condition_number=float(cond[i]),
-                    iterations=int(evals[i]),
-                    success=bool(ok[i]),
-                    message="converged" if ok[i] else f"no convergence in {max_iterations} iterations",
-                )
-        pending = np.array(pending_next, dtype=np.intp)
-    return [o for o in out if o is not None]
-
-
 # =============================================================== the tasks
 @dataclass(frozen=True, eq=False)
 class _Chunk:
@@ -986,7 +536,7 @@ def _fill_fit(row: dict[str, Any], fit, n: int, seconds: float) -> None:
         message="" if fit.success else fit.message,
         n_poses=n,
         n_params=len(fit.names),
-        dropped=" ".join(d[0] if isinstance(d, tuple) else d.name for d in fit.dropped),
+        dropped=" ".join(d.name for d in fit.dropped),
         iterations=fit.iterations,
         rms_before_mm=fit.rms_before * 1e3,
         rms_after_mm=fit.rms_after * 1e3,
@@ -1007,12 +557,23 @@ def _error_row(case: Case, engine: str, chunk: _Chunk, err: BaseException) -> di
     return row
 
 
+def _failed_row(case: Case, engine: str, n: int, err: BaseException) -> dict[str, Any]:
+    """The row of a calibration the guards refused (too few poses, rank-deficient poses, a
+    diverged fit...): status ``failed`` with the guard's reason (not retried on resume)."""
+    row = _empty_row(case, engine)
+    row.update(status="failed", message=" ".join(str(err).split()), n_poses=n)
+    return row
+
+
 def _run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
     """Simulate, calibrate and validate the robots of one chunk; one row per robot.
 
-    A robot whose simulation or calibration raises gets an ``error`` row naming its
+    A robot whose calibration the guards refuse gets a ``failed`` row with the reason;
+    one whose simulation or calibration raises otherwise an ``error`` row naming its
     input; the others are unaffected.
     """
+    from robocal.identify.guards import CalibrationGuardError
+
     prep = chunk.prepared
     rows: dict[int, dict[str, Any]] = {}
     sims: dict[int, tuple] = {}
@@ -1036,6 +597,8 @@ def _run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
         t1 = time.perf_counter()
         try:
             rows[k] = _calibrate_row(chunk, case, *sims[k], t_sim)
+        except CalibrationGuardError as err:
+            rows[k] = _failed_row(case, "calibrate", sims[k][0].n, err)
         except Exception as err:
             rows[k] = _error_row(case, "calibrate", chunk, err)
         rows[k]["seconds"] = t_sim + time.perf_counter() - t1
@@ -1067,24 +630,35 @@ def _calibrate_row(chunk: _Chunk, case: Case, data, test, truth, t_sim: float) -
 
 
 def _batched_rows(chunk: _Chunk, todo: list[int], sims: dict, rows: dict, t_sim: float) -> None:
+    from robocal.identify.batch import batch_positions, calibrate_batch
+    from robocal.identify.guards import CalibrationGuardError
+
     prep = chunk.prepared
     t0 = time.perf_counter()
     by_count: dict[int, list[int]] = {}
     for k in todo:
         by_count.setdefault(sims[k][0].n, []).append(k)
     for members in by_count.values():
-        fits = calibrate_batch(
+        results = calibrate_batch(
             prep.nominal, [sims[k][0] for k in members], tool_guess=prep.tool_guess, max_std=prep.max_std
         )
+        fitted = []
+        for k, r in zip(members, results, strict=True):
+            if isinstance(r, CalibrationGuardError):
+                rows[k] = _failed_row(Case(k, chunk.pose_set, chunk.device), "batched", sims[k][0].n, r)
+            else:
+                fitted.append((k, r))
+        if not fitted:
+            continue
         # validation: predictions of every robot at the held-out poses in one call
-        values = np.stack([f.values for f in fits])
+        values = np.stack([fit.values for _, fit in fitted])
         m = len(prep.q_test)
-        pred = _positions(fits[0].chain, values, [prep.q_test] * len(fits)).reshape(len(fits), m, 3)
-        for i, k in enumerate(members):
+        pred = batch_positions(fitted[0][1].chain, values, [prep.q_test] * len(fitted)).reshape(-1, m, 3)
+        for i, (k, fit) in enumerate(fitted):
             case = Case(k, chunk.pose_set, chunk.device)
             data, test, truth = sims[k]
             row = _empty_row(case, "batched")
-            _fill_fit(row, fits[i], data.n, 0.0)
+            _fill_fit(row, fit, data.n, 0.0)
             row.update(_stats(np.linalg.norm(pred[i] - test.position, axis=1)))
             true_err = np.linalg.norm(pred[i] - truth, axis=1)
             row.update(
@@ -1467,6 +1041,7 @@ def _summarise(config: StudyConfig, rows: Iterable[Mapping[str, str]]) -> dict[s
                 "cases": len(mine),
                 "ok": len(ok),
                 "not_converged": sum(r["status"] == "not-converged" for r in mine),
+                "failed": sum(r["status"] == "failed" for r in mine),
                 "errors": sum(r["status"] == "error" for r in mine),
             }
             for col in ("true_rms_mm", "val_rms_mm", "rms_after_mm", "rms_before_mm"):

@@ -106,7 +106,7 @@ def study_command(
         )
         table.add_column("pose set", no_wrap=True)
         table.add_column("device", no_wrap=True)
-        for col in ("ok", "not conv.", "errors", "true RMS mm", "p95 mm", "val RMS mm"):
+        for col in ("ok", "not conv.", "failed", "errors", "true RMS mm", "p95 mm", "val RMS mm"):
             table.add_column(col, justify="right")
         for g in run.summary["groups"]:
             table.add_row(
@@ -114,6 +114,7 @@ def study_command(
                 g["device"],
                 str(g["ok"]),
                 str(g["not_converged"]),
+                str(g.get("failed", 0)),  # refused by the calibration's guards (see the message column)
                 str(g["errors"]),
                 _mm(g.get("true_rms_mm")),
                 _mm(g.get("true_rms_mm"), "p95"),

@@ -47,11 +47,18 @@ from robocal.identify.guards import (
     check_rank,
     check_solution,
     fit_to_noise,
-    residual_variance,
 )
-from robocal.identify.observability import Dropped, identifiable_subset
+from robocal.identify.observability import Dropped
 from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
+from robocal.identify.stages import (
+    identifiable_set,
+    initial_frames_and_tools,
+    poorly_identifiable,
+    robot_sizes,
+    screen_unidentifiable,
+    uncertainty,
+)
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
@@ -106,15 +113,6 @@ def parse_level(level: int | str | None) -> int | None:
 
 
 # ---------------------------------------------------------------------- start values
-def _project_rotation(M: Array) -> Array:
-    U, _, Vt = np.linalg.svd(M)
-    R = U @ Vt
-    if np.linalg.det(R) < 0:
-        U[:, -1] *= -1
-        R = U @ Vt
-    return R
-
-
 def initial_frame_and_tool(
     robot: Model,
     data: Measurements,
@@ -126,29 +124,24 @@ def initial_frame_and_tool(
     rounds: int = 4,
     T_flange: Array | None = None,
 ) -> tuple[Array, Array]:
-    """Alternate closed-form fits of the device frame and the tool (both 4x4).
+    """Alternate closed-form fits of the device frame and the tool (both 4x4): one robot
+    of :func:`robocal.identify.stages.initial_frames_and_tools`.
 
     ``T_flange``: the robot's end frames ``(n, 4, 4)`` at the data's joint values, when
     the caller has them (default: computed)."""
     if T_flange is None:
         T_flange = robot.fk(data.q)
-    T_tool = np.eye(4) if tool is None else np.asarray(tool, dtype=float)
-    T_frame = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
-    y = data.position
-    for _ in range(rounds if (fit_frame and fit_tool) else 1):
-        if fit_frame:
-            p_base = T_flange[:, :3, :3] @ T_tool[:3, 3] + T_flange[:, :3, 3]
-            T_frame = spatial.fit_rigid_transform(p_base, y)
-        if fit_tool:
-            # y = R0 (R_f t + p_f) + t0  =>  R_fᵀ (R0ᵀ (y - t0) - p_f) = t  (least squares: the mean)
-            R0, t0 = T_frame[:3, :3], T_frame[:3, 3]
-            b = (y - t0) @ R0 - T_flange[:, :3, 3]
-            T_tool = T_tool.copy()
-            T_tool[:3, 3] = np.einsum("nji,nj->i", T_flange[:, :3, :3], b) / len(y)
-            if measure == "pose":
-                R_f = T_frame[:3, :3] @ T_flange[:, :3, :3]
-                T_tool[:3, :3] = _project_rotation(np.einsum("nji,njk->ik", R_f, data.orientation))
-    return T_frame, T_tool
+    T_frame, T_tool = initial_frames_and_tools(
+        T_flange[None],
+        data.position[None],
+        orientation=data.orientation[None] if measure == "pose" else None,
+        T_tool=None if tool is None else np.asarray(tool, dtype=float),
+        T_frame=None if T_device_base is None else np.asarray(T_device_base, dtype=float),
+        fit_frame=fit_frame,
+        fit_tool=fit_tool,
+        rounds=rounds,
+    )
+    return T_frame[0], T_tool[0]
 
 
 #: Seed 001's bounds around the nominal robot parameters: ±5 mm on lengths, ±2° on angles.
@@ -743,56 +736,9 @@ def file_hash(path: str | Path) -> str:
 def _uncertainty(
     problem: Problem, x: Array, known_noise: bool = False
 ) -> tuple[float, Array, Array, Array, float]:
-    """σ̂², covariance, standard deviations, correlations, condition number.
-
-    The covariance is σ̂²(JᵀWJ)⁻¹ with σ̂² from :func:`residual_variance` (1 when the
-    weights come from a stated noise the residuals agree with).  Pose measurements have
-    two groups of rows whose relative weight is a choice (``orientation_weight``), not a
-    noise ratio: each group gets its own σ̂² (its share of the degrees of freedom) and
-    the covariance is the sandwich (JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹ of the weighted rows,
-    which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
-    UR10 with an optical CMM twice)."""
-    r = problem.residual(x)
-    J = problem.jacobian(x)
-    m, p = J.shape
-    position = np.tile(np.arange(problem.rows) < 3, m // problem.rows)
-    row_s2 = np.empty(m)
-    for rows, known in ((position, known_noise), (~position, False)):
-        if rows.any():
-            dof = rows.sum() - p * rows.sum() / m
-            row_s2[rows] = residual_variance(float(r[rows] @ r[rows]), dof, known)
-    s2 = float(row_s2[0])
-    Jn, norms, lam, inverse = _normal_inverse(J)
-    if len(lam) and lam[0] > 1e-12 * lam[-1]:
-        # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvalues give
-        # the condition number
-        cond = math.sqrt(lam[-1] / lam[0])
-    else:  # nearly singular: singular values of Jn itself
-        sv = np.linalg.svd(Jn, compute_uv=False)
-        cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
-        inverse = np.linalg.pinv(Jn.T @ Jn)
-    if np.all(row_s2 == s2):
-        cov = s2 * inverse / np.outer(norms, norms)
-    else:
-        middle = Jn.T @ (Jn * row_s2[:, None])
-        cov = inverse @ middle @ inverse / np.outer(norms, norms)
-    std = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
-    return s2, cov, std, corr, cond
-
-
-def _normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
-    """``J`` with unit-norm columns, the column norms, and the eigenvalues and inverse of
-    the normalised normal matrix ``JnᵀJn`` (from one symmetric eigendecomposition; the
-    inverse is meaningful only when the smallest eigenvalue is well above round-off)."""
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    Jn = J / norms
-    lam, V = np.linalg.eigh(Jn.T @ Jn)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = (V / lam) @ V.T
-    return Jn, norms, lam, inverse
+    """σ̂², covariance, standard deviations, correlations, condition number of ``problem``
+    at ``x`` (:func:`robocal.identify.stages.uncertainty`)."""
+    return uncertainty(problem.residual(x), problem.jacobian(x), problem.rows, known_noise)
 
 
 def _screen(
@@ -804,50 +750,6 @@ def _screen(
         r, J, problem.effect_scale(x0), max_std, max_std_ratio, known_noise=known_noise
     )
     return [(problem.free_names[c], sigma) for c, sigma in found]
-
-
-def screen_unidentifiable(
-    r: Array,
-    J: Array,
-    scale: Array,
-    max_std: float = 5e-4,
-    max_std_ratio: float = 3.0,
-    margin: float = 3.0,
-    known_noise: bool = False,
-) -> list[tuple[int, float]]:
-    """Unknowns the measurements leave far beyond the pruning thresholds, found before
-    any fit: their column indices and σ as tool displacement (m), worst first.
-
-    The σ of the problem linearised at the start values — weighted residuals ``r``
-    ``(m,)`` and Jacobian ``J`` ``(m, p)``, residual variance 1 for a stated noise
-    (``known_noise``) or from one Gauss-Newton step, ``scale`` ``(p,)`` tool displacement
-    per unit of each unknown (:meth:`~robocal.identify.problem.Problem.effect_scale`) —
-    predict those of the fit.  An unknown whose σ exceeds ``margin`` times the pruning
-    threshold (``max(max_std, max_std_ratio × median σ)``) would be pruned after the fit
-    anyway, but could first drag the fit along a nearly flat valley (real UR10 data, plain
-    DH: θ5, α5 and d5, a5 at σ of millimetres to decimetres; 16-24 evaluations instead
-    of 3 on simulated DH UR10s).  Worst first, re-evaluated after each (correlated
-    unknowns often become determined once their partner is fixed); borderline cases are
-    left to the pruning after the fit.
-    """
-    keep = np.ones(J.shape[1], dtype=bool)
-    out: list[tuple[int, float]] = []
-    while keep.sum() > 1:
-        Jn, norms, lam, inverse = _normal_inverse(J[:, keep])
-        if lam[0] <= 1e-14 * lam[-1]:  # numerically singular: the fit and its checks decide
-            break
-        e = r - Jn @ (inverse @ (Jn.T @ r))  # the residual after one Gauss-Newton step
-        # with a stated noise (weights 1/σ) its variance is 1: far from the solution the
-        # one-step residual still holds nonlinear error (2° errors inflated σ 10-50x)
-        s2 = 1.0 if known_noise else float(e @ e) / max(len(r) - int(keep.sum()), 1)
-        move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[keep]
-        worst = int(np.argmax(move))
-        if move[worst] <= margin * max(max_std, max_std_ratio * float(np.median(move))):
-            break
-        column = int(np.flatnonzero(keep)[worst])
-        out.append((column, float(move[worst])))
-        keep[column] = False
-    return out
 
 
 COMPLIANCE_PREFIX = "compliance_"
@@ -1008,11 +910,6 @@ def _rms_rose(result: CalibrationResult, pose_errors: Array) -> str | None:
         f"leaves {large} of {len(pose_errors)} with errors over 3x the median, an error the model does not "
         "describe (backlash? a second robot configuration?); method='lm' minimises the RMS error instead"
     )
-
-
-def _robot_size(T_flange: Array) -> float:
-    """The robot's size (m) from its end frames ``(n, 4, 4)``: the largest coordinate."""
-    return max(float(np.abs(T_flange[:, :3, 3]).max()), 0.1)
 
 
 def _check_load_model(load_model: Model, model: Model) -> Model:
@@ -1284,7 +1181,7 @@ def calibrate_physics(
     chain = measurement_chain(model, T_frame, None if tool is None else T_tool, measure, fit_frame)
     if tool is not None and not fit_tool:
         chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
-    length = _robot_size(T_flange[:50])  # as the batched engine of robocal.study
+    length = float(robot_sizes(T_flange[None])[0])
     rows = 3 if measure == "position" else 6
     w = np.ones((n, rows))
     known_noise = weights == "sigma" and data.sigma is not None  # weights 1/σ of a stated noise
@@ -1366,11 +1263,8 @@ def calibrate_physics(
             problem_warnings.append(orientation_hint)
 
     # identifiable set, preferring the frame, then the tool, then the robot in chain order
-    J0 = problem.scaled_jacobian(problem.x0)
     names = problem.free_names
-    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
-    order += [x for x in names if x not in set(order)]
-    selection = identifiable_subset(J0, names, order="preference", prefer=order)
+    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names)
     problem_warnings += check_rank(
         given_model,
         data,
@@ -1416,14 +1310,12 @@ def calibrate_physics(
     # its bounds, so a poorly determined one cannot run away and is better kept
     prune = result.success and method != "bounded"
     for _ in range(len(x) - 1 if prune else 0):
-        move = std * problem.effect_scale(x)  # σ as tool displacement at the measured poses
-        threshold = max(max_std, max_std_ratio * float(np.median(move)))
-        worst = int(np.argmax(move))
-        # poorly identifiable: beyond the absolute threshold and far beyond the other
-        # parameters' uncertainty (noisy data makes every σ large; that is not a reason)
-        if move[worst] <= threshold:
+        # σ as tool displacement at the measured poses: beyond the thresholds?
+        found = poorly_identifiable(std, problem.effect_scale(x), max_std, max_std_ratio)
+        if found is None:
             break
-        dropped.append(Dropped(names[worst], "poorly identifiable", sigma=float(move[worst])))
+        worst, sigma = found
+        dropped.append(Dropped(names[worst], "poorly identifiable", sigma=sigma))
         keep = np.arange(len(x)) != worst
         problem = problem.fix([names[worst]])
         names = problem.free_names

@@ -85,8 +85,7 @@ def _identifiable(
     chain: Model, q: Array, measure: str, length: float, explain: bool = False
 ) -> tuple[set[str], Any]:
     """Identifiable free parameters of ``chain`` at poses ``q`` (the calibration's rank test)."""
-    from robocal.identify.observability import identifiable_subset
-    from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
+    from robocal.identify.stages import identifiable_set
 
     J = chain.jacobian(q, rows=measure)
     rot = np.array([s.is_rotation for s in chain.steps if s.free])
@@ -95,10 +94,7 @@ def _identifiable(
         J = J.reshape(len(q), 6, -1)
         J[:, 3:] *= length  # orientation rows as displacements at the robot's size
         J = J.reshape(6 * len(q), -1)
-    names = chain.free_names
-    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
-    order += [x for x in names if x not in set(order)]
-    selection = identifiable_subset(J, names, order="preference", prefer=order, explain=explain)
+    selection = identifiable_set(J, chain.free_names, explain=explain)  # the calibration's own rank test
     return set(selection.kept), selection
 
 

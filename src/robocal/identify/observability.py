@@ -441,7 +441,7 @@ def identifiable_subset(
                 dropped[c] = Dropped(names[c], "redundant", absorbers, residuals[j])
     kept = tuple(names[k] for k in sorted(kept_cols))
     pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
-    r_diag = np.r_[rel, np.zeros(int(zero.sum()))]
+    r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
     return IdentifiableSubset(kept, tuple(dropped[k] for k in sorted(dropped)), rank, pivots, r_diag)
 
 
@@ -461,7 +461,7 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     Gram-Schmidt (:func:`_gram_schmidt`) decides.
     """
     diag = np.abs(np.diag(np.linalg.qr(A, mode="r")))
-    diag = np.r_[diag, np.zeros(A.shape[1] - len(diag))]
+    diag = np.concatenate([diag, np.zeros(A.shape[1] - len(diag))])
     keep = diag > tolerance
     coefs = _absorbing(A, keep, tolerance)
     if coefs is None:

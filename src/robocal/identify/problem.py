@@ -175,8 +175,10 @@ class Problem:
         peak): their patterns (joint loads) can be far larger at other poses than at the
         measured ones, where a poorly determined coefficient would extrapolate badly (real
         UR10 data: a kept wrist-2 compliance gave an 11 mm held-out maximum)."""
+        from robocal.identify.stages import tool_displacement_scale
+
         J = self.jacobian(x, weighted=False).reshape(len(self.q), self.rows, -1)[:, :3]
-        scale = np.sqrt(np.max(np.sum(J**2, axis=1), axis=0))
+        scale = tool_displacement_scale(J)
         if self.n_effects:
             scale[-self.n_effects :] = self.free_scale[-self.n_effects :]
         return scale

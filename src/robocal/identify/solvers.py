@@ -32,11 +32,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-__all__ = ["METHODS", "SolveResult", "levenberg_marquardt", "solve"]
+__all__ = [
+    "METHODS",
+    "BatchSolveResult",
+    "SolveResult",
+    "levenberg_marquardt",
+    "levenberg_marquardt_batch",
+    "solve",
+]
 
 Array = NDArray[np.float64]
 
@@ -88,13 +94,97 @@ def _lm(
 def levenberg_marquardt(
     problem, x0: Array, *, max_iterations: int = 200, tolerance: float = 1e-10
 ) -> SolveResult:
-    """Levenberg-Marquardt with Moré's column scaling and Nielsen's damping update.
+    """Levenberg-Marquardt on one problem: :func:`levenberg_marquardt_batch` with a batch of one.
+
+    ``problem`` gives weighted residuals ``problem.residual(x)`` ``(m,)`` and their
+    Jacobian ``problem.jacobian(x)`` ``(m, p)``; ``max_iterations`` counts evaluations."""
+
+    def evaluate(x: Array, _which: NDArray[np.intp]) -> tuple[Array, Array]:
+        return problem.residual(x[0])[None], problem.jacobian(x[0])[None]
+
+    fit = levenberg_marquardt_batch(
+        evaluate, np.asarray(x0, dtype=float)[None], max_evaluations=max_iterations, tolerance=tolerance
+    )
+    return fit.result(0)
+
+
+@dataclass
+class BatchSolveResult:
+    """What :func:`levenberg_marquardt_batch` returns for ``K`` problems.
+
+    Attributes:
+        x: ``(K, p)`` the solutions; r, J: weighted residuals ``(K, m)`` and Jacobians
+            ``(K, m, p)`` there.
+        success: ``(K,)`` converged; iterations: ``(K,)`` accepted steps + 1;
+            evaluations: ``(K,)`` residual-and-Jacobian evaluations.
+        max_evaluations: the budget (for the message of a fit that ran out of it).
+    """
+
+    x: Array
+    r: Array
+    J: Array
+    success: NDArray[np.bool_]
+    iterations: NDArray[np.intp]
+    evaluations: NDArray[np.intp]
+    max_evaluations: int
+    histories: list[list[float]] = field(default_factory=list)
+
+    def message(self, k: int) -> str:
+        if self.success[k]:
+            return "converged: the next step would not improve the fit"
+        return f"no convergence in {self.max_evaluations} evaluations"
+
+    def result(self, k: int) -> SolveResult:
+        """Problem ``k``'s :class:`SolveResult`."""
+        return SolveResult(
+            self.x[k].copy(),
+            bool(self.success[k]),
+            self.message(k),
+            int(self.iterations[k]),
+            int(self.evaluations[k]),
+            self.histories[k],
+        )
+
+
+def _damped_steps(A: Array, g: Array, mu: Array) -> tuple[Array, Array]:
+    """Steps ``δ = −(A + μI)⁻¹ g`` for a stack of normal matrices ``A`` ``(k, p, p)``,
+    raising ``μ`` ``(k,)`` tenfold (at least to 1e-12) where ``A + μI`` is not positive
+    definite (its Cholesky factorisation fails)."""
+    eye = np.eye(A.shape[-1])
+    mu = mu.copy()
+    damped = A + mu[:, None, None] * eye
+    try:
+        np.linalg.cholesky(damped)
+    except np.linalg.LinAlgError:  # some are not positive definite: one at a time (rare)
+        for i in range(len(A)):
+            while True:
+                try:
+                    np.linalg.cholesky(damped[i])
+                    break
+                except np.linalg.LinAlgError:
+                    mu[i] = max(mu[i] * 10.0, 1e-12)
+                    damped[i] = A[i] + mu[i] * eye
+    # numpy has no batched triangular solve: one batched LU solve of the positive definite
+    # matrices (as accurate here, and cheaper than two general solves with the factor)
+    return np.linalg.solve(damped, -g[..., None])[..., 0], mu
+
+
+def levenberg_marquardt_batch(
+    evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
+    x0: Array,
+    *,
+    max_evaluations: int = 200,
+    tolerance: float = 1e-10,
+) -> BatchSolveResult:
+    """Levenberg-Marquardt with Moré's column scaling and Nielsen's damping update, for
+    ``K`` independent problems at once (one problem: :func:`levenberg_marquardt`).
 
     Written here rather than calling MINPACK (scipy's ``method="lm"``) because a
     calibration's residuals and Jacobian come out of one kinematic pass: evaluating them
     together at every trial point, and stopping as soon as the *predicted* gain of the
     next step is negligible (without evaluating that step), takes about half the passes
-    MINPACK's separate function and Jacobian calls need (``benchmarks/bench_calibrate.py``).
+    MINPACK's separate function and Jacobian calls need (``benchmarks/bench_calibrate.py``);
+    and because a study evaluates many robots' residuals in one batched pass.
 
     Each iteration solves ``(J_sᵀJ_s + μI) δ_s = −J_sᵀ r`` with ``J_s = J D⁻¹`` (``D``:
     the largest column norms met so far, MINPACK's scaling) by Cholesky; ``μ`` starts at
@@ -102,68 +192,97 @@ def levenberg_marquardt(
     starts from the nominal model) and follows the gain ratio ``ρ`` (actual over
     predicted decrease): ``μ ← μ·max(1/3, 1 − (2ρ − 1)³)`` on success, ``μ ← μ·ν,
     ν ← 2ν`` on failure (Nielsen 1999, "Damping parameter in Marquardt's method",
-    IMM-REP-1999-05).
+    IMM-REP-1999-05).  Every problem follows its own steps and damping; only the
+    evaluations are shared.
 
-    Stops when the predicted decrease of the next step is below ``tolerance`` times the
-    cost, or the step is below ``tolerance`` relative to the scaled parameters, or after
-    ``max_iterations`` evaluations (``method="lm"`` allows ``max_iterations · (p + 1)``,
-    the evaluation budget MINPACK would have with a finite-difference Jacobian).
+    A problem stops when the predicted decrease of its next step is below ``tolerance``
+    times its cost, or the step is below ``tolerance`` relative to the scaled
+    parameters, or after ``max_evaluations`` evaluations.
+
+    Args:
+        evaluate: ``evaluate(x, which)`` → weighted residuals ``(k, m)`` and Jacobians
+            ``(k, m, p)`` of problems ``which`` ``(k,)`` (indices into the batch) at
+            ``x`` ``(k, p)``.
+        x0: ``(K, p)`` start values.
     """
     x = np.array(x0, dtype=float)
-    r, J = problem.residual(x), problem.jacobian(x)
-    cost = float(r @ r)
-    history = [math.sqrt(cost / max(len(r), 1))]
-    D = np.linalg.norm(J, axis=0)
+    K = len(x)
+    ids = np.arange(K)  # the problems still running; their state below, compacted as they stop
+    r, J = evaluate(x, ids)
+    r, J = np.array(r, dtype=float), np.array(J, dtype=float)
+    m = max(r.shape[1], 1)
+    cost = _squares(r)
+    histories = [[math.sqrt(c / m)] for c in cost.tolist()]
+    D = _column_norms(J)
     D[D == 0] = 1.0
-    mu, nu = None, 2.0
-    evaluations = 1
-    eye = np.eye(len(x))
-    while True:
-        D = np.maximum(D, np.linalg.norm(J, axis=0))
-        Js = J / D
-        A = Js.T @ Js
-        g = Js.T @ r
-        if mu is None:
-            mu = 1e-6 * float(np.max(np.diag(A)))
-        while True:  # a damping for which A + μI factors (μ grows on failure)
-            try:
-                step = -scipy.linalg.cho_solve(scipy.linalg.cho_factor(A + mu * eye), g)
+    mu = np.full(K, np.nan)
+    nu = np.full(K, 2.0)
+    evaluations = np.ones(K, dtype=np.intp)
+    done = BatchSolveResult(x.copy(), r.copy(), J.copy(), np.zeros(K, dtype=bool), np.zeros(K, dtype=np.intp),
+                            np.zeros(K, dtype=np.intp), max_evaluations, histories)  # fmt: skip
+    while len(ids):
+        D = np.maximum(D, _column_norms(J))
+        Js = J / D[:, None, :]
+        JsT = Js.transpose(0, 2, 1)
+        A = JsT @ Js
+        g = (JsT @ r[:, :, None])[..., 0]
+        fresh = np.isnan(mu)
+        if fresh.any():
+            mu[fresh] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
+        step, mu = _damped_steps(A, g, mu)
+        predicted = -np.sum(step * (2.0 * g + (A @ step[:, :, None])[..., 0]), axis=1)
+        small_step = _norms(step) <= tolerance * (_norms(D * x) + tolerance)
+        converged = (predicted <= tolerance * cost) | small_step | (cost == 0.0)
+        stop = converged | (evaluations >= max_evaluations)
+        if stop.any():  # record the stopped ones, keep the others
+            f, k = np.flatnonzero(stop), ids[stop]
+            done.x[k], done.r[k], done.J[k] = x[f], r[f], J[f]
+            done.success[k], done.evaluations[k] = converged[f], evaluations[f]
+            going = ~stop
+            ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted = (
+                a[going] for a in (ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted)
+            )
+            if not len(ids):
                 break
-            except np.linalg.LinAlgError:
-                mu = max(mu * 10.0, 1e-12)
-        predicted = -float(step @ (2.0 * g + A @ step))  # cost − |r + J_s δ_s|²
-        small_step = np.linalg.norm(step) <= tolerance * (np.linalg.norm(D * x) + tolerance)
-        if predicted <= tolerance * cost or small_step or cost == 0.0:
-            return SolveResult(
-                x,
-                True,
-                "converged: the next step would not improve the fit",
-                len(history),
-                evaluations,
-                history,
-            )
-        if evaluations >= max_iterations:
-            return SolveResult(
-                x,
-                False,
-                f"no convergence in {max_iterations} evaluations",
-                len(history),
-                evaluations,
-                history,
-            )
         x_new = x + step / D
-        r_new = problem.residual(x_new)
-        evaluations += 1
-        cost_new = float(r_new @ r_new)
+        r_new, J_new = evaluate(x_new, ids)
+        evaluations = evaluations + 1
+        cost_new = _squares(r_new)
         rho = (cost - cost_new) / predicted
-        if rho > 0:
-            x, r, J, cost = x_new, r_new, problem.jacobian(x_new), cost_new
-            history.append(math.sqrt(cost / max(len(r), 1)))
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
+        better = rho > 0
+        if better.all():
+            x, r, J, cost = x_new, r_new, J_new, cost_new
         else:
-            mu *= nu
-            nu *= 2.0
+            x = np.where(better[:, None], x_new, x)
+            r = np.where(better[:, None], r_new, r)
+            J = np.where(better[:, None, None], J_new, J)
+            cost = np.where(better, cost_new, cost)
+        if better.all():
+            mu = mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = np.full_like(nu, 2.0)
+        else:
+            with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
+                mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
+            nu = np.where(better, 2.0, nu * 2.0)
+        for k, c in zip(ids[better].tolist(), cost_new[better].tolist(), strict=True):
+            histories[k].append(math.sqrt(c / m))
+    done.iterations[:] = [len(h) for h in histories]
+    return done
+
+
+def _squares(r: Array) -> Array:
+    """``(k,)`` sums of squares of the rows of ``r`` ``(k, m)``."""
+    return np.einsum("km,km->k", r, r)
+
+
+def _norms(v: Array) -> Array:
+    """``(k,)`` Euclidean norms of the rows of ``v`` ``(k, p)``."""
+    return np.sqrt(np.einsum("kp,kp->k", v, v))
+
+
+def _column_norms(J: Array) -> Array:
+    """``(k, p)`` Euclidean norms of the columns of a stack of matrices ``J`` ``(k, m, p)``."""
+    return np.sqrt(np.einsum("kmp,kmp->kp", J, J))
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100, **_) -> SolveResult:

@@ -1,0 +1,253 @@
+"""The stages of a calibration, shared by :func:`robocal.calibrate` and the batched engine.
+
+Both calibration engines — :func:`robocal.identify.calibrate.calibrate_physics` (one
+robot, any method, device and joint effects) and :func:`robocal.identify.batch.calibrate_batch`
+(many robots of one model at once, for studies) — call these functions, so that a
+study's calibration is ``rc.calibrate``'s to round-off:
+
+* start values: :func:`initial_frames_and_tools` (device frame by Kabsch/Horn, tool by
+  linear least squares, alternated) and :func:`robot_sizes`;
+* the identifiable set: :func:`identifiable_set` (the sequential rank test preferring
+  the device frame, then the tool, then the robot in chain order);
+* screening before the first fit: :func:`screen_unidentifiable`;
+* the solver: :func:`robocal.identify.solvers.levenberg_marquardt_batch`;
+* uncertainty: :func:`uncertainty` (σ̂²(JᵀWJ)⁻¹, condition number);
+* pruning after the fit: :func:`tool_displacement_scale`, :func:`poorly_identifiable`.
+
+Functions with a leading batch axis ``K`` work on many robots at once; the others on one
+(the batched engine calls them per robot: they are cheap next to the fits).
+Units: SI (m, rad); weighted residuals are in units of their σ.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal import spatial
+from robocal.identify.guards import residual_variance
+from robocal.identify.observability import IdentifiableSubset, identifiable_subset
+
+__all__ = [
+    "identifiable_set",
+    "initial_frames_and_tools",
+    "normal_inverse",
+    "poorly_identifiable",
+    "preference_order",
+    "robot_sizes",
+    "screen_unidentifiable",
+    "tool_displacement_scale",
+    "uncertainty",
+]
+
+Array = NDArray[np.float64]
+
+FRAME_PREFIX = "frame_"  # as robocal.identify.problem (not imported: problem imports nothing from here)
+TOOL_PREFIX = "tcp_"
+
+
+# ---------------------------------------------------------------------- start values
+def _project_rotations(M: Array) -> Array:
+    """The nearest rotations ``(..., 3, 3)`` to matrices ``M`` (SVD, det +1)."""
+    U, _, Vt = np.linalg.svd(M)
+    flip = np.linalg.det(U @ Vt) < 0
+    U[flip, :, -1] *= -1
+    return U @ Vt
+
+
+def initial_frames_and_tools(
+    T_flange: Array,
+    position: Array,
+    *,
+    orientation: Array | None = None,
+    T_tool: Array | None = None,
+    T_frame: Array | None = None,
+    fit_frame: bool = True,
+    fit_tool: bool = True,
+    rounds: int = 4,
+) -> tuple[Array, Array]:
+    """Start values of the device frame and the tool of ``K`` robots: alternating
+    closed-form fits (Kabsch/Horn for ``T_device_base``, the mean of the least-squares
+    tool points, and for pose data the nearest rotation of the tool's orientation).
+
+    Args:
+        T_flange: ``(K, n, 4, 4)`` the robots' end frames at the measured joint values.
+        position: ``(K, n, 3)`` measured positions (m, device frame).
+        orientation: ``(K, n, 3, 3)`` measured rotations (pose data) or None.
+        T_tool: ``(4, 4)`` or ``(K, 4, 4)`` start of the tool (default identity).
+        T_frame: ``(4, 4)`` or ``(K, 4, 4)`` the known device frame when it is not
+            fitted (default identity).
+        fit_frame, fit_tool: which of the two are fitted (both: ``rounds`` rounds).
+
+    Returns:
+        ``(K, 4, 4)`` device frames and ``(K, 4, 4)`` tools.
+    """
+    K, n = T_flange.shape[:2]
+    T_tool = np.array(np.broadcast_to(np.eye(4) if T_tool is None else T_tool, (K, 4, 4)), dtype=float)
+    T_frame = np.array(np.broadcast_to(np.eye(4) if T_frame is None else T_frame, (K, 4, 4)), dtype=float)
+    R_f, p_f = T_flange[..., :3, :3], T_flange[..., :3, 3]
+    y = np.asarray(position, dtype=float)
+    for _ in range(rounds if (fit_frame and fit_tool) else 1):
+        if fit_frame:
+            p_base = (R_f @ T_tool[:, None, :3, 3:])[..., 0] + p_f
+            T_frame = spatial.fit_rigid_transform(p_base, y)
+        if fit_tool:
+            # y = R0 (R_f t + p_f) + t0  =>  R_fᵀ (R0ᵀ (y - t0) - p_f) = t  (least squares: the mean)
+            R0, t0 = T_frame[:, :3, :3], T_frame[:, :3, 3]
+            b = (y - t0[:, None, :]) @ R0 - p_f
+            T_tool[:, :3, 3] = np.einsum("anji,anj->ai", R_f, b) / n
+            if orientation is not None:
+                R = R0[:, None] @ R_f
+                T_tool[:, :3, :3] = _project_rotations(np.einsum("anji,anjk->aik", R, orientation))
+    return T_frame, T_tool
+
+
+def robot_sizes(T_flange: Array) -> Array:
+    """``(K,)`` the robots' sizes (m), to weigh rotations against lengths: the largest
+    coordinate of their end frames ``(K, n, 4, 4)`` at the first 50 poses (at least 0.1)."""
+    head = T_flange[:, :50, :3, 3]
+    return np.maximum(np.abs(head).reshape(len(head), -1).max(axis=1), 0.1)
+
+
+# ---------------------------------------------------------------------- identifiable set
+def preference_order(names: Sequence[str]) -> list[str]:
+    """Which unknowns to keep first when some are redundant: the device frame, then the
+    tool, then the others in chain order."""
+    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
+    return order + [x for x in names if x not in set(order)]
+
+
+def identifiable_set(J_scaled: Array, names: Sequence[str], explain: bool = True) -> IdentifiableSubset:
+    """The calibration's identifiable set: the sequential rank test
+    (:func:`~robocal.identify.observability.identifiable_subset`, ``order="preference"``)
+    over the weighted Jacobian ``(m, p)`` with every unknown as a tool displacement."""
+    prefer = preference_order(names)
+    return identifiable_subset(J_scaled, names, order="preference", prefer=prefer, explain=explain)
+
+
+def tool_displacement_scale(J_position: Array) -> Array:
+    """``(..., p)`` the largest displacement (m) of the measured point per unit of each
+    unknown over the poses, from the unweighted position rows of the Jacobian
+    ``(..., n, 3, p)`` (:meth:`robocal.identify.problem.Problem.effect_scale`)."""
+    return np.sqrt(np.max(np.sum(J_position**2, axis=-2), axis=-2))
+
+
+# ---------------------------------------------------------------------- screening
+def normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
+    """``J`` with unit-norm columns, the column norms, and the eigenvalues and inverse of
+    the normalised normal matrix ``JnᵀJn`` (from one symmetric eigendecomposition; the
+    inverse is meaningful only when the smallest eigenvalue is well above round-off)."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    Jn = J / norms
+    lam, V = np.linalg.eigh(Jn.T @ Jn)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = (V / lam) @ V.T
+    return Jn, norms, lam, inverse
+
+
+def screen_unidentifiable(
+    r: Array,
+    J: Array,
+    scale: Array,
+    max_std: float = 5e-4,
+    max_std_ratio: float = 3.0,
+    margin: float = 3.0,
+    known_noise: bool = False,
+) -> list[tuple[int, float]]:
+    """Unknowns the measurements leave far beyond the pruning thresholds, found before
+    any fit: their column indices and σ as tool displacement (m), worst first.
+
+    The σ of the problem linearised at the start values — weighted residuals ``r``
+    ``(m,)`` and Jacobian ``J`` ``(m, p)``, residual variance 1 for a stated noise
+    (``known_noise``) or from one Gauss-Newton step, ``scale`` ``(p,)`` tool displacement
+    per unit of each unknown (:meth:`~robocal.identify.problem.Problem.effect_scale`) —
+    predict those of the fit.  An unknown whose σ exceeds ``margin`` times the pruning
+    threshold (``max(max_std, max_std_ratio × median σ)``) would be pruned after the fit
+    anyway, but could first drag the fit along a nearly flat valley (real UR10 data, plain
+    DH: θ5, α5 and d5, a5 at σ of millimetres to decimetres; 16-24 evaluations instead
+    of 3 on simulated DH UR10s).  Worst first, re-evaluated after each (correlated
+    unknowns often become determined once their partner is fixed); borderline cases are
+    left to the pruning after the fit.
+    """
+    keep = np.ones(J.shape[1], dtype=bool)
+    out: list[tuple[int, float]] = []
+    while keep.sum() > 1:
+        Jn, norms, lam, inverse = normal_inverse(J[:, keep])
+        if lam[0] <= 1e-14 * lam[-1]:  # numerically singular: the fit and its checks decide
+            break
+        e = r - Jn @ (inverse @ (Jn.T @ r))  # the residual after one Gauss-Newton step
+        # with a stated noise (weights 1/σ) its variance is 1: far from the solution the
+        # one-step residual still holds nonlinear error (2° errors inflated σ 10-50x)
+        s2 = 1.0 if known_noise else float(e @ e) / max(len(r) - int(keep.sum()), 1)
+        move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[keep]
+        worst = int(np.argmax(move))
+        if move[worst] <= margin * max(max_std, max_std_ratio * float(np.median(move))):
+            break
+        column = int(np.flatnonzero(keep)[worst])
+        out.append((column, float(move[worst])))
+        keep[column] = False
+    return out
+
+
+# ---------------------------------------------------------------------- uncertainty and pruning
+def uncertainty(
+    r: Array, J: Array, rows: int, known_noise: bool = False
+) -> tuple[float, Array, Array, Array, float]:
+    """σ̂², covariance, standard deviations, correlations and condition number of a fit
+    with weighted residuals ``r`` ``(m,)`` and Jacobian ``J`` ``(m, p)``, ``rows`` (3 or 6)
+    rows per pose.
+
+    The covariance is σ̂²(JᵀWJ)⁻¹ with σ̂² from :func:`residual_variance` (1 when the
+    weights come from a stated noise the residuals agree with).  Pose measurements have
+    two groups of rows whose relative weight is a choice (``orientation_weight``), not a
+    noise ratio: each group gets its own σ̂² (its share of the degrees of freedom) and
+    the covariance is the sandwich (JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹ of the weighted rows,
+    which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
+    UR10 with an optical CMM twice)."""
+    m, p = J.shape
+    position = np.tile(np.arange(rows) < 3, m // rows)
+    row_s2 = np.empty(m)
+    for group, known in ((position, known_noise), (~position, False)):
+        if group.any():
+            dof = group.sum() - p * group.sum() / m
+            row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known)
+    s2 = float(row_s2[0])
+    Jn, norms, lam, inverse = normal_inverse(J)
+    if len(lam) and lam[0] > 1e-12 * lam[-1]:
+        # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvalues give
+        # the condition number
+        cond = math.sqrt(lam[-1] / lam[0])
+    else:  # nearly singular: singular values of Jn itself
+        sv = np.linalg.svd(Jn, compute_uv=False)
+        cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
+        inverse = np.linalg.pinv(Jn.T @ Jn)
+    if np.all(row_s2 == s2):
+        cov = s2 * inverse / np.outer(norms, norms)
+    else:
+        middle = Jn.T @ (Jn * row_s2[:, None])
+        cov = inverse @ middle @ inverse / np.outer(norms, norms)
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
+    return s2, cov, std, corr, cond
+
+
+def poorly_identifiable(
+    std: Array, scale: Array, max_std: float, max_std_ratio: float
+) -> tuple[int, float] | None:
+    """The unknown to prune after a fit, ``(index, σ as tool displacement in m)``, or None.
+
+    σ as a tool displacement (``std`` times ``scale``, both ``(p,)``) beyond the absolute
+    threshold ``max_std`` and beyond ``max_std_ratio`` times the median of all unknowns'
+    (noisy data makes every σ large; that is not a reason): the worst such one."""
+    if len(std) < 2:  # the last unknown is never pruned
+        return None
+    move = std * scale
+    worst = int(np.argmax(move))
+    if move[worst] <= max(max_std, max_std_ratio * float(np.median(move))):
+        return None
+    return worst, float(move[worst])
