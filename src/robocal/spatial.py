@@ -21,10 +21,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 __all__ = [
     "MOTIONS",
@@ -191,16 +194,24 @@ def skew(v: ArrayLike) -> Array:
     return S
 
 
+def _scipy_rotation() -> type[Rotation]:
+    """scipy's ``Rotation``, imported on first use (``scipy.spatial`` would add about 0.15 s to the
+    start of every ``robocal`` command)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
 def _as_rotation(R: ArrayLike) -> tuple[Rotation, tuple[int, ...]]:
     R = np.asarray(R, dtype=float)
     batch = R.shape[:-2]
-    return Rotation.from_matrix(R.reshape(-1, 3, 3)), batch
+    return _scipy_rotation().from_matrix(R.reshape(-1, 3, 3)), batch
 
 
 def rotvec_to_matrix(rotvec: ArrayLike) -> Array:
     """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis * angle, rad)."""
     v = np.asarray(rotvec, dtype=float)
-    return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape((*v.shape[:-1], 3, 3))
+    return _scipy_rotation().from_rotvec(v.reshape(-1, 3)).as_matrix().reshape((*v.shape[:-1], 3, 3))
 
 
 def matrix_to_rotvec(R: ArrayLike) -> Array:
@@ -225,7 +236,7 @@ def matrix_to_rotvec(R: ArrayLike) -> Array:
     out = 0.5 * factor[:, None] * v
     near_pi = c < -0.99
     if near_pi.any():
-        out[near_pi] = Rotation.from_matrix(M[near_pi]).as_rotvec()
+        out[near_pi] = _scipy_rotation().from_matrix(M[near_pi]).as_rotvec()
     return out.reshape((*batch, 3))
 
 
@@ -236,7 +247,7 @@ def quaternion_to_matrix(quat: ArrayLike) -> Array:
     """
     q = np.asarray(quat, dtype=float)
     flat = q.reshape(-1, 4)
-    return Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape((*q.shape[:-1], 3, 3))
+    return _scipy_rotation().from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape((*q.shape[:-1], 3, 3))
 
 
 def matrix_to_quaternion(R: ArrayLike) -> Array:
@@ -249,7 +260,7 @@ def matrix_to_quaternion(R: ArrayLike) -> Array:
 def euler_to_matrix(angles: ArrayLike, seq: str = "ZXZ") -> Array:
     """Rotation matrices from Euler angles ``(..., 3)`` (rad) in scipy's ``seq`` convention."""
     a = np.asarray(angles, dtype=float)
-    return Rotation.from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape((*a.shape[:-1], 3, 3))
+    return _scipy_rotation().from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape((*a.shape[:-1], 3, 3))
 
 
 def matrix_to_euler(R: ArrayLike, seq: str = "ZXZ") -> Array:
