@@ -608,10 +608,19 @@ class Model:
         ``compiled``: use the compiled kernels (:mod:`robocal.model.kernels`; default: when
         numba is installed) or, with False, the numpy code (no numba import).
         """
+        if perturbations is None and compiled is not False and type(q) is np.ndarray and q.ndim == 1:
+            T = self._fk_one(q, compiled)  # one configuration: the interactive case, a few µs
+            if T is not None:
+                return T
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(compiled)
-        if kernels is not None:
+        if kernels is not None and d is None:
+            plan = self._plan
+            seg, _, offsets = self._kernel_segments
+            qt = np.ascontiguousarray(q.T)
+            T = kernels.forward_batch(qt, seg, offsets, plan.joint_axis_array, plan.joint_rot_array)
+        elif kernels is not None:
             T = self._kernel_forward(kernels, q, d, keep_anchors=False)[0]
         else:
             F, _ = self._forward(q, d, keep_anchors=False)
@@ -636,6 +645,24 @@ class Model:
         return T[0] if single else T
 
     # ------------------------------------------------------- compiled kernels (numba)
+    def _fk_one(self, q: Array, compiled: bool | None) -> Array | None:
+        """:meth:`fk` of one configuration by :func:`robocal.model.kernels.fk_one`, or None
+        when it does not apply (no numba, another shape or type: the general path decides)."""
+        kernels = _KERNELS[0] if _KERNELS else _kernels(compiled)
+        plan = self._plan
+        if (
+            kernels is None
+            or q.dtype != np.float64
+            or q.shape[0] != len(plan.joint_steps)
+            or not q.flags.c_contiguous
+        ):
+            return None
+        seg, _, offsets = self._kernel_segments
+        T = np.empty((4, 4))
+        if not kernels.fk_one(q, seg, offsets, plan.joint_axis_array, plan.joint_rot_array, T):
+            return None  # NaN/inf: the general path reports which joint
+        return T
+
     @cached_property
     def _kernel_segments(self) -> tuple[Array, Array, Array]:
         """:meth:`_kernel_data` for this model's own values (models are immutable)."""
@@ -990,13 +1017,19 @@ def _kernels(compiled: bool | None):
     """
     if compiled is False:
         return None
+    if _KERNELS:
+        return _KERNELS[0]
     try:
         from robocal.model import kernels
     except ImportError:
         if compiled:
             raise
         return None
+    _KERNELS.append(kernels)
     return kernels
+
+
+_KERNELS: list = []  # the kernels module once imported (a list: no `global` statement needed)
 
 
 _SMALL_BATCH = 20_000  # steps x poses below which the Jacobian's cross products run over all steps at once
