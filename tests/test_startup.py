@@ -8,7 +8,17 @@ import sys
 
 import pytest
 
-HEAVY = ("scipy.stats", "scipy.optimize", "pinocchio", "plotly", "dask", "distributed", "sklearn", "numba")
+HEAVY = (
+    "scipy.stats",
+    "scipy.optimize",
+    "scipy.spatial",
+    "pinocchio",
+    "plotly",
+    "dask",
+    "distributed",
+    "sklearn",
+    "numba",
+)
 
 _PROBE = """
 import contextlib, io, json, sys
