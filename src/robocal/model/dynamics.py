@@ -248,23 +248,27 @@ def _mass_points(model: Model, payload: Payload | None) -> tuple[NDArray[np.intp
     Bodies before the first joint are left out, as in :func:`to_pinocchio`; a payload hangs
     from the last joint at the tool frame.
     """
+    from robocal.model.chain import _elementaries
+
     plan = model._plan
     seg_T, local = model._segments  # frames before each step in their joint's frame (cached)
-    joints, masses, centres = [], [], []
-    for body in model.bodies:
-        i = model._index[body.frame]
-        joint = int(plan.anchor_of[i]) - 1 + (model.steps[i].joint is not None)
-        if joint < 0:
-            continue
-        step = model.steps[i]
-        placement = np.eye(4) if step.joint is not None else local[i] @ elementary(step.motion, step.value)
-        joints.append(joint)
-        masses.append(body.mass)
-        centres.append(placement[:3, :3] @ np.asarray(body.com) + placement[:3, 3])
+    steps = np.array([model._index[b.frame] for b in model.bodies], dtype=np.intp)
+    # the frame after each body's step in its joint's frame: local @ the step's own transform
+    # (identity for a joint step: the joint frame itself)
+    after = local[steps] @ _elementaries(plan.step_axis[steps], plan.step_rot[steps], model.values[steps])
+    after[plan.step_joint[steps]] = np.eye(4)
+    joints = plan.anchor_of[steps] - 1 + plan.step_joint[steps]
+    masses = [b.mass for b in model.bodies]
+    centres = [T[:3, :3] @ np.asarray(b.com) + T[:3, 3] for T, b in zip(after, model.bodies, strict=True)]
+    joints = list(joints)
     if payload is not None and payload.mass > 0:
         joints.append(model.dof - 1)
         masses.append(payload.mass)
         centres.append(seg_T[-1][:3, :3] @ np.asarray(payload.com) + seg_T[-1][:3, 3])
+    keep = [k for k, j in enumerate(joints) if j >= 0]  # bodies before the first joint: fixed
+    joints = [joints[k] for k in keep]
+    masses = [masses[k] for k in keep]
+    centres = [centres[k] for k in keep]
     return np.array(joints, dtype=np.intp), np.array(masses), np.array(centres).reshape(-1, 3)
 
 
