@@ -182,10 +182,16 @@ def test_wrench_input_errors():
 
 
 @pytest.mark.parametrize("name", ["katana450", "ur10", "puma560"])
-def test_static_pass_equals_pinocchio_rnea(name):
-    """The vectorised static wrenches (and gravity torques) against Pinocchio's RNEA and
-    generalized gravity, pose by pose, with a tilted gravity and a payload off the tool axis."""
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_static_pass_equals_pinocchio_rnea(name, compiled, monkeypatch):
+    """The static wrenches in one pass (compiled kernel, and the numpy code) and the gravity
+    torques against Pinocchio's RNEA and generalized gravity, pose by pose, with a tilted
+    gravity and a payload off the tool axis."""
+    from robocal.model import chain
     from robocal.model.dynamics import _rnea_wrenches, _static_wrenches
+
+    if not compiled:
+        monkeypatch.setattr(chain, "_kernels", lambda compiled=None: None)
 
     model = rc.robot(name)
     rng = np.random.default_rng(11)

@@ -282,13 +282,33 @@ def _static_wrenches(model: Model, q: Array, gravity: ArrayLike | None, payload:
     both running sums from the tool back; then rotated into the joint frame.  This is what
     RNEA computes with zero velocities and accelerations (Featherstone, *Rigid Body Dynamics
     Algorithms*, 2008, sect. 5.3), written over the poses so that a calibration's load pass
-    costs a few µs per pose instead of one Pinocchio call and model per pose.
+    costs a few µs per pose instead of one Pinocchio call and model per pose.  With numba
+    the same sums run compiled (:func:`robocal.model.kernels.static_wrenches`), else in numpy
+    below; the tests hold both to RNEA.
     """
     g = np.array([0.0, 0.0, -9.81]) if gravity is None else np.asarray(gravity, dtype=float)
     if g.shape != (3,) or not np.all(np.isfinite(g)):
         raise ValueError(f"gravity must be 3 finite numbers (m/s², base frame), got {gravity!r}")
     joints, masses, centres = _mass_points(model, payload)
     n, dof = q.shape
+    from robocal.model.chain import _kernels
+
+    kernels = _kernels(None)
+    if kernels is not None:  # compiled: one pass per pose, no numpy call per joint
+        order = np.argsort(joints, kind="stable")
+        plan = model._plan
+        seg, _, offsets = model._kernel_segments
+        return kernels.static_wrenches(
+            np.ascontiguousarray(q),
+            seg,
+            offsets,
+            plan.joint_axis_array,
+            plan.joint_rot_array,
+            np.ascontiguousarray(joints[order]),
+            np.ascontiguousarray(masses[order]),
+            np.ascontiguousarray(centres[order]),
+            g,
+        )
     _, anchors = model._forward(q, None, keep_anchors=True)  # (dof + 1, 3, 4, n), [R | p] rows
     frames = anchors[1:]  # the frame after joint j: (dof, 3, 4, n)
     R, o = frames[:, :, :3], frames[:, :, 3]  # (dof, 3, 3, n), (dof, 3, n)

@@ -24,7 +24,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["evaluate", "fk_one", "forward", "forward_batch", "segment_data"]
+__all__ = ["evaluate", "fk_one", "forward", "forward_batch", "segment_data", "static_wrenches"]
 
 _jit = numba.njit(cache=True, nogil=True)
 
@@ -398,3 +398,40 @@ def evaluate(
                     for r in range(3):
                         P[row + 3 + r, j, t] = A[r]
     return T, J, P
+
+
+@_jit
+def static_wrenches(q, seg, offsets, joint_axis, joint_rot, joints, masses, centres, g):
+    """Support wrenches at rest ``(n, dof, 6)`` (as
+    :func:`robocal.model.dynamics._static_wrenches`, its formulas): for each pose the joint
+    frames, then the masses' sums from the tool back, each rotated into its joint frame."""
+    n, dof = q.shape
+    out = np.empty((n, dof, 6))
+    anchors = np.empty((dof + 1, 3, 4))
+    F = np.empty((3, 4))
+    pert = np.zeros((1, dof, 3))
+    b = joints.shape[0]
+    for p in range(n):
+        _pose_forward(q, pert, p, False, seg, offsets, joint_axis, joint_rot, anchors, F)
+        M = 0.0
+        S0 = S1 = S2 = 0.0
+        k = b - 1  # the masses are sorted by joint
+        for j in range(dof - 1, -1, -1):
+            A = anchors[j + 1]
+            while k >= 0 and joints[k] == j:
+                m = masses[k]
+                c0, c1, c2 = centres[k, 0], centres[k, 1], centres[k, 2]
+                S0 += m * (A[0, 0] * c0 + A[0, 1] * c1 + A[0, 2] * c2 + A[0, 3])
+                S1 += m * (A[1, 0] * c0 + A[1, 1] * c1 + A[1, 2] * c2 + A[1, 3])
+                S2 += m * (A[2, 0] * c0 + A[2, 1] * c1 + A[2, 2] * c2 + A[2, 3])
+                M += m
+                k -= 1
+            l0, l1, l2 = S0 - M * A[0, 3], S1 - M * A[1, 3], S2 - M * A[2, 3]  # Σ m (c − o_j)
+            f0, f1, f2 = -M * g[0], -M * g[1], -M * g[2]
+            n0 = l2 * g[1] - l1 * g[2]  # lever × (−g)
+            n1 = l0 * g[2] - l2 * g[0]
+            n2 = l1 * g[0] - l0 * g[1]
+            for c in range(3):  # Rᵀ v: column c of R dotted with v
+                out[p, j, c] = A[0, c] * f0 + A[1, c] * f1 + A[2, c] * f2
+                out[p, j, 3 + c] = A[0, c] * n0 + A[1, c] * n1 + A[2, c] * n2
+    return out
