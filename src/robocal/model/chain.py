@@ -649,19 +649,19 @@ class Model:
         """:meth:`fk` of one configuration by :func:`robocal.model.kernels.fk_one`, or None
         when it does not apply (no numba, another shape or type: the general path decides)."""
         kernels = _KERNELS[0] if _KERNELS else _kernels(compiled)
-        plan = self._plan
-        if (
-            kernels is None
-            or q.dtype != np.float64
-            or q.shape[0] != len(plan.joint_steps)
-            or not q.flags.c_contiguous
-        ):
+        if kernels is None or q.dtype is not _FLOAT64 or q.strides != (8,):
             return None
-        seg, _, offsets = self._kernel_segments
         T = np.empty((4, 4))
-        if not kernels.fk_one(q, seg, offsets, plan.joint_axis_array, plan.joint_rot_array, T):
-            return None  # NaN/inf: the general path reports which joint
-        return T
+        return T if kernels.fk_one(q, self._fk_one_data, T) else None
+
+    @cached_property
+    def _fk_one_data(self) -> Array:
+        """:func:`robocal.model.kernels.pack_one` of this model."""
+        from robocal.model import kernels
+
+        plan = self._plan
+        seg, _, offsets = self._kernel_segments
+        return kernels.pack_one(seg, offsets, plan.joint_axis_array, plan.joint_rot_array)
 
     @cached_property
     def _kernel_segments(self) -> tuple[Array, Array, Array]:
@@ -1029,6 +1029,7 @@ def _kernels(compiled: bool | None):
     return kernels
 
 
+_FLOAT64 = np.dtype(np.float64)
 _KERNELS: list = []  # the kernels module once imported (a list: no `global` statement needed)
 
 
