@@ -6,26 +6,33 @@
 >>> T = model.fk([[0, -1.57, 1.57, 0, 1.57, 0]])   # (1, 4, 4) tool frame, m
 """
 
+from __future__ import annotations
+
 from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING
 
 from robocal import spatial
-from robocal.compensate import compensate
-from robocal.identify import CalibrationResult, calibrate, cross_validate, validate
-from robocal.measure import Measurements, read_measurements, write_measurements
-from robocal.model import (
-    Body,
-    Joint,
-    JointEffects,
-    Model,
-    ModelFileError,
-    Step,
-    calibration_model,
-    load_model,
-    robot,
-    robots,
-    save_model,
+from robocal._lazy import lazy_package
+
+# Loaded on first use (robocal._lazy): the command line starts without numpy's heavier
+# neighbours (scipy.stats, Pinocchio, plotly, Dask).
+lazy_package(
+    __name__,
+    {
+        "robocal.compensate.commands": ("compensate",),
+        "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
+        "robocal.identify.validate": ("cross_validate", "validate"),
+        "robocal.measure.dataset": ("Measurements", "read_measurements", "write_measurements"),
+        "robocal.model.chain": ("Body", "Joint", "JointEffects", "Model", "Step"),
+        "robocal.model.complete": ("calibration_model",),
+        "robocal.model.files": ("ModelFileError", "load_model", "save_model"),
+        "robocal.model.catalog": ("robot", "robots"),
+        "robocal.model.builder": ("build_model",),
+    },
 )
-from robocal.model.builder import build_model
+
+if TYPE_CHECKING:
+    from robocal.model.chain import Model
 
 try:
     __version__ = version("robocal")

@@ -11,17 +11,21 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
 import typer
 from rich.table import Table
 
-from robocal import spatial
 from robocal.console import console, err_console, fail
-from robocal.model.catalog import robot, robots
-from robocal.model.chain import Model
-from robocal.model.files import ModelFileError, load_model
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from robocal.model.chain import Model
+
+# Start-up: this module and the command modules it registers import only typer and rich at
+# the top; each command imports what it uses (tests/test_cli.py checks that `robocal --help`
+# loads none of scipy.stats, Pinocchio, plotly, Dask, scikit-learn).
 
 app = typer.Typer(
     help="robocal: calibration of serial robot arms.",
@@ -35,6 +39,9 @@ app.add_typer(robots_app, name="robots")
 
 def resolve_model(name_or_path: str) -> Model:
     """A catalog robot by name, or a model file by path (``.yaml``/``.yml``)."""
+    from robocal.model.catalog import robot
+    from robocal.model.files import ModelFileError, load_model
+
     path = Path(name_or_path)
     if not name_or_path.strip():
         raise fail("no robot given: a catalog name (robocal robots) or a model file")
@@ -79,6 +86,8 @@ def robots_list(ctx: typer.Context) -> None:
     """List the catalog robots (use `robocal robots show NAME` for one)."""
     if ctx.invoked_subcommand is not None:
         return
+    from robocal.model.catalog import robot, robots
+
     table = Table(title="robocal catalog", title_justify="left")
     for col in ("name", "robot", "joints", "parameters", "mass data"):
         table.add_column(col)
@@ -129,6 +138,8 @@ def robots_show(name: Annotated[str, typer.Argument(help="catalog name or model 
 
 
 def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
+    import numpy as np
+
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
     except ValueError:
@@ -151,11 +162,13 @@ def fk(
     as_json: Annotated[bool, typer.Option("--json", help="print JSON (m, rad) instead of a table")] = False,
 ) -> None:
     """Tool pose of a robot at the given joint values (rad and m unless --deg)."""
+    from robocal import spatial
+
     m = resolve_model(name)
     qv = _parse_q(q, m, deg)
     limits = m.joint_limits
     outside = [m.joint_names[j] for j in range(m.dof) if not limits[j, 0] <= qv[j] <= limits[j, 1]]
-    T = m.fk(qv)
+    T = m.fk(qv, compiled=False)  # one pose: numpy's 60 µs beat numba's import and cache load
     quat = spatial.matrix_to_quaternion(T[:3, :3])
     rpy = spatial.matrix_to_euler(T[:3, :3], "xyz")
     zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")

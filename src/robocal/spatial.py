@@ -21,10 +21,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 __all__ = [
     "MOTIONS",
@@ -191,16 +194,24 @@ def skew(v: ArrayLike) -> Array:
     return S
 
 
+def _scipy_rotation() -> type[Rotation]:
+    """scipy's ``Rotation``, imported on first use (``scipy.spatial`` would add about 0.15 s to the
+    start of every ``robocal`` command)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
 def _as_rotation(R: ArrayLike) -> tuple[Rotation, tuple[int, ...]]:
     R = np.asarray(R, dtype=float)
     batch = R.shape[:-2]
-    return Rotation.from_matrix(R.reshape(-1, 3, 3)), batch
+    return _scipy_rotation().from_matrix(R.reshape(-1, 3, 3)), batch
 
 
 def rotvec_to_matrix(rotvec: ArrayLike) -> Array:
     """Rotation matrices ``(..., 3, 3)`` from rotation vectors ``(..., 3)`` (axis * angle, rad)."""
     v = np.asarray(rotvec, dtype=float)
-    return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape((*v.shape[:-1], 3, 3))
+    return _scipy_rotation().from_rotvec(v.reshape(-1, 3)).as_matrix().reshape((*v.shape[:-1], 3, 3))
 
 
 def matrix_to_rotvec(R: ArrayLike) -> Array:
@@ -225,7 +236,7 @@ def matrix_to_rotvec(R: ArrayLike) -> Array:
     out = 0.5 * factor[:, None] * v
     near_pi = c < -0.99
     if near_pi.any():
-        out[near_pi] = Rotation.from_matrix(M[near_pi]).as_rotvec()
+        out[near_pi] = _scipy_rotation().from_matrix(M[near_pi]).as_rotvec()
     return out.reshape((*batch, 3))
 
 
@@ -236,29 +247,124 @@ def quaternion_to_matrix(quat: ArrayLike) -> Array:
     """
     q = np.asarray(quat, dtype=float)
     flat = q.reshape(-1, 4)
-    return Rotation.from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape((*q.shape[:-1], 3, 3))
+    return _scipy_rotation().from_quat(flat[:, [1, 2, 3, 0]]).as_matrix().reshape((*q.shape[:-1], 3, 3))
 
 
 def matrix_to_quaternion(R: ArrayLike) -> Array:
     """Scalar-first unit quaternions ``(..., 4)`` with ``w >= 0`` of rotation matrices."""
-    rotation, batch = _as_rotation(R)
-    q = rotation.as_quat(canonical=True)[:, [3, 0, 1, 2]]
-    return q.reshape((*batch, 4))
+    R = np.asarray(R, dtype=float)
+    M = R.reshape(-1, 3, 3)
+    if not _is_rotation(M):  # scipy projects other matrices onto rotations (or refuses them)
+        rotation, batch = _as_rotation(R)
+        return rotation.as_quat(canonical=True)[:, [3, 0, 1, 2]].reshape((*batch, 4))
+    return _canonical(_quaternions(M))[:, [3, 0, 1, 2]].reshape((*R.shape[:-2], 4))
+
+
+# Quaternions and Euler angles of rotation matrices in numpy: the same results as scipy's
+# Rotation (tests/test_spatial.py compares them), without importing scipy.spatial, which
+# would cost the `robocal fk` command about a third of its start-up.
+def _is_rotation(M: Array) -> bool:
+    """Whether every ``(3, 3)`` matrix of ``M`` is a rotation to 1e-12."""
+    gram = M @ np.swapaxes(M, -1, -2)
+    return bool(np.all(np.abs(gram - np.eye(3)) <= 1e-12) and np.all(np.linalg.det(M) > 0))
+
+
+def _quaternions(M: Array) -> Array:
+    """Unit quaternions ``(N, 4)`` (x, y, z, w) of rotations ``(N, 3, 3)`` by Shepperd's method
+    (J. Guidance and Control 1, 1978): built from the largest of 4w², 4x², 4y², 4z²."""
+    trace = M[:, 0, 0] + M[:, 1, 1] + M[:, 2, 2]
+    choice = np.argmax(np.stack([M[:, 0, 0], M[:, 1, 1], M[:, 2, 2], trace], axis=1), axis=1)
+    q = np.empty((len(M), 4))
+    w = choice == 3
+    q[w] = np.stack(
+        [M[w, 2, 1] - M[w, 1, 2], M[w, 0, 2] - M[w, 2, 0], M[w, 1, 0] - M[w, 0, 1], 1.0 + trace[w]], axis=1
+    )
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        rows = choice == i
+        q[rows, i] = 1.0 - trace[rows] + 2.0 * M[rows, i, i]
+        q[rows, j] = M[rows, j, i] + M[rows, i, j]
+        q[rows, k] = M[rows, k, i] + M[rows, i, k]
+        q[rows, 3] = M[rows, k, j] - M[rows, j, k]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _canonical(q: Array) -> Array:
+    """``q`` or ``−q`` (x, y, z, w): ``w > 0``, or the first non-zero of x, y, z positive."""
+    flip = q[:, 3] < 0
+    undecided = q[:, 3] == 0
+    for i in range(3):
+        flip |= undecided & (q[:, i] < 0)
+        undecided &= q[:, i] == 0
+    return np.where(flip[:, None], -q, q)
+
+
+def _euler_from_quaternions(q: Array, seq: str) -> Array:
+    """Euler angles ``(N, 3)`` of unit quaternions (x, y, z, w) for scipy's ``seq``, by the
+    direct method of Bernardes and Viollet, "Quaternion to Euler angles conversion: a direct,
+    general and computationally efficient method", PLoS ONE 17(11), 2022; at gimbal lock the
+    third angle is zero (with a warning), as scipy does."""
+    extrinsic = seq.islower()
+    axes = ["xyz".index(c) for c in seq.lower()]
+    i, j, k = axes if extrinsic else axes[::-1]
+    symmetric = i == k
+    if symmetric:
+        k = 3 - i - j
+    sign = (i - j) * (j - k) * (k - i) // 2  # +1 for a cyclic (i, j, k), −1 otherwise
+    w = q[:, 3]
+    if symmetric:
+        a, b, c, d = w, q[:, i], q[:, j], q[:, k] * sign
+    else:
+        a, b, c, d = w - q[:, j], q[:, i] + q[:, k] * sign, q[:, j] + w, q[:, k] * sign - q[:, i]
+    angles = np.zeros((len(q), 3))
+    angles[:, 1] = 2.0 * np.arctan2(np.hypot(c, d), np.hypot(a, b))
+    half_sum, half_diff = np.arctan2(b, a), np.arctan2(d, c)
+    near_zero = np.abs(angles[:, 1]) <= 1e-7
+    near_pi = np.abs(angles[:, 1] - np.pi) <= 1e-7
+    regular = ~(near_zero | near_pi)
+    if not regular.all():
+        import warnings
+
+        warnings.warn(
+            "Gimbal lock detected. Setting third angle to zero since it is not possible to uniquely "
+            "determine all angles.",
+            UserWarning,
+            stacklevel=3,
+        )
+    first, third = (0, 2) if extrinsic else (2, 0)
+    angles[:, 0] = np.where(near_zero, 2.0 * half_sum, 2.0 * half_diff * (-1.0 if extrinsic else 1.0))
+    angles[:, first] = np.where(regular, half_sum - half_diff, angles[:, first])
+    angles[:, third] = np.where(regular, half_sum + half_diff, angles[:, third])
+    if not symmetric:
+        angles[:, third] *= sign
+        angles[:, 1] -= np.pi / 2
+    return (angles + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def euler_to_matrix(angles: ArrayLike, seq: str = "ZXZ") -> Array:
     """Rotation matrices from Euler angles ``(..., 3)`` (rad) in scipy's ``seq`` convention."""
     a = np.asarray(angles, dtype=float)
-    return Rotation.from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape((*a.shape[:-1], 3, 3))
+    return _scipy_rotation().from_euler(seq, a.reshape(-1, 3)).as_matrix().reshape((*a.shape[:-1], 3, 3))
 
 
 def matrix_to_euler(R: ArrayLike, seq: str = "ZXZ") -> Array:
     """Euler angles ``(..., 3)`` (rad) of rotation matrices in scipy's ``seq`` convention.
 
-    At gimbal lock scipy sets the third angle to zero and warns.
+    At gimbal lock the third angle is set to zero, with a warning (as scipy does).
     """
-    rotation, batch = _as_rotation(R)
-    return rotation.as_euler(seq).reshape((*batch, 3))
+    R = np.asarray(R, dtype=float)
+    M = R.reshape(-1, 3, 3)
+    valid_seq = (
+        isinstance(seq, str)
+        and len(seq) == 3
+        and (set(seq) <= set("xyz") or set(seq) <= set("XYZ"))
+        and seq[0] != seq[1]
+        and seq[1] != seq[2]
+    )
+    if not valid_seq or not _is_rotation(M):  # scipy's messages, or its projection onto rotations
+        rotation, batch = _as_rotation(R)
+        return rotation.as_euler(seq).reshape((*batch, 3))
+    return _euler_from_quaternions(_quaternions(M), seq).reshape((*R.shape[:-2], 3))
 
 
 def pose_error(T_actual: ArrayLike, T_reference: ArrayLike) -> Array:

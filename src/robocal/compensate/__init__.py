@@ -2,18 +2,25 @@
 Cartesian targets, calibration filters for joint programs, path correction (full IK or
 seed 003 eq. 5.22) and off-line program files (``robocal compensate``)."""
 
-from robocal.compensate.commands import (
-    Compensation,
-    PathCompensation,
-    TargetFileError,
-    Targets,
-    compensate,
-    compensate_cartesian_path,
-    compensate_path,
-    filter_program,
-    nominal_model,
-    read_program,
-    read_targets,
+from robocal._lazy import lazy_package
+
+lazy_package(
+    __name__,
+    {
+        "robocal.compensate.commands": (
+            "Compensation",
+            "PathCompensation",
+            "TargetFileError",
+            "Targets",
+            "compensate",
+            "compensate_cartesian_path",
+            "compensate_path",
+            "filter_program",
+            "nominal_model",
+            "read_program",
+            "read_targets",
+        ),
+    },
 )
 
 __all__ = [

@@ -1,25 +1,32 @@
 """Evaluation — did it work, shown to a person: ISO 9283 metrics, the seeds' error
 tables and the self-contained HTML report."""
 
-from robocal.evaluate.metrics import (
-    ERROR_QUANTITIES,
-    ErrorTable,
-    Improvement,
-    PathAccuracy,
-    PoseAccuracy,
-    PoseCharacteristics,
-    PoseErrors,
-    PoseRepeatability,
-    error_table,
-    improvement,
-    iso9283_pose_characteristics,
-    mean_ci,
-    path_accuracy,
-    pose_accuracy,
-    pose_errors,
-    pose_repeatability,
+from robocal._lazy import lazy_package
+
+lazy_package(
+    __name__,
+    {
+        "robocal.evaluate.metrics": (
+            "ERROR_QUANTITIES",
+            "ErrorTable",
+            "Improvement",
+            "PathAccuracy",
+            "PoseAccuracy",
+            "PoseCharacteristics",
+            "PoseErrors",
+            "PoseRepeatability",
+            "error_table",
+            "improvement",
+            "iso9283_pose_characteristics",
+            "mean_ci",
+            "path_accuracy",
+            "pose_accuracy",
+            "pose_errors",
+            "pose_repeatability",
+        ),
+        "robocal.evaluate.report": ("build_report", "write_report"),
+    },
 )
-from robocal.evaluate.report import build_report, write_report
 
 __all__ = [
     "ERROR_QUANTITIES",

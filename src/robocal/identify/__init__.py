@@ -1,8 +1,15 @@
 """Step 3 of a calibration — what the parameters really are: identification and validation."""
 
-from robocal.identify.calibrate import CalibrationResult, calibrate
-from robocal.identify.observability import Dropped, IdentifiableSubset, identifiable_subset
-from robocal.identify.validate import ValidationStats, cross_validate, validate
+from robocal._lazy import lazy_package
+
+lazy_package(
+    __name__,
+    {
+        "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
+        "robocal.identify.observability": ("Dropped", "IdentifiableSubset", "identifiable_subset"),
+        "robocal.identify.validate": ("ValidationStats", "cross_validate", "validate"),
+    },
+)
 
 __all__ = [
     "CalibrationResult",

@@ -1,55 +1,62 @@
 """Step 2 of a calibration — what was observed: datasets, devices, simulation, poses."""
 
-from robocal.measure.dataset import (
-    MeasurementFileError,
-    Measurements,
-    MeasurementWarning,
-    Problem,
-    check_measurements,
-    read_measurements,
-    write_measurements,
-)
-from robocal.measure.devices import (
-    CalibrationPlate,
-    Camera,
-    Device,
-    LaserTracker,
-    Observations,
-    OpticalCMM,
-    PenOnPaper,
-    make_device,
-    plate_points,
-)
-from robocal.measure.ik import IKResult, solve_ik
-from robocal.measure.paths import (
-    Circle,
-    CubicSpline,
-    JointPath,
-    circle_path,
-    circle_through,
-    cubic_spline,
-    joint_path,
-    line_path,
-)
-from robocal.measure.poses import (
-    Cube,
-    PoseSet,
-    diagonal_plane_poses,
-    iso9283_poses,
-    largest_cube,
-    random_poses,
-    read_poses,
-    write_poses,
-)
-from robocal.measure.simulate import (
-    EncoderNoise,
-    PayloadCompliance,
-    Truth,
-    VirtualRobot,
-    draw_true_model,
-    load_truth,
-    save_simulation,
-    simulate,
+from robocal._lazy import lazy_package
+
+lazy_package(
+    __name__,
+    {
+        "robocal.measure.dataset": (
+            "MeasurementFileError",
+            "Measurements",
+            "MeasurementWarning",
+            "Problem",
+            "check_measurements",
+            "read_measurements",
+            "write_measurements",
+        ),
+        "robocal.measure.devices": (
+            "CalibrationPlate",
+            "Camera",
+            "Device",
+            "LaserTracker",
+            "Observations",
+            "OpticalCMM",
+            "PenOnPaper",
+            "make_device",
+            "plate_points",
+        ),
+        "robocal.measure.ik": ("IKResult", "solve_ik"),
+        "robocal.measure.paths": (
+            "Circle",
+            "CubicSpline",
+            "JointPath",
+            "circle_path",
+            "circle_through",
+            "cubic_spline",
+            "joint_path",
+            "line_path",
+        ),
+        "robocal.measure.poses": (
+            "Cube",
+            "PoseSet",
+            "diagonal_plane_poses",
+            "iso9283_poses",
+            "largest_cube",
+            "random_poses",
+            "read_poses",
+            "write_poses",
+        ),
+        "robocal.measure.simulate": (
+            "EncoderNoise",
+            "PayloadCompliance",
+            "Truth",
+            "VirtualRobot",
+            "draw_true_model",
+            "load_truth",
+            "save_simulation",
+            "simulate",
+        ),
+    },
 )
 
 __all__ = [

@@ -19,7 +19,7 @@ import re
 import warnings
 from collections import defaultdict
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -27,22 +27,10 @@ from rich.table import Table
 
 from robocal import spatial
 from robocal.console import console, err_console, fail, refuse_overwrite
-from robocal.measure.dataset import (
-    PROBLEM_CODES,
-    MeasurementFileError,
-    Measurements,
-    Problem,
-    check_measurements,
-    read_measurements,
-)
 from robocal.measure.devices import DEVICES, make_device
-from robocal.measure.simulate import (
-    VirtualRobot,
-    draw_true_model,
-    parse_quantity_option,
-    save_simulation,
-    simulate,
-)
+
+if TYPE_CHECKING:  # the readers and the simulator are imported by the commands that use them
+    from robocal.measure.dataset import Measurements, Problem
 
 __all__ = ["register"]
 
@@ -125,6 +113,8 @@ def _rows_text(rows: list[int | None], limit: int = 6) -> str:
 
 
 def _problem_table(problems: list[Problem], title: str) -> Table:
+    from robocal.measure.dataset import PROBLEM_CODES
+
     groups: dict[tuple, list[Problem]] = defaultdict(list)
     for p in problems:
         groups[(p.severity, p.code, p.column)].append(p)
@@ -202,6 +192,8 @@ def data_check(
     incomplete: Incomplete = "error",
 ) -> None:
     """List every problem of a measurement file, or summarise it if it is clean."""
+    from robocal.measure.dataset import check_measurements, read_measurements
+
     model = _model(robot)
     options = dict(
         length_unit=length_unit,
@@ -285,6 +277,15 @@ def simulate_command(
         return simulate_log_command(robot, log, seed, noise, force)
     if poses is None or output is None:
         raise fail("give --poses POSES.csv and -o OUTPUT.csv (or --log LOG.csv for an ISO 9283 log)")
+    from robocal.measure.dataset import MeasurementFileError, read_measurements
+    from robocal.measure.simulate import (
+        VirtualRobot,
+        draw_true_model,
+        parse_quantity_option,
+        save_simulation,
+        simulate,
+    )
+
     refuse_overwrite(output, force, "measurement file")
     model = _model(robot)
     if device not in DEVICES:

@@ -197,8 +197,10 @@ def _pose_list(idx: NDArray[np.intp], limit: int = 8) -> str:
 _TRACKER_POSE = spatial.compose(spatial.transl(2.5, 0.8, 0.3), spatial.homogeneous(spatial.rotz(np.pi - 0.3)))
 _CMM_POSE = look_at([4.0, 0.5, 1.2], [0.0, 0.0, 0.5])
 _CAMERA_POSE = look_at([2.0, -0.5, 1.5], [0.0, 0.0, 0.5])
+# extrinsic xyz Euler angles (11.7°, 11.8°, 0°) = Ry(11.8°) Rx(11.7°), written without scipy's
+# Rotation so that importing this module stays light (the `robocal` command's start-up)
 _PLATE_POSE = spatial.homogeneous(
-    spatial.euler_to_matrix(np.radians([11.7, 11.8, 0.0]), "xyz"), [0.45, 0.0, 0.0]
+    spatial.roty(np.radians(11.8)) @ spatial.rotx(np.radians(11.7)), [0.45, 0.0, 0.0]
 )
 _PAPER_POSE = spatial.homogeneous(spatial.roty(np.pi / 4), [0.4, 0.0, 0.3])
 

@@ -1,9 +1,16 @@
 """Step 1 of a calibration — what the robot is: chains, conventions, files and the catalog."""
 
-from robocal.model.catalog import robot, robots
-from robocal.model.chain import Body, Joint, JointEffects, Model, Step
-from robocal.model.complete import calibration_model
-from robocal.model.files import ModelFileError, load_model, save_model
+from robocal._lazy import lazy_package
+
+lazy_package(
+    __name__,
+    {
+        "robocal.model.catalog": ("robot", "robots"),
+        "robocal.model.chain": ("Body", "Joint", "JointEffects", "Model", "Step"),
+        "robocal.model.complete": ("calibration_model"),
+        "robocal.model.files": ("ModelFileError", "load_model", "save_model"),
+    },
+)
 
 __all__ = [
     "Body",

@@ -274,6 +274,9 @@ class _Plan:
     step_rot: NDArray[np.bool_]  # (P,)
     segment_table: NDArray[np.intp]  # (dof + 1, L) steps of each segment, padded with P (identity)
     segment_slot: NDArray[np.intp]  # (P,) flat index a * L + t of each constant step in the table
+    joint_axis_array: NDArray[np.intp]  # (dof,) joint_axis for the compiled kernels
+    joint_rot_array: NDArray[np.bool_]  # (dof,)
+    step_joint: NDArray[np.bool_]  # (P,) is step i a joint step?
 
 
 _PLANS: dict[tuple[tuple[str, bool], ...], _Plan] = {}  # compiled plans by chain structure
@@ -472,6 +475,9 @@ class Model:
             step_rot=np.array([s.is_rotation for s in self.steps], dtype=bool),
             segment_table=table,
             segment_slot=slot,
+            joint_axis_array=np.array([self.steps[i].axis for i in joint_steps], dtype=np.intp),
+            joint_rot_array=np.array([self.steps[i].is_rotation for i in joint_steps], dtype=bool),
+            step_joint=np.array([s.joint is not None for s in self.steps], dtype=bool),
         )
 
     def _check_q(self, q: ArrayLike) -> tuple[Array, bool]:
@@ -595,26 +601,140 @@ class Model:
                 F = np.matmul(seg_T[j + 1].T, F)  # each row r of [R | p]: (4, 4)ᵀ @ (4, n)
         return F, anchors
 
-    def fk(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
+    def fk(self, q: ArrayLike, perturbations: ArrayLike | None = None, compiled: bool | None = None) -> Array:
         """Tool frames ``T_base_tool`` shaped ``(n, 4, 4)`` for joint values ``q`` ``(n, dof)``.
 
         ``perturbations`` ``(n, dof, 3)`` are per-pose joint perturbations (δα, δβ, δθ).
+        ``compiled``: use the compiled kernels (:mod:`robocal.model.kernels`; default: when
+        numba is installed) or, with False, the numpy code (no numba import).
         """
+        if perturbations is None and compiled is not False and type(q) is np.ndarray and q.ndim == 1:
+            T = self._fk_one(q, compiled)  # one configuration: the interactive case, a few µs
+            if T is not None:
+                return T
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
-        F, _ = self._forward(q, d, keep_anchors=False)
-        T = _to_homogeneous(F)
+        kernels = _kernels(compiled)
+        if kernels is not None and d is None:
+            plan = self._plan
+            seg, _, offsets = self._kernel_segments
+            qt = np.ascontiguousarray(q.T)
+            T = kernels.forward_batch(qt, seg, offsets, plan.joint_axis_array, plan.joint_rot_array)
+        elif kernels is not None:
+            T = self._kernel_forward(kernels, q, d, keep_anchors=False)[0]
+        else:
+            F, _ = self._forward(q, d, keep_anchors=False)
+            T = _to_homogeneous(F)
         return T[0] if single else T
 
-    def joint_frames(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
-        """Frames after each joint step, ``(n, dof, 4, 4)`` in the base frame."""
+    def joint_frames(
+        self, q: ArrayLike, perturbations: ArrayLike | None = None, compiled: bool | None = None
+    ) -> Array:
+        """Frames after each joint step, ``(n, dof, 4, 4)`` in the base frame (``compiled``: as
+        for :meth:`fk`)."""
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
+        kernels = _kernels(compiled)
+        if kernels is not None:
+            T = self._kernel_forward(kernels, q, d, keep_anchors=True)[1]
+            return T[0] if single else T
         _, anchors = self._forward(q, d, keep_anchors=True)
         T = np.zeros((len(q), self.dof, 4, 4))
         T[:, :, :3, :] = anchors[1:].transpose(3, 0, 1, 2)
         T[:, :, 3, 3] = 1.0
         return T[0] if single else T
+
+    # ------------------------------------------------------- compiled kernels (numba)
+    def _fk_one(self, q: Array, compiled: bool | None) -> Array | None:
+        """:meth:`fk` of one configuration by :func:`robocal.model.kernels.fk_one`, or None
+        when it does not apply (no numba, another shape or type: the general path decides)."""
+        kernels = _KERNELS[0] if _KERNELS else _kernels(compiled)
+        if kernels is None or q.dtype is not _FLOAT64 or q.strides != (8,):
+            return None
+        T = np.empty((4, 4))
+        return T if kernels.fk_one(q, self._fk_one_data, T) else None
+
+    @cached_property
+    def _fk_one_data(self) -> Array:
+        """:func:`robocal.model.kernels.pack_one` of this model."""
+        from robocal.model import kernels
+
+        plan = self._plan
+        seg, _, offsets = self._kernel_segments
+        return kernels.pack_one(seg, offsets, plan.joint_axis_array, plan.joint_rot_array)
+
+    @cached_property
+    def _kernel_segments(self) -> tuple[Array, Array, Array]:
+        """:meth:`_kernel_data` for this model's own values (models are immutable)."""
+        from robocal.model import kernels
+
+        return self._kernel_data(kernels, self.values)
+
+    def _kernel_data(self, kernels, values: Array | None) -> tuple[Array, Array, Array]:
+        """Segment transforms, local step frames and joint offsets for parameter ``values``."""
+        if values is None:
+            return self._kernel_segments
+        plan = self._plan
+        values = np.ascontiguousarray(values, dtype=float)
+        seg, local = kernels.segment_data(values, plan.step_axis, plan.step_rot, plan.step_joint, self.dof)
+        return seg, local, values[plan.joint_steps]
+
+    def _kernel_perturbations(self, d: Array | None) -> tuple[Array, bool]:
+        if d is None:
+            return np.zeros((1, self.dof, 3)), False
+        return np.ascontiguousarray(d, dtype=float), True
+
+    def _kernel_forward(
+        self, kernels, q: Array, d: Array | None, keep_anchors: bool, values: Array | None = None
+    ) -> tuple[Array, Array]:
+        plan = self._plan
+        seg, _, offsets = self._kernel_data(kernels, values)
+        pert, has_pert = self._kernel_perturbations(d)
+        return kernels.forward(
+            np.ascontiguousarray(q),
+            pert,
+            has_pert,
+            seg,
+            offsets,
+            plan.joint_axis_array,
+            plan.joint_rot_array,
+            keep_anchors,
+        )
+
+    def _kernel_evaluate(
+        self,
+        kernels,
+        q: Array,
+        d: Array | None,
+        steps: NDArray[np.intp],
+        rows: int,
+        values: Array | None = None,
+        joint_columns: bool = False,
+        perturbation_columns: bool = False,
+    ) -> tuple[Array, Array, Array]:
+        """:func:`robocal.model.kernels.evaluate`: ``T (n, 4, 4)``, the columns of ``steps``
+        ``(n * rows, m)`` and the joint/perturbation columns ``(n * rows, dof, 3)``."""
+        plan = self._plan
+        seg, local, offsets = self._kernel_data(kernels, values)
+        pert, has_pert = self._kernel_perturbations(d)
+        return kernels.evaluate(
+            np.ascontiguousarray(q),
+            pert,
+            has_pert,
+            seg,
+            local,
+            offsets,
+            plan.joint_axis_array,
+            plan.joint_rot_array,
+            plan.anchor_of,
+            plan.step_axis,
+            plan.step_rot,
+            np.ascontiguousarray(steps, dtype=np.intp),
+            plan.joint_steps,
+            rows,
+            joint_columns or perturbation_columns,
+            perturbation_columns,
+        )
 
     def _columns(
         self,
@@ -729,16 +849,21 @@ class Model:
         q: ArrayLike,
         rows: Literal["position", "pose"] = "position",
         perturbations: ArrayLike | None = None,
+        compiled: bool | None = None,
     ) -> tuple[Array, Array]:
         """Tool frames ``(n, 4, 4)`` and the identification Jacobian in one pass.
 
-        See :meth:`jacobian` for the Jacobian's layout.
+        See :meth:`jacobian` for the Jacobian's layout, :meth:`fk` for ``compiled``.
         """
         if rows not in ("position", "pose"):
             raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
         free = np.flatnonzero(self.free_mask)
+        kernels = _kernels(compiled)
+        if kernels is not None:
+            T, J, _ = self._kernel_evaluate(kernels, q, d, free, 6 if rows == "pose" else 3)
+            return (T[0] if single else T), J
         F, J = self._columns(q, d, free, orientation=rows == "pose")
         J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(-1, len(free))
         T = _to_homogeneous(F)
@@ -753,6 +878,7 @@ class Model:
         perturbations: ArrayLike | None = None,
         joint_columns: bool = False,
         perturbation_columns: bool = False,
+        compiled: bool | None = None,
     ) -> tuple[Array, ...]:
         """Tool frames and identification Jacobian for other parameter values, without
         building a new model (the inner loop of the solvers).
@@ -768,6 +894,7 @@ class Model:
             perturbation_columns: also return the derivatives with respect to all
                 joint perturbations, ``(3n, dof, 3)`` or ``(6n, dof, 3)`` for (δα, δβ, δθ)
                 (see :meth:`perturbation_jacobian`).
+            compiled: as for :meth:`fk`.
 
         Returns:
             ``T (n, 4, 4)``, ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``, the joint
@@ -778,6 +905,11 @@ class Model:
         v = None if values is None else np.asarray(values, dtype=float)
         if v is not None and v.shape != (len(self.steps),):
             raise ValueError(f"values shaped {v.shape}; model {self.name!r} has {len(self.steps)} parameters")
+        kernels = _kernels(compiled)
+        if kernels is not None:
+            return self._evaluate_compiled(
+                kernels, q, d, v, rows, jacobian, joint_columns, perturbation_columns
+            )
         if not jacobian and not joint_columns and not perturbation_columns:
             F, _ = self._forward(q, d, keep_anchors=False, values=v)
             return _to_homogeneous(F), None
@@ -796,6 +928,31 @@ class Model:
             out += (J_joints,)
         if perturbation_columns:
             out += (_perturbation_layout(tilt[0], J_joints),)
+        return out
+
+    def _evaluate_compiled(
+        self,
+        kernels,
+        q: Array,
+        d: Array | None,
+        v: Array | None,
+        rows: str,
+        jacobian: bool,
+        joint_columns: bool,
+        perturbation_columns: bool,
+    ) -> tuple[Array, ...]:
+        """:meth:`evaluate` by the compiled kernels (same returns)."""
+        if not jacobian and not joint_columns and not perturbation_columns:
+            return self._kernel_forward(kernels, q, d, keep_anchors=False, values=v)[0], None
+        free = np.flatnonzero(self.free_mask) if jacobian else np.zeros(0, dtype=np.intp)
+        T, J, P = self._kernel_evaluate(
+            kernels, q, d, free, 6 if rows == "pose" else 3, v, joint_columns, perturbation_columns
+        )
+        out: tuple[Array, ...] = (T, J if jacobian else None)
+        if joint_columns:
+            out += (np.ascontiguousarray(P[:, :, 2]),)
+        if perturbation_columns:
+            out += (P,)
         return out
 
     def jacobian(
@@ -838,12 +995,44 @@ class Model:
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
         q, single = self._check_q(q)
         d = self._check_perturbations(perturbations, len(q))
+        kernels = _kernels(None)
+        if kernels is not None:
+            J = self._kernel_evaluate(kernels, q, d, self._plan.joint_steps, 6)[1].reshape(
+                len(q), 6, self.dof
+            )
+            return J[0] if single else J
         _, J = self._columns(q, d, self._plan.joint_steps)
         J = np.ascontiguousarray(J.transpose(2, 1, 0))
         return J[0] if single else J
 
 
 _EYE4 = np.eye(4)
+
+
+def _kernels(compiled: bool | None):
+    """The compiled kernels module when they are to be used, else None (numpy).
+
+    ``compiled``: True requires them, False never uses them, None uses them when numba is
+    installed.  The module (and numba) is imported on first use only.
+    """
+    if compiled is False:
+        return None
+    if _KERNELS:
+        return _KERNELS[0]
+    try:
+        from robocal.model import kernels
+    except ImportError:
+        if compiled:
+            raise
+        return None
+    _KERNELS.append(kernels)
+    return kernels
+
+
+_FLOAT64 = np.dtype(np.float64)
+_KERNELS: list = []  # the kernels module once imported (a list: no `global` statement needed)
+
+
 _SMALL_BATCH = 20_000  # steps x poses below which the Jacobian's cross products run over all steps at once
 
 

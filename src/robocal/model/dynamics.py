@@ -13,9 +13,11 @@ child link — the moment about the joint axis is the joint torque, the two othe
 carried by the bearings — in the joint frame (the frame right after the joint step,
 :meth:`~robocal.model.chain.Model.joint_frames`; Pinocchio's joint frame ``j + 1``),
 for static poses (gravity in any direction, a payload) and along trajectories
-(velocities and accelerations: the dynamic recursion of eq. 5.14).  It is Pinocchio's
-recursive Newton-Euler algorithm (``pin.rnea``) with the per-joint forces
-``data.f[j + 1]`` it leaves behind.
+(velocities and accelerations: the dynamic recursion of eq. 5.14).  Along trajectories it is
+Pinocchio's recursive Newton-Euler algorithm (``pin.rnea``) with the per-joint forces
+``data.f[j + 1]`` it leaves behind; for static poses (the calibration's case, every pose of
+every load pass) it is the same sum in one vectorised pass over all poses from robocal's
+own joint frames (:func:`_static_wrenches`; the tests hold it to RNEA).
 
 Sign: these are *support* wrenches (what the joint applies to hold and move the
 link: Craig's ``n_i`` and ``f_i``, eq. 5.14).  Seed 003's static eq. 4.21 writes the
@@ -111,14 +113,15 @@ def gravity_torques(model, q: np.ndarray, gravity: np.ndarray | None = None) -> 
 
     Needs the model's mass properties (:class:`~robocal.model.chain.Body`).
     """
-    import pinocchio as pin
-
     if not model.bodies:
         raise ValueError(f"model {model.name!r} has no mass properties (bodies) to compute gravity torques")
-    pm = to_pinocchio(model, gravity)
-    data = pm.createData()
-    q = np.atleast_2d(np.asarray(q, dtype=float))
-    return np.array([pin.computeGeneralizedGravity(pm, data, qk) for qk in q])
+    q_arr, _ = model._check_q(np.atleast_2d(np.asarray(q, dtype=float)))
+    W = _static_wrenches(model, q_arr, gravity, None)
+    plan = model._plan
+    component = np.array(
+        [k + (3 if rot else 0) for k, rot in zip(plan.joint_axis, plan.joint_rot, strict=True)]
+    )
+    return W[:, np.arange(model.dof), component]  # the moment (force) along each joint's axis
 
 
 @dataclass(frozen=True)
@@ -183,8 +186,9 @@ def joint_wrenches(
     joint torque (force for a prismatic joint); the others are carried by the
     bearings.  Seed 003's eq. 4.21 load moment is ``−η``.
 
-    Computed with Pinocchio's recursive Newton-Euler algorithm on :func:`to_pinocchio`'s
-    model (one C++ call per pose).
+    Static poses (``qd``, ``qdd`` zero or not given): one vectorised pass over all poses
+    from the chain's joint frames; otherwise Pinocchio's recursive Newton-Euler algorithm on
+    :func:`to_pinocchio`'s model (one C++ call per pose).
 
     Args:
         model: the chain with mass properties (``model.bodies``).
@@ -197,8 +201,6 @@ def joint_wrenches(
     Returns:
         ``(n, dof, 6)`` (``(dof, 6)`` for a 1-D ``q``).
     """
-    import pinocchio as pin
-
     if not model.bodies and (payload is None or payload.mass == 0):
         raise ValueError(f"model {model.name!r} has no mass properties (bodies) to compute joint wrenches")
     q_arr = np.asarray(q, dtype=float)
@@ -207,6 +209,20 @@ def joint_wrenches(
     shape = q_arr.shape
     v = _joint_rates(qd, shape, "velocities")
     a = _joint_rates(qdd, shape, "accelerations")
+    if v.any() or a.any():
+        out = _rnea_wrenches(model, q_arr, v, a, gravity, payload)
+    else:  # at rest: all poses at once (tests/test_dynamics.py holds it to RNEA)
+        out = _static_wrenches(model, q_arr, gravity, payload)
+    return out[0] if single else out
+
+
+def _rnea_wrenches(
+    model: Model, q: Array, v: Array, a: Array, gravity: ArrayLike | None, payload: Payload | None
+) -> Array:
+    """:func:`joint_wrenches` by Pinocchio's RNEA, one call per pose ``(n, dof, 6)``: the
+    dynamic case, and the reference of :func:`_static_wrenches` in the tests."""
+    import pinocchio as pin
+
     pm = to_pinocchio(model, gravity)
     if payload is not None and payload.mass > 0:
         tool = pm.frames[pm.getFrameId(TOOL_FRAME)]
@@ -217,12 +233,107 @@ def joint_wrenches(
         )
     data = pm.createData()
     dof = model.dof
-    out = np.empty((len(q_arr), dof, 6))
-    for k in range(len(q_arr)):  # one Pinocchio RNEA per pose (C++; a few µs)
-        pin.rnea(pm, data, q_arr[k], v[k], a[k])
+    out = np.empty((len(q), dof, 6))
+    for k in range(len(q)):  # one Pinocchio RNEA per pose (C++; a few µs)
+        pin.rnea(pm, data, q[k], v[k], a[k])
         for j in range(dof):
             out[k, j] = data.f[j + 1].vector
-    return out[0] if single else out
+    return out
+
+
+def _mass_points(model: Model, payload: Payload | None) -> tuple[NDArray[np.intp], Array, Array]:
+    """The chain's masses as points fixed to joint frames: the joint each hangs from, its
+    mass (kg) and its centre (m) in that joint's frame, ``(b,)``, ``(b,)``, ``(b, 3)``.
+
+    Bodies before the first joint are left out, as in :func:`to_pinocchio`; a payload hangs
+    from the last joint at the tool frame.
+    """
+    from robocal.model.chain import _elementaries
+
+    plan = model._plan
+    seg_T, local = model._segments  # frames before each step in their joint's frame (cached)
+    steps = np.array([model._index[b.frame] for b in model.bodies], dtype=np.intp)
+    # the frame after each body's step in its joint's frame: local @ the step's own transform
+    # (identity for a joint step: the joint frame itself)
+    after = local[steps] @ _elementaries(plan.step_axis[steps], plan.step_rot[steps], model.values[steps])
+    after[plan.step_joint[steps]] = np.eye(4)
+    joints = plan.anchor_of[steps] - 1 + plan.step_joint[steps]
+    masses = [b.mass for b in model.bodies]
+    centres = [T[:3, :3] @ np.asarray(b.com) + T[:3, 3] for T, b in zip(after, model.bodies, strict=True)]
+    joints = list(joints)
+    if payload is not None and payload.mass > 0:
+        joints.append(model.dof - 1)
+        masses.append(payload.mass)
+        centres.append(seg_T[-1][:3, :3] @ np.asarray(payload.com) + seg_T[-1][:3, 3])
+    keep = [k for k, j in enumerate(joints) if j >= 0]  # bodies before the first joint: fixed
+    joints = [joints[k] for k in keep]
+    masses = [masses[k] for k in keep]
+    centres = [centres[k] for k in keep]
+    return np.array(joints, dtype=np.intp), np.array(masses), np.array(centres).reshape(-1, 3)
+
+
+def _static_wrenches(model: Model, q: Array, gravity: ArrayLike | None, payload: Payload | None) -> Array:
+    """:func:`joint_wrenches` at rest for all poses in one vectorised pass, ``(n, dof, 6)``.
+
+    At rest every mass only needs holding against gravity, so the support wrench at joint
+    ``j`` is the sum over the masses beyond it: force ``f = −M_j g`` and moment
+    ``(S_j − M_j o_j) × (−g)`` about the joint frame's origin ``o_j``, with ``M_j`` the mass
+    beyond joint ``j`` and ``S_j`` its first moment ``Σ m c`` (centres in the base frame),
+    both running sums from the tool back; then rotated into the joint frame.  This is what
+    RNEA computes with zero velocities and accelerations (Featherstone, *Rigid Body Dynamics
+    Algorithms*, 2008, sect. 5.3), written over the poses so that a calibration's load pass
+    costs a few µs per pose instead of one Pinocchio call and model per pose.  With numba
+    the same sums run compiled (:func:`robocal.model.kernels.static_wrenches`), else in numpy
+    below; the tests hold both to RNEA.
+    """
+    g = np.array([0.0, 0.0, -9.81]) if gravity is None else np.asarray(gravity, dtype=float)
+    if g.shape != (3,) or not np.all(np.isfinite(g)):
+        raise ValueError(f"gravity must be 3 finite numbers (m/s², base frame), got {gravity!r}")
+    joints, masses, centres = _mass_points(model, payload)
+    n, dof = q.shape
+    from robocal.model.chain import _kernels
+
+    kernels = _kernels(None)
+    if kernels is not None:  # compiled: one pass per pose, no numpy call per joint
+        order = np.argsort(joints, kind="stable")
+        plan = model._plan
+        seg, _, offsets = model._kernel_segments
+        return kernels.static_wrenches(
+            np.ascontiguousarray(q),
+            seg,
+            offsets,
+            plan.joint_axis_array,
+            plan.joint_rot_array,
+            np.ascontiguousarray(joints[order]),
+            np.ascontiguousarray(masses[order]),
+            np.ascontiguousarray(centres[order]),
+            g,
+        )
+    _, anchors = model._forward(q, None, keep_anchors=True)  # (dof + 1, 3, 4, n), [R | p] rows
+    frames = anchors[1:]  # the frame after joint j: (dof, 3, 4, n)
+    R, o = frames[:, :, :3], frames[:, :, 3]  # (dof, 3, 3, n), (dof, 3, n)
+    # masses and first moments hanging from each joint, then summed from the tool back
+    M = np.zeros(dof)
+    S = np.zeros((dof, 3, n))
+    for joint, mass, centre in zip(joints, masses, centres, strict=True):
+        M[joint] += mass
+        S[joint] += mass * (
+            R[joint, :, 0] * centre[0] + R[joint, :, 1] * centre[1] + R[joint, :, 2] * centre[2]
+        )
+        S[joint] += mass * o[joint]
+    M = np.cumsum(M[::-1])[::-1]  # beyond each joint: running sums from the tool back
+    S = np.cumsum(S[::-1], axis=0)[::-1]
+    lever = S - M[:, None, None] * o  # (dof, 3, n): Σ m (c − o_j)
+    moment = np.empty_like(lever)  # lever × (−g)
+    moment[:, 0] = lever[:, 2] * g[1] - lever[:, 1] * g[2]
+    moment[:, 1] = lever[:, 0] * g[2] - lever[:, 2] * g[0]
+    moment[:, 2] = lever[:, 1] * g[0] - lever[:, 0] * g[1]
+    out = np.empty((n, dof, 6))
+    # into the joint frames: component k is column k of R dotted with the vector
+    force = -g[None, :, None] * M[:, None, None]  # (dof, 3, 1)
+    out[..., :3] = (R * force[:, :, None]).sum(axis=1).transpose(2, 0, 1)
+    out[..., 3:] = (R * moment[:, :, None]).sum(axis=1).transpose(2, 0, 1)
+    return out
 
 
 def joint_moments(

@@ -1,0 +1,264 @@
+"""Calibration at scale: Levenberg-Marquardt on normal equations accumulated over chunks of
+poses, so that memory is O(p² + chunk) instead of O(n·p) — a million poses in well under a
+gigabyte (``benchmarks/bench_streaming.py``).
+
+The dense solver (:func:`robocal.identify.solvers.levenberg_marquardt`) only ever uses the
+Jacobian through ``JᵀJ``, ``Jᵀr`` and ``rᵀr`` (its column scaling is the square root of
+``diag(JᵀJ)``), so the same iteration runs on those sums: :func:`levenberg_marquardt_streaming`
+is that solver step for step (same scaling, damping updates and stopping rules; the tests hold
+the two to each other), with each pass over the poses one chunk at a time.  A trial point costs
+a residual pass (forward kinematics only); the normal equations are accumulated at accepted
+points, as the dense solver computes the Jacobian there.
+
+:func:`refit` is the large-data path of a calibration: the structure of the fit (which
+parameters are identifiable, the device frame, the tool, the start values) comes from an
+ordinary :func:`robocal.calibrate` on a subsample, and the refit estimates the same parameters
+from all poses, with their covariance from the accumulated ``JᵀJ``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
+
+from robocal.identify.solvers import SolveResult
+from robocal.model.chain import Model
+
+__all__ = ["DEFAULT_CHUNK", "NormalEquations", "StreamingFit", "levenberg_marquardt_streaming", "refit"]
+
+Array = NDArray[np.float64]
+
+#: poses per chunk: a position chunk's Jacobian is 3 · chunk · p doubles (about 20 MB at p = 40)
+DEFAULT_CHUNK = 20_000
+
+
+@dataclass(frozen=True)
+class NormalEquations:
+    """Sums over all poses of a weighted position fit at one parameter point.
+
+    Attributes:
+        JtJ: ``(p, p)`` ``Jᵀ J`` of the weighted residuals' Jacobian (columns: the chain's
+            free parameters, SI units).
+        Jtr: ``(p,)`` ``Jᵀ r``.
+        cost: ``rᵀ r`` (weighted residuals; m² for unit weights).
+        rows: number of residuals (3 per pose).
+    """
+
+    JtJ: Array
+    Jtr: Array
+    cost: float
+    rows: int
+
+
+class _PositionData:
+    """Joint values, measured positions (m, device frame) and weights (1/σ, per row) of a
+    position calibration, evaluated one chunk of poses at a time."""
+
+    def __init__(self, chain: Model, q: Array, position: Array, weights: Array, chunk: int) -> None:
+        self.chain, self.q, self.position, self.weights, self.chunk = chain, q, position, weights, chunk
+        self.free = chain.free_mask
+
+    def _values(self, x: Array) -> Array:
+        v = self.chain.values
+        v[self.free] = x
+        return v
+
+    def _chunks(self):
+        for lo in range(0, len(self.q), self.chunk):
+            yield slice(lo, min(lo + self.chunk, len(self.q)))
+
+    def cost(self, x: Array) -> float:
+        """``rᵀ r`` at ``x`` (forward kinematics only)."""
+        values, total = self._values(x), 0.0
+        for s in self._chunks():
+            T, _ = self.chain.evaluate(self.q[s], values, jacobian=False)
+            r = (T[:, :3, 3] - self.position[s]) * self.weights[s]
+            total += float(np.einsum("ij,ij->", r, r))
+        return total
+
+    def normal_equations(self, x: Array) -> NormalEquations:
+        """:class:`NormalEquations` at ``x``, one chunk's Jacobian in memory at a time."""
+        values = self._values(x)
+        p = int(self.free.sum())
+        JtJ, Jtr, total = np.zeros((p, p)), np.zeros(p), 0.0
+        for s in self._chunks():
+            T, J = self.chain.evaluate(self.q[s], values)
+            w = self.weights[s].reshape(-1)
+            r = (T[:, :3, 3] - self.position[s]).reshape(-1) * w
+            J *= w[:, None]
+            JtJ += J.T @ J
+            Jtr += J.T @ r
+            total += float(r @ r)
+        return NormalEquations(JtJ, Jtr, total, 3 * len(self.q))
+
+
+def levenberg_marquardt_streaming(
+    data: _PositionData, x0: Array, *, max_iterations: int = 200, tolerance: float = 1e-10
+) -> tuple[SolveResult, NormalEquations]:
+    """:func:`~robocal.identify.solvers.levenberg_marquardt` on accumulated normal equations.
+
+    With ``N = JᵀJ`` and ``D`` the largest column norms met so far (``√diag N``), the scaled
+    system of the dense solver is ``A = N / (D Dᵀ)``, ``g = Jᵀr / D``; the step, the
+    predicted decrease, Nielsen's damping update and the stopping rules are the dense
+    solver's.  Returns the solver's result and the normal equations at the solution.
+    """
+    x = np.array(x0, dtype=float)
+    ne = data.normal_equations(x)
+    cost = ne.cost
+    history = [math.sqrt(cost / max(ne.rows, 1))]
+    D = np.sqrt(np.diag(ne.JtJ)).copy()
+    D[D == 0] = 1.0
+    mu, nu = None, 2.0
+    evaluations = 1
+    eye = np.eye(len(x))
+    while True:
+        D = np.maximum(D, np.sqrt(np.diag(ne.JtJ)))
+        A = ne.JtJ / np.outer(D, D)
+        g = ne.Jtr / D
+        if mu is None:
+            mu = 1e-6 * float(np.max(np.diag(A)))
+        while True:
+            try:
+                step = -scipy.linalg.cho_solve(scipy.linalg.cho_factor(A + mu * eye), g)
+                break
+            except np.linalg.LinAlgError:
+                mu = max(mu * 10.0, 1e-12)
+        predicted = -float(step @ (2.0 * g + A @ step))
+        small_step = np.linalg.norm(step) <= tolerance * (np.linalg.norm(D * x) + tolerance)
+        if predicted <= tolerance * cost or small_step or cost == 0.0:
+            message = "converged: the next step would not improve the fit"
+            return SolveResult(x, True, message, len(history), evaluations, history), ne
+        if evaluations >= max_iterations:
+            message = f"no convergence in {max_iterations} evaluations"
+            return SolveResult(x, False, message, len(history), evaluations, history), ne
+        x_new = x + step / D
+        cost_new = data.cost(x_new)
+        evaluations += 1
+        rho = (cost - cost_new) / predicted
+        if rho > 0:
+            x, ne = x_new, data.normal_equations(x_new)
+            cost = ne.cost
+            history.append(math.sqrt(cost / max(ne.rows, 1)))
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+        else:
+            mu *= nu
+            nu *= 2.0
+
+
+@dataclass(frozen=True)
+class StreamingFit:
+    """The parameters of a calibration estimated from all poses by :func:`refit`.
+
+    Attributes:
+        chain: the measurement chain at the estimates (device frame, robot, tool).
+        names: the estimated parameters (those of the subsample's calibration).
+        estimates, start, std: their values (SI), start values (the subsample's estimates)
+            and standard deviations (from ``σ̂² (JᵀJ)⁻¹``).
+        covariance: ``(p, p)``.
+        residual_std: σ̂ of the weighted residuals (m for unit weights).
+        rms_after: RMS position error (m) over all poses at the estimates.
+        n: poses used; chunk: poses per chunk.
+        success, message, iterations, evaluations: the solver's record.
+        seconds: wall time of the refit.
+    """
+
+    chain: Model
+    names: tuple[str, ...]
+    estimates: Array
+    start: Array
+    std: Array
+    covariance: Array
+    residual_std: float
+    rms_after: float
+    n: int
+    chunk: int
+    success: bool
+    message: str
+    iterations: int
+    evaluations: int
+    seconds: float
+
+
+def refit(
+    calibration,
+    q: ArrayLike,
+    position: ArrayLike,
+    sigma: ArrayLike | None = None,
+    *,
+    chunk: int = DEFAULT_CHUNK,
+    max_iterations: int = 200,
+    tolerance: float = 1e-10,
+) -> StreamingFit:
+    """Estimate a calibration's parameters again from (many) more poses, streaming.
+
+    Args:
+        calibration: a :class:`~robocal.identify.calibrate.CalibrationResult` of a position
+            calibration without joint effects or learned residual (typically on a
+            subsample of ``q``): its measurement chain, its estimated parameters and their
+            values as the start.
+        q: ``(n, dof)`` joint values (rad, m).
+        position: ``(n, 3)`` measured positions (m, device frame).
+        sigma: ``(n, 3)`` position standard deviations (m), weights ``1/σ``; default unit
+            weights.
+        chunk: poses per chunk (memory: about ``3 · chunk · p`` doubles for the Jacobian).
+
+    Raises:
+        ValueError: for a pose calibration, joint-effect or residual parameters, or shapes
+            that do not fit.
+    """
+    t0 = time.perf_counter()
+    chain = calibration.measurement_chain
+    if chain is None or calibration.measure != "position":
+        raise ValueError("refit needs a position calibration with its measurement chain")
+    if tuple(chain.free_names) != tuple(calibration.names) or calibration.model.residual is not None:
+        raise ValueError(
+            "refit estimates geometric parameters only: this calibration has joint-effect or residual "
+            f"parameters ({', '.join(n for n in calibration.names if n not in set(chain.free_names))})"
+        )
+    q = np.ascontiguousarray(q, dtype=float)
+    position = np.asarray(position, dtype=float)
+    if q.ndim != 2 or q.shape[1] != chain.dof or position.shape != (len(q), 3):
+        raise ValueError(
+            f"q shaped {q.shape} and position {position.shape}: expected (n, {chain.dof}) and (n, 3)"
+        )
+    if chunk < 1:
+        raise ValueError(f"chunk must be a positive number of poses, got {chunk}")
+    weights = (
+        np.ones((len(q), 3)) if sigma is None else 1.0 / np.maximum(np.asarray(sigma, dtype=float), 1e-12)
+    )
+    if weights.shape != (len(q), 3):
+        raise ValueError(f"sigma shaped {weights.shape}; expected ({len(q)}, 3)")
+    data = _PositionData(chain, q, position, weights, int(chunk))
+    x0 = chain.free_values
+    result, ne = levenberg_marquardt_streaming(data, x0, max_iterations=max_iterations, tolerance=tolerance)
+    x = result.x
+    dof_resid = max(ne.rows - len(x), 1)
+    s2 = ne.cost / dof_resid
+    covariance = s2 * np.linalg.pinv(ne.JtJ)
+    fitted = chain.with_free_values(x)
+    unweighted = (
+        ne.cost if sigma is None else _PositionData(chain, q, position, np.ones((len(q), 3)), chunk).cost(x)
+    )
+    return StreamingFit(
+        chain=fitted,
+        names=tuple(chain.free_names),
+        estimates=x,
+        start=x0,
+        std=np.sqrt(np.maximum(np.diag(covariance), 0.0)),
+        covariance=covariance,
+        residual_std=math.sqrt(s2),
+        rms_after=math.sqrt(unweighted / len(q)),
+        n=len(q),
+        chunk=int(chunk),
+        success=result.success,
+        message=result.message,
+        iterations=result.iterations,
+        evaluations=result.evaluations,
+        seconds=time.perf_counter() - t0,
+    )

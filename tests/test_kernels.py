@@ -1,0 +1,121 @@
+"""The compiled kernels (robocal.model.kernels, numba) against the numpy reference of
+robocal.model.chain: forward kinematics, joint frames, the identification Jacobian and the
+fused evaluation with joint and perturbation columns, to 1e-12."""
+
+import numpy as np
+import pytest
+
+import robocal as rc
+from robocal.model.chain import Joint, Model, Step
+
+pytest.importorskip("numba")
+
+TOL = 1e-12
+
+
+def mixed_chain() -> Model:
+    """Revolute and prismatic joints about all three axes, constant steps between them and
+    a joint first and last (segments of every length, including empty ones)."""
+    steps = (
+        Step("Rz", "t1", 0.1, joint=Joint("q1")),
+        Step("Tz", "d1", 0.3),
+        Step("Rx", "a1", -0.2),
+        Step("Ty", "s2", 0.05, joint=Joint("q2")),
+        Step("Ry", "t3", 0.4, joint=Joint("q3")),
+        Step("Tx", "a3", 0.25),
+        Step("Ty", "b3", -0.1),
+        Step("Rz", "g3", 0.3),
+        Step("Tx", "s4", 0.0, joint=Joint("q4")),
+        Step("Rx", "t5", -0.3, joint=Joint("q5")),
+        Step("Tz", "tool", 0.12),
+    )
+    return Model("mixed", steps)
+
+
+MODELS = {
+    "ur10-calibration": lambda: rc.calibration_model("ur10"),
+    "puma560": lambda: rc.robot("puma560"),
+    "mixed": mixed_chain,
+}
+
+
+def close(a, b):
+    assert a.shape == b.shape
+    np.testing.assert_allclose(a, b, rtol=0, atol=TOL)
+
+
+@pytest.fixture(params=sorted(MODELS))
+def case(request):
+    model = MODELS[request.param]()
+    rng = np.random.default_rng(7)
+    q = rng.uniform(-2.5, 2.5, (9, model.dof))
+    pert = rng.normal(0.0, 0.02, (9, model.dof, 3))
+    values = model.values + rng.normal(0.0, 1e-3, len(model.values))
+    return model, q, pert, values
+
+
+def test_fk_and_joint_frames(case):
+    model, q, pert, _ = case
+    for d in (None, pert):
+        close(model.fk(q, d, compiled=True), model.fk(q, d, compiled=False))
+        close(model.joint_frames(q, d, compiled=True), model.joint_frames(q, d, compiled=False))
+    close(model.fk(q[0], compiled=True), model.fk(q[0], compiled=False))  # one configuration, (4, 4)
+    # a non-contiguous q (a column slice) gives the same frames
+    wide = np.concatenate([q, q], axis=1)[:, : model.dof]
+    close(model.fk(wide, compiled=True), model.fk(q, compiled=False))
+
+
+@pytest.mark.parametrize("rows", ["position", "pose"])
+def test_identification_jacobian_and_fused_evaluation(case, rows):
+    model, q, pert, values = case
+    for a, b in zip(
+        model.fk_jacobian(q, rows, pert, compiled=True),
+        model.fk_jacobian(q, rows, pert, compiled=False),
+        strict=True,
+    ):
+        close(a, b)
+    for d in (None, pert):
+        for options in (
+            dict(jacobian=False),
+            dict(),
+            dict(joint_columns=True),
+            dict(joint_columns=True, perturbation_columns=True),
+            dict(jacobian=False, perturbation_columns=True),
+        ):
+            fast = model.evaluate(q, values, rows, perturbations=d, compiled=True, **options)
+            ref = model.evaluate(q, values, rows, perturbations=d, compiled=False, **options)
+            assert len(fast) == len(ref)
+            for a, b in zip(fast, ref, strict=True):
+                if b is None:
+                    assert a is None
+                else:
+                    close(a, b)
+
+
+def test_joint_jacobian_and_perturbation_jacobian(case):
+    model, q, pert, _ = case
+    from robocal.model import chain
+
+    compiled = model.joint_jacobian(q, pert)
+    P = model.perturbation_jacobian(q, "pose", pert)
+    original = chain._kernels
+    try:
+        chain._kernels = lambda compiled=None: None  # the numpy path throughout
+        close(compiled, model.joint_jacobian(q, pert))
+        close(P, model.perturbation_jacobian(q, "pose", pert))
+    finally:
+        chain._kernels = original
+
+
+def test_calibration_is_the_same_with_the_numpy_path(monkeypatch):
+    """A whole calibration through the compiled kernels equals the numpy one."""
+    from robocal.model import chain
+
+    model = rc.calibration_model("ur10")
+    true = rc.measure.draw_true_model(model, length=1e-3, angle=np.radians(0.05), seed=2)
+    robot = rc.measure.VirtualRobot(model, true, rc.measure.LaserTracker(p_tool_target=np.array([0, 0, 0.1])))
+    data = rc.measure.simulate(robot, rc.measure.random_poses(model, 30, seed=4), seed=1)
+    fast = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])
+    monkeypatch.setattr(chain, "_kernels", lambda compiled=None: None)
+    ref = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])
+    np.testing.assert_allclose(fast.model.values, ref.model.values, rtol=0, atol=1e-10)
