@@ -447,6 +447,11 @@ def run_demo(
                 write_measurements(train, out / "train.csv")
                 write_measurements(test, out / "test.csv")
                 save_model(true, out / "true_model.yaml")
+                if not quick:  # ISO 9283's fourteen characteristics, from a simulated timed log
+                    from robocal.evaluate.iso9283_report import evaluate_log
+                    from robocal.evaluate.iso9283_sim import simulate_log
+
+                    ev["iso9283"] = evaluate_log(simulate_log(nominal, seed=seed).log).to_dict()
                 ev["timings_s"] = dict(steps.timings)
                 atomic_write_text(out / "evaluation.json", json.dumps(ev) + "\n")
                 report_path = write_report(
