@@ -18,7 +18,7 @@ import typer
 from rich.table import Table
 
 from robocal import spatial
-from robocal.console import console, err_console, fail
+from robocal.console import console, fail, safe, warn
 from robocal.model.catalog import robot, robots
 from robocal.model.chain import Model
 from robocal.model.files import ModelFileError, load_model
@@ -93,9 +93,9 @@ def robots_list(ctx: typer.Context) -> None:
 def robots_show(name: Annotated[str, typer.Argument(help="catalog name or model file")]) -> None:
     """Parameter table of one robot in mm and degrees."""
     m = resolve_model(name)
-    console.print(f"[bold]{m.name}[/] — {m.title}", highlight=False)
+    console.print(f"[bold]{safe(m.name)}[/] — {safe(m.title)}", highlight=False, markup=True)
     if m.source:
-        console.print(f"[dim]source: {m.source}[/]", highlight=False)
+        console.print(f"[dim]source: {safe(m.source)}[/]", highlight=False, markup=True)
     table = Table(show_lines=False)
     for col in ("#", "motion", "parameter", "value", "unit", "free", "joint", "limits"):
         table.add_column(col, justify="right" if col in ("#", "value") else "left")
@@ -175,7 +175,7 @@ def fk(
             )
         )
         return
-    console.print(f"[bold]{m.name}[/] tool frame in the base frame", highlight=False)
+    console.print(f"[bold]{safe(m.name)}[/] tool frame in the base frame", highlight=False, markup=True)
     table = Table(show_header=False)
     for _ in range(4):
         table.add_column(justify="right")
@@ -194,7 +194,7 @@ def fk(
         highlight=False,
     )
     if outside:
-        err_console.print(f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False)
+        warn(f"outside joint limits: {', '.join(outside)}")
 
 
 # Command groups of the other calibration steps register themselves here, one line

@@ -500,7 +500,7 @@ def _summary_numbers(result, before, after, after_geo, ev, seconds, report_path)
 def _print_summary(numbers: Mapping[str, Any]) -> None:
     from rich.table import Table
 
-    from robocal.console import console
+    from robocal.console import console, safe
     from robocal.identify.guards import FitToNoise
 
     held = numbers["held_out"]
@@ -550,4 +550,4 @@ def _print_summary(numbers: Mapping[str, Any]) -> None:
         highlight=False,
     )
     if numbers.get("report"):
-        console.print(f"[bold]report:[/] {numbers['report']}", highlight=False)
+        console.print(f"[bold]report:[/] {safe(numbers['report'])}", highlight=False, markup=True)

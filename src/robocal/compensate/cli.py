@@ -25,7 +25,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, refuse_overwrite, safe
 
 __all__ = ["register"]
 
@@ -183,9 +183,10 @@ def compensate_command(
     if not result.reachable.all():
         bad = [result.names[i] for i in np.flatnonzero(~result.reachable)]
         err_console.print(
-            f"[yellow]warning:[/] {len(bad)} target(s) not reached: {', '.join(bad[:10])}"
+            f"[yellow]warning:[/] {len(bad)} target(s) not reached: {safe(', '.join(bad[:10]))}"
             + (" ..." if len(bad) > 10 else ""),
             highlight=False,
+            markup=True,
         )
         raise typer.Exit(code=1)
 
@@ -193,9 +194,10 @@ def compensate_command(
 def _print(result, robot: str, source: Path) -> None:
     s = result.summary()
     console.print(
-        f"[bold]{robot}[/] — {s['n']} {result.kind} targets from {source.name}: "
+        f"[bold]{safe(robot)}[/] — {s['n']} {result.kind} targets from {safe(source.name)}: "
         f"{s['reachable']} reached, {s['branch_kept']} in the nominal configuration",
         highlight=False,
+        markup=True,
     )
     table = Table(
         title=f"predicted error of the calibrated robot at the {s['reachable']} reached targets",

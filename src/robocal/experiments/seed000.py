@@ -228,8 +228,9 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
 
 def _print(numbers: dict[str, Any]) -> None:
     from rich.table import Table
+    from rich.text import Text
 
-    from robocal.console import console
+    from robocal.console import console, safe
 
     seed = numbers["seed"]
     for name, r in numbers["robots"].items():
@@ -241,15 +242,18 @@ def _print(numbers: dict[str, Any]) -> None:
             table.add_column(col)
         for row in r["links"]:
             params = " ".join(
-                f"[bold]{p}[/]" if p in row["identified"] else f"[dim]{p}[/]"
+                f"[bold]{safe(p)}[/]" if p in row["identified"] else f"[dim]{safe(p)}[/]"
                 for p in row["robocal_parameters"]
             )
             table.add_row(
                 str(row["link"]),
                 row["relation"],
                 f"eq. {row['seed_equation']} ({row['seed_set']})",
-                f"eq. {row['robocal_equation']} {row['robocal_kind']}: ({row['robocal_motions']})\n{params}",
-                "[green]yes[/]" if row["match"] else "[red]no[/]",
+                Text.from_markup(
+                    f"eq. {row['robocal_equation']} {row['robocal_kind']}: "
+                    f"({row['robocal_motions']})\n{params}"
+                ),
+                Text("yes", "green") if row["match"] else Text("no", "red"),
             )
         console.print(table)
     summary = Table(
@@ -274,8 +278,12 @@ def _print(numbers: dict[str, Any]) -> None:
             name,
             f"{r['identified_parameters']} (4R+2P+6)",
             str(r["jacobian_rank"]),
-            "[green]complete, minimal, continuous[/]" if r["built_check"]["ok"] else "[red]singular[/]",
-            "ok" if dh["ok"] else f"[red]singular[/] link {', '.join(map(str, dh['singular_links']))}",
+            Text("complete, minimal, continuous", "green")
+            if r["built_check"]["ok"]
+            else Text("singular", "red"),
+            "ok"
+            if dh["ok"]
+            else Text.from_markup(f"[red]singular[/] link {', '.join(map(str, dh['singular_links']))}"),
             f"{b['held_out_before_mean_mm']:.2f} → {b['held_out_mean_mm']:.3f} | {d['held_out_mean_mm']:.3f}",
             f"{b['condition_number']:.3g} | {d['condition_number']:.3g}",
         )

@@ -462,6 +462,7 @@ def _print(numbers: dict[str, Any]) -> None:
         f"[bold]seed 001[/] — calibration table, bounded L1 calibration, compensated commands "
         f"({pub['source']})",
         highlight=False,
+        markup=True,
     )
     console.print(
         f"table arm: seed {numbers['arm_seed']} of {numbers['arms_considered']} arms with DH errors within "
@@ -520,7 +521,7 @@ def _print(numbers: dict[str, Any]) -> None:
                     f"{len(row[name]['failed'])}",
                 )
         console.print(table)
-    console.print("[bold]where the simulation differs from the seed, and why[/]")
+    console.print("[bold]where the simulation differs from the seed, and why[/]", markup=True)
     for line in numbers["differences"]:
         console.print(f"  - {line}", highlight=False)
 

@@ -492,13 +492,14 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
 def _table(title: str, rows: dict[str, dict[str, list[float]]], thesis: dict | None = None):
     from rich import box
     from rich.table import Table
+    from rich.text import Text
 
     table = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
     table.add_column("mm / deg", no_wrap=True)
     for c in COLUMNS:
         table.add_column(c, justify="right", no_wrap=True)
     for stat in ("minimum", "maximum", "average"):
-        table.add_row(f"[bold]{stat}[/]")
+        table.add_row(Text(stat, "bold"))
         for key, summary in rows.items():
             table.add_row(f" {key}", *(f"{v:.3f}" for v in summary[stat]))
             if thesis is not None and key in thesis.get(stat, {}):

@@ -12,7 +12,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail
+from robocal.console import console, err_console, fail, safe, warn
 from robocal.measure.commands import (
     AngleUnit,
     Columns,
@@ -65,7 +65,7 @@ def _read(
         raise fail(as_cli_text(str(err))) from None
     for w in caught:
         if isinstance(w.message, MeasurementWarning):
-            err_console.print(f"[yellow]warning:[/] {as_cli_text(str(w.message))}", highlight=False)
+            warn(as_cli_text(str(w.message)))
     if "rows_left_out" in data.metadata:
         err_console.print(
             f"{data.metadata['rows_left_out']} incomplete row(s) of {path.name} left out (--incomplete drop)",
@@ -278,7 +278,7 @@ def calibrate_command(
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
         for note in _validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
-            console.print(note, highlight=False)
+            console.print(note, highlight=False, markup=True)
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
     if report:
         from robocal.evaluate.report import write_report
@@ -294,6 +294,7 @@ def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measur
     for ``--model`` the file's chain (``--chain complete``: the complete model built from
     it); a chain calibrated as it is gets the parameterisation warnings of rc.calibrate."""
     from robocal.model.complete import calibration_model
+
     effective = measure or ("pose" if data.orientation is not None else "position")
     complete = chain == "complete" or (chain is None and robot_name is not None)
     if complete:
@@ -318,9 +319,10 @@ def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measur
 def _print_result(result) -> None:
     head = "converged" if result.success else "[red]NOT CONVERGED[/]"
     console.print(
-        f"[bold]{result.model.name}[/] — {result.method}, {result.measure} measurements, {result.n} poses: "
-        f"{head} ({result.iterations} iterations, {result.seconds * 1e3:.0f} ms)",
+        f"[bold]{safe(result.model.name)}[/] — {safe(result.method)}, {safe(result.measure)} measurements, "
+        f"{result.n} poses: {head} ({result.iterations} iterations, {result.seconds * 1e3:.0f} ms)",
         highlight=False,
+        markup=True,
     )
     console.print(
         f"RMS error on the calibration poses {result.rms_before * 1e3:.4f} mm → "
@@ -344,15 +346,19 @@ def _print_result(result) -> None:
         for line in effect_lines(effects):
             console.print(f"  {line}", highlight=False)
     for d in result.dropped:
-        console.print(f"  [dim]not identified:[/] {d}", highlight=False)
+        console.print(f"  [dim]not identified:[/] {safe(d)}", highlight=False, markup=True)
     for a, b, rho in result.high_correlations:
-        console.print(f"  [yellow]warning:[/] {a} and {b} are correlated ({rho:+.3f})", highlight=False)
+        console.print(
+            f"  [yellow]warning:[/] {safe(a)} and {safe(b)} are correlated ({rho:+.3f})",
+            highlight=False,
+            markup=True,
+        )
     if result.fit_to_noise is not None and result.fit_to_noise.warning() is None:  # else in the warnings
         console.print(result.fit_to_noise.summary(), highlight=False)
     for line in result.residual_lines():
         console.print(line, highlight=False, markup=False)
     for w in result.metadata.get("warnings", []):
-        console.print(f"[yellow]warning:[/] {w}", highlight=False)
+        warn(w)
 
 
 def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
@@ -392,7 +398,7 @@ def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str]
             "calibration's"
         )
     if warning:
-        notes.append(f"[yellow]warning:[/] {warning}")
+        notes.append(f"[yellow]warning:[/] {safe(warning)}")
     return notes, warning
 
 
@@ -455,7 +461,7 @@ def validate_command(
         return
     console.print(_stats_table(f"{result.model.name} on {data_path.name}", stats))
     for note in filter(None, notes):
-        console.print(note, highlight=False)
+        console.print(note, highlight=False, markup=True)
 
 
 def register(app: typer.Typer) -> None:

@@ -22,9 +22,10 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from robocal import spatial
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, refuse_overwrite, safe
 from robocal.measure.dataset import (
     PROBLEM_CODES,
     MeasurementFileError,
@@ -135,8 +136,8 @@ def _problem_table(problems: list[Problem], title: str) -> Table:
         severity, code, column = key
         style = "bold red" if severity == "error" else "yellow"
         table.add_row(
-            f"[{style}]{severity}[/]",
-            f"{code}\n[dim]{PROBLEM_CODES.get(code, '')}[/]",
+            Text(severity, style),
+            Text.from_markup(f"{safe(code)}\n[dim]{safe(PROBLEM_CODES.get(code, ''))}[/]"),
             column or "-",
             _rows_text([p.row for p in items]),
             as_cli_text(items[0].message),
@@ -222,8 +223,9 @@ def data_check(
     if errors:
         console.print(
             f"[bold red]{len(errors)} error(s)[/]: the file cannot be used as read; first: "
-            f"{as_cli_text(str(errors[0]))}",
+            f"{safe(as_cli_text(str(errors[0])))}",
             highlight=False,
+            markup=True,
             soft_wrap=True,
         )
         raise typer.Exit(code=1)
@@ -296,8 +298,9 @@ def simulate_command(
         q = read_measurements(poses, model=model)
         if q.position is not None:
             err_console.print(
-                f"[yellow]note:[/] {poses} has measured positions; only its joint values are used",
+                f"[yellow]note:[/] {safe(poses)} has measured positions; only its joint values are used",
                 highlight=False,
+                markup=True,
             )
         model_rng = np.random.default_rng(None if seed is None else [seed, 1])
         length = parse_quantity_option(length_tol, "length", "--length-tol")

@@ -24,7 +24,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, refuse_overwrite, safe
 
 __all__ = ["register"]
 
@@ -115,10 +115,12 @@ def poses_command(
             console.print(table)
             meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
             for d in sub.dropped:
-                console.print(f"[dim]not identifiable: {d}[/]", highlight=False)
+                console.print(f"[dim]not identifiable: {safe(d)}[/]", highlight=False, markup=True)
         elif method is Method.iso9283:
             if n not in (None, 5):
-                err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5")
+                err_console.print(
+                    "[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True
+                )
             with console.status("searching the largest ISO 9283 cube..."):
                 iso = iso9283_poses(m, kind=kind, seed=seed, region=box)  # type: ignore[arg-type]
             q = iso.q
