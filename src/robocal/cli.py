@@ -18,6 +18,7 @@ import typer
 from rich.table import Table
 
 from robocal import spatial
+from robocal.cli_errors import RobocalGroup
 from robocal.console import console, fail, safe, warn
 from robocal.model.catalog import robot, robots
 from robocal.model.chain import Model
@@ -28,6 +29,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    cls=RobocalGroup,  # no traceback: an exception a command lets through becomes one line
 )
 robots_app = typer.Typer(help="The robot catalog.", invoke_without_command=True)
 app.add_typer(robots_app, name="robots")

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import math
 import time
 from collections.abc import Iterator, Mapping
@@ -438,20 +437,21 @@ def run_demo(
             if out is not None:
                 from robocal.evaluate.report import write_report
                 from robocal.measure.dataset import write_measurements
-                from robocal.model.files import atomic_write_text, save_model
+                from robocal.model.files import atomic_write_text, save_model, strict_json
 
                 out = Path(out)
-                out.mkdir(parents=True, exist_ok=True)
                 result.metadata |= {"source": "robocal demo", "robot": robot, "seed": seed}
-                result.save(out)
-                write_measurements(train, out / "train.csv")
-                write_measurements(test, out / "test.csv")
-                save_model(true, out / "true_model.yaml")
                 ev["timings_s"] = dict(steps.timings)
-                atomic_write_text(out / "evaluation.json", json.dumps(ev) + "\n")
-                report_path = write_report(
-                    result, out / "report.html", data=train, test_data=test, evaluation=ev
-                )
+
+                def the_rest(stage: Path) -> None:  # written with the result, all or nothing
+                    write_measurements(train, stage / "train.csv")
+                    write_measurements(test, stage / "test.csv")
+                    save_model(true, stage / "true_model.yaml")
+                    atomic_write_text(stage / "evaluation.json", strict_json(ev) + "\n")
+                    write_report(result, stage / "report.html", data=train, test_data=test, evaluation=ev)
+
+                result.save(out, also=the_rest)
+                report_path = out / "report.html"
     seconds = time.perf_counter() - t_start
     numbers = _summary_numbers(result, before, after, after_geo, ev, seconds, report_path)
     numbers["timings_s"] = dict(steps.timings)

@@ -273,7 +273,18 @@ def calibrate_command(
     if test is not None:
         validation = rc.validate(result, test)
         result.metadata["validation"] = validation.to_dict()
-    result.save(out)
+    from robocal.outdir import FolderBusyError
+
+    def write_report_too(stage_dir: Path) -> None:
+        from robocal.evaluate.report import write_report
+
+        with console.status("writing the report ..."):
+            write_report(result, stage_dir / "report.html", data=train, test_data=test)
+
+    try:  # model.yaml, measurement_model.yaml, result.json (and report.html): all or nothing
+        result.save(out, also=write_report_too if report else None)
+    except FolderBusyError as err:
+        raise fail(str(err)) from None
     _print_result(result)
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
@@ -281,11 +292,7 @@ def calibrate_command(
             console.print(note, highlight=False, markup=True)
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
     if report:
-        from robocal.evaluate.report import write_report
-
-        with console.status("writing the report ..."):
-            path = write_report(result, out / "report.html", data=train, test_data=test)
-        console.print(f"report: {path}", highlight=False)
+        console.print(f"report: {out / 'report.html'}", highlight=False)
 
 
 def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measure: str | None, data):

@@ -60,7 +60,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, mode
 from robocal.model import conventions
 from robocal.model.chain import Body, Joint, JointEffects, Model, Step
 
-__all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "save_model"]
+__all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "save_model", "strict_json"]
 
 FORMAT_VERSION = 1
 MAX_FILE_BYTES = 5_000_000
@@ -448,6 +448,25 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
+def _finite(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None (JSON has no NaN/Infinity)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def strict_json(value: Any, **kwargs: Any) -> str:
+    """``json.dumps`` that writes strict JSON: a non-finite float (NaN, ±inf) becomes
+    ``null`` instead of the ``NaN``/``Infinity`` that other JSON readers refuse."""
+    import json
+
+    return json.dumps(_finite(value), allow_nan=False, **kwargs)
+
+
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename (never half-written)."""
     return atomic_write_bytes(path, text.encode("utf-8"))
@@ -464,18 +483,26 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
         # mkstemp makes the file private (0600); give it the permissions of a normal new file
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        if err.filename is None:  # a failed write() (disk full) names no file: name the target
+            raise OSError(err.errno, err.strerror, str(path)) from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
 
 
-def save_model(model: Model, path: str | os.PathLike[str]) -> Path:
-    """Write ``model`` to a YAML file atomically (SI units, exact round trip)."""
+def save_model(model: Model, path: str | os.PathLike[str], run_id: str | None = None) -> Path:
+    """Write ``model`` to a YAML file atomically (SI units, exact round trip); ``run_id``
+    stamps it as one file of a result folder (:mod:`robocal.outdir`)."""
+    name = model.name.replace("\n", " ").replace("\r", " ")
     header = (
-        f"# robocal model '{model.name}': {model.dof} joints, {len(model.steps)} parameters; "
-        "values in m and rad\n"
+        f"# robocal model '{name}': {model.dof} joints, {len(model.steps)} parameters; values in m and rad\n"
     )
+    if run_id is not None:
+        header += f"# robocal run: {run_id}\n"
     body = yaml.safe_dump(
         model_to_dict(model),
         sort_keys=False,
