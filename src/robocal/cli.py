@@ -19,7 +19,7 @@ from rich.table import Table
 
 from robocal import spatial
 from robocal.cli_errors import RobocalGroup
-from robocal.console import console, fail, safe, warn
+from robocal.console import console, fail, input_problem, safe, warn
 from robocal.model.catalog import robot, robots
 from robocal.model.chain import Model
 from robocal.model.files import ModelFileError, load_model
@@ -42,8 +42,9 @@ def resolve_model(name_or_path: str) -> Model:
         raise fail("no robot given: a catalog name (robocal robots) or a model file")
     try:
         if path.suffix in (".yaml", ".yml") or path.exists():
-            if not path.is_file():
-                raise fail(f"model file {path} does not exist")
+            problem = input_problem(path, "model file")
+            if problem is not None:
+                raise fail(f"model file {problem}" if problem.endswith("does not exist") else problem)
             if _is_geometry_file(path):
                 raise fail(
                     f"{path} is a joint-geometry file: build a model from it first, "
@@ -140,6 +141,8 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
             f"--q has {len(values)} values but {m.name} has {m.dof} joints ({', '.join(m.joint_names)})"
         )
     q = np.array(values)
+    if not np.all(np.isfinite(q)):
+        raise fail(f"--q {text!r}: joint values must be finite numbers (no nan or inf)")
     if deg:
         q = np.where(np.array(m.joint_types) == "revolute", np.radians(q), q / 1000.0)
     return q

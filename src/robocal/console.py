@@ -20,7 +20,17 @@ from rich.console import Console
 from rich.errors import MarkupError
 from rich.markup import escape
 
-__all__ = ["console", "err_console", "fail", "plain", "refuse_overwrite", "safe", "warn"]
+__all__ = [
+    "check_input",
+    "console",
+    "err_console",
+    "fail",
+    "input_problem",
+    "plain",
+    "refuse_overwrite",
+    "safe",
+    "warn",
+]
 
 #: C0 controls except tab and newline, DEL and the C1 controls (ESC starts terminal
 #: escape sequences; CSI 0x9b does on some terminals)
@@ -70,6 +80,38 @@ def fail(message: str) -> typer.Exit:
 def warn(message: str) -> None:
     """Print ``warning: message`` on stderr (``message`` printed as written, no markup)."""
     err_console.print("[yellow]warning:[/] " + safe(message), highlight=False, markup=True)
+
+
+def input_problem(path, what: str = "file") -> str | None:
+    """Why ``path`` cannot be read as an input ``what``, in one line naming it, or None.
+
+    A FIFO, socket or device (``/dev/stdin``) is named as such, not as missing."""
+    import os
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return f"{path} does not exist"
+    except PermissionError:
+        return f"{path}: permission denied; check the file's permissions"
+    except OSError as err:
+        return f"{path}: {err.strerror or err}"
+    if stat.S_ISDIR(mode):
+        return f"{path} is a directory; give a {what}"
+    if not stat.S_ISREG(mode):
+        return (
+            f"{path} is not a regular file (a pipe, socket or device such as /dev/stdin): the {what} must "
+            "be a file; save it to one and give its path"
+        )
+    return None
+
+
+def check_input(path, what: str = "file") -> None:
+    """Stop (exit 2) with :func:`input_problem`'s line when ``path`` is no readable file."""
+    problem = input_problem(path, what)
+    if problem is not None:
+        raise fail(problem)
 
 
 def refuse_overwrite(path, force: bool, what: str = "file") -> None:

@@ -1656,6 +1656,9 @@ def run_fleet(
         raise StudyError(
             f"{directory}: several files share the name(s) {', '.join(twice)} (their results would clash)"
         )
+    if table_path.name in stems:  # its result folder would be the table itself
+        clash = files[stems.index(table_path.name)]
+        raise StudyError(f"{clash}: a file named like the fleet table {table_path.name}; rename it")
     todo, skipped, resumed = [], [], 0
     for p in files:
         old = table.rows.get(names[p])

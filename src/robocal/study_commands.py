@@ -19,7 +19,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from robocal.console import console, err_console, fail, safe
+from robocal.console import console, err_console, fail, input_problem, safe
 
 __all__ = ["register"]
 
@@ -79,7 +79,8 @@ def study_command(
     from robocal.study import StudyError, load_study_config, run_study
 
     if not config.is_file():
-        raise fail(f"study file {config} does not exist")
+        problem = input_problem(config, "study file")
+        raise fail(f"study file {problem}" if problem.endswith("does not exist") else problem)
     try:
         cfg = load_study_config(config)
     except StudyError as err:

@@ -25,7 +25,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail, refuse_overwrite, safe
+from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 
 __all__ = ["register"]
 
@@ -49,7 +49,8 @@ def _load(source: Path):
             return load_model(source)
         except (OSError, ModelFileError) as err:
             raise fail(str(err)) from None
-    raise fail(f"{source} does not exist (a calibration directory or a model file)")
+    problem = input_problem(source, "calibration directory or model file") or f"{source} cannot be read"
+    raise fail(problem + (" (a calibration directory or a model file)" if problem.endswith("exist") else ""))
 
 
 def _parse_q0(text: str, dof: int, factor: np.ndarray) -> np.ndarray:

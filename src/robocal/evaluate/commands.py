@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from robocal.console import console, fail, refuse_overwrite
+from robocal.console import check_input, console, fail, refuse_overwrite
 
 __all__ = ["register"]
 
@@ -64,8 +64,7 @@ def report_command(
                 return None
             options = {}
         else:
-            if not path.is_file():
-                raise fail(f"{path} does not exist")
+            check_input(path, "measurement file")
             options = {
                 "length_unit": length_unit,
                 "angle_unit": angle_unit,
@@ -101,7 +100,7 @@ def demo_command(
     out: Annotated[Path, typer.Option("--out", help="directory for the calibration, data and report")] = Path(
         "robocal-demo"
     ),
-    seed: Annotated[int, typer.Option("--seed", help="seeds the whole demo")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="seeds the whole demo")] = 0,
     poses: Annotated[int, typer.Option("--poses", help="calibration poses (chosen O1-optimally)")] = 50,
     quick: Annotated[bool, typer.Option("--quick", help="fewer poses and cycles: a faster run")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,

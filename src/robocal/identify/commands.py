@@ -12,7 +12,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail, safe, warn
+from robocal.console import check_input, console, err_console, fail, safe, warn
 from robocal.measure.commands import (
     AngleUnit,
     Columns,
@@ -44,8 +44,7 @@ def _read(
 
     if path.is_dir():
         raise fail(f"{path} is a directory; --data takes a measurement file")
-    if not path.is_file():
-        raise fail(f"{path} does not exist")
+    check_input(path, "measurement file")
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", MeasurementWarning)
@@ -119,7 +118,7 @@ def calibrate_command(
     train_n: Annotated[
         int | None, typer.Option("--train-n", help="calibrate on N random rows, validate on the rest")
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="seed of the --train-n draw")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="seed of the --train-n draw")] = 0,
     tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
     compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
     level: Annotated[

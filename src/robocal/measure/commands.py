@@ -251,7 +251,7 @@ def simulate_command(
             "default: the device's own (robocal.measure.devices)"
         ),
     ] = None,
-    seed: Annotated[int | None, typer.Option(help="seed of the drawn errors and the noise")] = None,
+    seed: Annotated[int | None, typer.Option(min=0, help="seed of the drawn errors and the noise")] = None,
     length_tol: Annotated[str, typer.Option(help="tolerance of length parameters, e.g. 0.5mm")] = "0.5mm",
     angle_tol: Annotated[str, typer.Option(help="tolerance of angle parameters, e.g. 0.05deg")] = "0.05deg",
     tol: Annotated[

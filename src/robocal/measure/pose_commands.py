@@ -26,7 +26,12 @@ from rich.table import Table
 
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
 
-__all__ = ["register"]
+__all__ = ["MAX_POOL", "MAX_POSES", "register"]
+
+#: at most this many poses per command (a measurement campaign has tens to thousands)
+MAX_POSES = 100_000
+#: at most this many candidates for --method optimal (its Jacobians: ~0.1 GB per 100 000)
+MAX_POOL = 100_000
 
 
 class Method(StrEnum):
@@ -59,11 +64,18 @@ def poses_command(
     method: Annotated[Method, typer.Option("--method", help="how to choose the poses")] = Method.random,
     n: Annotated[
         int | None,
-        typer.Option("--n", help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)"),
+        typer.Option(
+            "--n",
+            min=1,
+            max=MAX_POSES,
+            help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)",
+        ),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="random seed")] = 0,
     index: Annotated[str, typer.Option("--index", help="index maximised by --method optimal: O1..O5")] = "O1",
-    pool: Annotated[int, typer.Option("--pool", help="candidate pool size for --method optimal")] = 2000,
+    pool: Annotated[
+        int, typer.Option("--pool", min=1, max=MAX_POOL, help="candidate pool size for --method optimal")
+    ] = 2000,
     rows: Annotated[str, typer.Option("--rows", help="measured quantities: position or pose")] = "position",
     kind: Annotated[
         str | None,

@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from robocal.console import console, fail, refuse_overwrite, safe, warn
+from robocal.console import console, fail, input_problem, refuse_overwrite, safe, warn
 
 __all__ = ["register"]
 
@@ -58,7 +58,10 @@ def build_command(
 
     catalog = not geometry.is_file() and str(geometry).lower() in robots()
     if not geometry.is_file() and not catalog:
-        raise fail(f"{geometry} does not exist (nor is it a catalog robot: robocal robots)")
+        problem = input_problem(geometry, "geometry, URDF or model file") or f"{geometry} cannot be read"
+        if problem.endswith("does not exist"):
+            problem += " (nor is it a catalog robot: robocal robots)"
+        raise fail(problem)
     try:
         if geometry.suffix.lower() == ".urdf":
             result = build_from_urdf(geometry, measure or "pose", tip)
