@@ -216,8 +216,13 @@ def calibrate_command(
             sigma = parse_quantity_option(noise, "length", "--noise")
         except ValueError as err:
             raise fail(str(err)) from None
-        if not sigma > 0:
-            raise fail(f"--noise {noise}: a positive standard deviation, e.g. 0.03mm")
+        from robocal.measure.dataset import MAX_SIGMA, MIN_SIGMA
+
+        if not MIN_SIGMA <= sigma <= MAX_SIGMA:
+            raise fail(
+                f"--noise {noise}: a standard deviation between {MIN_SIGMA * 1e3:g} mm and "
+                f"{MAX_SIGMA * 1e3:g} mm, e.g. 0.03mm"
+            )
         if data.sigma is not None:
             raise fail(f"--noise: {data_path} has its own sigma columns; leave --noise out")
         data = dataclasses.replace(data, sigma=np.full((data.n, 3), sigma))

@@ -27,6 +27,7 @@ from rich.text import Text
 from robocal import spatial
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
 from robocal.measure.dataset import (
+    MAX_SIGMA,
     PROBLEM_CODES,
     MeasurementFileError,
     Measurements,
@@ -44,6 +45,11 @@ from robocal.measure.simulate import (
 )
 
 __all__ = ["register"]
+
+#: simulate: tolerances of the drawn true robot may be at most 0.1 m and 10 degrees (a real
+#: robot's errors are below a few mm and tenths of a degree)
+MAX_LENGTH_TOL = 0.1
+MAX_ANGLE_TOL = math.radians(10.0)
 
 # The reader's options on every command that reads measurements, and its messages in
 # their command-line spelling.
@@ -294,7 +300,12 @@ def simulate_command(
     try:
         dev = make_device(device, **kwargs)
         if noise is not None:
-            dev = dev.with_noise(parse_quantity_option(noise, "length", "--noise"))
+            sigma = parse_quantity_option(noise, "length", "--noise")
+            if not 0 <= sigma <= MAX_SIGMA:
+                raise ValueError(
+                    f"--noise {noise}: a standard deviation between 0 and {MAX_SIGMA * 1e3:g} mm"
+                )
+            dev = dev.with_noise(sigma)
         q = read_measurements(poses, model=model)
         if q.position is not None:
             err_console.print(
@@ -305,6 +316,10 @@ def simulate_command(
         model_rng = np.random.default_rng(None if seed is None else [seed, 1])
         length = parse_quantity_option(length_tol, "length", "--length-tol")
         angle = parse_quantity_option(angle_tol, "angle", "--angle-tol")
+        if not 0 <= length <= MAX_LENGTH_TOL:
+            raise ValueError(f"--length-tol {length_tol}: between 0 and {MAX_LENGTH_TOL * 1e3:g} mm")
+        if not 0 <= angle <= MAX_ANGLE_TOL:
+            raise ValueError(f"--angle-tol {angle_tol}: between 0 and {math.degrees(MAX_ANGLE_TOL):g} deg")
         for name, value in tolerances.items():
             if not re.search(r"[A-Za-zµμ°]\s*$", value) and float(value or "nan") != 0.0:
                 raise ValueError(f"--tol {name}={value}: give the unit, e.g. {name}={value}mm or {value}deg")
@@ -317,7 +332,14 @@ def simulate_command(
             seed=model_rng,
         )
         vr = VirtualRobot(model, true, dev)
-        data = simulate(vr, q, seed)
+        with np.errstate(all="ignore"):
+            data = simulate(vr, q, seed)
+        arrays = [a for a in (data.position, data.orientation, data.sigma) if a is not None]
+        if not all(np.all(np.isfinite(a)) for a in arrays):
+            raise ValueError(
+                "the simulated measurements are not finite: the --tol, --length-tol, --angle-tol or --noise "
+                "values are too large for this robot; give those of a real robot, e.g. 0.5mm and 0.05deg"
+            )
         if train is not None:
             if not 0 < train <= 1:
                 raise ValueError(f"--train {train}: expected a fraction in (0, 1]")

@@ -93,6 +93,10 @@ MAX_REVOLUTE_RAD = 4.0 * math.pi
 #: Largest measurement file read (bytes): about five million poses; reading takes about
 #: ten times the file's size in memory.
 MAX_FILE_BYTES = 512 * 1024 * 1024
+#: A stated measurement noise (1σ, m) must lie in [MIN_SIGMA, MAX_SIGMA]: 0 or a tiny σ
+#: makes the weights infinite, a huge one makes them vanish
+MIN_SIGMA = 1e-9
+MAX_SIGMA = 1.0
 
 Severity = Literal["error", "warning"]
 
@@ -573,11 +577,16 @@ class _Reader:
             position = self._numbers(cols["position"]) * self.L
         if cols["sigma"]:
             sigma = self._numbers(cols["sigma"]) * self.L
-            bad = good[:, None] & np.isfinite(sigma) & (sigma < 0)
+            bad = good[:, None] & np.isfinite(sigma) & ((sigma < MIN_SIGMA) | (sigma > MAX_SIGMA))
             for i, c in np.argwhere(bad):
+                cell = self._cell(i, cols["sigma"][c])
                 self.error(
                     "sigma",
-                    f"standard deviation {self._cell(i, cols['sigma'][c])!r} is negative",
+                    f"standard deviation {cell!r} is negative"
+                    if sigma[i, c] < 0
+                    else f"standard deviation {cell!r} is outside {MIN_SIGMA * 1e3:g}..{MAX_SIGMA * 1e3:g} "
+                    "mm "
+                    "(leave the sigma columns out when the noise is not known)",
                     int(self.line_no[i]),
                     cols["sigma"][c],
                 )
