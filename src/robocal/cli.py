@@ -59,11 +59,11 @@ def resolve_model(name_or_path: str) -> Model:
 def _is_geometry_file(path: Path) -> bool:
     """Whether a YAML file holds joint geometry for the builder (``joints:``) rather than a
     model (``steps:``)."""
-    import yaml
+    from robocal.model.files import read_yaml
 
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, RecursionError, yaml.YAMLError):
+    try:  # read_yaml: the size and entry limits are checked before the file is parsed
+        data = read_yaml(path, "model")
+    except (OSError, ModelFileError):
         return False  # the model loader reports it
     return isinstance(data, dict) and "joints" in data and "steps" not in data
 

@@ -414,6 +414,18 @@ IncompleteMode = Literal["error", "drop"]
 SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "semicolon": ";", "comma": ","}
 
 
+_EXCEL_SEP = re.compile(r"^\ufeff?sep=(.)\s*$")
+
+
+def _encoding_hint(path: Path) -> str | None:
+    """What a file that is not UTF-8 most likely is, from its first bytes."""
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "it is UTF-16 (byte-order mark); save it as UTF-8 (CSV UTF-8 in Excel)"
+    return None
+
+
 def _csv_rows(lines: Sequence[str], sep: str):
     """csv rows of ``lines``; a space separator means runs of spaces."""
     return csv.reader(lines, delimiter=sep, skipinitialspace=sep == " ")
@@ -500,8 +512,18 @@ class _Reader:
         except FileNotFoundError:
             self.error("file", "file not found")
             return None
-        except (OSError, UnicodeDecodeError) as err:
-            self.error("file", f"cannot be read as UTF-8 text: {err}")
+        except UnicodeDecodeError as err:
+            self.error("file", f"cannot be read as UTF-8 text: {_encoding_hint(path) or err}")
+            return None
+        except OSError as err:
+            self.error("file", f"cannot be read: {err.strerror or err}")
+            return None
+        if "\x00" in text[:4096] and text[:4096].count("\x00") > len(text[:4096]) // 4:
+            self.error(
+                "file",
+                "cannot be read as UTF-8 text: it looks like UTF-16 (a NUL byte between the "
+                "characters); save it as UTF-8 (CSV UTF-8 in Excel)",
+            )
             return None
         lines = text.splitlines()
         metadata: dict[str, str] = {}
@@ -512,11 +534,16 @@ class _Reader:
                 key, value = line.split(":", 1)
                 metadata[key.strip()] = value.strip()
             first += 1
+        sep = self.sep
+        excel_sep = _EXCEL_SEP.match(lines[first]) if first < len(lines) else None
+        if excel_sep:  # Excel's "sep=;" line names the separator
+            if sep is None:
+                sep = excel_sep.group(1)
+            first += 1
         if first >= len(lines):
             self.error("header", "no header row (the file is empty or only has comments)")
             return None
         self.header_line = first + 1
-        sep = self.sep
         if sep is None:
             header_text = lines[first]
             sep = max((";", "\t", ","), key=header_text.count)
