@@ -63,7 +63,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from robocal import spatial
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Joint, Model, Step
-from robocal.model.files import Count, Number, atomic_write_text, format_validation_error
+from robocal.model.files import (
+    Count,
+    Number,
+    atomic_write_text,
+    csv_text,
+    csv_untext,
+    format_validation_error,
+)
 
 __all__ = [
     "FLEET_COLUMNS",
@@ -1131,7 +1138,7 @@ class _Table:
                     break
                 raise StudyError(f"{self.path}: row {i} has {len(cells)} cells, expected {len(self.columns)}")
             row = dict(zip(self.columns, cells, strict=True))
-            self.rows[row[self.key]] = row
+            self.rows[csv_untext(row[self.key])] = row
             good.append(line)
         if len(good) != len(lines):
             atomic_write_text(self.path, "".join(good))
@@ -1149,13 +1156,13 @@ class _Table:
             fh.flush()
             os.fsync(fh.fileno())
         for row in new:
-            self.rows[row[self.key]] = row
+            self.rows[csv_untext(row[self.key])] = row
 
 
 def _cell(value: Any) -> str:
     if isinstance(value, float | np.floating):
         return repr(float(value))
-    return str(value)
+    return csv_text(str(value))  # a file name or message is never run as a spreadsheet formula
 
 
 def _atomic_write_bytes(path: Path, data: bytes) -> Path:

@@ -71,7 +71,7 @@ from robocal.identify.problem import TOOL_PREFIX
 from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.paths import joint_path
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.model.files import atomic_write_text, csv_text
 
 __all__ = [
     "Compensation",
@@ -360,7 +360,11 @@ class Compensation:
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(header)
         for i, name in enumerate(self.names):
-            row = [name, *(_fmt(v) for v in self.q[i] * f), *(_fmt(v) for v in self.q_nominal[i] * f)]
+            row = [
+                csv_text(name),
+                *(_fmt(v) for v in self.q[i] * f),
+                *(_fmt(v) for v in self.q_nominal[i] * f),
+            ]
             row += [_fmt(self.error_before[i] * 1e3, 6), _fmt(self.error_after[i] * 1e3, 6)]
             row.append("true" if self.reachable[i] else "false")
             if pose:

@@ -63,7 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.model.files import atomic_write_text, csv_text
 
 __all__ = [
     "MeasurementFileError",
@@ -336,7 +336,7 @@ def write_measurements(data: Measurements, path: str | Path) -> Path:
     for key, value in meta.items():
         buf.write(f"# {key}: {' '.join(str(value).split())}\n")
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(header + (["set"] if data.split is not None else []))
+    writer.writerow([csv_text(h) for h in header] + (["set"] if data.split is not None else []))
     for i, row in enumerate(table):
         cells = [_fmt(v) for v in row]
         if data.split is not None:

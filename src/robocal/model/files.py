@@ -60,7 +60,15 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, mode
 from robocal.model import conventions
 from robocal.model.chain import Body, Joint, JointEffects, Model, Step
 
-__all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "save_model", "strict_json"]
+__all__ = [
+    "ModelFileError",
+    "csv_text",
+    "load_model",
+    "model_from_dict",
+    "model_to_dict",
+    "save_model",
+    "strict_json",
+]
 
 FORMAT_VERSION = 1
 MAX_FILE_BYTES = 5_000_000
@@ -531,6 +539,28 @@ def strict_json(value: Any, **kwargs: Any) -> str:
     import json
 
     return json.dumps(_finite(value), allow_nan=False, **kwargs)
+
+
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_text(cell: str) -> str:
+    """A text cell for a CSV file that a spreadsheet will not run as a formula: a cell
+    that starts with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return and is not a
+    number gets a leading ``'`` (the usual convention, OWASP "CSV injection"); numbers
+    such as ``-0.5`` are written as they are."""
+    if not cell.startswith(_FORMULA_START):
+        return cell
+    try:
+        float(cell)
+    except ValueError:
+        return "'" + cell
+    return cell
+
+
+def csv_untext(cell: str) -> str:
+    """The text :func:`csv_text` was given (its leading ``'`` removed)."""
+    return cell[1:] if cell.startswith("'") and cell[1:].startswith(_FORMULA_START) else cell
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
