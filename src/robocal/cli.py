@@ -8,7 +8,6 @@ Commands:
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Annotated
@@ -22,7 +21,7 @@ from robocal.cli_errors import RobocalGroup
 from robocal.console import console, fail, input_problem, safe, warn
 from robocal.model.catalog import robot, robots
 from robocal.model.chain import Model
-from robocal.model.files import ModelFileError, load_model
+from robocal.model.files import ModelFileError, load_model, strict_json
 
 app = typer.Typer(
     help="robocal: calibration of serial robot arms.",
@@ -166,7 +165,7 @@ def fk(
     zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")
     if as_json:
         print(
-            json.dumps(
+            strict_json(
                 {
                     "robot": m.name,
                     "q": qv.tolist(),

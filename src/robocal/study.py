@@ -45,7 +45,6 @@ import csv
 import dataclasses
 import hashlib
 import io
-import json
 import math
 import os
 import tempfile
@@ -70,6 +69,7 @@ from robocal.model.files import (
     csv_text,
     csv_untext,
     format_validation_error,
+    strict_json,
 )
 
 __all__ = [
@@ -1432,7 +1432,7 @@ def run_study(
     summary = _summarise(config, mine)
     summary["seconds"] = seconds
     summary["calibrations_per_second"] = computed / seconds if seconds > 0 else 0.0
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out / "summary.json", strict_json(summary, indent=2) + "\n")
     _plot_summary(config, mine, out / "summary.png")
     return StudyRun(
         out=out,

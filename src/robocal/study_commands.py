@@ -9,7 +9,6 @@ Commands:
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +19,7 @@ from rich.table import Table
 from rich.text import Text
 
 from robocal.console import console, err_console, fail, input_problem, safe
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -100,7 +100,7 @@ def study_command(
         if bar is not None:
             bar.stop()
     if as_json:
-        print(json.dumps(run.summary))
+        print(strict_json(run.summary))
     else:
         table = Table(
             title=f"{cfg.name}: {run.total} cases (RMS: mean over the robots; true: against the true robot)",

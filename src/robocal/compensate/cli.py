@@ -17,7 +17,6 @@ all the same), 2 on bad input.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -26,6 +25,7 @@ import typer
 from rich.table import Table
 
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -176,7 +176,7 @@ def compensate_command(
     if out is not None:
         result.write(out, angle_unit=angle_unit, length_unit=length_unit)
     if as_json:
-        print(json.dumps(result.to_dict(angle_unit, length_unit)))
+        print(strict_json(result.to_dict(angle_unit, length_unit)))
     else:
         _print(result, model.name, source_file)
         if out is not None:

@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from robocal.console import check_input, console, fail, refuse_overwrite
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -122,7 +123,7 @@ def demo_command(
     except ValueError as err:
         raise fail(f"demo on {robot}: {err}") from None
     if as_json:
-        print(json.dumps(numbers))
+        print(strict_json(numbers))
 
 
 def register(app: typer.Typer) -> None:

@@ -27,12 +27,13 @@ other poses.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from robocal.model.files import strict_json
 
 __all__ = ["SEED_NUMBERS", "SEED_SETS", "run", "seed_rule"]
 
@@ -313,4 +314,4 @@ def _write(out: Path, numbers: dict[str, Any], reports: dict[str, Any]) -> None:
             test_data=test,
             title=f"seed 000: {name} built model, 15 pose measurements",
         )
-    atomic_write_text(out / "seed000.json", json.dumps(numbers, indent=2, default=float) + "\n")
+    atomic_write_text(out / "seed000.json", strict_json(numbers, indent=2, default=float) + "\n")

@@ -46,7 +46,6 @@ checks the calibration away from the circle.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -57,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
+from robocal.model.files import strict_json
 
 __all__ = [
     "BASE_OFFSET",
@@ -700,7 +700,7 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     from robocal.model.files import atomic_write_text
 
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "seed003.json", json.dumps(numbers, indent=2, default=str) + "\n")
+    atomic_write_text(out / "seed003.json", strict_json(numbers, indent=2, default=str) + "\n")
     atomic_write_text(out / "seed003.md", _markdown(numbers))
     import os
     import tempfile

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import warnings
 from pathlib import Path
 from typing import Annotated
@@ -24,6 +23,7 @@ from robocal.measure.commands import (
     Sep,
     as_cli_text,
 )
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -468,7 +468,7 @@ def validate_command(
     if warning:
         extra["warning"] = warning
     if as_json:
-        print(json.dumps(stats.to_dict() | extra))
+        print(strict_json(stats.to_dict() | extra))
         return
     console.print(_stats_table(f"{result.model.name} on {data_path.name}", stats))
     for note in filter(None, notes):

@@ -524,8 +524,14 @@ _UMASK = _read_umask()
 
 def _finite(value: Any) -> Any:
     """``value`` with every non-finite float replaced by None (JSON has no NaN/Infinity)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
+    if isinstance(value, float) or (hasattr(value, "dtype") and getattr(value, "ndim", 1) == 0):
+        try:  # a float or a numpy scalar
+            number = float(value)
+        except (TypeError, ValueError):
+            return value
+        if isinstance(value, float) or value.dtype.kind == "f":
+            return number if math.isfinite(number) else None
+        return value.item()
     if isinstance(value, dict):
         return {k: _finite(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
