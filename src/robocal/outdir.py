@@ -26,7 +26,8 @@ disagree.
 
 For tests: the environment variable ``ROBOCAL_TEST_KILL_AT`` names a write step
 (:data:`STEPS`) at which the process kills itself with SIGKILL, to check that every
-interruption leaves a complete result.
+interruption leaves a complete result; ``ROBOCAL_TEST_NO_EXCHANGE=1`` takes the two-rename
+path of systems without ``renameat2`` (``parked`` is the step between its renames).
 """
 
 from __future__ import annotations
@@ -53,11 +54,12 @@ __all__ = [
     "check_consistent",
     "new_run_id",
     "read_run_id",
+    "restore",
     "transaction",
 ]
 
 #: the write steps of a transaction, in order (see ``ROBOCAL_TEST_KILL_AT``)
-STEPS = ("locked", "staged", "carried", "swapped", "cleaned")
+STEPS = ("locked", "staged", "carried", "parked", "swapped", "cleaned")
 
 _RUN_LINE = re.compile(r"^# robocal run: ([0-9a-f]{8,64})\s*$")
 
@@ -234,6 +236,16 @@ def recover(target: Path) -> None:
         shutil.rmtree(path, ignore_errors=True)
 
 
+def restore(target: str | os.PathLike[str]) -> None:
+    """For readers: when ``target`` is missing but a writer killed between its two renames
+    left the earlier result parked beside it, put that back (under the folder's lock)."""
+    target = Path(os.path.abspath(target))
+    if target.exists() or not any(p.name.endswith(".old") for p in _leftovers(target)):
+        return
+    with contextlib.suppress(FolderBusyError), _lock(target, wait_s=5.0):
+        recover(target)
+
+
 def _carry_over(old: Path, stage: Path, owned: Collection[str]) -> None:
     """Hard-link (or copy) into ``stage`` what ``old`` holds beyond the files the writer owns."""
     for entry in os.scandir(old):
@@ -331,10 +343,11 @@ def _swap(stage: Path, target: Path) -> None:
     else:
         os.rename(stage, target)
         return
-    if _exchange(stage, target):
+    if os.environ.get("ROBOCAL_TEST_NO_EXCHANGE") != "1" and _exchange(stage, target):
         return
     parked = target.parent / f".{target.name}.{secrets.token_hex(6)}.old"
     os.rename(target, parked)
+    _test_step("parked")
     os.rename(stage, target)
     os.rename(parked, stage)
 

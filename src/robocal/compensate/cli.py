@@ -34,7 +34,9 @@ def _load(source: Path):
     """A CalibrationResult from a directory, or a Model from a model file."""
     from robocal.identify.calibrate import CalibrationResult
     from robocal.model.files import ModelFileError, load_model
+    from robocal.outdir import restore
 
+    restore(source)  # a writer killed mid-swap on a system without atomic exchange
     if source.is_dir():
         if not (source / "result.json").is_file():
             raise fail(

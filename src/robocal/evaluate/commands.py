@@ -50,7 +50,9 @@ def report_command(
     from robocal.evaluate.report import write_report
     from robocal.identify.calibrate import CalibrationResult
     from robocal.measure.dataset import MeasurementFileError, read_measurements
+    from robocal.outdir import restore
 
+    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
     if not (directory / "result.json").is_file():
         raise fail(f"{directory} holds no calibration result (result.json)")
     try:

@@ -435,7 +435,9 @@ def validate_command(
     """Error statistics of a calibrated model on (held-out) measurements."""
     import robocal as rc
     from robocal.identify.calibrate import CalibrationResult
+    from robocal.outdir import restore
 
+    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
     if not (directory / "result.json").is_file():
         raise fail(f"{directory} holds no calibration result (result.json)")
     try:
