@@ -66,6 +66,14 @@ class _SafeConsole(Console):
 #: Markup is off by default: a line is printed as written unless the call asks for markup
 #: (``markup=True``) and escapes the data it quotes with :func:`safe`.
 console = _SafeConsole(markup=False)
+_status = console.status
+
+
+def _safe_status(status, *args, **kwargs):  # a spinner's text is always read as markup by Rich
+    return _status(safe(status) if isinstance(status, str) else status, *args, **kwargs)
+
+
+console.status = _safe_status  # type: ignore[method-assign]
 err_console = _SafeConsole(stderr=True, soft_wrap=True, markup=False)  # never wrapped mid-word
 
 

@@ -193,6 +193,10 @@ def calibrate_command(
         raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
     if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
         raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
+    from robocal.identify.solvers import METHODS
+
+    if method not in METHODS:
+        raise fail(f"--method {method!r}: {', '.join(METHODS)}")
     if loss != "linear" and method != "lm":
         raise fail(f"--loss {loss} needs --method lm")
     from robocal.identify.calibrate import BOUNDS_CHOICES
@@ -241,7 +245,7 @@ def calibrate_command(
             guess = np.array([float(v) for v in tool.replace(",", " ").split()]) * 1e-3
         except ValueError:
             raise fail(f"--tool {tool!r}: three numbers in mm") from None
-        if guess.shape != (3,):
+        if guess.shape != (3,) or not np.all(np.isfinite(guess)):
             raise fail(f"--tool {tool!r}: three numbers in mm")
     effect_option = effects
     if effects is not None and effects not in ("none", "predict", "identify"):
@@ -266,7 +270,8 @@ def calibrate_command(
                 **({"bounds": bounds} if bounds is not None else {}),
             )
     except ValueError as err:
-        raise fail(as_cli_text(str(err))) from None
+        message = as_cli_text(str(err))  # the data's problem: name the file unless the message does
+        raise fail(message if str(data_path) in message else f"{data_path}: {message}") from None
     result.metadata |= {
         "data_file": str(data_path),
         "data_sha256": file_hash(data_path),

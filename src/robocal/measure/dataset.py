@@ -119,8 +119,11 @@ PROBLEM_CODES = {
     "repeated-pose": "joint values repeated in a poses file (a warning)",
     "split": "a train/test label other than 'train' or 'test'",
     "quaternion": "a quaternion whose norm is not 1",
-    "sigma": "a negative standard deviation",
+    "sigma": "a standard deviation that is negative, zero or out of range",
+    "range": "a position farther than any device measures (more than 10 km)",
 }
+#: A measured position farther than this from the device (m) is a wrong cell, not a reach
+MAX_POSITION = 1e4
 LimitsMode = Literal["error", "warn", "ignore"]
 
 _POSITION = ("x", "y", "z")
@@ -1132,6 +1135,16 @@ class _Reader:
         return f"rows {self.line_no[0]}-{self.line_no[-1]}"
 
     def _check_length_unit(self, position: Array, names: list[str]) -> None:
+        with np.errstate(over="ignore", invalid="ignore"):
+            far = np.abs(position) > MAX_POSITION
+        for i, c in np.argwhere(far)[:10]:
+            self.error(
+                "range",
+                f"{_short(self._cell(int(i), names[c]))} {self.length_unit} is farther than any device "
+                f"measures ({MAX_POSITION / 1000:g} km)",
+                int(self.line_no[i]),
+                names[c],
+            )
         dist = np.linalg.norm(position, axis=1)
         dist = dist[np.isfinite(dist)]
         if dist.size == 0:

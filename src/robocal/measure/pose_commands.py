@@ -53,6 +53,8 @@ def _region(text: str | None) -> np.ndarray | None:
     if len(v) != 6:
         raise fail(f"--region {text!r}: expected six numbers in mm, got {len(v)}")
     box = np.array(v).reshape(2, 3) * 1e-3
+    if not np.all(np.isfinite(box)):
+        raise fail(f"--region {text!r}: expected six finite numbers in mm")
     if np.any(box[0] >= box[1]):
         raise fail(f"--region {text!r}: each minimum must be below its maximum")
     return box
