@@ -378,8 +378,8 @@ def _urdf(transform):
 
 def _fixed_chain(n: int) -> str:
     joints = "".join(
-        f'<link name="f{i + 1}"/><joint name="fj{i}" type="fixed"><parent link="f{i}"/><child link="f{i + 1}"/>'
-        "</joint>"
+        f'<link name="f{i + 1}"/><joint name="fj{i}" type="fixed"><parent link="f{i}"/>'
+        f'<child link="f{i + 1}"/></joint>'
         for i in range(n)
     )
     return f'<?xml version="1.0"?><robot name="x"><link name="f0"/>{joints}</robot>'
@@ -393,7 +393,8 @@ URDF_CASES = [
             "r.urdf": _urdf(
                 lambda t: t.replace(
                     '<joint name="elbow_joint" type="revolute">',
-                    '<joint name="elbow_joint" type="revolute"><mimic joint="shoulder_lift_joint" multiplier="1"/>',
+                    '<joint name="elbow_joint" type="revolute">'
+                    '<mimic joint="shoulder_lift_joint" multiplier="1"/>',
                 )
             )
         },
