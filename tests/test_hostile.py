@@ -273,7 +273,11 @@ CSV_CASES = [
 ]
 
 # ------------------------------------------------------------------ YAML (model, geometry)
-GOOD_MODEL = "name: {name}\nchain:\n  - {{motion: Rz, param: t1, joint: q1}}\n  - {{motion: Tx, param: a1, value: 0.5}}\n"
+GOOD_MODEL = (
+    "name: {name}\nchain:\n"
+    "  - {{motion: Rz, param: t1, joint: q1}}\n"
+    "  - {{motion: Tx, param: a1, value: 0.5}}\n"
+)
 SHOW = ("robots", "show", "{dir}/m.yaml")
 
 
