@@ -3,6 +3,7 @@ disk, two writers at once: the folder always holds one complete result, never a 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -97,10 +98,9 @@ def test_two_writers_at_once_leave_one_complete_result(old):
     ]
     seen = set()
     while any(p.poll() is None for p in procs):
-        try:
+        # a reader racing the swap may see files of two runs: it says so, never uses them
+        with contextlib.suppress(FileNotFoundError, FolderMixedError, AssertionError, json.JSONDecodeError):
             seen.add(_state(old))
-        except (FileNotFoundError, FolderMixedError, AssertionError, json.JSONDecodeError):
-            pass  # a reader racing the swap may see files of two runs: it says so, never uses them
     for p in procs:
         assert p.wait() == 0, p.stderr.read()
     assert _state(old) in ("w1", "w2")
