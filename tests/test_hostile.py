@@ -365,6 +365,12 @@ YAML_CASES = [
         says=("s.yaml",),
     ),
     Case(
+        "study-ten-million",
+        ("study", "{dir}/s.yaml", "--out", "{dir}/out"),
+        {"s.yaml": "robot: ur10\nrobots: 10000000\npose_sets: [{name: a, n: 30}]\n"},
+        says=("s.yaml",),
+    ),
+    Case(
         "study-missing",
         ("study", "{dir}/s.yaml", "--out", "{dir}/out"),
         {},

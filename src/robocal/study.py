@@ -191,6 +191,11 @@ class _Validation(BaseModel):
     seed: Count | None = None
 
 
+#: Calibrations a study may have (robots x pose sets x devices): a million take about a
+#: quarter of an hour with the batched engine and its table about 0.3 GB
+MAX_STUDY_CASES = 1_000_000
+
+
 class StudyConfig(BaseModel):
     """A Monte Carlo study (YAML file; lengths as text with a unit or SI numbers).
 
@@ -218,7 +223,7 @@ class StudyConfig(BaseModel):
     name: str = Field(default="study", min_length=1)
     robot: str | None = Field(default=None, min_length=1)
     geometry: str | None = Field(default=None, min_length=1)
-    robots: Count = Field(ge=1, le=10_000_000)
+    robots: Count = Field(ge=1, le=1_000_000)
     seed: Count = 0
     errors: _Errors = _Errors()
     tool: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
@@ -232,6 +237,16 @@ class StudyConfig(BaseModel):
     engine: Literal["auto", "batched", "calibrate"] = "auto"
     residual: Literal["none", "auto", "joint_fourier"] = "none"
     chunk: Count = Field(default=50, ge=1, le=100_000)
+
+    @model_validator(mode="after")
+    def _size(self) -> StudyConfig:
+        cases = self.robots * len(self.pose_sets) * len(self.devices)
+        if cases > MAX_STUDY_CASES:
+            raise ValueError(
+                f"robots x pose_sets x devices = {cases} calibrations; a study may have up to "
+                f"{MAX_STUDY_CASES} (split it into several studies)"
+            )
+        return self
 
     @model_validator(mode="after")
     def _one_robot(self) -> StudyConfig:
