@@ -62,7 +62,31 @@ def explain(exc: BaseException) -> tuple[str, int] | None:
         )
     if isinstance(exc, RecursionError):
         return "the input is nested too deeply to be read", BAD_INPUT
+    if isinstance(exc, _input_errors()):  # a reader's or writer's own error: it names the input
+        return str(exc), BAD_INPUT
     return None
+
+
+def _input_errors() -> tuple[type[BaseException], ...]:
+    """The error classes whose messages name the input (imported only when one is needed)."""
+    from robocal.compensate.programs import ProgramError
+    from robocal.measure.dataset import MeasurementFileError
+    from robocal.model.builder import GeometryError
+    from robocal.model.files import ModelFileError
+    from robocal.model.urdf import URDFError
+    from robocal.outdir import FolderBusyError, FolderMixedError
+    from robocal.study import StudyError
+
+    return (
+        ProgramError,
+        MeasurementFileError,
+        GeometryError,
+        ModelFileError,
+        URDFError,
+        FolderBusyError,
+        FolderMixedError,
+        StudyError,
+    )
 
 
 def _first_line(text: str, limit: int = 300) -> str:

@@ -88,8 +88,10 @@ def report_command(
     if ev_path.is_file():
         try:
             evaluation = json.loads(ev_path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as err:
-            raise fail(f"{ev_path}: not valid JSON: {err}") from None
+        except (ValueError, RecursionError) as err:  # not JSON, not UTF-8, nested too deeply
+            raise fail(f"{ev_path}: not valid JSON: {err or 'nested too deeply'}") from None
+        if not isinstance(evaluation, dict):
+            raise fail(f"{ev_path}: not a robocal evaluation (a JSON object expected)")
     try:
         with console.status("writing the report ..."):
             path = write_report(result, output, data=data, test_data=test, evaluation=evaluation, title=title)
@@ -104,7 +106,9 @@ def demo_command(
         "robocal-demo"
     ),
     seed: Annotated[int, typer.Option("--seed", min=0, help="seeds the whole demo")] = 0,
-    poses: Annotated[int, typer.Option("--poses", help="calibration poses (chosen O1-optimally)")] = 50,
+    poses: Annotated[
+        int, typer.Option("--poses", max=10_000, help="calibration poses (O1-optimal; at most 10 000)")
+    ] = 50,
     quick: Annotated[bool, typer.Option("--quick", help="fewer poses and cycles: a faster run")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
