@@ -64,10 +64,20 @@ def _state(target: Path) -> str:
     return tag
 
 
+def _write_here(target: Path, tag: str) -> None:
+    """What WRITER does, in this process."""
+    with transaction(target, OWNED) as st:
+        for name in ("a.yaml", "b.yaml"):
+            (st.path / name).write_text(outdir.run_id_line(st.run_id) + f"tag: {tag}\n")
+        (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id, "tag": tag}))
+        if tag == "old":
+            (st.path / "old_only.txt").write_text("x")
+
+
 @pytest.fixture
 def old(tmp_path) -> Path:
     target = tmp_path / "res"
-    assert _write(target, "old").returncode == 0
+    _write_here(target, "old")
     (target / "notes.txt").write_text("mine")
     return target
 
@@ -84,7 +94,7 @@ def test_a_writer_killed_at_any_step_leaves_one_complete_result(old, step, excha
     before_swap = outdir.STEPS.index(step) < outdir.STEPS.index("swapped")
     assert _state(old) == ("old" if before_swap else "new")
     # the next writer cleans what the killed one left
-    assert _write(old, "next").returncode == 0
+    _write_here(old, "next")
     assert _state(old) == "next"
     assert sorted(os.listdir(old.parent)) == ["res"]
 
@@ -162,7 +172,7 @@ def test_an_exception_in_the_block_changes_nothing(old):
 
 
 def test_stale_files_of_the_earlier_result_are_dropped(old):
-    assert _write(old, "new").returncode == 0
+    _write_here(old, "new")
     assert not (old / "old_only.txt").exists() and _state(old) == "new"
 
 
@@ -182,3 +192,17 @@ def test_a_mixed_folder_is_named_file_by_file(old):
     (old / "b.yaml").write_text(outdir.run_id_line("ab" * 16))
     with pytest.raises(FolderMixedError, match=r"but b\.yaml \(run abab"):
         check_consistent(old, ("a.yaml", "b.yaml"))
+
+
+def test_a_folder_with_sub_folders_is_written_in_place_and_kept(tmp_path):
+    home = tmp_path / "home"
+    (home / "projects").mkdir(parents=True)
+    (home / "projects" / "big.bin").write_bytes(b"x" * 1000)
+    (home / "old_only.txt").write_text("stale")
+    inode = home.stat().st_ino
+    with transaction(home, OWNED) as st:
+        (st.path / "a.yaml").write_text(outdir.run_id_line(st.run_id))
+        (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id}))
+    assert home.stat().st_ino == inode  # not renamed, nothing copied
+    assert sorted(os.listdir(home)) == ["a.yaml", "projects", "result.json"]
+    assert (home / "projects" / "big.bin").stat().st_size == 1000

@@ -12,7 +12,11 @@ report and data files written with it) is one result: its files only make sense 
   crash comes between the two);
 * files in ``NAME`` that the writer does not own (a user's notes, another tool's files) are
   carried over (hard links, or copies across devices); files it owns are replaced or
-  dropped, so no stale ``measurement_model.yaml`` of an earlier calibration survives.
+  dropped, so no stale ``measurement_model.yaml`` of an earlier calibration survives;
+* a folder that cannot or should not be renamed (the working directory or a parent of
+  it, a mount point, a folder with sub-folders or more than 50 other files: a home
+  directory given as ``--out``) is written file by file, ``result.json`` last; the run
+  ids then let readers detect a mix left by a crash in between.
 
 Writers of the same folder are serialised by a lock file ``.NAME.lock`` beside it
 (``flock``; removed on release): a second writer stops at once with a message naming the
@@ -248,13 +252,11 @@ def restore(target: str | os.PathLike[str]) -> None:
 
 def _carry_over(old: Path, stage: Path, owned: Collection[str]) -> None:
     """Hard-link (or copy) into ``stage`` what ``old`` holds beyond the files the writer owns."""
-    for entry in os.scandir(old):
+    for entry in os.scandir(old):  # files only (a folder with sub-folders is written in place)
         if entry.name in owned or (stage / entry.name).exists():
             continue
         src, dst = Path(entry.path), stage / entry.name
-        if entry.is_dir(follow_symlinks=False):
-            shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy)
-        elif entry.is_symlink():
+        if entry.is_symlink():
             os.symlink(os.readlink(src), dst)
         else:
             _link_or_copy(src, dst)
@@ -275,14 +277,29 @@ class Stage:
     run_id: str
 
 
-def _in_place_only(target: Path) -> bool:
+#: a folder with more entries than this that the writer does not own (or with a folder of
+#: its own) is not a result folder but, say, a home directory: it is written in place
+MAX_CARRIED = 50
+
+
+def _in_place_only(target: Path, owned: Collection[str]) -> bool:
     """Whether ``target`` must not be renamed: the working directory (or one of its
-    parents) or a mount point."""
+    parents), a mount point, or a folder holding sub-folders or many files of others."""
     try:
         cwd = Path.cwd().resolve()
     except OSError:
         return True
-    return target == cwd or target in cwd.parents or os.path.ismount(target)
+    if target == cwd or target in cwd.parents or os.path.ismount(target):
+        return True
+    foreign = 0
+    with os.scandir(target) as entries:
+        for entry in entries:
+            if entry.name in owned:
+                continue
+            foreign += 1
+            if foreign > MAX_CARRIED or entry.is_dir(follow_symlinks=False):
+                return True
+    return False
 
 
 @contextlib.contextmanager
@@ -316,7 +333,7 @@ def transaction(
         try:
             yield Stage(stage, run_id or new_run_id())
             _test_step("staged")
-            if target.is_dir() and _in_place_only(target):
+            if target.is_dir() and _in_place_only(target, owned):
                 _move_files_in(stage, target, owned)
                 return
             if target.is_dir():
