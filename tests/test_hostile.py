@@ -546,6 +546,20 @@ OPTION_CASES = [
         writes=("out.csv",),
     ),
     Case("demo-seed-negative", ("demo", "--seed", "-3", "--out", "{dir}/out"), usage=True, says=("--seed",)),
+    Case(
+        "demo-poses-huge",
+        ("demo", "--poses", "100000000", "--out", "{dir}/out"),
+        usage=True,
+        says=("--poses",),
+    ),
+    Case(
+        "usage-choice-markup",
+        ("poses", "ur10", "--method", "[/x]", "-o", "{dir}/out"),
+        usage=True,
+        says=("[/x]",),
+    ),
+    Case("usage-option-markup", ("poses", "ur10", "--[/x]"), usage=True, says=("--[/x]",)),
+    Case("usage-command-markup", ("[/x]",), usage=True, says=("[/x]",)),
     Case("stdin-data", (*CAL[:4], "/dev/stdin", *CAL[5:]), says=("/dev/stdin", "not a regular file")),
     Case("fifo-data", _cal(), {}, says=("d.csv", "not a regular file")),
 ]
@@ -633,6 +647,31 @@ FOLDER_CASES = [
     if reader in ("validate", "report", "compensate") or name in ("list", "mixed-runs")
 ]
 FOLDER_CASES += [
+    Case(
+        "report-evaluation-not-json",
+        REPORT,
+        {"res/result.json": _result(lambda t: t), "res/model.yaml": _model, "res/evaluation.json": "{x"},
+        says=("evaluation.json", "not valid JSON"),
+        writes=("out.html",),
+    ),
+    Case(
+        "report-evaluation-list",
+        REPORT,
+        {"res/result.json": _result(lambda t: t), "res/model.yaml": _model, "res/evaluation.json": "[1]"},
+        says=("evaluation.json",),
+        writes=("out.html",),
+    ),
+    Case(
+        "report-evaluation-utf16",
+        REPORT,
+        {
+            "res/result.json": _result(lambda t: t),
+            "res/model.yaml": _model,
+            "res/evaluation.json": "{}".encode("utf-16"),
+        },
+        says=("evaluation.json",),
+        writes=("out.html",),
+    ),
     Case("validate-no-folder", VALIDATE, {}, says=("res", "no calibration result"), writes=()),
     Case(
         "validate-result-dir",
