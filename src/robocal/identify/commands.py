@@ -374,7 +374,7 @@ def _print_result(result) -> None:
     for line in result.residual_lines():
         console.print(line, highlight=False, markup=False)
     for w in result.metadata.get("warnings", []):
-        warn(w)
+        console.print(f"[yellow]warning:[/] {safe(w)}", highlight=False, markup=True)
 
 
 def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
