@@ -142,7 +142,7 @@ def check_command(
         table.add_column(col)
     colours = {"ok": "green", "near-singular": "yellow", "singular": "red"}
     for link in result.links:
-        verdict = f"[{colours[link.verdict]}]{link.verdict}[/]"
+        verdict = Text(link.verdict, colours[link.verdict])
         table.add_row(
             str(link.index), " ".join(link.parameters), link.target, f"{link.rank}/{link.needed}", verdict
         )
