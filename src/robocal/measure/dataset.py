@@ -1136,7 +1136,7 @@ class _Reader:
 
     def _check_length_unit(self, position: Array, names: list[str]) -> None:
         with np.errstate(over="ignore", invalid="ignore"):
-            far = np.abs(position) > MAX_POSITION
+            far = np.isfinite(position) & (np.abs(position) > MAX_POSITION)  # NaN/inf: reported already
         for i, c in np.argwhere(far)[:10]:
             self.error(
                 "range",
