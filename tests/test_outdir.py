@@ -206,3 +206,15 @@ def test_a_folder_with_sub_folders_is_written_in_place_and_kept(tmp_path):
     assert home.stat().st_ino == inode  # not renamed, nothing copied
     assert sorted(os.listdir(home)) == ["a.yaml", "projects", "result.json"]
     assert (home / "projects" / "big.bin").stat().st_size == 1000
+
+
+def test_a_killed_single_file_writer_leaves_nothing_the_next_one_keeps(tmp_path):
+    from robocal.model.files import atomic_write_text
+
+    target = tmp_path / "poses.csv"
+    killed = subprocess.Popen([sys.executable, "-c", "pass"])
+    killed.wait()  # a process id that no longer runs
+    (tmp_path / f".poses.csv.{killed.pid}.abc123.tmp").write_text("half")
+    (tmp_path / f".poses.csv.{os.getppid()}.def456.tmp").write_text("a live writer's")
+    atomic_write_text(target, "q1\n0\n")
+    assert sorted(os.listdir(tmp_path)) == [f".poses.csv.{os.getppid()}.def456.tmp", "poses.csv"]
