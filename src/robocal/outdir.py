@@ -56,6 +56,7 @@ __all__ = [
     "FolderMixedError",
     "Stage",
     "check_consistent",
+    "check_not_busy",
     "new_run_id",
     "read_run_id",
     "restore",
@@ -178,6 +179,15 @@ def _lock(target: Path, wait_s: float) -> Iterator[None]:
         with contextlib.suppress(OSError):
             os.unlink(lock_path)
         os.close(fd)
+
+
+def check_not_busy(target: str | os.PathLike[str]) -> None:
+    """Raise :class:`FolderBusyError` at once when another process is writing ``target``
+    (for commands that would otherwise compute for minutes before finding out)."""
+    target = Path(os.path.abspath(target))
+    if (target.parent / f".{target.name}.lock").exists():
+        with _lock(target, 0.0):
+            pass
 
 
 # ------------------------------------------------------------------ swapping
@@ -308,7 +318,7 @@ def transaction(
     owned: Collection[str],
     *,
     run_id: str | None = None,
-    wait_s: float = 0.0,
+    wait_s: float = 1.0,
 ) -> Iterator[Stage]:
     """Write the result folder ``target`` as a whole.
 
@@ -318,7 +328,8 @@ def transaction(
     or dropped; everything else in ``target`` is kept).
 
     Raises:
-        FolderBusyError: another process holds the folder's lock (after ``wait_s`` seconds).
+        FolderBusyError: another process holds the folder's lock (after ``wait_s`` seconds:
+            a moment, so that a :func:`check_not_busy` probe never stops a writer).
     """
     target = Path(os.path.abspath(target))
     if target.exists() and target.is_dir():

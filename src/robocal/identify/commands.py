@@ -187,6 +187,12 @@ def calibrate_command(
         raise fail(f"--out {out} is a file; give a directory for model.yaml and result.json")
     if (out / "result.json").exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
+    from robocal.outdir import FolderBusyError, check_not_busy
+
+    try:  # before the work: a second writer learns it at once, not after the calibration
+        check_not_busy(out)
+    except FolderBusyError as err:
+        raise fail(str(err)) from None
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
     if residual not in ("auto", "none", "joint_fourier"):
@@ -282,8 +288,6 @@ def calibrate_command(
     if test is not None:
         validation = rc.validate(result, test)
         result.metadata["validation"] = validation.to_dict()
-    from robocal.outdir import FolderBusyError
-
     def write_report_too(stage_dir: Path) -> None:
         from robocal.evaluate.report import write_report
 
