@@ -8,7 +8,6 @@ Commands:
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -16,7 +15,8 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail
+from robocal.cli_errors import RobocalGroup
+from robocal.console import console, fail, input_problem, safe, warn
 
 if TYPE_CHECKING:
     import numpy as np
@@ -32,6 +32,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    cls=RobocalGroup,  # no traceback: an exception a command lets through becomes one line
 )
 robots_app = typer.Typer(help="The robot catalog.", invoke_without_command=True)
 app.add_typer(robots_app, name="robots")
@@ -47,8 +48,9 @@ def resolve_model(name_or_path: str) -> Model:
         raise fail("no robot given: a catalog name (robocal robots) or a model file")
     try:
         if path.suffix in (".yaml", ".yml") or path.exists():
-            if not path.is_file():
-                raise fail(f"model file {path} does not exist")
+            problem = input_problem(path, "model file")
+            if problem is not None:
+                raise fail(f"model file {problem}" if problem.endswith("does not exist") else problem)
             if _is_geometry_file(path):
                 raise fail(
                     f"{path} is a joint-geometry file: build a model from it first, "
@@ -63,11 +65,11 @@ def resolve_model(name_or_path: str) -> Model:
 def _is_geometry_file(path: Path) -> bool:
     """Whether a YAML file holds joint geometry for the builder (``joints:``) rather than a
     model (``steps:``)."""
-    import yaml
+    from robocal.model.files import ModelFileError, read_yaml
 
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, RecursionError, yaml.YAMLError):
+    try:  # read_yaml: the size and entry limits are checked before the file is parsed
+        data = read_yaml(path, "model")
+    except (OSError, ModelFileError):
         return False  # the model loader reports it
     return isinstance(data, dict) and "joints" in data and "steps" not in data
 
@@ -102,9 +104,9 @@ def robots_list(ctx: typer.Context) -> None:
 def robots_show(name: Annotated[str, typer.Argument(help="catalog name or model file")]) -> None:
     """Parameter table of one robot in mm and degrees."""
     m = resolve_model(name)
-    console.print(f"[bold]{m.name}[/] — {m.title}", highlight=False)
+    console.print(f"[bold]{safe(m.name)}[/] — {safe(m.title)}", highlight=False, markup=True)
     if m.source:
-        console.print(f"[dim]source: {m.source}[/]", highlight=False)
+        console.print(f"[dim]source: {safe(m.source)}[/]", highlight=False, markup=True)
     table = Table(show_lines=False)
     for col in ("#", "motion", "parameter", "value", "unit", "free", "joint", "limits"):
         table.add_column(col, justify="right" if col in ("#", "value") else "left")
@@ -149,6 +151,8 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
             f"--q has {len(values)} values but {m.name} has {m.dof} joints ({', '.join(m.joint_names)})"
         )
     q = np.array(values)
+    if not np.all(np.isfinite(q)):
+        raise fail(f"--q {text!r}: joint values must be finite numbers (no nan or inf)")
     if deg:
         q = np.where(np.array(m.joint_types) == "revolute", np.radians(q), q / 1000.0)
     return q
@@ -163,6 +167,7 @@ def fk(
 ) -> None:
     """Tool pose of a robot at the given joint values (rad and m unless --deg)."""
     from robocal import spatial
+    from robocal.model.files import strict_json
 
     m = resolve_model(name)
     qv = _parse_q(q, m, deg)
@@ -174,7 +179,7 @@ def fk(
     zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")
     if as_json:
         print(
-            json.dumps(
+            strict_json(
                 {
                     "robot": m.name,
                     "q": qv.tolist(),
@@ -188,7 +193,7 @@ def fk(
             )
         )
         return
-    console.print(f"[bold]{m.name}[/] tool frame in the base frame", highlight=False)
+    console.print(f"[bold]{safe(m.name)}[/] tool frame in the base frame", highlight=False, markup=True)
     table = Table(show_header=False)
     for _ in range(4):
         table.add_column(justify="right")
@@ -207,7 +212,7 @@ def fk(
         highlight=False,
     )
     if outside:
-        err_console.print(f"[yellow]warning:[/] outside joint limits: {', '.join(outside)}", highlight=False)
+        warn(f"outside joint limits: {', '.join(outside)}")
 
 
 # Command groups of the other calibration steps register themselves here, one line

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import math
 import time
 from collections.abc import Iterator, Mapping
@@ -438,25 +437,26 @@ def run_demo(
             if out is not None:
                 from robocal.evaluate.report import write_report
                 from robocal.measure.dataset import write_measurements
-                from robocal.model.files import atomic_write_text, save_model
+                from robocal.model.files import atomic_write_text, save_model, strict_json
 
                 out = Path(out)
-                out.mkdir(parents=True, exist_ok=True)
                 result.metadata |= {"source": "robocal demo", "robot": robot, "seed": seed}
-                result.save(out)
-                write_measurements(train, out / "train.csv")
-                write_measurements(test, out / "test.csv")
-                save_model(true, out / "true_model.yaml")
                 if not quick:  # ISO 9283's fourteen characteristics, from a simulated timed log
                     from robocal.evaluate.iso9283_report import evaluate_log
                     from robocal.evaluate.iso9283_sim import simulate_log
 
                     ev["iso9283"] = evaluate_log(simulate_log(nominal, seed=seed).log).to_dict()
                 ev["timings_s"] = dict(steps.timings)
-                atomic_write_text(out / "evaluation.json", json.dumps(ev) + "\n")
-                report_path = write_report(
-                    result, out / "report.html", data=train, test_data=test, evaluation=ev
-                )
+
+                def the_rest(stage: Path) -> None:  # written with the result, all or nothing
+                    write_measurements(train, stage / "train.csv")
+                    write_measurements(test, stage / "test.csv")
+                    save_model(true, stage / "true_model.yaml")
+                    atomic_write_text(stage / "evaluation.json", strict_json(ev) + "\n")
+                    write_report(result, stage / "report.html", data=train, test_data=test, evaluation=ev)
+
+                result.save(out, also=the_rest)
+                report_path = out / "report.html"
     seconds = time.perf_counter() - t_start
     numbers = _summary_numbers(result, before, after, after_geo, ev, seconds, report_path)
     numbers["timings_s"] = dict(steps.timings)
@@ -505,7 +505,7 @@ def _summary_numbers(result, before, after, after_geo, ev, seconds, report_path)
 def _print_summary(numbers: Mapping[str, Any]) -> None:
     from rich.table import Table
 
-    from robocal.console import console
+    from robocal.console import console, safe
     from robocal.identify.guards import FitToNoise
 
     held = numbers["held_out"]
@@ -555,4 +555,4 @@ def _print_summary(numbers: Mapping[str, Any]) -> None:
         highlight=False,
     )
     if numbers.get("report"):
-        console.print(f"[bold]report:[/] {numbers['report']}", highlight=False)
+        console.print(f"[bold]report:[/] {safe(numbers['report'])}", highlight=False, markup=True)

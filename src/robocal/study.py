@@ -43,7 +43,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
-import json
 import math
 import os
 import tempfile
@@ -59,7 +58,15 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from robocal.model.chain import Model
-from robocal.model.files import Count, Number, atomic_write_text, format_validation_error
+from robocal.model.files import (
+    Count,
+    Number,
+    atomic_write_text,
+    csv_text,
+    csv_untext,
+    format_validation_error,
+    strict_json,
+)
 
 __all__ = [
     "FLEET_COLUMNS",
@@ -188,6 +195,11 @@ class _Validation(BaseModel):
     seed: Count | None = None
 
 
+#: Calibrations a study may have (robots x pose sets x devices): a million take about a
+#: quarter of an hour with the batched engine and its table about 0.3 GB
+MAX_STUDY_CASES = 1_000_000
+
+
 class StudyConfig(BaseModel):
     """A Monte Carlo study (YAML file; lengths as text with a unit or SI numbers).
 
@@ -215,7 +227,7 @@ class StudyConfig(BaseModel):
     name: str = Field(default="study", min_length=1)
     robot: str | None = Field(default=None, min_length=1)
     geometry: str | None = Field(default=None, min_length=1)
-    robots: Count = Field(ge=1, le=10_000_000)
+    robots: Count = Field(ge=1, le=1_000_000)
     seed: Count = 0
     errors: _Errors = _Errors()
     tool: tuple[Number, Number, Number] = (0.0, 0.0, 0.0)
@@ -229,6 +241,16 @@ class StudyConfig(BaseModel):
     engine: Literal["auto", "batched", "calibrate"] = "auto"
     residual: Literal["none", "auto", "joint_fourier"] = "none"
     chunk: Count = Field(default=50, ge=1, le=100_000)
+
+    @model_validator(mode="after")
+    def _size(self) -> StudyConfig:
+        cases = self.robots * len(self.pose_sets) * len(self.devices)
+        if cases > MAX_STUDY_CASES:
+            raise ValueError(
+                f"robots x pose_sets x devices = {cases} calibrations; a study may have up to "
+                f"{MAX_STUDY_CASES} (split it into several studies)"
+            )
+        return self
 
     @model_validator(mode="after")
     def _one_robot(self) -> StudyConfig:
@@ -705,7 +727,7 @@ class _Table:
                     break
                 raise StudyError(f"{self.path}: row {i} has {len(cells)} cells, expected {len(self.columns)}")
             row = dict(zip(self.columns, cells, strict=True))
-            self.rows[row[self.key]] = row
+            self.rows[csv_untext(row[self.key])] = row
             good.append(line)
         if len(good) != len(lines):
             atomic_write_text(self.path, "".join(good))
@@ -723,13 +745,13 @@ class _Table:
             fh.flush()
             os.fsync(fh.fileno())
         for row in new:
-            self.rows[row[self.key]] = row
+            self.rows[csv_untext(row[self.key])] = row
 
 
 def _cell(value: Any) -> str:
     if isinstance(value, float | np.floating):
         return repr(float(value))
-    return str(value)
+    return csv_text(str(value))  # a file name or message is never run as a spreadsheet formula
 
 
 def _atomic_write_bytes(path: Path, data: bytes) -> Path:
@@ -999,7 +1021,7 @@ def run_study(
     summary = _summarise(config, mine)
     summary["seconds"] = seconds
     summary["calibrations_per_second"] = computed / seconds if seconds > 0 else 0.0
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out / "summary.json", strict_json(summary, indent=2) + "\n")
     _plot_summary(config, mine, out / "summary.png")
     return StudyRun(
         out=out,
@@ -1231,6 +1253,9 @@ def run_fleet(
         raise StudyError(
             f"{directory}: several files share the name(s) {', '.join(twice)} (their results would clash)"
         )
+    if table_path.name in stems:  # its result folder would be the table itself
+        clash = files[stems.index(table_path.name)]
+        raise StudyError(f"{clash}: a file named like the fleet table {table_path.name}; rename it")
     todo, skipped, resumed = [], [], 0
     for p in files:
         old = table.rows.get(names[p])

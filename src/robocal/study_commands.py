@@ -9,7 +9,6 @@ Commands:
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -17,8 +16,10 @@ import numpy as np
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
+from rich.text import Text
 
-from robocal.console import console, err_console, fail
+from robocal.console import console, err_console, fail, input_problem, safe
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -38,7 +39,7 @@ def _progress(enabled: bool, what: str):
     if not enabled:
         return None, None
     bar = Progress(
-        TextColumn(f"[bold]{what}[/]"),
+        TextColumn(f"[bold]{safe(what)}[/]"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeRemainingColumn(),
@@ -78,7 +79,8 @@ def study_command(
     from robocal.study import StudyError, load_study_config, run_study
 
     if not config.is_file():
-        raise fail(f"study file {config} does not exist")
+        problem = input_problem(config, "study file")
+        raise fail(f"study file {problem}" if problem.endswith("does not exist") else problem)
     try:
         cfg = load_study_config(config)
     except StudyError as err:
@@ -98,7 +100,7 @@ def study_command(
         if bar is not None:
             bar.stop()
     if as_json:
-        print(json.dumps(run.summary))
+        print(strict_json(run.summary))
     else:
         table = Table(
             title=f"{cfg.name}: {run.total} cases (RMS: mean over the robots; true: against the true robot)",
@@ -129,6 +131,7 @@ def study_command(
         + (f", {run.resumed} already in the table" if run.resumed else "")
         + (f", [red]{run.errors} error(s)[/] (see the message column)" if run.errors else ""),
         highlight=False,
+        markup=True,
     )
     console.print(f"calibrations/s: {run.calibrations_per_second:.1f}", highlight=False)
 
@@ -236,7 +239,7 @@ def fleet_command(
     for col in ("file", "status", "poses", "RMS before mm", "RMS after mm", "held-out RMS mm"):
         table.add_column(col, justify="left" if col in ("file", "status") else "right")
     for row in run.rows:
-        status = row["status"] if row["status"] == "ok" else f"[red]{row['status']}[/]"
+        status = Text(row["status"], "" if row["status"] == "ok" else "red")
         table.add_row(
             row["file"],
             status,
@@ -248,12 +251,15 @@ def fleet_command(
     console.print(table)
     for row in run.rows:
         if row["status"] != "ok" and row["message"]:
-            err_console.print(f"[red]{row['file']}:[/] {row['message']}", highlight=False)
+            err_console.print(
+                f"[red]{safe(row['file'])}:[/] {safe(row['message'])}", highlight=False, markup=True
+            )
     for name in run.skipped:
         err_console.print(
-            f"[yellow]skipped {name}:[/] changed since its calibration; --force recalibrates it "
+            f"[yellow]skipped {safe(name)}:[/] changed since its calibration; --force recalibrates it "
             "(and replaces the previous result)",
             highlight=False,
+            markup=True,
         )
     console.print(
         f"wrote {run.table} and one folder per calibrated file in {run.out}; {run.calibrated} calibrated, "

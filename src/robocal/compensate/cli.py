@@ -19,7 +19,6 @@ target was not reached (the file is written all the same), 2 on bad input.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -27,7 +26,8 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -36,7 +36,9 @@ def _load(source: Path):
     """A CalibrationResult from a directory, or a Model from a model file."""
     from robocal.identify.calibrate import CalibrationResult
     from robocal.model.files import ModelFileError, load_model
+    from robocal.outdir import restore
 
+    restore(source)  # a writer killed mid-swap on a system without atomic exchange
     if source.is_dir():
         if not (source / "result.json").is_file():
             raise fail(
@@ -51,7 +53,8 @@ def _load(source: Path):
             return load_model(source)
         except (OSError, ModelFileError) as err:
             raise fail(str(err)) from None
-    raise fail(f"{source} does not exist (a calibration directory or a model file)")
+    problem = input_problem(source, "calibration directory or model file") or f"{source} cannot be read"
+    raise fail(problem + (" (a calibration directory or a model file)" if problem.endswith("exist") else ""))
 
 
 def _parse_q0(text: str, dof: int, factor: np.ndarray) -> np.ndarray:
@@ -177,7 +180,7 @@ def compensate_command(
     if out is not None:
         result.write(out, angle_unit=angle_unit, length_unit=length_unit)
     if as_json:
-        print(json.dumps(result.to_dict(angle_unit, length_unit)))
+        print(strict_json(result.to_dict(angle_unit, length_unit)))
     else:
         _print(result, model.name, source_file)
         if out is not None:
@@ -185,9 +188,10 @@ def compensate_command(
     if not result.reachable.all():
         bad = [result.names[i] for i in np.flatnonzero(~result.reachable)]
         err_console.print(
-            f"[yellow]warning:[/] {len(bad)} target(s) not reached: {', '.join(bad[:10])}"
+            f"[yellow]warning:[/] {len(bad)} target(s) not reached: {safe(', '.join(bad[:10]))}"
             + (" ..." if len(bad) > 10 else ""),
             highlight=False,
+            markup=True,
         )
         raise typer.Exit(code=1)
 
@@ -195,9 +199,10 @@ def compensate_command(
 def _print(result, robot: str, source: Path) -> None:
     s = result.summary()
     console.print(
-        f"[bold]{robot}[/] — {s['n']} {result.kind} targets from {source.name}: "
+        f"[bold]{safe(robot)}[/] — {s['n']} {result.kind} targets from {safe(source.name)}: "
         f"{s['reachable']} reached, {s['branch_kept']} in the nominal configuration",
         highlight=False,
+        markup=True,
     )
     table = Table(
         title=f"position error of the real robot at the {s['reachable']} reached targets",

@@ -55,7 +55,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
-import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -71,7 +70,7 @@ from robocal.identify.problem import TOOL_PREFIX
 from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.paths import joint_path
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.model.files import atomic_write_text, csv_text, strict_json
 
 __all__ = [
     "Compensation",
@@ -378,7 +377,11 @@ class Compensation:
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(header)
         for i, name in enumerate(self.names):
-            row = [name, *(_fmt(v) for v in self.q[i] * f), *(_fmt(v) for v in self.q_nominal[i] * f)]
+            row = [
+                csv_text(name),
+                *(_fmt(v) for v in self.q[i] * f),
+                *(_fmt(v) for v in self.q_nominal[i] * f),
+            ]
             row += [_fmt(self.error_before[i] * 1e3, 6), _fmt(self.error_after[i] * 1e3, 6)]
             row.append(_fmt(self.expected_error_after[i] * 1e3, 6))
             row.append("true" if self.reachable[i] else "false")
@@ -399,7 +402,7 @@ class Compensation:
                 f"angle_unit must be one of {list(_ANGLE)} and length_unit one of {list(_LENGTH)}"
             )
         if path.suffix.lower() == ".json":
-            text = json.dumps(self.to_dict(angle_unit, length_unit), indent=2) + "\n"
+            text = strict_json(self.to_dict(angle_unit, length_unit), indent=2) + "\n"
         else:
             text = self.to_csv(angle_unit, length_unit)
         return atomic_write_text(path, text)

@@ -23,7 +23,7 @@ from typing import Annotated
 
 import typer
 
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, refuse_overwrite, safe, warn
 
 __all__ = ["register"]
 
@@ -71,7 +71,7 @@ def urdf_command(
     if ex.tool_link:
         console.print(f"measured tool: link {ex.tool_link}", highlight=False)
     for note in ex.notes:  # what the URDF leaves out (with sizes), and where the flange went
-        err_console.print(f"[yellow]note:[/] {note}", highlight=False)
+        err_console.print(f"[yellow]note:[/] {safe(note)}", highlight=False, markup=True)
 
 
 @export_app.command("ur-kinematics")
@@ -110,9 +110,10 @@ def ur_kinematics_command(
             f"[yellow]note:[/] the calibrated flange is {mm:.4f} mm / {deg:.5f} deg from the format's "
             "wrist_3 frame, which the format cannot hold: add it to the controller's TCP",
             highlight=False,
+            markup=True,
         )
     for m in left_out(calibrated):
-        err_console.print(f"[yellow]note:[/] {m.note}", highlight=False)
+        err_console.print(f"[yellow]note:[/] {safe(m.note)}", highlight=False, markup=True)
 
 
 def _frame_option(text: str | None, what: str):
@@ -234,13 +235,16 @@ def filter_command(
             "[yellow]note:[/] no $config.dat next to the program: TOOL_DATA/BASE_DATA are not read and the "
             "targets are taken as flange poses in the robot base; give --config-dat or --tool/--base",
             highlight=False,
+            markup=True,
         )
     for u in result.unsupported:
         err_console.print(
-            f"[yellow]untouched:[/] {u.file}: line {u.line}: {u.text} ({u.reason})", highlight=False
+            f"[yellow]untouched:[/] {safe(u.file)}: line {u.line}: {safe(u.text)} ({safe(u.reason)})",
+            highlight=False,
+            markup=True,
         )
     for p in result.problems:
-        err_console.print(f"[yellow]warning:[/] {p}", highlight=False)
+        warn(p)
     if strict and result.problems:
         raise typer.Exit(code=1)
 

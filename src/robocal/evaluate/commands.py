@@ -19,6 +19,7 @@ from robocal.measure.commands import (
     Orientation,
     Sep,
 )
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -69,7 +70,9 @@ def report_command(
     from robocal.identify.calibrate import CalibrationResult
     from robocal.identify.commands import _read, own_data
     from robocal.identify.provenance import READER_DEFAULTS
+    from robocal.outdir import restore
 
+    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
     if not (directory / "result.json").is_file():
         raise fail(f"{directory} holds no calibration result (result.json)")
     try:
@@ -102,18 +105,18 @@ def report_command(
     if ev_path.is_file():
         try:
             evaluation = json.loads(ev_path.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as err:
-            raise fail(f"{ev_path}: not valid JSON: {err}") from None
+        except (ValueError, RecursionError) as err:  # not JSON, not UTF-8, nested too deeply
+            raise fail(f"{ev_path}: not valid JSON: {err or 'nested too deeply'}") from None
+        if not isinstance(evaluation, dict):
+            raise fail(f"{ev_path}: not a robocal evaluation (a JSON object expected)")
     if iso9283_log is not None:
-        from rich.markup import escape
-
         from robocal.evaluate.iso9283_log import read_iso9283_log
         from robocal.evaluate.iso9283_report import evaluate_log
 
         try:  # a bad log is an Iso9283LogError, a ValueError naming file, row and column
             iso = evaluate_log(read_iso9283_log(iso9283_log)).to_dict()
         except ValueError as err:
-            raise fail(escape(str(err))) from None
+            raise fail(str(err)) from None
         evaluation = {**(evaluation or {}), "iso9283": iso}
     try:
         with console.status("writing the report ..."):
@@ -133,8 +136,10 @@ def demo_command(
             "directory, never the working directory, which may be a checkout)",
         ),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="seeds the whole demo")] = 0,
-    poses: Annotated[int, typer.Option("--poses", help="calibration poses (chosen O1-optimally)")] = 50,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="seeds the whole demo")] = 0,
+    poses: Annotated[
+        int, typer.Option("--poses", max=10_000, help="calibration poses (O1-optimal; at most 10 000)")
+    ] = 50,
     quick: Annotated[bool, typer.Option("--quick", help="fewer poses and cycles: a faster run")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
     force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
@@ -156,7 +161,7 @@ def demo_command(
     except ValueError as err:
         raise fail(f"demo on {robot}: {err}") from None
     if as_json:
-        print(json.dumps(numbers))
+        print(strict_json(numbers))
 
 
 def register(app: typer.Typer) -> None:

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from robocal.console import fail, refuse_overwrite
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -35,7 +35,7 @@ def reproduce_command(
     except CalibrationGuardError as err:  # a seed whose run cannot carry on without the fit
         raise fail(f"{name}: a calibration failed: {err}") from None
     if as_json:
-        print(json.dumps(numbers))
+        print(strict_json(numbers))
 
 
 def register(app: typer.Typer) -> None:

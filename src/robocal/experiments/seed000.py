@@ -27,12 +27,13 @@ other poses.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from robocal.model.files import strict_json
 
 __all__ = ["SEED_NUMBERS", "SEED_SETS", "run", "seed_rule"]
 
@@ -228,8 +229,9 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
 
 def _print(numbers: dict[str, Any]) -> None:
     from rich.table import Table
+    from rich.text import Text
 
-    from robocal.console import console
+    from robocal.console import console, safe
 
     seed = numbers["seed"]
     for name, r in numbers["robots"].items():
@@ -241,15 +243,18 @@ def _print(numbers: dict[str, Any]) -> None:
             table.add_column(col)
         for row in r["links"]:
             params = " ".join(
-                f"[bold]{p}[/]" if p in row["identified"] else f"[dim]{p}[/]"
+                f"[bold]{safe(p)}[/]" if p in row["identified"] else f"[dim]{safe(p)}[/]"
                 for p in row["robocal_parameters"]
             )
             table.add_row(
                 str(row["link"]),
                 row["relation"],
                 f"eq. {row['seed_equation']} ({row['seed_set']})",
-                f"eq. {row['robocal_equation']} {row['robocal_kind']}: ({row['robocal_motions']})\n{params}",
-                "[green]yes[/]" if row["match"] else "[red]no[/]",
+                Text.from_markup(
+                    f"eq. {row['robocal_equation']} {row['robocal_kind']}: "
+                    f"({row['robocal_motions']})\n{params}"
+                ),
+                Text("yes", "green") if row["match"] else Text("no", "red"),
             )
         console.print(table)
     summary = Table(
@@ -274,8 +279,12 @@ def _print(numbers: dict[str, Any]) -> None:
             name,
             f"{r['identified_parameters']} (4R+2P+6)",
             str(r["jacobian_rank"]),
-            "[green]complete, minimal, continuous[/]" if r["built_check"]["ok"] else "[red]singular[/]",
-            "ok" if dh["ok"] else f"[red]singular[/] link {', '.join(map(str, dh['singular_links']))}",
+            Text("complete, minimal, continuous", "green")
+            if r["built_check"]["ok"]
+            else Text("singular", "red"),
+            "ok"
+            if dh["ok"]
+            else Text.from_markup(f"[red]singular[/] link {', '.join(map(str, dh['singular_links']))}"),
             f"{b['held_out_before_mean_mm']:.2f} → {b['held_out_mean_mm']:.3f} | {d['held_out_mean_mm']:.3f}",
             f"{b['condition_number']:.3g} | {d['condition_number']:.3g}",
         )
@@ -305,4 +314,4 @@ def _write(out: Path, numbers: dict[str, Any], reports: dict[str, Any]) -> None:
             test_data=test,
             title=f"seed 000: {name} built model, 15 pose measurements",
         )
-    atomic_write_text(out / "seed000.json", json.dumps(numbers, indent=2, default=float) + "\n")
+    atomic_write_text(out / "seed000.json", strict_json(numbers, indent=2, default=float) + "\n")

@@ -43,7 +43,6 @@ and the 20-arm Monte Carlo.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,7 +61,7 @@ from robocal.measure.paths import cubic_spline, joint_path
 from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
 from robocal.model.catalog import robot
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.model.files import atomic_write_text, strict_json
 
 __all__ = [
     "BOARDS",
@@ -462,6 +461,7 @@ def _print(numbers: dict[str, Any]) -> None:
         f"[bold]seed 001[/] — calibration table, bounded L1 calibration, compensated commands "
         f"({pub['source']})",
         highlight=False,
+        markup=True,
     )
     console.print(
         f"table arm: seed {numbers['arm_seed']} of {numbers['arms_considered']} arms with DH errors within "
@@ -520,7 +520,7 @@ def _print(numbers: dict[str, Any]) -> None:
                     f"{len(row[name]['failed'])}",
                 )
         console.print(table)
-    console.print("[bold]where the simulation differs from the seed, and why[/]")
+    console.print("[bold]where the simulation differs from the seed, and why[/]", markup=True)
     for line in numbers["differences"]:
         console.print(f"  - {line}", highlight=False)
 
@@ -634,7 +634,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "results.json", json.dumps(numbers, indent=2) + "\n")
+        atomic_write_text(out / "results.json", strict_json(numbers, indent=2) + "\n")
         atomic_write_text(out / "report.md", _report(numbers))
         _plot(numbers, out / "trajectory_errors.png")
         if verbose:

@@ -46,7 +46,6 @@ checks the calibration away from the circle.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -57,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
+from robocal.model.files import strict_json
 
 __all__ = [
     "BASE_OFFSET",
@@ -492,13 +492,14 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
 def _table(title: str, rows: dict[str, dict[str, list[float]]], thesis: dict | None = None):
     from rich import box
     from rich.table import Table
+    from rich.text import Text
 
     table = Table(title=title, title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
     table.add_column("mm / deg", no_wrap=True)
     for c in COLUMNS:
         table.add_column(c, justify="right", no_wrap=True)
     for stat in ("minimum", "maximum", "average"):
-        table.add_row(f"[bold]{stat}[/]")
+        table.add_row(Text(stat, "bold"))
         for key, summary in rows.items():
             table.add_row(f" {key}", *(f"{v:.3f}" for v in summary[stat]))
             if thesis is not None and key in thesis.get(stat, {}):
@@ -699,7 +700,7 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     from robocal.model.files import atomic_write_text
 
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "seed003.json", json.dumps(numbers, indent=2, default=str) + "\n")
+    atomic_write_text(out / "seed003.json", strict_json(numbers, indent=2, default=str) + "\n")
     atomic_write_text(out / "seed003.md", _markdown(numbers))
     import os
     import tempfile

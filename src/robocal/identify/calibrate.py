@@ -31,7 +31,7 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -62,7 +62,7 @@ from robocal.identify.stages import (
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
-from robocal.model.files import atomic_write_text, load_model, save_model
+from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model, strict_json
 
 __all__ = [
     "BOUNDS_CHOICES",
@@ -632,26 +632,75 @@ class CalibrationResult:
             **self.metadata,
         }
 
-    def save(self, directory: str | Path) -> Path:
-        """Write ``model.yaml`` (calibrated) and ``result.json`` to ``directory`` atomically."""
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        save_model(self.model, directory / "model.yaml")
-        if self.measurement_chain is not None:
-            save_model(self.measurement_chain, directory / "measurement_model.yaml")
-        atomic_write_text(directory / "result.json", json.dumps(self.to_dict(), indent=2) + "\n")
-        return directory
+    def save(self, directory: str | Path, also: Callable[[Path], object] | None = None) -> Path:
+        """Write ``model.yaml`` (calibrated), ``measurement_model.yaml`` (the chain with
+        the device frame and tool, for pose/tool calibrations) and ``result.json`` to
+        ``directory`` as one transaction (:mod:`robocal.outdir`): the folder holds the
+        earlier result or this one, never a mix, also if the process dies or the disk is
+        full.  ``also(stage_dir)`` may write more files of the result (a report, the data)
+        into the staging directory; each file carries the same run id.
+
+        Raises:
+            robocal.outdir.FolderBusyError: another process is writing ``directory``.
+            OSError: the folder cannot be written (it is left as it was).
+        """
+        from robocal.outdir import transaction
+
+        with transaction(directory, RESULT_FILES) as stage:
+            save_model(self.model, stage.path / "model.yaml", run_id=stage.run_id)
+            if self.measurement_chain is not None:
+                save_model(self.measurement_chain, stage.path / "measurement_model.yaml", run_id=stage.run_id)
+            text = strict_json(self.to_dict() | {"run_id": stage.run_id}, indent=2) + "\n"
+            atomic_write_text(stage.path / "result.json", text)
+            if also is not None:
+                also(stage.path)
+        return Path(directory)
 
     @classmethod
     def load(cls, directory: str | Path) -> CalibrationResult:
-        """Read a result written by :meth:`save`."""
+        """Read a result written by :meth:`save`.
+
+        Raises:
+            ValueError: the folder holds no complete, consistent result (the message names
+                the file and what is wrong; :class:`robocal.outdir.FolderMixedError` when its
+                files come from different runs).
+        """
+        from robocal.outdir import check_consistent
+
         directory = Path(directory)
-        data = json.loads((directory / "result.json").read_text())
+        path = directory / "result.json"
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except UnicodeDecodeError as err:
+            raise ValueError(f"{path}: not UTF-8 text (byte {err.start})") from None
+        except json.JSONDecodeError as err:
+            raise ValueError(
+                f"{path}: not valid JSON (line {err.lineno}, column {err.colno}: {err.msg})"
+            ) from None
+        except RecursionError:
+            raise ValueError(f"{path}: nested too deeply to be a calibration result") from None
+        if not isinstance(data, dict):
+            raise ValueError(
+                f"{path}: not a calibration result (a JSON object expected, got {type(data).__name__})"
+            )
+        check_consistent(directory, ("model.yaml", "measurement_model.yaml"))
+        if not (directory / "model.yaml").is_file():
+            raise ValueError(f"{directory}: model.yaml is missing beside result.json; calibrate again")
+        try:
+            return cls._from_dict(directory, data)
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+            if isinstance(err, ModelFileError):
+                raise
+            what = f"missing field {err.args[0]!r}" if isinstance(err, KeyError) else str(err)
+            raise ValueError(f"{path}: not a calibration result written by robocal ({what})") from None
+
+    @classmethod
+    def _from_dict(cls, directory: Path, data: dict[str, Any]) -> CalibrationResult:
         model = load_model(directory / "model.yaml")
         chain_path = directory / "measurement_model.yaml"
         params = data["parameters"]
         cov = np.array(data["covariance"], dtype=float).reshape(len(params), len(params))
-        std = np.array([p["std"] for p in params])
+        std = np.array([p["std"] for p in params], dtype=float)
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = cov / np.outer(std, std)
         known = {f.name for f in dataclasses.fields(cls)}
@@ -666,8 +715,8 @@ class CalibrationResult:
             measure=data["measure"],
             method=data["method"],
             names=tuple(p["name"] for p in params),
-            estimates=np.array([p["estimate"] for p in params]),
-            nominal=np.array([p["nominal"] for p in params]),
+            estimates=np.array([p["estimate"] for p in params], dtype=float),
+            nominal=np.array([p["nominal"] for p in params], dtype=float),
             std=std,
             covariance=cov,
             correlation=corr,
@@ -683,7 +732,9 @@ class CalibrationResult:
             residual_std=data["residual_std_mm"] / 1e3,
             rms_before=data["rms_before_mm"] / 1e3,
             rms_after=data["rms_after_mm"] / 1e3,
-            condition_number=data["condition_number"],
+            condition_number=math.inf
+            if data["condition_number"] is None
+            else float(data["condition_number"]),
             n=data["n"],
             success=data["success"],
             message=data["message"],
@@ -702,7 +753,20 @@ class CalibrationResult:
         )
 
 
+#: the files of a calibration result folder (written and replaced together)
+RESULT_FILES = (
+    "model.yaml",
+    "measurement_model.yaml",
+    "result.json",
+    "report.html",
+    "train.csv",
+    "test.csv",
+    "evaluation.json",
+    "true_model.yaml",
+)
+
 _DICT_ONLY = {
+    "run_id",
     "robocal_version",
     "residual_cross_covariance",
     "residual_covariance_upper",

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import warnings
 from pathlib import Path
 from typing import Annotated
@@ -12,7 +11,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail
+from robocal.console import check_input, console, err_console, fail, safe, warn
 from robocal.measure.commands import (
     AngleUnit,
     Columns,
@@ -24,6 +23,7 @@ from robocal.measure.commands import (
     Sep,
     as_cli_text,
 )
+from robocal.model.files import strict_json
 
 __all__ = ["register"]
 
@@ -44,8 +44,7 @@ def _read(
 
     if path.is_dir():
         raise fail(f"{path} is a directory; --data takes a measurement file")
-    if not path.is_file():
-        raise fail(f"{path} does not exist")
+    check_input(path, "measurement file")
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", MeasurementWarning)
@@ -65,7 +64,7 @@ def _read(
         raise fail(as_cli_text(str(err))) from None
     for w in caught:
         if isinstance(w.message, MeasurementWarning):
-            err_console.print(f"[yellow]warning:[/] {as_cli_text(str(w.message))}", highlight=False)
+            warn(as_cli_text(str(w.message)))
     if "rows_left_out" in data.metadata:
         err_console.print(
             f"{data.metadata['rows_left_out']} incomplete row(s) of {path.name} left out (--incomplete drop)",
@@ -162,7 +161,7 @@ def calibrate_command(
     train_n: Annotated[
         int | None, typer.Option("--train-n", help="calibrate on N random rows, validate on the rest")
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="seed of the --train-n draw")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="seed of the --train-n draw")] = 0,
     tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
     compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
     level: Annotated[
@@ -231,12 +230,22 @@ def calibrate_command(
         raise fail(f"--out {out} is a file; give a directory for model.yaml and result.json")
     if (out / "result.json").exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
+    from robocal.outdir import FolderBusyError, check_not_busy
+
+    try:  # before the work: a second writer learns it at once, not after the calibration
+        check_not_busy(out)
+    except FolderBusyError as err:
+        raise fail(str(err)) from None
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
     if residual not in ("auto", "none", "joint_fourier"):
         raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
     if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
         raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
+    from robocal.identify.solvers import METHODS
+
+    if method not in METHODS:
+        raise fail(f"--method {method!r}: {', '.join(METHODS)}")
     if loss != "linear" and method != "lm":
         raise fail(f"--loss {loss} needs --method lm")
     from robocal.identify.calibrate import BOUNDS_CHOICES
@@ -261,8 +270,13 @@ def calibrate_command(
             sigma = parse_quantity_option(noise, "length", "--noise")
         except ValueError as err:
             raise fail(str(err)) from None
-        if not sigma > 0:
-            raise fail(f"--noise {noise}: a positive standard deviation, e.g. 0.03mm")
+        from robocal.measure.dataset import MAX_SIGMA, MIN_SIGMA
+
+        if not MIN_SIGMA <= sigma <= MAX_SIGMA:
+            raise fail(
+                f"--noise {noise}: a standard deviation between {MIN_SIGMA * 1e3:g} mm and "
+                f"{MAX_SIGMA * 1e3:g} mm, e.g. 0.03mm"
+            )
         if data.sigma is not None:
             raise fail(f"--noise: {data_path} has its own sigma columns; leave --noise out")
         data = dataclasses.replace(data, sigma=np.full((data.n, 3), sigma))
@@ -282,7 +296,7 @@ def calibrate_command(
             guess = np.array([float(v) for v in tool.replace(",", " ").split()]) * 1e-3
         except ValueError:
             raise fail(f"--tool {tool!r}: three numbers in mm") from None
-        if guess.shape != (3,):
+        if guess.shape != (3,) or not np.all(np.isfinite(guess)):
             raise fail(f"--tool {tool!r}: three numbers in mm")
     effect_option = effects
     if effects is not None and effects not in ("none", "predict", "identify"):
@@ -307,7 +321,8 @@ def calibrate_command(
                 **({"bounds": bounds} if bounds is not None else {}),
             )
     except ValueError as err:
-        raise fail(as_cli_text(str(err))) from None
+        message = as_cli_text(str(err))  # the data's problem: name the file unless the message does
+        raise fail(message if str(data_path) in message else f"{data_path}: {message}") from None
     from robocal.identify.provenance import Provenance
 
     sha256 = file_hash(data_path)
@@ -325,19 +340,24 @@ def calibrate_command(
     if test is not None:
         validation = rc.validate(result, test)
         result.metadata["validation"] = validation.to_dict()
-    result.save(out)
+    def write_report_too(stage_dir: Path) -> None:
+        from robocal.evaluate.report import write_report
+
+        with console.status("writing the report ..."):
+            write_report(result, stage_dir / "report.html", data=train, test_data=test)
+
+    try:  # model.yaml, measurement_model.yaml, result.json (and report.html): all or nothing
+        result.save(out, also=write_report_too if report else None)
+    except FolderBusyError as err:
+        raise fail(str(err)) from None
     _print_result(result)
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
         for note in _validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
-            console.print(note, highlight=False)
+            console.print(note, highlight=False, markup=True)
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
     if report:
-        from robocal.evaluate.report import write_report
-
-        with console.status("writing the report ..."):
-            path = write_report(result, out / "report.html", data=train, test_data=test)
-        console.print(f"report: {path}", highlight=False)
+        console.print(f"report: {out / 'report.html'}", highlight=False)
 
 
 def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measure: str | None, data):
@@ -346,6 +366,7 @@ def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measur
     for ``--model`` the file's chain (``--chain complete``: the complete model built from
     it); a chain calibrated as it is gets the parameterisation warnings of rc.calibrate."""
     from robocal.model.complete import calibration_model
+
     effective = measure or ("pose" if data.orientation is not None else "position")
     complete = chain == "complete" or (chain is None and robot_name is not None)
     if complete:
@@ -370,9 +391,10 @@ def _chain_to_calibrate(model, robot_name: str | None, chain: str | None, measur
 def _print_result(result) -> None:
     head = "converged" if result.success else "[red]NOT CONVERGED[/]"
     console.print(
-        f"[bold]{result.model.name}[/] — {result.method}, {result.measure} measurements, {result.n} poses: "
-        f"{head} ({result.iterations} iterations, {result.seconds * 1e3:.0f} ms)",
+        f"[bold]{safe(result.model.name)}[/] — {safe(result.method)}, {safe(result.measure)} measurements, "
+        f"{result.n} poses: {head} ({result.iterations} iterations, {result.seconds * 1e3:.0f} ms)",
         highlight=False,
+        markup=True,
     )
     console.print(
         f"RMS error on the calibration poses {result.rms_before * 1e3:.4f} mm → "
@@ -396,15 +418,19 @@ def _print_result(result) -> None:
         for line in effect_lines(effects):
             console.print(f"  {line}", highlight=False)
     for d in result.dropped:
-        console.print(f"  [dim]not identified:[/] {d}", highlight=False)
+        console.print(f"  [dim]not identified:[/] {safe(d)}", highlight=False, markup=True)
     for a, b, rho in result.high_correlations:
-        console.print(f"  [yellow]warning:[/] {a} and {b} are correlated ({rho:+.3f})", highlight=False)
+        console.print(
+            f"  [yellow]warning:[/] {safe(a)} and {safe(b)} are correlated ({rho:+.3f})",
+            highlight=False,
+            markup=True,
+        )
     if result.fit_to_noise is not None and result.fit_to_noise.warning() is None:  # else in the warnings
         console.print(result.fit_to_noise.summary(), highlight=False)
     for line in result.residual_lines():
         console.print(line, highlight=False, markup=False)
     for w in result.metadata.get("warnings", []):
-        console.print(f"[yellow]warning:[/] {w}", highlight=False)
+        console.print(f"[yellow]warning:[/] {safe(w)}", highlight=False, markup=True)
 
 
 def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
@@ -444,7 +470,7 @@ def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str]
             "calibration's"
         )
     if warning:
-        notes.append(f"[yellow]warning:[/] {warning}")
+        notes.append(f"[yellow]warning:[/] {safe(warning)}")
     return notes, warning
 
 
@@ -496,7 +522,9 @@ def validate_command(
     """Error statistics of a calibrated model on (held-out) measurements."""
     import robocal as rc
     from robocal.identify.calibrate import CalibrationResult
+    from robocal.outdir import restore
 
+    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
     if not (directory / "result.json").is_file():
         raise fail(f"{directory} holds no calibration result (result.json)")
     try:
@@ -526,11 +554,11 @@ def validate_command(
     if warning:
         extra["warning"] = warning
     if as_json:
-        print(json.dumps(stats.to_dict() | extra))
+        print(strict_json(stats.to_dict() | extra))
         return
     console.print(_stats_table(f"{result.model.name} on {data_path.name} ({data.n} poses)", stats))
     for note in filter(None, notes):
-        console.print(note, highlight=False)
+        console.print(note, highlight=False, markup=True)
 
 
 def register(app: typer.Typer) -> None:

@@ -24,15 +24,21 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from robocal import spatial
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, refuse_overwrite, safe
 from robocal.measure.devices import DEVICES, make_device
 
 if TYPE_CHECKING:  # the readers and the simulator are imported by the commands that use them
     from robocal.measure.dataset import Measurements, Problem
 
 __all__ = ["register"]
+
+#: simulate: tolerances of the drawn true robot may be at most 0.1 m and 10 degrees (a real
+#: robot's errors are below a few mm and tenths of a degree)
+MAX_LENGTH_TOL = 0.1
+MAX_ANGLE_TOL = math.radians(10.0)
 
 # The reader's options on every command that reads measurements, and its messages in
 # their command-line spelling.
@@ -127,8 +133,8 @@ def _problem_table(problems: list[Problem], title: str) -> Table:
         severity, code, column = key
         style = "bold red" if severity == "error" else "yellow"
         table.add_row(
-            f"[{style}]{severity}[/]",
-            f"{code}\n[dim]{PROBLEM_CODES.get(code, '')}[/]",
+            Text(severity, style),
+            Text.from_markup(f"{safe(code)}\n[dim]{safe(PROBLEM_CODES.get(code, ''))}[/]"),
             column or "-",
             _rows_text([p.row for p in items]),
             as_cli_text(items[0].message),
@@ -216,8 +222,9 @@ def data_check(
     if errors:
         console.print(
             f"[bold red]{len(errors)} error(s)[/]: the file cannot be used as read; first: "
-            f"{as_cli_text(str(errors[0]))}",
+            f"{safe(as_cli_text(str(errors[0])))}",
             highlight=False,
+            markup=True,
             soft_wrap=True,
         )
         raise typer.Exit(code=1)
@@ -245,7 +252,7 @@ def simulate_command(
             "default: the device's own (robocal.measure.devices)"
         ),
     ] = None,
-    seed: Annotated[int | None, typer.Option(help="seed of the drawn errors and the noise")] = None,
+    seed: Annotated[int | None, typer.Option(min=0, help="seed of the drawn errors and the noise")] = None,
     length_tol: Annotated[str, typer.Option(help="tolerance of length parameters, e.g. 0.5mm")] = "0.5mm",
     angle_tol: Annotated[str, typer.Option(help="tolerance of angle parameters, e.g. 0.05deg")] = "0.05deg",
     tol: Annotated[
@@ -277,7 +284,7 @@ def simulate_command(
         return simulate_log_command(robot, log, seed, noise, force)
     if poses is None or output is None:
         raise fail("give --poses POSES.csv and -o OUTPUT.csv (or --log LOG.csv for an ISO 9283 log)")
-    from robocal.measure.dataset import MeasurementFileError, read_measurements
+    from robocal.measure.dataset import MAX_SIGMA, MeasurementFileError, read_measurements
     from robocal.measure.simulate import (
         VirtualRobot,
         draw_true_model,
@@ -308,16 +315,26 @@ def simulate_command(
     try:
         dev = make_device(device, **kwargs)
         if noise is not None:
-            dev = dev.with_noise(parse_quantity_option(noise, "length", "--noise"))
+            sigma = parse_quantity_option(noise, "length", "--noise")
+            if not 0 <= sigma <= MAX_SIGMA:
+                raise ValueError(
+                    f"--noise {noise}: a standard deviation between 0 and {MAX_SIGMA * 1e3:g} mm"
+                )
+            dev = dev.with_noise(sigma)
         q = read_measurements(poses, model=model)
         if q.position is not None:
             err_console.print(
-                f"[yellow]note:[/] {poses} has measured positions; only its joint values are used",
+                f"[yellow]note:[/] {safe(poses)} has measured positions; only its joint values are used",
                 highlight=False,
+                markup=True,
             )
         model_rng = np.random.default_rng(None if seed is None else [seed, 1])
         length = parse_quantity_option(length_tol, "length", "--length-tol")
         angle = parse_quantity_option(angle_tol, "angle", "--angle-tol")
+        if not 0 <= length <= MAX_LENGTH_TOL:
+            raise ValueError(f"--length-tol {length_tol}: between 0 and {MAX_LENGTH_TOL * 1e3:g} mm")
+        if not 0 <= angle <= MAX_ANGLE_TOL:
+            raise ValueError(f"--angle-tol {angle_tol}: between 0 and {math.degrees(MAX_ANGLE_TOL):g} deg")
         for name, value in tolerances.items():
             if not re.search(r"[A-Za-zµμ°]\s*$", value) and float(value or "nan") != 0.0:
                 raise ValueError(f"--tol {name}={value}: give the unit, e.g. {name}={value}mm or {value}deg")
@@ -330,7 +347,14 @@ def simulate_command(
             seed=model_rng,
         )
         vr = VirtualRobot(model, true, dev)
-        data = simulate(vr, q, seed)
+        with np.errstate(all="ignore"):
+            data = simulate(vr, q, seed)
+        arrays = [a for a in (data.position, data.orientation, data.sigma) if a is not None]
+        if not all(np.all(np.isfinite(a)) for a in arrays):
+            raise ValueError(
+                "the simulated measurements are not finite: the --tol, --length-tol, --angle-tol or --noise "
+                "values are too large for this robot; give those of a real robot, e.g. 0.5mm and 0.05deg"
+            )
         if train is not None:
             if not 0 < train <= 1:
                 raise ValueError(f"--train {train}: expected a fraction in (0, 1]")

@@ -63,7 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.model.files import atomic_write_text, csv_text
 
 __all__ = [
     "MeasurementFileError",
@@ -93,6 +93,10 @@ MAX_REVOLUTE_RAD = 4.0 * math.pi
 #: Largest measurement file read (bytes): about five million poses; reading takes about
 #: ten times the file's size in memory.
 MAX_FILE_BYTES = 512 * 1024 * 1024
+#: A stated measurement noise (1σ, m) must lie in [MIN_SIGMA, MAX_SIGMA]: 0 or a tiny σ
+#: makes the weights infinite, a huge one makes them vanish
+MIN_SIGMA = 1e-9
+MAX_SIGMA = 1.0
 
 Severity = Literal["error", "warning"]
 
@@ -115,8 +119,11 @@ PROBLEM_CODES = {
     "repeated-pose": "joint values repeated in a poses file (a warning)",
     "split": "a train/test label other than 'train' or 'test'",
     "quaternion": "a quaternion whose norm is not 1",
-    "sigma": "a negative standard deviation",
+    "sigma": "a standard deviation that is negative, zero or out of range",
+    "range": "a position farther than any device measures (more than 10 km)",
 }
+#: A measured position farther than this from the device (m) is a wrong cell, not a reach
+MAX_POSITION = 1e4
 LimitsMode = Literal["error", "warn", "ignore"]
 
 _POSITION = ("x", "y", "z")
@@ -332,7 +339,7 @@ def write_measurements(data: Measurements, path: str | Path) -> Path:
     for key, value in meta.items():
         buf.write(f"# {key}: {' '.join(str(value).split())}\n")
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(header + (["set"] if data.split is not None else []))
+    writer.writerow([csv_text(h) for h in header] + (["set"] if data.split is not None else []))
     for i, row in enumerate(table):
         cells = [_fmt(v) for v in row]
         if data.split is not None:
@@ -408,6 +415,62 @@ IncompleteMode = Literal["error", "drop"]
 
 #: Names a separator may be given by (on a command line a tab is hard to type).
 SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "semicolon": ";", "comma": ","}
+
+
+#: Files larger than this are read in chunks into arrays (memory about 2x the numbers
+#: instead of 20x as text); they are checked up to the first problem of each column
+LARGE_FILE_BYTES = 8 * 1024 * 1024
+
+
+def _head_text(path: Path, size: int = 1 << 16) -> str:
+    """The first lines of a file (up to ``size`` bytes, whole lines) as text."""
+    with open(path, "rb") as fh:
+        head = fh.read(size)
+    cut = head.rfind(b"\n")
+    return head[: cut + 1 if cut >= 0 else len(head)].decode("utf-8-sig")
+
+
+def _is_utf8(raw: bytes) -> bool:
+    try:
+        raw.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+class _CompactRows:
+    """The rows of a large file: numbers per column (``numbers[k]``), a column's first
+    problem (``failed[k]``: code, message, line), the lower-case labels of a text column
+    (``labels[k]``) and each row's byte offset, from which a row's cells are read again
+    for a message."""
+
+    def __init__(self, path: Path, sep: str, width: int) -> None:
+        self.path, self.sep, self.width = path, sep, width
+        self.numbers: dict[int, Array] = {}
+        self.failed: dict[int, tuple[str, str, int]] = {}
+        self.labels: dict[int, NDArray[np.str_]] = {}
+        self.offsets = np.zeros(0, dtype=np.int64)
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+    def __getitem__(self, i: int) -> list[str]:
+        with open(self.path, "rb") as fh:
+            fh.seek(int(self.offsets[i]))
+            line = fh.readline().decode("utf-8", errors="replace")
+        return next(_csv_rows([line.strip() if self.sep == " " else line], self.sep), [])
+
+
+_EXCEL_SEP = re.compile(r"^\ufeff?sep=(.)\s*$")
+
+
+def _encoding_hint(path: Path) -> str | None:
+    """What a file that is not UTF-8 most likely is, from its first bytes."""
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "it is UTF-16 (byte-order mark); save it as UTF-8 (CSV UTF-8 in Excel)"
+    return None
 
 
 def _csv_rows(lines: Sequence[str], sep: str):
@@ -491,13 +554,26 @@ class _Reader:
                 f"{path.stat().st_size} bytes is more than the {MAX_FILE_BYTES} a measurement file may have",
             )
             return None
+        # a large file is read in chunks, its numbers kept as arrays (bounded memory); a
+        # small one as text, every problem of every row listed
+        large = path.exists() and path.stat().st_size > LARGE_FILE_BYTES and self.incomplete == "error"
         try:
-            text = path.read_text(encoding="utf-8-sig")
+            text = _head_text(path) if large else path.read_text(encoding="utf-8-sig")
         except FileNotFoundError:
             self.error("file", "file not found")
             return None
-        except (OSError, UnicodeDecodeError) as err:
-            self.error("file", f"cannot be read as UTF-8 text: {err}")
+        except UnicodeDecodeError as err:
+            self.error("file", f"cannot be read as UTF-8 text: {_encoding_hint(path) or err}")
+            return None
+        except OSError as err:
+            self.error("file", f"cannot be read: {err.strerror or err}")
+            return None
+        if "\x00" in text[:4096] and text[:4096].count("\x00") > len(text[:4096]) // 4:
+            self.error(
+                "file",
+                "cannot be read as UTF-8 text: it looks like UTF-16 (a NUL byte between the "
+                "characters); save it as UTF-8 (CSV UTF-8 in Excel)",
+            )
             return None
         lines = text.splitlines()
         metadata: dict[str, str] = {}
@@ -508,11 +584,16 @@ class _Reader:
                 key, value = line.split(":", 1)
                 metadata[key.strip()] = value.strip()
             first += 1
+        sep = self.sep
+        excel_sep = _EXCEL_SEP.match(lines[first]) if first < len(lines) else None
+        if excel_sep:  # Excel's "sep=;" line names the separator
+            if sep is None:
+                sep = excel_sep.group(1)
+            first += 1
         if first >= len(lines):
             self.error("header", "no header row (the file is empty or only has comments)")
             return None
         self.header_line = first + 1
-        sep = self.sep
         if sep is None:
             header_text = lines[first]
             sep = max((";", "\t", ","), key=header_text.count)
@@ -540,10 +621,16 @@ class _Reader:
                 where[name] = k
         self.where = where
 
-        body = [(i + 1, ln) for i, ln in enumerate(lines[first + 1 :], start=first + 1) if ln.strip()]
-        body = [(no, ln) for no, ln in body if not ln.lstrip().startswith("#")]
-        rows, unreadable = self._split_lines(body, sep)
-        self.line_no = np.array([no for no, _ in body], dtype=int)
+        if large:
+            rows = self._stream_body(first + 1, sep)
+            if rows is None:
+                return None
+            unreadable: list[int] = []
+        else:
+            body = [(i + 1, ln) for i, ln in enumerate(lines[first + 1 :], start=first + 1) if ln.strip()]
+            body = [(no, ln) for no, ln in body if not ln.lstrip().startswith("#")]
+            rows, unreadable = self._split_lines(body, sep)
+            self.line_no = np.array([no for no, _ in body], dtype=int)
         self.rows = rows
 
         cols = self._resolve_columns()
@@ -556,7 +643,7 @@ class _Reader:
         # ragged rows: reported once, their cells are not looked at again
         good = np.ones(len(rows), dtype=bool)
         good[unreadable] = False
-        for i, r in enumerate(rows):
+        for i, r in enumerate(rows if not isinstance(rows, _CompactRows) else ()):  # compact: not ragged
             if len(r) != len(header) and i not in unreadable:
                 good[i] = False
                 self.error(
@@ -567,17 +654,25 @@ class _Reader:
         self.good = good
 
         joint_cols, joint_scale = cols["joints"], cols["joint_scale"]
-        q = self._numbers(joint_cols) * joint_scale
+        q = self._numbers(joint_cols)
+        q *= joint_scale  # in place: a large file's arrays are not copied
         position = sigma = orientation = temperature = None
         if cols["position"]:
-            position = self._numbers(cols["position"]) * self.L
+            position = self._numbers(cols["position"])
+            position *= self.L
         if cols["sigma"]:
-            sigma = self._numbers(cols["sigma"]) * self.L
-            bad = good[:, None] & np.isfinite(sigma) & (sigma < 0)
+            sigma = self._numbers(cols["sigma"])
+            sigma *= self.L
+            bad = good[:, None] & np.isfinite(sigma) & ((sigma < MIN_SIGMA) | (sigma > MAX_SIGMA))
             for i, c in np.argwhere(bad):
+                cell = self._cell(i, cols["sigma"][c])
                 self.error(
                     "sigma",
-                    f"standard deviation {self._cell(i, cols['sigma'][c])!r} is negative",
+                    f"standard deviation {cell!r} is negative"
+                    if sigma[i, c] < 0
+                    else f"standard deviation {cell!r} is outside {MIN_SIGMA * 1e3:g}..{MAX_SIGMA * 1e3:g} "
+                    "mm "
+                    "(leave the sigma columns out when the noise is not known)",
                     int(self.line_no[i]),
                     cols["sigma"][c],
                 )
@@ -653,6 +748,108 @@ class _Reader:
                 unreadable.append(i)
                 self.error("file", f"cannot be read as CSV: {err}", no)
         return rows, unreadable
+
+    def _stream_body(self, skip: int, sep: str) -> _CompactRows | None:
+        """Read the rows after the first ``skip`` lines chunk by chunk into per-column
+        arrays (:class:`_CompactRows`); sets ``self.line_no``.  A ragged or unreadable row
+        stops the reading (None, the problem reported)."""
+        store = _CompactRows(self.path, sep, len(self.header))
+        numbers: list[list[Array]] = [[] for _ in self.header]
+        labels: list[list[Array] | None] = [None for _ in self.header]
+        line_nos: list[Array] = []
+        offsets: list[Array] = []
+        with open(self.path, "rb") as fh:
+            offset = 0
+            for _ in range(skip):
+                offset += len(fh.readline())
+            no = skip
+            while chunk := fh.readlines(1 << 20):  # about 12 000 rows at a time
+                nos, offs, texts = [], [], []
+                for raw in chunk:
+                    no += 1
+                    if raw.strip() and not raw.lstrip().startswith(b"#"):
+                        nos.append(no)
+                        offs.append(offset)
+                        texts.append(raw)
+                    offset += len(raw)
+                try:
+                    lines = [t.decode("utf-8") for t in texts]
+                except UnicodeDecodeError:
+                    bad = next(n for n, t in zip(nos, texts, strict=True) if not _is_utf8(t))
+                    self.error("file", "cannot be read as UTF-8 text", bad)
+                    return None
+                rows = self._chunk_rows(lines, nos, sep)
+                if rows is None:
+                    return None
+                for k in range(len(self.header)):
+                    cells = [r[k].strip() for r in rows]
+                    self._chunk_column(k, cells, nos, not line_nos, numbers, labels, store)
+                line_nos.append(np.array(nos, dtype=np.int64))
+                offsets.append(np.array(offs, dtype=np.int64))
+        self.line_no = np.concatenate(line_nos) if line_nos else np.zeros(0, dtype=np.int64)
+        store.offsets = np.concatenate(offsets) if offsets else np.zeros(0, dtype=np.int64)
+        for k in range(len(self.header)):
+            if k not in store.failed:
+                store.numbers[k] = np.concatenate(numbers[k]) if numbers[k] else np.zeros(0)
+            if labels[k]:
+                store.labels[k] = np.concatenate(labels[k])
+        return store
+
+    def _chunk_rows(self, lines: list[str], nos: list[int], sep: str) -> list[list[str]] | None:
+        width = len(self.header)
+        try:
+            rows = list(_csv_rows([ln.strip() if sep == " " else ln for ln in lines], sep))
+        except csv.Error:
+            rows = []
+        if len(rows) != len(lines):  # a quote opened on one line: every line is its own row
+            rows = []
+            for no, ln in zip(nos, lines, strict=True):
+                try:
+                    rows.append(next(_csv_rows([ln.strip() if sep == " " else ln], sep), []))
+                except csv.Error as err:
+                    self.error("file", f"cannot be read as CSV: {err}", no)
+                    return None
+        for no, r in zip(nos, rows, strict=True):
+            if len(r) != width:
+                self.error("ragged", f"has {len(r)} cells but the header has {width} (separator {sep!r})", no)
+                return None
+        return rows
+
+    def _chunk_column(
+        self, k: int, cells: list[str], nos: list[int], first: bool, numbers, labels, store
+    ) -> None:
+        """Convert column ``k`` of a chunk: its numbers are kept; at its first problem the
+        column is marked failed (the problem kept for :meth:`_numbers`) and, when that is in
+        the first chunk, its cells are kept as labels (a train/test column)."""
+        if k not in store.failed:
+            text = [c.replace(",", ".") for c in cells] if self.decimal == "," else cells
+            try:
+                values = np.fromiter(map(float, text), dtype=float, count=len(text))
+            except ValueError:
+                for no, c, t in zip(nos, cells, text, strict=True):
+                    try:
+                        float(t)
+                    except ValueError:
+                        hint = ""
+                        if self.decimal == "." and _DECIMAL_COMMA.match(c):
+                            hint = "; it looks like a decimal comma: pass decimal=','"
+                        store.failed[k] = (
+                            ("empty", "empty cell (missing value)", no)
+                            if not c
+                            else ("not-a-number", f"{_short(c)} is not a number{hint}", no)
+                        )
+                        break
+            else:
+                finite = np.isfinite(values)
+                if finite.all():
+                    numbers[k].append(values)
+                    return
+                m = int(np.flatnonzero(~finite)[0])
+                store.failed[k] = ("not-finite", f"value {_short(cells[m])} is not finite", nos[m])
+            numbers[k] = []
+            labels[k] = [] if first else None
+        if labels[k] is not None:
+            labels[k].append(np.array([c.lower() for c in cells], dtype="<U5"))
 
     def _header_text(self, limit: int = 20) -> str:
         shown = ", ".join(self.header[:limit])
@@ -803,6 +1000,8 @@ class _Reader:
 
     def _numbers(self, names: Sequence[str]) -> Array:
         """``(n, len(names))`` floats; bad cells are reported and left NaN."""
+        if isinstance(self.rows, _CompactRows):
+            return self._compact_numbers(names)
         n = len(self.rows)
         out = np.full((n, len(names)), np.nan)
         good = np.flatnonzero(self.good)
@@ -849,8 +1048,37 @@ class _Reader:
             out[good, c] = values
         return out
 
+    def _compact_numbers(self, names: Sequence[str]) -> Array:
+        store = self.rows
+        out = np.full((len(store), len(names)), np.nan)
+        for c, name in enumerate(names):
+            k = self.where[name]
+            if k in store.failed:
+                code, message, no = store.failed[k]
+                self.error(code, message + " (a large file is checked up to the first problem)", no, name)
+            else:  # each column is asked for once (one role each): its array is handed over
+                out[:, c] = store.numbers.pop(k)
+        return out
+
     def _split(self, name: str) -> NDArray[np.str_] | None:
         k = self.where[name]
+        if isinstance(self.rows, _CompactRows):
+            labels = self.rows.labels.get(k)
+            if labels is None:  # numbers, or text from a later chunk on: the first row is wrong
+                labels = np.full(len(self.rows), "", dtype="<U5")
+                bad = np.zeros(len(labels), dtype=bool)
+                bad[:1] = True
+            else:
+                bad = ~np.isin(labels, ("train", "test"))
+            for i in np.flatnonzero(bad)[:1]:
+                self.error(
+                    "split",
+                    f"{_short(self._cell(int(i), name))} is not a train/test label "
+                    "(expected 'train' or 'test')",
+                    int(self.line_no[i]),
+                    name,
+                )
+            return labels
         labels = np.array([r[k].strip().lower() if k < len(r) else "" for r in self.rows], dtype="<U5")
         for i in np.flatnonzero(self.good & ~np.isin(labels, ("train", "test"))):
             self.error(
@@ -907,6 +1135,16 @@ class _Reader:
         return f"rows {self.line_no[0]}-{self.line_no[-1]}"
 
     def _check_length_unit(self, position: Array, names: list[str]) -> None:
+        with np.errstate(over="ignore", invalid="ignore"):
+            far = np.isfinite(position) & (np.abs(position) > MAX_POSITION)  # NaN/inf: reported already
+        for i, c in np.argwhere(far)[:10]:
+            self.error(
+                "range",
+                f"{_short(self._cell(int(i), names[c]))} {self.length_unit} is farther than any device "
+                f"measures ({MAX_POSITION / 1000:g} km)",
+                int(self.line_no[i]),
+                names[c],
+            )
         dist = np.linalg.norm(position, axis=1)
         dist = dist[np.isfinite(dist)]
         if dist.size == 0:
@@ -969,21 +1207,33 @@ class _Reader:
 
     def _check_duplicates(self, cols, q, position, ori_values, sigma, split) -> None:
         parts = [q] + [a for a in (position, ori_values, sigma) if a is not None]
-        table = np.concatenate(parts, axis=1)
         if split is not None:
-            table = np.concatenate([table, (split == "train")[:, None].astype(float)], axis=1)
-        usable = np.flatnonzero(self.good & np.all(np.isfinite(table), axis=1))
+            parts.append((split == "train")[:, None].astype(float))
+        ok = self.good.copy()
+        for a in parts:
+            ok &= np.all(np.isfinite(a), axis=1)
+        usable = np.flatnonzero(ok)
         if usable.size < 2:
             return
-        _, first, inverse, counts = np.unique(
-            table[usable], axis=0, return_index=True, return_inverse=True, return_counts=True
-        )
-        inverse = inverse.reshape(-1)
+        # equal rows found through a 64-bit hash of their bits (sorting one number per row
+        # instead of whole rows: memory linear in the rows, not a copy of the table), each
+        # candidate then compared exactly
+        h = np.zeros(usable.size, dtype=np.uint64)
+        for a in parts:
+            for c in range(a.shape[1]):
+                bits = (a[usable, c] + 0.0).view(np.uint64)  # + 0.0: -0.0 and 0.0 are equal
+                h = (h * np.uint64(0x100000001B3)) ^ bits
+        order = np.argsort(h, kind="stable")  # stable: within a run, rows in file order
+        hs = h[order]
+        is_start = np.r_[True, hs[1:] != hs[:-1]]
+        run_first = order[np.flatnonzero(is_start)][np.cumsum(is_start) - 1]  # first row of each run
+        pairs = []
+        for k in np.flatnonzero(~is_start):
+            i, i0 = usable[order[k]], usable[run_first[k]]
+            if all(np.array_equal(a[i], a[i0]) for a in parts):
+                pairs.append((i, i0))
         joints_only = position is None
-        for m in np.flatnonzero(counts[inverse] > 1):
-            i, i0 = usable[m], usable[first[inverse[m]]]
-            if i == i0:
-                continue
+        for i, i0 in sorted(pairs):
             if joints_only:
                 self.warn(
                     "repeated-pose",

@@ -24,9 +24,14 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, err_console, fail, refuse_overwrite, safe
 
-__all__ = ["register"]
+__all__ = ["MAX_POOL", "MAX_POSES", "register"]
+
+#: at most this many poses per command (a measurement campaign has tens to thousands)
+MAX_POSES = 100_000
+#: at most this many candidates for --method optimal (its Jacobians: ~0.1 GB per 100 000)
+MAX_POOL = 100_000
 
 
 class Method(StrEnum):
@@ -48,6 +53,8 @@ def _region(text: str | None) -> np.ndarray | None:
     if len(v) != 6:
         raise fail(f"--region {text!r}: expected six numbers in mm, got {len(v)}")
     box = np.array(v).reshape(2, 3) * 1e-3
+    if not np.all(np.isfinite(box)):
+        raise fail(f"--region {text!r}: expected six finite numbers in mm")
     if np.any(box[0] >= box[1]):
         raise fail(f"--region {text!r}: each minimum must be below its maximum")
     return box
@@ -59,11 +66,18 @@ def poses_command(
     method: Annotated[Method, typer.Option("--method", help="how to choose the poses")] = Method.random,
     n: Annotated[
         int | None,
-        typer.Option("--n", help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)"),
+        typer.Option(
+            "--n",
+            min=1,
+            max=MAX_POSES,
+            help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)",
+        ),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", help="random seed")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="random seed")] = 0,
     index: Annotated[str, typer.Option("--index", help="index maximised by --method optimal: O1..O5")] = "O1",
-    pool: Annotated[int, typer.Option("--pool", help="candidate pool size for --method optimal")] = 2000,
+    pool: Annotated[
+        int, typer.Option("--pool", min=1, max=MAX_POOL, help="candidate pool size for --method optimal")
+    ] = 2000,
     rows: Annotated[str, typer.Option("--rows", help="measured quantities: position or pose")] = "position",
     kind: Annotated[
         str | None,
@@ -115,10 +129,12 @@ def poses_command(
             console.print(table)
             meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
             for d in sub.dropped:
-                console.print(f"[dim]not identifiable: {d}[/]", highlight=False)
+                console.print(f"[dim]not identifiable: {safe(d)}[/]", highlight=False, markup=True)
         elif method is Method.iso9283:
             if n not in (None, 5):
-                err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5")
+                err_console.print(
+                    "[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True
+                )
             with console.status("searching the largest ISO 9283 cube..."):
                 iso = iso9283_poses(m, kind=kind, seed=seed, region=box)  # type: ignore[arg-type]
             q = iso.q

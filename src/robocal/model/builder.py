@@ -642,7 +642,12 @@ def load_geometry(path: str | Path) -> Geometry:
         r, p, y = (v * A for v in spec.tcp.rpy)
         rotation = spatial.euler_to_matrix([r, p, y], "xyz")
     elif spec.tcp.quaternion is not None:
-        rotation = spatial.quaternion_to_matrix(spec.tcp.quaternion)
+        norm = math.sqrt(sum(v * v for v in spec.tcp.quaternion))
+        if not abs(norm - 1.0) < 0.01:  # a unit quaternion written with four digits is within 1e-4
+            raise GeometryError(
+                f"{path}: tcp.quaternion: {list(spec.tcp.quaternion)} has norm {norm:.3g}, not 1 (w, x, y, z)"
+            )
+        rotation = spatial.quaternion_to_matrix(np.asarray(spec.tcp.quaternion) / norm)
     tcp = Tcp(
         tuple(v * L for v in spec.tcp.position), None if rotation is None else tuple(map(tuple, rotation))
     )

@@ -7,8 +7,9 @@ from typing import Annotated
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
-from robocal.console import console, err_console, fail, refuse_overwrite
+from robocal.console import console, fail, input_problem, refuse_overwrite, safe, warn
 
 __all__ = ["register"]
 
@@ -57,7 +58,10 @@ def build_command(
 
     catalog = not geometry.is_file() and str(geometry).lower() in robots()
     if not geometry.is_file() and not catalog:
-        raise fail(f"{geometry} does not exist (nor is it a catalog robot: robocal robots)")
+        problem = input_problem(geometry, "geometry, URDF or model file") or f"{geometry} cannot be read"
+        if problem.endswith("does not exist"):
+            problem += " (nor is it a catalog robot: robocal robots)"
+        raise fail(problem)
     try:
         if geometry.suffix.lower() == ".urdf":
             result = build_from_urdf(geometry, measure or "pose", tip)
@@ -84,7 +88,9 @@ def build_command(
         table.add_column(col)
     free = set(model.free_names)
     for info in result.links:
-        params = " ".join(f"[bold]{p}[/]" if p in free else f"[dim]{p}[/]" for p in info.parameters)
+        params = Text.from_markup(
+            " ".join(f"[bold]{safe(p)}[/]" if p in free else f"[dim]{safe(p)}[/]" for p in info.parameters)
+        )
         table.add_row(str(info.index), info.label, params)
     console.print(table)
     R = model.joint_types.count("revolute")
@@ -96,7 +102,7 @@ def build_command(
         highlight=False,
     )
     for warning in result.warnings:
-        err_console.print(f"[yellow]warning:[/] {warning}", highlight=False)
+        warn(warning)
     save_model(model, output)
     console.print(f"wrote {output}", highlight=False)
 
@@ -136,7 +142,7 @@ def check_command(
         table.add_column(col)
     colours = {"ok": "green", "near-singular": "yellow", "singular": "red"}
     for link in result.links:
-        verdict = f"[{colours[link.verdict]}]{link.verdict}[/]"
+        verdict = Text(link.verdict, colours[link.verdict])
         table.add_row(
             str(link.index), " ".join(link.parameters), link.target, f"{link.rank}/{link.needed}", verdict
         )
@@ -145,7 +151,7 @@ def check_command(
     for col in ("joint", "max parameter change / tilt", "unrepresentable part", "verdict"):
         cont.add_column(col)
     for c in result.continuity:
-        verdict = "[green]continuous[/]" if c.continuous else "[red]jumps / cannot follow[/]"
+        verdict = Text("continuous", "green") if c.continuous else Text("jumps / cannot follow", "red")
         cont.add_row(c.joint, f"{c.parameter_change:.3g}", f"{c.residual:.2e}", verdict)
     console.print(cont)
     full = result.identification_rank == result.identification_columns
@@ -154,11 +160,12 @@ def check_command(
         f"{result.identification_columns} free parameters, condition number {result.condition_number:.3g}"
         + ("" if full else " [red](rank deficient)[/]"),
         highlight=False,
+        markup=True,
     )
     if result.ok:
-        console.print("[bold green]verdict: complete, minimal and continuous[/]")
+        console.print("[bold green]verdict: complete, minimal and continuous[/]", markup=True)
     else:
-        console.print("[bold red]verdict: singular or discontinuous parameterisation[/]")
+        console.print("[bold red]verdict: singular or discontinuous parameterisation[/]", markup=True)
         for link in result.links:
             if link.verdict != "ok":
                 console.print(f"  link {link.index}: {link.explanation}", highlight=False)

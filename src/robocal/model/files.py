@@ -47,6 +47,7 @@ Lengths and angles are in ``units`` (default m and rad).  Files written by
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
@@ -60,7 +61,15 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, mode
 from robocal.model import conventions
 from robocal.model.chain import Body, Joint, JointEffects, Model, Step
 
-__all__ = ["ModelFileError", "load_model", "model_from_dict", "model_to_dict", "save_model"]
+__all__ = [
+    "ModelFileError",
+    "csv_text",
+    "load_model",
+    "model_from_dict",
+    "model_to_dict",
+    "save_model",
+    "strict_json",
+]
 
 FORMAT_VERSION = 1
 MAX_FILE_BYTES = 5_000_000
@@ -319,6 +328,66 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
         raise ModelFileError(f"{origin}: {err}") from None
 
 
+class _DuplicateKeyCheck:
+    """Refuses a key that appears twice in a mapping (mixed into the loaders below)."""
+
+    def construct_mapping(self, node, deep=False):  # type: ignore[no-untyped-def]
+        # YAML lets a later key silently replace an earlier one: a typo'd copy-paste would
+        # then change a model without a word, so a repeated key is an error here
+        seen: dict[Any, Any] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)  # type: ignore[attr-defined]
+            try:
+                first = seen.setdefault(key, key_node.start_mark)
+            except TypeError:  # an unhashable key: the base class reports it
+                continue
+            if first is not key_node.start_mark:
+                raise yaml.constructor.ConstructorError(
+                    None,
+                    None,
+                    f"key {key!r} appears twice (first on line {first.line + 1})",
+                    key_node.start_mark,
+                )
+        return super().construct_mapping(node, deep=deep)  # type: ignore[misc]
+
+
+#: libyaml's parser where PyYAML has it (4x faster; the events are checked first, below)
+_FastBase = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _FastLoader(_DuplicateKeyCheck, _FastBase):  # type: ignore[misc, valid-type]
+    """libyaml's safe loader with the duplicate-key check; aliases, nesting and size are
+    checked on the event stream before it runs (:func:`_check_events`)."""
+
+
+#: YAML events (scalars, mapping and sequence starts ...) a file may have: a 1000-step
+#: model has about 15 000; 200 000 take about 3 s to load
+MAX_YAML_EVENTS = 200_000
+#: Nesting depth a file may have (a model file has 4 levels)
+MAX_YAML_DEPTH = 50
+
+
+def _check_events(text: str) -> None:
+    """Refuse aliases, nesting deeper than MAX_YAML_DEPTH and more than MAX_YAML_EVENTS
+    events, in one linear pass of libyaml's parser (no document is built)."""
+    depth = 0
+    for count, event in enumerate(yaml.parse(text, Loader=_FastBase), start=1):
+        if isinstance(event, yaml.AliasEvent):
+            raise yaml.constructor.ConstructorError(
+                None, None, "YAML aliases (*name) are not allowed in model files", event.start_mark
+            )
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                raise RecursionError
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+        if count > MAX_YAML_EVENTS:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"more than {MAX_YAML_EVENTS} entries (values, keys, lists)", event.start_mark
+            )
+
+
 class _NoAliasLoader(yaml.SafeLoader):
     """Safe loader that refuses YAML aliases (they allow exponential 'billion laughs' blow-up)."""
 
@@ -370,7 +439,13 @@ def read_yaml(path: str | os.PathLike[str], kind: str, error: type[Exception] = 
     except UnicodeDecodeError as err:
         raise error(f"{path}: not UTF-8 text (byte {err.start}: {err.reason})") from None
     try:
-        return yaml.load(text, Loader=_NoAliasLoader)
+        try:
+            _check_events(text)
+            return yaml.load(text, Loader=_FastLoader)
+        except yaml.YAMLError:
+            if len(text) > 100_000:  # libyaml's message (the pure-Python one would take seconds)
+                raise
+            return yaml.load(text, Loader=_NoAliasLoader)  # its messages are the clearer ones
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None) or getattr(err, "context_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
@@ -448,34 +523,111 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
+def _finite(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by None (JSON has no NaN/Infinity)."""
+    if isinstance(value, float) or (hasattr(value, "dtype") and getattr(value, "ndim", 1) == 0):
+        try:  # a float or a numpy scalar
+            number = float(value)
+        except (TypeError, ValueError):
+            return value
+        if isinstance(value, float) or value.dtype.kind == "f":
+            return number if math.isfinite(number) else None
+        return value.item()
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def strict_json(value: Any, **kwargs: Any) -> str:
+    """``json.dumps`` that writes strict JSON: a non-finite float (NaN, ±inf) becomes
+    ``null`` instead of the ``NaN``/``Infinity`` that other JSON readers refuse."""
+    import json
+
+    return json.dumps(_finite(value), allow_nan=False, **kwargs)
+
+
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_text(cell: str) -> str:
+    """A text cell for a CSV file that a spreadsheet will not run as a formula: a cell
+    that starts with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return and is not a
+    number gets a leading ``'`` (the usual convention, OWASP "CSV injection"); numbers
+    such as ``-0.5`` are written as they are."""
+    if not cell.startswith(_FORMULA_START):
+        return cell
+    try:
+        float(cell)
+    except ValueError:
+        return "'" + cell
+    return cell
+
+
+def csv_untext(cell: str) -> str:
+    """The text :func:`csv_text` was given (its leading ``'`` removed)."""
+    return cell[1:] if cell.startswith("'") and cell[1:].startswith(_FORMULA_START) else cell
+
+
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename (never half-written)."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Remove the ``.NAME.<pid>.*.tmp`` files that writers of ``path`` killed before their
+    rename left behind (those whose process is gone)."""
+    prefix = f".{path.name}."
+    try:
+        names = [n for n in os.listdir(path.parent) if n.startswith(prefix) and n.endswith(".tmp")]
+    except OSError:
+        return
+    for name in names:
+        pid = name[len(prefix) :].split(".", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:  # its writer is gone
+            with contextlib.suppress(OSError):
+                os.unlink(path.parent / name)
+        except (PermissionError, OverflowError):
+            continue
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary file and a rename (never half-written)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    _remove_stale_temporaries(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         # mkstemp makes the file private (0600); give it the permissions of a normal new file
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        if err.filename is None:  # a failed write() (disk full) names no file: name the target
+            raise OSError(err.errno, err.strerror, str(path)) from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
 
 
-def save_model(model: Model, path: str | os.PathLike[str]) -> Path:
-    """Write ``model`` to a YAML file atomically (SI units, exact round trip)."""
+def save_model(model: Model, path: str | os.PathLike[str], run_id: str | None = None) -> Path:
+    """Write ``model`` to a YAML file atomically (SI units, exact round trip); ``run_id``
+    stamps it as one file of a result folder (:mod:`robocal.outdir`)."""
+    name = model.name.replace("\n", " ").replace("\r", " ")
     header = (
-        f"# robocal model '{model.name}': {model.dof} joints, {len(model.steps)} parameters; "
-        "values in m and rad\n"
+        f"# robocal model '{name}': {model.dof} joints, {len(model.steps)} parameters; values in m and rad\n"
     )
+    if run_id is not None:
+        header += f"# robocal run: {run_id}\n"
     body = yaml.safe_dump(
         model_to_dict(model),
         sort_keys=False,

@@ -22,6 +22,9 @@ MAX_URDF_BYTES = 20_000_000
 #: the joint count (a 300-joint chain takes 1.8 GB and 2.5 s, 500 joints 8 GB), and a
 #: whole humanoid has about 40.
 MAX_URDF_JOINTS = 200
+#: Joints of any type (fixed ones too): the URDF reader walks the tree recursively, and a
+#: chain of 100 000 fixed joints crashes it
+MAX_URDF_ALL_JOINTS = 2000
 
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
@@ -77,6 +80,7 @@ def _check_xml(path: Path) -> None:
     parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
     links: set[str] = set()
     joints: list[dict] = []
+    joint_names: set[str | None] = set()  # a set: the check stays linear in the joint count
     stack: list[str] = []
 
     def refuse(*_):
@@ -94,8 +98,9 @@ def _check_xml(path: Path) -> None:
                 raise URDFError(f"line {line}: link {name!r} is defined twice")
             links.add(name)
         elif tag == "joint" and parent == "robot":
-            if any(j["name"] == attrs.get("name") for j in joints):
+            if attrs.get("name") in joint_names:
                 raise URDFError(f"line {line}: joint {attrs.get('name')!r} is defined twice")
+            joint_names.add(attrs.get("name"))
             joints.append({"name": attrs.get("name"), "type": attrs.get("type"), "line": line})
         elif parent == "joint" and joints:
             j = joints[-1]
@@ -108,6 +113,12 @@ def _check_xml(path: Path) -> None:
                 axis = _numbers(attrs.get("xyz"), 3, "axis xyz", line)
                 if axis is not None and not any(axis):
                     raise URDFError(f"line {line}: joint {j['name']!r}: the axis is zero")
+            elif tag == "mimic":
+                raise URDFError(
+                    f"line {line}: joint {j['name']!r} mimics joint {attrs.get('joint')!r}: coupled (mimic) "
+                    "joints are not supported (robocal would calibrate it as an independent joint); make it "
+                    "fixed or remove the <mimic> element if the joint really moves on its own"
+                )
             elif tag == "limit":
                 lo = _numbers(attrs.get("lower", "0"), 1, "limit lower", line)
                 hi = _numbers(attrs.get("upper", "0"), 1, "limit upper", line)
@@ -122,8 +133,8 @@ def _check_xml(path: Path) -> None:
     parser.StartElementHandler = start
     parser.EndElementHandler = lambda tag: stack.pop()
     try:
-        with open(path, "rb") as fh:
-            parser.ParseFile(fh)
+        # one buffer: fed in chunks, expat re-scans a long token (a 19 MB comment) per chunk
+        parser.Parse(path.read_bytes(), True)
     except expat.ExpatError as err:
         raise URDFError(
             f"{path}: not well-formed XML: {expat.ErrorString(err.code)} (line {err.lineno}, "
@@ -145,6 +156,11 @@ def _check_xml(path: Path) -> None:
                 raise URDFError(f"{where}: {end} link {link!r} is not a <link> of the robot")
         if j["type"] in ("revolute", "prismatic") and not j.get("limit"):
             raise URDFError(f"{where}: a {j['type']} joint needs <limit lower upper effort velocity>")
+    if len(joints) > MAX_URDF_ALL_JOINTS:  # urdfdom recurses per link: deep chains crash it
+        raise URDFError(
+            f"{path}: {len(joints)} joints; robocal reads URDFs of up to {MAX_URDF_ALL_JOINTS} "
+            "(fixed ones included)"
+        )
     movable = sum(j["type"] != "fixed" for j in joints)
     if movable > MAX_URDF_JOINTS:
         raise URDFError(f"{path}: {movable} movable joints; robocal reads URDFs of up to {MAX_URDF_JOINTS}")

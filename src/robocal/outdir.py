@@ -1,0 +1,402 @@
+"""Result folders written as transactions: all of a result or none of it, never a mix.
+
+A calibration folder (``model.yaml``, ``measurement_model.yaml``, ``result.json``, and the
+report and data files written with it) is one result: its files only make sense together.
+:func:`transaction` writes such a folder into a temporary sibling directory
+(``.NAME.<random>.staging``) and swaps it in as a whole:
+
+* ``NAME`` does not exist (or is empty): one ``rename`` of the staging directory;
+* ``NAME`` holds an earlier result: on Linux the two directories are exchanged in one
+  atomic ``renameat2(RENAME_EXCHANGE)``, elsewhere by two renames with the earlier result
+  kept as ``.NAME.<random>.old`` in between (restored by the next writer or reader if a
+  crash comes between the two);
+* files in ``NAME`` that the writer does not own (a user's notes, another tool's files) are
+  carried over (hard links, or copies across devices); files it owns are replaced or
+  dropped, so no stale ``measurement_model.yaml`` of an earlier calibration survives;
+* a folder that cannot or should not be renamed (the working directory or a parent of
+  it, a mount point, a folder with sub-folders or more than 50 other files: a home
+  directory given as ``--out``) is written file by file, ``result.json`` last; the run
+  ids then let readers detect a mix left by a crash in between.
+
+Writers of the same folder are serialised by a lock file ``.NAME.lock`` beside it
+(``flock``; removed on release): a second writer stops at once with a message naming the
+process that holds the lock.  A process killed at any point leaves either the earlier or
+the new result in ``NAME``; its leftover ``.NAME.*.staging`` / ``.NAME.*.old`` directories
+are removed by the next writer, and readers ignore them.
+
+Every file of a result carries the same run id (``result.json``: ``"run_id"``; YAML files:
+a ``# robocal run: ID`` comment line); :func:`check_consistent` refuses a folder whose files
+disagree.
+
+For tests: the environment variable ``ROBOCAL_TEST_KILL_AT`` names a write step
+(:data:`STEPS`) at which the process kills itself with SIGKILL, to check that every
+interruption leaves a complete result; ``ROBOCAL_TEST_NO_EXCHANGE=1`` takes the two-rename
+path of systems without ``renameat2`` (``parked`` is the step between its renames).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import errno
+import os
+import re
+import secrets
+import shutil
+import signal
+import time
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = [
+    "STEPS",
+    "FolderBusyError",
+    "FolderMixedError",
+    "Stage",
+    "check_consistent",
+    "check_not_busy",
+    "new_run_id",
+    "read_run_id",
+    "restore",
+    "transaction",
+]
+
+#: the write steps of a transaction, in order (see ``ROBOCAL_TEST_KILL_AT``)
+STEPS = ("locked", "staged", "carried", "parked", "swapped", "cleaned")
+
+_RUN_LINE = re.compile(r"^# robocal run: ([0-9a-f]{8,64})\s*$")
+
+
+class FolderBusyError(RuntimeError):
+    """Another process is writing the same result folder."""
+
+
+class FolderMixedError(ValueError):
+    """The files of a result folder come from different runs (the message names them)."""
+
+
+def new_run_id() -> str:
+    """A fresh run id (32 hex digits)."""
+    return secrets.token_hex(16)
+
+
+def run_id_line(run_id: str) -> str:
+    """The comment line that stamps a YAML or CSV file with ``run_id``."""
+    return f"# robocal run: {run_id}\n"
+
+
+def read_run_id(path: Path) -> str | None:
+    """The run id of a file written by a transaction: ``result.json``'s ``run_id`` or a
+    ``# robocal run: ID`` line among the first lines of a text file; None when it has none."""
+    path = Path(path)
+    if path.suffix == ".json":
+        import json
+
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        value = data.get("run_id") if isinstance(data, dict) else None
+        return value if isinstance(value, str) else None
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for _ in range(5):
+                match = _RUN_LINE.match(fh.readline(200))
+                if match:
+                    return match.group(1)
+    except OSError:
+        return None
+    return None
+
+
+def check_consistent(directory: Path, files: Collection[str], anchor: str = "result.json") -> None:
+    """Raise :class:`FolderMixedError` when the files of a result folder disagree.
+
+    ``anchor``'s run id (None for a folder written before run ids) must be the run id of
+    every other file of ``files`` present in ``directory``; the message names each file that
+    differs and its run id.
+    """
+    directory = Path(directory)
+    want = read_run_id(directory / anchor)
+    bad = []
+    for name in files:
+        if name == anchor or not (directory / name).is_file():
+            continue
+        got = read_run_id(directory / name)
+        if got != want:
+            bad.append(f"{name} (run {got or 'none'})")
+    if bad:
+        raise FolderMixedError(
+            f"{directory}: the files come from different runs: {anchor} is run {want or 'none'} but "
+            f"{', '.join(bad)}; calibrate again into this folder (--force) or a new one"
+        )
+
+
+def _test_step(step: str) -> None:
+    if os.environ.get("ROBOCAL_TEST_KILL_AT") == step:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+# ------------------------------------------------------------------ the lock
+@contextlib.contextmanager
+def _lock(target: Path, wait_s: float) -> Iterator[None]:
+    """Hold ``.NAME.lock`` beside ``target`` (flock), removed on release (no lock where the
+    system has no flock: Windows)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+
+    lock_path = target.parent / f".{target.name}.lock"
+    deadline = time.monotonic() + wait_s
+    while True:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+            os.close(fd)
+            if time.monotonic() >= deadline:
+                raise FolderBusyError(
+                    f"{target} is being written by another robocal process"
+                    + (f" (pid {holder})" if holder.isdigit() else "")
+                    + "; wait for it to finish or write elsewhere"
+                ) from None
+            time.sleep(0.05)
+            continue
+        # the lock file may have been removed (and recreated) by its previous holder
+        # between our open and our lock: then start again on the current file
+        try:
+            same = os.fstat(fd).st_ino == os.stat(lock_path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lock_path)
+        os.close(fd)
+
+
+def check_not_busy(target: str | os.PathLike[str]) -> None:
+    """Raise :class:`FolderBusyError` at once when another process is writing ``target``
+    (for commands that would otherwise compute for minutes before finding out)."""
+    target = Path(os.path.abspath(target))
+    if (target.parent / f".{target.name}.lock").exists():
+        with _lock(target, 0.0):
+            pass
+
+
+# ------------------------------------------------------------------ swapping
+def _renameat2():
+    """glibc's ``renameat2`` (Linux 3.15+, glibc 2.28+) or None."""
+    if not hasattr(os, "O_DIRECTORY") or os.uname().sysname != "Linux":
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        function = libc.renameat2
+    except (OSError, AttributeError):
+        return None
+    function.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    function.restype = ctypes.c_int
+    return function
+
+
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap directories ``a`` and ``b`` atomically; False when the system cannot."""
+    function = _renameat2()
+    if function is None:
+        return False
+    rc = function(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):  # not on this file system
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def _leftovers(target: Path) -> list[Path]:
+    prefix = f".{target.name}."
+    try:
+        names = os.listdir(target.parent)
+    except OSError:
+        return []
+    return [
+        target.parent / n
+        for n in names
+        if n.startswith(prefix) and (n.endswith(".staging") or n.endswith(".old"))
+    ]
+
+
+def recover(target: Path) -> None:
+    """Undo what a killed writer left: restore an earlier result parked as ``.NAME.*.old``
+    when ``NAME`` is missing, and remove leftover staging and parked directories.  Call
+    with the folder's lock held."""
+    leftovers = _leftovers(target)
+    if not target.exists():
+        parked = sorted((p for p in leftovers if p.name.endswith(".old")), key=lambda p: p.stat().st_mtime)
+        if parked:
+            os.rename(parked[-1], target)
+            leftovers.remove(parked[-1])
+    for path in leftovers:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def restore(target: str | os.PathLike[str]) -> None:
+    """For readers: when ``target`` is missing but a writer killed between its two renames
+    left the earlier result parked beside it, put that back (under the folder's lock)."""
+    target = Path(os.path.abspath(target))
+    if target.exists() or not any(p.name.endswith(".old") for p in _leftovers(target)):
+        return
+    with contextlib.suppress(FolderBusyError), _lock(target, wait_s=5.0):
+        recover(target)
+
+
+def _carry_over(old: Path, stage: Path, owned: Collection[str]) -> None:
+    """Hard-link (or copy) into ``stage`` what ``old`` holds beyond the files the writer owns."""
+    for entry in os.scandir(old):  # files only (a folder with sub-folders is written in place)
+        if entry.name in owned or (stage / entry.name).exists():
+            continue
+        src, dst = Path(entry.path), stage / entry.name
+        if entry.is_symlink():
+            os.symlink(os.readlink(src), dst)
+        else:
+            _link_or_copy(src, dst)
+
+
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """The staging directory of a transaction (``path``) and the run id its files carry."""
+
+    path: Path
+    run_id: str
+
+
+#: a folder with more entries than this that the writer does not own (or with a folder of
+#: its own) is not a result folder but, say, a home directory: it is written in place
+MAX_CARRIED = 50
+
+
+def _in_place_only(target: Path, owned: Collection[str]) -> bool:
+    """Whether ``target`` must not be renamed: the working directory (or one of its
+    parents), a mount point, or a folder holding sub-folders or many files of others."""
+    try:
+        cwd = Path.cwd().resolve()
+    except OSError:
+        return True
+    if target == cwd or target in cwd.parents or os.path.ismount(target):
+        return True
+    foreign = 0
+    with os.scandir(target) as entries:
+        for entry in entries:
+            if entry.name in owned:
+                continue
+            foreign += 1
+            if foreign > MAX_CARRIED or entry.is_dir(follow_symlinks=False):
+                return True
+    return False
+
+
+@contextlib.contextmanager
+def transaction(
+    target: str | os.PathLike[str],
+    owned: Collection[str],
+    *,
+    run_id: str | None = None,
+    wait_s: float = 1.0,
+) -> Iterator[Stage]:
+    """Write the result folder ``target`` as a whole.
+
+    Write every file of the result into ``stage.path`` inside the ``with`` block; on a
+    normal exit the folder is swapped in whole (see the module docstring), on an exception
+    nothing changes.  ``owned`` names the files a result of this kind consists of (replaced
+    or dropped; everything else in ``target`` is kept).
+
+    Raises:
+        FolderBusyError: another process holds the folder's lock (after ``wait_s`` seconds:
+            a moment, so that a :func:`check_not_busy` probe never stops a writer).
+    """
+    target = Path(os.path.abspath(target))
+    if target.exists() and target.is_dir():
+        target = target.resolve()
+    target.parent.mkdir(parents=True, exist_ok=True)
+    owned = frozenset(owned)
+    with _lock(target, wait_s):
+        _test_step("locked")
+        recover(target)
+        stage = Path(os.path.join(target.parent, f".{target.name}.{secrets.token_hex(6)}.staging"))
+        os.mkdir(stage)
+        try:
+            yield Stage(stage, run_id or new_run_id())
+            _test_step("staged")
+            if target.is_dir() and _in_place_only(target, owned):
+                _move_files_in(stage, target, owned)
+                return
+            if target.is_dir():
+                _carry_over(target, stage, owned)
+            _test_step("carried")
+            _swap(stage, target)
+            _test_step("swapped")
+        finally:
+            shutil.rmtree(stage, ignore_errors=True)
+        _test_step("cleaned")
+
+
+def _swap(stage: Path, target: Path) -> None:
+    """Put ``stage`` in ``target``'s place; the earlier ``target`` ends at ``stage``."""
+    if not target.exists():
+        os.rename(stage, target)
+        return
+    if not target.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "not a directory", str(target))
+    try:
+        os.rmdir(target)  # an empty folder: nothing to keep
+    except OSError:
+        pass
+    else:
+        os.rename(stage, target)
+        return
+    if os.environ.get("ROBOCAL_TEST_NO_EXCHANGE") != "1" and _exchange(stage, target):
+        return
+    parked = target.parent / f".{target.name}.{secrets.token_hex(6)}.old"
+    os.rename(target, parked)
+    _test_step("parked")
+    os.rename(stage, target)
+    os.rename(parked, stage)
+
+
+def _move_files_in(stage: Path, target: Path, owned: Collection[str]) -> None:
+    """The working directory or a mount point is written file by file (it cannot be
+    renamed); the run ids let readers detect a mix should the process die in between."""
+    for name in owned:
+        if (target / name).exists() and not (stage / name).exists():
+            (target / name).unlink()
+    for entry in sorted(os.listdir(stage), key=lambda n: n == "result.json"):  # result.json last
+        os.replace(stage / entry, target / entry)
+
+
+def write_files(stage: Stage, files: dict[str, str | bytes]) -> None:
+    """Write ``files`` (name -> text or bytes) into the staging directory."""
+    for name, content in files.items():
+        data = content.encode("utf-8") if isinstance(content, str) else content
+        (stage.path / name).write_bytes(data)
