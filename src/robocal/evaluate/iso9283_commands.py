@@ -14,7 +14,6 @@ from typing import Annotated
 
 import typer
 import yaml
-from rich.markup import escape
 from rich.table import Table
 
 from robocal.console import console, fail, refuse_overwrite
@@ -52,25 +51,25 @@ def iso9283_command(
         data = read_iso9283_log(log)
         results = evaluate_log(data, EvaluationOptions(band=band_m))
     except Iso9283LogError as err:
-        raise fail(escape(str(err))) from None
+        raise fail(str(str(err))) from None
     except ValueError as err:
-        raise fail(escape(f"{log}: {err}" if str(log) not in str(err) else str(err))) from None
+        raise fail(str(f"{log}: {err}" if str(log) not in str(err) else str(err))) from None
     if html_out is not None:
         atomic_write_text(html_out, results_html(results, f"ISO 9283 characteristics of {log.name}"))
     if as_json:
         print(json.dumps(results.to_dict(), indent=1, allow_nan=False))
         return
-    table = Table(title=escape(f"ISO 9283 characteristics of {log}"), title_justify="left", show_lines=True)
+    table = Table(title=str(f"ISO 9283 characteristics of {log}"), title_justify="left", show_lines=True)
     for col in ("#", "characteristic", "clause", "result", "cycles"):
         table.add_column(col, overflow="fold")
     for row, r in zip(results_text(results), results.rows, strict=True):
         style = "" if r.measured else "dim"
-        table.add_row(*(escape(c) for c in row), style=style)
+        table.add_row(*(str(c) for c in row), style=style)
     console.print(table)
     measured = sum(r.measured for r in results.rows)
     console.print(f"{measured} of 14 measured; limit band {results.band * 1e3:g} mm", highlight=False)
     if html_out is not None:
-        console.print(f"wrote {escape(str(html_out))}", highlight=False)
+        console.print(f"wrote {str(html_out)!s}", highlight=False)
 
 
 def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | None, force: bool) -> None:
@@ -92,17 +91,17 @@ def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | N
             errors = LogErrors(noise=sigma)
         sim = simulate_log(model, errors=errors, seed=0 if seed is None else seed)
     except ValueError as err:
-        raise fail(escape(str(err))) from None
+        raise fail(str(str(err))) from None
     truth_path = log.with_name(log.stem + ".truth.yaml")
     write_iso9283_log(sim.log, log)
     atomic_write_text(truth_path, yaml.safe_dump(sim.truth, sort_keys=False))
     console.print(
-        escape(f"wrote {log} ({sim.log.n} samples, tests: {', '.join(sim.log.tests())})")
-        + escape(f" and the truth {truth_path}"),
+        str(f"wrote {log} ({sim.log.n} samples, tests: {', '.join(sim.log.tests())})")
+        + str(f" and the truth {truth_path}"),
         highlight=False,
         soft_wrap=True,
     )
-    console.print(escape(f"next: robocal iso9283 {log} --html {log.with_suffix('.html')}"), highlight=False)
+    console.print(str(f"next: robocal iso9283 {log} --html {log.with_suffix('.html')}"), highlight=False)
 
 
 def register(app: typer.Typer) -> None:
