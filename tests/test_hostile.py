@@ -721,7 +721,8 @@ def test_a_file_name_with_markup_is_printed_as_written(base, tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert str(out / "model.yaml") in result.output.replace("\n", ""), result.output
-    result = CliRunner().invoke(app, ["validate", str(out), "--data", str(folder / "[red].csv"), "--all-rows"])
+    args = ["validate", str(out), "--data", str(folder / "[red].csv"), "--all-rows"]
+    result = CliRunner().invoke(app, args)
     assert result.exit_code == 0 and "[red].csv" in result.output, result.output
 
 
