@@ -60,10 +60,10 @@ __all__ = [
     "LINEAR_STEP",
     "InfluenceAnalysis",
     "PerPoseSets",
+    "deviation_steps",
     "influence_analysis",
     "per_pose_sets",
     "solve_per_pose",
-    "test_steps",
 ]
 
 Array = NDArray[np.float64]
@@ -74,7 +74,7 @@ ANGULAR_STEP = math.radians(0.05)
 LINEAR_STEP = 1e-4
 
 
-def test_steps(problem, angular_step: float = ANGULAR_STEP, linear_step: float = LINEAR_STEP) -> Array:
+def deviation_steps(problem, angular_step: float = ANGULAR_STEP, linear_step: float = LINEAR_STEP) -> Array:
     """``(p,)`` test deviation of each unknown of ``problem`` (rad or m; an effect
     coefficient: the value that moves the tool by ``linear_step`` at the robot's size)."""
     rot = np.array([s.is_rotation for s in problem.chain.steps if s.free], dtype=bool)
@@ -145,7 +145,7 @@ def influence_analysis(
     """Seed 003 §3.5: impose each test deviation on the model at ``x`` and measure the tool
     point's displacement at every pose of ``problem`` (finite deviations, not derivatives)."""
     x = np.asarray(x, dtype=float)
-    steps = test_steps(problem, angular_step, linear_step)
+    steps = deviation_steps(problem, angular_step, linear_step)
     n, width = len(problem.q), problem.rows
     p0 = problem.predicted(x)[:, :3, 3]
     r0 = problem.residual(x).reshape(n, width)
@@ -195,7 +195,7 @@ def per_pose_sets(
     width = problem.rows
     n = len(problem.q)
     w = problem.weights.reshape(n, width)
-    scale = test_steps(problem)  # unknowns in units of their test deviation
+    scale = deviation_steps(problem)  # unknowns in units of their test deviation
     J = problem.jacobian(x).reshape(n, width, -1) * scale  # weighted rows (1/σ), as the other methods
     r = -problem.residual(x).reshape(n, width)  # ΔP = measured − predicted (weighted)
     JJt_inv = np.linalg.pinv(J @ J.transpose(0, 2, 1), rcond=1e-12, hermitian=True)
@@ -243,7 +243,7 @@ def _correction_maps(problem, x: Array, k: Array | None) -> tuple[Array, Array]:
     """Each pose's limit correction map ``Mᵢ = K Jᵢᵀ(Jᵢ K Jᵢᵀ)⁻¹`` (``(n, p, w)``, unknowns'
     units, weighted rows; ``K = I`` for eq. 3.6) and the weighted Jacobian ``(n, w, p)``."""
     n, width = len(problem.q), problem.rows
-    scale = test_steps(problem)
+    scale = deviation_steps(problem)
     J = problem.jacobian(x).reshape(n, width, -1)
     Js = J * scale
     gain = np.ones((n, J.shape[2])) if k is None else np.asarray(k, dtype=float)
@@ -260,7 +260,7 @@ def _balanced_step(problem, x: Array, k: Array | None) -> Array:
     r = -problem.residual(x).reshape(len(problem.q), problem.rows)
     g = np.einsum("npw,nw->p", M, r)
     A = np.einsum("npw,nwq->pq", M, J)
-    scale = test_steps(problem)
+    scale = deviation_steps(problem)
     return np.linalg.lstsq(A * scale, g, rcond=1e-12)[0] * scale
 
 
