@@ -615,6 +615,16 @@ def _mean_sd(values: list[float]) -> dict[str, float]:
     return {"mean": float(a.mean()), "sd": float(a.std(ddof=1)) if len(a) > 1 else 0.0}
 
 
+def noise_seeds(draws: int) -> tuple[int, ...]:
+    """The measurement-noise seeds of ``draws`` noise draws (those of :func:`run`)."""
+    return tuple(1 + 10 * k for k in range(draws))
+
+
+def run_sizes(quick: bool) -> tuple[int, int, int]:
+    """Held-out poses, noise draws and circle samples of :func:`run`."""
+    return (100, 2, 120) if quick else (200, 5, 360)
+
+
 def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> dict[str, Any]:
     """Run the seed 003 experiment; see the module docstring.
 
@@ -629,9 +639,9 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         held-out average |ΔP| (mm), averaged over the noise draws.
     """
     t0 = time.perf_counter()
-    n_test, draws, n_samples = (100, 2, 120) if quick else (200, 5, 360)
+    n_test, draws, n_samples = run_sizes(quick)
     setup = katana_setup(n_test=n_test)
-    runs = [static_experiment(setup, noise_seed=1 + 10 * k) for k in range(draws)]
+    runs = [static_experiment(setup, noise_seed=seed) for seed in noise_seeds(draws)]
     first = runs[0]
     keys = ["before", *STATIC_METHODS]
     held = {k: _mean_sd([r["held_out"][k]["average"][3] for r in runs]) for k in keys}
@@ -640,7 +650,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     robust = static_experiment(robust_setup, noise_seed=5)
     static = {f"{k}_static": first["results"][k] for k in ("simultaneous", "simultaneous_measured")}
     trajectory = trajectory_experiment(setup, static, n_samples=n_samples)
-    chapter_3 = influence_experiment(setup, tuple(1 + 10 * k for k in range(draws)))
+    chapter_3 = influence_experiment(setup, noise_seeds(draws))
     numbers: dict[str, Any] = {
         **{k: round(held[k]["mean"], 4) for k in ("before", "conventional", "tilt_aware", "simultaneous")},
         "units": "mm and deg; held-out = poses not used for calibration",
