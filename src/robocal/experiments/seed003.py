@@ -17,6 +17,14 @@ virtual Katana whose errors are the thesis' own numbers:
   (:func:`robocal.measure.poses.diagonal_plane_poses`); held-out poses drawn at random
   over the workspace above the table.
 
+**Influence-based identification (ch. 3, Fig. 3.8, Table 3.4)**: the thesis' parameters
+(Table 3.2's) identified from the 118 poses by the thesis' standard method (eq. 3.6 at
+each pose, the per-pose sets averaged) and its influence-based one (eqs. 3.7-3.8), one
+pass each as the thesis describes them, by the best per-pose set, repeated until the set
+stops moving, by least squares over all poses and by the least sum of distances (the
+floor of Table 3.4's average |ΔP| for any set of those parameters); the influence
+analysis of Fig. 3.8 (:mod:`robocal.identify.influence`).
+
 **Static calibration (ch. 4, Tables 4.5/4.6)**: before; conventional (geometric,
 level 2); the thesis' two-stage "tilt-aware" method (tilting predicted from the
 measured joint parameters and removed, then geometric identification: eqs.
