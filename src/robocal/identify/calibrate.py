@@ -1091,6 +1091,9 @@ def calibrate_physics(
     bounds: tuple[ArrayLike, ArrayLike] | Literal["default", "widened"] | None = "default",
     resolution: float = 1e-5,
     relaxation: float = 0.5,
+    per_pose: bool = False,
+    combine: Literal["mean", "best", "fit"] = "mean",
+    passes: int | None = None,
     max_iterations: int = 200,
     max_std: float = 5e-4,
     max_std_ratio: float = 3.0,
@@ -1135,6 +1138,14 @@ def calibrate_physics(
             ``result.metadata["at_bounds"]`` and in a warning.
         resolution: measurement resolution (m): the ``pinv``/``influence`` stop criterion.
         relaxation: C < 1 of the ``influence`` method.
+        per_pose: ``pinv`` only: seed 003's per-pose pseudo-inverse Jᵢᵀ(JᵢJᵢᵀ)⁻¹ at each
+            pose, then the best-fit set (:mod:`robocal.identify.influence`), instead of
+            (JᵀJ)⁻¹Jᵀ over all poses.
+        combine: per-pose methods (``influence``, ``pinv`` with ``per_pose``): how the
+            per-pose sets become one: ``"mean"``, ``"best"`` or ``"fit"``
+            (:mod:`robocal.identify.influence`).
+        passes: per-pose methods: ``1`` is the thesis' single pass; ``None`` repeats it
+            until the combined set stops moving.
         max_std: a parameter whose standard deviation, as a displacement of the tool (m:
             σ times the largest displacement of the measured point per unit of the
             parameter over the measured poses; for joint-effect coefficients σ times the
@@ -1349,8 +1360,8 @@ def calibrate_physics(
         options |= {"loss": loss, "f_scale": f_scale * float(np.median(w[:, :3]))}
     elif method in ("pinv", "influence"):
         options |= {"resolution": resolution}
-        if method == "influence":
-            options["relaxation"] = relaxation
+        if method == "influence" or per_pose:
+            options |= {"combine": combine, "passes": passes, "per_pose": per_pose, "relaxation": relaxation}
     elif method == "bounded":
         lo, hi, widened = _bounded_method_bounds(bounds, problem, selection.dropped, length, set(model.names))
         if widened is not None:
