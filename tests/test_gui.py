@@ -19,7 +19,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from urllib.parse import urlparse
+from urllib.parse import urljoin, urlparse
 
 import pytest
 
@@ -316,7 +316,7 @@ def test_calibrate_series_a_on_100_poses(page, shots):
     link = pg.locator("#report-link")
     link.wait_for(timeout=120_000)  # written after the result is shown
     report = link.get_attribute("href")
-    response = pg.request.get(report)
+    response = pg.request.get(urljoin(pg.url, report))
     assert response.ok and "<html" in response.text()[:200].lower()
 
 
@@ -344,7 +344,7 @@ def test_bad_csv_shows_the_readers_message(page, shots, tmp_path):
     bad.write_text("q1,q2,x,y,z\n0.1,0.2,1.0,2.0,3.0\n0.3,abc,1.1,2.1,3.1\n", encoding="utf-8")
     pg = page
     _open_calibration(pg, bad)
-    error = pg.locator("#csv-error")
+    error = pg.locator("#csv-error", has_text="bad.csv")
     error.wait_for(timeout=30_000)
     assert "bad.csv" in error.inner_text() and "row 3" in error.inner_text() and "'q2'" in error.inner_text()
     cells = pg.locator("table.problems tbody tr").first.locator("td")

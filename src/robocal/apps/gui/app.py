@@ -23,7 +23,7 @@ body { font-family: system-ui, sans-serif; margin: 0; color: #222; font-size: 14
 header { background: #1f3b57; color: white; padding: 0.5rem 1rem; }
 header b { font-size: 1.2rem; margin-right: 1rem; }
 .page { display: flex; gap: 1rem; padding: 0.5rem 1rem; align-items: flex-start; }
-.left { flex: 1 1 50%; min-width: 0; } .right { flex: 1 1 50%; min-width: 0; }
+.left, .right { flex: 1 1 50%; min-width: 0; overflow-x: auto; }
 .toolbar { margin: 0.4rem 0; display: flex; gap: 0.4rem; align-items: center; flex-wrap: wrap; }
 .toolbar > div { display: inline-block; }
 button { padding: 0.25rem 0.6rem; cursor: pointer; }
@@ -56,6 +56,7 @@ fieldset { border: 1px solid #ccc; margin: 0.4rem 0; }
 .progress { height: 14px; background: #eee; border-radius: 7px; overflow: hidden; margin: 0.4rem 0; }
 .bar { height: 100%; width: 0%; background: #1f77b4; transition: width 0.3s; }
 @keyframes pulse { 0% { opacity: 1; } 50% { opacity: 0.55; } 100% { opacity: 1; } }
+pre.cv { font-size: 0.78rem; background: #f6f6f6; padding: 0.3rem; }
 pre.raw { background: #f6f6f6; padding: 0.4rem; font-size: 0.75rem; overflow-x: auto; }
 .big { font-size: 1.05rem; font-weight: 600; margin: 0.3rem 0; }
 """

@@ -155,6 +155,7 @@ def layout(catalog: Sequence[str]) -> html.Div:
             dcc.Interval(id="cal-poll", interval=400, disabled=True),
             dcc.Store(id="cal-run-id"),
             dcc.Store(id="cal-shown"),
+            dcc.Store(id="csv-file"),
             dcc.Download(id="cal-download"),
         ],
         className="page",
@@ -202,7 +203,7 @@ def preview_table(data, joint_types: Sequence[str] | None = None) -> html.Table:
     )
 
 
-def _problems(err) -> html.Div:
+def _problems(err, path: Path) -> html.Div:
     problems = [p for p in getattr(err, "problems", []) if p.severity == "error"][:20]
     rows = [
         html.Tr([html.Td("" if p.row is None else str(p.row)), html.Td(p.column or ""), html.Td(p.message)])
@@ -216,7 +217,8 @@ def _problems(err) -> html.Div:
         if rows
         else ""
     )
-    return html.Div([html.Div(str(err), className="error", id="csv-error"), table])
+    message = str(err).replace(str(path), path.name)  # the name the user knows, not the upload's copy
+    return html.Div([html.Div(message, className="error", id="csv-error"), table])
 
 
 def _raw_head(path: Path, lines: int = 6) -> html.Pre:
@@ -315,7 +317,7 @@ def results_view(out: Path) -> list[Any]:
         html.Div(head, id="result-head"),
         html.Div(held_line, id="held-out", className="big"),
         html.Div(verdict, id="fit-to-noise"),
-        *[html.Div(line, className="hint") for line in result.residual_lines()],
+        html.Pre("\n".join(result.residual_lines()), className="cv") if result.residual_lines() else "",
         *warns,
         _stats_table(
             [
@@ -392,41 +394,47 @@ def register(app: Dash, workdir: Path) -> None:
             return rc.load_model(path)
         return rc.calibration_model(choice, measure)
 
+    def data_file(token: str | None) -> Path | None:
+        """The uploaded file of this page (each upload has its own directory)."""
+        if not token:
+            return None
+        path = workdir / "data" / token
+        return path if path.is_file() and path.parent.parent == workdir / "data" else None
+
     @app.callback(
         Output("csv-name", "children"),
+        Output("csv-file", "data"),
         Input("upload-csv", "contents"),
         State("upload-csv", "filename"),
         prevent_initial_call=True,
     )
     def upload(contents, filename):
         data = _decode_bytes(contents)
-        name = Path(filename or "measurements.csv").name
-        target = workdir / "data" / name
-        target.parent.mkdir(exist_ok=True)
-        for old in target.parent.iterdir():
-            old.unlink()
+        name = Path(filename or "measurements.csv").name or "measurements.csv"
+        token = f"{uuid.uuid4().hex[:12]}/{name}"
+        target = workdir / "data" / token
+        target.parent.mkdir(parents=True)
         target.write_bytes(data)
-        return f"{name} ({len(data):,} bytes)"
+        return f"{name} ({len(data):,} bytes)", token
 
     @app.callback(
         Output("csv-preview", "children"),
-        Input("csv-name", "children"),
+        Input("csv-file", "data"),
         *reader_inputs,
         Input("cal-model", "value"),
         State("built-model", "data"),
     )
-    def preview(name, *args):
+    def preview(token, *args):
         *options, choice, built = args
-        files = list((workdir / "data").glob("*")) if (workdir / "data").is_dir() else []
-        if not files:
+        path = data_file(token)
+        if path is None:
             return html.Div("open a measurement CSV", className="hint")
-        path = files[0]
         try:
             opts = read_options(*options)
             model = model_for(choice, built, "position")
             data, warns = _read(path, opts, model)
         except ValueError as err:
-            return [_problems(err), html.H4("the file's first lines"), _raw_head(path)]
+            return [_problems(err, path), html.H4("the file's first lines"), _raw_head(path)]
         observed = {
             "joints": "joint values only",
             "position": "positions",
@@ -461,20 +469,21 @@ def register(app: Dash, workdir: Path) -> None:
         State("cal-tool", "value"),
         State("cal-noise", "value"),
         State("cal-compliance", "value"),
+        State("csv-file", "data"),
         prevent_initial_call=True,
     )
     def run(_n, *args):
         options = read_options(*args[:8])
-        choice, built, measure, method, residual, train_n, seed, tool, noise, compliance = args[8:]
-        files = list((workdir / "data").glob("*")) if (workdir / "data").is_dir() else []
+        choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, token = args[8:]
+        path = data_file(token)
         try:
-            if not files:
+            if path is None:
                 raise ValueError("open a measurement CSV first")
             if choice is None:
                 raise ValueError("choose the robot (its model)")
             effective = measure
             if measure == "auto":
-                data, _ = _read(files[0], options)
+                data, _ = _read(path, options)
                 effective = "pose" if data.orientation is not None else "position"
             model = model_for(choice, built, effective)
             n = _float(train_n, "calibration poses")
@@ -503,7 +512,7 @@ def register(app: Dash, workdir: Path) -> None:
         run_id = uuid.uuid4().hex[:12]
         model_file = save_model(model, workdir / "runs" / f"{run_id}.model.yaml")
         job = CalibrationJob(
-            data=files[0],
+            data=path,
             reader=options,
             model_file=model_file,
             out=workdir / "runs" / run_id,
@@ -517,7 +526,7 @@ def register(app: Dash, workdir: Path) -> None:
             measure=None if measure == "auto" else measure,
         )
         runner.start(job)
-        return run_id, False, f"calibrating {model.name} on {files[0].name} ...", "", ""
+        return run_id, False, f"calibrating {model.name} on {path.name} ...", "", ""
 
     @app.callback(
         Output("cal-bar", "style"),

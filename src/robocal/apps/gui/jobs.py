@@ -163,7 +163,7 @@ def _run(job: CalibrationJob, queue) -> None:
         write_report(result, job.out / "report.html", data=train, test_data=test)
         _send(queue, "done", str(job.out))
     except (MeasurementFileError, ValueError) as err:
-        _send(queue, "error", str(err))
+        _send(queue, "error", str(err).replace(str(job.data), job.data.name))
     except Exception as err:  # an unexpected failure still ends the run with one line
         _send(queue, "error", f"calibration failed: {type(err).__name__}: {err}")
         _send(queue, "trace", traceback.format_exc())
