@@ -28,6 +28,7 @@ from robocal.apps.gui.form import (
     check_form,
     form_from_catalog,
     form_from_geometry_text,
+    form_from_urdf,
     geometry_yaml,
     link_rows,
     model_file_text,
@@ -109,6 +110,15 @@ def test_link_rows_give_equation_checks_and_the_count():
         form_from_geometry_text((ROOT / "examples/geometry/gantry_ppp_rrr.yaml").read_text())
     )
     assert "4·3 + 2·3 + 6 = 24" in link_rows(gantry)[1]
+
+
+def test_urdf_import_fills_the_form():
+    form = form_from_urdf((ROOT / "tests" / "data" / "ur10.urdf").read_text(encoding="utf-8"), "ur10.urdf")
+    assert len(form.joints) == 6 and form.joints[0]["name"] == "shoulder_pan_joint"
+    _, result = build_form(form)
+    assert result is not None and len(result.model.free_names) == 30
+    with pytest.raises(ValueError, match="broken.urdf"):
+        form_from_urdf("<robot name='x'><link name='a'/>", "broken.urdf")
 
 
 # ----------------------------------------------------------------------- the browser
@@ -264,7 +274,7 @@ def test_builder_types_the_ur10_and_saves_the_cli_model_file(page, shots, tmp_pa
     _type(pg, 2, "ay", "0")
     _type(pg, 2, "px", "six")
     pg.locator(f".invalid > {_field(2, 'ay')}").wait_for(timeout=10_000)
-    assert pg.locator(f".invalid > {_field(2, 'px')}").count() == 1
+    pg.locator(f".invalid > {_field(2, 'px')}").wait_for(timeout=10_000)
     assert pg.locator(f".invalid > {_field(1, 'px')}").count() == 0
     assert "zero length" in pg.locator(".rowmsg").nth(3).inner_text()
     pg.screenshot(path=str(shots / "builder_invalid.png"), full_page=True)
@@ -279,7 +289,7 @@ def _radio(pg, ident: str, value: str) -> None:
     pg.locator(f"#{ident} input[value='{value}']").check()
 
 
-def test_calibrate_series_a_on_100_poses(page, shots):
+def test_calibrate_series_a_on_100_poses(page, shots, tmp_path):
     if not SERIES_A.is_file():
         pytest.skip(f"{SERIES_A} is not there (../shared beside the repository)")
     pg = page
@@ -318,6 +328,19 @@ def test_calibrate_series_a_on_100_poses(page, shots):
     report = link.get_attribute("href")
     response = pg.request.get(urljoin(pg.url, report))
     assert response.ok and "<html" in response.text()[:200].lower()
+
+    # compensate two targets (mm, base frame) and export the calibrated URDF
+    targets = tmp_path / "targets.csv"
+    targets.write_text("name,x,y,z\nA,600,-200,400\nB,500,100,300\n", encoding="utf-8")
+    with pg.expect_download() as download:
+        pg.locator("#upload-targets input[type=file]").set_input_files(str(targets))
+    compensated = download.value.path().read_text(encoding="utf-8").splitlines()
+    assert compensated[0].startswith("name,q1,") and len(compensated) == 3
+    assert "2 of 2 targets reached" in pg.locator("#export-message").inner_text()
+    with pg.expect_download() as download:
+        pg.click("#export-urdf")
+    assert "<robot" in download.value.path().read_text(encoding="utf-8")
+    assert "learned residual" in pg.locator("#export-message").inner_text()  # what the URDF cannot carry
 
 
 def test_cancel_stops_a_calibration(page):

@@ -261,24 +261,21 @@ def _stats_table(rows: Sequence[tuple[str, dict | None]]) -> html.Table:
 
 
 def _residual_figure(sets: dict) -> Any:
+    """Histograms of the per-pose position errors: before and after on the calibration poses,
+    after on the held-out poses (one panel each: their scales differ by orders of magnitude)."""
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
-    fig = make_subplots(rows=1, cols=2, subplot_titles=("calibration poses", "held-out poses"))
-    traces = (
-        ("before", "before (nominal model, fitted frame and tool)", 1),
-        ("after", "after calibration", 1),
-        ("held_out", "held-out, calibrated", 2),
+    panels = (
+        ("before", "calibration poses, start model", "#d62728"),
+        ("after", "calibration poses, calibrated", "#1f77b4"),
+        ("held_out", "held-out poses, calibrated", "#2ca02c"),
     )
-    for key, name, col in traces:
-        if sets.get(key) is not None:
-            fig.add_trace(go.Histogram(x=sets[key]["errors_mm"], name=name, opacity=0.6), 1, col)
-    fig.update_layout(
-        barmode="overlay",
-        height=320,
-        margin={"l": 40, "r": 10, "t": 40, "b": 40},
-        legend={"orientation": "h"},
-    )
+    shown = [p for p in panels if sets.get(p[0]) is not None]
+    fig = make_subplots(rows=1, cols=len(shown), subplot_titles=[title for _, title, _ in shown])
+    for col, (key, title, colour) in enumerate(shown, start=1):
+        fig.add_trace(go.Histogram(x=sets[key]["errors_mm"], name=title, marker_color=colour), 1, col)
+    fig.update_layout(height=300, margin={"l": 40, "r": 10, "t": 40, "b": 40}, showlegend=False)
     fig.update_xaxes(title_text="position error per pose, mm")
     return fig
 
