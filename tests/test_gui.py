@@ -117,8 +117,24 @@ def test_urdf_import_fills_the_form():
     assert len(form.joints) == 6 and form.joints[0]["name"] == "shoulder_pan_joint"
     _, result = build_form(form)
     assert result is not None and len(result.model.free_names) == 30
-    with pytest.raises(ValueError, match="broken.urdf"):
+    with pytest.raises(ValueError, match=r"broken\.urdf"):
         form_from_urdf("<robot name='x'><link name='a'/>", "broken.urdf")
+
+
+def test_gui_command_refuses_a_busy_port_in_one_line():
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        result = CliRunner().invoke(app, ["gui", "--port", str(port), "--no-browser"])
+    assert result.exit_code == 2
+    assert f"--port {port}: the port is in use" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(app, ["gui", "--port", "70000", "--no-browser"])
+    assert result.exit_code == 2 and "between 1 and 65535" in result.output
 
 
 # ----------------------------------------------------------------------- the browser
