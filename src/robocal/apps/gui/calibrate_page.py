@@ -52,6 +52,7 @@ def _row(label: str, control: Any, hint: str = "") -> html.Div:
 def layout(catalog: Sequence[str]) -> html.Div:
     """The calibration page."""
     text = {"type": "text", "debounce": False}
+    reread = {"type": "text", "debounce": 0.5}  # the reader's text options: re-read once the typing pauses
     reader = html.Fieldset(
         [
             html.Legend("measurement file and reader options"),
@@ -63,12 +64,12 @@ def layout(catalog: Sequence[str]) -> html.Div:
             _row("decimal mark", _radio("opt-decimal", (".", ","), ".")),
             _row(
                 "orientation",
-                dcc.Input(id="opt-orientation", value="auto", style={"width": "12em"}, **text),
+                dcc.Input(id="opt-orientation", value="auto", style={"width": "12em"}, **reread),
                 "auto | none | quaternion | rotvec | euler:SEQ[:deg|rad]",
             ),
             _row(
                 "column renames",
-                dcc.Input(id="opt-columns", value="", style={"width": "46em"}, **text),
+                dcc.Input(id="opt-columns", value="", style={"width": "46em"}, **reread),
                 "q1=file_column, x=..., (robocal name = the file's)",
             ),
             _row("incomplete rows", _radio("opt-incomplete", ("error", "drop"), "error")),
@@ -406,7 +407,10 @@ def register(app: Dash, workdir: Path) -> None:
         prevent_initial_call=True,
     )
     def upload(contents, filename):
-        data = _decode_bytes(contents)
+        try:
+            data = _decode_bytes(contents)
+        except ValueError as err:
+            return html.Span(str(err), className="error"), None
         name = Path(filename or "measurements.csv").name or "measurements.csv"
         token = f"{uuid.uuid4().hex[:12]}/{name}"
         target = workdir / "data" / token
