@@ -486,6 +486,25 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
                     "true": (1.0 / tv / kgfm) if tv > 0 else math.inf,
                 }
         out[joint] = entry
+    # joint effects the poses cannot tell (below zero, within 3σ of it, or unloaded): the reason
+    keys = {  # coefficient prefix -> (entry, JointEffects field)
+        "clearance_": ("clearance_tilt_deg", "clearance_tilt"),
+        "backlash_": ("backlash_deg", "backlash"),
+        "compliance_": ("stiffness_kgfm_per_deg", "compliance"),
+    }
+    for d in result.dropped:
+        prefix = next((p for p in keys if d.name.startswith(p)), None)
+        if prefix is None:
+            continue
+        joint = d.name.removeprefix(prefix)
+        entry = out.setdefault(joint, {}).setdefault(keys[prefix][0], {"estimate": None, "sigma": None})
+        t = true.get(joint)
+        tv = getattr(t, keys[prefix][1], 0.0)
+        if t is None or prefix != "compliance_":
+            entry["true"] = math.degrees(tv) if t is not None else 0.0
+        else:
+            entry["true"] = (1.0 / tv / kgfm) if tv > 0 else math.inf
+        entry["not_identified"] = str(d).split(": ", 1)[1]
     return out
 
 
@@ -649,6 +668,9 @@ def _print(numbers: dict[str, Any], first: dict[str, Any]) -> None:
     for joint, row in numbers["joint_parameters"].items():
         parts = []
         for name, v in row.items():
+            if v.get("not_identified"):
+                parts.append(f"{name} not identified (true {v['true']:.4g}): {v['not_identified']}")
+                continue
             s = "" if v["sigma"] is None else f" ± {v['sigma']:.3g}"
             parts.append(f"{name} {v['estimate']:.4g}{s} (true {v['true']:.4g})")
         console.print(f"  {joint}: " + "; ".join(parts), highlight=False)
