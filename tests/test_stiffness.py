@@ -145,15 +145,21 @@ def test_katana_without_payload_reports_q5_stiffness_not_identified(katana):
     assert {"backlash_q5", "clearance_q5"} <= set(result.names)
 
 
-def test_two_stage_method_with_joint_parameters_off_by_25_percent():
+def test_two_stage_method_with_joint_parameters_off_by_25_percent(katana):
     """Seed 003's two-stage method given Table 5.2 while the robot's joints differ by up to
-    ±25 %: still several times better than the geometric calibration, but the error of
-    the joint parameters remains (and the residuals say so); identifying the joint
-    effects, starting from Table 5.2, recovers the robot's own (within 3σ) and the noise."""
-    setup = katana_setup(n_test=100, joint_parameter_error=0.25, error_seed=3)
+    ±25 % (uniform, every clearance, backlash and stiffness): still several times better
+    than the geometric calibration, but the error of the joint parameters remains (and the
+    residuals say so); identifying the joint effects, starting from Table 5.2, recovers the
+    robot's own (within 3σ) and the noise."""
+    rng = np.random.default_rng(3)
+    off = tuple(
+        dataclasses.replace(e, **{a: getattr(e, a) * rng.uniform(0.75, 1.25) for a in ATTR.values()})
+        for e in katana.nominal.joint_effects
+    )
+    setup = dataclasses.replace(katana, true=dataclasses.replace(katana.true, joint_effects=off))
     truth, given = truth_of(setup.true), truth_of(setup.nominal)
-    off = [abs(truth[k] / given[k] - 1) for k in truth if given[k]]
-    assert 0.1 < max(off) <= 0.25
+    ratio = [abs(truth[k] / given[k] - 1) for k in truth if given[k]]
+    assert 0.2 < max(ratio) <= 0.25
     train, test = (katana_data(setup, q, seed) for q, seed in ((setup.train_q, 1), (setup.test_q, 2)))
 
     def held_out(result) -> float:
@@ -266,3 +272,32 @@ def test_every_method_keeps_joint_effects_physical(katana):
         assert any(d.reason in ("unphysical", "undetermined") for d in result.dropped)
         if method == "bounded":
             assert len(result.metadata["at_bounds"]) < len(result.names)
+
+
+def test_learned_residual_stage_holds_the_effects_it_confounds(monkeypatch):
+    """With a learned residual the joint uncertainty of both can leave a compliance within
+    3σ of zero (the real UR10's wrists: -136 ± 400 µrad/N·m): it is held at zero, the
+    physics refitted, and the reason names the learned angle errors.  Here the joint
+    uncertainty is inflated 50x for wrist_1 to force the case."""
+    from robocal.identify import residual as stage
+
+    joint_uncertainty = stage._joint_uncertainty
+
+    def inflated(result, q):
+        result = joint_uncertainty(result, q)
+        f = np.where(np.array(result.names) == "compliance_wrist_1", 50.0, 1.0)
+        return dataclasses.replace(result, std=f * result.std, covariance=np.outer(f, f) * result.covariance)
+
+    monkeypatch.setattr(stage, "_joint_uncertainty", inflated)
+    effects = tuple(JointEffects(j, compliance=c) for j, c in UR10_COMPLIANCE.items())
+    geometric, true, data = ur10_twin(effects, (0.0, 0.0, -9.81), None, 0, n=40)
+    result = rc.calibrate(
+        geometric, data, tool_guess=TARGET, compliance=True, residual="joint_fourier",
+        residual_harmonics=1, cv_folds=2,
+    )
+    assert result.model.residual is not None
+    held = dropped(result)["compliance_wrist_1"]
+    assert held.reason == "undetermined" and "with the learned joint angle errors" in held.detail
+    assert "compliance_wrist_1" not in result.names and "compliance_elbow" in result.names
+    assert_physical(result)
+    assert_stiffness_within_3_sigma(result, true, ["shoulder_lift", "elbow"])

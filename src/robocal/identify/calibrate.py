@@ -67,6 +67,7 @@ __all__ = [
     "calibrate_physics",
     "default_bounds",
     "effect_verdict",
+    "effects_to_hold",
     "parameters_at_bounds",
     "parse_level",
 ]
@@ -933,22 +934,58 @@ def effect_verdict(
     return Dropped(name, "undetermined", detail=f"{fit}: {why}; {kept}")
 
 
-def _undetermined_effect(problem: Problem, x: Array, std: Array) -> Dropped | None:
-    """The joint-effect coefficient of ``problem`` whose estimate ``x`` is least
-    supported (lowest ``x/σ``) among those :func:`effect_verdict` rejects, or None."""
-    m = problem.n_effects
-    if not m:
-        return None
-    p = len(x) - m
-    z = x[p:] / np.maximum(std[p:], 1e-300)
-    for k in np.argsort(z):
-        peak = float(np.abs(problem.effect_basis[k]).max())
-        verdict = effect_verdict(
-            problem.effect_names[k], float(x[p + k]), float(std[p + k]), float(problem.effect_start[k]), peak
-        )
-        if verdict is not None:
-            return verdict
-    return None
+def effects_to_hold(
+    names: Sequence[str],
+    x: Array,
+    covariance: Array,
+    start: dict[str, float],
+    peak_load: dict[str, float] | None = None,
+    confounder: str | None = None,
+) -> tuple[Array, list[Dropped]]:
+    """The joint-effect coefficients (``start``'s keys, physically ≥ 0) to hold at their
+    start values, and the other estimates once they are held.
+
+    An active set on the linearised problem: the least supported coefficient that
+    :func:`effect_verdict` rejects is held, the others move to their conditional mean
+    ``x − Σ_k (x_k − start_k) / Σ_kk`` with covariance ``Σ − Σ_k Σ_kᵀ / Σ_kk`` (what a
+    Gauss-Newton refit with it fixed gives), and the next is judged — one refit at the
+    end instead of one per coefficient.
+
+    Args:
+        names, x, covariance: the estimated parameters ``(p,)``, SI, and their ``(p, p)``
+            covariance.
+        start: start value of each joint-effect coefficient among ``names``.
+        peak_load, confounder: passed to :func:`effect_verdict`.
+
+    Returns:
+        ``x`` conditioned on the held coefficients (the held ones at their start values)
+        and one :class:`Dropped` per held coefficient, in the order they were held.
+    """
+    x, C = np.array(x, dtype=float), np.array(covariance, dtype=float)
+    active = [k for k, n in enumerate(names) if n in start]
+    held: list[Dropped] = []
+    while active:
+        sigma = np.sqrt(np.maximum(np.diag(C), 0.0))
+        verdicts = {}
+        for k in active:
+            verdict = effect_verdict(
+                names[k], float(x[k]), float(sigma[k]), start[names[k]], (peak_load or {}).get(names[k]),
+                confounder=confounder,
+            )  # fmt: skip
+            if verdict is not None:
+                verdicts[k] = verdict
+        if not verdicts:
+            break
+        k = min(verdicts, key=lambda i: x[i] / max(sigma[i], 1e-300))
+        held.append(verdicts[k])
+        active.remove(k)
+        if C[k, k] > 0:
+            gain = C[:, k] / C[k, k]
+            x = x - gain * (x[k] - start[names[k]])
+            C = C - np.outer(gain, C[k])
+        x[k] = start[names[k]]
+        C[k, :] = C[:, k] = 0.0
+    return x, held
 
 
 def _payload_dict(payload: Payload) -> dict[str, Any]:
@@ -1504,18 +1541,21 @@ def calibrate_physics(
         _, cov, std, corr, cond = _uncertainty(problem, x, known_noise)
     # joint effects are physical (>= 0) and identified only when the data tells them from zero
     for _ in range(problem.n_effects if result.success else 0):
-        verdict = _undetermined_effect(problem, x, std)
-        if verdict is None:
+        held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
+        peaks = dict(zip(problem.effect_names, np.abs(problem.effect_basis).max(axis=(1, 2, 3)), strict=True))
+        x_held, verdicts = effects_to_hold(names, x, cov, held_at, peaks)
+        if not verdicts:
             break
-        dropped.append(verdict)
-        keep = np.array([name != verdict.name for name in names], dtype=bool)
-        problem = problem.fix([verdict.name])
-        names, x0 = problem.free_names, x0[keep]
+        dropped += verdicts
+        keep = np.array([name not in {v.name for v in verdicts} for name in names], dtype=bool)
+        problem = problem.fix([v.name for v in verdicts])
+        names, x0, x_start = problem.free_names, x0[keep], x_held[keep]
         if method == "bounded":
             options["bounds"] = tuple(b[keep] for b in options["bounds"])
+            x_start = np.clip(x_start, *options["bounds"])
         t_solve = time.perf_counter()
-        # from the solution found: only an insignificant (or unphysical) coefficient has gone
-        result = solve(problem, x[keep], method, **options)
+        # from the linearised solution with them held (a Gauss-Newton step from the fit found)
+        result = solve(problem, x_start, method, **options)
         solve_seconds += time.perf_counter() - t_solve
         evaluations += result.evaluations
         x = result.x

@@ -556,31 +556,24 @@ def _refit_with_residual(
     errors explain as well (a wrist's compliance under its own weight is a smooth function
     of the wrist's angle: the real UR10's wrist compliances came out at -136 ± 400
     µrad/N·m) is below zero or within 3σ of it once both are fitted: it is held at its
-    start value and the physics refitted, least supported first."""
-    from robocal.identify.calibrate import effect_verdict
+    start value and the physics refitted (:func:`~robocal.identify.calibrate.effects_to_hold`)."""
+    from robocal.identify.calibrate import effects_to_hold
 
     held = dict(options.get("hold_effects") or {})
-    for _ in range(64):  # at most one pass per joint-effect coefficient (few)
+    for _ in range(8):  # one refit settles it but for the problem's nonlinearity
         result = _joint_uncertainty(
             calibrate_physics(model, data, method, **{**options, "hold_effects": held}), data.q
         )
-        start = dict(zip(result.names, result.nominal, strict=True))
-        verdicts = [
-            (value / max(sigma, 1e-300), verdict)
-            for name, value, sigma in zip(result.names, result.estimates, result.std, strict=True)
-            if name in result.effect_names
-            and (
-                verdict := effect_verdict(
-                    name, float(value), float(sigma), start[name], confounder="the learned joint angle errors"
-                )
-            )
-            is not None
-        ]
+        effects = set(result.effect_names)
+        start = {n: float(v) for n, v in zip(result.names, result.nominal, strict=True) if n in effects}
+        learned = "the learned joint angle errors"
+        _, verdicts = effects_to_hold(
+            result.names, result.estimates, result.covariance, start, confounder=learned
+        )
         if not verdicts:
-            return result
-        worst = min(verdicts, key=lambda v: v[0])[1]
-        held[worst.name] = worst
-    return result  # pragma: no cover - more effects than passes
+            break
+        held.update({v.name: v for v in verdicts})
+    return result
 
 
 def _memo(fit: Callable[[Array], PhysicalFit], whole: PhysicalFit, n: int) -> Callable[[Array], PhysicalFit]:
