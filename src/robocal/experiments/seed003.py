@@ -484,6 +484,10 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
                     "estimate": (1.0 / v / kgfm) if v > 0 else math.inf,
                     "sigma": None if (s is None or v <= 0) else s / v**2 / kgfm,
                     "true": (1.0 / tv / kgfm) if tv > 0 else math.inf,
+                    # 1σ of the compliance mapped to the stiffness: [1/(c + σ), 1/(c − σ)]
+                    "interval_1sigma": (
+                        None if (s is None or v <= s) else [1 / (v + s) / kgfm, 1 / (v - s) / kgfm]
+                    ),
                 }
         out[joint] = entry
     # joint effects the poses cannot tell (below zero, within 3σ of it, or unloaded): the reason
@@ -672,6 +676,8 @@ def _print(numbers: dict[str, Any], first: dict[str, Any]) -> None:
                 parts.append(f"{name} not identified (true {v['true']:.4g}): {v['not_identified']}")
                 continue
             s = "" if v["sigma"] is None else f" ± {v['sigma']:.3g}"
+            if v.get("interval_1sigma"):
+                s = " (1σ: {:.4g}-{:.4g})".format(*v["interval_1sigma"])
             parts.append(f"{name} {v['estimate']:.4g}{s} (true {v['true']:.4g})")
         console.print(f"  {joint}: " + "; ".join(parts), highlight=False)
     console.print(

@@ -1313,9 +1313,9 @@ def calibrate_physics(
 
     Joint effects are physical: an identified clearance tilt, backlash or compliance is at
     least :data:`EFFECT_SIGNIFICANCE` σ above zero.  One that the fit puts below zero, or
-    closer to it, is kept at its start value and the fit repeated, least supported first
-    (a non-negativity active set with a significance test); ``dropped`` says why
-    (:func:`effect_verdict`).
+    closer to it, is kept at its start value and the fit repeated (a non-negativity active
+    set with a significance test, chosen least supported first on the linearised problem:
+    :func:`effects_to_hold`); ``dropped`` says why (:func:`effect_verdict`).
     """
     call = dict(locals())
     t_start = time.perf_counter()
@@ -1541,6 +1541,8 @@ def calibrate_physics(
         _, cov, std, corr, cond = _uncertainty(problem, x, known_noise)
     # joint effects are physical (>= 0) and identified only when the data tells them from zero
     for _ in range(problem.n_effects if result.success else 0):
+        if not problem.n_effects:
+            break
         held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
         peaks = dict(zip(problem.effect_names, np.abs(problem.effect_basis).max(axis=(1, 2, 3)), strict=True))
         x_held, verdicts = effects_to_hold(names, x, cov, held_at, peaks)
