@@ -20,7 +20,9 @@ predicted from measured joint parameters and removed before the geometric
 identification (``effects="predict"``, seed 003's two-stage method, eqs. 4.20-4.22,
 5.13, 5.20) or identified together with the geometric parameters, with their
 uncertainty (``effects="identify"``, the default of level 3: clearance tilt, backlash
-and axial compliance of every joint, where observable).
+and axial compliance of every joint, where observable).  A joint effect is physically
+≥ 0 and counts as identified only at least 3σ above zero; otherwise it is kept at its
+start value and reported as not identified, with the reason (:func:`effect_verdict`).
 """
 
 from __future__ import annotations
