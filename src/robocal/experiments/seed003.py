@@ -596,8 +596,31 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
                     "estimate": (1.0 / v / kgfm) if v > 0 else math.inf,
                     "sigma": None if (s is None or v <= 0) else s / v**2 / kgfm,
                     "true": (1.0 / tv / kgfm) if tv > 0 else math.inf,
+                    # 1σ of the compliance mapped to the stiffness: [1/(c + σ), 1/(c − σ)]
+                    "interval_1sigma": (
+                        None if (s is None or v <= s) else [1 / (v + s) / kgfm, 1 / (v - s) / kgfm]
+                    ),
                 }
         out[joint] = entry
+    # joint effects the poses cannot tell (below zero, within 3σ of it, or unloaded): the reason
+    keys = {  # coefficient prefix -> (entry, JointEffects field)
+        "clearance_": ("clearance_tilt_deg", "clearance_tilt"),
+        "backlash_": ("backlash_deg", "backlash"),
+        "compliance_": ("stiffness_kgfm_per_deg", "compliance"),
+    }
+    for d in result.dropped:
+        prefix = next((p for p in keys if d.name.startswith(p)), None)
+        if prefix is None:
+            continue
+        joint = d.name.removeprefix(prefix)
+        entry = out.setdefault(joint, {}).setdefault(keys[prefix][0], {"estimate": None, "sigma": None})
+        t = true.get(joint)
+        tv = getattr(t, keys[prefix][1], 0.0)
+        if t is None or prefix != "compliance_":
+            entry["true"] = math.degrees(tv) if t is not None else 0.0
+        else:
+            entry["true"] = (1.0 / tv / kgfm) if tv > 0 else math.inf
+        entry["not_identified"] = str(d).split(": ", 1)[1]
     return out
 
 
@@ -862,7 +885,12 @@ def _print(numbers: dict[str, Any], first: dict[str, Any]) -> None:
     for joint, row in numbers["joint_parameters"].items():
         parts = []
         for name, v in row.items():
+            if v.get("not_identified"):
+                parts.append(f"{name} not identified (true {v['true']:.4g}): {v['not_identified']}")
+                continue
             s = "" if v["sigma"] is None else f" ± {v['sigma']:.3g}"
+            if v.get("interval_1sigma"):
+                s = " (1σ: {:.4g}-{:.4g})".format(*v["interval_1sigma"])
             parts.append(f"{name} {v['estimate']:.4g}{s} (true {v['true']:.4g})")
         console.print(f"  {joint}: " + "; ".join(parts), highlight=False)
     console.print(
