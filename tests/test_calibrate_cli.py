@@ -89,6 +89,10 @@ def test_calibrate_then_validate(measured, tmp_path):
     again = runner.invoke(app, args)
     assert again.exit_code == 2 and "--force" in again.output
     assert runner.invoke(app, [*args, "--force", "--method", "pinv"]).exit_code == 0
+    per_pose = runner.invoke(app, [*args, "--force", "--method", "pinv", "--per-pose", "--residual", "none"])
+    assert per_pose.exit_code == 0, per_pose.output
+    wrong = runner.invoke(app, [*args, "--force", "--per-pose"])
+    assert wrong.exit_code == 2 and "--per-pose needs --method pinv" in wrong.output
     with_report = runner.invoke(app, [*args, "--force", "--report"])
     assert with_report.exit_code == 0, with_report.output
     page = (out / "report.html").read_text()

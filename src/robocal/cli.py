@@ -248,6 +248,9 @@ _iso9283_commands.register(app)
 from robocal import study_commands as _study_commands  # noqa: E402
 
 _study_commands.register(app)
+from robocal.apps.gui import commands as _gui_commands  # noqa: E402
+
+_gui_commands.register(app)
 # --- end of registered commands ---
 
 

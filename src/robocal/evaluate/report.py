@@ -959,10 +959,13 @@ def build_report(
                 "redundant": "redundant",
                 "no effect": "no effect on the measurements",
                 "poorly identifiable": "poorly identifiable",
+                "unphysical": "outside its physical range (≥ 0)",
+                "undetermined": "not told from zero by the data",
             }.get(d.reason, d.reason)
             detail = ", ".join(f"{n} ({c:+.3g})" for n, c in d.absorbed_by) if d.absorbed_by else ""
             if d.sigma is not None:
                 detail = f"σ {d.sigma * 1e3:.3g} mm as tool displacement; kept at its start value"
+            detail = getattr(d, "detail", "") or detail
             drows.append([d.name, why, detail])
         body += _table(["parameter not identified", "reason", "absorbed by (coefficient) / detail"], drows)
     corr = result.high_correlations
@@ -1239,7 +1242,8 @@ def build_report(
 
     # ---- joint effects
     other = _effect_estimates(result)
-    if result.compliance or other:
+    held = [d for d in result.dropped if d.reason in ("unphysical", "undetermined")]
+    if result.compliance or other or held:
         body = ""
         if result.compliance:
             comp_idx = {
@@ -1271,6 +1275,12 @@ def build_report(
                 rows,
                 caption="joint effects of the calibrated model (clearance tilt, backlash, stiffness: "
                 "robocal.model.joints); σ – where predicted, not identified",
+            )
+        if held:  # physically >= 0 and told from zero by the data, or not identified
+            body += _table(
+                ["joint effect", "not identified because"],
+                [[d.name, d.detail or d.reason] for d in held],
+                caption="joint effects below zero or within 3σ of it: kept at their start values",
             )
         q_eff = test_data.q if test_data is not None else (data.q if data is not None else None)
         pert = result.joint_perturbations(q_eff) if q_eff is not None else None

@@ -7,6 +7,10 @@ Each experiment is a module ``robocal.experiments.<name>`` with a function
 that runs the experiment, writes its report (and files) to ``out`` when given, prints
 the seed's published numbers next to robocal's, and returns its numbers as plain data
 (the ``--json`` output).
+
+``robocal reproduce all --md docs/reproductions --readme README.md --force`` runs them all
+and writes the comparison documents and the README's quoted numbers
+(:mod:`robocal.experiments.reproductions`).
 """
 
 from __future__ import annotations

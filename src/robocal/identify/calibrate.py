@@ -20,7 +20,9 @@ predicted from measured joint parameters and removed before the geometric
 identification (``effects="predict"``, seed 003's two-stage method, eqs. 4.20-4.22,
 5.13, 5.20) or identified together with the geometric parameters, with their
 uncertainty (``effects="identify"``, the default of level 3: clearance tilt, backlash
-and axial compliance of every joint, where observable).
+and axial compliance of every joint, where observable).  A joint effect is physically
+≥ 0 and counts as identified only at least 3σ above zero; otherwise it is kept at its
+start value and reported as not identified, with the reason (:func:`effect_verdict`).
 """
 
 from __future__ import annotations
@@ -66,12 +68,15 @@ from robocal.model.files import ModelFileError, atomic_write_text, load_model, s
 
 __all__ = [
     "BOUNDS_CHOICES",
+    "EFFECT_SIGNIFICANCE",
     "LEVELS",
     "RESIDUAL_CHOICES",
     "CalibrationResult",
     "calibrate",
     "calibrate_physics",
     "default_bounds",
+    "effect_verdict",
+    "effects_to_hold",
     "parameters_at_bounds",
     "parse_level",
 ]
@@ -398,6 +403,11 @@ class CalibrationResult:
                     out.append((self.names[i], self.names[j], float(self.correlation[i, j])))
         return out
 
+    @property
+    def effect_names(self) -> tuple[str, ...]:
+        """The identified joint-effect coefficients among :attr:`names` (``compliance_q2``...)."""
+        return tuple(n for n in self.names if _effect_prefix(n) is not None)
+
     def deltas(self) -> dict[str, float]:
         return {n: float(e - v) for n, e, v in zip(self.names, self.estimates, self.nominal, strict=True)}
 
@@ -612,6 +622,7 @@ class CalibrationResult:
                     "reason": d.reason,
                     "absorbed_by": [list(a) for a in d.absorbed_by],
                     **({"sigma_mm": d.sigma * 1e3} if d.sigma is not None else {}),
+                    **({"detail": d.detail} if d.detail else {}),
                 }
                 for d in self.dropped
             ],
@@ -726,6 +737,7 @@ class CalibrationResult:
                     d["reason"],
                     tuple(tuple(a) for a in d["absorbed_by"]),
                     sigma=d["sigma_mm"] / 1e3 if "sigma_mm" in d else None,
+                    detail=d.get("detail", ""),
                 )
                 for d in data["dropped"]
             ),
@@ -861,12 +873,110 @@ def effect_lines(effects: dict[str, dict[str, tuple[float, float | None]]]) -> l
                 parts.append(f"{attr} {math.degrees(v):.4f}{pm(s, math.degrees(1), '.4f')} deg")
                 continue
             parts.append(f"{attr} {v * 1e6:.4g}{pm(s, 1e6, '.3g')} µrad/N·m")
-            if v > 0:  # the stiffness k = 1/c, σ_k = σ_c / c²
+            if v > 0:  # the stiffness k = 1/c; its 1σ interval [1/(c + σ), 1/(c − σ)] is skewed
                 label = "stiffness" if attr == "compliance" else "radial stiffness"
-                sk = None if s is None else s / v**2
-                parts.append(f"{label} {1.0 / v / kgfm:.4g}{pm(sk, 1.0 / kgfm, '.3g')} kgf·m/deg")
+                interval = ""
+                if s is not None and v > s:
+                    interval = f" (1σ: {1.0 / (v + s) / kgfm:.4g}-{1.0 / (v - s) / kgfm:.4g})"
+                parts.append(f"{label} {1.0 / v / kgfm:.4g}{interval} kgf·m/deg")
         lines.append(f"{joint}: " + ", ".join(parts))
     return lines
+
+
+#: an identified joint effect (clearance tilt, backlash, compliance: physically >= 0) lies at
+#: least this many standard deviations above zero; otherwise it is not identified
+EFFECT_SIGNIFICANCE = 3.0
+
+
+def effect_verdict(
+    name: str,
+    value: float,
+    sigma: float,
+    start: float = 0.0,
+    peak_load: float | None = None,
+    significance: float = EFFECT_SIGNIFICANCE,
+    confounder: str | None = None,
+) -> Dropped | None:
+    """Whether a joint-effect coefficient's estimate may be reported as identified.
+
+    Clearance tilts, backlashes and compliances are physically ≥ 0.  An estimate below
+    zero is ``"unphysical"``; one less than ``significance`` σ above zero is
+    ``"undetermined"`` — the data cannot tell it from zero, and its stiffness 1/c would
+    be meaningless (σ_k = σ_c/c² understates the spread: seed 003's Katana q5, 57 ± 23
+    µrad/N·m for a true 22, read as a stiffness of 31 ± 12 kgf·m/deg for a true 80).
+    Either way the coefficient is kept at its ``start`` value.  ``peak_load``: the joint's
+    largest load at the measured poses (N·m), quoted for compliances (a small load is the
+    usual reason); ``confounder``: what else was fitted that explains the same errors
+    (the learned joint angle errors).  Returns None when the estimate stands."""
+    if np.isfinite(value) and np.isfinite(sigma) and value >= 0.0 and value >= significance * sigma:
+        return None
+    f, unit = display_unit(name, False)
+    fitted = f"the fit with {confounder}" if confounder else "the fit"
+    fit = f"{fitted} gave {value * f:.3g} ± {sigma * f:.2g} {unit}"
+    kept = f"kept at its start value {start * f:.3g} {unit}"
+    if value < 0:
+        return Dropped(name, "unphysical", detail=f"{fit}: below zero, not physical; {kept}")
+    if confounder:
+        why = f"within {significance:g}σ of zero: {confounder} explain the same errors"
+    else:
+        why = f"within {significance:g}σ of zero: the data cannot tell it from zero"
+        if peak_load is not None and name.startswith(("compliance_", "radial_compliance_")):
+            why += f" (the joint's load reaches {peak_load:.3g} N·m at these poses; more load would tell)"
+    return Dropped(name, "undetermined", detail=f"{fit}: {why}; {kept}")
+
+
+def effects_to_hold(
+    names: Sequence[str],
+    x: Array,
+    covariance: Array,
+    start: dict[str, float],
+    peak_load: dict[str, float] | None = None,
+    confounder: str | None = None,
+) -> tuple[Array, list[Dropped]]:
+    """The joint-effect coefficients (``start``'s keys, physically ≥ 0) to hold at their
+    start values, and the other estimates once they are held.
+
+    An active set on the linearised problem: the least supported coefficient that
+    :func:`effect_verdict` rejects is held, the others move to their conditional mean
+    ``x − Σ_k (x_k − start_k) / Σ_kk`` with covariance ``Σ − Σ_k Σ_kᵀ / Σ_kk`` (what a
+    Gauss-Newton refit with it fixed gives), and the next is judged — one refit at the
+    end instead of one per coefficient.
+
+    Args:
+        names, x, covariance: the estimated parameters ``(p,)``, SI, and their ``(p, p)``
+            covariance.
+        start: start value of each joint-effect coefficient among ``names``.
+        peak_load, confounder: passed to :func:`effect_verdict`.
+
+    Returns:
+        ``x`` conditioned on the held coefficients (the held ones at their start values)
+        and one :class:`Dropped` per held coefficient, in the order they were held.
+    """
+    x, C = np.array(x, dtype=float), np.array(covariance, dtype=float)
+    active = [k for k, n in enumerate(names) if n in start]
+    held: list[Dropped] = []
+    while active:
+        sigma = np.sqrt(np.maximum(np.diag(C), 0.0))
+        verdicts = {}
+        for k in active:
+            verdict = effect_verdict(
+                names[k], float(x[k]), float(sigma[k]), start[names[k]], (peak_load or {}).get(names[k]),
+                confounder=confounder,
+            )  # fmt: skip
+            if verdict is not None:
+                verdicts[k] = verdict
+        if not verdicts:
+            break
+        k = min(verdicts, key=lambda i: x[i] / max(sigma[i], 1e-300))
+        held.append(verdicts[k])
+        active.remove(k)
+        if C[k, k] > 0:
+            gain = C[:, k] / C[k, k]
+            x = x - gain * (x[k] - start[names[k]])
+            C = C - np.outer(gain, C[k])
+        x[k] = start[names[k]]
+        C[k, :] = C[:, k] = 0.0
+    return x, held
 
 
 def _payload_dict(payload: Payload) -> dict[str, Any]:
@@ -1091,6 +1201,9 @@ def calibrate_physics(
     bounds: tuple[ArrayLike, ArrayLike] | Literal["default", "widened"] | None = "default",
     resolution: float = 1e-5,
     relaxation: float = 0.5,
+    per_pose: bool = False,
+    combine: Literal["mean", "best", "fit"] = "mean",
+    passes: int | None = None,
     max_iterations: int = 200,
     max_std: float = 5e-4,
     max_std_ratio: float = 3.0,
@@ -1104,6 +1217,7 @@ def calibrate_physics(
     accelerations: ArrayLike | None = None,
     load_passes: int = 3,
     load_model: Model | None = None,
+    hold_effects: dict[str, str | Dropped] | None = None,
 ) -> CalibrationResult:
     """Identify the physical robot's parameters from measurements (geometry and joint
     effects; :func:`calibrate` adds the learned residual).
@@ -1135,6 +1249,14 @@ def calibrate_physics(
             ``result.metadata["at_bounds"]`` and in a warning.
         resolution: measurement resolution (m): the ``pinv``/``influence`` stop criterion.
         relaxation: C < 1 of the ``influence`` method.
+        per_pose: ``pinv`` only: seed 003's per-pose pseudo-inverse Jᵢᵀ(JᵢJᵢᵀ)⁻¹ at each
+            pose, then the best-fit set (:mod:`robocal.identify.influence`), instead of
+            (JᵀJ)⁻¹Jᵀ over all poses.
+        combine: per-pose methods (``influence``, ``pinv`` with ``per_pose``): how the
+            per-pose sets become one: ``"mean"``, ``"best"`` or ``"fit"``
+            (:mod:`robocal.identify.influence`).
+        passes: per-pose methods: ``1`` is the thesis' single pass; ``None`` repeats it
+            until the combined set stops moving.
         max_std: a parameter whose standard deviation, as a displacement of the tool (m:
             σ times the largest displacement of the measured point per unit of the
             parameter over the measured poses; for joint-effect coefficients σ times the
@@ -1181,6 +1303,16 @@ def calibrate_physics(
             (Katana 450: 31 of 118 poses, up to 0.4 mm); the second pass removes this.
         load_model: the model whose geometry gives the joint loads (default ``model``;
             set by the passes).
+        hold_effects: joint-effect coefficients (``compliance_wrist_2``) kept at their start
+            values and not identified, with the reason to report in ``dropped`` (a text or a
+            :class:`~robocal.identify.observability.Dropped`); the learned residual's stage
+            holds those it confounds.
+
+    Joint effects are physical: an identified clearance tilt, backlash or compliance is at
+    least :data:`EFFECT_SIGNIFICANCE` σ above zero.  One that the fit puts below zero, or
+    closer to it, is kept at its start value and the fit repeated (a non-negativity active
+    set with a significance test, chosen least supported first on the linearised problem:
+    :func:`effects_to_hold`); ``dropped`` says why (:func:`effect_verdict`).
     """
     call = dict(locals())
     t_start = time.perf_counter()
@@ -1341,6 +1473,13 @@ def calibrate_physics(
     )
     if selection.dropped:
         problem = problem.fix([d.name for d in selection.dropped])
+    held = [
+        why if isinstance(why, Dropped) else Dropped(name, "undetermined", detail=str(why))
+        for name, why in (hold_effects or {}).items()
+        if name in problem.effect_names
+    ]
+    if held:
+        problem = problem.fix([d.name for d in held])
     names = problem.free_names
     x0 = problem.x0
 
@@ -1349,14 +1488,14 @@ def calibrate_physics(
         options |= {"loss": loss, "f_scale": f_scale * float(np.median(w[:, :3]))}
     elif method in ("pinv", "influence"):
         options |= {"resolution": resolution}
-        if method == "influence":
-            options["relaxation"] = relaxation
+        if method == "influence" or per_pose:
+            options |= {"combine": combine, "passes": passes, "per_pose": per_pose, "relaxation": relaxation}
     elif method == "bounded":
         lo, hi, widened = _bounded_method_bounds(bounds, problem, selection.dropped, length, set(model.names))
         if widened is not None:
             problem_warnings.append(widened)
         options["bounds"] = (lo, hi)
-    dropped = list(selection.dropped)
+    dropped = list(selection.dropped) + held
     if method != "bounded":  # the hopeless ones before the first fit (they are pruned anyway)
         screened = _screen(problem, x0, max_std, max_std_ratio, known_noise)
         if screened:
@@ -1388,6 +1527,29 @@ def calibrate_physics(
         # from the start values: the dropped parameter may have dragged others along a
         # nearly flat valley of the first fit (real UR10 data, plain DH: a5 +143 mm)
         result = solve(problem, x0, method, **options)
+        solve_seconds += time.perf_counter() - t_solve
+        evaluations += result.evaluations
+        x = result.x
+        _, cov, std, corr, cond = _uncertainty(problem, x, known_noise)
+    # joint effects are physical (>= 0) and identified only when the data tells them from zero
+    for _ in range(problem.n_effects if result.success else 0):
+        if not problem.n_effects:
+            break
+        held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
+        peaks = dict(zip(problem.effect_names, np.abs(problem.effect_basis).max(axis=(1, 2, 3)), strict=True))
+        x_held, verdicts = effects_to_hold(names, x, cov, held_at, peaks)
+        if not verdicts:
+            break
+        dropped += verdicts
+        keep = np.array([name not in {v.name for v in verdicts} for name in names], dtype=bool)
+        problem = problem.fix([v.name for v in verdicts])
+        names, x0, x_start = problem.free_names, x0[keep], x_held[keep]
+        if method == "bounded":
+            options["bounds"] = tuple(b[keep] for b in options["bounds"])
+            x_start = np.clip(x_start, *options["bounds"])
+        t_solve = time.perf_counter()
+        # from the linearised solution with them held (a Gauss-Newton step from the fit found)
+        result = solve(problem, x_start, method, **options)
         solve_seconds += time.perf_counter() - t_solve
         evaluations += result.evaluations
         x = result.x

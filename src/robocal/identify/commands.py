@@ -150,6 +150,14 @@ def calibrate_command(
     ] = None,
     measure: Annotated[str | None, typer.Option("--measure", help="position | pose")] = None,
     method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
+    per_pose: Annotated[
+        bool,
+        typer.Option(
+            "--per-pose",
+            help="with --method pinv: seed 003's per-pose pseudo-inverse Jᵀ(JJᵀ)⁻¹ at each pose, then the "
+            "mean of the per-pose sets (instead of (JᵀJ)⁻¹Jᵀ over all poses)",
+        ),
+    ] = False,
     bounds: Annotated[
         str | None,
         typer.Option(
@@ -254,6 +262,8 @@ def calibrate_command(
         raise fail(f"--bounds {bounds!r}: {' or '.join(BOUNDS_CHOICES)}")
     if bounds is not None and method != "bounded":
         raise fail(f"--bounds {bounds} needs --method bounded")
+    if per_pose and method != "pinv":
+        raise fail("--per-pose needs --method pinv")
     data = _read(
         data_path, model, length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete
     )
@@ -319,6 +329,7 @@ def calibrate_command(
                 loss=loss,
                 residual=residual,
                 **({"bounds": bounds} if bounds is not None else {}),
+                **({"per_pose": True} if per_pose else {}),
             )
     except ValueError as err:
         message = as_cli_text(str(err))  # the data's problem: name the file unless the message does

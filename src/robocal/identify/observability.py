@@ -261,7 +261,11 @@ class Dropped:
         reason: ``"no effect"`` (zero column), ``"redundant"`` (its column is, within
             the rank tolerance, a combination of the kept columns) or ``"poorly
             identifiable"`` (kept out by the calibration because its standard deviation
-            is too large; see :func:`robocal.identify.calibrate`).
+            is too large; see :func:`robocal.identify.calibrate`); for joint-effect
+            coefficients (clearance, backlash, compliance: physically ≥ 0) also
+            ``"unphysical"`` (the fit put it below zero) or ``"undetermined"`` (less than
+            3σ above zero, or confounded with a learned residual): kept at its start value,
+            ``detail`` says why with the numbers.
         absorbed_by: ``(name, coefficient)`` of the kept parameters whose combination
             reproduces its column: a change δ of this parameter moves the tool like
             changes ``coefficient · δ`` of those (in the Jacobian's units), largest
@@ -269,15 +273,19 @@ class Dropped:
         residual: relative norm of the part of its (unit-norm) column the kept columns
             do not explain (≈ 0 for an exact redundancy).
         sigma: poorly identifiable only: its standard deviation as a tool displacement (m).
+        detail: unphysical and undetermined: the estimate, its σ and why it is not used.
     """
 
     name: str
-    reason: Literal["no effect", "redundant", "poorly identifiable"]
+    reason: Literal["no effect", "redundant", "poorly identifiable", "unphysical", "undetermined"]
     absorbed_by: tuple[tuple[str, float], ...] = ()
     residual: float = 0.0
     sigma: float | None = None
+    detail: str = ""
 
     def __str__(self) -> str:
+        if self.reason in ("unphysical", "undetermined"):
+            return f"{self.name}: {self.detail or self.reason}"
         if self.reason == "no effect":
             return f"{self.name}: no effect on the measurements"
         if self.reason == "poorly identifiable":

@@ -7,7 +7,9 @@
                measurement uncertainty.
 ``pinv``       Seed 003 eq. 3.6: the classic iterated pseudo-inverse
                ΔE = (JᵀJ)⁻¹JᵀΔP over all poses, repeated until the correction moves the
-               tool by less than the measurement resolution.
+               tool by less than the measurement resolution.  ``per_pose=True``: the
+               thesis' own use of eq. 3.6, ΔE = Jᵢᵀ(JᵢJᵢᵀ)⁻¹ΔPᵢ iterated at each pose,
+               then the best-fit set (:mod:`robocal.identify.influence`).
 ``bounded``    Seed 001 eq. 4: minimise Σ_j |X_j − X'_j| (sum of distances, not of
                squares) with |δd|, |δL| ≤ 5 mm and |δθ|, |δα| ≤ 2°.  Solved by
                iteratively reweighted least squares (Weiszfeld's scheme for sums of
@@ -15,13 +17,13 @@
                scipy's ``least_squares(method="trf")`` — trust-region reflective is the
                scipy least-squares routine that honours bounds.  (Seed 001 used MATLAB's
                fmincon on the same objective.)
-``influence``  Seed 003 ch. 3 (eqs. 3.7-3.8): per pose an influence vector k from
-               perturbing each parameter (+0.05° angular, +0.1 mm linear), relative to
-               the most influential one; per pose the correction
-               ΔE = C·k∘Jᵀ(JJᵀ)⁻¹ΔP is iterated (C < 1) until the pose's error is below
-               the resolution; the best-fit set over all poses is the one that best
-               reproduces every pose's corrected position, argmin Σ_i |J_i (E − E_i)|²;
-               it is relinearised until it stops moving.
+``influence``  Seed 003 ch. 3 (eqs. 3.7-3.8, :mod:`robocal.identify.influence`): per
+               pose an influence vector k from the thesis' test deviations (+0.05°,
+               +0.1 mm), relative to the most influential parameter; per pose the
+               correction ΔE = C·k∘Jᵢᵀ(JᵢJᵢᵀ)⁻¹ΔP iterated (C < 1) until the pose's error
+               is below the resolution; the per-pose sets combined into one
+               (``combine="mean"``, ``"best"`` or ``"fit"``); ``passes=1`` is the
+               thesis' single pass, the default repeats it until the set stops moving.
 =============  =========================================================================
 """
 
@@ -375,70 +377,24 @@ def _bounded(
     return SolveResult(np.clip(x, lo, hi), False, message, max_rounds, evaluations)
 
 
-def _influence(
-    problem,
-    x0: Array,
-    *,
-    relaxation: float = 0.5,
-    resolution: float = 1e-5,
-    max_iterations: int = 200,
-    inner_iterations: int = 50,
-    angular_step: float = math.radians(0.05),
-    linear_step: float = 1e-4,
-    **_,
-) -> SolveResult:
-    """Seed 003 ch. 3: influence-weighted per-pose identification, then the best fit."""
-    if not 0 < relaxation < 1:
-        raise ValueError(f"the influence method needs 0 < C < 1, got C={relaxation}")
-    x = x0.copy()
-    width = problem.rows
-    # the thesis' test steps: +0.05° on angles, +0.1 mm on lengths (effect coefficients:
-    # the step that moves the tool as much as 0.1 mm would)
-    move_scale = problem.free_scale
-    n_geo = len(x) - problem.n_effects
-    rot = np.array([s.is_rotation for s in problem.chain.steps if s.free], dtype=bool)
-    step = np.concatenate([np.where(rot, angular_step, linear_step), linear_step / move_scale[n_geo:]])
-    history = []
-    # rows weighted as in the other methods (1/σ; orientation rows by orientation_weight),
-    # so that metres and radians of pose measurements are not mixed; the per-pose stop test
-    # is on the unweighted position error
-    w = problem.weights.reshape(-1, width)
-    for it in range(1, max_iterations + 1):
-        r = problem.residual(x).reshape(-1, width)  # weighted ΔP per pose (model - measured)
-        J = problem.jacobian(x).reshape(r.shape[0], width, -1)  # (n, w, p)
-        history.append(float(np.sqrt(np.mean((r / w) ** 2))))
-        # influence of each parameter at each pose: tool displacement for its test step
-        influence = np.linalg.norm(J[:, :3] / w[:, :3, None], axis=1) * step  # (n, p), metres
-        k = influence / np.maximum(influence.max(axis=1, keepdims=True), 1e-300)
-        # per pose, iterate ΔE = C k∘Jᵀ(JJᵀ)⁻¹ΔP in the linearised model until |ΔP| < resolution
-        # unknowns as tool displacements (rotations times the robot's size), so that the
-        # minimum-norm step weighs a radian and a metre consistently
-        Js = J / move_scale
-        JJt = Js @ Js.transpose(0, 2, 1)
-        JJt_inv = np.linalg.pinv(JJt, rcond=1e-10)
-        e = np.zeros((r.shape[0], len(x)))
-        remaining = -r.copy()
-        for _ in range(inner_iterations):
-            if np.all(np.linalg.norm(remaining[:, :3] / w[:, :3], axis=1) < resolution):
-                break
-            step_e = relaxation * k * np.einsum("nwp,nwv,nv->np", Js, JJt_inv, remaining)
-            e += step_e
-            remaining -= np.einsum("nwp,np->nw", Js, step_e)
-        # the best-fit set: the parameters that best reproduce every pose's corrected
-        # position, argmin_E Σ_i |J_i (E - e_i)|² (seed 003 §3.6)
-        targets = np.einsum("nwp,np->nw", Js, e).reshape(-1)
-        dx = np.linalg.lstsq(Js.reshape(-1, len(x)), targets, rcond=None)[0] / move_scale
-        x = x + dx
-        if np.max(np.abs(dx) * move_scale) < 1e-3 * resolution:
-            return SolveResult(x, True, "the best-fit set stopped moving", it, it, history)
-    return SolveResult(
-        x, False, f"no convergence in {max_iterations} iterations", max_iterations, max_iterations, history
-    )
+def _pinv_or_per_pose(problem, x0: Array, *, per_pose: bool = False, **options) -> SolveResult:
+    if per_pose:  # seed 003 eq. 3.6 as the thesis applies it: per pose, then the best-fit set
+        from robocal.identify.influence import solve_per_pose
+
+        return solve_per_pose(problem, x0, influence=False, **options)
+    return _pinv(problem, x0, **options)
+
+
+def _influence(problem, x0: Array, **options) -> SolveResult:
+    """Seed 003 ch. 3 (:mod:`robocal.identify.influence`)."""
+    from robocal.identify.influence import solve_per_pose
+
+    return solve_per_pose(problem, x0, influence=True, **options)
 
 
 METHODS: dict[str, Callable[..., SolveResult]] = {
     "lm": _lm,
-    "pinv": _pinv,
+    "pinv": _pinv_or_per_pose,
     "bounded": _bounded,
     "influence": _influence,
 }

@@ -1,0 +1,1 @@
+"""Applications built on robocal's public API (the GUI)."""

@@ -1,0 +1,1 @@
+"""``robocal gui``: the model builder and the calibration in a browser window (Dash, offline)."""

@@ -1,0 +1,136 @@
+"""The ``robocal gui`` web app: Dash on localhost, every script served from installed packages.
+
+Dash serves its renderer, React and plotly.js (bundled with ``dash.dcc``) from the
+installed Python packages (``serve_locally``); there are no external stylesheets,
+fonts or scripts, so the app works without a network and no request leaves the
+machine (the browser tests fail on any request to another host).  The app's files
+(uploads, calibration results, reports) live in a temporary directory removed on exit.
+"""
+
+from __future__ import annotations
+
+import atexit
+import shutil
+import tempfile
+import threading
+import webbrowser
+from pathlib import Path
+
+__all__ = ["create_app", "serve"]
+
+CSS = """
+body { font-family: system-ui, sans-serif; margin: 0; color: #222; font-size: 14px; }
+header { background: #1f3b57; color: white; padding: 0.5rem 1rem; }
+header b { font-size: 1.2rem; margin-right: 1rem; }
+.page { display: flex; gap: 1rem; padding: 0.5rem 1rem; align-items: flex-start; }
+.left, .right { flex: 1 1 50%; min-width: 0; overflow-x: auto; }
+.toolbar { margin: 0.4rem 0; display: flex; gap: 0.4rem; align-items: center; flex-wrap: wrap; }
+.toolbar > div { display: inline-block; }
+button { padding: 0.25rem 0.6rem; cursor: pointer; }
+button.primary { background: #1f77b4; color: white; border: 1px solid #1f77b4; }
+.joint-row, .joint-head { display: flex; gap: 0.25rem; align-items: center; margin: 0.1rem 0; }
+.joint-head span { color: #555; font-size: 0.85rem; margin-right: 1.5rem; }
+.rownum { width: 2.2em; text-align: right; color: #555; }
+.field { font-family: inherit; }
+input.field { border: 1px solid #bbb; padding: 0.15rem 0.25rem; }
+.invalid, .invalid input { border-color: #d62728 !important; background: #fdecea !important; }
+.dash-input-container.invalid { outline: 2px solid #d62728; }
+.rowmsg { color: #d62728; font-size: 0.85rem; margin-left: 2.6em; }
+.type, .type label { display: inline-flex; } .type label, .catalog label { margin-right: 0.5rem; }
+.joint-head span { display: inline-block; box-sizing: border-box; }
+.joint-row .dash-input-container { box-sizing: border-box; }
+.meta label { margin-right: 1rem; }
+.note, .hint { color: #666; font-size: 0.85rem; margin-left: 0.5rem; }
+.message { margin: 0.3rem 0; min-height: 1.2em; }
+.error { color: #b00020; font-weight: 600; } .warning { color: #8a5a00; } .ok { color: #1a7f37; }
+.bad { color: #b00020; }
+.count { font-weight: 600; margin: 0.3rem 0; }
+table { border-collapse: collapse; font-size: 0.85rem; margin: 0.3rem 0; }
+td, th { border-bottom: 1px solid #ddd; padding: 0.15rem 0.45rem; text-align: left; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+td.eq { font-family: ui-monospace, monospace; font-size: 0.8rem; }
+.dim { color: #999; }
+fieldset { border: 1px solid #ccc; margin: 0.4rem 0; }
+.opt { margin: 0.2rem 0; } .opt .lab { display: inline-block; width: 9.5em; color: #333; }
+.opt label { margin-right: 0.6rem; }
+.progress { height: 14px; background: #eee; border-radius: 7px; overflow: hidden; margin: 0.4rem 0; }
+.bar { height: 100%; width: 0%; background: #1f77b4; transition: width 0.3s; }
+@keyframes pulse { 0% { opacity: 1; } 50% { opacity: 0.55; } 100% { opacity: 1; } }
+pre.cv { font-size: 0.78rem; background: #f6f6f6; padding: 0.3rem; }
+pre.raw { background: #f6f6f6; padding: 0.4rem; font-size: 0.75rem; overflow-x: auto; }
+.big { font-size: 1.05rem; font-weight: 600; margin: 0.3rem 0; }
+"""
+
+INDEX = (
+    """<!DOCTYPE html>
+<html lang="en"><head>{%metas%}<title>robocal</title>{%favicon%}{%css%}<style>"""
+    + CSS
+    + """</style>
+</head><body>{%app_entry%}<footer>{%config%}{%scripts%}{%renderer%}</footer></body></html>"""
+)
+
+
+def create_app(workdir: Path):
+    """The Dash app; its files (uploads, results) in ``workdir``."""
+    from dash import Dash, dcc, html
+    from flask import abort, send_from_directory
+
+    import robocal as rc
+    from robocal.apps.gui import builder_page, calibrate_page
+
+    app = Dash(
+        __name__,
+        title="robocal",
+        serve_locally=True,
+        external_scripts=[],
+        external_stylesheets=[],
+        assets_folder=str(workdir / "assets"),  # none: the style is in the page
+        suppress_callback_exceptions=True,
+        update_title=None,
+    )
+    app.index_string = INDEX
+    catalog = rc.robots()
+    app.layout = html.Div(
+        [
+            html.Header(
+                [html.B("robocal"), html.Span(f"calibration of serial robot arms · {rc.__version__}")]
+            ),
+            dcc.Store(id="built-model"),
+            dcc.Tabs(
+                id="tabs",
+                value="builder",
+                children=[
+                    dcc.Tab(label="Model builder", value="builder", children=builder_page.layout(catalog)),
+                    dcc.Tab(label="Calibration", value="calibrate", children=calibrate_page.layout(catalog)),
+                ],
+            ),
+        ]
+    )
+    builder_page.register(app)
+    calibrate_page.register(app, workdir)
+    runs = workdir / "runs"
+
+    @app.server.route("/runs/<run_id>/<name>")
+    def run_file(run_id: str, name: str):
+        allowed = {"report.html", "model.yaml", "result.json", "train.csv", "test.csv"}
+        if name not in allowed or not run_id.isalnum() or not (runs / run_id / name).is_file():
+            abort(404)
+        return send_from_directory(runs / run_id, name)
+
+    return app
+
+
+def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") -> None:
+    """Run the app on ``host:port`` until Ctrl-C; open the browser unless told not to."""
+    workdir = Path(tempfile.mkdtemp(prefix="robocal-gui-"))
+    atexit.register(shutil.rmtree, workdir, ignore_errors=True)
+    app = create_app(workdir)
+    url = f"http://{host}:{port}/"
+    print(f"robocal gui on {url} (Ctrl-C stops it)", flush=True)
+    if open_browser:
+        threading.Timer(1.0, webbrowser.open, args=(url,)).start()
+    try:
+        app.run(host=host, port=port, debug=False)
+    finally:
+        app.robocal_runner.cancel()
+        shutil.rmtree(workdir, ignore_errors=True)
