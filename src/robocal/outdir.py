@@ -46,7 +46,7 @@ import secrets
 import shutil
 import signal
 import time
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,10 +57,12 @@ __all__ = [
     "Stage",
     "check_consistent",
     "check_not_busy",
+    "file_set",
     "new_run_id",
     "read_run_id",
     "restore",
     "transaction",
+    "write_together",
 ]
 
 #: the write steps of a transaction, in order (see ``ROBOCAL_TEST_KILL_AT``)
@@ -400,3 +402,79 @@ def write_files(stage: Stage, files: dict[str, str | bytes]) -> None:
     for name, content in files.items():
         data = content.encode("utf-8") if isinstance(content, str) else content
         (stage.path / name).write_bytes(data)
+
+
+# ------------------------------------------------------------------ sets of files beside each other
+def _temporary_beside(path: Path, kind: str) -> Path:
+    """``.NAME.<pid>.<random>.KIND.tmp`` beside ``path`` (removed by
+    :func:`robocal.model.files.atomic_write_bytes` once its process is gone)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.{kind}.tmp")
+
+
+def _commit_set(paths: Sequence[Path], temporaries: Sequence[Path]) -> None:
+    """Rename every temporary onto its path; should a rename fail, put the earlier files
+    back (kept as hard links, or copies) and remove the new ones that had no earlier file."""
+    backups: dict[Path, Path] = {}
+    renamed: list[Path] = []
+    try:
+        for path in paths:
+            if path.is_file():
+                backups[path] = _temporary_beside(path, "old")
+                _link_or_copy(path, backups[path])
+        for index, (path, tmp) in enumerate(zip(paths, temporaries, strict=True)):
+            if index:
+                _test_step("set-renaming")
+            os.replace(tmp, path)
+            renamed.append(path)
+    except BaseException:
+        for path in renamed:
+            with contextlib.suppress(OSError):
+                if path in backups:
+                    os.replace(backups.pop(path), path)
+                else:
+                    path.unlink()
+        raise
+    finally:
+        for backup in backups.values():
+            with contextlib.suppress(OSError):
+                backup.unlink()
+
+
+@contextlib.contextmanager
+def file_set(paths: Sequence[str | os.PathLike[str]], *, wait_s: float = 1.0) -> Iterator[list[Path]]:
+    """Write several files that belong together (a program and its ``.dat``, measurements
+    and their truth) all or none: yields one temporary path beside each of ``paths``; write
+    every one of them inside the ``with`` block.  On a normal exit they are renamed into
+    place (first path first); on an exception, or a failed rename, the earlier files stay
+    (or none, when there were none) and the temporaries are removed.  Writers are serialised
+    by the lock of the first path (:class:`FolderBusyError` after ``wait_s`` seconds).
+
+    A process killed between the renames can leave a mix: give the files a run id
+    (:func:`run_id_line`) so that their reader can refuse it."""
+    targets = [Path(os.path.abspath(p)) for p in paths]
+    if len(set(targets)) != len(targets):
+        raise ValueError(f"the same file is given twice among {', '.join(map(str, paths))}")
+    for target in targets:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    with _lock(targets[0], wait_s):
+        temporaries = [_temporary_beside(t, "new") for t in targets]
+        try:
+            yield temporaries
+            missing = [str(t) for t, tmp in zip(targets, temporaries, strict=True) if not tmp.is_file()]
+            if missing:
+                raise RuntimeError(f"internal error: not written: {', '.join(missing)}")
+            _commit_set(targets, temporaries)
+        finally:
+            for tmp in temporaries:
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+
+
+def write_together(files: dict[Path, bytes], *, wait_s: float = 1.0) -> None:
+    """Write ``files`` (path -> content) all or none (see :func:`file_set`)."""
+    from robocal.model.files import atomic_write_bytes
+
+    paths = list(files)
+    with file_set(paths, wait_s=wait_s) as temporaries:
+        for path, tmp in zip(paths, temporaries, strict=True):
+            atomic_write_bytes(tmp, files[path])
