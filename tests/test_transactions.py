@@ -163,3 +163,47 @@ def test_failed_first_filter_leaves_neither_file(tmp_path, monkeypatch):
     with pytest.raises(OSError):
         filter_program_file(program, rc.robot("kr16"), out)
     assert list(out.parent.iterdir()) == []
+
+
+# ------------------------------------------------------------------ study summaries
+def _study_config(robots: int):
+    from robocal.study import StudyConfig
+
+    return StudyConfig.model_validate(
+        dict(
+            name="t",
+            robot="ur10",
+            robots=robots,
+            seed=3,
+            tool=(0.0, 0.0, 109.0),
+            pose_sets=[{"name": "r30", "kind": "random", "n": 30}],
+            devices=[{"name": "t20", "kind": "laser-tracker", "noise": "0.02mm"}],
+            validation={"n": 20},
+            chunk=4,
+        )
+    )
+
+
+def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
+    import json
+
+    from PIL import Image
+
+    from robocal.study import run_study
+
+    out = tmp_path / "s"
+    first = run_study(_study_config(2), out, workers=0)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["run_id"] == first.summary["run_id"] and summary["groups"][0]["cases"] == 2
+    assert Image.open(out / "summary.png").info["Description"] == f"robocal run: {summary['run_id']}"
+    before = {n: (out / n).read_bytes() for n in ("summary.json", "summary.png")}
+    _fail_replace_onto(monkeypatch, "summary.png")  # a full disk between the two files
+    with pytest.raises(OSError):
+        run_study(_study_config(3), out, workers=0)
+    monkeypatch.undo()
+    assert {n: (out / n).read_bytes() for n in ("summary.json", "summary.png")} == before
+    assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
+    third = run_study(_study_config(3), out, workers=0)  # resumes, and now writes both
+    summary = json.loads((out / "summary.json").read_text())
+    assert third.resumed == 3 and summary["groups"][0]["cases"] == 3
+    assert Image.open(out / "summary.png").info["Description"] == f"robocal run: {summary['run_id']}"
