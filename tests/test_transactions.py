@@ -207,3 +207,63 @@ def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
     summary = json.loads((out / "summary.json").read_text())
     assert third.resumed == 3 and summary["groups"][0]["cases"] == 3
     assert Image.open(out / "summary.png").info["Description"] == f"robocal run: {summary['run_id']}"
+
+
+# ------------------------------------------------------------------ the report carries its result's run id
+def test_report_carries_the_run_id_and_a_foreign_report_is_refused(tmp_path):
+    from robocal.evaluate.report import write_report
+    from robocal.identify.calibrate import CalibrationResult
+
+    ur10 = rc.robot("ur10")
+    dev = LaserTracker(p_tool_target=[0.0, 0.0, 0.1], sigma=15e-6)
+    q = np.random.default_rng(5).uniform(-2, 2, (40, 6))
+    data = simulate(VirtualRobot(ur10, draw_true_model(ur10, seed=7), dev), q, seed=8)
+    result = rc.calibrate(ur10, data)
+
+    def with_report(stage: Path) -> None:  # as `robocal calibrate --report` does
+        run_id = outdir.read_run_id(stage / "result.json")
+        write_report(result, stage / "report.html", data=data, run_id=run_id)
+
+    for name in ("a", "b"):
+        result.save(tmp_path / name, also=with_report)
+    run_a = outdir.read_run_id(tmp_path / "a" / "result.json")
+    assert run_a and outdir.read_run_id(tmp_path / "a" / "report.html") == run_a
+    assert f'<meta name="robocal-run" content="{run_a}">' in (tmp_path / "a" / "report.html").read_text()
+    CalibrationResult.load(tmp_path / "a")  # consistent
+    # a report written from a result folder takes that folder's run id
+    write_report(tmp_path / "a", tmp_path / "elsewhere.html")
+    assert outdir.read_run_id(tmp_path / "elsewhere.html") == run_a
+    # b's report beside a's result: refused, naming the report
+    (tmp_path / "a" / "report.html").write_bytes((tmp_path / "b" / "report.html").read_bytes())
+    with pytest.raises(outdir.FolderMixedError, match=r"report\.html \(run [0-9a-f]+\)"):
+        CalibrationResult.load(tmp_path / "a")
+    with pytest.raises(ValueError, match="not a run id"):
+        outdir.run_id_meta('"><script>')
+
+
+def test_simulation_killed_between_its_renames_is_refused_then_replaced(tmp_path, sim):
+    import subprocess
+    import textwrap
+
+    (robot1, data1), _ = sim
+    save_simulation(robot1, data1, tmp_path / "meas.csv", seed=3)
+    script = textwrap.dedent(
+        f"""
+        import numpy as np, robocal as rc
+        from robocal.measure.devices import LaserTracker
+        from robocal.measure.simulate import VirtualRobot, draw_true_model, save_simulation, simulate
+        ur10 = rc.robot("ur10")
+        robot = VirtualRobot(ur10, draw_true_model(ur10, seed=9), LaserTracker(sigma=15e-6))
+        q = np.random.default_rng(1).uniform(-2, 2, (12, 6))
+        save_simulation(robot, simulate(robot, q, seed=3), {str(tmp_path / "meas.csv")!r}, seed=3)
+        """
+    )
+    env = dict(os.environ, ROBOCAL_TEST_KILL_AT="set-renaming")
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, timeout=120)
+    assert proc.returncode == -9, proc.stderr.decode()
+    assert any(p.name.endswith(".tmp") for p in tmp_path.iterdir())  # what the killed writer left
+    with pytest.raises(outdir.FolderMixedError, match=r"meas\.true_model\.yaml"):
+        load_truth(tmp_path / "meas.csv")  # a new true model beside the earlier truth: refused
+    save_simulation(robot1, data1, tmp_path / "meas.csv", seed=3)  # the next writer cleans up
+    assert sorted(_snapshot(tmp_path)) == sorted(SIM_FILES)
+    assert load_truth(tmp_path / "meas.csv").true == robot1.true

@@ -24,9 +24,14 @@ process that holds the lock.  A process killed at any point leaves either the ea
 the new result in ``NAME``; its leftover ``.NAME.*.staging`` / ``.NAME.*.old`` directories
 are removed by the next writer, and readers ignore them.
 
-Every file of a result carries the same run id (``result.json``: ``"run_id"``; YAML files:
-a ``# robocal run: ID`` comment line); :func:`check_consistent` refuses a folder whose files
-disagree.
+Every file of a result carries the same run id (``result.json``: ``"run_id"``; YAML and CSV
+files: a ``# robocal run: ID`` comment line; the HTML report: ``<meta name="robocal-run"
+content="ID">``); :func:`check_consistent` refuses a folder whose files disagree.
+
+Files that belong together but do not form a folder (a simulation's measurements, truth and
+models; a KRL ``.src`` and its ``.dat``; a study's ``summary.json`` and ``summary.png``) are
+written by :func:`file_set` / :func:`write_together`: temporary names beside them, then
+one rename each, the earlier files put back should a rename fail.
 
 For tests: the environment variable ``ROBOCAL_TEST_KILL_AT`` names a write step
 (:data:`STEPS`) at which the process kills itself with SIGKILL, to check that every
@@ -61,6 +66,8 @@ __all__ = [
     "new_run_id",
     "read_run_id",
     "restore",
+    "run_id_line",
+    "run_id_meta",
     "transaction",
     "write_together",
 ]
@@ -69,6 +76,8 @@ __all__ = [
 STEPS = ("locked", "staged", "carried", "parked", "swapped", "cleaned")
 
 _RUN_LINE = re.compile(r"^# robocal run: ([0-9a-f]{8,64})\s*$")
+_RUN_META = re.compile(r'<meta name="robocal-run" content="([0-9a-f]{8,64})">')
+_RUN_ID = re.compile(r"[0-9a-f]{8,64}")
 
 
 class FolderBusyError(RuntimeError):
@@ -89,10 +98,25 @@ def run_id_line(run_id: str) -> str:
     return f"# robocal run: {run_id}\n"
 
 
+def run_id_meta(run_id: str) -> str:
+    """The ``<meta>`` element that stamps an HTML report with ``run_id`` (a run id is hex)."""
+    if not _RUN_ID.fullmatch(run_id):
+        raise ValueError(f"not a run id: {run_id!r}")
+    return f'<meta name="robocal-run" content="{run_id}">'
+
+
 def read_run_id(path: Path) -> str | None:
-    """The run id of a file written by a transaction: ``result.json``'s ``run_id`` or a
-    ``# robocal run: ID`` line among the first lines of a text file; None when it has none."""
+    """The run id of a file written by a transaction: ``result.json``'s ``run_id``, an HTML
+    report's ``<meta name="robocal-run">`` in its first 4 kB, or a ``# robocal run: ID``
+    line among the first lines of a text file; None when it has none."""
     path = Path(path)
+    if path.suffix in (".html", ".htm"):
+        try:
+            with open(path, encoding="utf-8", errors="replace") as fh:
+                match = _RUN_META.search(fh.read(4096))
+        except OSError:
+            return None
+        return match.group(1) if match else None
     if path.suffix == ".json":
         import json
 
@@ -456,7 +480,11 @@ def file_set(paths: Sequence[str | os.PathLike[str]], *, wait_s: float = 1.0) ->
         raise ValueError(f"the same file is given twice among {', '.join(map(str, paths))}")
     for target in targets:
         target.parent.mkdir(parents=True, exist_ok=True)
+    from robocal.model.files import _remove_stale_temporaries  # those of killed writers
+
     with _lock(targets[0], wait_s):
+        for target in targets:
+            _remove_stale_temporaries(target)
         temporaries = [_temporary_beside(t, "new") for t in targets]
         try:
             yield temporaries
