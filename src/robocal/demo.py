@@ -449,11 +449,16 @@ def run_demo(
                 ev["timings_s"] = dict(steps.timings)
 
                 def the_rest(stage: Path) -> None:  # written with the result, all or nothing
-                    write_measurements(train, stage / "train.csv")
-                    write_measurements(test, stage / "test.csv")
-                    save_model(true, stage / "true_model.yaml")
-                    atomic_write_text(stage / "evaluation.json", strict_json(ev) + "\n")
-                    write_report(result, stage / "report.html", data=train, test_data=test, evaluation=ev)
+                    from robocal.outdir import read_run_id
+
+                    run_id = read_run_id(stage / "result.json")  # each file carries the result's run id
+                    write_measurements(train, stage / "train.csv", run_id=run_id)
+                    write_measurements(test, stage / "test.csv", run_id=run_id)
+                    save_model(true, stage / "true_model.yaml", run_id=run_id)
+                    evaluation = ev | ({"run_id": run_id} if run_id else {})
+                    atomic_write_text(stage / "evaluation.json", strict_json(evaluation) + "\n")
+                    report = stage / "report.html"
+                    write_report(result, report, data=train, test_data=test, evaluation=ev, run_id=run_id)
 
                 result.save(out, also=the_rest)
                 report_path = out / "report.html"

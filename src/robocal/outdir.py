@@ -24,9 +24,14 @@ process that holds the lock.  A process killed at any point leaves either the ea
 the new result in ``NAME``; its leftover ``.NAME.*.staging`` / ``.NAME.*.old`` directories
 are removed by the next writer, and readers ignore them.
 
-Every file of a result carries the same run id (``result.json``: ``"run_id"``; YAML files:
-a ``# robocal run: ID`` comment line); :func:`check_consistent` refuses a folder whose files
-disagree.
+Every file of a result carries the same run id (``result.json``: ``"run_id"``; YAML and CSV
+files: a ``# robocal run: ID`` comment line; the HTML report: ``<meta name="robocal-run"
+content="ID">``); :func:`check_consistent` refuses a folder whose files disagree.
+
+Files that belong together but do not form a folder (a simulation's measurements, truth and
+models; a KRL ``.src`` and its ``.dat``; a study's ``summary.json`` and ``summary.png``) are
+written by :func:`file_set` / :func:`write_together`: temporary names beside them, then
+one rename each, the earlier files put back should a rename fail.
 
 For tests: the environment variable ``ROBOCAL_TEST_KILL_AT`` names a write step
 (:data:`STEPS`) at which the process kills itself with SIGKILL, to check that every
@@ -46,7 +51,7 @@ import secrets
 import shutil
 import signal
 import time
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,16 +62,22 @@ __all__ = [
     "Stage",
     "check_consistent",
     "check_not_busy",
+    "file_set",
     "new_run_id",
     "read_run_id",
     "restore",
+    "run_id_line",
+    "run_id_meta",
     "transaction",
+    "write_together",
 ]
 
 #: the write steps of a transaction, in order (see ``ROBOCAL_TEST_KILL_AT``)
 STEPS = ("locked", "staged", "carried", "parked", "swapped", "cleaned")
 
 _RUN_LINE = re.compile(r"^# robocal run: ([0-9a-f]{8,64})\s*$")
+_RUN_META = re.compile(r'<meta name="robocal-run" content="([0-9a-f]{8,64})">')
+_RUN_ID = re.compile(r"[0-9a-f]{8,64}")
 
 
 class FolderBusyError(RuntimeError):
@@ -87,10 +98,25 @@ def run_id_line(run_id: str) -> str:
     return f"# robocal run: {run_id}\n"
 
 
+def run_id_meta(run_id: str) -> str:
+    """The ``<meta>`` element that stamps an HTML report with ``run_id`` (a run id is hex)."""
+    if not _RUN_ID.fullmatch(run_id):
+        raise ValueError(f"not a run id: {run_id!r}")
+    return f'<meta name="robocal-run" content="{run_id}">'
+
+
 def read_run_id(path: Path) -> str | None:
-    """The run id of a file written by a transaction: ``result.json``'s ``run_id`` or a
-    ``# robocal run: ID`` line among the first lines of a text file; None when it has none."""
+    """The run id of a file written by a transaction: ``result.json``'s ``run_id``, an HTML
+    report's ``<meta name="robocal-run">`` in its first 4 kB, or a ``# robocal run: ID``
+    line among the first lines of a text file; None when it has none."""
     path = Path(path)
+    if path.suffix in (".html", ".htm"):
+        try:
+            with open(path, encoding="utf-8", errors="replace") as fh:
+                match = _RUN_META.search(fh.read(4096))
+        except OSError:
+            return None
+        return match.group(1) if match else None
     if path.suffix == ".json":
         import json
 
@@ -400,3 +426,83 @@ def write_files(stage: Stage, files: dict[str, str | bytes]) -> None:
     for name, content in files.items():
         data = content.encode("utf-8") if isinstance(content, str) else content
         (stage.path / name).write_bytes(data)
+
+
+# ------------------------------------------------------------------ sets of files beside each other
+def _temporary_beside(path: Path, kind: str) -> Path:
+    """``.NAME.<pid>.<random>.KIND.tmp`` beside ``path`` (removed by
+    :func:`robocal.model.files.atomic_write_bytes` once its process is gone)."""
+    return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.{kind}.tmp")
+
+
+def _commit_set(paths: Sequence[Path], temporaries: Sequence[Path]) -> None:
+    """Rename every temporary onto its path; should a rename fail, put the earlier files
+    back (kept as hard links, or copies) and remove the new ones that had no earlier file."""
+    backups: dict[Path, Path] = {}
+    renamed: list[Path] = []
+    try:
+        for path in paths:
+            if path.is_file():
+                backups[path] = _temporary_beside(path, "old")
+                _link_or_copy(path, backups[path])
+        for index, (path, tmp) in enumerate(zip(paths, temporaries, strict=True)):
+            if index:
+                _test_step("set-renaming")
+            os.replace(tmp, path)
+            renamed.append(path)
+    except BaseException:
+        for path in renamed:
+            with contextlib.suppress(OSError):
+                if path in backups:
+                    os.replace(backups.pop(path), path)
+                else:
+                    path.unlink()
+        raise
+    finally:
+        for backup in backups.values():
+            with contextlib.suppress(OSError):
+                backup.unlink()
+
+
+@contextlib.contextmanager
+def file_set(paths: Sequence[str | os.PathLike[str]], *, wait_s: float = 1.0) -> Iterator[list[Path]]:
+    """Write several files that belong together (a program and its ``.dat``, measurements
+    and their truth) all or none: yields one temporary path beside each of ``paths``; write
+    every one of them inside the ``with`` block.  On a normal exit they are renamed into
+    place (first path first); on an exception, or a failed rename, the earlier files stay
+    (or none, when there were none) and the temporaries are removed.  Writers are serialised
+    by the lock of the first path (:class:`FolderBusyError` after ``wait_s`` seconds).
+
+    A process killed between the renames can leave a mix: give the files a run id
+    (:func:`run_id_line`) so that their reader can refuse it."""
+    targets = [Path(os.path.abspath(p)) for p in paths]
+    if len(set(targets)) != len(targets):
+        raise ValueError(f"the same file is given twice among {', '.join(map(str, paths))}")
+    for target in targets:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    from robocal.model.files import _remove_stale_temporaries  # those of killed writers
+
+    with _lock(targets[0], wait_s):
+        for target in targets:
+            _remove_stale_temporaries(target)
+        temporaries = [_temporary_beside(t, "new") for t in targets]
+        try:
+            yield temporaries
+            missing = [str(t) for t, tmp in zip(targets, temporaries, strict=True) if not tmp.is_file()]
+            if missing:
+                raise RuntimeError(f"internal error: not written: {', '.join(missing)}")
+            _commit_set(targets, temporaries)
+        finally:
+            for tmp in temporaries:
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+
+
+def write_together(files: dict[Path, bytes], *, wait_s: float = 1.0) -> None:
+    """Write ``files`` (path -> content) all or none (see :func:`file_set`)."""
+    from robocal.model.files import atomic_write_bytes
+
+    paths = list(files)
+    with file_set(paths, wait_s=wait_s) as temporaries:
+        for path, tmp in zip(paths, temporaries, strict=True):
+            atomic_write_bytes(tmp, files[path])

@@ -45,7 +45,6 @@ import hashlib
 import io
 import math
 import os
-import tempfile
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -67,6 +66,7 @@ from robocal.model.files import (
     format_validation_error,
     strict_json,
 )
+from robocal.outdir import new_run_id, write_together
 
 __all__ = [
     "FLEET_COLUMNS",
@@ -754,19 +754,6 @@ def _cell(value: Any) -> str:
     return csv_text(str(value))  # a file name or message is never run as a spreadsheet formula
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
-
-
 # =============================================================== running
 @dataclass
 class StudyRun:
@@ -1021,8 +1008,13 @@ def run_study(
     summary = _summarise(config, mine)
     summary["seconds"] = seconds
     summary["calibrations_per_second"] = computed / seconds if seconds > 0 else 0.0
-    atomic_write_text(out / "summary.json", strict_json(summary, indent=2) + "\n")
-    _plot_summary(config, mine, out / "summary.png")
+    summary["run_id"] = new_run_id()
+    write_together(  # the summary and its plot: both of this run or neither
+        {
+            out / "summary.json": (strict_json(summary, indent=2) + "\n").encode("utf-8"),
+            out / "summary.png": _summary_png(config, mine, summary["run_id"]),
+        }
+    )
     return StudyRun(
         out=out,
         total=len(cases),
@@ -1080,8 +1072,9 @@ def _summarise(config: StudyConfig, rows: Iterable[Mapping[str, str]]) -> dict[s
     return {"study": config.name, "robot": robot, "robots": config.robots, "groups": groups}
 
 
-def _plot_summary(config: StudyConfig, rows: Iterable[Mapping[str, str]], path: Path) -> None:
-    """Box plot of the held-out error against the true robot per (pose set, device), as PNG."""
+def _summary_png(config: StudyConfig, rows: Iterable[Mapping[str, str]], run_id: str) -> bytes:
+    """Box plot of the held-out error against the true robot per (pose set, device), as PNG
+    bytes (``run_id`` in its ``Description``, the ``run_id`` of ``summary.json``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -1110,9 +1103,9 @@ def _plot_summary(config: StudyConfig, rows: Iterable[Mapping[str, str]], path: 
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png")
+    fig.savefig(buf, format="png", metadata={"Description": f"robocal run: {run_id}"})
     plt.close(fig)
-    _atomic_write_bytes(path, buf.getvalue())
+    return buf.getvalue()
 
 
 # =============================================================== fleets

@@ -1241,13 +1241,6 @@ def _read(path: Path) -> tuple[str, str]:
         return data.decode("latin-1"), "latin-1"
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    """``data`` to ``path`` through a temporary file and a rename (never half-written)."""
-    from robocal.model.files import atomic_write_bytes
-
-    atomic_write_bytes(path, data)
-
-
 def filter_program_file(
     path: str | Path,
     calibrated: CalibrationResult | Model,
@@ -1258,7 +1251,7 @@ def filter_program_file(
     **options,
 ) -> FilteredProgram:
     """Filter a program file (see :func:`filter_program_text`); written to ``out``
-    atomically when given (KRL: ``out`` and the ``.dat`` next to it).  Nothing is
+    atomically when given (KRL: ``out`` and the ``.dat`` next to it, both or neither).  Nothing is
     written when the program cannot be read.
 
     KRL: ``config_dat`` is the ``$config.dat`` holding ``TOOL_DATA``/``BASE_DATA``
@@ -1280,8 +1273,12 @@ def filter_program_file(
             options["config_dat"] = (str(cfg), _read(cfg)[0])
     result = filter_program_text(texts, language, calibrated, **options)
     if out is not None:
+        from robocal.outdir import write_together
+
         out = Path(out)
+        files = {}
         for label, text in result.texts.items():
             target = out if label == str(path) else out.with_suffix(Path(label).suffix)
-            _write_atomic(target, text.encode(encodings[label]))
+            files[target] = text.encode(encodings[label])
+        write_together(files)  # KRL: the .src and its .dat both or neither
     return result

@@ -1439,6 +1439,7 @@ def write_report(
     test_data: Measurements | None = None,
     evaluation: Mapping[str, Any] | None = None,
     title: str | None = None,
+    run_id: str | None = None,
 ) -> Path:
     """Write the self-contained HTML report of a calibration to ``out_path`` (atomically).
 
@@ -1454,18 +1455,26 @@ def write_report(
         evaluation: ISO 9283 poses and paths, compensation, truth, timings (see the
             module docstring).
         title: the report's heading.
+        run_id: the run id of the result folder the report belongs to (default: that of
+            ``result_or_dir/result.json``), stamped as ``<meta name="robocal-run">``
+            (:mod:`robocal.outdir`).
 
     Returns:
         ``out_path``.
     """
     from robocal.model.files import atomic_write_text
+    from robocal.outdir import read_run_id, run_id_meta
 
     if isinstance(result_or_dir, CalibrationResult):
         result = result_or_dir
     else:
+        run_id = run_id if run_id is not None else read_run_id(Path(result_or_dir) / "result.json")
         result, d_train, d_test, d_ev = _load_dir(Path(result_or_dir))
         data = data if data is not None else d_train
         test_data = test_data if test_data is not None else d_test
         evaluation = evaluation if evaluation is not None else d_ev
     page = build_report(result, data=data, test_data=test_data, evaluation=evaluation, title=title)
+    if run_id is not None:
+        head = '<meta charset="utf-8">'
+        page = page.replace(head, head + "\n" + run_id_meta(run_id), 1)
     return atomic_write_text(out_path, page)

@@ -694,7 +694,8 @@ class CalibrationResult:
             raise ValueError(
                 f"{path}: not a calibration result (a JSON object expected, got {type(data).__name__})"
             )
-        check_consistent(directory, ("model.yaml", "measurement_model.yaml"))
+        # not train.csv, test.csv or evaluation.json: a user may put their own there for `report`
+        check_consistent(directory, ("model.yaml", "measurement_model.yaml", "report.html"))
         if not (directory / "model.yaml").is_file():
             raise ValueError(f"{directory}: model.yaml is missing beside result.json; calibrate again")
         try:

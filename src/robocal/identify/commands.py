@@ -353,9 +353,11 @@ def calibrate_command(
         result.metadata["validation"] = validation.to_dict()
     def write_report_too(stage_dir: Path) -> None:
         from robocal.evaluate.report import write_report
+        from robocal.outdir import read_run_id
 
+        run_id = read_run_id(stage_dir / "result.json")  # the report is one file of this result
         with console.status("writing the report ..."):
-            write_report(result, stage_dir / "report.html", data=train, test_data=test)
+            write_report(result, stage_dir / "report.html", data=train, test_data=test, run_id=run_id)
 
     try:  # model.yaml, measurement_model.yaml, result.json (and report.html): all or nothing
         result.save(out, also=write_report_too if report else None)

@@ -306,8 +306,10 @@ def _fmt(v: float) -> str:
     return repr(float(v))
 
 
-def write_measurements(data: Measurements, path: str | Path) -> Path:
-    """Write ``data`` as CSV (SI units, ``,`` separator) atomically.
+def write_measurements(data: Measurements, path: str | Path, run_id: str | None = None) -> Path:
+    """Write ``data`` as CSV (SI units, ``,`` separator) atomically; ``run_id`` stamps it as
+    one file of a set written together (a ``# robocal run: ID`` first line; a run id read
+    with the data is never copied into another file).
 
     Columns: joint names as ``q1..qN``, then ``x y z``, ``qw qx qy qz``, ``sx sy sz``,
     ``temperature``, extra columns and ``set`` when present.  Floats are written with
@@ -333,7 +335,10 @@ def write_measurements(data: Measurements, path: str | Path) -> Path:
     table = np.concatenate(cols, axis=1) if cols else np.zeros((data.n, 0))
     buf = io.StringIO()
     meta = dict(data.metadata)
+    meta.pop("robocal run", None)
     meta.setdefault("units", "m, rad")
+    if run_id is not None:
+        buf.write(f"# robocal run: {run_id}\n")
     if data.joint_names != tuple(header[: data.dof]):
         meta["joints"] = " ".join(data.joint_names)
     for key, value in meta.items():

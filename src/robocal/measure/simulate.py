@@ -37,6 +37,7 @@ from robocal.measure.dataset import Measurements, write_measurements
 from robocal.measure.devices import Device, device_from_dict
 from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text, load_model, save_model
+from robocal.outdir import FolderMixedError, file_set, new_run_id, read_run_id, run_id_line
 
 __all__ = [
     "EncoderNoise",
@@ -457,8 +458,6 @@ def save_simulation(
     stem = path.stem
     true_file = f"{stem}.true_model.yaml"
     nominal_file = f"{stem}.nominal_model.yaml"
-    save_model(robot.true, path.with_name(true_file))
-    save_model(robot.nominal, path.with_name(nominal_file))
     effects = []
     for effect in robot.effects:
         desc = effect.to_dict() if hasattr(effect, "to_dict") else {"type": "callable"}
@@ -483,14 +482,41 @@ def save_simulation(
         "deviations": deviations,
         "info": _plain(info),
     }
+    run_id = new_run_id()
     header = (
         f"# robocal simulation truth for {path.name}: device {robot.device.kind}, robot {nom.name}, "
-        "seed " + str(seed) + "; SI units (m, rad)\n"
+        "seed " + str(seed) + "; SI units (m, rad)\n" + run_id_line(run_id)
     )
     text = header + yaml.safe_dump(_plain(doc), sort_keys=False, default_flow_style=None, width=100)
-    write_measurements(data, path)
-    atomic_write_text(tpath, text)
+    # all four files or none: never new measurements beside an earlier truth
+    targets = [path.with_name(true_file), path.with_name(nominal_file), path, tpath]
+    with file_set(targets) as (true_tmp, nominal_tmp, data_tmp, truth_tmp):
+        save_model(robot.true, true_tmp, run_id=run_id)
+        save_model(robot.nominal, nominal_tmp, run_id=run_id)
+        write_measurements(data, data_tmp, run_id=run_id)
+        atomic_write_text(truth_tmp, text)
     return path, tpath
+
+
+def _check_same_run(truth_file: Path, doc: dict) -> None:
+    """Refuse a truth file beside measurements or models of another simulation (a run
+    killed between its renames, or files copied together by hand)."""
+    want = read_run_id(truth_file)
+    if want is None:  # written before run ids
+        return
+    names = [doc.get("data_file"), doc.get("nominal_model_file"), doc.get("true_model_file")]
+    bad = []
+    for name in names:
+        if not isinstance(name, str) or not (truth_file.parent / name).is_file():
+            continue
+        got = read_run_id(truth_file.parent / name)
+        if got != want:
+            bad.append(f"{name} (run {got or 'none'})")
+    if bad:
+        raise FolderMixedError(
+            f"{truth_file}: the truth is of simulation run {want} but {', '.join(bad)}: "
+            "these files come from different simulations; simulate again"
+        )
 
 
 def load_truth(path: str | Path) -> Truth:
@@ -504,6 +530,7 @@ def load_truth(path: str | Path) -> Truth:
         raise FileNotFoundError(f"{path}: truth file not found") from None
     if not isinstance(doc, dict) or doc.get("robocal_truth") != 1:
         raise ValueError(f"{path}: not a robocal truth file (no 'robocal_truth: 1')")
+    _check_same_run(path, doc)
     try:
         nominal = load_model(path.with_name(doc["nominal_model_file"]))
         true = load_model(path.with_name(doc["true_model_file"]))
