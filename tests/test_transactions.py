@@ -239,6 +239,17 @@ def test_report_carries_the_run_id_and_a_foreign_report_is_refused(tmp_path):
         CalibrationResult.load(tmp_path / "a")
     with pytest.raises(ValueError, match="not a run id"):
         outdir.run_id_meta('"><script>')
+    # the library's way, as the GUI does: save, then write the report from the object (or
+    # from the result loaded again): it belongs to the saved files
+    result.save(tmp_path / "c")
+    write_report(result, tmp_path / "c" / "report.html", data=data)
+    loaded = CalibrationResult.load(tmp_path / "c")
+    write_report(loaded, tmp_path / "c" / "report.html", data=data)
+    CalibrationResult.load(tmp_path / "c")
+    # a report of another result written into the folder is still refused
+    write_report(CalibrationResult.load(tmp_path / "b"), tmp_path / "c" / "report.html", data=data)
+    with pytest.raises(outdir.FolderMixedError, match=r"report\.html"):
+        CalibrationResult.load(tmp_path / "c")
 
 
 def test_simulation_killed_between_its_renames_is_refused_then_replaced(tmp_path, sim):

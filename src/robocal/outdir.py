@@ -98,6 +98,11 @@ def run_id_line(run_id: str) -> str:
     return f"# robocal run: {run_id}\n"
 
 
+def is_run_id(value: object) -> bool:
+    """Whether ``value`` is a run id (hex text, as :func:`new_run_id` makes)."""
+    return isinstance(value, str) and _RUN_ID.fullmatch(value) is not None
+
+
 def run_id_meta(run_id: str) -> str:
     """The ``<meta>`` element that stamps an HTML report with ``run_id`` (a run id is hex)."""
     if not _RUN_ID.fullmatch(run_id):

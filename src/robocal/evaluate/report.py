@@ -1463,10 +1463,12 @@ def write_report(
         ``out_path``.
     """
     from robocal.model.files import atomic_write_text
-    from robocal.outdir import read_run_id, run_id_meta
+    from robocal.outdir import is_run_id, read_run_id, run_id_meta
 
     if isinstance(result_or_dir, CalibrationResult):
         result = result_or_dir
+        saved = result.metadata.get("saved_run_id")  # set by save() and load()
+        run_id = run_id if run_id is not None else (saved if is_run_id(saved) else None)
     else:
         run_id = run_id if run_id is not None else read_run_id(Path(result_or_dir) / "result.json")
         result, d_train, d_test, d_ev = _load_dir(Path(result_or_dir))

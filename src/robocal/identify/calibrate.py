@@ -665,6 +665,8 @@ class CalibrationResult:
             atomic_write_text(stage.path / "result.json", text)
             if also is not None:
                 also(stage.path)
+        # a report written later from this object carries the run id of the files it belongs to
+        self.metadata["saved_run_id"] = stage.run_id
         return Path(directory)
 
     @classmethod
@@ -699,12 +701,16 @@ class CalibrationResult:
         if not (directory / "model.yaml").is_file():
             raise ValueError(f"{directory}: model.yaml is missing beside result.json; calibrate again")
         try:
-            return cls._from_dict(directory, data)
+            result = cls._from_dict(directory, data)
         except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
             if isinstance(err, ModelFileError):
                 raise
             what = f"missing field {err.args[0]!r}" if isinstance(err, KeyError) else str(err)
             raise ValueError(f"{path}: not a calibration result written by robocal ({what})") from None
+        result.metadata.pop("saved_run_id", None)
+        if data.get("run_id") is not None:  # a report written from it belongs to these files
+            result.metadata["saved_run_id"] = data["run_id"]
+        return result
 
     @classmethod
     def _from_dict(cls, directory: Path, data: dict[str, Any]) -> CalibrationResult:
