@@ -251,7 +251,7 @@ def builder_figure(result) -> Any:
     drawn as a dashed line through its joint, and room around the labels."""
     import plotly.graph_objects as go
 
-    from robocal.model.view import model_figure
+    from robocal.model.view import model_figure, padded_scene
 
     model = result.model
     fig = model_figure(model, title=f"{model.name}: {model.dof} joints, zero position")
@@ -277,18 +277,10 @@ def builder_figure(result) -> Any:
             line={"color": "#9467bd", "width": 3, "dash": "dash"}, hoverinfo="skip",
         )
     )  # fmt: skip
-    lo, hi = pts.min(axis=0) - 0.25 * size, pts.max(axis=0) + 0.25 * size  # labels stay inside
-    span = hi - lo
     fig.update_layout(
         height=560,
         uirevision="builder",
-        scene={
-            "xaxis": {"range": [lo[0], hi[0]], "title": "x mm"},
-            "yaxis": {"range": [lo[1], hi[1]], "title": "y mm"},
-            "zaxis": {"range": [lo[2], hi[2]], "title": "z mm"},
-            "aspectmode": "manual",
-            "aspectratio": dict(zip("xyz", (span / span.max()).tolist(), strict=True)),
-        },
+        scene=padded_scene(pts, pad=0.25 * size),  # labels stay inside
     )
     return fig
 
