@@ -67,18 +67,10 @@ def report_command(
     if output is not None:
         refuse_overwrite(output, force, "report")
     from robocal.evaluate.report import write_report
-    from robocal.identify.calibrate import CalibrationResult
-    from robocal.identify.commands import _read, own_data
+    from robocal.identify.commands import _read, load_result, own_data
     from robocal.identify.provenance import READER_DEFAULTS
-    from robocal.outdir import restore
 
-    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
-    if not (directory / "result.json").is_file():
-        raise fail(f"{directory} holds no calibration result (result.json)")
-    try:
-        result = CalibrationResult.load(directory)
-    except (OSError, ValueError, KeyError) as err:
-        raise fail(f"{directory}: cannot read the result: {err}") from None
+    result = load_result(directory)
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
 

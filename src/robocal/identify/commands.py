@@ -81,6 +81,22 @@ def _given_options(ctx: typer.Context, values: dict) -> dict:
     return {k: v for k, v in values.items() if ctx.get_parameter_source(k) in given}
 
 
+def load_result(directory: Path):
+    """The calibration result in ``directory`` (exit 2 with one line when there is none or it
+    cannot be read); a writer killed mid-swap is undone first."""
+    from robocal.identify.calibrate import CalibrationResult
+    from robocal.outdir import restore
+
+    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
+    if not (directory / "result.json").is_file():
+        raise fail(f"{directory} holds no calibration result (result.json)")
+    try:
+        result = CalibrationResult.load(directory)
+    except (OSError, ValueError, KeyError) as err:
+        raise fail(f"{directory}: cannot read the result: {err}") from None
+    return result
+
+
 def own_data(ctx: typer.Context, directory: Path, result, data_path: Path | None, values: dict):
     """The calibration's own data, read again with its own reader options and split as it
     was calibrated: ``(path, SplitRows)``, or None when ``data_path`` is another file or the
@@ -534,16 +550,8 @@ def validate_command(
 ) -> None:
     """Error statistics of a calibrated model on (held-out) measurements."""
     import robocal as rc
-    from robocal.identify.calibrate import CalibrationResult
-    from robocal.outdir import restore
 
-    restore(directory)  # a writer killed mid-swap on a system without atomic exchange
-    if not (directory / "result.json").is_file():
-        raise fail(f"{directory} holds no calibration result (result.json)")
-    try:
-        result = CalibrationResult.load(directory)
-    except (OSError, ValueError, KeyError) as err:
-        raise fail(f"{directory}: cannot read the result: {err}") from None
+    result = load_result(directory)
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     notes, extra = [], {}
