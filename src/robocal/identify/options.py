@@ -203,6 +203,8 @@ class CalibrationOptions:
             TypeError: an unknown keyword (named), or a field given both ways.
         """
         base = options if options is not None else cls()
+        if not keywords:
+            return base
         groups = {name: getattr(base, name) for name in _GROUPS}
         given = {name: v for name, v in keywords.items() if isinstance(v, _GROUPS.get(name, ()))}
         groups.update(given)
