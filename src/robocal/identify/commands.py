@@ -363,6 +363,7 @@ def calibrate_command(
     if test is not None:
         validation = rc.validate(result, test)
         result = result.with_validation(validation.to_dict())
+
     def write_report_too(stage_dir: Path) -> None:
         from robocal.evaluate.report import write_report
         from robocal.outdir import read_run_id

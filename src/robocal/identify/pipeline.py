@@ -2,10 +2,10 @@
 
 1. :func:`_check_inputs` — the method, the data, the model (guards of
    :mod:`robocal.identify.guards`: bad data is refused before any fit);
-2. :func:`_start_values` — device frame and tool by closed-form fits
-   (:func:`robocal.identify.stages.initial_frames_and_tools`);
-3. :func:`_build_problem` — the measurement chain, row weights and joint-effect
-   patterns (:class:`~robocal.identify.problem.Problem`);
+2. start values — device frame and tool by closed-form fits
+   (:func:`robocal.identify.stages.initial_frames_and_tools`), and
+3. the problem — the measurement chain, row weights and joint-effect patterns
+   (:func:`robocal.identify.problem_setup.build_problem`);
 4. :func:`_identifiable` — the identifiable set by the sequential rank test, and the
    rank guard;
 5. :func:`_screen` — unknowns the data leaves hopeless, fixed before the first fit;
@@ -13,7 +13,7 @@
    (poorly identifiable unknowns fixed and the fit repeated) and :func:`_hold_effects`
    (joint effects not ≥ 3σ above zero held);
 7. :func:`_assemble` — the calibrated model, device frame and residuals;
-8. :func:`_diagnose` — warnings, fit-to-noise, the solution guard.
+8. :func:`robocal.identify.diagnose.diagnose` — warnings, fit-to-noise, the solution guard.
 
 Joint-effect load passes (:func:`_with_load_passes`) repeat 2-8 with the joint loads of
 the calibrated geometry.  The residual model (:func:`robocal.calibrate` with
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -34,106 +33,32 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.identify.bounds import bounded_method_bounds, parameters_at_bounds
 from robocal.identify.diagnose import diagnose, parameterisation_warnings
-from robocal.identify.effects import COMPLIANCE_PREFIX, EffectPlan, effect_plan, effects_to_hold
+from robocal.identify.effects import COMPLIANCE_PREFIX, effect_plan, effects_to_hold
 from robocal.identify.guards import check_data, check_rank
 from robocal.identify.observability import Dropped
-from robocal.identify.options import CalibrationOptions, check_load_model
-from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
-from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
-from robocal.identify.solvers import METHODS, SolveResult, solve
+from robocal.identify.options import CalibrationOptions
+from robocal.identify.problem import FRAME_PREFIX
+from robocal.identify.problem_setup import LEVELS, Run, build_problem, parse_level, without_measured_tool
+from robocal.identify.result import CalibrationResult, Diagnostics
+from robocal.identify.solvers import METHODS, solve
 from robocal.identify.stages import (
     identifiable_set,
-    initial_frames_and_tools,
     poorly_identifiable,
-    robot_sizes,
     screen_unidentifiable,
     uncertainty,
 )
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 
-__all__ = ["calibrate_physics", "parse_level", "without_measured_tool"]
+__all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
 
 Array = NDArray[np.float64]
-
-#: calibration levels by name (seed 003 §1.2)
-LEVELS: dict[str, int] = {
-    "1": 1, "offsets": 1, "joint-offsets": 1, "zero-offset": 1,
-    "2": 2, "kinematic": 2, "geometric": 2,
-    "3": 3, "non-geometric": 3,
-}  # fmt: skip
-
-
-def parse_level(level: int | str | None) -> int | None:
-    """1, 2 or 3 from a number or a name (``offsets``, ``kinematic``, ``non-geometric``)."""
-    if level is None:
-        return None
-    key = str(level).strip().lower()
-    if key not in LEVELS:
-        raise ValueError(
-            f"unknown calibration level {level!r}: 1 (joint offsets), 2 (kinematic) or 3 (non-geometric)"
-        )
-    return LEVELS[key]
-
-
-def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
-    """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
-    its end, and their transform (4x4; None when there are none)."""
-    k = len(model.steps)
-    while k and model.steps[k - 1].name.startswith(TOOL_PREFIX) and model.steps[k - 1].joint is None:
-        k -= 1
-    if k == len(model.steps):
-        return model, None
-    tool = model.steps[k:]
-    T = spatial.chain_product([s.motion for s in tool], [s.value for s in tool])
-    return dataclasses.replace(model, steps=model.steps[:k]), T
-
-
-def _as_frame(value: Any) -> Array:
-    """A tool or frame given as a position (3,) or a 4x4 transform, as 4x4."""
-    g = np.asarray(value, dtype=float)
-    return g if g.shape == (4, 4) else spatial.homogeneous(p=g)
-
-
-# ---------------------------------------------------------------------- the working state
-@dataclass
-class _Run:
-    """What one pass of the pipeline knows; internal and short-lived (the result it
-    produces is frozen)."""
-
-    given_model: Model  # the model as given (tool steps of an earlier calibration removed)
-    model: Model  # its candidates (level 1: the joint offsets only)
-    data: Measurements
-    method: str
-    options: CalibrationOptions
-    measure: str
-    plan: EffectPlan
-    level: int | None
-    warnings: list[CalibrationWarning] = field(default_factory=list)
-    orientation_hint: str = ""
-    known_noise: bool = False
-    length: float = 1.0
-    solver: dict[str, Any] = field(default_factory=dict)
-    dropped: list[Dropped] = field(default_factory=list)
-    problem: Problem | None = None
-    x0: Array | None = None
-    x: Array | None = None
-    fit: SolveResult | None = None
-    covariance: tuple[float, Array, Array, Array, float] | None = None
-    solve_seconds: float = 0.0
-    evaluations: int = 0
-    effect_names: tuple[str, ...] = ()
-    effect_kinds: tuple[tuple[str, str], ...] = ()
-    effect_start: Array | None = None
-
-    def warn(self, code: str, message: str) -> None:
-        self.warnings.append(CalibrationWarning(code, message))
 
 
 # ---------------------------------------------------------------------- 1. checks
 def _check_inputs(
     model: Model, data: Measurements, method: str, options: CalibrationOptions, hold: dict | None
-) -> _Run:
+) -> Run:
     """The method, the data and the model; refuses what cannot be calibrated."""
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
@@ -155,7 +80,7 @@ def _check_inputs(
         setup = options.setup
     effects = options.joint_effects
     level = parse_level(effects.level)
-    run = _Run(model, model, data, method, options, measure, effect_plan(model, level, effects.effects,
+    run = Run(model, model, data, method, options, measure, effect_plan(model, level, effects.effects,
                effects.compliance), level)  # fmt: skip
     # stop with an explanation when the data cannot determine the model (identical
     # poses, joints that never move, too few poses...) rather than fit a silent bad model
@@ -173,129 +98,8 @@ def _check_inputs(
     return run
 
 
-# ---------------------------------------------------------------------- 2. start values
-def _start_values(run: _Run) -> tuple[Array, Array, Array, bool]:
-    """Start values of the device frame and the tool (4x4 each), the flange frames
-    ``(n, 4, 4)`` at the data's joint values, and whether the frame is fitted."""
-    setup, data = run.options.setup, run.data
-    fit_frame = isinstance(setup.frame, str) and setup.frame == "fit"
-    T_known = None
-    if not isinstance(setup.frame, str):
-        T_known = np.asarray(setup.frame, dtype=float)
-        if T_known.shape != (4, 4):
-            raise ValueError(f"frame must be 'fit', 'fixed' or a 4x4 transform, got shape {T_known.shape}")
-    T_tool0 = np.eye(4) if setup.tool_guess is None else _as_frame(setup.tool_guess)
-    fit_tool = isinstance(setup.tool, str) and setup.tool == "fit"
-    if setup.tool is not None and not isinstance(setup.tool, str):
-        T_tool0 = _as_frame(setup.tool)
-    T_flange = run.model.fk(data.q)
-    T_frame, T_tool = initial_frames_and_tools(
-        T_flange[None],
-        data.position[None],
-        orientation=data.orientation[None] if run.measure == "pose" else None,
-        T_tool=T_tool0,
-        T_frame=T_known,
-        fit_frame=fit_frame,
-        fit_tool=fit_tool and setup.tool is not None,
-    )
-    return T_frame[0], T_tool[0], T_flange, fit_frame
-
-
-# ---------------------------------------------------------------------- 3. the problem
-def _row_weights(run: _Run, rows: int) -> Array:
-    """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``."""
-    data, weights = run.data, run.options.weights
-    w = np.ones((data.n, rows))
-    run.known_noise = weights.by == "sigma" and data.sigma is not None
-    if run.known_noise:
-        w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
-    if rows == 6:
-        w[:, 3:] = weights.orientation * (w[:, :3].mean(axis=1, keepdims=True))
-    return w
-
-
-def _effect_terms(run: _Run, load_model: Model | None) -> tuple[Array | None, Array | None]:
-    """The identified joint effects' patterns ``(k, n, dof, 3)`` and the perturbations
-    of the model's other joint effects, known and predicted at every pose."""
-    from robocal.model.joints import EFFECT_KINDS, EFFECT_PREFIXES, effect_basis, load_moments
-    from robocal.model.joints import joint_perturbations as predict_effects
-
-    model, q, plan, e = run.model, run.data.q, run.plan, run.options.joint_effects
-    geometry = model if load_model is None else check_load_model(load_model, model)
-    loads = load_moments(geometry, q, e.velocities, e.accelerations, gravity=np.asarray(e.gravity),
-                         payload=e.payload)  # fmt: skip
-    basis = None
-    if plan.kinds:
-        joints = plan.joints if plan.joints is not None else e.joints
-        basis, run.effect_names, run.effect_kinds = effect_basis(model, q, kinds=plan.kinds, joints=joints,
-                                                                 loads=loads)  # fmt: skip
-        run.effect_names, run.effect_kinds = tuple(run.effect_names), tuple(run.effect_kinds)
-    by_joint = {x.joint: x for x in model.joint_effects}
-    run.effect_start = np.array(
-        [getattr(by_joint[j], EFFECT_PREFIXES[k][1]) if j in by_joint else 0.0 for k, j in run.effect_kinds]
-    )
-    if not model.joint_effects:
-        return basis, None
-    # the model's joint effects that are not identified are known: predicted at every pose
-    identified = set(run.effect_kinds)
-    rest = [
-        dataclasses.replace(
-            x, **{EFFECT_PREFIXES[k][1]: 0.0 for k in EFFECT_KINDS if (k, x.joint) in identified}
-        )
-        for x in model.joint_effects
-    ]
-    known = predict_effects(model, q, effects=rest, loads=loads)
-    if not np.any(known):
-        return basis, None
-    predicted = {k: [x.joint for x in rest if getattr(x, EFFECT_PREFIXES[k][1])] for k in EFFECT_KINDS}
-    listed = "; ".join(f"{k} ({', '.join(j)})" for k, j in predicted.items() if j)
-    run.warn(  # a robot whose joints differ from its model's would be mis-corrected
-        "effects-predicted",
-        f"joint effects of model {model.name!r} predicted as known, not identified: {listed}; if this "
-        "robot's differ, identify them too (level=3 / --level 3) or calibrate a model without them",
-    )
-    return basis, known
-
-
-def _build_problem(run: _Run, load_model: Model | None) -> None:
-    """The measurement chain at the start values, weights and joint-effect patterns."""
-    setup, data, measure = run.options.setup, run.data, run.measure
-    T_frame, T_tool, T_flange, fit_frame = _start_values(run)
-    chain = measurement_chain(run.model, T_frame, None if setup.tool is None else T_tool, measure, fit_frame)
-    if setup.tool is not None and not (isinstance(setup.tool, str) and setup.tool == "fit"):
-        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
-    run.length = float(robot_sizes(T_flange[None])[0])
-    rows = 3 if measure == "position" else 6
-    w = _row_weights(run, rows)
-    basis, known = _effect_terms(run, load_model) if run.plan.mode != "none" else (None, None)
-    if run.model.residual is not None:  # a learned residual given with the model is known: applied
-        learned = run.model.residual.perturbations(data.q, run.model.dof)
-        known = learned if known is None else known + learned
-    start = run.effect_start if run.plan.mode != "none" else None
-    run.problem = Problem(chain, data.q, data.position, data.orientation if rows == 6 else None,
-                          w.reshape(-1), run.length, basis, run.effect_names, known, start)  # fmt: skip
-    if rows == 6:
-        _check_orientations(run)
-
-
-def _check_orientations(run: _Run) -> None:
-    """With the device frame and the tool fitted, a real robot's orientations agree with
-    its model to a degree or so; far more means the file's rotations are read wrongly."""
-    problem = run.problem
-    r = problem.residual(problem.x0, weighted=False).reshape(run.data.n, 6)
-    angle = np.degrees(np.median(np.linalg.norm(r[:, 3:], axis=1)))
-    if angle > 5.0:
-        run.orientation_hint = (
-            f"the measured orientations differ from the model's by {angle:.3g}° (median) after the "
-            "device frame and the tool were fitted: check the orientation convention of the data "
-            "(orientation='euler:XYZ:deg' / --orientation: intrinsic XYZ is upper case, extrinsic "
-            "xyz lower case), or calibrate positions only (measure='position')"
-        )
-        run.warn("orientation", run.orientation_hint)
-
-
 # ---------------------------------------------------------------------- 4. identifiable set
-def _identifiable(run: _Run, hold: dict | None) -> None:
+def _identifiable(run: Run, hold: dict | None) -> None:
     """The identifiable set, preferring the frame, then the tool, then the robot in chain
     order (one factorisation of the scaled Jacobian at the start values); the rank guard;
     joint effects the caller holds."""
@@ -319,7 +123,7 @@ def _identifiable(run: _Run, hold: dict | None) -> None:
     run.solver = _solver_options(run, selection.dropped)
 
 
-def _solver_options(run: _Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
+def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
     """The chosen method's settings (each method takes only its own)."""
     o, method = run.options, run.method
     solver: dict[str, Any] = {"max_iterations": o.setup.max_iterations}
@@ -346,7 +150,7 @@ def _solver_options(run: _Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------- 5. screening
-def _screen(run: _Run) -> None:
+def _screen(run: Run) -> None:
     """The hopeless unknowns, fixed before the first fit (they would be pruned anyway);
     not for ``bounded`` (its bounds keep a poorly determined unknown from running away)."""
     if run.method == "bounded":
@@ -363,7 +167,7 @@ def _screen(run: _Run) -> None:
 
 
 # ---------------------------------------------------------------------- 6. solve, prune, hold
-def _solve(run: _Run, x_start: Array) -> None:
+def _solve(run: Run, x_start: Array) -> None:
     """One fit from ``x_start`` and the uncertainty at its solution (from the solver's
     last Jacobian when it has it: no second evaluation)."""
     t = time.perf_counter()
@@ -377,7 +181,7 @@ def _solve(run: _Run, x_start: Array) -> None:
     run.covariance = uncertainty(r, J, run.problem.rows, run.known_noise)
 
 
-def _prune(run: _Run) -> None:
+def _prune(run: Run) -> None:
     """Drop what these measurements cannot determine, worst first, and refit from the
     start values (the dropped unknown may have dragged others along a nearly flat valley
     of the first fit: real UR10 data, plain DH, a5 +143 mm).  Not after an unconverged
@@ -400,7 +204,7 @@ def _prune(run: _Run) -> None:
         _solve(run, run.x0)
 
 
-def _hold_effects(run: _Run) -> None:
+def _hold_effects(run: Run) -> None:
     """Joint effects are physical (≥ 0) and identified only when the data tells them from
     zero: the others are held at their start values and the fit repeated from the
     linearised solution with them held (:func:`effects_to_hold`)."""
@@ -426,7 +230,7 @@ def _hold_effects(run: _Run) -> None:
 
 
 # ---------------------------------------------------------------------- 7. the result
-def _calibrated_models(run: _Run) -> tuple[Model, Model, Array]:
+def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     """The calibrated measurement chain, the calibrated robot (tool appended, the given
     model's free flags) and ``T_device_base`` (4x4)."""
     chain = run.problem.chain
@@ -457,7 +261,7 @@ def _calibrated_models(run: _Run) -> tuple[Model, Model, Array]:
     return calibrated_chain, calibrated, T_device_base
 
 
-def _assemble(run: _Run, t_start: float) -> CalibrationResult:
+def _assemble(run: Run, t_start: float) -> CalibrationResult:
     """The frozen result of this pass (warnings and diagnostics added by :func:`diagnose`)."""
     problem, x, n = run.problem, run.x, run.data.n
     names = problem.free_names
@@ -489,10 +293,10 @@ def _assemble(run: _Run, t_start: float) -> CalibrationResult:
 
 # ---------------------------------------------------------------------- the sequence
 def _calibrate_once(
-    run: _Run, load_model: Model | None, hold: dict | None, t_start: float
+    run: Run, load_model: Model | None, hold: dict | None, t_start: float
 ) -> CalibrationResult:
     """Stages 2-8 for the joint loads of ``load_model``'s geometry."""
-    _build_problem(run, load_model)
+    build_problem(run, load_model)
     _identifiable(run, hold)
     _screen(run)
     _solve(run, run.x0)
@@ -531,12 +335,12 @@ def calibrate_physics(
     options = CalibrationOptions.from_keywords(options, **keywords)
     run = _check_inputs(model, data, method, options, hold_effects)
     if run.plan.mode != "none" and options.joint_effects.load_passes > 1:
-        return _with_load_passes(run, hold_effects, t_start)
+        return _with_load_passes(run, model, hold_effects, t_start)
     return _calibrate_once(run, None, hold_effects, t_start)
 
 
 # ---------------------------------------------------------------------- joint-effect load passes
-def _load_signs(run: _Run, geometry: Model) -> NDArray[np.int8]:
+def _load_signs(run: Run, geometry: Model) -> NDArray[np.int8]:
     from robocal.model.joints import DEADBAND, load_moments
 
     e = run.options.joint_effects
@@ -552,12 +356,12 @@ def _geometry_of(result: CalibrationResult, model: Model) -> Model:
     return model.with_values({n: calibrated[n] for n in model.names if n in calibrated})
 
 
-def _with_load_passes(run: _Run, hold: dict | None, t_start: float) -> CalibrationResult:
+def _with_load_passes(run: Run, model: Model, hold: dict | None, t_start: float) -> CalibrationResult:
     """Calibrate, then recompute the joint loads with the calibrated geometry and
     calibrate again, until the loads' signs stop changing (at most ``load_passes``):
     near a load's sign change the nominal geometry can predict the wrong side of the
-    backlash at a few poses (Katana 450: 31 of 118 poses, up to 0.4 mm)."""
-    model = run.given_model
+    backlash at a few poses (Katana 450: 31 of 118 poses, up to 0.4 mm).  ``model``: the
+    model as given, whose geometry gives the first pass's loads."""
     signs = _load_signs(run, model)
     fresh = dataclasses.replace(run, warnings=list(run.warnings))
     result = _calibrate_once(fresh, model, hold, t_start)
