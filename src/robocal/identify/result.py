@@ -30,6 +30,7 @@ from robocal.model.dynamics import Payload
 
 if TYPE_CHECKING:
     from robocal.identify.provenance import Provenance
+    from robocal.identify.residual import CVTable
 
 __all__ = ["CalibrationResult", "CalibrationWarning", "Diagnostics"]
 
@@ -79,6 +80,12 @@ class Diagnostics:
     residual_rms_after_mm: float | None = None
     at_bounds: tuple[str, ...] | None = None
     objective: Mapping[str, Any] | None = None
+
+    def cv_table(self) -> CVTable | None:
+        """The cross-validation table as a :class:`~robocal.identify.residual.CVTable`."""
+        from robocal.identify.residual import CVTable
+
+        return None if self.cv is None else CVTable.from_dict(dict(self.cv))
 
 
 @dataclass(frozen=True, eq=False)
