@@ -196,7 +196,7 @@ def main(argv=None) -> int:
         f"| robocal `rc.calibrate` (analytic Jacobian, own LM), end to end | {t_ours * 1e3:.1f} ms | "
         f"{result.rms_after * 1e3:.4f} mm | 1 |"
     )
-    print(f"| robocal, the Levenberg-Marquardt solve inside it | {t_solve * 1e3:.1f} ms | | |")
+    print(f"| robocal, the Levenberg-Marquardt solve inside it (wall time) | {t_solve * 1e3:.1f} ms | | |")
     for run in runs:
         t_fd = float(np.median(theirs[run]))
         print(
