@@ -42,13 +42,8 @@ def main(argv=None) -> None:
     model = complete_model("ur10", "position")
     result = rc.calibrate(model, train, tool_guess=[0, 0, 0.109], compliance=True)
     stats = rc.validate(result, test)
-    result.metadata |= {
-        "data_file": str(args.data),
-        "train_n": train.n,
-        "seed": args.seed,
-        "validation": stats.to_dict(),
-    }
-    result.save(args.out)
+    result = result.with_records(data_file=str(args.data), train_n=train.n, seed=args.seed)
+    result = result.with_validation(stats.to_dict()).save(args.out)
     path = write_report(
         result,
         args.out / "report.html",

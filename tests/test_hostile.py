@@ -786,7 +786,7 @@ def test_compensate_csv_neutralises_target_names(base, tmp_path):
 def test_a_full_disk_leaves_the_earlier_result_and_one_line(base, tmp_path, monkeypatch):
     import sys
 
-    calibrate_module = sys.modules["robocal.identify.calibrate"]
+    calibrate_module = sys.modules["robocal.identify.result_io"]  # writes result.json
 
     out = tmp_path / "cal"
     shutil.copytree(base / "cal", out)

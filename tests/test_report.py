@@ -141,7 +141,8 @@ def test_report_lists_other_joint_effects_when_the_result_has_them(calibration):
     import dataclasses
 
     result = dataclasses.replace(calibration[0])
-    result.effect_estimates = lambda: {"elbow": {"backlash": (2.5e-4, 3e-5), "tilt_alpha": (1e-4, None)}}
+    estimates = {"elbow": {"backlash": (2.5e-4, 3e-5), "tilt_alpha": (1e-4, None)}}
+    object.__setattr__(result, "effect_estimates", lambda: estimates)  # frozen: a stand-in on a copy
     page = build_report(result)
     assert "<section id='joint-effects'>" in page
     assert "backlash" in page and "0.00025" in page and "tilt_alpha" in page

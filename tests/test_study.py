@@ -168,14 +168,22 @@ ALL_NUMBERS = (
 
 
 def test_study_engines_agree(tmp_path):
-    """One engine: the batched rows are rc.calibrate's to 1e-10."""
-    a = _rows(run_study(_config(robots=3), tmp_path / "a", workers=0).out / "results.csv")
-    b = run_study(_config(robots=3, engine="calibrate"), tmp_path / "b", workers=0)
+    """One engine: the batched rows are rc.calibrate's to 1e-10, and a case the guards
+    refuse (6 poses for a UR10 with its device frame and tool) fails in both with the
+    same reason."""
+    sets = [*_config().pose_sets, {"name": "p6", "kind": "random", "n": 6}]
+    a = _rows(run_study(_config(robots=3, pose_sets=sets), tmp_path / "a", workers=0).out / "results.csv")
+    b = run_study(_config(robots=3, engine="calibrate", pose_sets=sets), tmp_path / "b", workers=0)
     assert b.engine == "calibrate"
     by_case = {r["case"]: r for r in _rows(b.out / "results.csv")}
+    assert len(a) == len(by_case) == 9
     for r in a:
         other = by_case[r["case"]]
         assert r["engine"] == "batched" and other["engine"] == "calibrate"
+        if r["pose_set"] == "p6":
+            assert r["status"] == other["status"] == "failed"
+            assert r["message"] == other["message"] and "measure at least" in r["message"]
+            continue
         assert (r["status"], r["dropped"]) == (other["status"], other["dropped"]) == ("ok", other["dropped"])
         for col in ALL_NUMBERS:
             assert float(r[col]) == pytest.approx(float(other[col]), rel=1e-10, abs=0), col

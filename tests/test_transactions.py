@@ -241,7 +241,7 @@ def test_report_carries_the_run_id_and_a_foreign_report_is_refused(tmp_path):
         outdir.run_id_meta('"><script>')
     # the library's way, as the GUI does: save, then write the report from the object (or
     # from the result loaded again): it belongs to the saved files
-    result.save(tmp_path / "c")
+    result = result.save(tmp_path / "c")  # the result as saved: it carries the files' run id
     write_report(result, tmp_path / "c" / "report.html", data=data)
     loaded = CalibrationResult.load(tmp_path / "c")
     write_report(loaded, tmp_path / "c" / "report.html", data=data)

@@ -365,7 +365,7 @@ def run_demo(
             after = rc.validate(result, test)
             after_geo = rc.validate(geometric, test)
             before = before_validation(result, test)
-            result.metadata["validation"] = after.to_dict()
+            result = result.with_validation(after.to_dict())
             ev["comparison"] = [
                 {"model": "nominal (tracker frame and tool fitted)", **(before.to_dict() if before else {})},
                 {"model": "geometric calibration", **after_geo.to_dict()},
@@ -440,7 +440,7 @@ def run_demo(
                 from robocal.model.files import atomic_write_text, save_model, strict_json
 
                 out = Path(out)
-                result.metadata |= {"source": "robocal demo", "robot": robot, "seed": seed}
+                result = result.with_records(source="robocal demo", robot=robot, seed=seed)
                 if not quick:  # ISO 9283's fourteen characteristics, from a simulated timed log
                     from robocal.evaluate.iso9283_report import evaluate_log
                     from robocal.evaluate.iso9283_sim import simulate_log

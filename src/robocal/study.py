@@ -1151,13 +1151,13 @@ def _fleet_task(item: _FleetItem) -> tuple[dict[str, Any], Any]:
             )
             model = calibration_model(model, measure)
         result = calibrate(model, train, **item.calibrate_options)
-        result.metadata |= {"data_file": str(item.path), "data_sha256": row["sha256"], "train_n": train.n}
+        result = result.with_records(data_file=str(item.path), data_sha256=row["sha256"], train_n=train.n)
         _fill_fit(row, result, train.n, 0.0)
         row.pop("iterations", None)
         row.pop("dropped", None)
         if test is not None:
             stats = validate(result, test)
-            result.metadata["validation"] = stats.to_dict()
+            result = result.with_validation(stats.to_dict())
             row.update(_stats(stats.errors))
     except Exception as err:
         row.update(status="error", message=" ".join(str(err).split()) or type(err).__name__)

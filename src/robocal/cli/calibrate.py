@@ -356,17 +356,14 @@ def calibrate_command(
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     reader |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     provenance = Provenance.record(data_path, sha256, reader, noise_sigma, train_n, seed)
-    result.metadata |= {
-        "data_file": str(data_path),
-        "data_sha256": sha256,
-        "train_n": train.n,
-        "seed": seed,
-        "provenance": provenance.to_dict(),
-    }
+    result = result.with_provenance(
+        provenance, data_file=str(data_path), data_sha256=sha256, train_n=train.n, seed=seed
+    )
     validation = None
     if test is not None:
         validation = rc.validate(result, test)
-        result.metadata["validation"] = validation.to_dict()
+        result = result.with_validation(validation.to_dict())
+
     def write_report_too(stage_dir: Path) -> None:
         from robocal.evaluate.report import write_report
         from robocal.outdir import read_run_id

@@ -767,7 +767,7 @@ def build_report(
         validate(result, test_data) if test_data is not None and test_data.position is not None else None
     )
     test_before = before_validation(result, test_data) if test_data is not None else None
-    stored_validation = result.metadata.get("validation") if isinstance(result.metadata, dict) else None
+    stored_validation = result.metadata.get("validation") if isinstance(result.metadata, Mapping) else None
 
     # ISO 9283 characteristics from the evaluation
     iso = ev.get("iso_poses")

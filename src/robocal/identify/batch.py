@@ -261,7 +261,7 @@ def calibrate_batch(
         ValueError: no positions, different pose counts or a joint count that does not
             fit the model.
     """
-    from robocal.identify.calibrate import _without_measured_tool
+    from robocal.identify.pipeline import without_measured_tool
 
     if not data:
         return []
@@ -275,7 +275,7 @@ def calibrate_batch(
             raise ValueError(f"data[{k}] has {d.n} poses; a batch needs the same count ({n}) for all")
     if model.residual is not None:  # as rc.calibrate: a learned residual is refitted, not used
         model = dataclasses.replace(model, residual=None)
-    model, carried_tool = _without_measured_tool(model)
+    model, carried_tool = without_measured_tool(model)
     if carried_tool is not None and tool_guess is None:
         tool_guess = carried_tool
     out: list[BatchFit | CalibrationGuardError | None] = [None] * len(data)

@@ -289,9 +289,9 @@ def check_rank(
 
 def _diverged(result: Any) -> str | None:
     """What grew during the fit, or ``None``: the method's own objective when it records
-    one (``metadata["objective"]``: ``method="bounded"`` minimises the sum of distances,
+    one (``diagnostics.objective``: ``method="bounded"`` minimises the sum of distances,
     which may legitimately raise the RMS error), else the RMS position error."""
-    objective = getattr(result, "metadata", {}).get("objective")
+    objective = getattr(getattr(result, "diagnostics", None), "objective", None)
     if objective is not None:
         if objective["after"] > objective["before"] * (1 + 1e-9) + 1e-12:
             return (

@@ -274,7 +274,6 @@ def solve_per_pose(
     combine: Combine = "mean",
     passes: int | None = None,
     max_iterations: int = 200,
-    **_,
 ) -> SolveResult:
     """Seed 003's identification: per-pose sets (eq. 3.6, or eqs. 3.7-3.8 when
     ``influence``), combined into one set (``combine``).

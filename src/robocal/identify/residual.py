@@ -465,7 +465,7 @@ def calibrate_with_residual(
     """The physical calibration plus the learned residual chosen by cross-validation on
     ``data`` (see the module docstring); returns a
     :class:`~robocal.identify.calibrate.CalibrationResult` whose ``model.residual`` is the
-    residual (None when CV chose the physics alone) and whose ``metadata["cv"]`` is the table."""
+    residual (None when CV chose the physics alone) and whose ``diagnostics.cv`` is the table."""
     t0 = time.perf_counter()
     grid = DEFAULT_HARMONICS if harmonics is None else tuple(np.atleast_1d(harmonics).astype(int).tolist())
     if not grid or min(grid) < 1 or max(grid) > MAX_HARMONICS:
@@ -477,11 +477,11 @@ def calibrate_with_residual(
     revolute = [s.is_rotation for s in model.steps if s.joint is not None]
     joints = [j for j, rot in enumerate(revolute) if rot]
     if data.n < max(MIN_CV_POSES, 2 * folds) or not joints:
-        base.metadata.setdefault("warnings", []).append(
+        return base.with_warnings(
             f"{data.n} poses are too few to choose a learned residual by {folds}-fold cross-validation "
-            f"(at least {max(MIN_CV_POSES, 2 * folds)}): the physical model alone"
+            f"(at least {max(MIN_CV_POSES, 2 * folds)}): the physical model alone",
+            code="residual",
         )
-        return base
     names = [model.joint_names[j] for j in joints]
     variants = {_physics_name(options): options}
     asked = any(options.get(k) not in (None, False, "none") for k in ("compliance", "effects", "level"))
@@ -516,8 +516,7 @@ def calibrate_with_residual(
             data.q, data.position, usable, names, joints, grid, folds, include_none=kind == "auto"
         )
     except ValueError as err:
-        base.metadata.setdefault("warnings", []).append(f"{err}: the physical model alone")
-        return base
+        return base.with_warnings(f"{err}: the physical model alone", code="residual")
     chosen = next(c for c in table.candidates if c.name == table.chosen)
     fit = full[chosen.physics]
     result = fit.result
@@ -533,19 +532,15 @@ def calibrate_with_residual(
                 variants[chosen.physics],
             )  # fmt: skip
         except (ValueError, np.linalg.LinAlgError) as err:
-            fit.result.metadata.setdefault("warnings", []).append(
+            return fit.result.with_warnings(
                 f"the physical model with the learned residual could not be calibrated ({err}): the "
-                "physical model alone"
-            )
-            fit.result.metadata["cv"] = table.to_dict()
-            return fit.result
+                "physical model alone",
+                code="residual",
+            ).with_diagnostics(cv=table.to_dict())
         e = data.position - result.predict(data.q)[:, :3, 3]
-        result.metadata["residual_rms_after_mm"] = float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) * 1e3
-    else:
-        result = dataclasses.replace(result, metadata=dict(result.metadata))
-    result.metadata["cv"] = table.to_dict()
-    result.seconds = time.perf_counter() - t0
-    return result
+        rms_mm = float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) * 1e3
+        result = result.with_diagnostics(residual_rms_after_mm=rms_mm)
+    return result.with_diagnostics(cv=table.to_dict()).replace(seconds=time.perf_counter() - t0)
 
 
 def _refit_with_residual(
@@ -621,5 +616,4 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
         std=std,
         correlation=corr,
         residual_cross_covariance=cov[:p, p:] * d[None, :],
-        metadata=dict(result.metadata),
     )

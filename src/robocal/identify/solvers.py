@@ -59,6 +59,10 @@ class SolveResult:
     iterations: int
     evaluations: int = 0
     history: list[float] = field(default_factory=list)  # RMS residual per iteration (weighted)
+    # weighted residuals (m,) and Jacobian (m, p) at x, when the solver has them (LM: its
+    # last evaluation), so that the uncertainty needs no second evaluation
+    r: Array | None = field(default=None, repr=False)
+    J: Array | None = field(default=None, repr=False)
 
 
 def _lm(
@@ -69,7 +73,6 @@ def _lm(
     f_scale: float = 1.0,
     max_iterations: int = 200,
     tolerance: float = 1e-10,
-    **_,
 ) -> SolveResult:
     if loss != "linear":  # robust losses: scipy's trust-region reflective, which supports them
         res = least_squares(
@@ -145,6 +148,8 @@ class BatchSolveResult:
             int(self.iterations[k]),
             int(self.evaluations[k]),
             self.histories[k],
+            self.r[k],
+            self.J[k],
         )
 
 
@@ -287,7 +292,7 @@ def _column_norms(J: Array) -> Array:
     return np.sqrt(np.einsum("kmp,kmp->kp", J, J))
 
 
-def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100, **_) -> SolveResult:
+def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100) -> SolveResult:
     """Seed 003 eq. 3.6, iterated: Gauss-Newton with the pseudo-inverse of J."""
     x = x0.copy()
     history = []
@@ -315,7 +320,6 @@ def _bounded(
     tolerance: float = 1e-7,
     max_iterations: int = 500,
     max_rounds: int = 200,
-    **_,
 ) -> SolveResult:
     """Seed 001 eq. 4: min Σ_j |e_j| (sum of the poses' error distances) under bounds.
 
@@ -385,8 +389,8 @@ def _pinv_or_per_pose(problem, x0: Array, *, per_pose: bool = False, **options) 
     return _pinv(problem, x0, **options)
 
 
-def _influence(problem, x0: Array, **options) -> SolveResult:
-    """Seed 003 ch. 3 (:mod:`robocal.identify.influence`)."""
+def _influence(problem, x0: Array, *, per_pose: bool = True, **options) -> SolveResult:
+    """Seed 003 ch. 3 (:mod:`robocal.identify.influence`; always per pose)."""
     from robocal.identify.influence import solve_per_pose
 
     return solve_per_pose(problem, x0, influence=True, **options)
@@ -401,7 +405,12 @@ METHODS: dict[str, Callable[..., SolveResult]] = {
 
 
 def solve(problem, x0: Array, method: str = "lm", **options) -> SolveResult:
-    """Run ``method`` on ``problem`` from ``x0`` (the free parameter values)."""
+    """Run ``method`` on ``problem`` from ``x0`` (the free parameter values).
+
+    Raises:
+        ValueError: an unknown method.
+        TypeError: an option the method does not take (named; not silently dropped).
+    """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     return METHODS[method](problem, np.asarray(x0, dtype=float), **options)

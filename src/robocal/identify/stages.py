@@ -27,7 +27,6 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal import spatial
 from robocal.identify.guards import residual_variance
 from robocal.identify.observability import IdentifiableSubset, identifiable_subset
 
@@ -89,20 +88,48 @@ def initial_frames_and_tools(
     T_tool = np.array(np.broadcast_to(np.eye(4) if T_tool is None else T_tool, (K, 4, 4)), dtype=float)
     T_frame = np.array(np.broadcast_to(np.eye(4) if T_frame is None else T_frame, (K, 4, 4)), dtype=float)
     R_f, p_f = T_flange[..., :3, :3], T_flange[..., :3, 3]
+    R_fT = np.swapaxes(R_f, -1, -2)
     y = np.asarray(position, dtype=float)
+    if fit_frame and not np.all(np.isfinite(y)):
+        raise ValueError("point sets contain NaN or inf")
     for _ in range(rounds if (fit_frame and fit_tool) else 1):
         if fit_frame:
             p_base = (R_f @ T_tool[:, None, :3, 3:])[..., 0] + p_f
-            T_frame = spatial.fit_rigid_transform(p_base, y)
+            T_frame = _rigid_fits(p_base, y)
         if fit_tool:
             # y = R0 (R_f t + p_f) + t0  =>  R_fᵀ (R0ᵀ (y - t0) - p_f) = t  (least squares: the mean)
             R0, t0 = T_frame[:, :3, :3], T_frame[:, :3, 3]
             b = (y - t0[:, None, :]) @ R0 - p_f
-            T_tool[:, :3, 3] = np.einsum("anji,anj->ai", R_f, b) / n
+            T_tool[:, :3, 3] = (R_fT @ b[..., None]).sum(axis=1)[..., 0] / n
             if orientation is not None:
                 R = R0[:, None] @ R_f
                 T_tool[:, :3, :3] = _project_rotations(np.einsum("anji,anjk->aik", R, orientation))
     return T_frame, T_tool
+
+
+def _rigid_fits(P: Array, Q: Array) -> Array:
+    """``(K, 4, 4)`` least-squares rigid transforms mapping ``P`` onto ``Q`` (both
+    ``(K, n, 3)``, m): :func:`robocal.spatial.fit_rigid_transform` (Kabsch/Horn) for
+    unweighted batches, with matmuls instead of its general weighted path (the start
+    values run it every round; 4x faster)."""
+    K, n = P.shape[:2]
+    p0, q0 = P.mean(axis=1), Q.mean(axis=1)
+    H = np.swapaxes(P - p0[:, None], 1, 2) @ (Q - q0[:, None]) / n
+    U, s, Vt = np.linalg.svd(H)
+    degenerate = s[:, 1] <= 1e-12 * np.maximum(s[:, 0], 1e-300)
+    if np.any(degenerate):
+        where = int(np.flatnonzero(degenerate)[0])
+        raise ValueError(
+            f"points of fit ({where},) are (nearly) collinear; a rigid transform is not determined"
+        )
+    V = np.swapaxes(Vt, 1, 2)
+    Ut = np.swapaxes(U, 1, 2)
+    V[:, :, 2] *= np.sign(np.linalg.det(V @ Ut))[:, None]
+    T = np.zeros((K, 4, 4))
+    T[:, :3, :3] = V @ Ut
+    T[:, :3, 3] = q0 - (T[:, :3, :3] @ p0[..., None])[..., 0]
+    T[:, 3, 3] = 1.0
+    return T
 
 
 def robot_sizes(T_flange: Array) -> Array:

@@ -141,19 +141,16 @@ def _run(job: CalibrationJob, queue) -> None:
         if job.tool_mm is not None:
             options["tool_guess"] = np.asarray(job.tool_mm, dtype=float) * 1e-3
         result = rc.calibrate(model, train, method=job.method, residual=job.residual, **options)
-        result.metadata |= {
-            "data_file": job.data.name,
-            "data_sha256": file_hash(job.data),
-            "train_n": train.n,
-            "seed": job.seed,
-        }
+        result = result.with_records(
+            data_file=job.data.name, data_sha256=file_hash(job.data), train_n=train.n, seed=job.seed
+        )
         validation = None
         if test is not None:
             _stage(queue, "validate")
             validation = rc.validate(result, test)
-            result.metadata["validation"] = validation.to_dict()
+            result = result.with_validation(validation.to_dict())
         _stage(queue, "save")
-        result.save(job.out)
+        result = result.save(job.out)  # carries the saved files' run id (for the report)
         rc.write_measurements(train, job.out / "train.csv")
         if test is not None:
             rc.write_measurements(test, job.out / "test.csv")

@@ -1,0 +1,183 @@
+"""The last stage of a calibration: what the user should know about it.
+
+:func:`diagnose` adds to a :class:`~robocal.identify.result.CalibrationResult` its warnings
+(outlier poses, too little redundancy, residuals beyond the stated noise, parameters at
+their bounds, an RMS error that rose under seed 001's objective) and diagnostics
+(fit-to-noise, outliers, the bounded method's objective), then runs the solution guard
+(:func:`robocal.identify.guards.check_solution`).  Units: SI (m, rad).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.identify.guards import CalibrationGuardError, check_solution, fit_to_noise
+from robocal.identify.problem import Problem
+from robocal.identify.result import CalibrationResult, CalibrationWarning
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Model
+
+__all__ = ["diagnose", "outlier_poses", "parameterisation_warnings"]
+
+Array = NDArray[np.float64]
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_parameterisation_warnings(model: Model, measure: str) -> tuple[str, ...]:
+    from robocal.model.singularity import parameterisation_warnings as warnings
+
+    return tuple(warnings(model, measure))
+
+
+def parameterisation_warnings(model: Model, measure: str) -> list[str]:
+    """Why ``model`` is a poor chain to calibrate (singular or discontinuous at its nominal
+    values: e.g. plain DH for parallel axes), with the fix; ``[]`` for a complete model.
+    15-25 ms per chain, so cached per model (models are immutable and hashable)."""
+    try:
+        return list(_cached_parameterisation_warnings(model, measure))
+    except TypeError:  # pragma: no cover - an unhashable model: check it every time
+        from robocal.model.singularity import parameterisation_warnings as warnings
+
+        return warnings(model, measure)
+
+
+def outlier_poses(errors: Array, sigma: Array | None, factor: float = 5.0) -> list[int]:
+    """Indices of the poses whose position residual ``errors`` ``(n,)`` (m) exceeds
+    ``factor`` times the median residual (and ``factor`` times the 3D noise when the data
+    states it): a residual of a well fitted pose is rarely over 3x the median (3D
+    Gaussian), so these are measurement glitches or poses the model cannot reach."""
+    limit = factor * float(np.median(errors))
+    if sigma is not None:
+        limit = max(limit, factor * float(np.sqrt(np.mean(np.sum(sigma**2, axis=1)))))
+    return [int(i) for i in np.flatnonzero(errors > limit)] if len(errors) >= 10 else []
+
+
+def _distance_objective(problem: Problem, x0: Array, x: Array) -> dict[str, Any]:
+    """Seed 001's objective, the sum of the poses' weighted error distances (what
+    ``method="bounded"`` minimises; 1 per σ), at the start values and at the solution,
+    with the plain mean distances (m) for display."""
+
+    def sums(z: Array) -> tuple[float, float]:
+        weighted = problem.residual(z).reshape(-1, problem.rows)
+        plain = problem.residual(z, weighted=False).reshape(-1, problem.rows)
+        return float(np.linalg.norm(weighted, axis=1).sum()), float(np.linalg.norm(plain, axis=1).mean())
+
+    (before, mean_before), (after, mean_after) = sums(x0), sums(x)
+    return {
+        "name": "sum of distances",
+        "before": before,
+        "after": after,
+        "mean_distance_before": mean_before,
+        "mean_distance_after": mean_after,
+    }
+
+
+def _rms_rose(result: CalibrationResult, pose_errors: Array) -> str | None:
+    """A warning when a sum-of-distances fit raised the RMS error (legitimately: it fits
+    most poses and leaves a minority with large errors), or ``None``."""
+    if result.rms_after <= result.rms_before:
+        return None
+    large = int(np.sum(pose_errors > 3.0 * float(np.median(pose_errors))))
+    mean = result.diagnostics.objective
+    return (
+        f"the RMS error rose from {result.rms_before * 1e3:.4g} to {result.rms_after * 1e3:.4g} mm while the "
+        f"mean distance fell from {mean['mean_distance_before'] * 1e3:.4g} to "
+        f"{mean['mean_distance_after'] * 1e3:.4g} mm: the sum of distances (seed 001) fits most poses and "
+        f"leaves {large} of {len(pose_errors)} with errors over 3x the median, an error the model does not "
+        "describe (backlash? a second robot configuration?); method='lm' minimises the RMS error instead"
+    )
+
+
+def _bounds_warnings(
+    result: CalibrationResult, pose_errors: Array, at: Sequence[str]
+) -> list[CalibrationWarning]:
+    out = []
+    if (rose := _rms_rose(result, pose_errors)) is not None:
+        out.append(CalibrationWarning("rms-rose", rose))
+    if at:
+        out.append(CalibrationWarning(
+            "at-bounds",
+            f"{', '.join(at)} ended at {'its bound' if len(at) == 1 else 'their bounds'}: the bound, not "
+            "the data, decided the value and the fit may be poor; widen the bounds (bounds='widened' for "
+            "parameters that absorb redundant ones, or your own arrays) or use method='lm'",
+        ))  # fmt: skip
+    return out
+
+
+def _outlier_warning(outliers: list[int], errors: Array, data: Measurements, loss: str) -> CalibrationWarning:
+    worst = sorted(outliers, key=lambda i: -errors[i])[:5]
+    shown = ", ".join(
+        f"{i} ({errors[i] * 1e3:.3g} mm at q = [{', '.join(f'{v:.4g}' for v in data.q[i])}])" for i in worst
+    )
+    return CalibrationWarning(
+        "outliers",
+        f"{len(outliers)} pose(s) with residuals far beyond the others (more than 5x their median"
+        + (" and 5x the noise" if data.sigma is not None else "")
+        + f"): {shown}{' ...' if len(outliers) > 5 else ''}; measurement glitches? "
+        + ("a robust loss (loss='soft_l1' / --loss soft_l1) down-weights them" if loss == "linear" else ""),
+    )
+
+
+def _redundancy_warning(n: int, rows: int, unknowns: int) -> CalibrationWarning | None:
+    if n * rows >= 2 * unknowns:
+        return None
+    needed = -(-2 * unknowns // rows)  # poses for twice as many equations as unknowns
+    return CalibrationWarning(
+        "few-equations",
+        f"{n} poses give {n * rows} equations for {unknowns} unknowns: so little redundancy makes the "
+        "estimates sensitive to every measurement and their uncertainty itself uncertain; measure at "
+        f"least {needed} poses",
+    )
+
+
+def diagnose(
+    result: CalibrationResult,
+    problem: Problem,
+    data: Measurements,
+    warnings: Sequence[CalibrationWarning],
+    known_noise: bool,
+    loss: str,
+    x0: Array,
+    at_bounds: Sequence[str] | None,
+    orientation_hint: str = "",
+) -> CalibrationResult:
+    """``result`` with its warnings (``warnings`` of the earlier stages first) and
+    diagnostics, after the solution guard.
+
+    Raises:
+        CalibrationGuardError: the solution guard's (with the orientation hint, if any).
+    """
+    out = list(warnings)
+    residuals = np.asarray(result.residuals)
+    errors = np.linalg.norm(residuals[:, :3], axis=1)  # (n,) m
+    outliers = outlier_poses(errors, data.sigma)
+    changes: dict[str, Any] = {"outlier_poses": tuple(outliers)}
+    if at_bounds is not None:
+        changes |= {
+            "at_bounds": tuple(at_bounds),
+            "objective": _distance_objective(problem, x0, result.estimates),
+        }
+        result = result.with_diagnostics(**changes)
+        out += _bounds_warnings(result, errors, at_bounds)
+    if outliers:
+        out.append(_outlier_warning(outliers, errors, data, loss))
+    if (few := _redundancy_warning(data.n, problem.rows, len(result.estimates))) is not None:
+        out.append(few)
+    if known_noise:
+        # does the model explain the data down to the noise? (position rows; for pose
+        # measurements their share of the estimated parameters)
+        noise = fit_to_noise(residuals[:, :3], data.sigma, len(result.estimates) * 3 / problem.rows)
+        changes["fit_to_noise"] = noise
+        if (text := noise.warning()) is not None:
+            out.append(CalibrationWarning("fit-to-noise", text))
+    result = result.with_diagnostics(**changes)
+    try:
+        out += [CalibrationWarning("solution", w) for w in check_solution(result)]
+    except CalibrationGuardError as err:
+        raise CalibrationGuardError(f"{err}; {orientation_hint}" if orientation_hint else str(err)) from None
+    return result.replace(warnings=tuple(out))

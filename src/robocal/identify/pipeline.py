@@ -1,0 +1,378 @@
+"""The physical calibration as a sequence of named stages (:func:`calibrate_physics`).
+
+1. :func:`_check_inputs` — the method, the data, the model (guards of
+   :mod:`robocal.identify.guards`: bad data is refused before any fit);
+2. start values — device frame and tool by closed-form fits
+   (:func:`robocal.identify.stages.initial_frames_and_tools`), and
+3. the problem — the measurement chain, row weights and joint-effect patterns
+   (:func:`robocal.identify.problem_setup.build_problem`);
+4. :func:`_identifiable` — the identifiable set by the sequential rank test, and the
+   rank guard;
+5. :func:`_screen` — unknowns the data leaves hopeless, fixed before the first fit;
+6. :func:`_solve` — the solver (:mod:`robocal.identify.solvers`), then :func:`_prune`
+   (poorly identifiable unknowns fixed and the fit repeated) and :func:`_hold_effects`
+   (joint effects not ≥ 3σ above zero held);
+7. :func:`_assemble` — the calibrated model, device frame and residuals;
+8. :func:`robocal.identify.diagnose.diagnose` — warnings, fit-to-noise, the solution guard.
+
+Joint-effect load passes (:func:`_with_load_passes`) repeat 2-8 with the joint loads of
+the calibrated geometry.  The residual model (:func:`robocal.calibrate` with
+``residual=...``) and the uncertainty of the learned residual are stages of
+:mod:`robocal.identify.residual` around this one.  Units: SI (m, rad).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal import spatial
+from robocal.identify.bounds import bounded_method_bounds, parameters_at_bounds
+from robocal.identify.diagnose import diagnose, parameterisation_warnings
+from robocal.identify.effects import COMPLIANCE_PREFIX, effect_plan, effects_to_hold
+from robocal.identify.guards import check_data, check_rank
+from robocal.identify.observability import Dropped
+from robocal.identify.options import CalibrationOptions
+from robocal.identify.problem import FRAME_PREFIX
+from robocal.identify.problem_setup import LEVELS, Run, build_problem, parse_level, without_measured_tool
+from robocal.identify.result import CalibrationResult, Diagnostics
+from robocal.identify.solvers import METHODS, solve
+from robocal.identify.stages import (
+    identifiable_set,
+    poorly_identifiable,
+    screen_unidentifiable,
+    uncertainty,
+)
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Model
+
+__all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
+
+Array = NDArray[np.float64]
+
+
+# ---------------------------------------------------------------------- 1. checks
+def _check_inputs(
+    model: Model, data: Measurements, method: str, options: CalibrationOptions, hold: dict | None
+) -> Run:
+    """The method, the data and the model; refuses what cannot be calibrated."""
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if data.position is None:
+        raise ValueError("the measurements have no positions to calibrate against")
+    if data.dof != model.dof:
+        raise ValueError(
+            f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
+        )
+    setup = options.setup
+    measure = setup.measure or ("pose" if data.orientation is not None else "position")
+    if measure == "pose" and data.orientation is None:
+        raise ValueError("measure='pose' needs measured orientations")
+    # a calibrated model (model.yaml of an earlier calibration) carries its measured tool:
+    # it becomes the tool's start value
+    model, carried_tool = without_measured_tool(model)
+    if carried_tool is not None and setup.tool_guess is None:
+        options = options.replace(tool_guess=carried_tool)
+        setup = options.setup
+    effects = options.joint_effects
+    level = parse_level(effects.level)
+    run = Run(model, model, data, method, options, measure, effect_plan(model, level, effects.effects,
+               effects.compliance), level)  # fmt: skip
+    # stop with an explanation when the data cannot determine the model (identical
+    # poses, joints that never move, too few poses...) rather than fit a silent bad model
+    for text in check_data(model, data):
+        run.warn("data", text)
+    for text in parameterisation_warnings(model, measure):
+        run.warn("parameterisation", text)
+    if (3 if measure == "position" else 6) * data.n < len(model.free_names) + 12:
+        # so few poses that there may be fewer equations than unknowns: say so before fitting
+        check_rank(
+            model, data, measure=measure, frame=setup.frame, tool=setup.tool, tool_guess=setup.tool_guess
+        )
+    if level == 1:  # joint offsets only: every other robot parameter is kept
+        run.model = model.fixed([s.name for s in model.steps if s.joint is None])
+    return run
+
+
+# ---------------------------------------------------------------------- 4. identifiable set
+def _identifiable(run: Run, hold: dict | None) -> None:
+    """The identifiable set, preferring the frame, then the tool, then the robot in chain
+    order (one factorisation of the scaled Jacobian at the start values); the rank guard;
+    joint effects the caller holds."""
+    problem, setup = run.problem, run.options.setup
+    names = problem.free_names
+    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names)
+    for text in check_rank(run.given_model, run.data, measure=run.measure, frame=setup.frame, tool=setup.tool,
+                           tool_guess=setup.tool_guess, kept=selection.kept, candidates=names):  # fmt: skip
+        run.warn("rank", text)
+    if selection.dropped:
+        problem = problem.fix([d.name for d in selection.dropped])
+    held = [
+        why if isinstance(why, Dropped) else Dropped(name, "undetermined", detail=str(why))
+        for name, why in (hold or {}).items()
+        if name in problem.effect_names
+    ]
+    if held:
+        problem = problem.fix([d.name for d in held])
+    run.problem, run.x0 = problem, problem.x0
+    run.dropped = list(selection.dropped) + held
+    run.solver = _solver_options(run, selection.dropped)
+
+
+def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
+    """The chosen method's settings (each method takes only its own)."""
+    o, method = run.options, run.method
+    solver: dict[str, Any] = {"max_iterations": o.setup.max_iterations}
+    if method == "lm":
+        f_scale = o.loss.f_scale * float(np.median(run.problem.weights.reshape(run.data.n, -1)[:, :3]))
+        solver |= {"loss": o.loss.loss, "f_scale": f_scale}
+    elif method in ("pinv", "influence"):
+        p = o.per_pose
+        solver["resolution"] = p.resolution
+        if method == "influence" or p.per_pose:
+            solver |= {
+                "combine": p.combine,
+                "passes": p.passes,
+                "per_pose": p.per_pose,
+                "relaxation": p.relaxation,
+            }
+    elif method == "bounded":
+        robot = set(run.model.names)
+        lo, hi, widened = bounded_method_bounds(o.bounds.value, run.problem, rank_dropped, run.length, robot)
+        if widened is not None:
+            run.warn("bounds-widened", widened)
+        solver["bounds"] = (lo, hi)
+    return solver
+
+
+# ---------------------------------------------------------------------- 5. screening
+def _screen(run: Run) -> None:
+    """The hopeless unknowns, fixed before the first fit (they would be pruned anyway);
+    not for ``bounded`` (its bounds keep a poorly determined unknown from running away)."""
+    if run.method == "bounded":
+        return
+    problem, x0, pruning = run.problem, run.x0, run.options.pruning
+    r, J = problem.residual(x0), problem.jacobian(x0)
+    found = screen_unidentifiable(r, J, problem.effect_scale(x0), pruning.max_std, pruning.max_std_ratio,
+                                  known_noise=run.known_noise)  # fmt: skip
+    if found:
+        names = problem.free_names
+        run.dropped += [Dropped(names[c], "poorly identifiable", sigma=sigma) for c, sigma in found]
+        run.problem = problem.fix([names[c] for c, _ in found])
+        run.x0 = run.problem.x0
+
+
+# ---------------------------------------------------------------------- 6. solve, prune, hold
+def _solve(run: Run, x_start: Array) -> None:
+    """One fit from ``x_start`` and the uncertainty at its solution (from the solver's
+    last Jacobian when it has it: no second evaluation)."""
+    t = time.perf_counter()
+    run.fit = solve(run.problem, x_start, run.method, **run.solver)
+    run.solve_seconds += time.perf_counter() - t
+    run.evaluations += run.fit.evaluations
+    run.x = run.fit.x
+    r, J = run.fit.r, run.fit.J
+    if r is None or J is None:
+        r, J = run.problem.residual(run.x), run.problem.jacobian(run.x)
+    run.covariance = uncertainty(r, J, run.problem.rows, run.known_noise)
+
+
+def _prune(run: Run) -> None:
+    """Drop what these measurements cannot determine, worst first, and refit from the
+    start values (the dropped unknown may have dragged others along a nearly flat valley
+    of the first fit: real UR10 data, plain DH, a5 +143 mm).  Not after an unconverged
+    fit (its σ say nothing) nor a bounded one (its bounds keep every unknown in range)."""
+    pruning = run.options.pruning
+    if not run.fit.success or run.method == "bounded":
+        return
+    for _ in range(len(run.x) - 1):
+        std = run.covariance[2]
+        found = poorly_identifiable(
+            std, run.problem.effect_scale(run.x), pruning.max_std, pruning.max_std_ratio
+        )
+        if found is None:
+            return
+        worst, sigma = found
+        names = run.problem.free_names
+        run.dropped.append(Dropped(names[worst], "poorly identifiable", sigma=sigma))
+        run.problem = run.problem.fix([names[worst]])
+        run.x0 = run.x0[np.arange(len(run.x)) != worst]
+        _solve(run, run.x0)
+
+
+def _hold_effects(run: Run) -> None:
+    """Joint effects are physical (≥ 0) and identified only when the data tells them from
+    zero: the others are held at their start values and the fit repeated from the
+    linearised solution with them held (:func:`effects_to_hold`)."""
+    for _ in range(run.problem.n_effects if run.fit.success else 0):
+        problem = run.problem
+        if not problem.n_effects:
+            return
+        names = problem.free_names
+        held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
+        peaks = dict(zip(problem.effect_names, np.abs(problem.effect_basis).max(axis=(1, 2, 3)), strict=True))
+        x_held, verdicts = effects_to_hold(names, run.x, run.covariance[1], held_at, peaks)
+        if not verdicts:
+            return
+        run.dropped += verdicts
+        held = {v.name for v in verdicts}
+        keep = np.array([name not in held for name in names], dtype=bool)
+        run.problem = problem.fix([v.name for v in verdicts])
+        run.x0, x_start = run.x0[keep], x_held[keep]
+        if run.method == "bounded":
+            run.solver["bounds"] = tuple(b[keep] for b in run.solver["bounds"])
+            x_start = np.clip(x_start, *run.solver["bounds"])
+        _solve(run, x_start)
+
+
+# ---------------------------------------------------------------------- 7. the result
+def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
+    """The calibrated measurement chain, the calibrated robot (tool appended, the given
+    model's free flags) and ``T_device_base`` (4x4)."""
+    chain = run.problem.chain
+    values = run.problem.values(run.x)
+    calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
+    frame_names = {s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))}
+    frame_steps_ = calibrated_chain.steps[: len(frame_names)]  # the frame steps come first
+    T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
+    free_before = {s.name: s.free for s in run.given_model.steps}
+    robot_steps = tuple(
+        s if s.free == free_before.get(s.name, True) else dataclasses.replace(s, free=not s.free)
+        for s in calibrated_chain.steps
+        if s.name not in frame_names
+    )
+    given = run.given_model
+    calibrated = dataclasses.replace(given, steps=robot_steps, notes=(given.notes + " calibrated").strip())
+    if run.plan.mode == "none":
+        calibrated = dataclasses.replace(calibrated, joint_effects=())
+    elif run.plan.kinds:
+        from robocal.model.joints import effects_from_values
+
+        estimated = dict(zip(run.problem.free_names, run.x, strict=True))
+        pairs = zip(run.effect_names, run.effect_kinds, run.effect_start, strict=True)
+        effect_values = {pair: estimated.get(c, s0) for c, pair, s0 in pairs}
+        calibrated = dataclasses.replace(
+            calibrated, joint_effects=effects_from_values(run.model, effect_values)
+        )
+    return calibrated_chain, calibrated, T_device_base
+
+
+def _assemble(run: Run, t_start: float) -> CalibrationResult:
+    """The frozen result of this pass (warnings and diagnostics added by :func:`diagnose`)."""
+    problem, x, n = run.problem, run.x, run.data.n
+    names = problem.free_names
+    r_plain = problem.residual(x, weighted=False).reshape(n, problem.rows)
+    r_start = problem.residual(run.x0, weighted=False).reshape(n, problem.rows)
+    _, cov, std, corr, cond = run.covariance
+    chain, calibrated, T_device_base = _calibrated_models(run)
+    effects = run.options.joint_effects
+    level = run.level if run.level is not None else (3 if run.plan.mode != "none" else 2)
+    return CalibrationResult(
+        model=calibrated, T_device_base=T_device_base, measure=run.measure, method=run.method,
+        names=names, estimates=x, nominal=run.x0, std=std, covariance=cov, correlation=corr,
+        dropped=tuple(run.dropped),
+        residual_std=float(np.sqrt(np.sum(r_plain[:, :3] ** 2) / max(3 * n - len(x), 1))),
+        rms_before=float(np.sqrt(np.mean(np.sum(r_start[:, :3] ** 2, axis=1)))),
+        rms_after=float(np.sqrt(np.mean(np.sum(r_plain[:, :3] ** 2, axis=1)))),
+        condition_number=cond, n=n, success=run.fit.success, message=run.fit.message,
+        iterations=run.fit.iterations, seconds=time.perf_counter() - t_start, measurement_chain=chain,
+        compliance={
+            name.removeprefix(COMPLIANCE_PREFIX): float(v)
+            for name, v in zip(names, x, strict=True)
+            if name.startswith(COMPLIANCE_PREFIX)
+        },
+        gravity=effects.gravity, payload=effects.payload, residuals=r_plain,
+        diagnostics=Diagnostics(solve_seconds=run.solve_seconds, evaluations=run.evaluations, level=level,
+                                effects=run.plan.mode),
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------- the sequence
+def _calibrate_once(
+    run: Run, load_model: Model | None, hold: dict | None, t_start: float
+) -> CalibrationResult:
+    """Stages 2-8 for the joint loads of ``load_model``'s geometry."""
+    build_problem(run, load_model)
+    _identifiable(run, hold)
+    _screen(run)
+    _solve(run, run.x0)
+    _prune(run)
+    _hold_effects(run)
+    result = _assemble(run, t_start)
+    bounds = run.solver.get("bounds") if run.method == "bounded" else None
+    at_bounds = None if bounds is None else parameters_at_bounds(result.names, run.x, *bounds)
+    return diagnose(result, run.problem, run.data, run.warnings, run.known_noise, run.options.loss.loss,
+                    run.x0, at_bounds, run.orientation_hint)  # fmt: skip
+
+
+def calibrate_physics(
+    model: Model,
+    data: Measurements,
+    method: str = "lm",
+    options: CalibrationOptions | None = None,
+    *,
+    hold_effects: dict[str, str | Dropped] | None = None,
+    **keywords: Any,
+) -> CalibrationResult:
+    """Identify the physical robot's parameters (geometry and joint effects) from
+    measurements; :func:`robocal.calibrate` documents the options and adds the learned
+    residual.
+
+    Args:
+        model, data, method: as :func:`robocal.calibrate`.
+        options: the settings (:class:`~robocal.identify.options.CalibrationOptions`),
+            changed by ``keywords`` (its groups or their fields by plain name; an unknown
+            one is an error).
+        hold_effects: joint-effect coefficients kept at their start values and not
+            identified, with the reason reported in ``dropped`` (the learned residual's
+            stage holds those it confounds).
+    """
+    t_start = time.perf_counter()
+    options = CalibrationOptions.from_keywords(options, **keywords)
+    run = _check_inputs(model, data, method, options, hold_effects)
+    if run.plan.mode != "none" and options.joint_effects.load_passes > 1:
+        return _with_load_passes(run, model, hold_effects, t_start)
+    return _calibrate_once(run, None, hold_effects, t_start)
+
+
+# ---------------------------------------------------------------------- joint-effect load passes
+def _load_signs(run: Run, geometry: Model) -> NDArray[np.int8]:
+    from robocal.model.joints import DEADBAND, load_moments
+
+    e = run.options.joint_effects
+    eta = load_moments(geometry, run.data.q, e.velocities, e.accelerations, gravity=np.asarray(e.gravity),
+                       payload=e.payload)  # fmt: skip
+    return np.where(np.abs(eta) > DEADBAND, np.sign(eta), 0).astype(np.int8)
+
+
+def _geometry_of(result: CalibrationResult, model: Model) -> Model:
+    """``model`` with the calibrated values of its own parameters (the tool steps the
+    calibration appended left out): the geometry for the joint loads."""
+    calibrated = dict(zip(result.model.names, result.model.values.tolist(), strict=True))
+    return model.with_values({n: calibrated[n] for n in model.names if n in calibrated})
+
+
+def _with_load_passes(run: Run, model: Model, hold: dict | None, t_start: float) -> CalibrationResult:
+    """Calibrate, then recompute the joint loads with the calibrated geometry and
+    calibrate again, until the loads' signs stop changing (at most ``load_passes``):
+    near a load's sign change the nominal geometry can predict the wrong side of the
+    backlash at a few poses (Katana 450: 31 of 118 poses, up to 0.4 mm).  ``model``: the
+    model as given, whose geometry gives the first pass's loads."""
+    signs = _load_signs(run, model)
+    fresh = dataclasses.replace(run, warnings=list(run.warnings))
+    result = _calibrate_once(fresh, model, hold, t_start)
+    done = 1
+    while done < run.options.joint_effects.load_passes:
+        geometry = _geometry_of(result, model)
+        new_signs = _load_signs(run, geometry)
+        if np.array_equal(new_signs, signs):
+            break
+        signs = new_signs
+        fresh = dataclasses.replace(run, warnings=list(run.warnings))
+        result = _calibrate_once(fresh, geometry, hold, t_start)
+        done += 1
+    return result.with_diagnostics(load_passes=done).replace(seconds=time.perf_counter() - t_start)

@@ -1,0 +1,222 @@
+"""The first stages of a calibration (:mod:`robocal.identify.pipeline`): the working
+state of a pass (:class:`Run`), the start values of the device frame and the tool, and the
+calibration problem — measurement chain, row weights, joint-effect patterns and the
+perturbations known in advance.  Units: SI (m, rad)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal import spatial
+from robocal.identify.effects import EffectPlan
+from robocal.identify.observability import Dropped
+from robocal.identify.options import CalibrationOptions, check_load_model
+from robocal.identify.problem import TOOL_PREFIX, Problem, measurement_chain
+from robocal.identify.result import CalibrationWarning
+from robocal.identify.solvers import SolveResult
+from robocal.identify.stages import initial_frames_and_tools, robot_sizes
+from robocal.measure.dataset import Measurements
+from robocal.model.chain import Model
+
+__all__ = ["LEVELS", "Run", "build_problem", "parse_level", "without_measured_tool"]
+
+Array = NDArray[np.float64]
+
+#: calibration levels by name (seed 003 §1.2)
+LEVELS: dict[str, int] = {
+    "1": 1, "offsets": 1, "joint-offsets": 1, "zero-offset": 1,
+    "2": 2, "kinematic": 2, "geometric": 2,
+    "3": 3, "non-geometric": 3,
+}  # fmt: skip
+
+
+def parse_level(level: int | str | None) -> int | None:
+    """1, 2 or 3 from a number or a name (``offsets``, ``kinematic``, ``non-geometric``)."""
+    if level is None:
+        return None
+    key = str(level).strip().lower()
+    if key not in LEVELS:
+        raise ValueError(
+            f"unknown calibration level {level!r}: 1 (joint offsets), 2 (kinematic) or 3 (non-geometric)"
+        )
+    return LEVELS[key]
+
+
+def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
+    """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
+    its end, and their transform (4x4; None when there are none)."""
+    k = len(model.steps)
+    while k and model.steps[k - 1].name.startswith(TOOL_PREFIX) and model.steps[k - 1].joint is None:
+        k -= 1
+    if k == len(model.steps):
+        return model, None
+    tool = model.steps[k:]
+    T = spatial.chain_product([s.motion for s in tool], [s.value for s in tool])
+    return dataclasses.replace(model, steps=model.steps[:k]), T
+
+
+def _as_frame(value: Any) -> Array:
+    """A tool or frame given as a position (3,) or a 4x4 transform, as 4x4."""
+    g = np.asarray(value, dtype=float)
+    return g if g.shape == (4, 4) else spatial.homogeneous(p=g)
+
+
+# ---------------------------------------------------------------------- the working state
+@dataclass
+class Run:
+    """What one pass of the pipeline knows; internal and short-lived (the result it
+    produces is frozen)."""
+
+    given_model: Model  # the model as given (tool steps of an earlier calibration removed)
+    model: Model  # its candidates (level 1: the joint offsets only)
+    data: Measurements
+    method: str
+    options: CalibrationOptions
+    measure: str
+    plan: EffectPlan
+    level: int | None
+    warnings: list[CalibrationWarning] = field(default_factory=list)
+    orientation_hint: str = ""
+    known_noise: bool = False
+    length: float = 1.0
+    solver: dict[str, Any] = field(default_factory=dict)
+    dropped: list[Dropped] = field(default_factory=list)
+    problem: Problem | None = None
+    x0: Array | None = None
+    x: Array | None = None
+    fit: SolveResult | None = None
+    covariance: tuple[float, Array, Array, Array, float] | None = None
+    solve_seconds: float = 0.0
+    evaluations: int = 0
+    effect_names: tuple[str, ...] = ()
+    effect_kinds: tuple[tuple[str, str], ...] = ()
+    effect_start: Array | None = None
+
+    def warn(self, code: str, message: str) -> None:
+        self.warnings.append(CalibrationWarning(code, message))
+
+
+# ---------------------------------------------------------------------- 2. start values
+def _start_values(run: Run) -> tuple[Array, Array, Array, bool]:
+    """Start values of the device frame and the tool (4x4 each), the flange frames
+    ``(n, 4, 4)`` at the data's joint values, and whether the frame is fitted."""
+    setup, data = run.options.setup, run.data
+    fit_frame = isinstance(setup.frame, str) and setup.frame == "fit"
+    T_known = None
+    if not isinstance(setup.frame, str):
+        T_known = np.asarray(setup.frame, dtype=float)
+        if T_known.shape != (4, 4):
+            raise ValueError(f"frame must be 'fit', 'fixed' or a 4x4 transform, got shape {T_known.shape}")
+    T_tool0 = np.eye(4) if setup.tool_guess is None else _as_frame(setup.tool_guess)
+    fit_tool = isinstance(setup.tool, str) and setup.tool == "fit"
+    if setup.tool is not None and not isinstance(setup.tool, str):
+        T_tool0 = _as_frame(setup.tool)
+    T_flange = run.model.fk(data.q)
+    T_frame, T_tool = initial_frames_and_tools(
+        T_flange[None],
+        data.position[None],
+        orientation=data.orientation[None] if run.measure == "pose" else None,
+        T_tool=T_tool0,
+        T_frame=T_known,
+        fit_frame=fit_frame,
+        fit_tool=fit_tool and setup.tool is not None,
+    )
+    return T_frame[0], T_tool[0], T_flange, fit_frame
+
+
+# ---------------------------------------------------------------------- 3. the problem
+def _row_weights(run: Run, rows: int) -> Array:
+    """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``."""
+    data, weights = run.data, run.options.weights
+    w = np.ones((data.n, rows))
+    run.known_noise = weights.by == "sigma" and data.sigma is not None
+    if run.known_noise:
+        w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
+    if rows == 6:
+        w[:, 3:] = weights.orientation * (w[:, :3].mean(axis=1, keepdims=True))
+    return w
+
+
+def _effect_terms(run: Run, load_model: Model | None) -> tuple[Array | None, Array | None]:
+    """The identified joint effects' patterns ``(k, n, dof, 3)`` and the perturbations
+    of the model's other joint effects, known and predicted at every pose."""
+    from robocal.model.joints import EFFECT_KINDS, EFFECT_PREFIXES, effect_basis, load_moments
+    from robocal.model.joints import joint_perturbations as predict_effects
+
+    model, q, plan, e = run.model, run.data.q, run.plan, run.options.joint_effects
+    geometry = model if load_model is None else check_load_model(load_model, model)
+    loads = load_moments(geometry, q, e.velocities, e.accelerations, gravity=np.asarray(e.gravity),
+                         payload=e.payload)  # fmt: skip
+    basis = None
+    if plan.kinds:
+        joints = plan.joints if plan.joints is not None else e.joints
+        basis, run.effect_names, run.effect_kinds = effect_basis(model, q, kinds=plan.kinds, joints=joints,
+                                                                 loads=loads)  # fmt: skip
+        run.effect_names, run.effect_kinds = tuple(run.effect_names), tuple(run.effect_kinds)
+    by_joint = {x.joint: x for x in model.joint_effects}
+    run.effect_start = np.array(
+        [getattr(by_joint[j], EFFECT_PREFIXES[k][1]) if j in by_joint else 0.0 for k, j in run.effect_kinds]
+    )
+    if not model.joint_effects:
+        return basis, None
+    # the model's joint effects that are not identified are known: predicted at every pose
+    identified = set(run.effect_kinds)
+    rest = [
+        dataclasses.replace(
+            x, **{EFFECT_PREFIXES[k][1]: 0.0 for k in EFFECT_KINDS if (k, x.joint) in identified}
+        )
+        for x in model.joint_effects
+    ]
+    known = predict_effects(model, q, effects=rest, loads=loads)
+    if not np.any(known):
+        return basis, None
+    predicted = {k: [x.joint for x in rest if getattr(x, EFFECT_PREFIXES[k][1])] for k in EFFECT_KINDS}
+    listed = "; ".join(f"{k} ({', '.join(j)})" for k, j in predicted.items() if j)
+    run.warn(  # a robot whose joints differ from its model's would be mis-corrected
+        "effects-predicted",
+        f"joint effects of model {model.name!r} predicted as known, not identified: {listed}; if this "
+        "robot's differ, identify them too (level=3 / --level 3) or calibrate a model without them",
+    )
+    return basis, known
+
+
+def build_problem(run: Run, load_model: Model | None) -> None:
+    """The measurement chain at the start values, weights and joint-effect patterns."""
+    setup, data, measure = run.options.setup, run.data, run.measure
+    T_frame, T_tool, T_flange, fit_frame = _start_values(run)
+    chain = measurement_chain(run.model, T_frame, None if setup.tool is None else T_tool, measure, fit_frame)
+    if setup.tool is not None and not (isinstance(setup.tool, str) and setup.tool == "fit"):
+        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
+    run.length = float(robot_sizes(T_flange[None])[0])
+    rows = 3 if measure == "position" else 6
+    w = _row_weights(run, rows)
+    basis, known = _effect_terms(run, load_model) if run.plan.mode != "none" else (None, None)
+    if run.model.residual is not None:  # a learned residual given with the model is known: applied
+        learned = run.model.residual.perturbations(data.q, run.model.dof)
+        known = learned if known is None else known + learned
+    start = run.effect_start if run.plan.mode != "none" else None
+    run.problem = Problem(chain, data.q, data.position, data.orientation if rows == 6 else None,
+                          w.reshape(-1), run.length, basis, run.effect_names, known, start)  # fmt: skip
+    if rows == 6:
+        _check_orientations(run)
+
+
+def _check_orientations(run: Run) -> None:
+    """With the device frame and the tool fitted, a real robot's orientations agree with
+    its model to a degree or so; far more means the file's rotations are read wrongly."""
+    problem = run.problem
+    r = problem.residual(problem.x0, weighted=False).reshape(run.data.n, 6)
+    angle = np.degrees(np.median(np.linalg.norm(r[:, 3:], axis=1)))
+    if angle > 5.0:
+        run.orientation_hint = (
+            f"the measured orientations differ from the model's by {angle:.3g}° (median) after the "
+            "device frame and the tool were fitted: check the orientation convention of the data "
+            "(orientation='euler:XYZ:deg' / --orientation: intrinsic XYZ is upper case, extrinsic "
+            "xyz lower case), or calibrate positions only (measure='position')"
+        )
+        run.warn("orientation", run.orientation_hint)

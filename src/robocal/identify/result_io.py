@@ -1,0 +1,309 @@
+"""``result.json``: a :class:`~robocal.identify.result.CalibrationResult` written, read back
+and saved as one transaction with its model files.
+
+The file's layout is that of earlier robocal versions (the typed fields of the result are
+written under their older ``metadata`` keys: ``warnings`` as texts, ``residuals_mm``,
+``fit_to_noise``, ``cv``, ``provenance``, ``validation``...), so results saved by an
+earlier robocal load, and a file that is not a result is refused with its path and the
+field that is wrong.  Lengths in the file are in mm where the key says so, SI otherwise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robocal.identify.effects import si_unit
+from robocal.identify.guards import FitToNoise
+from robocal.identify.observability import Dropped
+from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
+from robocal.model.dynamics import Payload
+from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model, strict_json
+
+__all__ = ["RESULT_FILES", "file_hash", "load_result", "metadata_dict", "result_dict", "save_result"]
+
+#: the files of a calibration result folder (written and replaced together)
+RESULT_FILES = (
+    "model.yaml",
+    "measurement_model.yaml",
+    "result.json",
+    "report.html",
+    "train.csv",
+    "test.csv",
+    "evaluation.json",
+    "true_model.yaml",
+)
+
+#: keys of result.json that are fields of the result, or derived from them
+_FIELDS = {
+    "run_id", "robocal_version", "residual_cross_covariance", "residual_covariance_upper", "payload",
+    "model", "rms_before_mm", "rms_after_mm", "residual_std_mm", "parameters", "high_correlations",
+    "frame", "method", "measure", "n", "success", "message", "iterations", "seconds", "covariance",
+    "dropped", "compliance_rad_per_Nm", "gravity", "condition_number",
+    # the metadata keys of the typed fields
+    "solve_seconds", "evaluations", "residuals_mm", "level", "outlier_poses", "effects", "at_bounds",
+    "objective", "fit_to_noise", "warnings", "warning_codes", "cv", "residual_rms_after_mm",
+    "load_passes", "provenance", "validation", "saved_run_id",
+}  # fmt: skip
+
+
+def _version() -> str:
+    from robocal import __version__
+
+    return __version__
+
+
+def file_hash(path: str | Path) -> str:
+    """SHA-256 of a file (recorded in results so that a calibration can be traced)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def metadata_dict(result: CalibrationResult) -> dict[str, Any]:
+    """The result's diagnostics, warnings, provenance and records under their
+    ``result.json`` keys (the older ``metadata`` dict)."""
+    d = result.diagnostics
+    out: dict[str, Any] = {"solve_seconds": d.solve_seconds, "evaluations": d.evaluations}
+    if result.residuals is not None:  # per pose, predicted minus measured (device frame)
+        out["residuals_mm"] = np.round(np.asarray(result.residuals) * 1e3, 6).tolist()
+    out |= {"level": d.level, "outlier_poses": list(d.outlier_poses), "effects": d.effects}
+    if d.at_bounds is not None:
+        out["at_bounds"] = list(d.at_bounds)
+    if d.objective is not None:
+        out["objective"] = dict(d.objective)
+    if d.fit_to_noise is not None:
+        out["fit_to_noise"] = d.fit_to_noise.to_dict()
+    out["warnings"] = [w.message for w in result.warnings]
+    out["warning_codes"] = [w.code for w in result.warnings]
+    if d.load_passes is not None:
+        out["load_passes"] = d.load_passes
+    if d.cv is not None:
+        out["cv"] = dict(d.cv)
+    if d.residual_rms_after_mm is not None:
+        out["residual_rms_after_mm"] = d.residual_rms_after_mm
+    out |= dict(result.records)
+    if result.provenance is not None:
+        out["provenance"] = result.provenance.to_dict()
+    if result.validation is not None:
+        out["validation"] = dict(result.validation)
+    if result.run_id is not None:
+        out["saved_run_id"] = result.run_id
+    return out
+
+
+def _payload_dict(payload: Payload) -> dict[str, Any]:
+    out: dict[str, Any] = {"mass": payload.mass, "com": list(payload.com)}
+    if payload.inertia is not None:
+        out["inertia"] = list(payload.inertia)
+    return out
+
+
+def result_dict(result: CalibrationResult) -> dict[str, Any]:
+    """The content of ``result.json`` (JSON types; lengths in mm where a key says so)."""
+    r = result
+    rot = {s.name: s.is_rotation for s in (r.measurement_chain or r.model).steps}
+    meta = metadata_dict(r)
+    meta.pop("saved_run_id", None)  # the file's run id is written by save_result
+    learned = r.model.residual
+    return {
+        "robocal_version": _version(),
+        "model": r.model.name,
+        "method": r.method,
+        "measure": r.measure,
+        "n": r.n,
+        "success": r.success,
+        "message": r.message,
+        "iterations": r.iterations,
+        "seconds": r.seconds,
+        "rms_before_mm": r.rms_before * 1e3,
+        "rms_after_mm": r.rms_after * 1e3,
+        "residual_std_mm": r.residual_std * 1e3,
+        "condition_number": r.condition_number,
+        "frame": {"T_device_base": np.asarray(r.T_device_base).tolist()},
+        "parameters": [
+            {
+                "name": n,
+                "unit": si_unit(n, rot.get(n, False)),
+                "nominal": float(v0),
+                "estimate": float(v),
+                "delta": float(v - v0),
+                "std": float(s),
+            }
+            for n, v0, v, s in zip(r.names, r.nominal, r.estimates, r.std, strict=True)
+        ],
+        "covariance": np.asarray(r.covariance).tolist(),
+        "dropped": [
+            {
+                "name": d.name,
+                "reason": d.reason,
+                "absorbed_by": [list(a) for a in d.absorbed_by],
+                **({"sigma_mm": d.sigma * 1e3} if d.sigma is not None else {}),
+                **({"detail": d.detail} if d.detail else {}),
+            }
+            for d in r.dropped
+        ],
+        "high_correlations": [list(c) for c in r.high_correlations],
+        "compliance_rad_per_Nm": dict(r.compliance),
+        "gravity": list(r.gravity),
+        **({"payload": _payload_dict(r.payload)} if r.payload is not None else {}),
+        **(
+            {
+                "residual_covariance_upper": learned.covariance_upper(),
+                "residual_cross_covariance": [
+                    [float(f"{v:.9g}") for v in row] for row in r.residual_cross_covariance
+                ],
+            }
+            if r.residual_cross_covariance is not None and learned is not None
+            else {}
+        ),
+        **meta,
+    }
+
+
+def save_result(
+    result: CalibrationResult, directory: str | Path, also: Callable[[Path], object] | None = None
+) -> CalibrationResult:
+    """:meth:`CalibrationResult.save`: the files as one transaction; returns the result
+    with the run id of the files."""
+    from robocal.outdir import transaction
+
+    with transaction(directory, RESULT_FILES) as stage:
+        save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)
+        if result.measurement_chain is not None:
+            save_model(result.measurement_chain, stage.path / "measurement_model.yaml", run_id=stage.run_id)
+        text = strict_json(result_dict(result) | {"run_id": stage.run_id}, indent=2) + "\n"
+        atomic_write_text(stage.path / "result.json", text)
+        if also is not None:
+            also(stage.path)
+    return result.replace(run_id=stage.run_id)
+
+
+def load_result(directory: str | Path) -> CalibrationResult:
+    """:meth:`CalibrationResult.load`."""
+    from robocal.outdir import check_consistent
+
+    directory = Path(directory)
+    path = directory / "result.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as err:
+        raise ValueError(f"{path}: not UTF-8 text (byte {err.start})") from None
+    except json.JSONDecodeError as err:
+        raise ValueError(
+            f"{path}: not valid JSON (line {err.lineno}, column {err.colno}: {err.msg})"
+        ) from None
+    except RecursionError:
+        raise ValueError(f"{path}: nested too deeply to be a calibration result") from None
+    if not isinstance(data, dict):
+        raise ValueError(
+            f"{path}: not a calibration result (a JSON object expected, got {type(data).__name__})"
+        )
+    # not train.csv, test.csv or evaluation.json: a user may put their own there for `report`
+    check_consistent(directory, ("model.yaml", "measurement_model.yaml", "report.html"))
+    if not (directory / "model.yaml").is_file():
+        raise ValueError(f"{directory}: model.yaml is missing beside result.json; calibrate again")
+    try:
+        return _from_dict(directory, data)
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as err:
+        if isinstance(err, ModelFileError):
+            raise
+        what = f"missing field {err.args[0]!r}" if isinstance(err, KeyError) else str(err)
+        raise ValueError(f"{path}: not a calibration result written by robocal ({what})") from None
+
+
+def _warnings(data: dict[str, Any]) -> tuple[CalibrationWarning, ...]:
+    texts = [str(w) for w in data.get("warnings", [])]
+    codes = data.get("warning_codes")
+    if not isinstance(codes, list) or len(codes) != len(texts):  # an older file: no codes
+        codes = ["unknown"] * len(texts)
+    return tuple(CalibrationWarning(str(c), t) for c, t in zip(codes, texts, strict=True))
+
+
+def _diagnostics(data: dict[str, Any]) -> Diagnostics:
+    noise = data.get("fit_to_noise")
+    at_bounds = data.get("at_bounds")
+    passes = data.get("load_passes")
+    rms = data.get("residual_rms_after_mm")
+    return Diagnostics(
+        solve_seconds=float(data.get("solve_seconds", 0.0)),
+        evaluations=int(data.get("evaluations", 0)),
+        level=int(data.get("level", 2)),
+        effects=str(data.get("effects", "none")),
+        load_passes=None if passes is None else int(passes),
+        outlier_poses=tuple(int(i) for i in data.get("outlier_poses", [])),
+        fit_to_noise=None if noise is None else FitToNoise.from_dict(noise),
+        cv=data.get("cv"),
+        residual_rms_after_mm=None if rms is None else float(rms),
+        at_bounds=None if at_bounds is None else tuple(at_bounds),
+        objective=data.get("objective"),
+    )
+
+
+def _from_dict(directory: Path, data: dict[str, Any]) -> CalibrationResult:
+    from robocal.identify.provenance import Provenance
+
+    model = load_model(directory / "model.yaml")
+    chain_path = directory / "measurement_model.yaml"
+    params = data["parameters"]
+    cov = np.array(data["covariance"], dtype=float).reshape(len(params), len(params))
+    std = np.array([p["std"] for p in params], dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
+    if model.residual is not None and data.get("residual_covariance_upper") is not None:
+        upper = data["residual_covariance_upper"]
+        model = dataclasses.replace(model, residual=model.residual.with_covariance_upper(upper))
+    residuals = data.get("residuals_mm")
+    cross = data.get("residual_cross_covariance")
+    return CalibrationResult(
+        model=model,
+        T_device_base=np.array(data["frame"]["T_device_base"], dtype=float).reshape(4, 4),
+        measure=data["measure"],
+        method=data["method"],
+        names=tuple(p["name"] for p in params),
+        estimates=np.array([p["estimate"] for p in params], dtype=float),
+        nominal=np.array([p["nominal"] for p in params], dtype=float),
+        std=std,
+        covariance=cov,
+        correlation=corr,
+        dropped=tuple(
+            Dropped(
+                d["name"],
+                d["reason"],
+                tuple(tuple(a) for a in d["absorbed_by"]),
+                sigma=d["sigma_mm"] / 1e3 if "sigma_mm" in d else None,
+                detail=d.get("detail", ""),
+            )
+            for d in data["dropped"]
+        ),
+        residual_std=data["residual_std_mm"] / 1e3,
+        rms_before=data["rms_before_mm"] / 1e3,
+        rms_after=data["rms_after_mm"] / 1e3,
+        condition_number=math.inf if data["condition_number"] is None else float(data["condition_number"]),
+        n=data["n"],
+        success=data["success"],
+        message=data["message"],
+        iterations=data["iterations"],
+        seconds=data["seconds"],
+        measurement_chain=load_model(chain_path) if chain_path.exists() else None,
+        compliance=dict(data.get("compliance_rad_per_Nm", {})),
+        gravity=tuple(data.get("gravity", (0.0, 0.0, -9.81))),
+        payload=Payload(**data["payload"]) if data.get("payload") else None,
+        residual_cross_covariance=None if cross is None else np.array(cross, dtype=float),
+        residuals=None if residuals is None else np.array(residuals, dtype=float) / 1e3,
+        warnings=_warnings(data),
+        diagnostics=_diagnostics(data),
+        provenance=Provenance.from_metadata(data),
+        validation=data.get("validation"),
+        records={k: v for k, v in data.items() if k not in _FIELDS},
+        run_id=data.get("run_id"),
+    )
