@@ -71,6 +71,7 @@ from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.paths import joint_path
 from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text, csv_text, strict_json
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS
 
 __all__ = [
     "Compensation",
@@ -90,8 +91,7 @@ Array = NDArray[np.float64]
 Calibrated = CalibrationResult | Model
 Frame = Literal["base", "measurement"]
 
-_LENGTH = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
-_ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
+_LENGTH, _ANGLE = LENGTH_UNITS, ANGLE_UNITS  # robocal.units
 
 
 # ---------------------------------------------------------------------- models

@@ -71,6 +71,7 @@ from robocal import spatial
 from robocal.identify.calibrate import CalibrationResult
 from robocal.identify.problem import TOOL_PREFIX, frame_steps
 from robocal.model.chain import Model
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS, unit_factor
 
 __all__ = [
     "FilteredProgram",
@@ -658,8 +659,8 @@ class _Units:
 
 _UNITS = {
     "urscript": _Units(1.0, 1.0, 7, 7),
-    "krl": _Units(1e-3, DEG, 4, 5),
-    "rapid": _Units(1e-3, DEG, 4, 5),
+    "krl": _Units(LENGTH_UNITS["mm"], ANGLE_UNITS["deg"], 4, 5),
+    "rapid": _Units(LENGTH_UNITS["mm"], ANGLE_UNITS["deg"], 4, 5),
 }
 
 
@@ -1088,8 +1089,8 @@ def filter_program_text(
                 "measured positions only: give the probe as built with --probe x,y,z (m)"
             )
     if language == "csv":
-        lf = {"m": 1.0, "mm": 1e-3, "um": 1e-6}[length_unit]
-        af = {"rad": 1.0, "deg": DEG}[angle_unit]
+        lf = unit_factor(length_unit, "length", "length_unit")
+        af = unit_factor(angle_unit, "angle", "angle_unit")
         units = _Units(lf, af, 7 if lf == 1.0 else 4, 7 if af == 1.0 else 5)
     else:
         units = _UNITS[language]

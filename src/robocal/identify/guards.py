@@ -45,7 +45,6 @@ __all__ = [
     "check_rank",
     "check_solution",
     "fit_to_noise",
-    "residual_variance",
 ]
 
 Array = NDArray[np.float64]
@@ -481,21 +480,3 @@ def fit_to_noise(
         # residuals a little above their expectation half of the time)
         unmodelled_rms=math.sqrt(max(ms - noise_ms, 0.0)) if p_value < significance else 0.0,
     )
-
-
-def residual_variance(chi2: ArrayLike, dof: ArrayLike, known: ArrayLike, significance: float = 1e-3) -> Array:
-    """The variance factor of weighted residuals for a covariance, ``χ²/dof`` or 1.
-
-    With weights 1/σ from a stated noise (``known``) the factor is 1 — the Cramér–Rao
-    covariance — unless a χ² test rejects the stated noise at ``significance`` (either
-    way): a few degrees of freedom cannot estimate it, and a model that explains the
-    data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``.
-    Arrays broadcast (the batched study engine).
-    """
-    import scipy.special
-
-    chi2, dof = np.asarray(chi2, dtype=float), np.maximum(np.asarray(dof, dtype=float), 1.0)
-    estimated = chi2 / dof
-    upper = scipy.special.chdtrc(dof, chi2)  # P(χ² >= observed)
-    rejected = (upper < significance) | (1.0 - upper < significance)
-    return np.where(np.asarray(known, dtype=bool) & ~rejected, 1.0, estimated)

@@ -37,6 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from robocal.identify.solve_result import SolveResult
+
 __all__ = [
     "METHODS",
     "BatchSolveResult",
@@ -47,18 +49,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-
-@dataclass
-class SolveResult:
-    """What a solver returns (scipy-style)."""
-
-    x: Array
-    success: bool
-    message: str
-    iterations: int
-    evaluations: int = 0
-    history: list[float] = field(default_factory=list)  # RMS residual per iteration (weighted)
 
 
 def _lm(

@@ -25,10 +25,9 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.identify.guards import residual_variance
 from robocal.identify.observability import IdentifiableSubset, identifiable_subset
 
 __all__ = [
@@ -37,6 +36,7 @@ __all__ = [
     "normal_inverse",
     "poorly_identifiable",
     "preference_order",
+    "residual_variance",
     "robot_sizes",
     "screen_unidentifiable",
     "tool_displacement_scale",
@@ -251,3 +251,21 @@ def poorly_identifiable(
     if move[worst] <= max(max_std, max_std_ratio * float(np.median(move))):
         return None
     return worst, float(move[worst])
+
+
+def residual_variance(chi2: ArrayLike, dof: ArrayLike, known: ArrayLike, significance: float = 1e-3) -> Array:
+    """The variance factor of weighted residuals for a covariance, ``χ²/dof`` or 1.
+
+    With weights 1/σ from a stated noise (``known``) the factor is 1 — the Cramér–Rao
+    covariance — unless a χ² test rejects the stated noise at ``significance`` (either
+    way): a few degrees of freedom cannot estimate it, and a model that explains the
+    data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``.
+    Arrays broadcast (the batched study engine).
+    """
+    import scipy.special
+
+    chi2, dof = np.asarray(chi2, dtype=float), np.maximum(np.asarray(dof, dtype=float), 1.0)
+    estimated = chi2 / dof
+    upper = scipy.special.chdtrc(dof, chi2)  # P(χ² >= observed)
+    rejected = (upper < significance) | (1.0 - upper < significance)
+    return np.where(np.asarray(known, dtype=bool) & ~rejected, 1.0, estimated)

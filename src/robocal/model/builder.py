@@ -440,8 +440,8 @@ def select_identifiable(
         J = J.reshape(len(q), 6, -1)
         J[:, 3:] *= size
         J = J.reshape(len(q) * 6, -1)
-    # identify builds on model: import late
-    from robocal.identify.observability import identifiable_subset
+    # scipy.linalg: imported on use
+    from robocal.model.rank import identifiable_subset
 
     selection = identifiable_subset(
         J, full.names, order="preference", prefer=order, rtol=tolerance, explain=False

@@ -60,6 +60,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, mode
 
 from robocal.model import conventions
 from robocal.model.chain import Body, Joint, JointEffects, Model, Step
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS, STIFFNESS_UNITS
 
 __all__ = [
     "ModelFileError",
@@ -77,8 +78,7 @@ MAX_FILE_BYTES = 5_000_000
 #: a hostile file from costing minutes of checks).
 MAX_STEPS = 1000
 
-LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
-ANGLE_SCALE = {"rad": 1.0, "deg": math.pi / 180.0}
+LENGTH_SCALE, ANGLE_SCALE = LENGTH_UNITS, ANGLE_UNITS  # robocal.units (the file schema allows m/mm, rad/deg)
 
 
 class ModelFileError(ValueError):
@@ -103,7 +103,7 @@ class _Units(BaseModel):
 
 
 #: N·m/rad per unit of each stiffness unit (kgf: standard gravity 9.80665 m/s²)
-STIFFNESS_SCALE = {"N*m/rad": 1.0, "N*m/deg": 180.0 / math.pi, "kgf*m/deg": 9.80665 * 180.0 / math.pi}
+STIFFNESS_SCALE = STIFFNESS_UNITS
 
 
 class _StepSpec(BaseModel):
