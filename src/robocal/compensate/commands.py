@@ -66,10 +66,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.calibrate import CalibrationResult
-from robocal.identify.problem import TOOL_PREFIX
 from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.paths import joint_path
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 from robocal.model.files import atomic_write_text, csv_text, strict_json
 from robocal.units import ANGLE_UNITS, LENGTH_UNITS
 
@@ -110,8 +109,8 @@ def nominal_model(result: CalibrationResult) -> Model:
 
 def _with_tool(nominal: Model, real: Model) -> Model:
     """``nominal`` with ``real``'s tool steps (``tcp_*``) appended when it has none."""
-    tool = [s for s in real.steps if s.name.startswith(TOOL_PREFIX)]
-    if not tool or any(s.name.startswith(TOOL_PREFIX) for s in nominal.steps):
+    tool = [s for s in real.steps if s.role is Role.TOOL]
+    if not tool or any(s.role is Role.TOOL for s in nominal.steps):
         return nominal
     clash = {s.name for s in tool} & set(nominal.names)
     if clash:  # pragma: no cover - names with the tool prefix are caught above

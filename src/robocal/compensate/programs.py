@@ -69,8 +69,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.calibrate import CalibrationResult
-from robocal.identify.problem import TOOL_PREFIX, frame_steps
-from robocal.model.chain import Model
+from robocal.identify.problem import frame_steps
+from robocal.model.chain import Model, Role
 from robocal.units import ANGLE_UNITS, LENGTH_UNITS, unit_factor
 
 __all__ = [
@@ -906,7 +906,7 @@ def _robot_models(
         real, nom, effects = calibrated, (calibrated if nominal is None else nominal), None
 
     def measured_tool(m: Model) -> Array | None:
-        steps = [s for s in m.steps if s.name.startswith(TOOL_PREFIX)]
+        steps = [s for s in m.steps if s.role is Role.TOOL]
         if not steps:
             return None
         return spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
@@ -920,7 +920,7 @@ def _robot_models(
         absorbed = tool_real @ spatial.inverse(P if P.shape == (4, 4) else spatial.homogeneous(p=P))
 
     def strip(m: Model, correction: Array) -> Model:
-        steps = tuple(s for s in m.steps if not s.name.startswith(TOOL_PREFIX))
+        steps = tuple(s for s in m.steps if s.role is not Role.TOOL)
         T = correction @ (np.eye(4) if tool is None else np.asarray(tool, dtype=float))
         if np.abs(T - np.eye(4)).max() > 0:
             steps = (*steps, *frame_steps(T, "program_tool", free=False))

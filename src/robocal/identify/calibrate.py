@@ -42,6 +42,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
+from robocal.identify.effects import (  # the joint-effect verdicts; names kept here for callers
+    COMPLIANCE_PREFIX,  # noqa: F401 - re-exported (evaluate.report)
+    EFFECT_SIGNIFICANCE,
+    display_unit,
+    effect_lines,
+    effect_verdict,
+    effects_to_hold,
+)
+from robocal.identify.effects import parameter_unit as _unit
 from robocal.identify.guards import (
     CalibrationGuardError,
     FitToNoise,
@@ -51,7 +60,7 @@ from robocal.identify.guards import (
     fit_to_noise,
 )
 from robocal.identify.observability import Dropped
-from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem, measurement_chain
+from robocal.identify.problem import Problem, measurement_chain
 from robocal.identify.solvers import METHODS, SolveResult, solve
 from robocal.identify.stages import (
     identifiable_set,
@@ -62,9 +71,10 @@ from robocal.identify.stages import (
     uncertainty,
 )
 from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 from robocal.model.dynamics import Payload
 from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model, strict_json
+from robocal.model.joints import effect_of
 
 __all__ = [
     "BOUNDS_CHOICES",
@@ -169,7 +179,7 @@ def _without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
     its end, and their transform (4x4; None when there are none)."""
     k = len(model.steps)
-    while k and model.steps[k - 1].name.startswith(TOOL_PREFIX) and model.steps[k - 1].joint is None:
+    while k and model.steps[k - 1].role is Role.TOOL and model.steps[k - 1].joint is None:
         k -= 1
     if k == len(model.steps):
         return model, None
@@ -218,11 +228,11 @@ def default_bounds(
     robot: set[str] | None = None,
 ) -> tuple[Array, Array]:
     """Seed 001's bounds: ±5 mm on lengths and ±2° on angles around the nominal robot
-    parameters (those in ``robot``, default: all but ``frame_*``/``tcp_*``); the device
-    frame, the tool and effect coefficients are left free."""
+    parameters (those in ``robot``, default: all ``names``); the others (the device
+    frame, the tool and effect coefficients) are left free."""
     lo, hi = np.full(len(names), -np.inf), np.full(len(names), np.inf)
     for k, (name, rot) in enumerate(zip(names, rotation, strict=True)):
-        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)) or (robot is not None and name not in robot):
+        if robot is not None and name not in robot:
             continue
         w = angle if rot else length
         lo[k], hi[k] = nominal[k] - w, nominal[k] + w
@@ -373,7 +383,7 @@ class CalibrationResult:
     def _load_robot(self) -> Model:
         """The calibrated robot without the measured tool steps: the geometry whose joint
         loads drive the joint effects (a payload sits at the robot's end)."""
-        steps = tuple(s for s in self.model.steps if not s.name.startswith(TOOL_PREFIX))
+        steps = tuple(s for s in self.model.steps if s.role is not Role.TOOL)
         if len(steps) == len(self.model.steps):
             return self.model
         return dataclasses.replace(self.model, steps=steps)
@@ -406,7 +416,7 @@ class CalibrationResult:
     @property
     def effect_names(self) -> tuple[str, ...]:
         """The identified joint-effect coefficients among :attr:`names` (``compliance_q2``...)."""
-        return tuple(n for n in self.names if _effect_prefix(n) is not None)
+        return tuple(n for n in self.names if effect_of(n) is not None)
 
     def deltas(self) -> dict[str, float]:
         return {n: float(e - v) for n, e, v in zip(self.names, self.estimates, self.nominal, strict=True)}
@@ -427,9 +437,9 @@ class CalibrationResult:
         names = [
             n
             for n in self.names
-            if n in set(chain.names) and not (frame == "base" and n.startswith(FRAME_PREFIX))
+            if n in set(chain.names) and not (frame == "base" and chain.roles[n] is Role.DEVICE)
         ]
-        effects = [n for n in self.names if _effect_prefix(n) is not None]
+        effects = [n for n in self.names if effect_of(n) is not None]
         perturbations = self.joint_perturbations(q)
         model = chain.with_free(None, free=False).with_free(names)
         J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
@@ -470,7 +480,7 @@ class CalibrationResult:
             raise ValueError("this result has no measurement chain (saved by an older robocal?)")
         perturbations = self.joint_perturbations(q)
         geometric = [n for n in self.names if n in set(chain.names)]
-        effects = [n for n in self.names if _effect_prefix(n) is not None]
+        effects = [n for n in self.names if effect_of(n) is not None]
         model = chain.with_free(None, free=False).with_free(geometric)
         J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
         J = J[:, :, [model.free_names.index(n) for n in geometric]]
@@ -833,157 +843,6 @@ def _screen(
         r, J, problem.effect_scale(x0), max_std, max_std_ratio, known_noise=known_noise
     )
     return [(problem.free_names[c], sigma) for c, sigma in found]
-
-
-COMPLIANCE_PREFIX = "compliance_"
-_EFFECT_UNITS = {  # coefficient prefix -> (SI unit, display factor, display unit)
-    "radial_compliance_": ("rad/(N·m)", 1e6, "µrad/N·m"),
-    "compliance_": ("rad/(N·m)", 1e6, "µrad/N·m"),
-    "clearance_": ("rad", math.degrees(1), "deg"),
-    "backlash_": ("rad", math.degrees(1), "deg"),
-}
-
-
-def _effect_prefix(name: str) -> str | None:
-    return next((p for p in _EFFECT_UNITS if name.startswith(p)), None)
-
-
-def _unit(name: str, rotation: bool) -> str:
-    prefix = _effect_prefix(name)
-    if prefix is not None:
-        return _EFFECT_UNITS[prefix][0]
-    return "rad" if rotation else "m"
-
-
-def display_unit(name: str, rotation: bool) -> tuple[float, str]:
-    """Factor and unit to show an estimated parameter (mm, deg, µrad/N·m)."""
-    prefix = _effect_prefix(name)
-    if prefix is not None:
-        return _EFFECT_UNITS[prefix][1:]
-    return (math.degrees(1), "deg") if rotation else (1e3, "mm")
-
-
-def effect_lines(effects: dict[str, dict[str, tuple[float, float | None]]]) -> list[str]:
-    """Human-readable joint-effect parameters, seed 003 Table 5.2 units (deg, kgf·m/deg)."""
-    from robocal.model.files import STIFFNESS_SCALE
-
-    kgfm = STIFFNESS_SCALE["kgf*m/deg"]
-
-    def pm(s: float | None, f: float, fmt: str) -> str:
-        return "" if s is None else f" ± {s * f:{fmt}}"
-
-    lines = []
-    for joint, row in effects.items():
-        parts = []
-        for attr, (v, s) in row.items():
-            if attr in ("clearance_tilt", "backlash"):
-                parts.append(f"{attr} {math.degrees(v):.4f}{pm(s, math.degrees(1), '.4f')} deg")
-                continue
-            parts.append(f"{attr} {v * 1e6:.4g}{pm(s, 1e6, '.3g')} µrad/N·m")
-            if v > 0:  # the stiffness k = 1/c; its 1σ interval [1/(c + σ), 1/(c − σ)] is skewed
-                label = "stiffness" if attr == "compliance" else "radial stiffness"
-                interval = ""
-                if s is not None and v > s:
-                    interval = f" (1σ: {1.0 / (v + s) / kgfm:.4g}-{1.0 / (v - s) / kgfm:.4g})"
-                parts.append(f"{label} {1.0 / v / kgfm:.4g}{interval} kgf·m/deg")
-        lines.append(f"{joint}: " + ", ".join(parts))
-    return lines
-
-
-#: an identified joint effect (clearance tilt, backlash, compliance: physically >= 0) lies at
-#: least this many standard deviations above zero; otherwise it is not identified
-EFFECT_SIGNIFICANCE = 3.0
-
-
-def effect_verdict(
-    name: str,
-    value: float,
-    sigma: float,
-    start: float = 0.0,
-    peak_load: float | None = None,
-    significance: float = EFFECT_SIGNIFICANCE,
-    confounder: str | None = None,
-) -> Dropped | None:
-    """Whether a joint-effect coefficient's estimate may be reported as identified.
-
-    Clearance tilts, backlashes and compliances are physically ≥ 0.  An estimate below
-    zero is ``"unphysical"``; one less than ``significance`` σ above zero is
-    ``"undetermined"`` — the data cannot tell it from zero, and its stiffness 1/c would
-    be meaningless (σ_k = σ_c/c² understates the spread: seed 003's Katana q5, 57 ± 23
-    µrad/N·m for a true 22, read as a stiffness of 31 ± 12 kgf·m/deg for a true 80).
-    Either way the coefficient is kept at its ``start`` value.  ``peak_load``: the joint's
-    largest load at the measured poses (N·m), quoted for compliances (a small load is the
-    usual reason); ``confounder``: what else was fitted that explains the same errors
-    (the learned joint angle errors).  Returns None when the estimate stands."""
-    if np.isfinite(value) and np.isfinite(sigma) and value >= 0.0 and value >= significance * sigma:
-        return None
-    f, unit = display_unit(name, False)
-    fitted = f"the fit with {confounder}" if confounder else "the fit"
-    fit = f"{fitted} gave {value * f:.3g} ± {sigma * f:.2g} {unit}"
-    kept = f"kept at its start value {start * f:.3g} {unit}"
-    if value < 0:
-        return Dropped(name, "unphysical", detail=f"{fit}: below zero, not physical; {kept}")
-    if confounder:
-        why = f"within {significance:g}σ of zero: {confounder} explain the same errors"
-    else:
-        why = f"within {significance:g}σ of zero: the data cannot tell it from zero"
-        if peak_load is not None and name.startswith(("compliance_", "radial_compliance_")):
-            why += f" (the joint's load reaches {peak_load:.3g} N·m at these poses; more load would tell)"
-    return Dropped(name, "undetermined", detail=f"{fit}: {why}; {kept}")
-
-
-def effects_to_hold(
-    names: Sequence[str],
-    x: Array,
-    covariance: Array,
-    start: dict[str, float],
-    peak_load: dict[str, float] | None = None,
-    confounder: str | None = None,
-) -> tuple[Array, list[Dropped]]:
-    """The joint-effect coefficients (``start``'s keys, physically ≥ 0) to hold at their
-    start values, and the other estimates once they are held.
-
-    An active set on the linearised problem: the least supported coefficient that
-    :func:`effect_verdict` rejects is held, the others move to their conditional mean
-    ``x − Σ_k (x_k − start_k) / Σ_kk`` with covariance ``Σ − Σ_k Σ_kᵀ / Σ_kk`` (what a
-    Gauss-Newton refit with it fixed gives), and the next is judged — one refit at the
-    end instead of one per coefficient.
-
-    Args:
-        names, x, covariance: the estimated parameters ``(p,)``, SI, and their ``(p, p)``
-            covariance.
-        start: start value of each joint-effect coefficient among ``names``.
-        peak_load, confounder: passed to :func:`effect_verdict`.
-
-    Returns:
-        ``x`` conditioned on the held coefficients (the held ones at their start values)
-        and one :class:`Dropped` per held coefficient, in the order they were held.
-    """
-    x, C = np.array(x, dtype=float), np.array(covariance, dtype=float)
-    active = [k for k, n in enumerate(names) if n in start]
-    held: list[Dropped] = []
-    while active:
-        sigma = np.sqrt(np.maximum(np.diag(C), 0.0))
-        verdicts = {}
-        for k in active:
-            verdict = effect_verdict(
-                names[k], float(x[k]), float(sigma[k]), start[names[k]], (peak_load or {}).get(names[k]),
-                confounder=confounder,
-            )  # fmt: skip
-            if verdict is not None:
-                verdicts[k] = verdict
-        if not verdicts:
-            break
-        k = min(verdicts, key=lambda i: x[i] / max(sigma[i], 1e-300))
-        held.append(verdicts[k])
-        active.remove(k)
-        if C[k, k] > 0:
-            gain = C[:, k] / C[k, k]
-            x = x - gain * (x[k] - start[names[k]])
-            C = C - np.outer(gain, C[k])
-        x[k] = start[names[k]]
-        C[k, :] = C[:, k] = 0.0
-    return x, held
 
 
 def _payload_dict(payload: Payload) -> dict[str, Any]:
@@ -1383,7 +1242,7 @@ def calibrate_physics(
 
     chain = measurement_chain(model, T_frame, None if tool is None else T_tool, measure, fit_frame)
     if tool is not None and not fit_tool:
-        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
+        chain = chain.fixed(chain.names_with_role(Role.TOOL))
     length = float(robot_sizes(T_flange[None])[0])
     rows = 3 if measure == "position" else 6
     w = np.ones((n, rows))
@@ -1467,7 +1326,7 @@ def calibrate_physics(
 
     # identifiable set, preferring the frame, then the tool, then the robot in chain order
     names = problem.free_names
-    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names)
+    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names, roles=problem.chain.roles)
     problem_warnings += check_rank(
         given_model,
         data,
@@ -1574,7 +1433,7 @@ def calibrate_physics(
     chain = problem.chain
     values = problem.values(x)
     calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
-    frame_names = [s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))]
+    frame_names = list(chain.names_with_role(Role.DEVICE))
     frame_steps_ = calibrated_chain.steps[: len(frame_names)]  # the frame steps come first
     T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
     robot_steps = [s for s in calibrated_chain.steps if s.name not in set(frame_names)]
@@ -1587,9 +1446,9 @@ def calibrate_physics(
         given_model, steps=tuple(robot_steps), notes=(given_model.notes + " calibrated").strip()
     )
     effects = {
-        name.removeprefix(COMPLIANCE_PREFIX): float(v)
+        effect[1]: float(v)
         for name, v in zip(names, x, strict=True)
-        if name.startswith(COMPLIANCE_PREFIX)
+        if (effect := effect_of(name)) is not None and effect[0] == "compliance"
     }
     if plan.mode == "none":
         calibrated = dataclasses.replace(calibrated, joint_effects=())

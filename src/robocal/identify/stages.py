@@ -22,13 +22,14 @@ Units: SI (m, rad); weighted residuals are in units of their σ.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.observability import IdentifiableSubset, identifiable_subset
+from robocal.model.chain import Role
 
 __all__ = [
     "identifiable_set",
@@ -45,8 +46,6 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-FRAME_PREFIX = "frame_"  # as robocal.identify.problem (not imported: problem imports nothing from here)
-TOOL_PREFIX = "tcp_"
 
 
 # ---------------------------------------------------------------------- start values
@@ -113,18 +112,23 @@ def robot_sizes(T_flange: Array) -> Array:
 
 
 # ---------------------------------------------------------------------- identifiable set
-def preference_order(names: Sequence[str]) -> list[str]:
+def preference_order(names: Sequence[str], roles: Mapping[str, Role]) -> list[str]:
     """Which unknowns to keep first when some are redundant: the device frame, then the
-    tool, then the others in chain order."""
-    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
+    tool, then the others in chain order (``roles``: the chain's :attr:`Model.roles`;
+    names it lacks, the joint-effect coefficients, come last)."""
+    device = [x for x in names if roles.get(x) is Role.DEVICE]
+    order = device + [x for x in names if roles.get(x) is Role.TOOL]
     return order + [x for x in names if x not in set(order)]
 
 
-def identifiable_set(J_scaled: Array, names: Sequence[str], explain: bool = True) -> IdentifiableSubset:
+def identifiable_set(
+    J_scaled: Array, names: Sequence[str], explain: bool = True, *, roles: Mapping[str, Role]
+) -> IdentifiableSubset:
     """The calibration's identifiable set: the sequential rank test
     (:func:`~robocal.identify.observability.identifiable_subset`, ``order="preference"``)
-    over the weighted Jacobian ``(m, p)`` with every unknown as a tool displacement."""
-    prefer = preference_order(names)
+    over the weighted Jacobian ``(m, p)`` with every unknown as a tool displacement;
+    ``roles``: the measurement chain's (:func:`preference_order`)."""
+    prefer = preference_order(names, roles)
     return identifiable_subset(J_scaled, names, order="preference", prefer=prefer, explain=explain)
 
 
