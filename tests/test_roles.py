@@ -103,3 +103,11 @@ def test_no_role_is_told_by_a_name_prefix_any_more():
         if prefix.search(line)
     ]
     assert not found, f"role tests by name prefix: {found}"
+
+
+def test_the_model_package_exports_role_and_its_other_names():
+    import robocal.model as m
+
+    for name in m.__all__:  # "calibration_model" was once exported letter by letter
+        assert getattr(m, name) is not None, name
+    assert m.Role is Role

@@ -754,7 +754,7 @@ def build_report(
     title: str | None = None,
 ) -> str:
     """The report as one HTML string (see the module docstring)."""
-    from robocal import __version__
+    from robocal._version import __version__
     from robocal.model.view import model_figure
 
     ev = dict(evaluation or {})

@@ -811,7 +811,7 @@ _DICT_ONLY = {
 
 
 def _version() -> str:
-    from robocal import __version__
+    from robocal._version import __version__
 
     return __version__
 
