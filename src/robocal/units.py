@@ -56,11 +56,13 @@ def unit_factor(unit: str, kind: UnitKind, where: str) -> float:
             keyword (``"length_unit"``) or a file's column.
 
     Raises:
-        ValueError: ``unit`` is not a ``kind`` unit; the message starts with ``where``.
+        ValueError: ``unit`` is not a ``kind`` unit; the message starts with ``where``
+            (``"length_unit must be a length unit, one of m, mm, um; got 'inch'"``).
     """
     table = _TABLES[kind]
     key = SPELLINGS.get(unit, unit) if isinstance(unit, str) else unit
     try:
         return table[key]
     except (KeyError, TypeError):
-        raise ValueError(f"{where}: {unit!r} is not a {kind} unit (one of {', '.join(table)})") from None
+        article = "an" if kind[0] in "aeiou" else "a"
+        raise ValueError(f"{where} must be {article} {kind} unit, one of {', '.join(table)}; got {unit!r}") from None
