@@ -25,7 +25,8 @@ def test_an_unknown_unit_names_where_it_came_from():
     message = r"^--length-unit must be a length unit, one of m, mm, um; got 'inch'$"
     with pytest.raises(ValueError, match=message):
         unit_factor("inch", "length", "--length-unit")
-    with pytest.raises(ValueError, match=r"^angle_unit must be an angle unit, one of rad, mrad, urad, deg; got 'grad'$"):
+    message = r"^angle_unit must be an angle unit, one of rad, mrad, urad, deg; got 'grad'$"
+    with pytest.raises(ValueError, match=message):
         unit_factor("grad", "angle", "angle_unit")
 
 

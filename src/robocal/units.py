@@ -65,4 +65,5 @@ def unit_factor(unit: str, kind: UnitKind, where: str) -> float:
         return table[key]
     except (KeyError, TypeError):
         article = "an" if kind[0] in "aeiou" else "a"
-        raise ValueError(f"{where} must be {article} {kind} unit, one of {', '.join(table)}; got {unit!r}") from None
+        known = ", ".join(table)
+        raise ValueError(f"{where} must be {article} {kind} unit, one of {known}; got {unit!r}") from None
