@@ -38,8 +38,11 @@ def test_the_readers_use_the_table():
 
 
 def test_there_is_no_second_units_table():
-    """A dict literal mapping a unit name to its factor belongs in robocal/units.py only."""
-    pattern = re.compile(r"""["'](mm|um|deg|mrad)["']\s*:\s*(1e-3|1e-6|math\.pi|DEG|np\.pi)""")
+    """A unit name mapped to its factor (a dict, or a choice on the name) belongs in robocal/units.py only."""
+    table = r"""["'](mm|um|deg|mrad)["']\s*:\s*(1e-3|1e-6|math\.pi|DEG|np\.pi)"""  # {"mm": 1e-3, ...}
+    # 1e-3 if unit == "mm" else 1.0
+    choice = r"""(1e-3|1e-6|(math|np)\.pi\s*/\s*180\S*)\s+if\s+[\w.]+\s*==\s*["'](mm|um|deg)["']"""
+    pattern = re.compile(f"{table}|{choice}")
     found = [
         f"{path.relative_to(SRC)}:{n}"
         for path in sorted(SRC.rglob("*.py"))

@@ -87,7 +87,7 @@ Array = NDArray[np.float64]
 Language = Literal["urscript", "krl", "rapid", "csv"]
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _NUM_RE = re.compile(_NUM)
-DEG = math.pi / 180
+DEG = ANGLE_UNITS["deg"]
 
 
 class ProgramError(ValueError):

@@ -66,6 +66,7 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.model.files import strict_json
 from robocal.model.joints import effect_of
+from robocal.units import ANGLE_UNITS
 
 __all__ = [
     "BASE_OFFSET",
@@ -82,7 +83,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-DEG = math.pi / 180.0
+DEG = ANGLE_UNITS["deg"]
 MM = 1e-3
 
 #: seed 003 Table 3.2 (standard identification of the real Katana), as deviations of
