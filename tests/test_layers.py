@@ -55,9 +55,13 @@ root_package = toy
 [importlinter:contract:layers]
 name = layers
 type = layers
+containers =
+    toy
+exhaustive = true
 layers =
-    toy.high
-    toy.low
+    high
+    (sub)
+    low
 
 [importlinter:contract:acyclic]
 name = acyclic
@@ -102,3 +106,12 @@ def test_the_checker_catches_a_circle_and_passes_a_clean_package(tmp_path):
     circle = _lint_imports(config, tmp_path, pythonpath=root)
     assert circle.returncode == 1, circle.stdout + circle.stderr
     assert "No cycles are allowed in toy.sub" in circle.stdout
+
+
+def test_the_checker_asks_a_new_module_for_its_layer(tmp_path):
+    root = _package(tmp_path, {"__init__.py": "", "high.py": "", "low.py": "", "newcomer.py": ""})
+    config = tmp_path / "contracts.ini"
+    config.write_text(_CONFIG)
+    result = _lint_imports(config, tmp_path, pythonpath=root)
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "toy.newcomer" in result.stdout and "not listed as layers" in result.stdout
