@@ -466,7 +466,7 @@ def test_wrist_rotations_near_the_probe_are_kept_and_nothing_is_biased():
 
 
 def test_residual_variance_uses_the_stated_noise_unless_the_residuals_reject_it():
-    from robocal.identify.guards import residual_variance
+    from robocal.identify.stages import residual_variance
 
     assert residual_variance(3.0, 2, known=True) == 1.0  # two degrees of freedom say little
     assert residual_variance(3.0, 2, known=False) == 1.5

@@ -104,7 +104,7 @@ def test_preference_order_keeps_the_preferred_of_two_redundant_parameters(ur10_p
 
 
 def test_sequential_rank_test_matches_gram_schmidt_on_random_deficient_matrices():
-    from robocal.identify.observability import _gram_schmidt, _sequential_rank_test
+    from robocal.model.rank import _gram_schmidt, _sequential_rank_test
 
     rng = np.random.default_rng(3)
     for trial in range(300):

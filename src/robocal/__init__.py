@@ -8,11 +8,11 @@
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING
 
 from robocal import spatial
 from robocal._lazy import lazy_package
+from robocal._version import __version__
 
 # Loaded on first use (robocal._lazy): the command line starts without numpy's heavier
 # neighbours (scipy.stats, Pinocchio, plotly, Dask).
@@ -34,10 +34,6 @@ lazy_package(
 if TYPE_CHECKING:
     from robocal.model.chain import Model
 
-try:
-    __version__ = version("robocal")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0.0.0"
 
 __all__ = [
     "Body",

@@ -28,6 +28,7 @@ from rich.table import Table
 
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 from robocal.model.files import strict_json
+from robocal.units import unit_factor
 
 __all__ = ["register"]
 
@@ -135,8 +136,8 @@ def compensate_command(
         from robocal.cli import resolve_model
 
         nominal_model = resolve_model(nominal)
-    angle_f = np.pi / 180 if angle_unit == "deg" else 1.0
-    length_f = {"m": 1.0, "mm": 1e-3, "um": 1e-6}[length_unit]
+    angle_f = unit_factor(angle_unit, "angle", "--angle-unit")
+    length_f = unit_factor(length_unit, "length", "--length-unit")
     factor = np.array([angle_f if t == "revolute" else length_f for t in model.joint_types])
     q_start = None if q0 is None else _parse_q0(q0, model.dof, factor)
     try:

@@ -66,11 +66,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.calibrate import CalibrationResult
-from robocal.identify.problem import TOOL_PREFIX
 from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.paths import joint_path
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 from robocal.model.files import atomic_write_text, csv_text, strict_json
+from robocal.units import unit_factor
 
 __all__ = [
     "Compensation",
@@ -90,8 +90,11 @@ Array = NDArray[np.float64]
 Calibrated = CalibrationResult | Model
 Frame = Literal["base", "measurement"]
 
-_LENGTH = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
-_ANGLE = {"rad": 1.0, "deg": math.pi / 180.0}
+
+
+def _factors(angle_unit: str, length_unit: str) -> tuple[float, float]:
+    """rad per ``angle_unit`` and m per ``length_unit`` (:mod:`robocal.units`)."""
+    return unit_factor(angle_unit, "angle", "angle_unit"), unit_factor(length_unit, "length", "length_unit")
 
 
 # ---------------------------------------------------------------------- models
@@ -110,8 +113,8 @@ def nominal_model(result: CalibrationResult) -> Model:
 
 def _with_tool(nominal: Model, real: Model) -> Model:
     """``nominal`` with ``real``'s tool steps (``tcp_*``) appended when it has none."""
-    tool = [s for s in real.steps if s.name.startswith(TOOL_PREFIX)]
-    if not tool or any(s.name.startswith(TOOL_PREFIX) for s in nominal.steps):
+    tool = [s for s in real.steps if s.role is Role.TOOL]
+    if not tool or any(s.role is Role.TOOL for s in nominal.steps):
         return nominal
     clash = {s.name for s in tool} & set(nominal.names)
     if clash:  # pragma: no cover - names with the tool prefix are caught above
@@ -330,7 +333,7 @@ class Compensation:
         return out
 
     def _joint_factor(self, angle_unit: str, length_unit: str) -> Array:
-        a, ln = _ANGLE[angle_unit], _LENGTH[length_unit]
+        a, ln = _factors(angle_unit, length_unit)
         return np.array([1 / a if t == "revolute" else 1 / ln for t in self.joint_types])
 
     def to_dict(self, angle_unit: str = "rad", length_unit: str = "mm") -> dict[str, Any]:
@@ -397,10 +400,7 @@ class Compensation:
         """Write the corrected program to ``path`` atomically: JSON for a ``.json``
         suffix, CSV otherwise (see :meth:`to_csv` and :meth:`to_dict`)."""
         path = Path(path)
-        if angle_unit not in _ANGLE or length_unit not in _LENGTH:
-            raise ValueError(
-                f"angle_unit must be one of {list(_ANGLE)} and length_unit one of {list(_LENGTH)}"
-            )
+        _factors(angle_unit, length_unit)  # a ValueError naming the unit before anything is written
         if path.suffix.lower() == ".json":
             text = strict_json(self.to_dict(angle_unit, length_unit), indent=2) + "\n"
         else:
@@ -935,8 +935,10 @@ def read_targets(
         TargetFileError: naming the file, the row (line number) and the column.
     """
     path = Path(path)
-    if length_unit not in _LENGTH:
-        raise TargetFileError(f"{path}: length unit {length_unit!r} is not one of {', '.join(_LENGTH)}")
+    try:
+        length = unit_factor(length_unit, "length", "length_unit")
+    except ValueError as err:
+        raise TargetFileError(f"{path}: {err}") from None
     header, data = _read_table(path, sep, decimal)
     missing = [c for c in ("x", "y", "z") if c not in header]
     if missing:
@@ -948,7 +950,7 @@ def read_targets(
     if any(has_q) and not all(has_q):
         absent = ", ".join(c for c in quat_cols if c not in header)
         raise TargetFileError(f"{path}: orientation needs all of qw, qx, qy, qz; missing {absent}")
-    p = _columns(header, data, path, ["x", "y", "z"], decimal) * _LENGTH[length_unit]
+    p = _columns(header, data, path, ["x", "y", "z"], decimal) * length
     names = _row_names(header, data)
     if not all(has_q):
         return Targets(names, p, "position")
@@ -977,10 +979,10 @@ def read_program(
     ``length_unit``.  Returns the names and ``(n, dof)`` joint values (rad, m).
     """
     path = Path(path)
-    if angle_unit not in _ANGLE or length_unit not in _LENGTH:
-        raise TargetFileError(
-            f"{path}: units must be rad|deg and m|mm|um, got {angle_unit!r}, {length_unit!r}"
-        )
+    try:
+        angle, length = _factors(angle_unit, length_unit)
+    except ValueError as err:
+        raise TargetFileError(f"{path}: {err}") from None
     header, data = _read_table(path, sep, decimal)
     cols = [f"q{j + 1}" for j in range(dof)]
     missing = [c for c in cols if c not in header]
@@ -993,5 +995,5 @@ def read_program(
         raise TargetFileError(f"{path}: no rows")
     q = _columns(header, data, path, cols, decimal)
     types = list(joint_types) if joint_types is not None else ["revolute"] * dof
-    f = np.array([_ANGLE[angle_unit] if t == "revolute" else _LENGTH[length_unit] for t in types])
+    f = np.array([angle if t == "revolute" else length for t in types])
     return _row_names(header, data), q * f

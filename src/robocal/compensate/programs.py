@@ -69,8 +69,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.calibrate import CalibrationResult
-from robocal.identify.problem import TOOL_PREFIX, frame_steps
-from robocal.model.chain import Model
+from robocal.identify.problem import frame_steps
+from robocal.model.chain import Model, Role
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS, unit_factor
 
 __all__ = [
     "FilteredProgram",
@@ -86,7 +87,7 @@ Array = NDArray[np.float64]
 Language = Literal["urscript", "krl", "rapid", "csv"]
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _NUM_RE = re.compile(_NUM)
-DEG = math.pi / 180
+DEG = ANGLE_UNITS["deg"]
 
 
 class ProgramError(ValueError):
@@ -658,8 +659,8 @@ class _Units:
 
 _UNITS = {
     "urscript": _Units(1.0, 1.0, 7, 7),
-    "krl": _Units(1e-3, DEG, 4, 5),
-    "rapid": _Units(1e-3, DEG, 4, 5),
+    "krl": _Units(LENGTH_UNITS["mm"], ANGLE_UNITS["deg"], 4, 5),
+    "rapid": _Units(LENGTH_UNITS["mm"], ANGLE_UNITS["deg"], 4, 5),
 }
 
 
@@ -905,7 +906,7 @@ def _robot_models(
         real, nom, effects = calibrated, (calibrated if nominal is None else nominal), None
 
     def measured_tool(m: Model) -> Array | None:
-        steps = [s for s in m.steps if s.name.startswith(TOOL_PREFIX)]
+        steps = [s for s in m.steps if s.role is Role.TOOL]
         if not steps:
             return None
         return spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
@@ -919,7 +920,7 @@ def _robot_models(
         absorbed = tool_real @ spatial.inverse(P if P.shape == (4, 4) else spatial.homogeneous(p=P))
 
     def strip(m: Model, correction: Array) -> Model:
-        steps = tuple(s for s in m.steps if not s.name.startswith(TOOL_PREFIX))
+        steps = tuple(s for s in m.steps if s.role is not Role.TOOL)
         T = correction @ (np.eye(4) if tool is None else np.asarray(tool, dtype=float))
         if np.abs(T - np.eye(4)).max() > 0:
             steps = (*steps, *frame_steps(T, "program_tool", free=False))
@@ -1088,8 +1089,8 @@ def filter_program_text(
                 "measured positions only: give the probe as built with --probe x,y,z (m)"
             )
     if language == "csv":
-        lf = {"m": 1.0, "mm": 1e-3, "um": 1e-6}[length_unit]
-        af = {"rad": 1.0, "deg": DEG}[angle_unit]
+        lf = unit_factor(length_unit, "length", "length_unit")
+        af = unit_factor(angle_unit, "angle", "angle_unit")
         units = _Units(lf, af, 7 if lf == 1.0 else 4, 7 if af == 1.0 else 5)
     else:
         units = _UNITS[language]

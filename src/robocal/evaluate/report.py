@@ -66,11 +66,11 @@ from robocal.evaluate.metrics import (
     path_accuracy,
     pose_errors,
 )
-from robocal.identify.calibrate import COMPLIANCE_PREFIX, CalibrationResult
-from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
+from robocal.identify.calibrate import CalibrationResult
 from robocal.identify.validate import ValidationStats, validate
 from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
+from robocal.model.joints import effect_of
 
 __all__ = ["before_validation", "build_report", "start_chain", "write_report"]
 
@@ -612,11 +612,20 @@ def _seed_table_html(table: ErrorTable, caption: str) -> str:
     return _table(header, rows, "seed", caption)
 
 
+def _effect_kind(name: str) -> str | None:
+    """The joint-effect kind of an estimated parameter (``"compliance"``...), None for a
+    parameter of the chain."""
+    effect = effect_of(name)
+    return None if effect is None else effect[0]
+
+
 def _parameter_rows(result: CalibrationResult, truth: Mapping[str, float]) -> list[dict[str, Any]]:
-    rot = {s.name: s.is_rotation for s in (result.measurement_chain or result.model).steps}
+    chain = result.measurement_chain or result.model
+    rot = {s.name: s.is_rotation for s in chain.steps}
+    group = {Role.DEVICE: "device frame", Role.TOOL: "tool", Role.KINEMATIC: "robot"}
     rows = []
     for n, v0, v, s in zip(result.names, result.nominal, result.estimates, result.std, strict=True):
-        if n.startswith(COMPLIANCE_PREFIX):
+        if _effect_kind(n) == "compliance":
             continue
         is_rot = rot.get(n, False)
         f = math.degrees(1) if is_rot else 1e3
@@ -626,9 +635,7 @@ def _parameter_rows(result: CalibrationResult, truth: Mapping[str, float]) -> li
                 "name": n,
                 "kind": "angle" if is_rot else "length",
                 "unit": "deg" if is_rot else "mm",
-                "group": "device frame"
-                if n.startswith(FRAME_PREFIX)
-                else ("tool" if n.startswith(TOOL_PREFIX) else "robot"),
+                "group": group[chain.roles.get(n, Role.KINEMATIC)],
                 "start": v0 * f,
                 "estimate": v * f,
                 "delta": (v - v0) * f,
@@ -747,7 +754,7 @@ def build_report(
     title: str | None = None,
 ) -> str:
     """The report as one HTML string (see the module docstring)."""
-    from robocal import __version__
+    from robocal._version import __version__
     from robocal.model.view import model_figure
 
     ev = dict(evaluation or {})
@@ -808,7 +815,7 @@ def build_report(
             f"iterations, {result.seconds * 1e3:.0f} ms",
         )
     )
-    n_geo = sum(not n.startswith(COMPLIANCE_PREFIX) for n in result.names)
+    n_geo = sum(_effect_kind(n) != "compliance" for n in result.names)
     n_eff = len(result.names) - n_geo
     cards.append(
         (
@@ -1247,9 +1254,9 @@ def build_report(
         body = ""
         if result.compliance:
             comp_idx = {
-                n.removeprefix(COMPLIANCE_PREFIX): k
+                effect[1]: k
                 for k, n in enumerate(result.names)
-                if n.startswith(COMPLIANCE_PREFIX)
+                if (effect := effect_of(n)) is not None and effect[0] == "compliance"
             }
             true_c = truth.get("compliance_rad_per_Nm", {})
             rows = []

@@ -65,6 +65,8 @@ from numpy.typing import NDArray
 
 from robocal import spatial
 from robocal.model.files import strict_json
+from robocal.model.joints import effect_of
+from robocal.units import ANGLE_UNITS
 
 __all__ = [
     "BASE_OFFSET",
@@ -81,7 +83,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-DEG = math.pi / 180.0
+DEG = ANGLE_UNITS["deg"]
 MM = 1e-3
 
 #: seed 003 Table 3.2 (standard identification of the real Katana), as deviations of
@@ -603,20 +605,20 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
                 }
         out[joint] = entry
     # joint effects the poses cannot tell (below zero, within 3σ of it, or unloaded): the reason
-    keys = {  # coefficient prefix -> (entry, JointEffects field)
-        "clearance_": ("clearance_tilt_deg", "clearance_tilt"),
-        "backlash_": ("backlash_deg", "backlash"),
-        "compliance_": ("stiffness_kgfm_per_deg", "compliance"),
+    keys = {  # effect kind -> (entry, JointEffects field)
+        "clearance": ("clearance_tilt_deg", "clearance_tilt"),
+        "backlash": ("backlash_deg", "backlash"),
+        "compliance": ("stiffness_kgfm_per_deg", "compliance"),
     }
     for d in result.dropped:
-        prefix = next((p for p in keys if d.name.startswith(p)), None)
-        if prefix is None:
+        effect = effect_of(d.name)
+        if effect is None or effect[0] not in keys:
             continue
-        joint = d.name.removeprefix(prefix)
-        entry = out.setdefault(joint, {}).setdefault(keys[prefix][0], {"estimate": None, "sigma": None})
+        kind, joint = effect
+        entry = out.setdefault(joint, {}).setdefault(keys[kind][0], {"estimate": None, "sigma": None})
         t = true.get(joint)
-        tv = getattr(t, keys[prefix][1], 0.0)
-        if t is None or prefix != "compliance_":
+        tv = getattr(t, keys[kind][1], 0.0)
+        if t is None or kind != "compliance":
             entry["true"] = math.degrees(tv) if t is not None else 0.0
         else:
             entry["true"] = (1.0 / tv / kgfm) if tv > 0 else math.inf

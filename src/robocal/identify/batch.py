@@ -128,9 +128,9 @@ def augmented_chain(
     if hit is not None and hit[3] is chain:
         return hit[0], hit[1], hit[2]
     steps = tuple(
-        Step(s.motion, s.name, 0.0, True, None, Joint("u:" + s.name))
+        Step(s.motion, s.name, 0.0, True, None, Joint("u:" + s.name), s.role)
         if mask[i]
-        else Step(s.motion, s.name, float(values[i]), False)
+        else Step(s.motion, s.name, float(values[i]), False, role=s.role)
         for i, s in enumerate(chain.steps)
     )
     aug = dataclasses.replace(chain, name=chain.name + "+batch", steps=steps, bodies=())
@@ -421,7 +421,7 @@ class _Batch:
         the identifiable set at the start values, the rank guard, then the screening."""
         names = self.free_names
         scale = np.where(self.rotation, self.length[k], 1.0)  # Problem.free_scale
-        selection = identifiable_set(J0 * scale, names)
+        selection = identifiable_set(J0 * scale, names, roles=self.chain.roles)
         check_rank(
             self.model,
             self.data[k],

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.observability import Dropped
-from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX, Problem
+from robocal.identify.problem import Problem
 from robocal.model.chain import Model
 
 __all__ = ["AT_BOUND_TOLERANCE", "bounded_method_bounds", "default_bounds", "parameters_at_bounds"]
@@ -71,7 +71,7 @@ def default_bounds(
     frame, the tool and effect coefficients are left free."""
     lo, hi = np.full(len(names), -np.inf), np.full(len(names), np.inf)
     for k, (name, rot) in enumerate(zip(names, rotation, strict=True)):
-        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)) or (robot is not None and name not in robot):
+        if robot is not None and name not in robot:
             continue
         w = angle if rot else length
         lo[k], hi[k] = nominal[k] - w, nominal[k] + w

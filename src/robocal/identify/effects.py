@@ -1,7 +1,10 @@
-"""Joint effects in a calibration: how they are planned (:func:`effect_plan`), when an
-identified one stands (:func:`effect_verdict`, :func:`effects_to_hold`: physically ≥ 0 and
-at least :data:`EFFECT_SIGNIFICANCE` σ above zero) and how their coefficients are shown
-(:func:`display_unit`, :func:`effect_lines`).  Units: SI (rad, rad per N·m)."""
+"""Joint-effect coefficients (clearance tilt, backlash, compliance: seed 003 ch. 5) once
+estimated: their units, whether an estimate stands (:func:`effect_verdict`) and which to
+hold at their start values (:func:`effects_to_hold`).
+
+Its own module so that the calibration (:mod:`robocal.identify.calibrate`) and the learned
+residual's refits (:mod:`robocal.identify.residual`) share it without importing each other.
+"""
 
 from __future__ import annotations
 
@@ -12,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.observability import Dropped
 from robocal.model.chain import Model
+from robocal.model.joints import EFFECT_PREFIXES, effect_of
+from robocal.model.rank import Dropped
 
 __all__ = [
     "COMPLIANCE_PREFIX",
@@ -22,39 +26,37 @@ __all__ = [
     "display_unit",
     "effect_lines",
     "effect_plan",
-    "effect_prefix",
     "effect_verdict",
     "effects_to_hold",
-    "si_unit",
+    "parameter_unit",
 ]
 
 Array = NDArray[np.float64]
 
-COMPLIANCE_PREFIX = "compliance_"
-_EFFECT_UNITS = {  # coefficient prefix -> (SI unit, display factor, display unit)
-    "radial_compliance_": ("rad/(N·m)", 1e6, "µrad/N·m"),
-    "compliance_": ("rad/(N·m)", 1e6, "µrad/N·m"),
-    "clearance_": ("rad", math.degrees(1), "deg"),
-    "backlash_": ("rad", math.degrees(1), "deg"),
+
+#: the name prefix of axial compliance coefficients (robocal.model.joints.EFFECT_PREFIXES)
+COMPLIANCE_PREFIX = EFFECT_PREFIXES["compliance"][0]
+_EFFECT_UNITS = {  # effect kind -> (SI unit, display factor, display unit)
+    "radial": ("rad/(N·m)", 1e6, "µrad/N·m"),
+    "compliance": ("rad/(N·m)", 1e6, "µrad/N·m"),
+    "clearance": ("rad", math.degrees(1), "deg"),
+    "backlash": ("rad", math.degrees(1), "deg"),
 }
 
 
-def effect_prefix(name: str) -> str | None:
-    return next((p for p in _EFFECT_UNITS if name.startswith(p)), None)
-
-
-def si_unit(name: str, rotation: bool) -> str:
-    prefix = effect_prefix(name)
-    if prefix is not None:
-        return _EFFECT_UNITS[prefix][0]
+def parameter_unit(name: str, rotation: bool) -> str:
+    """The SI unit of an estimated parameter (``m``, ``rad``, ``rad/(N·m)``)."""
+    effect = effect_of(name)
+    if effect is not None:
+        return _EFFECT_UNITS[effect[0]][0]
     return "rad" if rotation else "m"
 
 
 def display_unit(name: str, rotation: bool) -> tuple[float, str]:
     """Factor and unit to show an estimated parameter (mm, deg, µrad/N·m)."""
-    prefix = effect_prefix(name)
-    if prefix is not None:
-        return _EFFECT_UNITS[prefix][1:]
+    effect = effect_of(name)
+    if effect is not None:
+        return _EFFECT_UNITS[effect[0]][1:]
     return (math.degrees(1), "deg") if rotation else (1e3, "mm")
 
 
@@ -122,7 +124,7 @@ def effect_verdict(
         why = f"within {significance:g}σ of zero: {confounder} explain the same errors"
     else:
         why = f"within {significance:g}σ of zero: the data cannot tell it from zero"
-        if peak_load is not None and name.startswith(("compliance_", "radial_compliance_")):
+        if peak_load is not None and (effect_of(name) or ("",))[0] in ("compliance", "radial"):
             why += f" (the joint's load reaches {peak_load:.3g} N·m at these poses; more load would tell)"
     return Dropped(name, "undetermined", detail=f"{fit}: {why}; {kept}")
 

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 
 __all__ = [
     "CalibrationGuardError",
@@ -45,7 +45,6 @@ __all__ = [
     "check_rank",
     "check_solution",
     "fit_to_noise",
-    "residual_variance",
 ]
 
 Array = NDArray[np.float64]
@@ -64,7 +63,7 @@ def _measurement_chain(
     model: Model, measure: str, frame: Any, tool: Any, tool_guess: ArrayLike | None
 ) -> Model:
     from robocal import spatial
-    from robocal.identify.problem import TOOL_PREFIX, measurement_chain
+    from robocal.identify.problem import measurement_chain
 
     fit_frame = isinstance(frame, str) and frame == "fit"
     T_frame = np.eye(4) if isinstance(frame, str) else np.asarray(frame, dtype=float)
@@ -77,7 +76,7 @@ def _measurement_chain(
             T_tool = g if g.shape == (4, 4) else spatial.homogeneous(p=g)
     chain = measurement_chain(model, T_frame, T_tool, measure, fit_frame)
     if tool is not None and not (isinstance(tool, str) and tool == "fit"):
-        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
+        chain = chain.fixed(chain.names_with_role(Role.TOOL))
     return chain
 
 
@@ -94,7 +93,8 @@ def _identifiable(
         J = J.reshape(len(q), 6, -1)
         J[:, 3:] *= length  # orientation rows as displacements at the robot's size
         J = J.reshape(6 * len(q), -1)
-    selection = identifiable_set(J, chain.free_names, explain=explain)  # the calibration's own rank test
+    # the calibration's own rank test
+    selection = identifiable_set(J, chain.free_names, explain=explain, roles=chain.roles)
     return set(selection.kept), selection
 
 
@@ -331,8 +331,6 @@ def check_solution(
             than before), non-finite estimates or standard deviations, or implausible
             parameter changes (named, with their change).
     """
-    from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
-
     warnings: list[str] = []
     if not result.success:
         text = (
@@ -358,10 +356,11 @@ def check_solution(
     rot = {}
     chain = result.measurement_chain or result.model
     for s in chain.steps:
-        rot[s.name] = s.is_rotation
+        if s.role is Role.KINEMATIC:  # the device frame and the tool may move far
+            rot[s.name] = s.is_rotation
     implausible = []
     for name, v, v0 in zip(result.names, result.estimates, result.nominal, strict=True):
-        if name.startswith((FRAME_PREFIX, TOOL_PREFIX)) or name not in rot:
+        if name not in rot:
             continue
         change = abs(float(v - v0))
         if rot[name] and change > max_angle_change:
@@ -481,21 +480,3 @@ def fit_to_noise(
         # residuals a little above their expectation half of the time)
         unmodelled_rms=math.sqrt(max(ms - noise_ms, 0.0)) if p_value < significance else 0.0,
     )
-
-
-def residual_variance(chi2: ArrayLike, dof: ArrayLike, known: ArrayLike, significance: float = 1e-3) -> Array:
-    """The variance factor of weighted residuals for a covariance, ``χ²/dof`` or 1.
-
-    With weights 1/σ from a stated noise (``known``) the factor is 1 — the Cramér–Rao
-    covariance — unless a χ² test rejects the stated noise at ``significance`` (either
-    way): a few degrees of freedom cannot estimate it, and a model that explains the
-    data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``.
-    Arrays broadcast (the batched study engine).
-    """
-    import scipy.special
-
-    chi2, dof = np.asarray(chi2, dtype=float), np.maximum(np.asarray(dof, dtype=float), 1.0)
-    estimated = chi2 / dof
-    upper = scipy.special.chdtrc(dof, chi2)  # P(χ² >= observed)
-    rejected = (upper < significance) | (1.0 - upper < significance)
-    return np.where(np.asarray(known, dtype=bool) & ~rejected, 1.0, estimated)

@@ -53,7 +53,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.solvers import SolveResult
+from robocal.identify.solve_result import SolveResult
 
 __all__ = [
     "ANGULAR_STEP",

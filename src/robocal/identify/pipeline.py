@@ -33,11 +33,10 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.identify.bounds import bounded_method_bounds, parameters_at_bounds
 from robocal.identify.diagnose import diagnose, parameterisation_warnings
-from robocal.identify.effects import COMPLIANCE_PREFIX, effect_plan, effects_to_hold
+from robocal.identify.effects import effect_plan, effects_to_hold
 from robocal.identify.guards import check_data, check_rank
 from robocal.identify.observability import Dropped
 from robocal.identify.options import CalibrationOptions
-from robocal.identify.problem import FRAME_PREFIX
 from robocal.identify.problem_setup import LEVELS, Run, build_problem, parse_level, without_measured_tool
 from robocal.identify.result import CalibrationResult, Diagnostics
 from robocal.identify.solvers import METHODS, solve
@@ -48,7 +47,8 @@ from robocal.identify.stages import (
     uncertainty,
 )
 from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
+from robocal.model.joints import effect_of
 
 __all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
 
@@ -105,7 +105,7 @@ def _identifiable(run: Run, hold: dict | None) -> None:
     joint effects the caller holds."""
     problem, setup = run.problem, run.options.setup
     names = problem.free_names
-    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names)
+    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names, roles=problem.chain.roles)
     for text in check_rank(run.given_model, run.data, measure=run.measure, frame=setup.frame, tool=setup.tool,
                            tool_guess=setup.tool_guess, kept=selection.kept, candidates=names):  # fmt: skip
         run.warn("rank", text)
@@ -236,7 +236,7 @@ def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     chain = run.problem.chain
     values = run.problem.values(run.x)
     calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
-    frame_names = {s.name for s in chain.steps if s.name.startswith(("frame0_", FRAME_PREFIX))}
+    frame_names = set(chain.names_with_role(Role.DEVICE))
     frame_steps_ = calibrated_chain.steps[: len(frame_names)]  # the frame steps come first
     T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
     free_before = {s.name: s.free for s in run.given_model.steps}
@@ -281,9 +281,9 @@ def _assemble(run: Run, t_start: float) -> CalibrationResult:
         condition_number=cond, n=n, success=run.fit.success, message=run.fit.message,
         iterations=run.fit.iterations, seconds=time.perf_counter() - t_start, measurement_chain=chain,
         compliance={
-            name.removeprefix(COMPLIANCE_PREFIX): float(v)
+            effect[1]: float(v)
             for name, v in zip(names, x, strict=True)
-            if name.startswith(COMPLIANCE_PREFIX)
+            if (effect := effect_of(name)) is not None and effect[0] == "compliance"
         },
         gravity=effects.gravity, payload=effects.payload, residuals=r_plain,
         diagnostics=Diagnostics(solve_seconds=run.solve_seconds, evaluations=run.evaluations, level=level,

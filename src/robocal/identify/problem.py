@@ -30,20 +30,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
-from robocal.model.chain import Model, Step
+from robocal.model.chain import Model, Role, Step
 from robocal.model.conventions import frame6, sequence
 
 __all__ = ["FRAME_PREFIX", "TOOL_PREFIX", "Problem", "frame_steps", "measurement_chain"]
 
 Array = NDArray[np.float64]
+# the names of the steps measurement_chain adds; tell them by their Step.role, not by name
 FRAME_PREFIX = "frame_"
 TOOL_PREFIX = "tcp_"
 
 
-def frame_steps(T: Array, prefix: str, free: bool) -> list[Step]:
+def frame_steps(T: Array, prefix: str, free: bool, role: Role | None = None) -> list[Step]:
     """A rigid transform as six steps Tx Ty Tz Rz Ry Rx (intrinsic ZYX angles)."""
     rz, ry, rx = spatial.zyx_angles(T[:3, :3])
-    return frame6(prefix, *T[:3, 3], rz, ry, rx, free=free)
+    return frame6(prefix, *T[:3, 3], rz, ry, rx, free=free, role=role)
 
 
 def measurement_chain(
@@ -52,16 +53,17 @@ def measurement_chain(
     """The chain predicting observations in the device frame (see the module docstring)."""
     before: list[Step] = []
     if fit_frame or not np.allclose(T_device_base, np.eye(4)):
-        before += frame_steps(T_device_base, "frame0", free=False)
+        before += frame_steps(T_device_base, "frame0", free=False, role=Role.DEVICE)
     if fit_frame:
-        before += frame6("frame", free=True)
+        before += frame6("frame", free=True, role=Role.DEVICE)
     after: list[Step] = []
     if tool is not None:
         T_tool = np.asarray(tool, dtype=float)
         if measure == "pose":
-            after += frame_steps(T_tool, "tcp", free=True)
+            after += frame_steps(T_tool, "tcp", free=True, role=Role.TOOL)
         else:
-            after += sequence(("Tx", "Ty", "Tz"), T_tool[:3, 3], [f"{TOOL_PREFIX}{c}" for c in "xyz"])
+            names = [f"{TOOL_PREFIX}{c}" for c in "xyz"]
+            after += sequence(("Tx", "Ty", "Tz"), T_tool[:3, 3], names, role=Role.TOOL)
     clash = {s.name for s in before + after} & set(robot.names)
     if clash:
         raise ValueError(

@@ -16,12 +16,12 @@ from robocal import spatial
 from robocal.identify.effects import EffectPlan
 from robocal.identify.observability import Dropped
 from robocal.identify.options import CalibrationOptions, check_load_model
-from robocal.identify.problem import TOOL_PREFIX, Problem, measurement_chain
+from robocal.identify.problem import Problem, measurement_chain
 from robocal.identify.result import CalibrationWarning
 from robocal.identify.solvers import SolveResult
 from robocal.identify.stages import initial_frames_and_tools, robot_sizes
 from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 
 __all__ = ["LEVELS", "Run", "build_problem", "parse_level", "without_measured_tool"]
 
@@ -51,7 +51,7 @@ def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
     its end, and their transform (4x4; None when there are none)."""
     k = len(model.steps)
-    while k and model.steps[k - 1].name.startswith(TOOL_PREFIX) and model.steps[k - 1].joint is None:
+    while k and model.steps[k - 1].role is Role.TOOL and model.steps[k - 1].joint is None:
         k -= 1
     if k == len(model.steps):
         return model, None
@@ -191,7 +191,7 @@ def build_problem(run: Run, load_model: Model | None) -> None:
     T_frame, T_tool, T_flange, fit_frame = _start_values(run)
     chain = measurement_chain(run.model, T_frame, None if setup.tool is None else T_tool, measure, fit_frame)
     if setup.tool is not None and not (isinstance(setup.tool, str) and setup.tool == "fit"):
-        chain = chain.fixed([s.name for s in chain.steps if s.name.startswith(TOOL_PREFIX)])
+        chain = chain.fixed(chain.names_with_role(Role.TOOL))
     run.length = float(robot_sizes(T_flange[None])[0])
     rows = 3 if measure == "position" else 6
     w = _row_weights(run, rows)

@@ -68,7 +68,7 @@ class Provenance:
         train_n: int | None,
         seed: int,
     ) -> Provenance:
-        from robocal import __version__
+        from robocal._version import __version__
 
         versions = {"robocal": __version__, "numpy": np.__version__, "python": platform.python_version()}
         options = {k: reader.get(k, v) for k, v in READER_DEFAULTS.items()}

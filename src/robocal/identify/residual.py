@@ -552,7 +552,7 @@ def _refit_with_residual(
     of the wrist's angle: the real UR10's wrist compliances came out at -136 ± 400
     µrad/N·m) is below zero or within 3σ of it once both are fitted: it is held at its
     start value and the physics refitted (:func:`~robocal.identify.calibrate.effects_to_hold`)."""
-    from robocal.identify.calibrate import effects_to_hold
+    from robocal.identify.effects import effects_to_hold
 
     held = dict(options.get("hold_effects") or {})
     for _ in range(8):  # one refit settles it but for the problem's nonlinearity

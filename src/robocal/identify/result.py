@@ -21,12 +21,12 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.identify.effects import display_unit, effect_lines, effect_prefix
+from robocal.identify.effects import display_unit, effect_lines
 from robocal.identify.guards import FitToNoise
 from robocal.identify.observability import Dropped
-from robocal.identify.problem import FRAME_PREFIX, TOOL_PREFIX
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 from robocal.model.dynamics import Payload
+from robocal.model.joints import effect_of
 
 if TYPE_CHECKING:
     from robocal.identify.provenance import Provenance
@@ -245,7 +245,7 @@ class CalibrationResult:
     def _load_robot(self) -> Model:
         """The calibrated robot without the measured tool steps: the geometry whose joint
         loads drive the joint effects (a payload sits at the robot's end)."""
-        steps = tuple(s for s in self.model.steps if not s.name.startswith(TOOL_PREFIX))
+        steps = tuple(s for s in self.model.steps if s.role is not Role.TOOL)
         if len(steps) == len(self.model.steps):
             return self.model
         return dataclasses.replace(self.model, steps=steps)
@@ -278,7 +278,7 @@ class CalibrationResult:
     @property
     def effect_names(self) -> tuple[str, ...]:
         """The identified joint-effect coefficients among :attr:`names` (``compliance_q2``...)."""
-        return tuple(n for n in self.names if effect_prefix(n) is not None)
+        return tuple(n for n in self.names if effect_of(n) is not None)
 
     def deltas(self) -> dict[str, float]:
         return {n: float(e - v) for n, e, v in zip(self.names, self.estimates, self.nominal, strict=True)}
@@ -299,9 +299,9 @@ class CalibrationResult:
         names = [
             n
             for n in self.names
-            if n in set(chain.names) and not (frame == "base" and n.startswith(FRAME_PREFIX))
+            if n in set(chain.names) and not (frame == "base" and chain.roles[n] is Role.DEVICE)
         ]
-        effects = [n for n in self.names if effect_prefix(n) is not None]
+        effects = [n for n in self.names if effect_of(n) is not None]
         perturbations = self.joint_perturbations(q)
         model = chain.with_free(None, free=False).with_free(names)
         J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
@@ -342,7 +342,7 @@ class CalibrationResult:
             raise ValueError("this result has no measurement chain (saved by an older robocal?)")
         perturbations = self.joint_perturbations(q)
         geometric = [n for n in self.names if n in set(chain.names)]
-        effects = [n for n in self.names if effect_prefix(n) is not None]
+        effects = [n for n in self.names if effect_of(n) is not None]
         model = chain.with_free(None, free=False).with_free(geometric)
         J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
         J = J[:, :, [model.free_names.index(n) for n in geometric]]

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from robocal.identify.effects import si_unit
+from robocal.identify.effects import parameter_unit
 from robocal.identify.guards import FitToNoise
 from robocal.identify.observability import Dropped
 from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
@@ -133,7 +133,7 @@ def result_dict(result: CalibrationResult) -> dict[str, Any]:
         "parameters": [
             {
                 "name": n,
-                "unit": si_unit(n, rot.get(n, False)),
+                "unit": parameter_unit(n, rot.get(n, False)),
                 "nominal": float(v0),
                 "estimate": float(v),
                 "delta": float(v - v0),

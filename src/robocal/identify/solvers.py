@@ -37,6 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from robocal.identify.solve_result import SolveResult
+
 __all__ = [
     "METHODS",
     "BatchSolveResult",
@@ -47,22 +49,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-
-@dataclass
-class SolveResult:
-    """What a solver returns (scipy-style)."""
-
-    x: Array
-    success: bool
-    message: str
-    iterations: int
-    evaluations: int = 0
-    history: list[float] = field(default_factory=list)  # RMS residual per iteration (weighted)
-    # weighted residuals (m,) and Jacobian (m, p) at x, when the solver has them (LM: its
-    # last evaluation), so that the uncertainty needs no second evaluation
-    r: Array | None = field(default=None, repr=False)
-    J: Array | None = field(default=None, repr=False)
 
 
 def _lm(

@@ -22,13 +22,13 @@ Units: SI (m, rad); weighted residuals are in units of their σ.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from robocal.identify.guards import residual_variance
 from robocal.identify.observability import IdentifiableSubset, identifiable_subset
+from robocal.model.chain import Role
 
 __all__ = [
     "identifiable_set",
@@ -36,6 +36,7 @@ __all__ = [
     "normal_inverse",
     "poorly_identifiable",
     "preference_order",
+    "residual_variance",
     "robot_sizes",
     "screen_unidentifiable",
     "tool_displacement_scale",
@@ -44,8 +45,6 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-FRAME_PREFIX = "frame_"  # as robocal.identify.problem (not imported: problem imports nothing from here)
-TOOL_PREFIX = "tcp_"
 
 
 # ---------------------------------------------------------------------- start values
@@ -140,18 +139,23 @@ def robot_sizes(T_flange: Array) -> Array:
 
 
 # ---------------------------------------------------------------------- identifiable set
-def preference_order(names: Sequence[str]) -> list[str]:
+def preference_order(names: Sequence[str], roles: Mapping[str, Role]) -> list[str]:
     """Which unknowns to keep first when some are redundant: the device frame, then the
-    tool, then the others in chain order."""
-    order = [x for x in names if x.startswith(FRAME_PREFIX)] + [x for x in names if x.startswith(TOOL_PREFIX)]
+    tool, then the others in chain order (``roles``: the chain's :attr:`Model.roles`;
+    names it lacks, the joint-effect coefficients, come last)."""
+    device = [x for x in names if roles.get(x) is Role.DEVICE]
+    order = device + [x for x in names if roles.get(x) is Role.TOOL]
     return order + [x for x in names if x not in set(order)]
 
 
-def identifiable_set(J_scaled: Array, names: Sequence[str], explain: bool = True) -> IdentifiableSubset:
+def identifiable_set(
+    J_scaled: Array, names: Sequence[str], explain: bool = True, *, roles: Mapping[str, Role]
+) -> IdentifiableSubset:
     """The calibration's identifiable set: the sequential rank test
     (:func:`~robocal.identify.observability.identifiable_subset`, ``order="preference"``)
-    over the weighted Jacobian ``(m, p)`` with every unknown as a tool displacement."""
-    prefer = preference_order(names)
+    over the weighted Jacobian ``(m, p)`` with every unknown as a tool displacement;
+    ``roles``: the measurement chain's (:func:`preference_order`)."""
+    prefer = preference_order(names, roles)
     return identifiable_subset(J_scaled, names, order="preference", prefer=prefer, explain=explain)
 
 
@@ -278,3 +282,21 @@ def poorly_identifiable(
     if move[worst] <= max(max_std, max_std_ratio * float(np.median(move))):
         return None
     return worst, float(move[worst])
+
+
+def residual_variance(chi2: ArrayLike, dof: ArrayLike, known: ArrayLike, significance: float = 1e-3) -> Array:
+    """The variance factor of weighted residuals for a covariance, ``χ²/dof`` or 1.
+
+    With weights 1/σ from a stated noise (``known``) the factor is 1 — the Cramér–Rao
+    covariance — unless a χ² test rejects the stated noise at ``significance`` (either
+    way): a few degrees of freedom cannot estimate it, and a model that explains the
+    data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``.
+    Arrays broadcast (the batched study engine).
+    """
+    import scipy.special
+
+    chi2, dof = np.asarray(chi2, dtype=float), np.maximum(np.asarray(dof, dtype=float), 1.0)
+    estimated = chi2 / dof
+    upper = scipy.special.chdtrc(dof, chi2)  # P(χ² >= observed)
+    rejected = (upper < significance) | (1.0 - upper < significance)
+    return np.where(np.asarray(known, dtype=bool) & ~rejected, 1.0, estimated)

@@ -64,6 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 from robocal import spatial
 from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text, csv_text
+from robocal.units import unit_factor
 
 __all__ = [
     "MeasurementFileError",
@@ -77,8 +78,6 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
-ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
 
 #: A position column set whose median distance from the device origin (in m, after
 #: conversion) exceeds this is taken to be in mm although read as m (50 m is beyond
@@ -379,8 +378,8 @@ def _parse_orientation(spec: str) -> _Orientation:
                 "(intrinsic, e.g. 'XYZ') or all lower case (extrinsic, e.g. 'xyz'), no axis twice in a row"
             )
         unit = parts[2].lower() if len(parts) == 3 else None
-        if unit is not None and unit not in ANGLE_UNITS:
-            raise ValueError(f"orientation={spec!r}: angle unit must be one of {sorted(ANGLE_UNITS)}")
+        if unit is not None:
+            unit_factor(unit, "angle", f"orientation={spec!r}")
         return _Orientation("euler", seq, unit)
     raise ValueError(
         f"orientation={spec!r}: expected 'auto', 'none', 'quaternion', 'rotvec', 'euler:SEQ' "
@@ -502,10 +501,8 @@ class _Reader:
         extra: Sequence[str],
         incomplete: IncompleteMode = "error",
     ) -> None:
-        if length_unit not in LENGTH_UNITS:
-            raise ValueError(f"length_unit must be one of {sorted(LENGTH_UNITS)}, got {length_unit!r}")
-        if angle_unit not in ANGLE_UNITS:
-            raise ValueError(f"angle_unit must be one of {sorted(ANGLE_UNITS)}, got {angle_unit!r}")
+        L = unit_factor(length_unit, "length", "length_unit")
+        A = unit_factor(angle_unit, "angle", "angle_unit")
         if decimal not in (".", ","):
             raise ValueError(f"decimal must be '.' or ',', got {decimal!r}")
         sep = SEPARATOR_NAMES.get(sep, sep) if sep is not None else None
@@ -518,8 +515,7 @@ class _Reader:
         if model is not None and dof is not None and dof != model.dof:
             raise ValueError(f"dof={dof} contradicts model {model.name!r} with {model.dof} joints")
         self.path = path
-        self.L = LENGTH_UNITS[length_unit]
-        self.A = ANGLE_UNITS[angle_unit]
+        self.L, self.A = L, A
         self.length_unit, self.angle_unit = length_unit, angle_unit
         self.rename = _parse_columns(columns)
         self.sep, self.decimal = sep, decimal
@@ -1110,7 +1106,7 @@ class _Reader:
             return spatial.quaternion_to_matrix(values)
         unit = self.A
         if kind.startswith("euler"):
-            unit = ANGLE_UNITS[kind.split(":")[2]]
+            unit = unit_factor(kind.split(":")[2], "angle", "orientation")
         big = np.nanmax(np.abs(values), axis=0, initial=0.0) * unit
         fix = "angle_unit='deg'"
         if kind.startswith("euler"):

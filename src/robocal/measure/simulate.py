@@ -38,6 +38,7 @@ from robocal.measure.devices import Device, device_from_dict
 from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text, load_model, save_model
 from robocal.outdir import FolderMixedError, file_set, new_run_id, read_run_id, run_id_line
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS, SPELLINGS
 
 __all__ = [
     "EncoderNoise",
@@ -60,8 +61,6 @@ Array = NDArray[np.float64]
 #: (δθ in m for a prismatic joint).
 JointEffect = Callable[[Model, Array], Array]
 
-_LENGTH = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6}
-_ANGLE = {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180.0, "°": math.pi / 180.0, "urad": 1e-6}
 _QUANTITY = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-zµμ°]*)\s*$")
 
 
@@ -90,13 +89,14 @@ def parse_quantity(value: str | float, kind: Literal["length", "angle"]) -> floa
         out = float(value)
     else:
         m = _QUANTITY.match(value)
-        units = _LENGTH if kind == "length" else _ANGLE
-        if m is None or (m.group(2) and m.group(2) not in units):
+        units = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
+        unit = SPELLINGS.get(m.group(2), m.group(2)) if m is not None else None
+        if m is None or (unit and unit not in units):
             raise ValueError(
                 f"{value!r} is not a {kind} such as {'0.02mm' if kind == 'length' else '0.05deg'} "
                 f"(units: {', '.join(units)})"
             )
-        out = float(m.group(1)) * units.get(m.group(2), 1.0)
+        out = float(m.group(1)) * units.get(unit, 1.0)
     if not math.isfinite(out):
         raise ValueError(f"{kind} {value!r} is not finite")
     return out

@@ -6,8 +6,8 @@ lazy_package(
     __name__,
     {
         "robocal.model.catalog": ("robot", "robots"),
-        "robocal.model.chain": ("Body", "Joint", "JointEffects", "Model", "Step"),
-        "robocal.model.complete": ("calibration_model"),
+        "robocal.model.chain": ("Body", "Joint", "JointEffects", "Model", "Role", "Step"),
+        "robocal.model.complete": ("calibration_model",),
         "robocal.model.files": ("ModelFileError", "load_model", "save_model"),
     },
 )
@@ -18,6 +18,7 @@ __all__ = [
     "JointEffects",
     "Model",
     "ModelFileError",
+    "Role",
     "Step",
     "calibration_model",
     "load_model",

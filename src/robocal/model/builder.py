@@ -45,6 +45,7 @@ from robocal import spatial
 from robocal.model.chain import Joint, Model, Step
 from robocal.model.conventions import SCHROER_SETS
 from robocal.model.files import Number
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS
 
 __all__ = [
     "BuildResult",
@@ -440,8 +441,8 @@ def select_identifiable(
         J = J.reshape(len(q), 6, -1)
         J[:, 3:] *= size
         J = J.reshape(len(q) * 6, -1)
-    # identify builds on model: import late
-    from robocal.identify.observability import identifiable_subset
+    # scipy.linalg: imported on use
+    from robocal.model.rank import identifiable_subset
 
     selection = identifiable_subset(
         J, full.names, order="preference", prefer=order, rtol=tolerance, explain=False
@@ -627,8 +628,7 @@ def load_geometry(path: str | Path) -> Geometry:
         spec = _GeometryFile.model_validate(data)
     except ValidationError as err:
         raise GeometryError(f"{path}: {format_validation_error(err)}") from None
-    L = 1e-3 if spec.unit == "mm" else 1.0
-    A = math.pi / 180 if spec.angle_unit == "deg" else 1.0
+    L, A = LENGTH_UNITS[spec.unit], ANGLE_UNITS[spec.angle_unit]  # the schema allows m|mm, rad|deg
     joints = []
     for j in spec.joints:
         lim = None

@@ -40,6 +40,7 @@ import dataclasses
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from functools import cached_property
 from typing import Any, Literal
 
@@ -48,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal.spatial import MOTIONS
 
-__all__ = ["Body", "Joint", "JointEffects", "Model", "Step"]
+__all__ = ["Body", "Joint", "JointEffects", "Model", "Role", "Step"]
 
 Array = NDArray[np.float64]
 JointType = Literal["revolute", "prismatic"]
@@ -57,6 +58,32 @@ JointType = Literal["revolute", "prismatic"]
 def _check_name(kind: str, name: str) -> None:
     if not isinstance(name, str) or not name.strip():
         raise ValueError(f"{kind} name must be a non-empty string, got {name!r}")
+
+
+class Role(StrEnum):
+    """What a step of the chain stands for (:attr:`Step.role`).
+
+    * ``KINEMATIC``: the robot's own geometry (base, links, joint offsets, flange): what a
+      calibration corrects and a calibrated model carries to the controller.
+    * ``TOOL``: the tool, from the flange to the measured point or frame (the ``tcp_*``
+      steps a calibration appends; stripped for the robot's own kinematics).
+    * ``DEVICE``: the measuring device's frame relative to the robot base (the ``frame0_*``
+      start and ``frame_*`` correction a calibration prepends).
+    """
+
+    KINEMATIC = "kinematic"
+    TOOL = "tool"
+    DEVICE = "device"
+
+    @classmethod
+    def from_name(cls, name: str) -> Role:
+        """The role of a step from its name alone: how robocal told roles before they were
+        stored; used for steps built without one (model files without ``role`` entries)."""
+        if name.startswith("tcp_"):
+            return cls.TOOL
+        if name.startswith(("frame_", "frame0_")):
+            return cls.DEVICE
+        return cls.KINEMATIC
 
 
 @dataclass(frozen=True)
@@ -93,6 +120,10 @@ class Step:
         free: whether identification may change the value.
         bounds: optional ``(lower, upper)`` on the value (SI) for bounded solvers.
         joint: the joint variable driving this step, or ``None`` for a constant.
+        role: what the step stands for (:class:`Role`): the robot's geometry, the tool or
+            the measuring device's frame.  Not given (None): :meth:`Role.from_name`, so
+            that ``Step("Tx", "tcp_x")`` is a tool step as it always was; always a
+            :class:`Role` once constructed.
     """
 
     motion: str
@@ -101,6 +132,7 @@ class Step:
     free: bool = True
     bounds: tuple[float, float] | None = None
     joint: Joint | None = None
+    role: Role | None = None
 
     def __post_init__(self) -> None:
         if self.motion not in MOTIONS:
@@ -111,6 +143,13 @@ class Step:
             raise ValueError(f"parameter {self.name!r}: value {self.value!r} is not finite")
         object.__setattr__(self, "value", value)
         object.__setattr__(self, "free", bool(self.free))
+        try:
+            role = Role.from_name(self.name) if self.role is None else Role(self.role)
+        except ValueError:
+            raise ValueError(
+                f"step {self.name!r}: role {self.role!r} is not one of {', '.join(r.value for r in Role)}"
+            ) from None
+        object.__setattr__(self, "role", role)
         if self.bounds is not None:
             lo, hi = (float(v) for v in self.bounds)
             if math.isnan(lo) or math.isnan(hi) or lo > hi:
@@ -380,6 +419,15 @@ class Model:
     @cached_property
     def free_mask(self) -> NDArray[np.bool_]:
         return np.array([s.free for s in self.steps], dtype=bool)
+
+    @cached_property
+    def roles(self) -> dict[str, Role]:
+        """Each parameter's :class:`Role`, by name."""
+        return {s.name: s.role for s in self.steps}
+
+    def names_with_role(self, role: Role) -> tuple[str, ...]:
+        """Names of the parameters with ``role``, in chain order."""
+        return tuple(s.name for s in self.steps if s.role is role)
 
     @cached_property
     def free_names(self) -> tuple[str, ...]:

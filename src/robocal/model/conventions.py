@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Literal
 
-from robocal.model.chain import Body, Joint, Model, Step
+from robocal.model.chain import Body, Joint, Model, Role, Step
 
 __all__ = [
     "SCHROER_SETS",
@@ -85,6 +85,7 @@ def sequence(
     joint_name: str | None = None,
     limits: tuple[float, float] | None = None,
     free: bool | Sequence[bool] = True,
+    role: Role | None = None,
 ) -> list[Step]:
     """Steps for any sequence of elementary motions.
 
@@ -97,6 +98,8 @@ def sequence(
         joint_name: the joint's name (default ``"q"`` + the parameter name's index).
         limits: joint limits (rad or m).
         free: one flag for all steps or one per step.
+        role: what the steps stand for (:class:`~robocal.model.chain.Role`; default: from
+            each name, :meth:`~robocal.model.chain.Role.from_name`).
     """
     motions = [m[0].upper() + m[1].lower() for m in motions]
     if not (len(motions) == len(values) == len(names)):
@@ -109,7 +112,7 @@ def sequence(
         joint = None
         if k == joint_step:
             joint = Joint(joint_name or f"q_{name}", tuple(limits) if limits is not None else None)
-        steps.append(Step(motion, name, value, free=flag, joint=joint))
+        steps.append(Step(motion, name, value, free=flag, joint=joint, role=role))
     return steps
 
 
@@ -233,9 +236,11 @@ def frame6(
     rx: float = 0.0,
     *,
     free: bool = True,
+    role: Role | None = None,
 ) -> list[Step]:
     """A 6-parameter frame ``Tx Ty Tz Rz(γ) Ry(β) Rx(α)`` (seed 000 eq. 1), for a robot
-    base or a tool.  Parameters are named ``{prefix}_x ... {prefix}_rx``.
+    base or a tool.  Parameters are named ``{prefix}_x ... {prefix}_rx``; ``role``: what
+    the frame stands for (default: from the names, the robot's base unless ``tcp``/``frame``).
 
     Note the parameterisation is singular at β = ±90° (seed 000 eq. 2).
     """
@@ -244,6 +249,7 @@ def frame6(
         (x, y, z, rz, ry, rx),
         [f"{prefix}_{s}" for s in ("x", "y", "z", "rz", "ry", "rx")],
         free=free,
+        role=role,
     )
 
 

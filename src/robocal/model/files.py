@@ -59,7 +59,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, model_validator
 
 from robocal.model import conventions
-from robocal.model.chain import Body, Joint, JointEffects, Model, Step
+from robocal.model.chain import Body, Joint, JointEffects, Model, Role, Step
+from robocal.units import ANGLE_UNITS, LENGTH_UNITS, STIFFNESS_UNITS
 
 __all__ = [
     "ModelFileError",
@@ -77,8 +78,7 @@ MAX_FILE_BYTES = 5_000_000
 #: a hostile file from costing minutes of checks).
 MAX_STEPS = 1000
 
-LENGTH_SCALE = {"m": 1.0, "mm": 1e-3}
-ANGLE_SCALE = {"rad": 1.0, "deg": math.pi / 180.0}
+LENGTH_SCALE, ANGLE_SCALE = LENGTH_UNITS, ANGLE_UNITS  # robocal.units (the file schema allows m/mm, rad/deg)
 
 
 class ModelFileError(ValueError):
@@ -103,7 +103,7 @@ class _Units(BaseModel):
 
 
 #: N·m/rad per unit of each stiffness unit (kgf: standard gravity 9.80665 m/s²)
-STIFFNESS_SCALE = {"N*m/rad": 1.0, "N*m/deg": 180.0 / math.pi, "kgf*m/deg": 9.80665 * 180.0 / math.pi}
+STIFFNESS_SCALE = STIFFNESS_UNITS
 
 
 class _StepSpec(BaseModel):
@@ -115,6 +115,7 @@ class _StepSpec(BaseModel):
     bounds: Pair | None = None
     joint: Name | None = None
     limits: Pair | None = None
+    role: Literal["kinematic", "tool", "device"] | None = None  # absent (older files): from the name
 
     @model_validator(mode="after")
     def _limits_need_joint(self) -> _StepSpec:
@@ -203,7 +204,8 @@ def _step(spec: _StepSpec, units: _Units) -> Step:
             lim = tuple(v * scale for v in spec.limits)
         joint = Joint(spec.joint, lim)
     bounds = None if spec.bounds is None else tuple(v * scale for v in spec.bounds)
-    return Step(spec.motion, spec.param, spec.value * scale, spec.free, bounds, joint)
+    role = None if spec.role is None else Role(spec.role)  # None: from the name (older files)
+    return Step(spec.motion, spec.param, spec.value * scale, spec.free, bounds, joint, role)
 
 
 def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[Step]:
@@ -229,7 +231,7 @@ def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[S
         # with a link index: fix those whose symbol is listed.
         fixed = set(row.fixed)
         steps = [
-            Step(s.motion, s.name, s.value, False, s.bounds, s.joint)
+            Step(s.motion, s.name, s.value, False, s.bounds, s.joint, s.role)
             if s.name.rstrip("0123456789") in fixed
             else s
             for s in steps
@@ -475,6 +477,8 @@ def _step_to_dict(step: Step) -> dict[str, Any]:
         out["joint"] = step.joint.name
         if step.joint.limits is not None:
             out["limits"] = list(step.joint.limits)
+    if step.role is not Role.KINEMATIC or Role.from_name(step.name) is not step.role:
+        out["role"] = str(step.role)  # the robot's own steps need none (files stay as they were)
     return out
 
 

@@ -61,6 +61,7 @@ __all__ = [
     "clearance_tilt_angle",
     "contact_angle",
     "effect_basis",
+    "effect_of",
     "effects_from_values",
     "joint_perturbations",
     "load_moments",
@@ -81,6 +82,16 @@ EFFECT_PREFIXES: dict[str, tuple[str, str]] = {
     "radial": ("radial_compliance_", "radial_compliance"),
 }
 DEADBAND = 1e-9  # N·m (N): a load this small has no sign
+
+
+def effect_of(name: str) -> tuple[str, str] | None:
+    """``(kind, joint)`` of a joint-effect coefficient as :func:`joint_perturbations`
+    names it (``"compliance_q2"`` -> ``("compliance", "q2")``); None for a parameter of
+    the chain.  The one reader of those names: everything else asks it."""
+    for kind, (prefix, _) in sorted(EFFECT_PREFIXES.items(), key=lambda item: -len(item[1][0])):
+        if name.startswith(prefix):
+            return kind, name[len(prefix) :]
+    return None
 
 
 # ------------------------------------------------------------------ clearance geometry

@@ -47,8 +47,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
-from robocal.model.chain import Model
-from robocal.model.urdf_export import TOOL_PREFIX, rpy_from_matrix, urdf_origin
+from robocal.model.chain import Model, Role
+from robocal.model.urdf_export import rpy_from_matrix, urdf_origin
 
 __all__ = [
     "UR_JOINTS",
@@ -142,7 +142,7 @@ def ur_kinematics(model: Model, T_base_urbase: ArrayLike | None = None, hash: st
     joints = [s for s in model.steps if s.joint is not None]
     if len(joints) != 6 or any(s.joint_type != "revolute" for s in joints):
         raise ValueError(f"model {model.name!r}: the UR format holds six revolute joints")
-    robot = Model(name=model.name, steps=tuple(s for s in model.steps if not s.name.startswith(TOOL_PREFIX)))
+    robot = Model(name=model.name, steps=tuple(s for s in model.steps if s.role is not Role.TOOL))
     q0 = np.zeros(6)
     B = np.eye(4) if T_base_urbase is None else np.asarray(T_base_urbase, dtype=float)
     B_inv = spatial.inverse(B)

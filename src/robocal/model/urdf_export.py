@@ -51,13 +51,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
-from robocal.model.chain import Model
+from robocal.model.chain import Model, Role
 from robocal.model.urdf import URDFError, _read_checked
 
 __all__ = ["TOOL_PREFIX", "URDFExport", "calibrated_urdf", "rpy_from_matrix", "urdf_origin"]
 
 Array = NDArray[np.float64]
-#: Steps of the measured tool (the identification appends them after the robot).
+#: Names of the measured tool's steps (the identification appends them after the robot;
+#: told by their role, Role.TOOL)
 TOOL_PREFIX = "tcp_"
 #: How far the nominal model may be from the source URDF (m, rad) before the export
 #: refuses: the model was not built from this URDF.
@@ -131,10 +132,10 @@ class _Chain:
 
 
 def _split(model: Model) -> _Chain:
-    robot_steps = tuple(s for s in model.steps if not s.name.startswith(TOOL_PREFIX))
-    tool_steps = tuple(s for s in model.steps if s.name.startswith(TOOL_PREFIX))
+    robot_steps = tuple(s for s in model.steps if s.role is not Role.TOOL)
+    tool_steps = tuple(s for s in model.steps if s.role is Role.TOOL)
     last_joint = max(i for i, s in enumerate(model.steps) if s.joint is not None)
-    if any(i < last_joint for i, s in enumerate(model.steps) if s.name.startswith(TOOL_PREFIX)):
+    if any(i < last_joint for i, s in enumerate(model.steps) if s.role is Role.TOOL):
         raise ValueError(f"model {model.name!r}: tool steps ({TOOL_PREFIX}*) before the last joint")
     robot = dataclasses.replace(model, steps=robot_steps, bodies=(), joint_effects=())
     q0 = np.zeros(model.dof)
