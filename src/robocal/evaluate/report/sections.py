@@ -83,7 +83,8 @@ def summary(r: ReportData, figs: m.Figures) -> Section:
     cards += _card(
         "RMS error on calibration poses",
         _before_after(facts.rms_before_m, facts.rms_after_m, 4),
-        f"{facts.n} poses, {facts.method}, {facts.iterations} iterations, {facts.seconds * 1e3:.0f} ms",
+        f"{facts.n} poses, {facts.method}, {facts.iterations} "
+        f"iteration{'' if facts.iterations == 1 else 's'}, {facts.seconds * 1e3:.0f} ms",
     )
     cards += _card(
         "identified parameters",
@@ -119,8 +120,12 @@ def robot_model(r: ReportData, figs: m.Figures) -> Section:
     links = [
         n.strip().removesuffix(" calibrated") for n in model.notes.split(";") if n.strip().startswith("link")
     ]
-    body += "<div class='grid2'><div>" + m.table(["", ""], info) + "</div><div>"
-    body += m.table(["link parameterisation (seed 000)"], [[n] for n in links]) + "</div></div>"
+    info_table = m.table(["", ""], info)
+    if links:
+        link_table = m.table(["link parameterisation (seed 000)"], [[n] for n in links])
+        body += f"<div class='grid2'><div>{info_table}</div><div>{link_table}</div></div>"
+    else:
+        body += info_table
     if model.source:
         body += m.note(f"source: {m.e(model.source)}")
     intro = (
@@ -194,18 +199,16 @@ def identifiability(r: ReportData, figs: m.Figures) -> Section:
         ["not identified", len(facts.dropped)],
     ]
     rows += [[label, m.g(value)] for label, value in ident.indices]
-    body = "<div class='grid2'><div>" + m.table(["identifiability", "value"], rows)
-    if ident.indices:
+    body = m.table(["identifiability", "value"], rows)
+    if ident.singular_values is None:
+        body += m.note("Observability indices and singular values need the calibration measurements.")
+    else:
         body += m.note(
             "O1–O5 from the Jacobian with columns scaled by the expected parameter errors (0.1 mm, 0.05°; "
             "Sun &amp; Hollerbach 2008): larger is better."
         )
-    else:
-        body += m.note("Observability indices and singular values need the calibration measurements.")
-    body += "</div><div>"
-    if ident.singular_values is not None:
-        body += figs.html(fg.singular_values_figure(ident.singular_values), "singular-values", 340)
-    body += "</div></div>"
+        figure = figs.html(fg.singular_values_figure(ident.singular_values), "singular-values", 340)
+        body = f"<div class='grid2'><div>{body}</div><div>{figure}</div></div>"
     body += m.table(
         ["parameter not identified", "reason", "absorbed by (coefficient) / detail"], ident.dropped
     )

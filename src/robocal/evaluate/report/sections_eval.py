@@ -12,6 +12,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from robocal.evaluate.metrics import ERROR_QUANTITIES, ErrorTable
 from robocal.evaluate.report import figures as fg
 from robocal.evaluate.report import markup as m
@@ -123,10 +125,16 @@ def _iso_pose_table(r: ReportData) -> str:
     return m.table(["commands", "pose", "cycles", "AP", "APx", "APy", "APz", "RP"], rows, caption=caption)
 
 
+def _finite_mean(values: np.ndarray) -> float:
+    """The mean of the finite values (NaN where the attained path missed a normal plane)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.mean()) if finite.size else math.nan
+
+
 def _iso_path_table(r: ReportData) -> str:
     paths = () if r.iso is None else r.iso.paths
     rows = [
-        [p.name, case, pa.n_cycles, m.f(pa.AT * 1e3), m.f(pa.RT * 1e3), m.f(float(pa.at.mean()) * 1e3)]
+        [p.name, case, pa.n_cycles, m.f(pa.AT * 1e3), m.f(pa.RT * 1e3), m.f(_finite_mean(pa.at) * 1e3)]
         for p in paths
         for case, pa in p.accuracy.items()
     ]
