@@ -78,12 +78,14 @@ def _pose_set(facts: ResultFacts, name: str, data: Measurements, colour: str) ->
     revolute = np.array(model.joint_types) == "revolute"
     sigma = None if data.sigma is None else float(np.median(data.sigma)) * 1e3
     device = data.metadata.get("device") if isinstance(data.metadata, Mapping) else None
+    positions = model.fk(data.q)[:, :3, 3] * 1e3
     return PoseSet(
         name=name,
         colour=colour,
         n=data.n,
         observes=str(data.observes),
-        position_base_mm=model.fk(data.q)[:, :3, 3] * 1e3,
+        position_base_mm=positions,
+        extent_mm=np.ptp(positions, axis=0),
         joint_display=np.where(revolute, np.degrees(data.q), data.q * 1e3),
         median_sigma_mm=sigma,
         device=None if device is None else str(device),

@@ -101,6 +101,7 @@ class PoseSet:
     n: int
     observes: str
     position_base_mm: Array  # (n, 3): tool positions by the calibrated model
+    extent_mm: Array  # (3,): their extent along x, y, z
     joint_display: Array  # (n, dof): deg for revolute joints, mm for prismatic ones
     median_sigma_mm: float | None
     device: str | None

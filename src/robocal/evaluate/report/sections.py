@@ -178,9 +178,7 @@ def data(r: ReportData, figs: m.Figures) -> Section:
         body += figs.html(fg.joint_coverage_figure(cov), "joint-coverage", 380)
         rows = []
         for s in cov.sets:
-            extent = " × ".join(
-                f"{v:.0f}" for v in s.position_base_mm.max(axis=0) - s.position_base_mm.min(axis=0)
-            )
+            extent = " × ".join(f"{v:.0f}" for v in s.extent_mm)
             sigma = "not stated" if s.median_sigma_mm is None else f"{s.median_sigma_mm:.4f}"
             rows.append([s.name, s.n, s.observes, extent, sigma, s.device or "not stated"])
         body += m.table(["set", "poses", "observed", "extent x × y × z mm", "median σ mm", "device"], rows)
