@@ -294,3 +294,24 @@ def test_3d_labels_stay_inside_their_scenes(twin):
     _inside(model_figure(result.model), 0.05)
     report = collect_report(result, data=train, test_data=test)
     _inside(fg.coverage_figure(report.coverage), 0.02)
+    # an ISO 9283 cube far from the measured poses: its edges and P1-P5 still inside the scene
+    center, side = np.array([1.5, 1.5, 1.5]), 0.4
+    commanded = center + side * np.array(
+        [[0, 0, 0], [0.3, 0.3, 0.3], [-0.3, -0.3, -0.3], [0.3, -0.3, 0], [-0.3, 0.3, 0]]
+    )
+    iso = {
+        "labels": ["P1", "P2", "P3", "P4", "P5"],
+        "commanded": commanded,
+        "cube": {"center": center, "side": side, "plane": 1},
+        "cycles": 2,
+        "cases": {"nominal commands": np.stack([commanded, commanded + 1e-4], axis=1)},
+    }
+    report = collect_report(result, data=train, evaluation={"iso_poses": iso})
+    fig = fg.coverage_figure(report.coverage)
+    _inside(fig, 0.02)
+    scene = fig.to_plotly_json()["layout"]["scene"]
+    edges = report.coverage.cube_edges_mm[np.isfinite(report.coverage.cube_edges_mm[:, 0])]
+    for k, axis in enumerate("xyz"):
+        lo, hi = scene[f"{axis}axis"]["range"]
+        assert lo < edges[:, k].min() and edges[:, k].max() < hi
+    assert set(report.iso.poses) == {"nominal commands"}

@@ -44,11 +44,14 @@ def _points3d(points: Array, **style: Any) -> Any:
     return go.Scatter3d(x=points[:, 0], y=points[:, 1], z=points[:, 2], **style)
 
 
-def _labelled_points(cov: CoverageData) -> Array:
-    pts = [s.position_base_mm for s in cov.sets] + [np.zeros((1, 3))]
-    if cov.iso_points_mm is not None:
-        pts.append(cov.iso_points_mm)
-    return np.vstack(pts)
+def _scene_points(cov: CoverageData) -> Array:
+    """Every point the coverage figure draws (mm), NaN separators left out."""
+    pts = [s.position_base_mm for s in cov.sets] + [np.zeros((1, 3))] + [p for _, p in cov.paths_mm]
+    for extra in (cov.iso_points_mm, cov.cube_edges_mm):
+        if extra is not None:
+            pts.append(extra)
+    every = np.vstack(pts)
+    return every[np.all(np.isfinite(every), axis=1)]
 
 
 def coverage_figure(cov: CoverageData) -> Any:
@@ -81,7 +84,7 @@ def coverage_figure(cov: CoverageData) -> Any:
     fig.add_trace(
         _points3d(np.zeros((1, 3)), mode="markers+text", text=["base"], name="robot base", marker=base)
     )
-    points = _labelled_points(cov)
+    points = _scene_points(cov)
     size = float(np.ptp(points, axis=0).max()) if len(points) > 1 else 1000.0
     fig.update_layout(
         scene=padded_scene(points, pad=0.08 * max(size, 1.0)) | {"camera": CAMERA},
