@@ -286,7 +286,7 @@ def test_katana_conventional_two_stage_and_simultaneous(katana_data):
     d = simultaneous.joint_perturbations(test.q)
     assert d.shape == (test.n, 5, 3) and np.abs(d[..., :2]).max() > 1e-4
     text = simultaneous.summary()
-    assert "joint effects (identify" in text and "backlash_q2" in text and "±" in text and "kgf·m/deg" in text
+    assert "joint effects (identify" in text and "backlash_q2" in text and "±" in text and "kN·m/rad" in text
     assert "compliance_q1: no effect on the measurements" in text
 
 

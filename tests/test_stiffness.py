@@ -74,7 +74,7 @@ def dropped(result) -> dict[str, object]:
 def test_effect_verdict_rejects_negative_and_undetermined_values():
     assert effect_verdict("compliance_q2", 20e-6, 1e-6) is None
     below = effect_verdict("compliance_wrist_2", -10.9e-6, 93e-6)
-    assert below.reason == "unphysical" and "-10.9 ± 93 µrad/N·m" in str(below)
+    assert below.reason == "unphysical" and "-10.9 ± 93 µrad/(N·m)" in str(below)
     assert "not physical" in str(below)
     weak = effect_verdict("compliance_q5", 57.5e-6, 23e-6, peak_load=0.518)
     assert weak.reason == "undetermined" and "within 3σ of zero" in weak.detail and "0.518 N·m" in weak.detail
@@ -83,8 +83,8 @@ def test_effect_verdict_rejects_negative_and_undetermined_values():
     learned = effect_verdict(
         "compliance_wrist_1", 1.789e-3, 1.19e-3, confounder="the learned joint angle errors"
     )
-    assert "with the learned joint angle errors gave 1.79e+03 ± 1.2e+03 µrad/N·m" in learned.detail
-    assert "kept at its start value 0 µrad/N·m" in learned.detail
+    assert "with the learned joint angle errors gave 1.79e+03 ± 1.2e+03 µrad/(N·m)" in learned.detail
+    assert "kept at its start value 0 µrad/(N·m)" in learned.detail
 
 
 # ------------------------------------------------------------------ Katana 450 (seed 003)

@@ -37,8 +37,8 @@ Array = NDArray[np.float64]
 #: the name prefix of axial compliance coefficients (robocal.model.joints.EFFECT_PREFIXES)
 COMPLIANCE_PREFIX = EFFECT_PREFIXES["compliance"][0]
 _EFFECT_UNITS = {  # effect kind -> (SI unit, display factor, display unit)
-    "radial": ("rad/(N·m)", 1e6, "µrad/N·m"),
-    "compliance": ("rad/(N·m)", 1e6, "µrad/N·m"),
+    "radial": ("rad/(N·m)", 1e6, "µrad/(N·m)"),
+    "compliance": ("rad/(N·m)", 1e6, "µrad/(N·m)"),
     "clearance": ("rad", math.degrees(1), "deg"),
     "backlash": ("rad", math.degrees(1), "deg"),
 }
@@ -53,7 +53,7 @@ def parameter_unit(name: str, rotation: bool) -> str:
 
 
 def display_unit(name: str, rotation: bool) -> tuple[float, str]:
-    """Factor and unit to show an estimated parameter (mm, deg, µrad/N·m)."""
+    """Factor and unit to show an estimated parameter (mm, deg, µrad/(N·m))."""
     effect = effect_of(name)
     if effect is not None:
         return _EFFECT_UNITS[effect[0]][1:]
@@ -61,10 +61,11 @@ def display_unit(name: str, rotation: bool) -> tuple[float, str]:
 
 
 def effect_lines(effects: dict[str, dict[str, tuple[float, float | None]]]) -> list[str]:
-    """Human-readable joint-effect parameters, seed 003 Table 5.2 units (deg, kgf·m/deg)."""
-    from robocal.model.files import STIFFNESS_SCALE
+    """Human-readable joint-effect parameters: tilts in deg, compliances in µrad/(N·m) with
+    the stiffness in kN·m/rad (robocal's one convention, as in the report)."""
+    from robocal.model.joints import COMPLIANCE_UNIT, STIFFNESS_UNIT
 
-    kgfm = STIFFNESS_SCALE["kgf*m/deg"]
+    (cu, ck), (su, sk) = COMPLIANCE_UNIT, STIFFNESS_UNIT
 
     def pm(s: float | None, f: float, fmt: str) -> str:
         return "" if s is None else f" ± {s * f:{fmt}}"
@@ -76,13 +77,13 @@ def effect_lines(effects: dict[str, dict[str, tuple[float, float | None]]]) -> l
             if attr in ("clearance_tilt", "backlash"):
                 parts.append(f"{attr} {math.degrees(v):.4f}{pm(s, math.degrees(1), '.4f')} deg")
                 continue
-            parts.append(f"{attr} {v * 1e6:.4g}{pm(s, 1e6, '.3g')} µrad/N·m")
+            parts.append(f"{attr} {v * ck:.4g}{pm(s, ck, '.3g')} {cu}")
             if v > 0:  # the stiffness k = 1/c; its 1σ interval [1/(c + σ), 1/(c − σ)] is skewed
                 label = "stiffness" if attr == "compliance" else "radial stiffness"
                 interval = ""
                 if s is not None and v > s:
-                    interval = f" (1σ: {1.0 / (v + s) / kgfm:.4g}-{1.0 / (v - s) / kgfm:.4g})"
-                parts.append(f"{label} {1.0 / v / kgfm:.4g}{interval} kgf·m/deg")
+                    interval = f" (1σ: {sk / (v + s):.4g}-{sk / (v - s):.4g})"
+                parts.append(f"{label} {sk / v:.4g}{interval} {su}")
         lines.append(f"{joint}: " + ", ".join(parts))
     return lines
 
@@ -107,7 +108,7 @@ def effect_verdict(
     zero is ``"unphysical"``; one less than ``significance`` σ above zero is
     ``"undetermined"`` — the data cannot tell it from zero, and its stiffness 1/c would
     be meaningless (σ_k = σ_c/c² understates the spread: seed 003's Katana q5, 57 ± 23
-    µrad/N·m for a true 22, read as a stiffness of 31 ± 12 kgf·m/deg for a true 80).
+    µrad/(N·m) for a true 22, read as a stiffness of 31 ± 12 kgf·m/deg for a true 80).
     Either way the coefficient is kept at its ``start`` value.  ``peak_load``: the joint's
     largest load at the measured poses (N·m), quoted for compliances (a small load is the
     usual reason); ``confounder``: what else was fitted that explains the same errors

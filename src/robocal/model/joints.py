@@ -53,8 +53,10 @@ from robocal.model.chain import JointEffects, Model
 from robocal.model.dynamics import Payload, joint_wrenches
 
 __all__ = [
+    "COMPLIANCE_UNIT",
     "EFFECT_KINDS",
     "EFFECT_PREFIXES",
+    "STIFFNESS_UNIT",
     "JointEffects",
     "JointTilting",
     "clearance_radius",
@@ -81,6 +83,10 @@ EFFECT_PREFIXES: dict[str, tuple[str, str]] = {
     "compliance": ("compliance_", "compliance"),
     "radial": ("radial_compliance_", "radial_compliance"),
 }
+#: how robocal shows a joint's compliance and stiffness, everywhere (CLI summary, report):
+#: (unit, display value per SI value of rad/(N·m) resp. N·m/rad)
+COMPLIANCE_UNIT = ("µrad/(N·m)", 1e6)
+STIFFNESS_UNIT = ("kN·m/rad", 1e-3)
 DEADBAND = 1e-9  # N·m (N): a load this small has no sign
 
 
