@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
+from robocal.model.chain import Model
 
 __all__ = ["URDFError", "build_from_urdf", "geometry_from_urdf", "model_from_urdf"]
 
@@ -309,6 +310,8 @@ def build_from_urdf(
         raise URDFError(f"{path}: {err}") from None
 
 
-def model_from_urdf(path: str | Path, measure: str = "pose", tip: str | None = None, name: str | None = None):
+def model_from_urdf(
+    path: str | Path, measure: str = "pose", tip: str | None = None, name: str | None = None
+) -> Model:
     """The calibration model of a URDF robot (see :func:`build_from_urdf`)."""
     return build_from_urdf(path, measure, tip, name).model

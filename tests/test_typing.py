@@ -1,0 +1,58 @@
+"""mypy checks the public API: ``robocal/__init__.py`` and what it exports.
+
+``tests/typing/public_api.py`` uses every name of ``robocal.__all__`` as the README does; mypy
+runs on it with ``disallow_untyped_calls`` (a public function without type hints fails) and on
+the package's own small modules with ``disallow_untyped_defs``. The modules behind the exports
+are followed silently (configuration: ``[tool.mypy]`` in pyproject.toml): their signatures are
+checked against the use, their bodies are not yet mypy clean.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import robocal
+
+ROOT = Path(__file__).resolve().parents[1]
+USAGE = ROOT / "tests" / "typing" / "public_api.py"
+CHECKED = ["src/robocal/__init__.py", "src/robocal/_lazy.py", "src/robocal/spatial.py"]
+
+
+def test_mypy_accepts_the_public_api(tmp_path):
+    pytest.importorskip("mypy", reason="mypy is not installed (pip install -e '.[test]')")
+    command = [sys.executable, "-m", "mypy", "--cache-dir", str(tmp_path / "cache"), "--no-error-summary"]
+    checks = ["--disallow-untyped-defs", "--disallow-incomplete-defs", "--disallow-untyped-calls"]
+    result = subprocess.run(
+        [*command, *checks, str(USAGE), *CHECKED], cwd=ROOT, capture_output=True, text=True, timeout=300
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def _type_checking_imports() -> set[tuple[str, str]]:
+    tree = ast.parse((ROOT / "src" / "robocal" / "__init__.py").read_text(encoding="utf-8"))
+    block = next(
+        node for node in tree.body if isinstance(node, ast.If) and ast.unparse(node.test) == "TYPE_CHECKING"
+    )
+    return {
+        (node.module, alias.name)
+        for node in block.body
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("robocal.")
+        for alias in node.names
+    }
+
+
+def test_type_checkers_see_what_the_lazy_map_provides():
+    """``import robocal`` loads names lazily; its TYPE_CHECKING imports must name the same ones."""
+    lazy = {(module, name) for name, module in robocal.__dict__["_lazy_exports"].items()}
+    assert _type_checking_imports() == lazy
+
+
+def test_the_usage_file_uses_every_public_name():
+    text = USAGE.read_text(encoding="utf-8")
+    unused = [name for name in robocal.__all__ if f"rc.{name}" not in text]
+    assert not unused, f"tests/typing/public_api.py does not use rc.{', rc.'.join(unused)}"
