@@ -1,0 +1,348 @@
+"""The identifiable subset of a model's parameters: rank tests, dropped parameters and what absorbs them."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import scipy.linalg
+import scipy.optimize
+from numpy.typing import ArrayLike, NDArray
+
+from robocal.identify.indices import ANGLE_TOLERANCE as ANGLE_TOLERANCE
+from robocal.identify.indices import LENGTH_TOLERANCE as LENGTH_TOLERANCE
+from robocal.identify.indices import (
+    Rows,
+)
+from robocal.model.chain import Model
+
+Array = NDArray[np.float64]
+
+
+# ------------------------------------------------------------------------ identifiable subset
+@dataclass(frozen=True)
+class Dropped:
+    """A parameter left out of identification, and why.
+
+    Attributes:
+        name: the parameter.
+        reason: ``"no effect"`` (zero column), ``"redundant"`` (its column is, within
+            the rank tolerance, a combination of the kept columns) or ``"poorly
+            identifiable"`` (kept out by the calibration because its standard deviation
+            is too large; see :func:`robocal.identify.calibrate`); for joint-effect
+            coefficients (clearance, backlash, compliance: physically ≥ 0) also
+            ``"unphysical"`` (the fit put it below zero) or ``"undetermined"`` (less than
+            3σ above zero, or confounded with a learned residual): kept at its start value,
+            ``detail`` says why with the numbers.
+        absorbed_by: ``(name, coefficient)`` of the kept parameters whose combination
+            reproduces its column: a change δ of this parameter moves the tool like
+            changes ``coefficient · δ`` of those (in the Jacobian's units), largest
+            scaled contribution first, those above the listing threshold only.
+        residual: relative norm of the part of its (unit-norm) column the kept columns
+            do not explain (≈ 0 for an exact redundancy).
+        sigma: poorly identifiable only: its standard deviation as a tool displacement (m).
+        detail: unphysical and undetermined: the estimate, its σ and why it is not used.
+    """
+
+    name: str
+    reason: Literal["no effect", "redundant", "poorly identifiable", "unphysical", "undetermined"]
+    absorbed_by: tuple[tuple[str, float], ...] = ()
+    residual: float = 0.0
+    sigma: float | None = None
+    detail: str = ""
+
+    def __str__(self) -> str:
+        if self.reason in ("unphysical", "undetermined"):
+            return f"{self.name}: {self.detail or self.reason}"
+        if self.reason == "no effect":
+            return f"{self.name}: no effect on the measurements"
+        if self.reason == "poorly identifiable":
+            sigma = float("nan") if self.sigma is None else self.sigma
+            return (
+                f"{self.name}: poorly identifiable from these measurements (σ {sigma * 1e3:.3g} mm "
+                "as tool displacement); kept at its start value"
+            )
+        combo = ", ".join(f"{n} ({c:+.4g})" for n, c in self.absorbed_by) or "(none above threshold)"
+        return f"{self.name}: redundant, absorbed by {combo}"
+
+
+@dataclass(frozen=True)
+class IdentifiableSubset:
+    """Result of :func:`identifiable_subset`.
+
+    Attributes:
+        kept: identifiable parameters, in the input column order.
+        dropped: one :class:`Dropped` per parameter left out, in the input column order.
+        rank: numerical rank of the Jacobian (``len(kept)``).
+        pivots: all names in the order the rank test took them (QR pivots, or the
+            order of preference).
+        r_diag: along ``pivots``, how independent each column is of those before it:
+            ``|R_kk|`` of the QR of the unit-norm columns, relative to ``|R_00|``
+            (``"pivoted"``) or to the column itself (``"preference"``).
+    """
+
+    kept: tuple[str, ...]
+    dropped: tuple[Dropped, ...]
+    rank: int
+    pivots: tuple[str, ...]
+    r_diag: Array
+
+    @property
+    def dropped_names(self) -> tuple[str, ...]:
+        return tuple(d.name for d in self.dropped)
+
+    def absorbers_of(self, name: str) -> tuple[tuple[str, float], ...]:
+        for d in self.dropped:
+            if d.name == name:
+                return d.absorbed_by
+        raise KeyError(f"parameter {name!r} was not dropped")
+
+    def summary(self) -> str:
+        lines = [f"{self.rank} identifiable parameters: {', '.join(self.kept)}"]
+        lines += [f"  {d}" for d in self.dropped]
+        return "\n".join(lines)
+
+
+def identifiable_subset(
+    J: ArrayLike,
+    names: Sequence[str],
+    *,
+    order: Literal["pivoted", "preference"] = "pivoted",
+    prefer: Sequence[str] | None = None,
+    rtol: float | None = None,
+    threshold: float = 0.05,
+    explain: bool = True,
+) -> IdentifiableSubset:
+    """The identifiable parameters: a largest set of independent Jacobian columns.
+
+    Columns are scaled to unit norm first (rank decisions should not depend on units);
+    zero columns are "no effect".  Two ways to choose among redundant columns:
+
+    * ``"pivoted"`` (default): column-pivoted QR (``scipy.linalg.qr(pivoting=True)``)
+      takes, at each step, the column with the largest part not yet explained by the
+      columns taken before; the rank is the number of pivots with
+      ``|R_kk| > rtol · |R_00|`` (``rtol`` default 1e-6).  Ties between exactly
+      redundant columns (e.g. a base ``Tz`` and the first link's ``d1`` along the same
+      axis) go to the parameter in ``prefer`` first, then to the one *later* in the
+      column order: as in Schröer's minimal models (seed 000), the first link's
+      ``d``/``θ`` absorb the base's ``Tz``/``Rz`` and the tool frame absorbs the last
+      link's parameters.
+    * ``"preference"``: the sequential rank test the calibration uses.  Each column,
+      in the order ``prefer`` and then the others in column order, is kept unless the
+      part of it orthogonal to the columns kept before it is at most ``rtol`` (default
+      1e-7) of its norm.  Best-conditioned columns do not matter here; which of two
+      redundant parameters a user would rather keep does (the measurement frame's x or
+      the robot base's x?).  One unpivoted QR answers it for every column (see
+      :func:`_sequential_rank_test`).
+
+    Each dropped column's absorbers are the least-squares coefficients of its column in
+    the kept columns; those whose coefficient on unit-norm columns exceeds
+    ``threshold`` in magnitude are listed, converted back to the Jacobian's units.
+
+    Args:
+        J: ``(m, p)`` identification Jacobian (any units).
+        names: the ``p`` parameter names.
+        order: ``"pivoted"`` or ``"preference"`` (above).
+        prefer: names to keep first when there is a choice.
+        rtol: rank tolerance (above).
+        threshold: smallest |scaled coefficient| listed as an absorber.
+        explain: compute the absorbers (skip for a rank decision only).
+    """
+    J, names = _checked(J, names, order)
+    p = len(names)
+    norm = np.linalg.norm(J, axis=0)
+    zero = norm <= 1e-12 * max(norm.max(initial=0.0), 1e-300)
+    Js = J / np.where(zero, 1.0, norm)
+    ordered, n_preferred = _column_order(names, zero, order, tuple(prefer or ()))
+    if not ordered:
+        dropped = tuple(Dropped(names[k], "no effect") for k in range(p))
+        return IdentifiableSubset((), dropped, 0, names, np.zeros(p))
+    coef: Array | None = None
+    if order == "pivoted":
+        cols, rel, rank = _pivoted_rank(Js[:, ordered], n_preferred, 1e-6 if rtol is None else rtol)
+        cols = [ordered[k] for k in cols]
+        kept_cols, red_cols = cols[:rank], cols[rank:]
+    else:
+        keep, coef, rel = _sequential_rank_test(Js[:, ordered], 1e-7 if rtol is None else rtol)
+        cols = ordered
+        kept_cols = [c for c, k in zip(ordered, keep, strict=True) if k]
+        red_cols = [c for c, k in zip(ordered, keep, strict=True) if not k]
+        rank = len(kept_cols)
+    dropped = {k: Dropped(names[k], "no effect") for k in range(p) if zero[k]}
+    if red_cols:
+        if explain and coef is None and kept_cols:
+            coef = np.linalg.lstsq(Js[:, kept_cols], Js[:, red_cols], rcond=None)[0]
+        if not explain or coef is None:
+            dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
+        else:
+            dropped.update(_absorbers(Js, norm, names, kept_cols, red_cols, coef, threshold))
+    kept = tuple(names[k] for k in sorted(kept_cols))
+    pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
+    r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
+    return IdentifiableSubset(kept, tuple(dropped[k] for k in sorted(dropped)), rank, pivots, r_diag)
+
+
+def _checked(J: ArrayLike, names: Sequence[str], order: str) -> tuple[Array, tuple[str, ...]]:
+    J = np.asarray(J, dtype=float)
+    names = tuple(names)
+    if J.ndim != 2 or J.shape[1] != len(names):
+        raise ValueError(f"Jacobian shaped {J.shape} does not fit {len(names)} parameter names")
+    if not np.all(np.isfinite(J)):
+        raise ValueError("Jacobian contains NaN or inf")
+    if order not in ("pivoted", "preference"):
+        raise ValueError(f"order must be 'pivoted' or 'preference', got {order!r}")
+    return J, names
+
+
+def _column_order(
+    names: tuple[str, ...], zero: NDArray[np.bool_], order: str, prefer: tuple[str, ...]
+) -> tuple[list[int], int]:
+    """The columns with an effect in the order the rank test meets them (preferred first, then
+    the rest latest-first for ``"pivoted"``, in column order for ``"preference"``) and the number
+    of preferred ones among them."""
+    unknown = [n for n in prefer if n not in names]
+    if unknown:
+        raise KeyError(f"preferred parameter(s) {unknown} are not among the Jacobian's columns")
+    rank_pref = {n: k for k, n in enumerate(prefer)}
+    live = [k for k in range(len(names)) if not zero[k]]
+    sign = -1 if order == "pivoted" else 1
+    ordered = sorted(live, key=lambda k: (0, rank_pref[names[k]]) if names[k] in rank_pref else (1, sign * k))
+    return ordered, sum(1 for k in ordered if names[k] in rank_pref)
+
+
+def _pivoted_rank(A: Array, n_preferred: int, tol: float) -> tuple[list[int], Array, int]:
+    """Column-pivoted QR of the unit-norm columns ``A`` (preferred ones first): the pivot
+    order (indices into ``A``'s columns), ``|R_kk| / |R_00|`` per pivot and the rank."""
+    # a relative weight of 1e-9 decreasing along the columns breaks (numerical) ties
+    # between redundant columns in favour of the earlier one; real norm differences
+    # are larger
+    A = A * (1.0 + 1e-9 * np.linspace(1.0, 0.0, A.shape[1]))
+    if n_preferred:
+        # QR of the preferred block first, then of the rest projected off it, so that
+        # a preferred column is never displaced by a later one with a larger norm
+        piv = _two_stage_pivots(A, n_preferred)
+    else:
+        piv = scipy.linalg.qr(A, mode="economic", pivoting=True)[2]
+    d = np.abs(np.diag(scipy.linalg.qr(A[:, piv], mode="r")[0]))
+    d = np.r_[d, np.zeros(len(piv) - len(d))]
+    rel = d / d[0] if d[0] > 0 else d
+    return [int(k) for k in piv], rel, int(np.sum(rel > tol))
+
+
+def _absorbers(
+    Js: Array,
+    norm: Array,
+    names: tuple[str, ...],
+    kept_cols: list[int],
+    red_cols: list[int],
+    coef: Array,
+    threshold: float,
+) -> dict[int, Dropped]:
+    """Each redundant column's absorbers: the kept columns whose least-squares coefficient
+    ``coef`` ``(kept, redundant)`` on unit-norm columns ``Js`` exceeds ``threshold``, largest
+    first, converted back to the Jacobian's units (column norms ``norm``)."""
+    residuals = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0).tolist()
+    units = (coef * norm[red_cols] / norm[kept_cols][:, None]).T.tolist()
+    ranked = np.argsort(-np.abs(coef), axis=0, kind="stable").T.tolist()
+    listed = (np.abs(coef) > threshold).T.tolist()
+    out = {}
+    for j, c in enumerate(red_cols):
+        absorbers = tuple((names[kept_cols[k]], units[j][k]) for k in ranked[j] if listed[j][k])
+        out[c] = Dropped(names[c], "redundant", absorbers, residuals[j])
+    return out
+
+
+def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array]:
+    """Keep each unit-norm column of ``A`` (in order) unless it lies within ``tolerance``
+    of the span of the kept ones before it.
+
+    Returns the mask of kept columns, the coefficients ``(kept, dropped)`` of every
+    dropped column in the kept ones, and ``|R_kk|`` along the columns.
+
+    One unpivoted QR answers it for all columns: ``|R_kk|`` is the part of column k
+    orthogonal to all the columns before it.  A kept column passes against a span that
+    includes the dropped columns, so it passes against the kept ones alone too; a
+    dropped column still enters the QR as a (numerically random) direction, so its
+    verdict is checked by a least-squares fit in the kept columns, and if the check
+    disagrees (possible only with about as many rows as columns) the exact sequential
+    Gram-Schmidt (:func:`_gram_schmidt`) decides.
+    """
+    diag = np.abs(np.diag(np.linalg.qr(A, mode="r")))
+    diag = np.concatenate([diag, np.zeros(A.shape[1] - len(diag))])
+    keep = diag > tolerance
+    coefs = _absorbing(A, keep, tolerance)
+    if coefs is None:
+        keep = _gram_schmidt(A, tolerance)
+        coefs = _absorbing(A, keep, tolerance)
+        if coefs is None:  # cannot happen: Gram-Schmidt keeps a basis of the span
+            coefs = np.linalg.lstsq(A[:, keep], A[:, ~keep], rcond=None)[0]
+    return keep, coefs, diag
+
+
+def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> Array | None:
+    """Coefficients of the dropped (unit-norm) columns in the kept ones, or None if some
+    dropped column is not within ``tolerance`` of their span.  Normal equations first (a
+    fraction of the cost of an SVD least-squares fit; fine unless the kept columns are
+    badly conditioned, which the check of the fit then catches), the SVD fit otherwise."""
+    K, D = A[:, keep], A[:, ~keep]
+    if not D.shape[1]:
+        return np.zeros((K.shape[1], 0))
+    if not K.shape[1]:
+        return None
+    try:
+        coefs = scipy.linalg.cho_solve(scipy.linalg.cho_factor(K.T @ K), K.T @ D)
+        if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance):
+            return coefs
+    except np.linalg.LinAlgError:
+        pass
+    coefs = np.linalg.lstsq(K, D, rcond=None)[0]
+    return coefs if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance) else None
+
+
+def _gram_schmidt(A: Array, tolerance: float) -> NDArray[np.bool_]:
+    """The sequential rank test one column at a time (the reference for
+    :func:`_sequential_rank_test`), on unit-norm columns."""
+    Q = np.zeros((A.shape[0], 0))
+    keep = np.zeros(A.shape[1], dtype=bool)
+    for k in range(A.shape[1]):
+        v = A[:, k] - Q @ (Q.T @ A[:, k])
+        v -= Q @ (Q.T @ v)  # twice: orthogonal to working precision
+        residual = float(np.linalg.norm(v))
+        if residual > tolerance:
+            Q = np.column_stack([Q, v / residual])
+            keep[k] = True
+    return keep
+
+
+def _two_stage_pivots(A: Array, n_first: int) -> NDArray[np.intp]:
+    """Pivot order: pivoted QR of the first ``n_first`` columns, then of the others
+    after projecting out the span of the first block."""
+    first, rest = A[:, :n_first], A[:, n_first:]
+    if n_first == 0:
+        return scipy.linalg.qr(rest, mode="economic", pivoting=True)[2]
+    Q1, R1, p1 = scipy.linalg.qr(first, mode="economic", pivoting=True)
+    d1 = np.abs(np.diag(R1))
+    r1 = int(np.sum(d1 > 1e-10 * max(d1[0], 1e-300)))
+    Qk = Q1[:, :r1]
+    if rest.shape[1] == 0:
+        return p1
+    proj = rest - Qk @ (Qk.T @ rest)
+    p2 = scipy.linalg.qr(proj, mode="economic", pivoting=True)[2]
+    # independent preferred columns, then the others, then the dependent preferred ones
+    return np.r_[p1[:r1], n_first + p2, p1[r1:]].astype(np.intp)
+
+
+def identifiable_parameters(
+    model: Model,
+    q: ArrayLike,
+    *,
+    rows: Rows = "position",
+    rtol: float = 1e-6,
+    prefer: Sequence[str] | None = None,
+    threshold: float = 0.05,
+) -> IdentifiableSubset:
+    """:func:`identifiable_subset` of the model's free parameters at poses ``q`` ``(n, dof)``."""
+    J = model.jacobian(np.atleast_2d(np.asarray(q, dtype=float)), rows=rows)
+    return identifiable_subset(J, model.free_names, rtol=rtol, prefer=prefer, threshold=threshold)
