@@ -23,11 +23,10 @@ Everything is seeded: the same seed gives the same numbers.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -168,51 +167,6 @@ def compensate_positions(result, targets: ArrayLike, q_start: ArrayLike) -> tupl
     return _ik_compensation(result, targets, q_start), method + (f"; {note}" if note else "")
 
 
-# ------------------------------------------------------------------ the demo
-class _Steps:
-    """Rich progress over the demo's steps, or silence."""
-
-    def __init__(self, names: list[str], verbose: bool) -> None:
-        self.names = names
-        self.verbose = verbose
-        self.timings: dict[str, float] = {}
-        self._progress = None
-
-    @contextlib.contextmanager
-    def running(self) -> Iterator[_Steps]:
-        if not self.verbose:
-            yield self
-            return
-        from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
-        from robocal.console import console
-
-        with Progress(
-            SpinnerColumn(),
-            TextColumn("[progress.description]{task.description}"),
-            BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
-            TimeElapsedColumn(),
-            console=console,
-            transient=False,
-        ) as progress:
-            self._progress = progress
-            self._task = progress.add_task("robocal demo", total=len(self.names))
-            yield self
-            progress.update(self._task, description="robocal demo: done")
-        self._progress = None
-
-    @contextlib.contextmanager
-    def step(self, name: str) -> Iterator[None]:
-        if self._progress is not None:
-            self._progress.update(self._task, description=name)
-        t = time.perf_counter()
-        yield
-        self.timings[name] = time.perf_counter() - t
-        if self._progress is not None:
-            self._progress.advance(self._task)
-
-
 def _tracker_frame(rng: np.random.Generator) -> Array:
     """``T_device_base``: a tracker 2.5 m in front of the robot, turned, slightly tilted."""
     angle = rng.uniform(-np.pi, np.pi)
@@ -257,21 +211,11 @@ def run_demo(
         quick: smaller pool, cube search and cycles (for tests).
         verbose: Rich progress and the closing summary.
     """
-    import robocal as rc
-    from robocal.identify.observability import select_poses
-    from robocal.identify.problem import measurement_chain
-    from robocal.measure.devices import LaserTracker
-    from robocal.measure.paths import Circle, circle_path, joint_path, line_path
-    from robocal.measure.poses import iso9283_poses, random_poses
-    from robocal.measure.simulate import EncoderNoise, VirtualRobot, draw_true_model, simulate
-    from robocal.model.dynamics import gravity_torques
+    from robocal.demo_console import Steps, print_summary, summary_numbers
 
     t_start = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    if quick:
-        cycles = min(cycles, 5)
-    path_cycles = max(3, cycles // 3)
-    steps = _Steps(
+    demo = _Demo(robot, seed, quick, min(cycles, 5) if quick else cycles)
+    steps = Steps(
         [
             "building the calibration model (seed 000)",
             "drawing the real robot and placing the tracker",
@@ -284,280 +228,251 @@ def run_demo(
         ],
         verbose,
     )
-    names = iter(steps.names)
-    ev: dict[str, Any] = {"robot": robot, "seed": seed}
+    stages = (
+        demo.build_model,
+        demo.draw_robot,
+        lambda: demo.plan_poses(n_calibration, n_validation),
+        demo.simulate_measurements,
+        demo.calibrate,
+        demo.validate,
+        demo.compensate,
+        lambda: demo.write(None if out is None else Path(out), steps.timings),
+    )
     with steps.running():
-        with steps.step(next(names)):
-            nominal = complete_model(robot, "position")
-            tool = np.array(SMR_OFFSET)
-            nominal_tool = measurement_chain(
-                nominal, np.eye(4), spatial.homogeneous(p=tool), "position", False
-            )
-
-        with steps.step(next(names)):
-            true = draw_true_model(nominal, length=1e-3, angle=math.radians(0.1), seed=rng)
-            pool = random_poses(nominal, 400 if quick else 1000, seed=rng, margin=0.05)
-            tau = np.abs(gravity_torques(true, pool)).max(axis=0)
-            compliance = {
-                name: float(rng.uniform(2e-4, 6e-4) / tau[j])
-                for j, name in enumerate(nominal.joint_names)
-                if tau[j] > 0.05 * tau.max()
-            }
-            T_device_base = _tracker_frame(rng)
-            tracker = LaserTracker(
-                T_device_base=T_device_base, p_tool_target=tool, sigma=15e-6, sigma_per_m=6e-6
-            )
-            encoder = 1e-5  # rad, 1-sigma: repeatability
-
-            def virtual(noise_seed: int) -> VirtualRobot:
-                return VirtualRobot(
-                    nominal, true, tracker, [GravityCompliance(compliance), EncoderNoise(encoder, noise_seed)]
-                )
-
-            truth_deltas = {
-                n: float(v - v0)
-                for n, v, v0 in zip(true.names, true.values, nominal.values, strict=True)
-                if abs(v - v0) > 0
-            }
-            ev["truth"] = {
-                "parameter_deltas": truth_deltas,
-                "compliance_rad_per_Nm": compliance,
-                "T_device_base": T_device_base.tolist(),
-                "encoder_noise_rad": encoder,
-                "tracker": "15 µm + 6 µm/m (1σ per axis)",
-                "tolerances": "±1 mm lengths, ±0.1° angles (uniform)",
-            }
-
-        with steps.step(next(names)):
-            selection = select_poses(nominal, pool, n_calibration)
-            q_train = selection.q
-            q_test = random_poses(nominal, n_validation, seed=rng, margin=0.05)
-            search = {"samples": 1000, "candidates": 2} if quick else {}
-            iso = None
-            try:
-                iso = iso9283_poses(nominal_tool, seed=seed, **search)
-            except ValueError as err:  # e.g. a robot that cannot hold the orientation over a cube
-                ev["iso_error"] = str(err)
-            ev["poses"] = {
-                "calibration": len(q_train),
-                "held_out": len(q_test),
-                "pool": len(pool),
-                "selection_index": selection.index,
-                "O1": selection.value,
-            }
-
-        with steps.step(next(names)):
-            train = simulate(virtual(int(rng.integers(1 << 31))), q_train, seed=int(rng.integers(1 << 31)))
-            test = simulate(virtual(int(rng.integers(1 << 31))), q_test, seed=int(rng.integers(1 << 31)))
-
-        with steps.step(next(names)):
-            result = rc.calibrate(nominal, train, tool_guess=tool, compliance=True)
-            geometric = rc.calibrate(nominal, train, tool_guess=tool)
-            # what each model leaves unexplained, from its residuals against the tracker noise
-            ev["fit_to_noise"] = {
-                "geometric calibration": geometric.metadata.get("fit_to_noise"),
-                "geometry + joint compliance": result.metadata.get("fit_to_noise"),
-            }
-
-        with steps.step(next(names)):
-            from robocal.evaluate.report import before_validation
-
-            after = rc.validate(result, test)
-            after_geo = rc.validate(geometric, test)
-            before = before_validation(result, test)
-            result.metadata["validation"] = after.to_dict()
-            ev["comparison"] = [
-                {"model": "nominal (tracker frame and tool fitted)", **(before.to_dict() if before else {})},
-                {"model": "geometric calibration", **after_geo.to_dict()},
-                {"model": "geometric + joint compliance", **after.to_dict()},
-            ]
-
-        with steps.step(next(names)):
-            T_base_device = spatial.inverse(result.frame)
-            cases: dict[str, Any] = {}
-            method = ""
-            if iso is not None:
-                commanded = iso.positions
-                q_comp, method = compensate_positions(result, commanded, iso.q)
-                cases = {"nominal commands": iso.q, "compensated commands": q_comp}
-                ev["iso_poses"] = {
-                    "labels": list(iso.labels),
-                    "commanded": commanded.tolist(),
-                    "cube": {"center": iso.cube.center.tolist(), "side": iso.cube.side, "plane": iso.plane},
-                    "cycles": cycles,
-                    "cases": {
-                        name: _measure_cycles(virtual(100 + k), q, cycles, seed + 100 + k, T_base_device)
-                        .transpose(1, 0, 2)
-                        .tolist()
-                        for k, (name, q) in enumerate(cases.items())
-                    },
-                }
-                paths = []
-                centre, side = iso.cube.center, iso.cube.side
-                corners = iso.cube.plane_corners(iso.plane)
-                k_samples = 40 if quick else 120
-                line = line_path(commanded[1], commanded[3], k_samples)
-                normal = np.cross(corners[1] - corners[0], corners[3] - corners[0])
-                u = commanded[1] - centre
-                u -= normal * (u @ normal) / (normal @ normal)
-                circle = circle_path(
-                    Circle(centre, 0.3 * side, normal / np.linalg.norm(normal), u / np.linalg.norm(u)),
-                    k_samples,
-                )
-                for name, pts in (("line P2–P4", line), ("circle r = 0.3 × side about P1", circle)):
-                    frames = spatial.homogeneous(np.broadcast_to(iso.orientation, (len(pts), 3, 3)), pts)
-                    jp = joint_path(nominal_tool, frames, kind=str(iso.info["kind"]), q0=iso.q[0])
-                    if not jp.reachable.all():
-                        continue
-                    q_c, method = compensate_positions(result, pts, jp.q)
-                    paths.append(
-                        {
-                            "name": name,
-                            "commanded": pts.tolist(),
-                            "cycles": path_cycles,
-                            "cases": {
-                                "nominal commands": _measure_cycles(
-                                    virtual(200 + len(paths)), jp.q, path_cycles, seed + 200, T_base_device
-                                ).tolist(),
-                                "compensated commands": _measure_cycles(
-                                    virtual(300 + len(paths)), q_c, path_cycles, seed + 300, T_base_device
-                                ).tolist(),
-                            },
-                            "max_joint_change_deg": float(np.degrees(np.abs(q_c - jp.q).max())),
-                        }
-                    )
-                ev["paths"] = paths
-                ev["compensation"] = {
-                    "method": method,
-                    "max_joint_change_deg": float(np.degrees(np.abs(q_comp - iso.q).max())),
-                }
-
-        with steps.step(next(names)):
-            report_path = None
-            if out is not None:
-                from robocal.evaluate.report import write_report
-                from robocal.measure.dataset import write_measurements
-                from robocal.model.files import atomic_write_text, save_model, strict_json
-
-                out = Path(out)
-                result.metadata |= {"source": "robocal demo", "robot": robot, "seed": seed}
-                if not quick:  # ISO 9283's fourteen characteristics, from a simulated timed log
-                    from robocal.evaluate.iso9283_report import evaluate_log
-                    from robocal.evaluate.iso9283_sim import simulate_log
-
-                    ev["iso9283"] = evaluate_log(simulate_log(nominal, seed=seed).log).to_dict()
-                ev["timings_s"] = dict(steps.timings)
-
-                def the_rest(stage: Path) -> None:  # written with the result, all or nothing
-                    from robocal.outdir import read_run_id
-
-                    run_id = read_run_id(stage / "result.json")  # each file carries the result's run id
-                    write_measurements(train, stage / "train.csv", run_id=run_id)
-                    write_measurements(test, stage / "test.csv", run_id=run_id)
-                    save_model(true, stage / "true_model.yaml", run_id=run_id)
-                    evaluation = ev | ({"run_id": run_id} if run_id else {})
-                    atomic_write_text(stage / "evaluation.json", strict_json(evaluation) + "\n")
-                    report = stage / "report.html"
-                    write_report(result, report, data=train, test_data=test, evaluation=ev, run_id=run_id)
-
-                result.save(out, also=the_rest)
-                report_path = out / "report.html"
+        for name, stage in zip(steps.names, stages, strict=True):
+            with steps.step(name):
+                stage()
     seconds = time.perf_counter() - t_start
-    numbers = _summary_numbers(result, before, after, after_geo, ev, seconds, report_path)
+    numbers = summary_numbers(
+        demo.result, demo.before, demo.after, demo.after_geo, demo.ev, seconds, demo.report_path
+    )
     numbers["timings_s"] = dict(steps.timings)
     if verbose:
-        _print_summary(numbers)
+        print_summary(numbers)
     return numbers
 
 
-def _summary_numbers(result, before, after, after_geo, ev, seconds, report_path) -> dict[str, Any]:
-    from robocal.evaluate.metrics import improvement, iso9283_pose_characteristics, path_accuracy
+class _Demo:
+    """The demo's state, built up step by step (one method per step of :func:`run_demo`)."""
 
-    out: dict[str, Any] = {
-        "robot": ev["robot"],
-        "seconds": seconds,
-        "report": None if report_path is None else str(report_path),
-        "calibration_rms_mm": {"before": result.rms_before * 1e3, "after": result.rms_after * 1e3},
-        "held_out": {
-            "before": None if before is None else before.to_dict(),
-            "geometric": after_geo.to_dict(),
-            "after": after.to_dict(),
-        },
-        "condition_number": result.condition_number,
-        "fit_to_noise": ev.get("fit_to_noise"),
-        "identified": len(result.names),
-        "dropped": len(result.dropped),
-    }
-    if before is not None:
-        out["held_out_improvement"] = improvement(before.errors * 1e3, after.errors * 1e3).to_dict()
-    iso = ev.get("iso_poses")
-    if iso:
-        out["iso9283"] = {}
-        for case, attained in iso["cases"].items():
-            ch = iso9283_pose_characteristics(iso["commanded"], attained, iso["labels"])
-            out["iso9283"][case] = {
-                "AP_max_mm": max(a.AP for a in ch.accuracy) * 1e3,
-                "RP_max_mm": max(r.RP for r in ch.repeatability) * 1e3,
-            }
-        for path in ev.get("paths", []):
-            for case, attained in path["cases"].items():
-                pa = path_accuracy(path["commanded"], attained)
-                out["iso9283"].setdefault(case, {})[f"AT {path['name']} mm"] = pa.AT * 1e3
-        out["compensation"] = ev.get("compensation", {}).get("method")
-    return out
+    def __init__(self, robot: str, seed: int, quick: bool, cycles: int) -> None:
+        self.robot, self.seed, self.quick, self.cycles = robot, seed, quick, cycles
+        self.path_cycles = max(3, cycles // 3)
+        self.rng = np.random.default_rng(seed)
+        self.ev: dict[str, Any] = {"robot": robot, "seed": seed}
+        self.report_path: Path | None = None
 
+    def build_model(self) -> None:
+        from robocal.identify.problem import measurement_chain
 
-def _print_summary(numbers: Mapping[str, Any]) -> None:
-    from rich.table import Table
-
-    from robocal.console import console, safe
-    from robocal.identify.guards import FitToNoise
-
-    held = numbers["held_out"]
-    table = Table(title=f"robocal demo — {numbers['robot']}: held-out poses", title_justify="left")
-    for col in ("model", "mean mm", "RMS mm", "p95 mm", "max mm"):
-        table.add_column(col, justify="left" if col == "model" else "right")
-    rows = [
-        ("before calibration (nominal)", held["before"]),
-        ("geometric calibration", held["geometric"]),
-        ("geometry + joint compliance", held["after"]),
-    ]
-    for name, s in rows:
-        if s:
-            table.add_row(
-                name, f"{s['mean_mm']:.3f}", f"{s['rms_mm']:.3f}", f"{s['p95_mm']:.3f}", f"{s['max_mm']:.3f}"
-            )
-    console.print(table)
-    for name, fit in (numbers.get("fit_to_noise") or {}).items():
-        if fit:
-            console.print(f"{name}: {FitToNoise.from_dict(fit).summary()}", highlight=False)
-    imp = numbers.get("held_out_improvement")
-    if imp:
-        console.print(
-            f"mean held-out error {imp['mean_before']:.3f} mm → {imp['mean_after']:.3f} mm: "
-            f"{imp['percent']:.1f} % smaller (95 % CI "
-            f"{imp['percent_low']:.1f} to {imp['percent_high']:.1f} %)",
-            highlight=False,
+        self.nominal = complete_model(self.robot, "position")
+        self.tool = np.array(SMR_OFFSET)
+        self.nominal_tool = measurement_chain(
+            self.nominal, np.eye(4), spatial.homogeneous(p=self.tool), "position", False
         )
-    iso = numbers.get("iso9283")
-    if iso:
-        cases = list(iso)
-        t2 = Table(title="ISO 9283 in the test cube (robot base frame)", title_justify="left")
-        t2.add_column("characteristic mm")
-        for case in cases:
-            t2.add_column(case.replace(" commands", ""), justify="right")
-        keys = list(dict.fromkeys(k for case in cases for k in iso[case]))
-        for k in keys:
-            label = k.replace("_max_mm", " (worst of P1-P5)").replace(" mm", "")
-            t2.add_row(label, *(f"{iso[c].get(k, float('nan')):.3f}" for c in cases))
-        console.print(t2)
-        console.print(f"compensation: {numbers.get('compensation')}", highlight=False)
-    console.print(
-        f"calibration RMS {numbers['calibration_rms_mm']['before']:.3f} mm → "
-        f"{numbers['calibration_rms_mm']['after']:.4f} mm, condition "
-        f"number {numbers['condition_number']:.3g}; "
-        f"total {numbers['seconds']:.1f} s",
-        highlight=False,
-    )
-    if numbers.get("report"):
-        console.print(f"[bold]report:[/] {safe(numbers['report'])}", highlight=False, markup=True)
+
+    def draw_robot(self) -> None:
+        from robocal.measure.devices import LaserTracker
+        from robocal.measure.poses import random_poses
+        from robocal.measure.simulate import draw_true_model
+        from robocal.model.dynamics import gravity_torques
+
+        nominal, rng = self.nominal, self.rng
+        self.true = true = draw_true_model(nominal, length=1e-3, angle=math.radians(0.1), seed=rng)
+        self.pool = random_poses(nominal, 400 if self.quick else 1000, seed=rng, margin=0.05)
+        tau = np.abs(gravity_torques(true, self.pool)).max(axis=0)
+        self.compliance = {
+            name: float(rng.uniform(2e-4, 6e-4) / tau[j])
+            for j, name in enumerate(nominal.joint_names)
+            if tau[j] > 0.05 * tau.max()
+        }
+        T_device_base = _tracker_frame(rng)
+        self.tracker = LaserTracker(
+            T_device_base=T_device_base, p_tool_target=self.tool, sigma=15e-6, sigma_per_m=6e-6
+        )
+        self.encoder = 1e-5  # rad, 1-sigma: repeatability
+        truth_deltas = {
+            n: float(v - v0)
+            for n, v, v0 in zip(true.names, true.values, nominal.values, strict=True)
+            if abs(v - v0) > 0
+        }
+        self.ev["truth"] = {
+            "parameter_deltas": truth_deltas,
+            "compliance_rad_per_Nm": self.compliance,
+            "T_device_base": T_device_base.tolist(),
+            "encoder_noise_rad": self.encoder,
+            "tracker": "15 µm + 6 µm/m (1σ per axis)",
+            "tolerances": "±1 mm lengths, ±0.1° angles (uniform)",
+        }
+
+    def virtual(self, noise_seed: int) -> Any:
+        """The real robot measured by the tracker, its encoders' noise seeded with ``noise_seed``."""
+        from robocal.measure.simulate import EncoderNoise, VirtualRobot
+
+        effects = [GravityCompliance(self.compliance), EncoderNoise(self.encoder, noise_seed)]
+        return VirtualRobot(self.nominal, self.true, self.tracker, effects)
+
+    def plan_poses(self, n_calibration: int, n_validation: int) -> None:
+        from robocal.identify.observability import select_poses
+        from robocal.measure.poses import iso9283_poses, random_poses
+
+        selection = select_poses(self.nominal, self.pool, n_calibration)
+        self.q_train = selection.q
+        self.q_test = random_poses(self.nominal, n_validation, seed=self.rng, margin=0.05)
+        search = {"samples": 1000, "candidates": 2} if self.quick else {}
+        self.iso = None
+        try:
+            self.iso = iso9283_poses(self.nominal_tool, seed=self.seed, **search)
+        except ValueError as err:  # e.g. a robot that cannot hold the orientation over a cube
+            self.ev["iso_error"] = str(err)
+        self.ev["poses"] = {
+            "calibration": len(self.q_train),
+            "held_out": len(self.q_test),
+            "pool": len(self.pool),
+            "selection_index": selection.index,
+            "O1": selection.value,
+        }
+
+    def simulate_measurements(self) -> None:
+        from robocal.measure.simulate import simulate
+
+        rng = self.rng
+        self.train = simulate(
+            self.virtual(int(rng.integers(1 << 31))), self.q_train, seed=int(rng.integers(1 << 31))
+        )
+        self.test = simulate(
+            self.virtual(int(rng.integers(1 << 31))), self.q_test, seed=int(rng.integers(1 << 31))
+        )
+
+    def calibrate(self) -> None:
+        import robocal as rc
+
+        self.result = rc.calibrate(self.nominal, self.train, tool_guess=self.tool, compliance=True)
+        self.geometric = rc.calibrate(self.nominal, self.train, tool_guess=self.tool)
+        # what each model leaves unexplained, from its residuals against the tracker noise
+        self.ev["fit_to_noise"] = {
+            "geometric calibration": self.geometric.metadata.get("fit_to_noise"),
+            "geometry + joint compliance": self.result.metadata.get("fit_to_noise"),
+        }
+
+    def validate(self) -> None:
+        import robocal as rc
+        from robocal.evaluate.report import before_validation
+
+        self.after = rc.validate(self.result, self.test)
+        self.after_geo = rc.validate(self.geometric, self.test)
+        self.before = before_validation(self.result, self.test)
+        self.result.metadata["validation"] = self.after.to_dict()
+        self.ev["comparison"] = [
+            {
+                "model": "nominal (tracker frame and tool fitted)",
+                **(self.before.to_dict() if self.before else {}),
+            },
+            {"model": "geometric calibration", **self.after_geo.to_dict()},
+            {"model": "geometric + joint compliance", **self.after.to_dict()},
+        ]
+
+    def compensate(self) -> None:
+        iso = self.iso
+        if iso is None:
+            return
+        T_base_device = spatial.inverse(self.result.frame)
+        commanded = iso.positions
+        q_comp, method = compensate_positions(self.result, commanded, iso.q)
+        cases = {"nominal commands": iso.q, "compensated commands": q_comp}
+        cycles, seed = self.cycles, self.seed
+        self.ev["iso_poses"] = {
+            "labels": list(iso.labels),
+            "commanded": commanded.tolist(),
+            "cube": {"center": iso.cube.center.tolist(), "side": iso.cube.side, "plane": iso.plane},
+            "cycles": cycles,
+            "cases": {
+                name: _measure_cycles(self.virtual(100 + k), q, cycles, seed + 100 + k, T_base_device)
+                .transpose(1, 0, 2)
+                .tolist()
+                for k, (name, q) in enumerate(cases.items())
+            },
+        }
+        paths, method = self._paths(T_base_device, method)
+        self.ev["paths"] = paths
+        self.ev["compensation"] = {
+            "method": method,
+            "max_joint_change_deg": float(np.degrees(np.abs(q_comp - iso.q).max())),
+        }
+
+    def _paths(self, T_base_device: Array, method: str) -> tuple[list[dict[str, Any]], str]:
+        """ISO 9283 AT/RT: a line P2-P4 and a circle about P1 in the cube's diagonal plane,
+        with nominal and compensated commands; and the last compensation method used."""
+        from robocal.measure.paths import Circle, circle_path, joint_path, line_path
+
+        iso, seed, path_cycles = self.iso, self.seed, self.path_cycles
+        commanded = iso.positions
+        paths: list[dict[str, Any]] = []
+        centre, side = iso.cube.center, iso.cube.side
+        corners = iso.cube.plane_corners(iso.plane)
+        k_samples = 40 if self.quick else 120
+        line = line_path(commanded[1], commanded[3], k_samples)
+        normal = np.cross(corners[1] - corners[0], corners[3] - corners[0])
+        u = commanded[1] - centre
+        u -= normal * (u @ normal) / (normal @ normal)
+        circle = circle_path(
+            Circle(centre, 0.3 * side, normal / np.linalg.norm(normal), u / np.linalg.norm(u)),
+            k_samples,
+        )
+        for name, pts in (("line P2–P4", line), ("circle r = 0.3 × side about P1", circle)):
+            frames = spatial.homogeneous(np.broadcast_to(iso.orientation, (len(pts), 3, 3)), pts)
+            jp = joint_path(self.nominal_tool, frames, kind=str(iso.info["kind"]), q0=iso.q[0])
+            if not jp.reachable.all():
+                continue
+            q_c, method = compensate_positions(self.result, pts, jp.q)
+            nominal_cycles = _measure_cycles(
+                self.virtual(200 + len(paths)), jp.q, path_cycles, seed + 200, T_base_device
+            )
+            compensated_cycles = _measure_cycles(
+                self.virtual(300 + len(paths)), q_c, path_cycles, seed + 300, T_base_device
+            )
+            paths.append(
+                {
+                    "name": name,
+                    "commanded": pts.tolist(),
+                    "cycles": path_cycles,
+                    "cases": {
+                        "nominal commands": nominal_cycles.tolist(),
+                        "compensated commands": compensated_cycles.tolist(),
+                    },
+                    "max_joint_change_deg": float(np.degrees(np.abs(q_c - jp.q).max())),
+                }
+            )
+        return paths, method
+
+    def write(self, out: Path | None, timings: Mapping[str, float]) -> None:
+        """The calibration, the data, ``evaluation.json`` and the report, all or nothing."""
+        if out is None:
+            return
+        from robocal.evaluate.report import write_report
+        from robocal.measure.dataset import write_measurements
+        from robocal.model.files import atomic_write_text, save_model, strict_json
+
+        result, ev = self.result, self.ev
+        result.metadata |= {"source": "robocal demo", "robot": self.robot, "seed": self.seed}
+        if not self.quick:  # ISO 9283's fourteen characteristics, from a simulated timed log
+            from robocal.evaluate.iso9283_report import evaluate_log
+            from robocal.evaluate.iso9283_sim import simulate_log
+
+            ev["iso9283"] = evaluate_log(simulate_log(self.nominal, seed=self.seed).log).to_dict()
+        ev["timings_s"] = dict(timings)
+
+        def the_rest(stage: Path) -> None:  # written with the result, all or nothing
+            from robocal.outdir import read_run_id
+
+            run_id = read_run_id(stage / "result.json")  # each file carries the result's run id
+            write_measurements(self.train, stage / "train.csv", run_id=run_id)
+            write_measurements(self.test, stage / "test.csv", run_id=run_id)
+            save_model(self.true, stage / "true_model.yaml", run_id=run_id)
+            evaluation = ev | ({"run_id": run_id} if run_id else {})
+            atomic_write_text(stage / "evaluation.json", strict_json(evaluation) + "\n")
+            report = stage / "report.html"
+            write_report(result, report, data=self.train, test_data=self.test, evaluation=ev, run_id=run_id)
+
+        result.save(out, also=the_rest)
+        self.report_path = out / "report.html"
