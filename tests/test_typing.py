@@ -31,6 +31,12 @@ def test_mypy_accepts_the_public_api(tmp_path):
         [*command, *checks, str(USAGE), *CHECKED], cwd=ROOT, capture_output=True, text=True, timeout=300
     )
     assert result.returncode == 0, result.stdout + result.stderr
+    # and mypy sees robocal's types (an unresolved package would be Any, and anything would pass)
+    wrong = tmp_path / "wrong.py"
+    wrong.write_text('import robocal as rc\n\nnames: list[int] = rc.robots()\nrc.no_such_name()\n')
+    result = subprocess.run([*command, str(wrong)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert "list[int]" in result.stdout and "no_such_name" in result.stdout, result.stdout
 
 
 def _type_checking_imports() -> set[tuple[str, str]]:
