@@ -62,3 +62,19 @@ def test_the_usage_file_uses_every_public_name():
     text = USAGE.read_text(encoding="utf-8")
     unused = [name for name in robocal.__all__ if f"rc.{name}" not in text]
     assert not unused, f"tests/typing/public_api.py does not use rc.{', rc.'.join(unused)}"
+
+
+@pytest.mark.parametrize(
+    "package",
+    ["robocal", *(f"robocal.{p}" for p in ("model", "measure", "identify", "compensate", "evaluate"))],
+)
+def test_every_exported_name_resolves(package):
+    """What a package's ``__all__`` and lazy map promise is there (a lazy map entry written
+    ``("name")`` instead of ``("name",)`` would map the name's letters)."""
+    import importlib
+
+    module = importlib.import_module(package)
+    lazy = module.__dict__.get("_lazy_exports", {})
+    assert all(len(name) > 1 for name in lazy), sorted(name for name in lazy if len(name) == 1)
+    missing = [name for name in module.__all__ if not hasattr(module, name)]
+    assert not missing, f"{package}: {missing}"

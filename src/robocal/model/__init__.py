@@ -7,7 +7,7 @@ lazy_package(
     {
         "robocal.model.catalog": ("robot", "robots"),
         "robocal.model.chain": ("Body", "Joint", "JointEffects", "Model", "Step"),
-        "robocal.model.complete": ("calibration_model"),
+        "robocal.model.complete": ("calibration_model",),
         "robocal.model.files": ("ModelFileError", "load_model", "save_model"),
     },
 )
