@@ -5,16 +5,13 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import TYPE_CHECKING, Literal
+from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from robocal.model.chain import Model
-
-if TYPE_CHECKING:
-    from robocal.measure.ik import _Problem
 
 Array = NDArray[np.float64]
 TargetKind = Literal["position", "pose", "axis"]
@@ -73,7 +70,17 @@ def _seed_tree(model: Model, size: int, kind: TargetKind, w: float, k: int) -> c
     return cKDTree(_features(_seed_pool(model, size)[1], kind, w, k))
 
 
-def _nearest_pool(problem: _Problem, size: int, idx: NDArray[np.intp], rank: int) -> Array:
+class _Targets(Protocol):
+    """What :func:`_nearest_pool` reads of the IK's problem (``robocal.measure.ik._Problem``)."""
+
+    model: Model
+    T: Array  # (n, 4, 4) target frames
+    kind: TargetKind
+    w: float  # orientation weight, m/rad
+    k: int  # the tool axis of kind "axis"
+
+
+def _nearest_pool(problem: _Targets, size: int, idx: NDArray[np.intp], rank: int) -> Array:
     """For targets ``idx``: the pool configuration whose tool frame is the ``rank``-th
     nearest (0 = nearest) to the target's, ``(len(idx), dof)``."""
     tree = _seed_tree(problem.model, size, problem.kind, problem.w, problem.k)

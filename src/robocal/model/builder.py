@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -59,8 +60,7 @@ from robocal.model.geometry import (
     _normalise,
     geometry_fk,
 )
-from robocal.model.geometry_file import Geometry as Geometry
-from robocal.model.geometry_file import load_geometry
+from robocal.model.geometry_file import read_geometry_file
 
 __all__ = [
     "BuildResult",
@@ -392,3 +392,44 @@ def _check_reproduces(model: Model, geo, tcp: Tcp, measure: Measure) -> None:
         raise AssertionError("builder bug: the TCP is not reproduced")
     if measure == "pose" and tcp.rotation is not None and not np.allclose(T[:3, :3], tcp.rotation, atol=1e-9):
         raise AssertionError("builder bug: the TCP orientation is not reproduced")
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """A parsed geometry file, ready for :func:`build`."""
+
+    name: str
+    joints: tuple[JointGeometry, ...]
+    tcp: Tcp
+    measure: Measure
+    parallel_tolerance: float
+    title: str = ""
+    source: str = ""
+
+    def build(self, measure: Measure | None = None) -> BuildResult:
+        return build(
+            self.joints,
+            self.tcp,
+            measure or self.measure,
+            name=self.name,
+            parallel_tolerance=self.parallel_tolerance,
+            title=self.title,
+            source=self.source,
+        )
+
+
+def load_geometry(path: str | Path) -> Geometry:
+    """Read a joint-geometry YAML file (``unit: m|mm``, ``angle_unit: deg|rad``).
+
+    Example::
+
+        name: scara
+        unit: mm
+        joints:
+          - {type: revolute, position: [0, 0, 400], axis: [0, 0, 1], limits: [-170, 170]}
+          - {type: revolute, position: [350, 0, 0], axis: [0, 0, 1]}
+          - {type: prismatic, position: [300, 0, 0], axis: [0, 0, -1], limits: [0, 200]}
+          - {type: revolute, position: [0, 0, -50], axis: [0, 0, -1]}
+        tcp: {position: [0, 0, -100]}
+    """
+    return Geometry(*read_geometry_file(path))

@@ -1,11 +1,11 @@
-"""Joint-geometry files (YAML): :func:`load_geometry` reads one into a :class:`Geometry`."""
+"""Joint-geometry files (YAML), read and checked; :func:`robocal.model.builder.load_geometry`
+makes one a :class:`~robocal.model.builder.Geometry`."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -20,9 +20,6 @@ from robocal.model.geometry import (
     Tcp,
     _normalise,
 )
-
-if TYPE_CHECKING:
-    from robocal.model.builder import BuildResult
 
 _Config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
@@ -56,46 +53,12 @@ class _GeometryFile(BaseModel):
     tcp: _TcpSpec = _TcpSpec()
 
 
-@dataclass(frozen=True)
-class Geometry:
-    """A parsed geometry file, ready for :func:`build`."""
-
-    name: str
-    joints: tuple[JointGeometry, ...]
-    tcp: Tcp
-    measure: Measure
-    parallel_tolerance: float
-    title: str = ""
-    source: str = ""
-
-    def build(self, measure: Measure | None = None) -> BuildResult:
-        from robocal.model.builder import build  # the builder imports this module
-
-        return build(
-            self.joints,
-            self.tcp,
-            measure or self.measure,
-            name=self.name,
-            parallel_tolerance=self.parallel_tolerance,
-            title=self.title,
-            source=self.source,
-        )
-
-
-def load_geometry(path: str | Path) -> Geometry:
-    """Read a joint-geometry YAML file (``unit: m|mm``, ``angle_unit: deg|rad``).
-
-    Example::
-
-        name: scara
-        unit: mm
-        joints:
-          - {type: revolute, position: [0, 0, 400], axis: [0, 0, 1], limits: [-170, 170]}
-          - {type: revolute, position: [350, 0, 0], axis: [0, 0, 1]}
-          - {type: prismatic, position: [300, 0, 0], axis: [0, 0, -1], limits: [0, 200]}
-          - {type: revolute, position: [0, 0, -50], axis: [0, 0, -1]}
-        tcp: {position: [0, 0, -100]}
-    """
+def read_geometry_file(
+    path: str | Path,
+) -> tuple[str, tuple[JointGeometry, ...], Tcp, Measure, float, str, str]:
+    """A geometry file's fields, checked and in SI units: name, joints, TCP, measure, parallel
+    tolerance (rad), title, source (:func:`robocal.model.builder.load_geometry` makes them a
+    :class:`~robocal.model.builder.Geometry`)."""
     from robocal.model.files import format_validation_error, read_yaml
 
     path = Path(path)
@@ -135,4 +98,4 @@ def load_geometry(path: str | Path) -> Geometry:
         _normalise(joints, tcp)
     except GeometryError as err:
         raise GeometryError(f"{path}: {err}") from None
-    return Geometry(spec.name, tuple(joints), tcp, spec.measure, tol, spec.title, spec.source)
+    return spec.name, tuple(joints), tcp, spec.measure, tol, spec.title, spec.source

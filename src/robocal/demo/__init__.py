@@ -211,7 +211,7 @@ def run_demo(
         quick: smaller pool, cube search and cycles (for tests).
         verbose: Rich progress and the closing summary.
     """
-    from robocal.demo_console import Steps, print_summary, summary_numbers
+    from robocal.demo.console import Steps, print_summary, summary_numbers
 
     t_start = time.perf_counter()
     demo = _Demo(robot, seed, quick, min(cycles, 5) if quick else cycles)
