@@ -31,8 +31,18 @@ lazy_package(
     },
 )
 
-if TYPE_CHECKING:
-    from robocal.model.chain import Model
+if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_typing.py keeps them equal)
+    from pathlib import Path
+
+    from robocal.compensate.commands import compensate
+    from robocal.identify.calibrate import CalibrationResult, calibrate
+    from robocal.identify.validate import cross_validate, validate
+    from robocal.measure.dataset import Measurements, read_measurements, write_measurements
+    from robocal.model.builder import build_model
+    from robocal.model.catalog import robot, robots
+    from robocal.model.chain import Body, Joint, JointEffects, Model, Step
+    from robocal.model.complete import calibration_model
+    from robocal.model.files import ModelFileError, load_model, save_model
 
 
 __all__ = [
@@ -62,7 +72,7 @@ __all__ = [
 ]
 
 
-def model_from_urdf(path, measure: str = "pose", tip: str | None = None) -> Model:
+def model_from_urdf(path: str | Path, measure: str = "pose", tip: str | None = None) -> Model:
     """A complete, minimal, singularity-free calibration model of a URDF robot."""
     from robocal.model.urdf import model_from_urdf as _from_urdf  # Pinocchio: imported on use
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib
 import sys
 import types
+from typing import Any
 
 __all__ = ["lazy_package"]
 
@@ -23,7 +24,7 @@ __all__ = ["lazy_package"]
 class _LazyPackage(types.ModuleType):
     _lazy_exports: dict[str, str]
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:
         module = self.__dict__.get("_lazy_exports", {}).get(name)
         if module is None:  # a subpackage or module (rc.measure), as the eager imports bound them
             full = f"{self.__name__}.{name}"
@@ -37,7 +38,7 @@ class _LazyPackage(types.ModuleType):
         self.__dict__[name] = value
         return value
 
-    def __setattr__(self, name: str, value) -> None:
+    def __setattr__(self, name: str, value: object) -> None:
         exports = self.__dict__.get("_lazy_exports", {})
         if (
             name in exports

@@ -205,6 +205,55 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
             first problem.
     """
     name = str(path)
+    lines = _read_lines(path)
+    conditions, skip = _header(lines)
+    if skip >= len(lines):
+        raise _fail(name, None, None, "no header line (the file is empty or holds only comments)")
+    table, where = _records(name, lines, skip)
+    header = [c.strip() for c in table[0]] if table else []
+    _check_header(name, header, where[0] if where else None)
+    body = table[1:]
+    for k, r in enumerate(body):
+        if len(r) != len(header):
+            raise _fail(name, where[k + 1], None, f"{len(r)} fields, but the header has {len(header)}")
+    df = pd.DataFrame(body, columns=header, dtype=str)
+    if len(df) == 0:
+        raise _fail(name, None, None, "no data rows")
+    line = np.array(where[1:], dtype=int)
+    values = _numeric_columns(name, df, line)
+    texts = _text_columns(name, df, line)
+    _check_cycles_and_time(name, values, texts, line)
+    mm = 1e-3
+    pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
+    cmd = np.column_stack([values[c] for c in ("cmd_x_mm", "cmd_y_mm", "cmd_z_mm")]) * mm
+    R = Rc = None
+    if "a_deg" in values:
+        R = spatial.euler_to_matrix(
+            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[:3]])), ANGLES
+        )
+        Rc = spatial.euler_to_matrix(
+            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[3:]])), ANGLES
+        )
+    force = np.column_stack([values[c] for c in FORCE_COLUMNS]) if "fx_N" in values else None
+    return Iso9283Log(
+        source=name,
+        conditions=conditions,
+        time=values["time_s"],
+        test=texts["test"],
+        cycle=values["cycle"].astype(int),
+        target=texts["target"],
+        group=texts["group"],
+        position=pos,
+        commanded=cmd,
+        rotation=R,
+        commanded_rotation=Rc,
+        force=force,
+        line=line,
+    )
+
+
+def _read_lines(path: str | Path) -> list[str]:
+    name = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -215,10 +264,12 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
         raise Iso9283LogError(
             f"{name}: cannot read the file ({err.strerror or err.__class__.__name__})"
         ) from None
-    lines = text.splitlines()
-    conditions, skip = _header(lines)
-    if skip >= len(lines):
-        raise _fail(name, None, None, "no header line (the file is empty or holds only comments)")
+    return text.splitlines()
+
+
+def _records(name: str, lines: list[str], skip: int) -> tuple[list[list[str]], list[int]]:
+    """The CSV records after the ``skip`` header lines (blank lines skipped) and the line
+    number of each in the file."""
     table: list[list[str]] = []
     where: list[int] = []  # line number of every record in the file
     reader = csv.reader(io.StringIO("\n".join(lines[skip:])), strict=True)
@@ -229,38 +280,31 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
                 where.append(skip + reader.line_num)
     except csv.Error as err:
         raise _fail(name, skip + reader.line_num, None, f"not a CSV table: {err}") from None
-    header = [c.strip() for c in table[0]] if table else []
+    return table, where
+
+
+def _check_header(name: str, header: list[str], at: int | None) -> None:
     if len(header) == 1 and (";" in header[0] or "\t" in header[0]):
-        raise _fail(name, where[0], None, "the header has one column: columns must be separated by commas")
+        raise _fail(name, at, None, "the header has one column: columns must be separated by commas")
     seen = [c for k, c in enumerate(header) if c in header[:k]]
     if seen:
-        raise _fail(name, where[0], None, f"duplicate column {_short(seen[0])}")
+        raise _fail(name, at, None, f"duplicate column {_short(seen[0])}")
     unknown = [c for c in header if c not in COLUMNS]
     if unknown:
-        raise _fail(
-            name, where[0], None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})"
-        )
+        raise _fail(name, at, None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})")
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
-        raise _fail(name, where[0], None, f"missing column(s) {', '.join(missing)}")
+        raise _fail(name, at, None, f"missing column(s) {', '.join(missing)}")
     for group_cols, what in ((ORIENTATION_COLUMNS, "orientation"), (FORCE_COLUMNS, "load")):
         have = [c for c in group_cols if c in header]
         if have and len(have) != len(group_cols):
             lacking = [c for c in group_cols if c not in header]
-            raise _fail(
-                name, where[0], None, f"{what} columns come all or none: missing {', '.join(lacking)}"
-            )
-    body = table[1:]
-    for k, r in enumerate(body):
-        if len(r) != len(header):
-            raise _fail(name, where[k + 1], None, f"{len(r)} fields, but the header has {len(header)}")
-    df = pd.DataFrame(body, columns=header, dtype=str)
-    if len(df) == 0:
-        raise _fail(name, None, None, "no data rows")
-    line = np.array(where[1:], dtype=int)
-    numeric = [c for c in df.columns if c not in _TEXT]
+            raise _fail(name, at, None, f"{what} columns come all or none: missing {', '.join(lacking)}")
+
+
+def _numeric_columns(name: str, df: pd.DataFrame, line: NDArray[np.int_]) -> dict[str, np.ndarray]:
     values: dict[str, np.ndarray] = {}
-    for c in numeric:
+    for c in [c for c in df.columns if c not in _TEXT]:
         raw = df[c].str.strip()
         num = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
         bad = ~np.isfinite(num)
@@ -269,6 +313,10 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
             what = "empty" if raw.iloc[i] == "" else f"{_short(raw.iloc[i])} is not a finite number"
             raise _fail(name, int(line[i]), c, what)
         values[c] = num
+    return values
+
+
+def _text_columns(name: str, df: pd.DataFrame, line: NDArray[np.int_]) -> dict[str, np.ndarray]:
     texts = {
         c: df[c].str.strip().to_numpy(dtype=str) if c in df.columns else np.full(len(df), "") for c in _TEXT
     }
@@ -282,6 +330,12 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
         raise _fail(
             name, int(line[i]), "test", f"{_short(texts['test'][i])} is not one of {', '.join(TESTS)}"
         )
+    return texts
+
+
+def _check_cycles_and_time(
+    name: str, values: dict[str, np.ndarray], texts: dict[str, np.ndarray], line: NDArray[np.int_]
+) -> None:
     cyc = values["cycle"]
     bad_cycle = (cyc < 1) | (cyc != np.round(cyc))
     if bad_cycle.any():
@@ -299,33 +353,6 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
                 "time_s",
                 f"time goes back within test {test} ({t[i]:g} s after {t[i - 1]:g} s)",
             )
-    mm = 1e-3
-    pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
-    cmd = np.column_stack([values[c] for c in ("cmd_x_mm", "cmd_y_mm", "cmd_z_mm")]) * mm
-    R = Rc = None
-    if "a_deg" in values:
-        R = spatial.euler_to_matrix(
-            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[:3]])), ANGLES
-        )
-        Rc = spatial.euler_to_matrix(
-            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[3:]])), ANGLES
-        )
-    force = np.column_stack([values[c] for c in FORCE_COLUMNS]) if "fx_N" in values else None
-    return Iso9283Log(
-        source=name,
-        conditions=conditions,
-        time=t,
-        test=texts["test"],
-        cycle=cyc.astype(int),
-        target=texts["target"],
-        group=texts["group"],
-        position=pos,
-        commanded=cmd,
-        rotation=R,
-        commanded_rotation=Rc,
-        force=force,
-        line=line,
-    )
 
 
 def log_text(log: Iso9283Log, decimals: int = 6) -> str:

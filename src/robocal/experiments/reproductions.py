@@ -15,7 +15,7 @@ out, so that a cheap run can check the sections it does compute.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -275,69 +275,75 @@ def _fig_3_8(fig: dict[str, dict[str, float]]) -> Section:
 
 
 def sections_seed003(numbers: dict[str, Any]) -> list[Section]:
-    from robocal.experiments.seed003 import THESIS
-
     sections: list[Section] = []
     t34 = numbers.get("table_3_4")
     if t34 is not None:
-        fig = t34["influence_analysis"]
-        th = THESIS["table_3_4_average_dP"]
-        cal, held = t34["calibration_dP"], t34["held_out_dP"]
-        rows = [
-            Row("Fig. 3.8: θ2 +0.05°, average tool shift (mm)", "0.34", _f(fig["theta2"]["average_mm"])),
-            Row("Fig. 3.8: k of α2 (θ2 = 1)", "0.59", _f(fig["alpha2"]["k_of_average"], 2)),
-        ]
-        for key, label, seed_v in (
-            ("before", "before calibration", th["before"]),
-            ("standard", "standard (eq. 3.6 per pose, averaged)", th["standard"]),
-            ("influence", "influence-based (eqs. 3.7-3.8, averaged)", th["influence"]),
-            ("influence_best", "influence-based, best per-pose set", None),
-            ("influence_repeated", "influence-based, repeated until it stops", None),
-            ("least_squares", "least squares over all poses", None),
-            ("least_average", "least average any set of these parameters reaches", None),
-        ):
-            why = {
-                "before": "the virtual Katana: Table 3.2's geometry and Table 5.2's joints",
-                "standard": "averaging 118 per-pose minimum-norm sets recovers little of the error",
-                "influence": "k moves the correction to the influential parameters: lower, but not by 45 %",
-                "least_squares": "the RMS floor on these poses; the rest is the joints' tilting",
-                "least_average": "no identification of these parameters gets below it, the thesis' 0.21 does",
-            }.get(key, "")
-            rows.append(
-                Row(
-                    f"Table 3.4 mean position error, 118 poses (mm): {label}; held out",
-                    "—" if seed_v is None else f"{seed_v:.2f}",
-                    f"{cal[key]['mean']:.3f}; {held[key]['mean']:.3f}",
-                    why,
-                    quote=key in ("before", "standard", "influence", "least_squares", "least_average"),
-                )
-            )
-        table = t34["table_3_4"]
-        for key, label in (
-            ("before", "before"),
-            ("standard", "standard"),
-            ("influence", "influence-based"),
-            ("least_squares", "least squares"),
-        ):
-            seed_cols = THESIS["table_3_4"].get(key)
-            rows.append(
-                Row(
-                    f"Table 3.4 mean absolute X / Y / Z (mm); Φ / θ / Ψ (deg), 118 poses: {label}",
-                    "—" if seed_cols is None else _columns(seed_cols),
-                    _columns(table[key]),
-                    "orientation is measured, not identified, as in the thesis" if key == "before" else "",
-                )
-            )
-        sections.append(
-            Section(
-                "Ch. 3: influence-based identification (Table 3.4)",
-                tuple(rows),
-                tuple(numbers.get("table_3_4_notes", ())),
-            )
-        )
-        sections.append(_fig_3_8(fig))
+        sections += _sections_chapter_3(t34, numbers.get("table_3_4_notes", ()))
     if "calibration_average_dP" not in numbers:
         return sections
+    return [*sections, _section_chapter_4(numbers), _section_chapter_5(numbers)]
+
+
+def _sections_chapter_3(t34: dict[str, Any], notes: Sequence[str]) -> list[Section]:
+    from robocal.experiments.seed003 import THESIS
+
+    fig = t34["influence_analysis"]
+    th = THESIS["table_3_4_average_dP"]
+    cal, held = t34["calibration_dP"], t34["held_out_dP"]
+    rows = [
+        Row("Fig. 3.8: θ2 +0.05°, average tool shift (mm)", "0.34", _f(fig["theta2"]["average_mm"])),
+        Row("Fig. 3.8: k of α2 (θ2 = 1)", "0.59", _f(fig["alpha2"]["k_of_average"], 2)),
+    ]
+    for key, label, seed_v in (
+        ("before", "before calibration", th["before"]),
+        ("standard", "standard (eq. 3.6 per pose, averaged)", th["standard"]),
+        ("influence", "influence-based (eqs. 3.7-3.8, averaged)", th["influence"]),
+        ("influence_best", "influence-based, best per-pose set", None),
+        ("influence_repeated", "influence-based, repeated until it stops", None),
+        ("least_squares", "least squares over all poses", None),
+        ("least_average", "least average any set of these parameters reaches", None),
+    ):
+        why = {
+            "before": "the virtual Katana: Table 3.2's geometry and Table 5.2's joints",
+            "standard": "averaging 118 per-pose minimum-norm sets recovers little of the error",
+            "influence": "k moves the correction to the influential parameters: lower, but not by 45 %",
+            "least_squares": "the RMS floor on these poses; the rest is the joints' tilting",
+            "least_average": "no identification of these parameters gets below it, the thesis' 0.21 does",
+        }.get(key, "")
+        rows.append(
+            Row(
+                f"Table 3.4 mean position error, 118 poses (mm): {label}; held out",
+                "—" if seed_v is None else f"{seed_v:.2f}",
+                f"{cal[key]['mean']:.3f}; {held[key]['mean']:.3f}",
+                why,
+                quote=key in ("before", "standard", "influence", "least_squares", "least_average"),
+            )
+        )
+    table = t34["table_3_4"]
+    for key, label in (
+        ("before", "before"),
+        ("standard", "standard"),
+        ("influence", "influence-based"),
+        ("least_squares", "least squares"),
+    ):
+        seed_cols = THESIS["table_3_4"].get(key)
+        rows.append(
+            Row(
+                f"Table 3.4 mean absolute X / Y / Z (mm); Φ / θ / Ψ (deg), 118 poses: {label}",
+                "—" if seed_cols is None else _columns(seed_cols),
+                _columns(table[key]),
+                "orientation is measured, not identified, as in the thesis" if key == "before" else "",
+            )
+        )
+    return [
+        Section("Ch. 3: influence-based identification (Table 3.4)", tuple(rows), tuple(notes)),
+        _fig_3_8(fig),
+    ]
+
+
+def _section_chapter_4(numbers: dict[str, Any]) -> Section:
+    from robocal.experiments.seed003 import THESIS
+
     cal, held = numbers["calibration_average_dP"], numbers["held_out_average_dP"]
     t45, t46 = THESIS["table_4_5"]["average"], THESIS["held_out_average_dP"]
     static = []
@@ -372,7 +378,12 @@ def sections_seed003(numbers: dict[str, Any]) -> list[Section]:
             quote=True,
         )
     )
-    sections.append(Section("Ch. 4: static calibration (Tables 4.5, 4.6)", tuple(static)))
+    return Section("Ch. 4: static calibration (Tables 4.5, 4.6)", tuple(static))
+
+
+def _section_chapter_5(numbers: dict[str, Any]) -> Section:
+    from robocal.experiments.seed003 import THESIS
+
     tr, ttr = numbers["trajectory"], THESIS["trajectory_average_dP"]
     circle, line = tr["circle_average_dP"], tr["line_average_dP"]
     traj = [
@@ -391,8 +402,7 @@ def sections_seed003(numbers: dict[str, Any]) -> list[Section]:
     ]
     traj.append(Row("circle: influence-based + tilting (§6.2)", "—", f"{circle['influence_tilting']:.4f}"))
     traj.append(Row("line after calibration (tilting)", f"{ttr['line_after']:.3f}", f"{line['tilting']:.4f}"))
-    sections.append(Section("Ch. 5: the circle (§5.4-5.5, eq. 5.22)", tuple(traj), tuple(numbers["notes"])))
-    return sections
+    return Section("Ch. 5: the circle (§5.4-5.5, eq. 5.22)", tuple(traj), tuple(numbers["notes"]))
 
 
 #: experiment -> (title, sections function)

@@ -212,7 +212,7 @@ def _still_joints(model: Model, q: Array) -> list[str]:
     return [model.joint_names[j] for j in range(model.dof) if np.ptp(q[:, j]) < 1e-9]
 
 
-def check_rank(
+def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes them
     model: Model,
     data: Measurements,
     *,

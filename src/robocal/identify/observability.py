@@ -327,6 +327,64 @@ def _logdet_gain(Minv_solve: Array, B: Array) -> Array:
     return np.where(sign > 0, logdet, -np.inf)
 
 
+class _Pool:
+    """A candidate pool's per-pose blocks ``B`` ``(N, r, p)`` and the index being maximised."""
+
+    def __init__(self, B: Array, index: IndexName, shortlist: int) -> None:
+        N, _, p = B.shape
+        self.B, self.Bt = B, np.swapaxes(B, 1, 2)
+        self.info = np.einsum("nrp,nrq->npq", B, B)  # per-candidate B_cᵀ B_c
+        self.ridge = 1e-9 * float(np.trace(self.info.sum(axis=0))) / (N * p)
+        self.I_p = np.eye(p)
+        self.index, self.shortlist = index, shortlist
+
+    def value(self, M: Array, count: int) -> float:
+        lam = np.linalg.eigvalsh(M - self.ridge * self.I_p)
+        return float(_index_from_eig(lam, count, self.index))
+
+    def scores(self, M: Array, free: NDArray[np.intp], count: int) -> Array:
+        """Index after adding each free candidate to information ``M`` (with ridge)."""
+        _, r, p = self.B.shape
+        X = np.linalg.solve(M, self.Bt[free].transpose(1, 0, 2).reshape(p, -1))
+        gain = _logdet_gain(X.reshape(p, len(free), r).transpose(1, 0, 2), self.B[free])
+        if self.index == "O1" or count * r < p:  # determinant while the rank cannot be full
+            return gain
+        top = np.argsort(-gain)[: max(self.shortlist, 1)]
+        lam = np.linalg.eigvalsh(M[None] + self.info[free[top]] - self.ridge * self.I_p)
+        out = np.full(len(free), -np.inf)
+        out[top] = _index_from_eig(lam, count, self.index)
+        return out
+
+    def exchange(
+        self, sel: list[int], chosen: NDArray[np.bool_], M: Array, value: float, max_passes: int
+    ) -> tuple[int, int]:
+        """DETMAX-style exchanges on ``sel``/``chosen`` (updated in place) until no swap helps;
+        returns the number of swaps and passes."""
+        n = len(sel)
+        current = float(np.linalg.slogdet(M)[1]) if self.index == "O1" else value
+        swaps = passes = 0
+        for passes in range(1, max_passes + 1):  # noqa: B007 - the count is reported
+            improved = False
+            for pos in range(n):
+                out = sel[pos]
+                M_minus = M - self.info[out]
+                free = np.flatnonzero(~chosen)
+                sc = self.scores(M_minus, free, n)
+                j = int(np.argmax(sc))
+                new = float(np.linalg.slogdet(M_minus)[1]) + sc[j] if self.index == "O1" else sc[j]
+                if new > current + 1e-9 * max(abs(current), 1.0):
+                    k = int(free[j])
+                    chosen[out], chosen[k] = False, True
+                    sel[pos] = k
+                    M = M_minus + self.info[k]
+                    current = new
+                    swaps += 1
+                    improved = True
+            if not improved:
+                break
+        return swaps, passes
+
+
 def select_poses(
     model: Model,
     candidates: ArrayLike,
@@ -373,28 +431,7 @@ def select_poses(
         params = identifiable_parameters(model, Q, rows=rows).kept
     Js, s, names = scaled_jacobian(model, Q, rows=rows, params=params, scale=scale)
     r, p = (3 if rows == "position" else 6), len(names)
-    B = Js.reshape(N, r, p)
-    Bt = np.swapaxes(B, 1, 2)
-    info = np.einsum("nrp,nrq->npq", B, B)  # per-candidate B_cᵀ B_c
-    ridge = 1e-9 * float(np.trace(info.sum(axis=0))) / (N * p)
-    I_p = np.eye(p)
-
-    def value(M: Array, count: int) -> float:
-        lam = np.linalg.eigvalsh(M - ridge * I_p)
-        return float(_index_from_eig(lam, count, index))
-
-    def scores(M: Array, free: NDArray[np.intp], count: int) -> Array:
-        """Index after adding each free candidate to information ``M`` (with ridge)."""
-        X = np.linalg.solve(M, Bt[free].transpose(1, 0, 2).reshape(p, -1))
-        gain = _logdet_gain(X.reshape(p, len(free), r).transpose(1, 0, 2), B[free])
-        if index == "O1" or count * r < p:  # determinant while the rank cannot be full
-            return gain
-        top = np.argsort(-gain)[: max(shortlist, 1)]
-        lam = np.linalg.eigvalsh(M[None] + info[free[top]] - ridge * I_p)
-        out = np.full(len(free), -np.inf)
-        out[top] = _index_from_eig(lam, count, index)
-        return out
-
+    design = _Pool(Js.reshape(N, r, p), index, shortlist)
     chosen = np.zeros(N, dtype=bool)
     if initial is not None:
         sel = [int(i) for i in np.asarray(initial).reshape(-1)]
@@ -402,36 +439,16 @@ def select_poses(
             raise ValueError(f"initial must be {n} distinct indices into {N} candidates")
     else:
         sel = []
-    M = ridge * I_p + info[sel].sum(axis=0)
+    M = design.ridge * design.I_p + design.info[sel].sum(axis=0)
     chosen[sel] = True
     while len(sel) < n:  # greedy construction
         free = np.flatnonzero(~chosen)
-        k = int(free[np.argmax(scores(M, free, len(sel) + 1))])
+        k = int(free[np.argmax(design.scores(M, free, len(sel) + 1))])
         sel.append(k)
         chosen[k] = True
-        M = M + info[k]
-    greedy_value = value(M, n)
-    current = float(np.linalg.slogdet(M)[1]) if index == "O1" else greedy_value
-    swaps = passes = 0
-    for passes in range(1, max_passes + 1):  # noqa: B007 - the count is reported
-        improved = False
-        for pos in range(n):
-            out = sel[pos]
-            M_minus = M - info[out]
-            free = np.flatnonzero(~chosen)
-            sc = scores(M_minus, free, n)
-            j = int(np.argmax(sc))
-            new = float(np.linalg.slogdet(M_minus)[1]) + sc[j] if index == "O1" else sc[j]
-            if new > current + 1e-9 * max(abs(current), 1.0):
-                k = int(free[j])
-                chosen[out], chosen[k] = False, True
-                sel[pos] = k
-                M = M_minus + info[k]
-                current = new
-                swaps += 1
-                improved = True
-        if not improved:
-            break
+        M = M + design.info[k]
+    greedy_value = design.value(M, n)
+    swaps, passes = design.exchange(sel, chosen, M, greedy_value, max_passes)
     idx = np.array(sel, dtype=np.intp)
     final = observability_indices(singular_values(Js.reshape(N, r, p)[idx].reshape(-1, p)), n, p)
     return PoseSelection(

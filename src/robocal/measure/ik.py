@@ -39,30 +39,28 @@ at every iterate and passed to ``fk`` and ``joint_jacobian``; the Jacobian negle
 their own derivative with respect to ``q``, so the iteration converges to the fixed
 point ``fk(q, joint_effects(q)) = target`` as long as the effects change slowly with
 ``q`` (used by :mod:`robocal.compensate`).
+
+Starting configurations (random ones and the cached pool): :mod:`robocal.measure.ik_starts`.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from robocal import spatial
+from robocal.measure.ik_starts import TargetKind, _nearest_pool, random_configurations
 from robocal.model.chain import Model
 
 __all__ = ["IKResult", "PerturbationFunction", "TargetKind", "random_configurations", "solve_ik"]
 
 Array = NDArray[np.float64]
-TargetKind = Literal["position", "pose", "axis"]
 #: ``joint_effects(q (m, dof)) -> (m, dof, 3)`` joint perturbations, or None for none
 PerturbationFunction = Callable[[NDArray[np.float64]], NDArray[np.float64] | None]
-_POOL_SEED = 20240917  # the seed pool is fixed: results depend on `seed` only through random restarts
 
 
 @dataclass(frozen=True)
@@ -110,31 +108,6 @@ class IKResult:
             f"{len(bad)} of {n} targets not reached (first: target {bad[0]}); worst position error "
             f"{self.position_error[worst] * 1e3:.3g} mm at target {worst}"
         )
-
-
-def _sampling_box(model: Model) -> Array:
-    """``(dof, 2)`` box for random configurations: the joint limits, revolute joints
-    clipped to [-π, π], prismatic joints without limits to [-1, 1] m."""
-    box = model.joint_limits.copy()
-    revolute = np.array([t == "revolute" for t in model.joint_types])
-    wide = np.where(revolute, math.pi, 1.0)
-    box[:, 0] = np.maximum(box[:, 0], -wide)
-    box[:, 1] = np.minimum(box[:, 1], wide)
-    # a limit range entirely outside [-π, π] keeps its own limits
-    empty = box[:, 0] > box[:, 1]
-    box[empty] = model.joint_limits[empty]
-    return box
-
-
-def random_configurations(model: Model, n: int, rng: np.random.Generator | int | None = 0) -> Array:
-    """``(n, dof)`` configurations drawn uniformly within the joint limits (seeded).
-
-    Revolute joints whose limits are wider than [-π, π] are drawn in [-π, π] (every
-    orientation of the joint once); joints without limits in [-π, π] rad or [-1, 1] m.
-    """
-    rng = np.random.default_rng(rng)
-    box = _sampling_box(model)
-    return box[:, 0] + rng.random((int(n), model.dof)) * (box[:, 1] - box[:, 0])
 
 
 def _targets(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Array, TargetKind]:
@@ -223,40 +196,6 @@ class _Problem:
         return e, J, dist, angle
 
 
-def _features(T: Array, kind: TargetKind, w: float, k: int) -> Array:
-    """Task-space feature vectors whose squared Euclidean distance is the squared
-    position distance plus ``w²`` times a squared orientation distance
-    (``3 − trace(R_aᵀ R_b) ≈ angle²`` for poses, ``2 (1 − a·b) ≈ angle²`` for an axis)."""
-    p = T[:, :3, 3]
-    if kind == "position":
-        return p
-    if kind == "pose":
-        return np.concatenate([p, (w / math.sqrt(2.0)) * T[:, :3, :3].reshape(-1, 9)], axis=1)
-    return np.concatenate([p, w * T[:, :3, k]], axis=1)
-
-
-@lru_cache(maxsize=4)
-def _seed_pool(model: Model, size: int) -> tuple[Array, Array]:
-    """A fixed pool of ``size`` random configurations (seeded, cached per model) and
-    their tool frames."""
-    q = random_configurations(model, size, _POOL_SEED)
-    return q, model.fk(q)
-
-
-@lru_cache(maxsize=8)
-def _seed_tree(model: Model, size: int, kind: TargetKind, w: float, k: int) -> cKDTree:
-    return cKDTree(_features(_seed_pool(model, size)[1], kind, w, k))
-
-
-def _nearest_pool(problem: _Problem, size: int, idx: NDArray[np.intp], rank: int) -> Array:
-    """For targets ``idx``: the pool configuration whose tool frame is the ``rank``-th
-    nearest (0 = nearest) to the target's, ``(len(idx), dof)``."""
-    tree = _seed_tree(problem.model, size, problem.kind, problem.w, problem.k)
-    _, nn = tree.query(_features(problem.T[idx], problem.kind, problem.w, problem.k), k=rank + 1)
-    nn = np.asarray(nn).reshape(len(idx), rank + 1)
-    return _seed_pool(problem.model, size)[0][nn[:, rank]]
-
-
 def _lm_step(J: Array, e: Array, mu: Array) -> Array:
     """Damped least-squares steps ``dq`` (m, dof) minimising |J dq − e|² + mu |dq|²."""
     _, rows, dof = J.shape
@@ -325,7 +264,7 @@ def _run_lm(
     return q, dist, angle, iters
 
 
-def solve_ik(
+def solve_ik(  # noqa: PLR0913 - keyword-only options of a public function
     model: Model,
     targets: ArrayLike,
     *,
@@ -375,91 +314,25 @@ def solve_ik(
     """
     T, kind = _targets(targets, kind)
     n, dof = len(T), model.dof
-    if tool_axis not in (0, 1, 2):
-        raise ValueError(f"tool_axis must be 0, 1 or 2 (x, y, z), got {tool_axis!r}")
-    if restarts < 0 or max_iter < 1:
-        raise ValueError(f"restarts must be >= 0 and max_iter >= 1, got {restarts}, {max_iter}")
-    if not (tol > 0 and tol_angle > 0):
-        raise ValueError(f"tolerances must be positive, got tol={tol}, tol_angle={tol_angle}")
-    rng = np.random.default_rng(seed)
-    limits = model.joint_limits
-    q_start: Array | None = None
-    if q0 is not None:
-        q_start = np.asarray(q0, dtype=float)
-        if q_start.ndim == 1:
-            q_start = np.broadcast_to(q_start, (n, len(q_start)))
-        if q_start.shape != (n, dof):
-            raise ValueError(
-                f"q0 shaped {np.shape(q0)} does not fit {n} targets of model {model.name!r} "
-                f"with {dof} joints; expected ({n}, {dof}) or ({dof},)"
-            )
-        if not np.all(np.isfinite(q_start)):
-            raise ValueError("q0 contains NaN or inf")
+    _check_options(tool_axis, restarts, max_iter, tol, tol_angle)
+    q_start = None if q0 is None else _start_configurations(q0, n, model)
     problem = _Problem(model, T, kind, tool_axis, float(orientation_weight), joint_effects)
-    idx = np.arange(n)
     if n == 0:
         empty = np.zeros(0)
-        return IKResult(
-            np.zeros((0, dof)),
-            empty,
-            empty,
-            np.zeros(0, bool),
-            np.zeros(0, np.int64),
-            np.zeros(0, np.int64),
-            kind,
-        )
-    # starting configurations: q0, else the pool configuration nearest to the target;
-    # restarts alternate between the next-nearest pool configurations and fresh random ones
-    max_rank = 1 + (restarts + 1) // 2
-
-    def nearest(rank: int, rows: NDArray[np.intp]) -> Array | None:
-        """Starts for targets ``rows``: their ``rank``-th nearest pool configurations."""
-        if seed_pool <= 0 or rank >= min(max_rank, seed_pool):
-            return None
-        return _nearest_pool(problem, int(seed_pool), rows, rank)
-
-    used_near = 0
+        zeros = np.zeros(0, np.int64)
+        return IKResult(np.zeros((0, dof)), empty, empty, np.zeros(0, bool), zeros, zeros, kind)
+    search = _Search(
+        problem, np.random.default_rng(seed), tol, tol_angle, max_iter, damping, seed_pool, restarts
+    )
+    idx = np.arange(n)
     if q_start is None:
-        q_start = nearest(0, idx)
-        used_near = 1
+        q_start = search.nearest(0, idx)
+        search.used_near = 1
         if q_start is None:
-            q_start = random_configurations(model, n, rng)
-    q, dist, angle, iters = _run_lm(problem, q_start, idx, limits, tol, tol_angle, max_iter, damping)
+            q_start = random_configurations(model, n, search.rng)
+    q, dist, angle, iters = search.run(q_start, idx)
     seeds_used = np.ones(n, dtype=np.int64)
-    w2 = orientation_weight**2
-
-    def badness(d: Array, a: Array) -> Array:
-        return d**2 + w2 * a**2
-
-    # restarts in rounds of 1, 2, 4, 8, 8, ... starts per unreached target, solved together
-    remaining, rounds, slot = restarts, 0, 0
-    while remaining > 0:
-        todo = np.flatnonzero(~((dist < tol) & (angle < tol_angle)))
-        if not len(todo):
-            break
-        k = min(2**rounds, 8, remaining)
-        starts = []
-        for _ in range(k):
-            start = nearest(used_near, todo) if slot % 2 == 0 else None
-            if start is None:
-                start = random_configurations(model, len(todo), rng)
-            else:
-                used_near += 1
-            starts.append(start)
-            slot += 1
-        q_r, d_r, a_r, it_r = _run_lm(
-            problem, np.concatenate(starts), np.tile(todo, k), limits, tol, tol_angle, max_iter, damping
-        )
-        bad_r = badness(d_r, a_r).reshape(k, len(todo))
-        best = np.argmin(bad_r, axis=0)
-        pick = best * len(todo) + np.arange(len(todo))
-        better = bad_r[best, np.arange(len(todo))] < badness(dist[todo], angle[todo])
-        sel = todo[better]
-        q[sel], dist[sel], angle[sel] = q_r[pick[better]], d_r[pick[better]], a_r[pick[better]]
-        iters[todo] += it_r.reshape(k, len(todo)).sum(axis=0)
-        seeds_used[todo] += k
-        remaining -= k
-        rounds += 1
+    search.restart(q, dist, angle, iters, seeds_used, restarts, orientation_weight**2)
     reachable = (dist < tol) & (angle < tol_angle)
     return IKResult(
         q=q,
@@ -470,3 +343,106 @@ def solve_ik(
         seeds_used=seeds_used,
         kind=kind,
     )
+
+
+def _check_options(tool_axis: int, restarts: int, max_iter: int, tol: float, tol_angle: float) -> None:
+    if tool_axis not in (0, 1, 2):
+        raise ValueError(f"tool_axis must be 0, 1 or 2 (x, y, z), got {tool_axis!r}")
+    if restarts < 0 or max_iter < 1:
+        raise ValueError(f"restarts must be >= 0 and max_iter >= 1, got {restarts}, {max_iter}")
+    if not (tol > 0 and tol_angle > 0):
+        raise ValueError(f"tolerances must be positive, got tol={tol}, tol_angle={tol_angle}")
+
+
+def _start_configurations(q0: ArrayLike, n: int, model: Model) -> Array:
+    """``q0`` as ``(n, dof)`` starting configurations (one ``(dof,)`` row serves every target)."""
+    dof = model.dof
+    q_start = np.asarray(q0, dtype=float)
+    if q_start.ndim == 1:
+        q_start = np.broadcast_to(q_start, (n, len(q_start)))
+    if q_start.shape != (n, dof):
+        raise ValueError(
+            f"q0 shaped {np.shape(q0)} does not fit {n} targets of model {model.name!r} "
+            f"with {dof} joints; expected ({n}, {dof}) or ({dof},)"
+        )
+    if not np.all(np.isfinite(q_start)):
+        raise ValueError("q0 contains NaN or inf")
+    return q_start
+
+
+class _Search:
+    """Starting configurations and LM runs of one :func:`solve_ik` call: q0, else the pool
+    configuration nearest to the target; restarts alternate between the next-nearest pool
+    configurations and fresh random ones."""
+
+    def __init__(
+        self,
+        problem: _Problem,
+        rng: np.random.Generator,
+        tol: float,
+        tol_angle: float,
+        max_iter: int,
+        damping: float,
+        seed_pool: int,
+        restarts: int,
+    ) -> None:
+        self.problem, self.rng = problem, rng
+        self.limits = problem.model.joint_limits
+        self.tol, self.tol_angle, self.max_iter, self.damping = tol, tol_angle, max_iter, damping
+        self.seed_pool = int(seed_pool)
+        self.max_rank = 1 + (restarts + 1) // 2
+        self.used_near = 0
+
+    def nearest(self, rank: int, rows: NDArray[np.intp]) -> Array | None:
+        """Starts for targets ``rows``: their ``rank``-th nearest pool configurations."""
+        if self.seed_pool <= 0 or rank >= min(self.max_rank, self.seed_pool):
+            return None
+        return _nearest_pool(self.problem, self.seed_pool, rows, rank)
+
+    def run(self, q_start: Array, rows: NDArray[np.intp]) -> tuple[Array, Array, Array, NDArray[np.int64]]:
+        return _run_lm(
+            self.problem, q_start, rows, self.limits, self.tol, self.tol_angle, self.max_iter, self.damping
+        )
+
+    def restart(
+        self,
+        q: Array,
+        dist: Array,
+        angle: Array,
+        iters: NDArray[np.int64],
+        seeds_used: NDArray[np.int64],
+        restarts: int,
+        w2: float,
+    ) -> None:
+        """Restarts in rounds of 1, 2, 4, 8, 8, ... starts per unreached target, solved together;
+        the arrays are updated in place where a restart does better."""
+
+        def badness(d: Array, a: Array) -> Array:
+            return d**2 + w2 * a**2
+
+        remaining, rounds, slot = restarts, 0, 0
+        while remaining > 0:
+            todo = np.flatnonzero(~((dist < self.tol) & (angle < self.tol_angle)))
+            if not len(todo):
+                break
+            k = min(2**rounds, 8, remaining)
+            starts = []
+            for _ in range(k):
+                start = self.nearest(self.used_near, todo) if slot % 2 == 0 else None
+                if start is None:
+                    start = random_configurations(self.problem.model, len(todo), self.rng)
+                else:
+                    self.used_near += 1
+                starts.append(start)
+                slot += 1
+            q_r, d_r, a_r, it_r = self.run(np.concatenate(starts), np.tile(todo, k))
+            bad_r = badness(d_r, a_r).reshape(k, len(todo))
+            best = np.argmin(bad_r, axis=0)
+            pick = best * len(todo) + np.arange(len(todo))
+            better = bad_r[best, np.arange(len(todo))] < badness(dist[todo], angle[todo])
+            sel = todo[better]
+            q[sel], dist[sel], angle[sel] = q_r[pick[better]], d_r[pick[better]], a_r[pick[better]]
+            iters[todo] += it_r.reshape(k, len(todo)).sum(axis=0)
+            seeds_used[todo] += k
+            remaining -= k
+            rounds += 1

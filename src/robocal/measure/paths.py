@@ -20,6 +20,7 @@ Positions are metres in the robot's base frame, times seconds, velocities m/s.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -364,6 +365,19 @@ def joint_path(
         ik(slice(0, 1), q0)
         if not reach[0]:
             ik(slice(0, 1), q0, restarts=20)
+    _follow(ik, q, reach, block, max_joint_step)
+    steps = np.r_[0.0, np.abs(np.diff(q, axis=0)).max(axis=1)] if n > 1 else np.zeros(1)
+    jumps = np.flatnonzero(steps > max_joint_step)
+    return JointPath(q=q, reachable=reach, position_error=dist, angle_error=angle, jumps=jumps)
+
+
+def _follow(
+    ik: Callable[[slice, Array], None], q: Array, reach: NDArray[np.bool_], block: int, max_joint_step: float
+) -> None:
+    """Solve samples 1.. of a path (``ik`` fills ``q`` and ``reach`` for a slice) in blocks from
+    the last reached configuration; a block that misses a sample or jumps by more than
+    ``max_joint_step`` is re-solved one sample at a time from its first doubtful sample on."""
+    n = len(q)
     last = q[0].copy()
     i = 1
     while i < n:
@@ -379,6 +393,3 @@ def joint_path(
         elif reach[j - 1]:
             last = q[j - 1].copy()
         i = j
-    steps = np.r_[0.0, np.abs(np.diff(q, axis=0)).max(axis=1)] if n > 1 else np.zeros(1)
-    jumps = np.flatnonzero(steps > max_joint_step)
-    return JointPath(q=q, reachable=reach, position_error=dist, angle_error=angle, jumps=jumps)

@@ -219,7 +219,7 @@ def _check_kinds(kinds: Iterable[str]) -> tuple[str, ...]:
     return kinds
 
 
-def joint_perturbations(
+def joint_perturbations(  # noqa: PLR0913 - the load model's keyword-only options, as load_moments
     model: Model,
     q: ArrayLike,
     qd: ArrayLike | None = None,
@@ -280,7 +280,7 @@ def joint_perturbations(
 
 
 # ------------------------------------------------------------------ identification
-def effect_basis(
+def effect_basis(  # noqa: PLR0913 - the load model's keyword-only options, as load_moments
     model: Model,
     q: ArrayLike,
     qd: ArrayLike | None = None,

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
+from robocal.model.chain import Model
 
 __all__ = ["URDFError", "build_from_urdf", "geometry_from_urdf", "model_from_urdf"]
 
@@ -74,6 +75,14 @@ def _check_xml(path: Path) -> None:
     column), joints without parent or child link, links that do not exist, numbers
     that are not numbers, a zero axis, inverted limits, a revolute or prismatic joint
     without limits."""
+    links, joints = _scan_xml(path)
+    _check_joints(path, links, joints)
+    _check_tree(path, joints)
+
+
+def _scan_xml(path: Path) -> tuple[set[str], list[dict]]:
+    """The robot's link names and its joints (name, type, line, parent, child, limit), checking
+    the syntax and each joint element's numbers on the way."""
     from xml.parsers import expat
 
     parser = expat.ParserCreate()
@@ -103,30 +112,7 @@ def _check_xml(path: Path) -> None:
             joint_names.add(attrs.get("name"))
             joints.append({"name": attrs.get("name"), "type": attrs.get("type"), "line": line})
         elif parent == "joint" and joints:
-            j = joints[-1]
-            if tag in ("parent", "child"):
-                j[tag] = (attrs.get("link"), line)
-            elif tag == "origin":
-                _numbers(attrs.get("xyz"), 3, "origin xyz", line)
-                _numbers(attrs.get("rpy"), 3, "origin rpy", line)
-            elif tag == "axis":
-                axis = _numbers(attrs.get("xyz"), 3, "axis xyz", line)
-                if axis is not None and not any(axis):
-                    raise URDFError(f"line {line}: joint {j['name']!r}: the axis is zero")
-            elif tag == "mimic":
-                raise URDFError(
-                    f"line {line}: joint {j['name']!r} mimics joint {attrs.get('joint')!r}: coupled (mimic) "
-                    "joints are not supported (robocal would calibrate it as an independent joint); make it "
-                    "fixed or remove the <mimic> element if the joint really moves on its own"
-                )
-            elif tag == "limit":
-                lo = _numbers(attrs.get("lower", "0"), 1, "limit lower", line)
-                hi = _numbers(attrs.get("upper", "0"), 1, "limit upper", line)
-                if lo[0] > hi[0]:
-                    raise URDFError(
-                        f"line {line}: joint {j['name']!r}: limit lower {lo[0]:g} > upper {hi[0]:g}"
-                    )
-                j["limit"] = True
+            _joint_element(joints[-1], tag, attrs, line)
 
     parser.StartDoctypeDeclHandler = refuse
     parser.EntityDeclHandler = refuse
@@ -142,6 +128,35 @@ def _check_xml(path: Path) -> None:
         ) from None
     except URDFError as err:
         raise URDFError(f"{path}: {err}") from None
+    return links, joints
+
+
+def _joint_element(j: dict, tag: str, attrs: dict[str, str], line: int) -> None:
+    """Record or check one element inside ``<joint>`` ``j``."""
+    if tag in ("parent", "child"):
+        j[tag] = (attrs.get("link"), line)
+    elif tag == "origin":
+        _numbers(attrs.get("xyz"), 3, "origin xyz", line)
+        _numbers(attrs.get("rpy"), 3, "origin rpy", line)
+    elif tag == "axis":
+        axis = _numbers(attrs.get("xyz"), 3, "axis xyz", line)
+        if axis is not None and not any(axis):
+            raise URDFError(f"line {line}: joint {j['name']!r}: the axis is zero")
+    elif tag == "mimic":
+        raise URDFError(
+            f"line {line}: joint {j['name']!r} mimics joint {attrs.get('joint')!r}: coupled (mimic) "
+            "joints are not supported (robocal would calibrate it as an independent joint); make it "
+            "fixed or remove the <mimic> element if the joint really moves on its own"
+        )
+    elif tag == "limit":
+        lo = _numbers(attrs.get("lower", "0"), 1, "limit lower", line)
+        hi = _numbers(attrs.get("upper", "0"), 1, "limit upper", line)
+        if lo[0] > hi[0]:
+            raise URDFError(f"line {line}: joint {j['name']!r}: limit lower {lo[0]:g} > upper {hi[0]:g}")
+        j["limit"] = True
+
+
+def _check_joints(path: Path, links: set[str], joints: list[dict]) -> None:
     for j in joints:
         where = f"{path}: line {j['line']}: joint {j['name']!r}"
         if not j["name"]:
@@ -164,6 +179,10 @@ def _check_xml(path: Path) -> None:
     movable = sum(j["type"] != "fixed" for j in joints)
     if movable > MAX_URDF_JOINTS:
         raise URDFError(f"{path}: {movable} movable joints; robocal reads URDFs of up to {MAX_URDF_JOINTS}")
+
+
+def _check_tree(path: Path, joints: list[dict]) -> None:
+    """Every link is the child of one joint at most, and the joints form no loop."""
     children: dict[str, str] = {}
     parent_of: dict[str, str] = {}
     for j in joints:
@@ -309,6 +328,8 @@ def build_from_urdf(
         raise URDFError(f"{path}: {err}") from None
 
 
-def model_from_urdf(path: str | Path, measure: str = "pose", tip: str | None = None, name: str | None = None):
+def model_from_urdf(
+    path: str | Path, measure: str = "pose", tip: str | None = None, name: str | None = None
+) -> Model:
     """The calibration model of a URDF robot (see :func:`build_from_urdf`)."""
     return build_from_urdf(path, measure, tip, name).model

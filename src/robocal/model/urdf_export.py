@@ -36,13 +36,14 @@ load-dependent), a learned residual — is stated in an XML comment after ``<rob
 (the caller passes the notes and their sizes).
 
 Units: SI (m, rad) in the file, as URDF prescribes.
+
+Reading the source URDF's bytes: :mod:`robocal.model.urdf_source`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,6 +54,16 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.model.chain import Model, Role
 from robocal.model.urdf import URDFError, _read_checked
+from robocal.model.urdf_source import (
+    _axis_of,
+    _chain_to,
+    _default_tip,
+    _JointInfo,
+    _origin_of,
+    _scan,
+    _set_attrs,
+    urdf_origin,
+)
 
 __all__ = ["TOOL_PREFIX", "URDFExport", "calibrated_urdf", "rpy_from_matrix", "urdf_origin"]
 
@@ -100,12 +111,6 @@ def rpy_from_matrix(R: Array) -> tuple[float, float, float]:
     pitch = math.atan2(-M[2, 0], M[2, 2])
     yaw = math.atan2(-M[0, 1], M[1, 1])
     return roll, pitch, yaw
-
-
-def urdf_origin(xyz: Sequence[float], rpy: Sequence[float]) -> Array:
-    """The 4x4 transform of a URDF ``<origin xyz rpy>`` (m, rad)."""
-    r, p, y = rpy
-    return spatial.homogeneous(spatial.rotz(y) @ spatial.roty(p) @ spatial.rotx(r), xyz)
 
 
 def _num(v: float) -> str:
@@ -161,149 +166,10 @@ def _minimal_rotation(b: Array, a: Array) -> Array:
     return spatial.rotvec_to_matrix(v / s * math.atan2(s, c))
 
 
-# ---------------------------------------------------------------------- the source URDF
-@dataclass
-class _Element:
-    tag: str
-    start: int  # byte index of "<"
-    end: int  # byte index after the start tag's ">"
-    line: int
-    attrs: dict[str, str]
-
-
-@dataclass
-class _JointInfo:
-    name: str
-    type: str
-    line: int
-    element: _Element
-    parent: str = ""
-    child: str = ""
-    origin: _Element | None = None
-    axis: _Element | None = None
-
-
-def _tag_end(data: bytes, start: int) -> int:
-    """Byte index after the ``>`` closing the start tag at ``start`` (quotes respected)."""
-    quote = None
-    for i in range(start + 1, len(data)):
-        ch = data[i : i + 1]
-        if quote:
-            if ch == quote:
-                quote = None
-        elif ch in (b'"', b"'"):
-            quote = ch
-        elif ch == b">":
-            return i + 1
-    raise URDFError("unterminated tag")  # pragma: no cover - expat refused it before
-
-
-def _scan(path: Path, data: bytes) -> tuple[dict[str, _JointInfo], list[str], _Element]:
-    """Joints (in file order) with their element positions, the links, the ``<robot>``."""
-    from xml.parsers import expat
-
-    parser = expat.ParserCreate()
-    parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
-    joints: dict[str, _JointInfo] = {}
-    links: list[str] = []
-    stack: list[str] = []
-    robot: list[_Element] = []
-
-    def start(tag, attrs):
-        i = parser.CurrentByteIndex
-        el = _Element(tag, i, _tag_end(data, i), parser.CurrentLineNumber, dict(attrs))
-        parent = stack[-1] if stack else None
-        stack.append(tag)
-        if tag == "robot" and parent is None:
-            robot.append(el)
-        elif tag == "link" and parent == "robot":
-            links.append(attrs.get("name", ""))
-        elif tag == "joint" and parent == "robot":
-            name = attrs.get("name", "")
-            joints[name] = _JointInfo(name, attrs.get("type", ""), el.line, el)
-        elif parent == "joint" and len(stack) == 3 and joints:
-            j = joints[next(reversed(joints))]
-            if tag == "parent":
-                j.parent = attrs.get("link", "")
-            elif tag == "child":
-                j.child = attrs.get("link", "")
-            elif tag == "origin":
-                j.origin = el
-            elif tag == "axis":
-                j.axis = el
-
-    parser.StartElementHandler = start
-    parser.EndElementHandler = lambda tag: stack.pop()
-    parser.Parse(data, True)
-    if not robot:
-        raise URDFError(f"{path}: no <robot> root element")
-    return joints, links, robot[0]
-
-
-def _origin_of(j: _JointInfo) -> Array:
-    if j.origin is None:
-        return np.eye(4)
-    xyz = [float(v) for v in j.origin.attrs.get("xyz", "0 0 0").split()]
-    rpy = [float(v) for v in j.origin.attrs.get("rpy", "0 0 0").split()]
-    return urdf_origin(xyz, rpy)
-
-
-def _axis_of(j: _JointInfo) -> Array:
-    a = np.array([float(v) for v in (j.axis.attrs.get("xyz", "1 0 0") if j.axis else "1 0 0").split()])
-    return a / np.linalg.norm(a)
-
-
-def _set_attrs(tag: bytes, values: dict[str, str]) -> bytes:
-    """The start tag ``tag`` with attributes set (replaced in place, or appended)."""
-    for key, value in values.items():
-        pattern = re.compile(rb"(\s" + key.encode() + rb"\s*=\s*)([\"'])(.*?)\2", re.S)
-        m = pattern.search(tag)
-        if m:
-            q = m.group(2)
-            tag = tag[: m.start()] + m.group(1) + q + value.encode() + q + tag[m.end() :]
-        else:
-            close = len(tag) - (2 if tag.endswith(b"/>") else 1)
-            sep = b"" if tag[close - 1 : close].isspace() else b" "
-            tag = (
-                tag[:close]
-                + sep
-                + f'{key}="{value}"'.encode()
-                + (b" " if tag.endswith(b"/>") else b"")
-                + tag[close:]
-            )
-    return tag
-
-
 def _comment(notes: Sequence[str]) -> str:
     lines = ["robocal: calibrated kinematics (joint origins rewritten; joint offsets folded in)."]
     lines += [n.replace("--", "-") for n in notes]
     return "<!-- " + "\n     ".join(lines) + " -->"
-
-
-def _chain_to(joints: dict[str, _JointInfo], tip: str) -> list[_JointInfo]:
-    by_child = {j.child: j for j in joints.values()}
-    chain, link = [], tip
-    while link in by_child:
-        j = by_child[link]
-        chain.append(j)
-        link = j.parent
-    return chain[::-1]
-
-
-def _default_tip(joints: dict[str, _JointInfo], last_movable: _JointInfo) -> str:
-    """The link where the chain ends: the last link (in file order) reached from the last
-    movable joint's child through fixed joints only (``tool0`` in the ROS descriptions)."""
-    reach = {last_movable.child}
-    tip = last_movable.child
-    changed = True
-    while changed:
-        changed = False
-        for j in joints.values():
-            if j.type == "fixed" and j.parent in reach and j.child not in reach:
-                reach.add(j.child)
-                tip = j.child
-                changed = True
-    return tip
 
 
 def _export_source(
@@ -319,16 +185,86 @@ def _export_source(
     _read_checked(path)
     data = path.read_bytes()
     joints, links, robot = _scan(path, data)
+    chain, tip_link = _source_chain(path, model.joint_names, joints, links, tip)
+    root = chain[0].parent
+    # nominal link frames of the URDF at zero, and the calibrated ones
+    nom, cal = _split(nominal), _split(model)
+    new_origin, new_axis, W_urdf, W_last = _calibrated_joints(path, chain, nom, cal)
+    # the flange: the first fixed joint after the last movable joint carries the correction
+    after = chain[[j.name for j in chain].index(model.joint_names[-1]) + 1 :]
+    # the URDF's tip in the nominal model's flange frame: a rotation when the model does not
+    # hold the flange orientation (position measurement); it rides on the calibrated flange
+    G = spatial.inverse(nom.T_base_flange0) @ W_urdf
+    if np.linalg.norm(G[:3, 3]) > MATCH_TOL:
+        raise URDFError(
+            f"{path}: link {tip_link!r} is {np.linalg.norm(G[:3, 3]) * 1e3:.4g} mm from the nominal "
+            "model's flange: give the link the model ends at (tip)"
+        )
+    G[:3, 3] = 0.0
+    T_base_tip = cal.T_base_flange0 @ G
+    flange_link: str | None = None
+    flange_pair: str | None = None
+    if after:
+        rest = np.eye(4)
+        for j in after[1:]:
+            rest = rest @ _origin_of(j)
+        new_origin[after[0].name] = spatial.inverse(W_last) @ T_base_tip @ spatial.inverse(rest)
+    else:
+        gap = spatial.inverse(W_last) @ T_base_tip
+        if (
+            np.linalg.norm(gap[:3, 3]) > 1e-12
+            or np.linalg.norm(spatial.matrix_to_rotvec(gap[:3, :3])) > 1e-12
+        ):
+            # no fixed joint to carry the calibrated flange: a new flange link on the tip
+            flange_link = f"{tip_link}_calibrated"
+            flange_pair = _fixed_pair(flange_link, tip_link, gap, links, parent_is_new=False)
+            notes = [
+                *notes,
+                f"the calibrated flange is link {flange_link} (the chain ended at {tip_link}, "
+                "which has no fixed joint to carry it)",
+            ]
+    # edit the bytes, last edit first
+    edits = _joint_edits(data, joints, new_origin, new_axis)
+    additions: list[str] = [] if flange_pair is None else [flange_pair]
+    new_root = root
+    if device_link is not None:
+        if T_device_base is None:
+            raise ValueError("a device link needs T_device_base (the calibration's device frame)")
+        additions.append(_fixed_pair(device_link, root, np.asarray(T_device_base, dtype=float), links))
+        new_root = device_link
+    if tool_link is not None:
+        T_tip_tool = spatial.inverse(G) @ cal.T_flange_tool
+        parent = tip_link if flange_link is None else flange_link
+        additions.append(_fixed_pair(tool_link, parent, T_tip_tool, links, parent_is_new=False))
+    end_robot = data.rfind(b"</robot>")
+    if additions:
+        block = "\n  " + "\n  ".join(additions) + "\n"
+        edits.append((end_robot, end_robot, block.encode()))
+    comment = "\n  " + _comment(notes).replace("\n", "\n  ")
+    edits.append((robot.end, robot.end, comment.encode()))
+    return URDFExport(
+        text=_apply_edits(path, data, edits),
+        root=new_root,
+        tip=tip_link if flange_link is None else flange_link,
+        tool_link=tool_link,
+        changed=tuple(sorted(set(new_origin) | set(new_axis), key=list(joints).index)),
+        notes=tuple(notes),
+    )
+
+
+def _source_chain(
+    path: Path, names: Sequence[str], joints: dict[str, _JointInfo], links: list[str], tip: str | None
+) -> tuple[list[_JointInfo], str]:
+    """The URDF's joints from its root to the tip link (``tip`` or the default), checked to move
+    the model's joints ``names`` in order; and the tip link."""
     movable = {n: j for n, j in joints.items() if j.type != "fixed"}
-    names = model.joint_names
     missing = [n for n in names if n not in movable]
     if missing:
         raise URDFError(
             f"{path}: the model's joint(s) {', '.join(missing)} are not movable joints of this URDF "
             f"(it has {', '.join(movable) or 'none'}): not the URDF the model was built from"
         )
-    last = movable[names[-1]]
-    tip_link = tip or _default_tip(joints, last)
+    tip_link = tip or _default_tip(joints, movable[names[-1]])
     if tip_link not in links:
         raise URDFError(f"{path}: no link {tip_link!r}; links are {', '.join(links)}")
     chain = _chain_to(joints, tip_link)
@@ -338,10 +274,15 @@ def _export_source(
             f"{path}: the chain to {tip_link!r} moves {', '.join(chain_movable)}; the model has "
             f"{', '.join(names)}"
         )
-    root = chain[0].parent
-    # nominal link frames of the URDF at zero, and the calibrated ones
-    nom = _split(nominal)
-    cal = _split(model)
+    return chain, tip_link
+
+
+def _calibrated_joints(
+    path: Path, chain: list[_JointInfo], nom: _Chain, cal: _Chain
+) -> tuple[dict[str, Array], dict[str, Array], Array, Array]:
+    """The calibrated origin (and axis, where it changed) of every movable joint of ``chain``,
+    the nominal frame of the chain's end in the URDF ``W_urdf`` and the calibrated frame of the
+    last movable joint ``W_last`` (base frame, at zero)."""
     W_urdf = np.eye(4)
     W_cal = W_last = np.eye(4)
     new_origin: dict[str, Array] = {}
@@ -383,40 +324,14 @@ def _export_source(
         if cal.axes[k] != nom.axes[k] or np.linalg.norm(axis_cal - a) > 1e-15:
             new_axis[j.name] = axis_cal
         k += 1
-    # the flange: the first fixed joint after the last movable joint carries the correction
-    after = chain[[j.name for j in chain].index(names[-1]) + 1 :]
-    # the URDF's tip in the nominal model's flange frame: a rotation when the model does not
-    # hold the flange orientation (position measurement); it rides on the calibrated flange
-    G = spatial.inverse(nom.T_base_flange0) @ W_urdf
-    if np.linalg.norm(G[:3, 3]) > MATCH_TOL:
-        raise URDFError(
-            f"{path}: link {tip_link!r} is {np.linalg.norm(G[:3, 3]) * 1e3:.4g} mm from the nominal "
-            "model's flange: give the link the model ends at (tip)"
-        )
-    G[:3, 3] = 0.0
-    T_base_tip = cal.T_base_flange0 @ G
-    flange_link: str | None = None
-    flange_pair: str | None = None
-    if after:
-        rest = np.eye(4)
-        for j in after[1:]:
-            rest = rest @ _origin_of(j)
-        new_origin[after[0].name] = spatial.inverse(W_last) @ T_base_tip @ spatial.inverse(rest)
-    else:
-        gap = spatial.inverse(W_last) @ T_base_tip
-        if (
-            np.linalg.norm(gap[:3, 3]) > 1e-12
-            or np.linalg.norm(spatial.matrix_to_rotvec(gap[:3, :3])) > 1e-12
-        ):
-            # no fixed joint to carry the calibrated flange: a new flange link on the tip
-            flange_link = f"{tip_link}_calibrated"
-            flange_pair = _fixed_pair(flange_link, tip_link, gap, links, parent_is_new=False)
-            notes = [
-                *notes,
-                f"the calibrated flange is link {flange_link} (the chain ended at {tip_link}, "
-                "which has no fixed joint to carry it)",
-            ]
-    # edit the bytes, last edit first
+    return new_origin, new_axis, W_urdf, W_last
+
+
+def _joint_edits(
+    data: bytes, joints: dict[str, _JointInfo], new_origin: dict[str, Array], new_axis: dict[str, Array]
+) -> list[tuple[int, int, bytes]]:
+    """Byte edits ``(start, end, new)`` writing the new origins and axes; an origin that did not
+    change is dropped from ``new_origin`` and keeps its text as written."""
     edits: list[tuple[int, int, bytes]] = []
     for name, T in list(new_origin.items()):
         j = joints[name]
@@ -439,39 +354,18 @@ def _export_source(
             edits.append((j.axis.start, j.axis.end, _set_attrs(tag, values)))
         else:
             edits.append((j.element.end, j.element.end, f'<axis xyz="{values["xyz"]}"/>'.encode()))
-    additions: list[str] = [] if flange_pair is None else [flange_pair]
-    new_root = root
-    if device_link is not None:
-        if T_device_base is None:
-            raise ValueError("a device link needs T_device_base (the calibration's device frame)")
-        additions.append(_fixed_pair(device_link, root, np.asarray(T_device_base, dtype=float), links))
-        new_root = device_link
-    if tool_link is not None:
-        T_tip_tool = spatial.inverse(G) @ cal.T_flange_tool
-        parent = tip_link if flange_link is None else flange_link
-        additions.append(_fixed_pair(tool_link, parent, T_tip_tool, links, parent_is_new=False))
-    end_robot = data.rfind(b"</robot>")
-    if additions:
-        block = "\n  " + "\n  ".join(additions) + "\n"
-        edits.append((end_robot, end_robot, block.encode()))
-    comment = "\n  " + _comment(notes).replace("\n", "\n  ")
-    edits.append((robot.end, robot.end, comment.encode()))
+    return edits
+
+
+def _apply_edits(path: Path, data: bytes, edits: list[tuple[int, int, bytes]]) -> str:
     out = data
     for start, end, new in sorted(edits, key=lambda e: e[0], reverse=True):
         out = out[:start] + new + out[end:]
     try:
-        text = out.decode("utf-8")
+        return out.decode("utf-8")
     except UnicodeDecodeError as err:
         line = out[: err.start].count(b"\n") + 1
         raise URDFError(f"{path}: line {line}: not UTF-8 text") from None
-    return URDFExport(
-        text=text,
-        root=new_root,
-        tip=tip_link if flange_link is None else flange_link,
-        tool_link=tool_link,
-        changed=tuple(sorted(set(new_origin) | set(new_axis), key=list(joints).index)),
-        notes=tuple(notes),
-    )
 
 
 def _fixed_pair(new: str, existing: str, T: Array, links: Sequence[str], parent_is_new: bool = True) -> str:

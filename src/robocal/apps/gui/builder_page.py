@@ -332,6 +332,12 @@ def _messages(check: FormCheck, ids: Sequence[Mapping[str, Any]]) -> list[Any]:
 # ----------------------------------------------------------------------- callbacks
 def register(app: Dash) -> None:
     """The builder's callbacks."""
+    _register_form(app)
+    _register_files(app)
+
+
+def _register_form(app: Dash) -> None:
+    """The joints form: rows added, removed, moved or filled from a file; checked and built live."""
 
     @app.callback(
         Output("form-body", "children"),
@@ -347,32 +353,7 @@ def register(app: Dash) -> None:
         prevent_initial_call=True,
     )
     def restructure(_add, _acts, catalog, geometry, urdf, geometry_name, urdf_name, _values):
-        trigger = callback_context.triggered_id
-        if trigger is None:
-            return no_update, no_update
-        form = form_from_fields(callback_context.states_list[-1])
-        try:
-            if trigger == "add-joint":
-                form = dataclasses.replace(form, joints=(*form.joints, dict(BLANK_JOINT)))
-            elif isinstance(trigger, dict):
-                if not any(a.get("value") for a in callback_context.inputs_list[1] if a["id"] == trigger):
-                    return no_update, no_update  # a re-rendered button, not a click
-                form = dataclasses.replace(
-                    form, joints=_edited(form.joints, trigger["op"], int(trigger["row"]))
-                )
-            elif trigger == "catalog-robot":
-                if not catalog:
-                    return no_update, no_update
-                form = form_from_catalog(catalog)
-            elif trigger == "upload-geometry":
-                form = form_from_geometry_text(_decode(geometry), geometry_name or "the geometry file")
-            elif trigger == "upload-urdf":
-                form = form_from_urdf(_decode(urdf), urdf_name or "the URDF")
-        except (ValueError, KeyError) as err:
-            return no_update, html.Span(
-                str(err.args[0] if isinstance(err, KeyError) else err), className="error"
-            )
-        return render_form(form), ""
+        return _restructure(_add, _acts, catalog, geometry, urdf, geometry_name, urdf_name, _values)
 
     @app.callback(
         Output({"kind": "field", "row": ALL, "key": ALL}, "className"),
@@ -385,26 +366,11 @@ def register(app: Dash) -> None:
         State({"kind": "rowmsg", "row": ALL}, "id"),
     )
     def live(_values, message_ids):
-        items = callback_context.inputs_list[0]
-        form = form_from_fields(items)
-        check, result = build_form(form)
-        classes = [
-            "field invalid" if (i["id"]["row"], i["id"]["key"]) in check.errors else "field" for i in items
-        ]
-        messages = _messages(check, message_ids)
-        general = html.Span("; ".join(check.general), className="error") if check.general else ""
-        if result is None:
-            return (
-                classes,
-                messages,
-                no_update,
-                no_update,
-                "the model is not built: fix the marked fields",
-                general,
-            )
-        table, count = _links_table(result)
-        warn = [html.Div(w, className="warning") for w in result.warnings]
-        return classes, messages, builder_figure(result), table, [count, *warn], general
+        return _live(_values, message_ids)
+
+
+def _register_files(app: Dash) -> None:
+    """The geometry file and the model file of the form, downloaded."""
 
     @app.callback(
         Output("download-geometry", "data"),
@@ -414,12 +380,7 @@ def register(app: Dash) -> None:
         prevent_initial_call=True,
     )
     def save_geometry(_n, _values):
-        form = form_from_fields(callback_context.states_list[0])
-        check, _ = build_form(form)
-        if check.geometry is None:
-            return no_update, html.Span("fix the marked fields first", className="error")
-        name = f"{check.geometry['name']}_geometry.yaml"
-        return {"content": geometry_yaml(check.geometry), "filename": name}, f"saved {name}"
+        return _save_geometry(_n, _values)
 
     @app.callback(
         Output("download-model", "data"),
@@ -430,19 +391,80 @@ def register(app: Dash) -> None:
         prevent_initial_call=True,
     )
     def build_model_file(_n, _values):
-        form = form_from_fields(callback_context.states_list[0])
-        _check, result = build_form(form)
-        if result is None:
-            return no_update, no_update, html.Span("fix the marked fields first", className="error")
-        text = model_file_text(result)
-        name = f"{result.model.name}.yaml"
-        stored = {"name": result.model.name, "text": text}
+        return _build_model_file(_n, _values)
+
+
+def _restructure(_add, _acts, catalog, geometry, urdf, geometry_name, urdf_name, _values):
+    trigger = callback_context.triggered_id
+    if trigger is None:
+        return no_update, no_update
+    form = form_from_fields(callback_context.states_list[-1])
+    try:
+        if trigger == "add-joint":
+            form = dataclasses.replace(form, joints=(*form.joints, dict(BLANK_JOINT)))
+        elif isinstance(trigger, dict):
+            if not any(a.get("value") for a in callback_context.inputs_list[1] if a["id"] == trigger):
+                return no_update, no_update  # a re-rendered button, not a click
+            form = dataclasses.replace(form, joints=_edited(form.joints, trigger["op"], int(trigger["row"])))
+        elif trigger == "catalog-robot":
+            if not catalog:
+                return no_update, no_update
+            form = form_from_catalog(catalog)
+        elif trigger == "upload-geometry":
+            form = form_from_geometry_text(_decode(geometry), geometry_name or "the geometry file")
+        elif trigger == "upload-urdf":
+            form = form_from_urdf(_decode(urdf), urdf_name or "the URDF")
+    except (ValueError, KeyError) as err:
+        return no_update, html.Span(str(err.args[0] if isinstance(err, KeyError) else err), className="error")
+    return render_form(form), ""
+
+
+def _live(_values, message_ids):
+    items = callback_context.inputs_list[0]
+    form = form_from_fields(items)
+    check, result = build_form(form)
+    classes = [
+        "field invalid" if (i["id"]["row"], i["id"]["key"]) in check.errors else "field" for i in items
+    ]
+    messages = _messages(check, message_ids)
+    general = html.Span("; ".join(check.general), className="error") if check.general else ""
+    if result is None:
         return (
-            {"content": text, "filename": name},
-            stored,
-            f"built {name}: {len(result.model.free_names)} "
-            + ("identifiable parameters; it is offered on the calibration page"),
+            classes,
+            messages,
+            no_update,
+            no_update,
+            "the model is not built: fix the marked fields",
+            general,
         )
+    table, count = _links_table(result)
+    warn = [html.Div(w, className="warning") for w in result.warnings]
+    return classes, messages, builder_figure(result), table, [count, *warn], general
+
+
+def _save_geometry(_n, _values):
+    form = form_from_fields(callback_context.states_list[0])
+    check, _ = build_form(form)
+    if check.geometry is None:
+        return no_update, html.Span("fix the marked fields first", className="error")
+    name = f"{check.geometry['name']}_geometry.yaml"
+    return {"content": geometry_yaml(check.geometry), "filename": name}, f"saved {name}"
+
+
+def _build_model_file(_n, _values):
+    form = form_from_fields(callback_context.states_list[0])
+    _check, result = build_form(form)
+    if result is None:
+        return no_update, no_update, html.Span("fix the marked fields first", className="error")
+    text = model_file_text(result)
+    name = f"{result.model.name}.yaml"
+    stored = {"name": result.model.name, "text": text}
+    return (
+        {"content": text, "filename": name},
+        stored,
+        f"built {name}: {len(result.model.free_names)} "
+        + ("identifiable parameters; it is offered on the calibration page"),
+    )
 
 
 def _edited(joints: Sequence[Mapping[str, str]], op: str, row: int) -> tuple[Mapping[str, str], ...]:

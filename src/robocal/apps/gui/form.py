@@ -126,46 +126,8 @@ def check_form(form: BuilderForm) -> FormCheck:
         errors[("meta", "name")] = "the model needs a name"
     if form.measure not in ("pose", "position"):
         errors[("meta", "measure")] = "pose or position"
-    joints = []
     seen: dict[str, int] = {}
-    for i, row in enumerate(form.joints):
-        values: dict[str, float | None] = {}
-        for key in _NUMERIC:
-            text = row.get(key, "")
-            values[key] = _number(text)
-            optional = key in ("lo", "hi")
-            if values[key] is None and (str(text or "").strip() or not optional):
-                errors[(i, key)] = f"joint {i + 1}: {key} must be a number" + (
-                    "" if str(text or "").strip() else " (empty)"
-                )
-        kind = row.get("type")
-        if kind not in ("revolute", "prismatic"):
-            errors[(i, "type")] = f"joint {i + 1}: revolute or prismatic"
-        axis = [values[k] for k in ("ax", "ay", "az")]
-        if all(v is not None for v in axis) and float(np.linalg.norm(axis)) < 1e-12:
-            for k in ("ax", "ay", "az"):
-                errors[(i, k)] = f"joint {i + 1}: the axis has zero length"
-        lo, hi = values["lo"], values["hi"]
-        if (lo is None) != (hi is None) and (i, "lo") not in errors and (i, "hi") not in errors:
-            errors[(i, "lo" if lo is None else "hi")] = f"joint {i + 1}: give both limits or neither"
-        elif lo is not None and hi is not None and not lo < hi:
-            errors[(i, "lo")] = errors[(i, "hi")] = f"joint {i + 1}: the lower limit must be below the upper"
-        jname = (row.get("name") or "").strip()
-        if jname:
-            if not _NAME.match(jname):
-                errors[(i, "name")] = f"joint {i + 1}: a name of letters, digits, _ . - (not {jname[:20]!r})"
-            elif jname in seen:
-                errors[(i, "name")] = f"joint {i + 1}: the name {jname!r} is used by joint {seen[jname] + 1}"
-            seen.setdefault(jname, i)
-        entry: dict[str, Any] = {}
-        if jname:
-            entry["name"] = jname
-        entry["type"] = kind
-        entry["position"] = [_exact(values[k] or 0.0) for k in ("px", "py", "pz")]
-        entry["axis"] = [_exact(v or 0.0) for v in axis]
-        if lo is not None and hi is not None:
-            entry["limits"] = [_exact(lo), _exact(hi)]
-        joints.append(entry)
+    joints = [_check_joint(i, row, errors, seen) for i, row in enumerate(form.joints)]
     tcp_values = {}
     for key in TCP_FIELDS:
         text = form.tcp.get(key, "")
@@ -184,6 +146,50 @@ def check_form(form: BuilderForm) -> FormCheck:
         geometry["title"] = form.title.strip()
     geometry |= {"unit": "mm", "angle_unit": "deg", "measure": form.measure, "joints": joints, "tcp": tcp}
     return FormCheck({}, (), geometry)
+
+
+def _check_joint(
+    i: int, row: Mapping[str, Any], errors: dict[FieldKey, str], seen: dict[str, int]
+) -> dict[str, Any]:
+    """Joint row ``i`` of the form as the geometry file's entry; its problems go to ``errors``
+    (``seen``: joint names -> first row, updated)."""
+    values: dict[str, float | None] = {}
+    for key in _NUMERIC:
+        text = row.get(key, "")
+        values[key] = _number(text)
+        optional = key in ("lo", "hi")
+        if values[key] is None and (str(text or "").strip() or not optional):
+            errors[(i, key)] = f"joint {i + 1}: {key} must be a number" + (
+                "" if str(text or "").strip() else " (empty)"
+            )
+    kind = row.get("type")
+    if kind not in ("revolute", "prismatic"):
+        errors[(i, "type")] = f"joint {i + 1}: revolute or prismatic"
+    axis = [values[k] for k in ("ax", "ay", "az")]
+    if all(v is not None for v in axis) and float(np.linalg.norm(axis)) < 1e-12:
+        for k in ("ax", "ay", "az"):
+            errors[(i, k)] = f"joint {i + 1}: the axis has zero length"
+    lo, hi = values["lo"], values["hi"]
+    if (lo is None) != (hi is None) and (i, "lo") not in errors and (i, "hi") not in errors:
+        errors[(i, "lo" if lo is None else "hi")] = f"joint {i + 1}: give both limits or neither"
+    elif lo is not None and hi is not None and not lo < hi:
+        errors[(i, "lo")] = errors[(i, "hi")] = f"joint {i + 1}: the lower limit must be below the upper"
+    jname = (row.get("name") or "").strip()
+    if jname:
+        if not _NAME.match(jname):
+            errors[(i, "name")] = f"joint {i + 1}: a name of letters, digits, _ . - (not {jname[:20]!r})"
+        elif jname in seen:
+            errors[(i, "name")] = f"joint {i + 1}: the name {jname!r} is used by joint {seen[jname] + 1}"
+        seen.setdefault(jname, i)
+    entry: dict[str, Any] = {}
+    if jname:
+        entry["name"] = jname
+    entry["type"] = kind
+    entry["position"] = [_exact(values[k] or 0.0) for k in ("px", "py", "pz")]
+    entry["axis"] = [_exact(v or 0.0) for v in axis]
+    if lo is not None and hi is not None:
+        entry["limits"] = [_exact(lo), _exact(hi)]
+    return entry
 
 
 def geometry_yaml(geometry: Mapping[str, Any]) -> str:
