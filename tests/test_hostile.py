@@ -62,7 +62,6 @@ def base(tmp_path_factory) -> Path:
         app,
         [
             "calibrate",
-            "--robot",
             "ur10",
             "--data",
             str(root / "meas.csv"),
@@ -171,8 +170,8 @@ def _with_body(transform):
     return make
 
 
-CAL = ("calibrate", "--robot", "ur10", "--data", "{dir}/d.csv", "--out", "{dir}/out", "--residual", "none")
-CHECK = ("data", "check", "{dir}/d.csv", "--robot", "ur10")
+CAL = ("calibrate", "ur10", "--data", "{dir}/d.csv", "--out", "{dir}/out", "--residual", "none")
+CHECK = ("data", "check", "{dir}/d.csv", "ur10")
 
 
 def _cal(*extra: str) -> tuple[str, ...]:
@@ -510,7 +509,7 @@ OPTION_CASES = [
     ),
     Case(
         "calibrate-model-markup-path",
-        ("calibrate", "--model", "{dir}/[/x].yaml", "--data", "{dir}/d.csv", "--out", "{dir}/out"),
+        ("calibrate", "{dir}/[/x].yaml", "--data", "{dir}/d.csv", "--out", "{dir}/out"),
         {"d.csv": _csv_text},
         says=("[/x].yaml",),
     ),
@@ -548,9 +547,9 @@ OPTION_CASES = [
     Case("demo-seed-negative", ("demo", "--seed", "-3", "--out", "{dir}/out"), usage=True, says=("--seed",)),
     Case(
         "demo-poses-huge",
-        ("demo", "--poses", "100000000", "--out", "{dir}/out"),
+        ("demo", "--n", "100000000", "--out", "{dir}/out"),
         usage=True,
-        says=("--poses",),
+        says=("--n",),
     ),
     Case(
         "usage-choice-markup",
@@ -727,7 +726,7 @@ def test_a_file_name_with_markup_is_printed_as_written(base, tmp_path):
 
 
 def test_an_unexpected_exception_is_one_line_and_a_traceback_file(monkeypatch, tmp_path):
-    import robocal.cli as cli
+    import robocal.cli.robots as cli
 
     def boom(*args, **kwargs):
         raise ZeroDivisionError("[/x] \x1b[31m")

@@ -43,7 +43,7 @@ def test_the_command_line_starts_without_heavy_libraries(argv):
 
 def test_lazy_exports_keep_the_functions_named_like_modules():
     probe = (
-        "import robocal.identify.calibrate, robocal.measure.simulate, robocal.compensate.cli\n"
+        "import robocal.identify.calibrate, robocal.measure.simulate, robocal.cli.compensate\n"
         "import robocal as rc\n"
         "from robocal.identify import calibrate, validate\n"
         "from robocal.measure import simulate\n"

@@ -19,7 +19,7 @@ from robocal._lazy import lazy_package
 lazy_package(
     __name__,
     {
-        "robocal.compensate.commands": ("compensate",),
+        "robocal.compensate.compensation": ("compensate",),
         "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
         "robocal.identify.validate": ("cross_validate", "validate"),
         "robocal.measure.dataset": ("Measurements", "read_measurements", "write_measurements"),

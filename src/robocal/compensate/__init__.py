@@ -7,7 +7,7 @@ from robocal._lazy import lazy_package
 lazy_package(
     __name__,
     {
-        "robocal.compensate.commands": (
+        "robocal.compensate.compensation": (
             "Compensation",
             "PathCompensation",
             "TargetFileError",

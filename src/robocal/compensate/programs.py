@@ -6,12 +6,12 @@ numbers and nothing else changed: every other byte (comments, formatting, other
 statements, the numbers of targets that need no correction) is kept.  A program filtered
 with a nominal calibration (calibrated = nominal) is byte-identical to its input.
 
-Corrections (:mod:`robocal.compensate.commands`):
+Corrections (:mod:`robocal.compensate.compensation`):
 
 * a **joint target** ``q`` becomes the joint values that put the real (calibrated) tool
-  where the nominal model puts it at ``q`` (:func:`~robocal.compensate.commands.filter_program`);
+  where the nominal model puts it at ``q`` (:func:`~robocal.compensate.compensation.filter_program`);
 * a **Cartesian target** ``P`` becomes ``P' = nominal.fk(q')`` with ``q'`` the joint
-  values at which the real robot reaches ``P`` (:func:`~robocal.compensate.commands.compensate`):
+  values at which the real robot reaches ``P`` (:func:`~robocal.compensate.compensation.compensate`):
   the controller, commanded ``P'``, solves its nominal IK to ``q'`` and the real robot
   lands on ``P``.  The IK branch is that of the configuration the robot comes from:
   the previous target in execution order (motions to named targets count where they
@@ -895,7 +895,7 @@ def _robot_models(
     calibrated: CalibrationResult | Model, nominal: Model | None, tool: Array | None, probe: ArrayLike | None
 ) -> tuple[Model, Model, Callable[[Array], Array | None] | None]:
     """(real, nominal) robot models with the program's tool, and the joint effects."""
-    from robocal.compensate.commands import nominal_model
+    from robocal.compensate.compensation import nominal_model
 
     if isinstance(calibrated, CalibrationResult):
         real = calibrated.model
@@ -1048,7 +1048,7 @@ def filter_program_text(
             identified tool absorbed robot geometry, e.g. ``d6``; about 2 mm can be lost).
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
-    from robocal.compensate.commands import compensate, filter_program
+    from robocal.compensate.compensation import compensate, filter_program
 
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     dof = model.dof

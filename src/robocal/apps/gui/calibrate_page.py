@@ -621,7 +621,7 @@ def register(app: Dash, workdir: Path) -> None:
 
 def _compensate(result, contents: str, filename: str | None, unit: str, frame: str):
     import robocal as rc
-    from robocal.compensate.commands import read_targets
+    from robocal.compensate.compensation import read_targets
 
     name = Path(filename or "targets.csv").name
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
