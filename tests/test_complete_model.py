@@ -150,7 +150,7 @@ def test_parameterisation_warnings():
     assert "link 2 (shoulder_lift → elbow" in text and "link 3 (elbow → wrist_1" in text
     assert "shoulder_lift, elbow, wrist_1" in text  # their tilts cannot be followed
     assert "link 1 " not in text and "link 4 " not in text
-    assert "rc.calibration_model('ur10', 'position')" in text and "robocal calibrate --robot ur10" in text
+    assert "rc.calibration_model('ur10', 'position')" in text and "robocal calibrate ur10" in text
     assert seconds < 0.2, seconds  # ~25 ms on the development VM
     for measure in ("position", "pose"):
         assert parameterisation_warnings(rc.calibration_model("ur10", measure), measure) == []
@@ -205,7 +205,7 @@ def test_tilted_parallel_axes_complete_model_reaches_the_cramer_rao_bound():
 
 
 def test_tilted_parallel_axes_through_the_cli(tmp_path):
-    """The same scenario through ``robocal calibrate --robot ur10`` (complete by default)
+    """The same scenario through ``robocal calibrate ur10`` (complete by default)
     and ``robocal validate``; ``--chain catalog`` warns and is far worse."""
     robot = tilted_ur10(0)
     write_measurements(simulate(robot, poses(robot.nominal, 60, 100), seed=200), tmp_path / "train.csv")

@@ -492,7 +492,9 @@ def test_degenerate_logs_give_reasons_not_exceptions():
 
 
 def test_simulate_log_options(tmp_path):
-    both = runner.invoke(app, ["simulate", "ur10", "--log", "-o", str(tmp_path / "a.csv"), "--poses", "p.csv"])
+    both = runner.invoke(
+        app, ["simulate", "ur10", "--log", "-o", str(tmp_path / "a.csv"), "--poses", "p.csv"]
+    )
     assert both.exit_code == 2 and "drop --poses" in both.output
     neither = runner.invoke(app, ["simulate", "ur10"])
     assert neither.exit_code == 2 and "--log" in neither.output

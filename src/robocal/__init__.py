@@ -19,7 +19,7 @@ from robocal._lazy import lazy_package
 lazy_package(
     __name__,
     {
-        "robocal.compensate.compensation": ("compensate",),
+        "robocal.compensate.compensation": ("compensate_targets",),
         "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
         "robocal.identify.validate": ("cross_validate", "validate"),
         "robocal.measure.dataset": ("Measurements", "read_measurements", "write_measurements"),
@@ -52,7 +52,7 @@ __all__ = [
     "build_model",
     "calibrate",
     "calibration_model",
-    "compensate",
+    "compensate_targets",
     "cross_validate",
     "load_model",
     "model_from_urdf",

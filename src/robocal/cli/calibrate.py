@@ -56,56 +56,74 @@ Compliance = Annotated[bool, typer.Option("--compliance", help="also identify jo
 Data = Annotated[Path, typer.Option("--data", metavar="FILE", help="measurement CSV file")]
 
 
+Method = Annotated[str, typer.Option("--method", metavar="lm|pinv|bounded|influence", help="the solver")]
+PerPose = Annotated[
+    bool,
+    typer.Option(
+        "--per-pose",
+        help="with --method pinv: seed 003's per-pose pseudo-inverse Jᵀ(JJᵀ)⁻¹ at each pose, then the "
+        "mean of the per-pose sets (instead of (JᵀJ)⁻¹Jᵀ over all poses)",
+    ),
+]
+Bounds = Annotated[
+    str | None,
+    typer.Option(
+        "--bounds",
+        metavar="default|widened",
+        help="with --method bounded: default (seed 001: every robot parameter within ±5 mm, ±2° of its "
+        "nominal) | widened (wider for parameters that absorb redundant ones; warned)",
+    ),
+]
+TrainN = Annotated[
+    int | None,
+    typer.Option("--train-n", metavar="N", help="calibrate on N random rows, validate on the rest"),
+]
+Level = Annotated[
+    str | None,
+    typer.Option(
+        "--level",
+        metavar="1|2|3",
+        help="1 (joint offsets), 2 (kinematic, default) or 3 (non-geometric: with joint effects)",
+    ),
+]
+Effects = Annotated[
+    str | None,
+    typer.Option(
+        "--effects",
+        metavar="none|predict|identify|KINDS",
+        help="joint effects: none | predict (from the model's joint_effects, seed 003's two-stage "
+        'method) | identify (default of --level 3) | kinds, e.g. "compliance,backlash"',
+    ),
+]
+Loss = Annotated[
+    str,
+    typer.Option(
+        "--loss",
+        metavar="linear|soft_l1|huber|cauchy|arctan",
+        help="least squares, or a robust loss that down-weights glitches",
+    ),
+]
+Noise = Annotated[str | None, typer.Option("--noise", metavar="LENGTH", help=NOISE_HELP)]
+OutDir = Annotated[Path, out_option("directory for model.yaml and result.json", "DIR")]
+Measure = Annotated[str | None, measure_option("the measured quantities (default: the file's)")]
+Report = Annotated[bool, typer.Option("--report", help="also write DIR/report.html")]
+
+
 def calibrate_command(
     robot: Robot,
     data_path: Data,
-    out: Annotated[Path, out_option("directory for model.yaml and result.json", "DIR")],
+    out: OutDir,
     chain: Chain = None,
-    measure: Annotated[str | None, measure_option("the measured quantities (default: the file's)")] = None,
-    method: Annotated[
-        str, typer.Option("--method", metavar="lm|pinv|bounded|influence", help="the solver")
-    ] = "lm",
-    per_pose: Annotated[
-        bool,
-        typer.Option(
-            "--per-pose",
-            help="with --method pinv: seed 003's per-pose pseudo-inverse Jᵀ(JJᵀ)⁻¹ at each pose, then the "
-            "mean of the per-pose sets (instead of (JᵀJ)⁻¹Jᵀ over all poses)",
-        ),
-    ] = False,
-    bounds: Annotated[
-        str | None,
-        typer.Option(
-            "--bounds",
-            metavar="default|widened",
-            help="with --method bounded: default (seed 001: every robot parameter within ±5 mm, ±2° of its "
-            "nominal) | widened (wider for parameters that absorb redundant ones; warned)",
-        ),
-    ] = None,
-    train_n: Annotated[
-        int | None,
-        typer.Option("--train-n", metavar="N", help="calibrate on N random rows, validate on the rest"),
-    ] = None,
+    measure: Measure = None,
+    method: Method = "lm",
+    per_pose: PerPose = False,
+    bounds: Bounds = None,
+    train_n: TrainN = None,
     seed: Annotated[int, options.seed("seed of the --train-n draw")] = 0,
     tool: Tool = None,
     compliance: Compliance = False,
-    level: Annotated[
-        str | None,
-        typer.Option(
-            "--level",
-            metavar="1|2|3",
-            help="1 (joint offsets), 2 (kinematic, default) or 3 (non-geometric: with joint effects)",
-        ),
-    ] = None,
-    effects: Annotated[
-        str | None,
-        typer.Option(
-            "--effects",
-            metavar="none|predict|identify|KINDS",
-            help="joint effects: none | predict (from the model's joint_effects, seed 003's two-stage "
-            'method) | identify (default of --level 3) | kinds, e.g. "compliance,backlash"',
-        ),
-    ] = None,
+    level: Level = None,
+    effects: Effects = None,
     length_unit: LengthUnit = "m",
     angle_unit: AngleUnit = "rad",
     columns: Columns = None,
@@ -114,18 +132,11 @@ def calibrate_command(
     orientation: Orientation = "auto",
     limits: Limits = "error",
     incomplete: Incomplete = "error",
-    loss: Annotated[
-        str,
-        typer.Option(
-            "--loss",
-            metavar="linear|soft_l1|huber|cauchy|arctan",
-            help="least squares, or a robust loss that down-weights glitches",
-        ),
-    ] = "linear",
-    noise: Annotated[str | None, typer.Option("--noise", metavar="LENGTH", help=NOISE_HELP)] = None,
+    loss: Loss = "linear",
+    noise: Noise = None,
     residual: Residual = "auto",
     force: Force = False,
-    report: Annotated[bool, typer.Option("--report", help="also write DIR/report.html")] = False,
+    report: Report = False,
 ) -> None:
     """Identify the robot's parameters from measurements; write the calibrated model."""
     from robocal.model.catalog import is_model_path

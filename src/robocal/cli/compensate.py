@@ -26,7 +26,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.cli.options import Force, Json, out_option, parse_vector, resolve_model
+from robocal.cli.options import Decimal, Force, Json, Sep, out_option, parse_vector, resolve_model
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 from robocal.model.files import strict_json
 
@@ -63,65 +63,67 @@ def _load(source: Path):
     raise fail(problem + (" (a calibration directory or a model file)" if problem.endswith("exist") else ""))
 
 
+TargetsOption = Annotated[
+    Path | None,
+    typer.Option("--targets", metavar="FILE", help="CSV of Cartesian targets name,x,y,z[,qw,qx,qy,qz]"),
+]
+ProgramOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--program",
+        metavar="FILE",
+        help="CSV joint program q1..qN (+ optional name) from the nominal model",
+    ),
+]
+FrameOption = Annotated[
+    str,
+    typer.Option("--frame", metavar="base|measurement", help="base | measurement: the frame of the targets"),
+]
+LengthUnitOption = Annotated[
+    str,
+    typer.Option("--length-unit", metavar="m|mm|um", help="m | mm | um: target positions, prismatic joints"),
+]
+AngleUnitOption = Annotated[
+    str,
+    typer.Option(
+        "--angle-unit",
+        metavar="rad|deg",
+        help="rad | deg: joint values in --program, --q0 and the output",
+    ),
+]
+KindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--kind",
+        metavar="position|pose|axis",
+        help="position | pose | axis (default from the file / robot)",
+    ),
+]
+NominalOption = Annotated[
+    str | None,
+    typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
+]
+Q0Option = Annotated[
+    str | None,
+    typer.Option(
+        "--q0", metavar='"q1,...,qn"', help='configuration choosing the branch, e.g. "0,-90,90,0,90,0"'
+    ),
+]
+
+
 def compensate_command(
     source: Annotated[Path, CALIBRATION],
-    targets: Annotated[
-        Path | None,
-        typer.Option("--targets", metavar="FILE", help="CSV of Cartesian targets name,x,y,z[,qw,qx,qy,qz]"),
-    ] = None,
-    program: Annotated[
-        Path | None,
-        typer.Option(
-            "--program",
-            metavar="FILE",
-            help="CSV joint program q1..qN (+ optional name) from the nominal model",
-        ),
-    ] = None,
+    targets: TargetsOption = None,
+    program: ProgramOption = None,
     out: Annotated[Path | None, out_option("output file: .csv or .json")] = None,
-    frame: Annotated[
-        str,
-        typer.Option(
-            "--frame", metavar="base|measurement", help="base | measurement: the frame of the targets"
-        ),
-    ] = "base",
-    length_unit: Annotated[
-        str,
-        typer.Option(
-            "--length-unit", metavar="m|mm|um", help="m | mm | um: target positions, prismatic joints"
-        ),
-    ] = "m",
-    angle_unit: Annotated[
-        str,
-        typer.Option(
-            "--angle-unit",
-            metavar="rad|deg",
-            help="rad | deg: joint values in --program, --q0 and the output",
-        ),
-    ] = "rad",
-    kind: Annotated[
-        str | None,
-        typer.Option(
-            "--kind",
-            metavar="position|pose|axis",
-            help="position | pose | axis (default from the file / robot)",
-        ),
-    ] = None,
-    nominal: Annotated[
-        str | None,
-        typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
-    ] = None,
-    q0: Annotated[
-        str | None,
-        typer.Option(
-            "--q0", metavar='"q1,...,qn"', help='configuration choosing the branch, e.g. "0,-90,90,0,90,0"'
-        ),
-    ] = None,
-    sep: Annotated[
-        str | None, typer.Option("--sep", metavar="CHAR", help="column separator (default: sniffed)")
-    ] = None,
-    decimal: Annotated[
-        str, typer.Option("--decimal", metavar='"."|","', help='decimal mark: "." or ","')
-    ] = ".",
+    frame: FrameOption = "base",
+    length_unit: LengthUnitOption = "m",
+    angle_unit: AngleUnitOption = "rad",
+    kind: KindOption = None,
+    nominal: NominalOption = None,
+    q0: Q0Option = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
     as_json: Json = False,
     force: Force = False,
 ) -> None:
@@ -183,7 +185,7 @@ def compensate_command(
 
 def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: str, q_start, reader: dict):
     """``--targets``: joint commands for Cartesian targets; the result and the file read."""
-    from robocal.compensate.compensation import TargetFileError, compensate, read_targets
+    from robocal.compensate.compensation import TargetFileError, compensate_targets, read_targets
 
     try:
         tgt = read_targets(
@@ -196,7 +198,7 @@ def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: s
         else:
             values = tgt.values
         with console.status(f"compensating {len(tgt.names)} targets ..."):
-            result = compensate(
+            result = compensate_targets(
                 calibrated,
                 values,
                 nominal_model,

@@ -147,59 +147,68 @@ def _probe_option(text: str | None):
     return list(v) if len(v) == 3 else _frame_option(text, "--probe")
 
 
+ProgramOption = Annotated[
+    Path,
+    typer.Argument(
+        metavar="PROGRAM", help="robot program: .script, .src (+ .dat), .mod, .csv", show_default=False
+    ),
+]
+ToolOption = Annotated[
+    str | None,
+    typer.Option(
+        "--tool",
+        metavar='"x,y,z,rx,ry,rz"',
+        help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)",
+    ),
+]
+BaseOption = Annotated[
+    str | None,
+    typer.Option(
+        "--base", metavar='"x,y,z,rx,ry,rz"', help="the targets' frame in the robot base: x,y,z,rx,ry,rz"
+    ),
+]
+ProbeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--probe",
+        metavar='"x,y,z[,rx,ry,rz]"',
+        help="the calibration's measured tool as built: x,y,z (m) on the flange",
+    ),
+]
+NominalOption = Annotated[
+    str | None,
+    typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
+]
+LengthUnitOption = Annotated[str, typer.Option("--length-unit", metavar="m|mm", help="CSV programs: m | mm")]
+AngleUnitOption = Annotated[
+    str, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
+]
+StrictOption = Annotated[
+    bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
+]
+ConfigDatOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--config-dat",
+        metavar="FILE",
+        help="KRL: $config.dat of TOOL_DATA/BASE_DATA (default: next to it)",
+    ),
+]
+
+
 def filter_command(
     calibration: Annotated[Path, CALIBRATION],
-    program: Annotated[
-        Path,
-        typer.Argument(
-            metavar="PROGRAM", help="robot program: .script, .src (+ .dat), .mod, .csv", show_default=False
-        ),
-    ],
+    program: ProgramOption,
     out: Annotated[Path, out_option("the filtered program (KRL: and its .dat)")],
-    tool: Annotated[
-        str | None,
-        typer.Option(
-            "--tool",
-            metavar='"x,y,z,rx,ry,rz"',
-            help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)",
-        ),
-    ] = None,
-    base: Annotated[
-        str | None,
-        typer.Option(
-            "--base", metavar='"x,y,z,rx,ry,rz"', help="the targets' frame in the robot base: x,y,z,rx,ry,rz"
-        ),
-    ] = None,
-    probe: Annotated[
-        str | None,
-        typer.Option(
-            "--probe",
-            metavar='"x,y,z[,rx,ry,rz]"',
-            help="the calibration's measured tool as built: x,y,z (m) on the flange",
-        ),
-    ] = None,
-    nominal: Annotated[
-        str | None,
-        typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
-    ] = None,
-    length_unit: Annotated[
-        str, typer.Option("--length-unit", metavar="m|mm", help="CSV programs: m | mm")
-    ] = "m",
-    angle_unit: Annotated[
-        str, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
-    ] = "rad",
-    strict: Annotated[
-        bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
-    ] = False,
+    tool: ToolOption = None,
+    base: BaseOption = None,
+    probe: ProbeOption = None,
+    nominal: NominalOption = None,
+    length_unit: LengthUnitOption = "m",
+    angle_unit: AngleUnitOption = "rad",
+    strict: StrictOption = False,
     force: Force = False,
-    config_dat: Annotated[
-        Path | None,
-        typer.Option(
-            "--config-dat",
-            metavar="FILE",
-            help="KRL: $config.dat of TOOL_DATA/BASE_DATA (default: next to it)",
-        ),
-    ] = None,
+    config_dat: ConfigDatOption = None,
 ) -> None:
     """Correct every target of a robot program through a calibration; everything else stays byte-identical."""
     refuse_overwrite(out, force, "program")

@@ -205,55 +205,67 @@ NOISE_HELP = (
 )
 
 
+PosesOption = Annotated[
+    Path | None, typer.Option("--poses", metavar="FILE", help="poses CSV: joint columns q1..qN (rad, m)")
+]
+OutOption = Annotated[Path | None, out_option("measurements CSV to write (with --log: the ISO 9283 log)")]
+DeviceOption = Annotated[
+    str, typer.Option("--device", metavar="DEVICE", help=f"one of: {', '.join(DEVICES)}")
+]
+SeedOption = Annotated[
+    int | None, typer.Option("--seed", min=0, metavar="N", help="seed of the drawn errors and the noise")
+]
+LengthTolOption = Annotated[
+    str, typer.Option("--length-tol", metavar="LENGTH", help="tolerance of length parameters, e.g. 0.5mm")
+]
+AngleTolOption = Annotated[
+    str, typer.Option("--angle-tol", metavar="ANGLE", help="tolerance of angle parameters, e.g. 0.05deg")
+]
+TolOption = Annotated[
+    list[str] | None,
+    typer.Option("--tol", metavar="NAME=VALUE", help="per-parameter tolerance, e.g. theta2=0.2deg"),
+]
+DistributionOption = Annotated[
+    str,
+    typer.Option("--distribution", metavar="uniform|normal", help="uniform in ±tol, or normal (σ = tol)"),
+]
+DevicePoseOption = Annotated[
+    str | None,
+    typer.Option(
+        "--device-pose",
+        metavar='"x,y,z,roll,pitch,yaw"',
+        help="device pose in the robot base, mm and deg (Rz Ry Rx)",
+    ),
+]
+ToolOffsetOption = Annotated[
+    str | None,
+    typer.Option("--tool-offset", metavar='"x,y,z"', help="observed point in the tool frame, mm"),
+]
+TrainOption = Annotated[
+    float | None,
+    typer.Option("--train", metavar="FRACTION", help="fraction of rows labelled train (the rest test)"),
+]
+LogOption = Annotated[
+    bool, typer.Option("--log", help="instead: write a simulated ISO 9283 log (docs/iso9283.md) to -o")
+]
+
+
 def simulate_command(
     robot: Robot,
-    poses: Annotated[
-        Path | None, typer.Option("--poses", metavar="FILE", help="poses CSV: joint columns q1..qN (rad, m)")
-    ] = None,
-    out: Annotated[
-        Path | None, out_option("measurements CSV to write (with --log: the ISO 9283 log)")
-    ] = None,
-    device: Annotated[
-        str, typer.Option("--device", metavar="DEVICE", help=f"one of: {', '.join(DEVICES)}")
-    ] = "laser-tracker",
+    poses: PosesOption = None,
+    out: OutOption = None,
+    device: DeviceOption = "laser-tracker",
     noise: Annotated[str | None, typer.Option("--noise", metavar="LENGTH", help=NOISE_HELP)] = None,
-    seed: Annotated[
-        int | None, typer.Option("--seed", min=0, metavar="N", help="seed of the drawn errors and the noise")
-    ] = None,
-    length_tol: Annotated[
-        str, typer.Option("--length-tol", metavar="LENGTH", help="tolerance of length parameters, e.g. 0.5mm")
-    ] = "0.5mm",
-    angle_tol: Annotated[
-        str, typer.Option("--angle-tol", metavar="ANGLE", help="tolerance of angle parameters, e.g. 0.05deg")
-    ] = "0.05deg",
-    tol: Annotated[
-        list[str] | None,
-        typer.Option("--tol", metavar="NAME=VALUE", help="per-parameter tolerance, e.g. theta2=0.2deg"),
-    ] = None,
-    distribution: Annotated[
-        str,
-        typer.Option("--distribution", metavar="uniform|normal", help="uniform in ±tol, or normal (σ = tol)"),
-    ] = "uniform",
-    device_pose: Annotated[
-        str | None,
-        typer.Option(
-            "--device-pose",
-            metavar='"x,y,z,roll,pitch,yaw"',
-            help="device pose in the robot base, mm and deg (Rz Ry Rx)",
-        ),
-    ] = None,
-    tool_offset: Annotated[
-        str | None,
-        typer.Option("--tool-offset", metavar='"x,y,z"', help="observed point in the tool frame, mm"),
-    ] = None,
-    train: Annotated[
-        float | None,
-        typer.Option("--train", metavar="FRACTION", help="fraction of rows labelled train (the rest test)"),
-    ] = None,
+    seed: SeedOption = None,
+    length_tol: LengthTolOption = "0.5mm",
+    angle_tol: AngleTolOption = "0.05deg",
+    tol: TolOption = None,
+    distribution: DistributionOption = "uniform",
+    device_pose: DevicePoseOption = None,
+    tool_offset: ToolOffsetOption = None,
+    train: TrainOption = None,
     force: Force = False,
-    log: Annotated[
-        bool, typer.Option("--log", help="instead: write a simulated ISO 9283 log (docs/iso9283.md) to -o")
-    ] = False,
+    log: LogOption = False,
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
     if log:

@@ -31,23 +31,28 @@ model_app = typer.Typer(
 )
 
 
+GeometryOption = Annotated[
+    Path,
+    typer.Argument(
+        metavar="GEOMETRY",
+        help="joint-geometry YAML file, URDF file, or a model (catalog name or model YAML file) whose "
+        "joint geometry is read from its chain (rc.calibration_model)",
+    ),
+]
+MeasureOption = Annotated[
+    str | None, measure_option("the measured quantities (default: the file's, else pose)")
+]
+TipOption = Annotated[
+    str | None, typer.Option("--tip", metavar="LINK", help="URDF: frame to end the chain at")
+]
+
+
 @model_app.command("build")
 def build_command(
-    geometry: Annotated[
-        Path,
-        typer.Argument(
-            metavar="GEOMETRY",
-            help="joint-geometry YAML file, URDF file, or a model (catalog name or model YAML file) whose "
-            "joint geometry is read from its chain (rc.calibration_model)",
-        ),
-    ],
+    geometry: GeometryOption,
     out: Annotated[Path, out_option("model file to write (YAML)")],
-    measure: Annotated[
-        str | None, measure_option("the measured quantities (default: the file's, else pose)")
-    ] = None,
-    tip: Annotated[
-        str | None, typer.Option("--tip", metavar="LINK", help="URDF: frame to end the chain at")
-    ] = None,
+    measure: MeasureOption = None,
+    tip: TipOption = None,
     force: Force = False,
 ) -> None:
     """Build a complete, minimal, singularity-free model from joint geometry (seed 000)."""

@@ -53,46 +53,51 @@ def _region(text: str | None) -> np.ndarray | None:
     return box
 
 
+MethodOption = Annotated[
+    Method,
+    typer.Option("--method", metavar="random|optimal|iso9283|diagonal", help="how to choose the poses"),
+]
+NOption = Annotated[
+    int | None,
+    typer.Option(
+        "--n",
+        min=1,
+        max=MAX_POSES,
+        metavar="N",
+        help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)",
+    ),
+]
+IndexOption = Annotated[
+    str, typer.Option("--index", metavar="O1..O5", help="index maximised by --method optimal")
+]
+PoolOption = Annotated[
+    int,
+    typer.Option("--pool", min=1, max=MAX_POOL, metavar="N", help="candidate pool size for --method optimal"),
+]
+RowsOption = Annotated[
+    str, typer.Option("--rows", metavar="position|pose", help="the quantities that will be measured")
+]
+KindOption = Annotated[
+    str | None,
+    typer.Option("--kind", metavar="position|pose|axis", help="iso9283/diagonal: the IK constraint"),
+]
+RegionOption = Annotated[
+    str | None,
+    typer.Option("--region", metavar='"xmin,ymin,zmin,xmax,ymax,zmax"', help="box the cube must lie in, mm"),
+]
+
+
 def poses_command(
     robot: Robot,
     out: Annotated[Path, out_option("poses CSV to write (SI units)")],
-    method: Annotated[
-        Method,
-        typer.Option("--method", metavar="random|optimal|iso9283|diagonal", help="how to choose the poses"),
-    ] = Method.random,
-    n: Annotated[
-        int | None,
-        typer.Option(
-            "--n",
-            min=1,
-            max=MAX_POSES,
-            metavar="N",
-            help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)",
-        ),
-    ] = None,
+    method: MethodOption = Method.random,
+    n: NOption = None,
     seed: Annotated[int, options.seed()] = 0,
-    index: Annotated[
-        str, typer.Option("--index", metavar="O1..O5", help="index maximised by --method optimal")
-    ] = "O1",
-    pool: Annotated[
-        int,
-        typer.Option(
-            "--pool", min=1, max=MAX_POOL, metavar="N", help="candidate pool size for --method optimal"
-        ),
-    ] = 2000,
-    rows: Annotated[
-        str, typer.Option("--rows", metavar="position|pose", help="the quantities that will be measured")
-    ] = "position",
-    kind: Annotated[
-        str | None,
-        typer.Option("--kind", metavar="position|pose|axis", help="iso9283/diagonal: the IK constraint"),
-    ] = None,
-    region: Annotated[
-        str | None,
-        typer.Option(
-            "--region", metavar='"xmin,ymin,zmin,xmax,ymax,zmax"', help="box the cube must lie in, mm"
-        ),
-    ] = None,
+    index: IndexOption = "O1",
+    pool: PoolOption = 2000,
+    rows: RowsOption = "position",
+    kind: KindOption = None,
+    region: RegionOption = None,
     force: Force = False,
 ) -> None:
     """Choose poses to measure and write them as a poses CSV (joint columns only, rad/m)."""

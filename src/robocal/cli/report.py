@@ -151,7 +151,7 @@ def demo_command(
         ),
     ] = None,
     seed: Annotated[int, options.seed("seeds the whole demo")] = 0,
-    poses: Annotated[
+    n: Annotated[
         int,
         typer.Option("--n", max=10_000, metavar="N", help="calibration poses (O1-optimal; at most 10 000)"),
     ] = 50,
@@ -166,13 +166,13 @@ def demo_command(
     # the options first: a bad one is the error, whatever an earlier demo left in --out
     if robot not in robots():
         raise fail(f"unknown robot {robot!r}; choose one of {', '.join(robots())}")
-    if poses < 10:
-        raise fail(f"--n {poses}: a calibration needs at least 10 poses")
+    if n < 10:
+        raise fail(f"--n {n}: a calibration needs at least 10 poses")
     if out is None:
         out = Path.home() / "robocal-demo"
     refuse_overwrite(out, force, "demo folder")
     try:
-        numbers = run_demo(robot, out, seed=seed, n_calibration=poses, quick=quick, verbose=not as_json)
+        numbers = run_demo(robot, out, seed=seed, n_calibration=n, quick=quick, verbose=not as_json)
     except ValueError as err:
         raise fail(f"demo on {robot}: {err}") from None
     if as_json:

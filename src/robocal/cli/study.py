@@ -3,7 +3,7 @@
 Commands:
     robocal study CONFIG.yaml --out DIR [--workers N | --scheduler ADDR] [--robots N] [--force]
         run or resume a study; the last line printed is ``calibrations/s: <number>``
-    robocal fleet DIR --robot NAME [--out OUT] [--pattern "*.csv"] [read options] [--force]
+    robocal fleet ROBOT DIR [-o OUT] [--pattern "*.csv"] [read options] [--force]
         calibrate every measurement file of a folder; the last line is ``calibrations/s: <number>``
 """
 
@@ -17,7 +17,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from robocal.cli.calibrate import Chain, Compliance, Residual, Tool
+from robocal.cli.calibrate import Chain, Compliance, Method, Residual, Tool
 from robocal.cli.options import (
     AngleUnit,
     Columns,
@@ -32,6 +32,7 @@ from robocal.cli.options import (
     Scheduler,
     Sep,
     Workers,
+    as_cli_text,
     out_option,
     parse_vector,
     resolve_model,
@@ -151,18 +152,22 @@ def _print_study_end(run) -> None:
     console.print(f"calibrations/s: {run.calibrations_per_second:.1f}", highlight=False)
 
 
+DirectoryOption = Annotated[
+    Path,
+    typer.Argument(metavar="DIR", help="folder of measurement files, one per robot", show_default=False),
+]
+ForceOption = Annotated[
+    bool, typer.Option("--force", help="recalibrate every file and replace the previous results")
+]
+
+
 def fleet_command(
     robot: Robot,
-    directory: Annotated[
-        Path,
-        typer.Argument(metavar="DIR", help="folder of measurement files, one per robot", show_default=False),
-    ],
+    directory: DirectoryOption,
     chain: Chain = None,
     out: Annotated[Path | None, out_option("output folder (default DIR/calibrated)", "DIR")] = None,
     pattern: Annotated[str, typer.Option("--pattern", metavar="GLOB", help="which files of DIR")] = "*.csv",
-    method: Annotated[
-        str, typer.Option("--method", metavar="lm|pinv|bounded|influence", help="the solver")
-    ] = "lm",
+    method: Method = "lm",
     tool: Tool = None,
     compliance: Compliance = False,
     residual: Residual = "auto",
@@ -176,9 +181,7 @@ def fleet_command(
     incomplete: Incomplete = "error",
     workers: Workers = None,
     scheduler: Scheduler = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="recalibrate every file and replace the previous results")
-    ] = False,
+    force: ForceOption = False,
     no_progress: NoProgress = False,
 ) -> None:
     """Calibrate every measurement file of a folder (one robot each); resumes from OUT/fleet.csv."""
@@ -249,7 +252,9 @@ def _print_fleet(run, model, directory: Path) -> None:
     for row in run.rows:
         if row["status"] != "ok" and row["message"]:
             err_console.print(
-                f"[red]{safe(row['file'])}:[/] {safe(row['message'])}", highlight=False, markup=True
+                f"[red]{safe(row['file'])}:[/] {safe(as_cli_text(row['message']))}",
+                highlight=False,
+                markup=True,
             )
     for name in run.skipped:
         err_console.print(

@@ -1048,7 +1048,7 @@ def filter_program_text(
             identified tool absorbed robot geometry, e.g. ``d6``; about 2 mm can be lost).
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
-    from robocal.compensate.compensation import compensate, filter_program
+    from robocal.compensate.compensation import compensate_targets, filter_program
 
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     dof = model.dof
@@ -1164,13 +1164,13 @@ def filter_program_text(
             goal = T[:3, 3][None] if position_only else T[None]
             kind = "position" if position_only else "pose"
             opts = {"joint_effects": effects, "tol": tol, "tol_angle": tol}
-            res = compensate(real, goal, nom, kind=kind, q0=q_prev, **opts)
+            res = compensate_targets(real, goal, nom, kind=kind, q0=q_prev, **opts)
             config_kept = True
             if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0], nom)):
                 # the written configuration (KUKA S/T, ABB cf/cfx) chooses the branch: starts within it
                 starts = _config_starts(targets[i], nom, rng, 24)
                 for q_start in starts:
-                    trial = compensate(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
+                    trial = compensate_targets(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
                     if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0], nom):
                         res = trial
                         break

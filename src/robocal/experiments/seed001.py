@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.compensate import compensate, compensate_cartesian_path
+from robocal.compensate import compensate_cartesian_path, compensate_targets
 from robocal.identify.calibrate import calibrate
 from robocal.identify.guards import CalibrationGuardError
 from robocal.measure.dataset import Measurements
@@ -261,7 +261,7 @@ def _board_run(
     try:
         data = calibration_data(true, board, backlash, seeds[0])
         result = calibrate(nominal, data, method="bounded", frame=board.T_device_base, tool=None)
-        points = compensate(result, P, nominal, q0=q_points_nominal)
+        points = compensate_targets(result, P, nominal, q0=q_points_nominal)
         spline = compensate_cartesian_path(result, S, nominal, q0=Q_BRANCH, kind="position")
     except (CalibrationGuardError, ValueError, RuntimeError, np.linalg.LinAlgError) as err:
         # CalibrationGuardError is a ValueError: named for the reader
