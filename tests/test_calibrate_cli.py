@@ -101,7 +101,7 @@ def test_calibrate_then_validate(measured, tmp_path):
 def test_calibrate_errors_are_clear(measured, tmp_path):
     path, _ = measured
     result = runner.invoke(app, ["calibrate", "--data", str(path), "--out", str(tmp_path / "o")])
-    assert result.exit_code == 2 and "exactly one of --robot" in result.output
+    assert result.exit_code == 2 and "Missing argument 'ROBOT'" in result.output
     result = runner.invoke(
         app, ["calibrate", "ur10", "--data", str(tmp_path / "x.csv"), "--out", str(tmp_path)]
     )

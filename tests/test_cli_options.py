@@ -51,7 +51,7 @@ def _problems(commands) -> list[str]:
                     problems.append(f"{where}: an argument without a metavar")
                 if not p.help:
                     problems.append(f"{where}: an argument without help")
-                if p.name == "robot" and p.metavar not in ("ROBOT", "[ROBOT]"):
+                if p.name == "robot" and p.metavar != "ROBOT":
                     problems.append(f"{where}: the robot argument is spelled {p.metavar}, not ROBOT")
                 continue
             names = [*p.opts, *p.secondary_opts]

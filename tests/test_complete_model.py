@@ -280,7 +280,7 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     result = runner.invoke(
         app, [*base, str(path), "--chain", "catalog", "--out", str(tmp_path / "e")]
     )
-    assert result.exit_code != 0 and "--chain catalog is for --robot NAME" in flat(result.output)
+    assert result.exit_code != 0 and "--chain catalog is for a catalog ROBOT" in flat(result.output)
     result = runner.invoke(app, [*base, "ur10", "--chain", "dh", "--out", str(tmp_path / "f")])
     assert result.exit_code != 0 and "complete or catalog" in flat(result.output)
 

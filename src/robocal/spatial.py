@@ -474,11 +474,11 @@ def parse_vector(text: str, count: int | tuple[int, ...] | None = None) -> NDArr
     try:
         values = np.array([float(v) for v in parts], dtype=float)
     except ValueError:
-        raise ValueError("expected numbers separated by commas or spaces") from None
+        raise ValueError("the values must be numbers separated by commas or spaces") from None
     allowed = (count,) if isinstance(count, int) else count
     if allowed is not None and len(values) not in allowed:
         expected = " or ".join(str(n) for n in allowed)
-        raise ValueError(f"expected {expected} numbers, got {len(values)}")
+        raise ValueError(f"expected {expected} numbers, got {len(values)} values")
     if not np.all(np.isfinite(values)):
         raise ValueError("the values must be finite numbers (no nan or inf)")
     return values

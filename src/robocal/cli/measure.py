@@ -145,7 +145,7 @@ def data_check(
     robot: Annotated[
         str | None,
         typer.Argument(
-            metavar="[ROBOT]",
+            metavar="ROBOT",
             help="catalog name (robocal robots) or model file (.yaml): checks joint count, types, limits",
             show_default=False,
         ),

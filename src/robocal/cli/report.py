@@ -140,7 +140,7 @@ def _evaluation(directory: Path, iso9283_log: Path | None) -> dict | None:
 
 def demo_command(
     robot: Annotated[
-        str, typer.Argument(metavar="[ROBOT]", help="catalog robot of the virtual twin (robocal robots)")
+        str, typer.Argument(metavar="ROBOT", help="catalog robot of the virtual twin (robocal robots)")
     ] = "ur10",
     out: Annotated[
         Path | None,
