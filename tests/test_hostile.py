@@ -559,7 +559,7 @@ OPTION_CASES = [
     ),
     Case("usage-option-markup", ("poses", "ur10", "--[/x]"), usage=True, says=("--[/x]",)),
     Case("usage-command-markup", ("[/x]",), usage=True, says=("[/x]",)),
-    Case("stdin-data", (*CAL[:4], "/dev/stdin", *CAL[5:]), says=("/dev/stdin", "not a regular file")),
+    Case("stdin-data", (*CAL[:3], "/dev/stdin", *CAL[4:]), says=("/dev/stdin", "not a regular file")),
     Case("fifo-data", _cal(), {}, says=("d.csv", "not a regular file")),
 ]
 
@@ -716,7 +716,7 @@ def test_a_file_name_with_markup_is_printed_as_written(base, tmp_path):
     shutil.copy(base / "meas.csv", folder / "[red].csv")
     out = tmp_path / "c[/y]"
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(folder / "[red].csv"), "--out", str(out), "--residual", "none"]
+        app, [*CAL[:3], str(folder / "[red].csv"), "--out", str(out), "--residual", "none"]
     )
     assert result.exit_code == 0, result.output
     assert str(out / "model.yaml") in result.output.replace("\n", ""), result.output
@@ -799,7 +799,7 @@ def test_a_full_disk_leaves_the_earlier_result_and_one_line(base, tmp_path, monk
 
     monkeypatch.setattr(calibrate_module, "atomic_write_text", full)
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(base / "meas.csv"), "--out", str(out), "--residual", "none", "--force"]
+        app, [*CAL[:3], str(base / "meas.csv"), "--out", str(out), "--residual", "none", "--force"]
     )
     assert result.exit_code == 2, result.output
     errors = [ln for ln in result.stderr.splitlines() if ln.startswith("error:")]
@@ -833,7 +833,7 @@ def test_an_unwritable_folder_is_one_line(base, tmp_path, monkeypatch):
 
     monkeypatch.setattr(outdir.os, "mkdir", denied)
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(base / "meas.csv"), "--out", str(tmp_path / "c"), "--residual", "none"]
+        app, [*CAL[:3], str(base / "meas.csv"), "--out", str(tmp_path / "c"), "--residual", "none"]
     )
     assert result.exit_code == 2
     assert "permission denied" in result.stderr and result.stderr.count("\n") == 1, result.stderr

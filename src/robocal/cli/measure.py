@@ -281,7 +281,7 @@ def simulate_command(
     refuse_overwrite(out, force, "measurement file")
     model = _model(robot)
     if device not in DEVICES:
-        raise fail(f"--device {device!r}: unknown; known: {', '.join(DEVICES)}")
+        raise fail(f"--device: unknown device {device!r}; known: {', '.join(DEVICES)}")
     if distribution not in ("uniform", "normal"):
         raise fail(f"--distribution must be uniform or normal, got {distribution!r}")
     tolerances = _tolerances(tol or [])
