@@ -9,7 +9,7 @@ poses).  Models:
 * plain DH            — the catalog's DH chain (``rc.robot("ur10")``), geometry only;
 * complete            — seed 000's complete model (``rc.calibration_model``), geometry only;
 * complete + compliance — plus joint compliance under gravity (catalog masses);
-* robocal default     — what ``robocal calibrate --robot ur10`` does: k-fold
+* robocal default     — what ``robocal calibrate ur10`` does: k-fold
   cross-validation on the training rows chooses among the above physics and the learned
   per-joint angle errors (``residual="auto"``);
 * + GP (ARD, exact)   — peer: complete + compliance, then a Gaussian process on the

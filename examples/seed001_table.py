@@ -71,7 +71,7 @@ def main() -> None:
 
     points = seed001.verification_points()
     q_nominal = solve_ik(nominal, points, q0=seed001.Q_BRANCH, restarts=0).q
-    commands = rc.compensate(result, points, nominal, q0=q_nominal)
+    commands = rc.compensate_targets(result, points, nominal, q0=q_nominal)
     before, after = measured_error(q_nominal, points, 1), measured_error(commands.q, points, 2)
     print(
         f"points 1-6: {before.mean() * 1e3:.2f} mm -> {after.mean() * 1e3:.2f} mm "

@@ -56,7 +56,7 @@ def main(argv=None) -> None:
         "plain DH": (dh, {}),
         "complete (built)": (complete, {}),
         "complete + compliance": (complete, {"compliance": True}),
-        # what `robocal calibrate --robot ur10` does: CV on the training poses chooses the
+        # what `robocal calibrate ur10` does: CV on the training poses chooses the
         # physics and the learned per-joint angle errors
         "robocal default (CV + learned residual)": (complete, {"residual": "auto"}),
     }

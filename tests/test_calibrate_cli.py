@@ -38,7 +38,6 @@ def test_calibrate_then_validate(measured, tmp_path):
     out = tmp_path / "cal"
     args = [
         "calibrate",
-        "--robot",
         "ur10",
         "--data",
         str(path),
@@ -102,16 +101,15 @@ def test_calibrate_then_validate(measured, tmp_path):
 def test_calibrate_errors_are_clear(measured, tmp_path):
     path, _ = measured
     result = runner.invoke(app, ["calibrate", "--data", str(path), "--out", str(tmp_path / "o")])
-    assert result.exit_code == 2 and "exactly one of --robot" in result.output
+    assert result.exit_code == 2 and "Missing argument 'ROBOT'" in result.output
     result = runner.invoke(
-        app, ["calibrate", "--robot", "ur10", "--data", str(tmp_path / "x.csv"), "--out", str(tmp_path)]
+        app, ["calibrate", "ur10", "--data", str(tmp_path / "x.csv"), "--out", str(tmp_path)]
     )
     assert result.exit_code == 2 and "does not exist" in result.output
     result = runner.invoke(
         app,
         [
             "calibrate",
-            "--robot",
             "katana450",
             "--data",
             str(path),
@@ -130,7 +128,7 @@ def test_noise_option_tests_the_fit_against_the_device_noise(measured, tmp_path)
     """The file has 10 µm noise per axis: stated as 0.01 mm the model explains it; stated
     as 0.001 mm the residuals are ten times the noise and the output says so."""
     path, _ = measured
-    base = ["calibrate", "--robot", "ur10", "--data", str(path), "--length-unit", "mm", "--tool", "0,0,109"]
+    base = ["calibrate", "ur10", "--data", str(path), "--length-unit", "mm", "--tool", "0,0,109"]
     right = runner.invoke(app, [*base, "--noise", "0.01mm", "--out", str(tmp_path / "a")])
     assert right.exit_code == 0, right.output
     assert "explains the data down to the measurement noise" in " ".join(right.output.split())
@@ -155,13 +153,13 @@ def test_validate_and_calibrate_corner_cases(measured, tmp_path):
     base = ["--length-unit", "mm", "--tool", "0,0,109"]
     out = tmp_path / "cal"
     result = runner.invoke(
-        app, ["calibrate", "--robot", "ur10", "--data", str(path), *base, "--out", str(out)]
+        app, ["calibrate", "ur10", "--data", str(path), *base, "--out", str(out)]
     )
     assert result.exit_code == 0, result.output
     # --out naming a file: refused before the fit
     (tmp_path / "afile").write_text("x")
     result = runner.invoke(
-        app, ["calibrate", "--robot", "ur10", "--data", str(path), *base, "--out", str(tmp_path / "afile")]
+        app, ["calibrate", "ur10", "--data", str(path), *base, "--out", str(tmp_path / "afile")]
     )
     assert result.exit_code == 2 and "is a file" in result.output
     # the calibrated model.yaml is a start model: its tool becomes the tool's start value
@@ -170,7 +168,6 @@ def test_validate_and_calibrate_corner_cases(measured, tmp_path):
         app,
         [
             "calibrate",
-            "--model",
             str(out / "model.yaml"),
             "--data",
             str(path),
@@ -187,7 +184,6 @@ def test_validate_and_calibrate_corner_cases(measured, tmp_path):
         app,
         [
             "calibrate",
-            "--model",
             str(out / "measurement_model.yaml"),
             "--data",
             str(path),
@@ -233,7 +229,6 @@ def test_validate_uses_the_rows_marked_test(measured, tmp_path):
         app,
         [
             "calibrate",
-            "--robot",
             "ur10",
             "--data",
             str(split_path),
@@ -278,7 +273,6 @@ def test_space_separated_files_and_separator_names(measured, tmp_path):
         app,
         [
             "calibrate",
-            "--robot",
             "ur10",
             "--data",
             str(tabbed),
@@ -296,7 +290,7 @@ def test_space_separated_files_and_separator_names(measured, tmp_path):
 
 
 def test_reader_messages_name_the_command_line_options():
-    from robocal.measure.commands import as_cli_text
+    from robocal.cli.options import as_cli_text
 
     assert (
         as_cli_text("looks like a decimal comma: pass decimal=','")
@@ -320,26 +314,26 @@ def test_calibrate_explains_what_to_change(measured, tmp_path):
         return result.exit_code, " ".join(result.output.split())
 
     base = ["--data", str(path), "--length-unit", "mm"]
-    code, text = run("--model", str(root / "examples" / "geometry" / "ur10.yaml"), *base)
+    code, text = run(str(root / "examples" / "geometry" / "ur10.yaml"), *base)
     assert code == 2 and "joint-geometry file" in text and "robocal model build" in text
-    code, text = run("--robot", "ur10", *base, "--measure", "bogus")
+    code, text = run("ur10", *base, "--measure", "bogus")
     assert code == 2 and "--measure 'bogus'" in text
-    code, text = run("--robot", "ur10", *base, "--measure", "pose")
+    code, text = run("ur10", *base, "--measure", "pose")
     assert code == 2 and "--measure pose needs measured orientations" in text
     joints_only = write_measurements(
         Measurements(q=np.zeros((3, 6)) + np.arange(3)[:, None]), tmp_path / "q.csv"
     )
-    code, text = run("--robot", "ur10", "--data", str(joints_only))
+    code, text = run("ur10", "--data", str(joints_only))
     assert code == 2 and "no measured positions" in text and "--columns" in text
-    code, text = run("--robot", "irb120", *base)
+    code, text = run("irb120", *base)
     assert code == 2 and "outside the limits" in text and "--limits warn" in text
-    code, text = run("--robot", "UR10", *base, "--tool", "0,0,109")  # catalog names in any case
+    code, text = run("UR10", *base, "--tool", "0,0,109")  # catalog names in any case
     assert code == 0, text
 
 
 def test_bounds_option_is_explicit_and_printed(measured, tmp_path):
     path, _ = measured
-    base = ["calibrate", "--robot", "ur10", "--chain", "catalog", "--data", str(path), "--length-unit", "mm"]
+    base = ["calibrate", "ur10", "--chain", "catalog", "--data", str(path), "--length-unit", "mm"]
     base += ["--tool", "0,0,109", "--residual", "none", "--method", "bounded"]
     result = runner.invoke(app, [*base, "--bounds", "widened", "--out", str(tmp_path / "w")])
     assert result.exit_code == 0, result.output

@@ -10,9 +10,9 @@ import robocal as rc
 from robocal import spatial
 from robocal.compensate import (
     TargetFileError,
-    compensate,
     compensate_cartesian_path,
     compensate_path,
+    compensate_targets,
     filter_program,
     nominal_model,
     read_program,
@@ -36,7 +36,7 @@ def _closed_loop(robot, result, n_targets=150, seed=7):
     the virtual robot: mean measured residual after and before (m), the compensation."""
     q_reach = random_poses(robot.nominal, n_targets, seed=seed)
     targets = robot.device.predict(robot.T_base_tool(q_reach)).position  # reachable by the real arm
-    comp = compensate(result, targets, frame="measurement")
+    comp = compensate_targets(result, targets, frame="measurement")
     after = simulate(robot, comp.q, seed=seed + 1).position
     before = simulate(robot, comp.q_nominal, seed=seed + 2).position
     return (
@@ -103,7 +103,7 @@ def test_closed_loop_with_joint_effects_iterates_to_the_fixed_point(ur10_complia
     assert after <= before / 5
     # ignoring the joint effects leaves the compliance uncorrected
     targets = robot.device.predict(robot.T_base_tool(comp.q)).position
-    geometric = compensate(result, targets, frame="measurement", joint_effects=lambda q: None)
+    geometric = compensate_targets(result, targets, frame="measurement", joint_effects=lambda q: None)
     measured = simulate(robot, geometric.q, seed=3).position
     assert np.linalg.norm(measured - targets, axis=1).mean() > 5 * held_out.mean
 
@@ -114,7 +114,7 @@ def test_commands_reach_targets_on_the_calibrated_model_in_the_nominal_branch():
     real = draw_true_model(nominal, length=2e-3, angle=np.radians(0.2), seed=5)
     q_ref = random_poses(nominal, 40, seed=4)
     T = nominal.fk(q_ref)
-    comp = compensate(real, T, nominal, q0=q_ref, restarts=0)
+    comp = compensate_targets(real, T, nominal, q0=q_ref, restarts=0)
     assert comp.success, comp.message
     assert np.abs(spatial.pose_error(real.fk(comp.q), T)).max() < 1e-9
     # the correction is small and keeps the configuration: elbow (q3) and wrist (q5) signs
@@ -129,13 +129,13 @@ def test_position_targets_and_errors_before():
     real = draw_true_model(nominal, length=3e-3, angle=np.radians(1.0), seed=1)
     q = np.array([[0.1, -1.0, 0.2], [-0.3, -0.8, 0.4]])
     p = nominal.fk(q)[:, :3, 3]
-    comp = compensate(real, p, nominal, q0=q)
+    comp = compensate_targets(real, p, nominal, q0=q)
     np.testing.assert_allclose(real.fk(comp.q)[:, :3, 3], p, atol=1e-9)
     expected_before = np.linalg.norm(real.fk(comp.q_nominal)[:, :3, 3] - p, axis=1)
     np.testing.assert_allclose(comp.error_before, expected_before, rtol=1e-9)
     assert comp.kind == "position" and np.all(comp.angle_after == 0)
     # a bare model with no nominal model: the errors before are unknown
-    alone = compensate(real, p, q0=q)
+    alone = compensate_targets(real, p, q0=q)
     assert np.isnan(alone.error_before).all() and alone.success
 
 
@@ -145,12 +145,12 @@ def test_unreachable_and_joint_limit_targets_are_flagged():
     q = np.radians([[0, -90, 90, 0, 90, 0], [10, -80, 70, 10, 80, 0]])
     p = nominal.fk(q)[:, :3, 3]
     far = np.array([[3.0, 0.0, 0.0]])
-    comp = compensate(real, np.vstack([p, far]), nominal, q0=q[0])
+    comp = compensate_targets(real, np.vstack([p, far]), nominal, q0=q[0])
     assert comp.reachable.tolist() == [True, True, False]
     assert not comp.success and "not reached: 3" in comp.message
     # a pose target whose correction needs joint 1 beyond a limit placed at the nominal value
     T = nominal.fk(q[:1])
-    free = compensate(real, T, nominal, q0=q[:1])
+    free = compensate_targets(real, T, nominal, q0=q[:1])
     assert free.success and abs(free.q[0, 0] - q[0, 0]) > 1e-5
     up = free.q[0, 0] > q[0, 0]
     limits = (q[0, 0] - 1.0, q[0, 0]) if up else (q[0, 0], q[0, 0] + 1.0)
@@ -164,7 +164,7 @@ def test_unreachable_and_joint_limit_targets_are_flagged():
         )
         return dataclasses.replace(model, steps=steps)
 
-    limited = compensate(limited(real), T, limited(nominal), q0=q[:1])
+    limited = compensate_targets(limited(real), T, limited(nominal), q0=q[:1])
     assert limits[0] <= limited.q[0, 0] <= limits[1]
     assert not limited.reachable[0] and limited.error_after[0] > 1e-5
 
@@ -174,14 +174,14 @@ def test_measurement_frame_targets(ur10_geometric):
     q = random_poses(robot.nominal, 10, seed=12)
     p_base = result.model.fk(q)[:, :3, 3]
     p_cell = p_base @ result.frame[:3, :3].T + result.frame[:3, 3]
-    a = compensate(result, p_cell, frame="measurement", q0=q)
-    b = compensate(result, p_base, frame="base", q0=q)
+    a = compensate_targets(result, p_cell, frame="measurement", q0=q)
+    b = compensate_targets(result, p_base, frame="base", q0=q)
     np.testing.assert_allclose(a.q, b.q, atol=1e-8)
     np.testing.assert_allclose(a.targets[:, :3, 3], b.targets[:, :3, 3], atol=1e-12)
     with pytest.raises(ValueError, match="needs a CalibrationResult"):
-        compensate(result.model, p_cell, frame="measurement")
+        compensate_targets(result.model, p_cell, frame="measurement")
     with pytest.raises(ValueError, match="frame must be"):
-        compensate(result, p_cell, frame="tracker")
+        compensate_targets(result, p_cell, frame="tracker")
 
 
 def test_nominal_model_of_a_result(ur10_geometric):
@@ -194,7 +194,7 @@ def test_nominal_model_of_a_result(ur10_geometric):
     # a nominal model without the tool gets the calibrated tool appended
     q = random_poses(catalog, 5, seed=3)
     T = result.model.fk(q)
-    comp = compensate(result, T[:, :3, 3], catalog, q0=q)
+    comp = compensate_targets(result, T[:, :3, 3], catalog, q0=q)
     assert comp.success
     assert np.abs(comp.error_before).max() < 0.02  # the nominal robot with the calibrated tool
 
@@ -202,13 +202,13 @@ def test_nominal_model_of_a_result(ur10_geometric):
 def test_errors_name_the_problem():
     model = rc.robot("ur10")
     with pytest.raises(ValueError, match="positions"):
-        compensate(model, np.zeros((3, 2)))
+        compensate_targets(model, np.zeros((3, 2)))
     with pytest.raises(ValueError, match="target 1 contains NaN"):
-        compensate(model, np.array([[0.5, 0, 0.5], [np.nan, 0, 0]]))
+        compensate_targets(model, np.array([[0.5, 0, 0.5], [np.nan, 0, 0]]))
     with pytest.raises(ValueError, match="has 3 joints"):
-        compensate(model, np.zeros((1, 3)), rc.robot("li2016_3dof"))
+        compensate_targets(model, np.zeros((1, 3)), rc.robot("li2016_3dof"))
     with pytest.raises(TypeError, match="CalibrationResult or a Model"):
-        compensate("ur10", np.zeros((1, 3)))
+        compensate_targets("ur10", np.zeros((1, 3)))
     with pytest.raises(ValueError, match=r"expected \(n, 6\)"):
         filter_program(model, np.zeros((2, 5)))
 
@@ -343,7 +343,7 @@ def test_write_csv_and_json(tmp_path):
     nominal = rc.robot("li2016_3dof")
     real = draw_true_model(nominal, length=3e-3, angle=np.radians(1.0), seed=1)
     q = np.array([[0.1, -1.0, 0.2], [-0.3, -0.8, 0.4]])
-    comp = compensate(real, nominal.fk(q)[:, :3, 3], nominal, q0=q, names=["a", "b"])
+    comp = compensate_targets(real, nominal.fk(q)[:, :3, 3], nominal, q0=q, names=["a", "b"])
     path = comp.write(tmp_path / "out.csv", angle_unit="deg")
     lines = path.read_text().splitlines()
     assert lines[0] == (

@@ -144,7 +144,7 @@ def test_unreachable_target_exit_status_1(cell, tmp_path):
         (["--targets", "T", "-o", "x.txt.gz"], "must be a .csv or .json"),
         (["--targets", "BAD"], "row 3, column 'z'"),
         (["--targets", "T", "--kind", "pose"], "needs orientation columns"),
-        (["--targets", "T", "--q0", "1,2"], "--q0 has 2 values"),
+        (["--targets", "T", "--q0", "1,2"], "got 2 values"),
     ],
 )
 def test_bad_input_exits_2_with_a_clear_message(cell, tmp_path, extra, message):

@@ -150,7 +150,7 @@ def test_parameterisation_warnings():
     assert "link 2 (shoulder_lift → elbow" in text and "link 3 (elbow → wrist_1" in text
     assert "shoulder_lift, elbow, wrist_1" in text  # their tilts cannot be followed
     assert "link 1 " not in text and "link 4 " not in text
-    assert "rc.calibration_model('ur10', 'position')" in text and "robocal calibrate --robot ur10" in text
+    assert "rc.calibration_model('ur10', 'position')" in text and "robocal calibrate ur10" in text
     assert seconds < 0.2, seconds  # ~25 ms on the development VM
     for measure in ("position", "pose"):
         assert parameterisation_warnings(rc.calibration_model("ur10", measure), measure) == []
@@ -205,7 +205,7 @@ def test_tilted_parallel_axes_complete_model_reaches_the_cramer_rao_bound():
 
 
 def test_tilted_parallel_axes_through_the_cli(tmp_path):
-    """The same scenario through ``robocal calibrate --robot ur10`` (complete by default)
+    """The same scenario through ``robocal calibrate ur10`` (complete by default)
     and ``robocal validate``; ``--chain catalog`` warns and is far worse."""
     robot = tilted_ur10(0)
     write_measurements(simulate(robot, poses(robot.nominal, 60, 100), seed=200), tmp_path / "train.csv")
@@ -214,7 +214,7 @@ def test_tilted_parallel_axes_through_the_cli(tmp_path):
     rms = {}
     for chain in ("complete", "catalog"):
         out = tmp_path / chain
-        args = ["calibrate", "--robot", "ur10", "--data", str(tmp_path / "train.csv"), "--tool", "0,0,109"]
+        args = ["calibrate", "ur10", "--data", str(tmp_path / "train.csv"), "--tool", "0,0,109"]
         args += ["--residual", "none"]  # the physical model, whose covariance gives the bound
         args += ["--out", str(out)] + (["--chain", "catalog"] if chain == "catalog" else [])
         result = runner.invoke(app, args)
@@ -256,32 +256,32 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     )
     runner = CliRunner()
     base = ["calibrate", "--data", str(data), "--tool", "0,0,109", "--residual", "none"]
-    result = runner.invoke(app, [*base, "--robot", "ur10", "--out", str(tmp_path / "a")])
+    result = runner.invoke(app, [*base, "ur10", "--out", str(tmp_path / "a")])
     assert result.exit_code == 0, result.output
     assert "model: ur10_complete, the complete model built from ur10's joint geometry for pose" in flat(
         result.output
     )
     result = runner.invoke(
-        app, [*base, "--robot", "ur10", "--measure", "position", "--out", str(tmp_path / "b")]
+        app, [*base, "ur10", "--measure", "position", "--out", str(tmp_path / "b")]
     )
     assert result.exit_code == 0, result.output
     assert "for position measurements" in flat(result.output)
     path = rc.save_model(dataclasses.replace(rc.robot("ur10"), name="my_ur10"), tmp_path / "my_ur10.yaml")
-    result = runner.invoke(app, [*base, "--model", str(path), "--out", str(tmp_path / "c")])
+    result = runner.invoke(app, [*base, str(path), "--out", str(tmp_path / "c")])
     assert result.exit_code == 0, result.output
     assert "model: my_ur10, the model file's chain as it is" in flat(result.output)
     assert "warning: the my_ur10 chain cannot describe" in flat(result.stdout)
     assert "rc.calibration_model(model, 'pose')" in flat(result.stdout)
     result = runner.invoke(
-        app, [*base, "--model", str(path), "--chain", "complete", "--out", str(tmp_path / "d")]
+        app, [*base, str(path), "--chain", "complete", "--out", str(tmp_path / "d")]
     )
     assert result.exit_code == 0, result.output
     assert "model: my_ur10_complete" in flat(result.output) and "warning: the" not in flat(result.output)
     result = runner.invoke(
-        app, [*base, "--model", str(path), "--chain", "catalog", "--out", str(tmp_path / "e")]
+        app, [*base, str(path), "--chain", "catalog", "--out", str(tmp_path / "e")]
     )
-    assert result.exit_code != 0 and "--chain catalog is for --robot NAME" in flat(result.output)
-    result = runner.invoke(app, [*base, "--robot", "ur10", "--chain", "dh", "--out", str(tmp_path / "f")])
+    assert result.exit_code != 0 and "--chain catalog is for a catalog ROBOT" in flat(result.output)
+    result = runner.invoke(app, [*base, "ur10", "--chain", "dh", "--out", str(tmp_path / "f")])
     assert result.exit_code != 0 and "complete or catalog" in flat(result.output)
 
 
@@ -292,7 +292,7 @@ def test_fleet_calibrates_the_complete_model_by_default(tmp_path):
     for k in range(2):
         write_measurements(simulate(robot, poses(robot.nominal, 40, 10 + k), seed=k), folder / f"r{k}.csv")
     runner = CliRunner()
-    base = ["fleet", str(folder), "--robot", "ur10", "--workers", "0", "--tool", "0,0,109", "--no-progress"]
+    base = ["fleet", "ur10", str(folder), "--workers", "0", "--tool", "0,0,109", "--no-progress"]
     base += ["--residual", "none"]
     result = runner.invoke(app, [*base, "--out", str(tmp_path / "complete")])
     assert result.exit_code == 0, result.output

@@ -320,7 +320,7 @@ def test_check_collects_every_problem(tmp_path):
 def test_cli_data_check_reports_problems_and_exit_code(tmp_path):
     path = write(tmp_path, "q1,q2,x,y,z\n10,100,300,0,100\n95,100,300,0,100\n10,100,300,inf,100\n")
     result = runner.invoke(
-        app, ["data", "check", str(path), "--robot", str(rc.save_model(arm(), tmp_path / "rp.yaml")),
+        app, ["data", "check", str(path), str(rc.save_model(arm(), tmp_path / "rp.yaml")),
               "--length-unit", "mm", "--angle-unit", "deg"],
     )  # fmt: skip
     assert result.exit_code == 1, result.output
@@ -336,7 +336,7 @@ def test_cli_data_check_summary_when_clean(tmp_path):
     path = write(tmp_path, "A;B;x;y;z\n10;100;300;0;100\n-20;250;290;-50;250\n")
     model_file = rc.save_model(arm(), tmp_path / "rp.yaml")
     result = runner.invoke(
-        app, ["data", "check", str(path), "--robot", str(model_file), "--length-unit", "mm",
+        app, ["data", "check", str(path), str(model_file), "--length-unit", "mm",
               "--angle-unit", "deg", "--sep", ";", "--columns", "q1=A,q2=B"],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
@@ -482,7 +482,6 @@ def test_unused_columns_are_named(tmp_path):
             "data",
             "check",
             str(path),
-            "--robot",
             str(_arm_file(tmp_path)),
             "--length-unit",
             "mm",

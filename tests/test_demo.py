@@ -63,7 +63,7 @@ def test_fallback_compensation_lands_on_the_targets(monkeypatch):
     )
     q_nom = q[:4]
     targets = result.predict(q_nom, frame=np.eye(4))[:, :3, 3] + 2e-3  # 2 mm away from where it is
-    monkeypatch.delattr(rc, "compensate", raising=False)
+    monkeypatch.delattr(rc, "compensate_targets", raising=False)
     q_c, method = compensate_positions(result, targets, q_nom)
     assert method.startswith("inverse kinematics on the calibrated model")
     reached = result.predict(q_c, frame=np.eye(4))[:, :3, 3]
@@ -72,7 +72,7 @@ def test_fallback_compensation_lands_on_the_targets(monkeypatch):
 
 def test_demo_command_runs_end_to_end(tmp_path):
     out = tmp_path / "demo"
-    res = runner.invoke(app, ["demo", "--out", str(out), "--quick", "--json", "--poses", "40"])
+    res = runner.invoke(app, ["demo", "--out", str(out), "--quick", "--json", "--n", "40"])
     assert res.exit_code == 0, res.output
     numbers = json.loads(res.output)
     held = numbers["held_out"]
@@ -96,7 +96,7 @@ def test_demo_command_runs_end_to_end(tmp_path):
 
 
 def test_demo_rejects_unknown_robots():
-    res = runner.invoke(app, ["demo", "--robot", "nonesuch"])
+    res = runner.invoke(app, ["demo", "nonesuch"])
     assert res.exit_code == 2 and "unknown robot" in res.output
 
 

@@ -21,10 +21,10 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
+from robocal.cli.options import as_cli_text
 from robocal.identify.guards import CalibrationGuardError, check_problem, check_solution
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure import dataset as dataset_module
-from robocal.measure.commands import as_cli_text
 from robocal.measure.dataset import MeasurementFileError, read_measurements
 from robocal.measure.poses import random_poses
 from robocal.model.builder import GeometryError, load_geometry
@@ -159,7 +159,7 @@ def test_broken_file_is_rejected_with_a_precise_message(name):
 def _command(path: Path, tmp: Path) -> list[str]:
     name = path.name
     if name.startswith("csv_"):
-        return ["calibrate", "--robot", "ur10", "--data", str(path), "--out", str(tmp / "cal")]
+        return ["calibrate", "ur10", "--data", str(path), "--out", str(tmp / "cal")]
     if name.startswith("model_"):
         return ["robots", "show", str(path)]
     if name.startswith("study_"):
@@ -185,7 +185,7 @@ def test_data_check_lists_every_problem_without_a_traceback():
         if not name.startswith("csv_"):
             continue
         with time_limit():
-            result = CliRunner().invoke(app, ["data", "check", str(BROKEN / name), "--robot", "ur10"])
+            result = CliRunner().invoke(app, ["data", "check", str(BROKEN / name), "ur10"])
         assert result.exit_code == 1, (name, result.output)
         assert "Traceback" not in result.output
         assert result.exception is None or isinstance(result.exception, SystemExit)

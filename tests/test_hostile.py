@@ -62,7 +62,6 @@ def base(tmp_path_factory) -> Path:
         app,
         [
             "calibrate",
-            "--robot",
             "ur10",
             "--data",
             str(root / "meas.csv"),
@@ -171,8 +170,8 @@ def _with_body(transform):
     return make
 
 
-CAL = ("calibrate", "--robot", "ur10", "--data", "{dir}/d.csv", "--out", "{dir}/out", "--residual", "none")
-CHECK = ("data", "check", "{dir}/d.csv", "--robot", "ur10")
+CAL = ("calibrate", "ur10", "--data", "{dir}/d.csv", "--out", "{dir}/out", "--residual", "none")
+CHECK = ("data", "check", "{dir}/d.csv", "ur10")
 
 
 def _cal(*extra: str) -> tuple[str, ...]:
@@ -510,7 +509,7 @@ OPTION_CASES = [
     ),
     Case(
         "calibrate-model-markup-path",
-        ("calibrate", "--model", "{dir}/[/x].yaml", "--data", "{dir}/d.csv", "--out", "{dir}/out"),
+        ("calibrate", "{dir}/[/x].yaml", "--data", "{dir}/d.csv", "--out", "{dir}/out"),
         {"d.csv": _csv_text},
         says=("[/x].yaml",),
     ),
@@ -548,9 +547,9 @@ OPTION_CASES = [
     Case("demo-seed-negative", ("demo", "--seed", "-3", "--out", "{dir}/out"), usage=True, says=("--seed",)),
     Case(
         "demo-poses-huge",
-        ("demo", "--poses", "100000000", "--out", "{dir}/out"),
+        ("demo", "--n", "100000000", "--out", "{dir}/out"),
         usage=True,
-        says=("--poses",),
+        says=("--n",),
     ),
     Case(
         "usage-choice-markup",
@@ -560,7 +559,7 @@ OPTION_CASES = [
     ),
     Case("usage-option-markup", ("poses", "ur10", "--[/x]"), usage=True, says=("--[/x]",)),
     Case("usage-command-markup", ("[/x]",), usage=True, says=("[/x]",)),
-    Case("stdin-data", (*CAL[:4], "/dev/stdin", *CAL[5:]), says=("/dev/stdin", "not a regular file")),
+    Case("stdin-data", (*CAL[:3], "/dev/stdin", *CAL[4:]), says=("/dev/stdin", "not a regular file")),
     Case("fifo-data", _cal(), {}, says=("d.csv", "not a regular file")),
 ]
 
@@ -717,7 +716,7 @@ def test_a_file_name_with_markup_is_printed_as_written(base, tmp_path):
     shutil.copy(base / "meas.csv", folder / "[red].csv")
     out = tmp_path / "c[/y]"
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(folder / "[red].csv"), "--out", str(out), "--residual", "none"]
+        app, [*CAL[:3], str(folder / "[red].csv"), "--out", str(out), "--residual", "none"]
     )
     assert result.exit_code == 0, result.output
     assert str(out / "model.yaml") in result.output.replace("\n", ""), result.output
@@ -727,7 +726,7 @@ def test_a_file_name_with_markup_is_printed_as_written(base, tmp_path):
 
 
 def test_an_unexpected_exception_is_one_line_and_a_traceback_file(monkeypatch, tmp_path):
-    import robocal.cli as cli
+    import robocal.cli.robots as cli
 
     def boom(*args, **kwargs):
         raise ZeroDivisionError("[/x] \x1b[31m")
@@ -800,7 +799,7 @@ def test_a_full_disk_leaves_the_earlier_result_and_one_line(base, tmp_path, monk
 
     monkeypatch.setattr(calibrate_module, "atomic_write_text", full)
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(base / "meas.csv"), "--out", str(out), "--residual", "none", "--force"]
+        app, [*CAL[:3], str(base / "meas.csv"), "--out", str(out), "--residual", "none", "--force"]
     )
     assert result.exit_code == 2, result.output
     errors = [ln for ln in result.stderr.splitlines() if ln.startswith("error:")]
@@ -834,7 +833,7 @@ def test_an_unwritable_folder_is_one_line(base, tmp_path, monkeypatch):
 
     monkeypatch.setattr(outdir.os, "mkdir", denied)
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(base / "meas.csv"), "--out", str(tmp_path / "c"), "--residual", "none"]
+        app, [*CAL[:3], str(base / "meas.csv"), "--out", str(tmp_path / "c"), "--residual", "none"]
     )
     assert result.exit_code == 2
     assert "permission denied" in result.stderr and result.stderr.count("\n") == 1, result.stderr

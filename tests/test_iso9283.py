@@ -419,7 +419,7 @@ def test_simulated_log_round_trip_and_command(simulated, tmp_path):
     assert np.abs(back.position - small.position).max() < 1e-9
     assert np.abs(back.rotation - small.rotation).max() < 1e-7
     html_path = tmp_path / "iso.html"
-    result = runner.invoke(app, ["iso9283", str(path), "--json", "--html", str(html_path)])
+    result = runner.invoke(app, ["iso9283", str(path), "--json", "-o", str(html_path)])
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     got = {c["number"]: c for c in data["characteristics"]}
@@ -427,7 +427,7 @@ def test_simulated_log_round_trip_and_command(simulated, tmp_path):
     assert not got[2]["measured"] and "multidirectional" in got[2]["summary"]
     page = html_path.read_text()
     assert "<script>" not in page and "&lt;script&gt;" in page
-    again = runner.invoke(app, ["iso9283", str(path), "--html", str(html_path)])
+    again = runner.invoke(app, ["iso9283", str(path), "-o", str(html_path)])
     assert again.exit_code == 2 and "--force" in again.output
     table = runner.invoke(app, ["iso9283", str(path), "--band", "0.05mm"])
     assert table.exit_code == 0 and "not measured" in table.output
@@ -492,7 +492,9 @@ def test_degenerate_logs_give_reasons_not_exceptions():
 
 
 def test_simulate_log_options(tmp_path):
-    both = runner.invoke(app, ["simulate", "ur10", "--log", str(tmp_path / "a.csv"), "--poses", "p.csv"])
+    both = runner.invoke(
+        app, ["simulate", "ur10", "--log", "-o", str(tmp_path / "a.csv"), "--poses", "p.csv"]
+    )
     assert both.exit_code == 2 and "drop --poses" in both.output
     neither = runner.invoke(app, ["simulate", "ur10"])
     assert neither.exit_code == 2 and "--log" in neither.output
@@ -503,11 +505,11 @@ def test_simulate_log_options(tmp_path):
 def test_simulate_log_command_end_to_end(tmp_path):
     """The README's two commands: every characteristic measured, the truth beside the log."""
     log = tmp_path / "iso.csv"
-    made = runner.invoke(app, ["simulate", "ur10", "--log", str(log), "--seed", "1"])
+    made = runner.invoke(app, ["simulate", "ur10", "--log", "-o", str(log), "--seed", "1"])
     assert made.exit_code == 0, made.output
     assert (tmp_path / "iso.truth.yaml").is_file()
     result = runner.invoke(app, ["iso9283", str(log), "--json"])
     assert result.exit_code == 0, result.output
     assert all(c["measured"] for c in json.loads(result.output)["characteristics"])
-    again = runner.invoke(app, ["simulate", "ur10", "--log", str(log)])
+    again = runner.invoke(app, ["simulate", "ur10", "--log", "-o", str(log)])
     assert again.exit_code == 2 and "--force" in again.output

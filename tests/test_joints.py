@@ -377,7 +377,6 @@ def test_cli_level_3(tmp_path, katana_data):
         app,
         [
             "calibrate",
-            "--model",
             str(model_path),
             "--data",
             str(data_path),
@@ -395,7 +394,6 @@ def test_cli_level_3(tmp_path, katana_data):
         app,
         [
             "calibrate",
-            "--model",
             str(model_path),
             "--data",
             str(data_path),

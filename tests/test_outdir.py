@@ -145,7 +145,6 @@ def test_the_calibrate_command_refuses_a_folder_being_written(tmp_path):
     out = tmp_path / "cal"
     args = [
         "calibrate",
-        "--robot",
         "ur10",
         "--data",
         str(tmp_path / "m.csv"),

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 import robocal as rc
 from robocal import spatial
 from robocal.cli import app
-from robocal.compensate.commands import nominal_model
+from robocal.compensate.compensation import nominal_model
 from robocal.compensate.programs import ProgramError, filter_program_file, filter_program_text
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
 from robocal.measure.ik import solve_ik
@@ -169,7 +169,7 @@ def test_malformed_programs_name_file_and_line_and_write_nothing(tmp_path, name,
         filter_program_file(path, rc.robot("ur10"), out)
     assert not out.exists()
     res = runner.invoke(
-        app, ["filter", str(path), "--calibration", str(_model_file(tmp_path)), "-o", str(out)]
+        app, ["filter", str(_model_file(tmp_path)), str(path), "-o", str(out)]
     )
     assert res.exit_code == 2 and not out.exists()
 
@@ -187,7 +187,7 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
     result.save(folder)
     out = tmp_path / "pick.script"
     res = runner.invoke(
-        app, ["filter", str(EXAMPLES / "pick.script"), "--calibration", str(folder), "-o", str(out)]
+        app, ["filter", str(folder), str(EXAMPLES / "pick.script"), "-o", str(out)]
     )
     assert res.exit_code == 2 and "--probe" in res.output and not out.exists()  # position-only calibration
     assert "pick.script: line" in " ".join(res.output.split())
@@ -195,9 +195,8 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
         app,
         [
             "filter",
-            str(EXAMPLES / "pick.script"),
-            "--calibration",
             str(folder),
+            str(EXAMPLES / "pick.script"),
             "-o",
             str(out),
             "--probe",
@@ -398,7 +397,7 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     result.save(folder)
     path = tmp_path / "far.script"
     path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
-    args = ["filter", str(path), "--calibration", str(folder), "--probe", "0,0,0.1", "-o"]
+    args = ["filter", str(folder), str(path), "--probe", "0,0,0.1", "-o"]
     res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
     assert res.exit_code == 0
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())
@@ -572,7 +571,7 @@ def test_cli_config_dat_and_strict_configuration_change(tmp_path):
     (tmp_path / "cfg.dat").write_text(
         f"TOOL_DATA[1]={{X 0.0,Y 0.0,Z {PROBE[2] * 1e3:.1f},A 0.0,B 0.0,C 0.0}}\n"
     )
-    args = ["filter", str(tmp_path / "prog.src"), "--calibration", str(tmp_path / "moved.yaml")]
+    args = ["filter", str(tmp_path / "moved.yaml"), str(tmp_path / "prog.src")]
     args += ["--nominal", "kr16", "-o", str(tmp_path / "out" / "prog.src")]
     res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "none.dat")])
     assert res.exit_code == 2 and "none.dat: no such $config.dat" in " ".join(res.output.split())

@@ -207,14 +207,15 @@ def test_compensation_uses_the_residual(with_errors):
 
     def miss(result: rc.CalibrationResult) -> float:
         # from the programmed configurations: the same branch, inside the calibrated range
-        q = rc.compensate(result, targets, frame="measurement", q0=q_ref, restarts=0).q
+        q = rc.compensate_targets(result, targets, frame="measurement", q0=q_ref, restarts=0).q
         return float(np.mean(np.linalg.norm(probe(q) - targets, axis=1)))
 
     assert miss(hybrid) < 0.3 * miss(physics), (miss(hybrid), miss(physics))
     # a bare calibrated model applies its residual too
-    q_base = rc.compensate(hybrid, targets[:5], frame="measurement").q
+    q_base = rc.compensate_targets(hybrid, targets[:5], frame="measurement").q
     reach = hybrid.model.fk(q_base, hybrid.joint_perturbations(q_base))[:, :3, 3]
-    np.testing.assert_allclose(rc.compensate(hybrid.model, reach, q0=q_base, restarts=0).q, q_base, atol=1e-6)
+    again = rc.compensate_targets(hybrid.model, reach, q0=q_base, restarts=0).q
+    np.testing.assert_allclose(again, q_base, atol=1e-6)
 
 
 def test_no_unmodelled_error_cv_keeps_physics_or_costs_nothing():
@@ -270,7 +271,7 @@ def test_exports_state_the_size_of_the_learned_residual(with_errors):
 
 def test_default_path_keeps_the_cramer_rao_bound_without_unmodelled_errors():
     """The issue's simulated UR10 (0.05° Hayati β on joints 2 and 3, unknown tracker frame,
-    109 mm probe, 0.02 mm noise, 60 poses), calibrated the way ``robocal calibrate --robot
+    109 mm probe, 0.02 mm noise, 60 poses), calibrated the way ``robocal calibrate
     ur10`` does (complete model, ``residual="auto"``): CV keeps the physics, and the held-out
     RMS against the truth stays within 1.15x the Cramér–Rao bound over 5 twins."""
     import math

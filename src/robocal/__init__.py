@@ -19,7 +19,7 @@ from robocal._version import __version__
 lazy_package(
     __name__,
     {
-        "robocal.compensate.commands": ("compensate",),
+        "robocal.compensate.compensation": ("compensate_targets",),
         "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
         "robocal.identify.validate": ("cross_validate", "validate"),
         "robocal.measure.dataset": ("Measurements", "read_measurements", "write_measurements"),
@@ -34,7 +34,7 @@ lazy_package(
 if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_typing.py keeps them equal)
     from pathlib import Path
 
-    from robocal.compensate.commands import compensate
+    from robocal.compensate.compensation import compensate_targets
     from robocal.identify.calibrate import CalibrationResult, calibrate
     from robocal.identify.validate import cross_validate, validate
     from robocal.measure.dataset import Measurements, read_measurements, write_measurements
@@ -58,7 +58,7 @@ __all__ = [
     "build_model",
     "calibrate",
     "calibration_model",
-    "compensate",
+    "compensate_targets",
     "cross_validate",
     "load_model",
     "model_from_urdf",

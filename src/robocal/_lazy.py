@@ -4,7 +4,7 @@ when one of its names is first used.
 A package lists its public names and the module each lives in; the standard library's
 PEP 562 module ``__getattr__`` does the rest. One detail needs a module class: some packages
 export a function named like one of their modules (``robocal.identify.calibrate``,
-``robocal.measure.simulate``, ``robocal.compensate``). Imported eagerly, the function was bound
+``robocal.measure.simulate``). Imported eagerly, the function was bound
 after the module and won; imported lazily, the import system would bind the module on the
 package when it is first loaded, hiding the function. The package class below keeps the
 exported function in that case, so ``from robocal.identify import calibrate`` is the function

@@ -41,6 +41,7 @@ __all__ = [
     "matrix_to_euler",
     "matrix_to_quaternion",
     "matrix_to_rotvec",
+    "parse_vector",
     "pose_error",
     "quaternion_to_matrix",
     "rot",
@@ -455,3 +456,29 @@ def _weighted_cross_covariance(
     Qc = Q - q0[..., None, :]
     H = np.einsum("...k,...ki,...kj->...ij", wn, Pc, Qc)  # (..., 3, 3) = sum w p q^T
     return H, p0, q0
+
+
+def parse_vector(text: str, count: int | tuple[int, ...] | None = None) -> NDArray[np.float64]:
+    """The one parser of robocal for a vector typed as text (``"x,y,z"``, ``"0, -90, 90"``,
+    ``"1 2 3"``; commas, semicolons and white space separate): a float array ``(n,)``.
+
+    Args:
+        text: the numbers as typed.
+        count: the number of values required (or the allowed numbers), None for any.
+
+    Raises:
+        ValueError: a message without the option's name (the caller adds it): not numbers,
+            the wrong count, or a value that is not finite.
+    """
+    parts = text.replace(",", " ").replace(";", " ").split()
+    try:
+        values = np.array([float(v) for v in parts], dtype=float)
+    except ValueError:
+        raise ValueError("the values must be numbers separated by commas or spaces") from None
+    allowed = (count,) if isinstance(count, int) else count
+    if allowed is not None and len(values) not in allowed:
+        expected = " or ".join(str(n) for n in allowed)
+        raise ValueError(f"expected {expected} numbers, got {len(values)} values")
+    if not np.all(np.isfinite(values)):
+        raise ValueError("the values must be finite numbers (no nan or inf)")
+    return values

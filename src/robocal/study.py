@@ -11,7 +11,7 @@ again resumes from the table.  ``robocal study config.yaml --out DIR`` (config f
 :class:`StudyConfig`, example ``examples/study_ur10.yaml``).
 
 A **fleet** run calibrates one robot per measurement file of a folder
-(``robocal fleet DIR --robot NAME``): ``OUT/<file stem>/`` gets the calibration
+(``robocal fleet ROBOT DIR``): ``OUT/<file stem>/`` gets the calibration
 (``model.yaml``, ``result.json``) and ``OUT/fleet.csv`` one row per file, also
 resumable.
 
@@ -357,18 +357,14 @@ def _quantity(value: Quantity, kind: Literal["length", "angle"], where: str) -> 
 
 
 def _resolve_model(name_or_path: str) -> Model:
-    from robocal.model.catalog import robot
-    from robocal.model.files import ModelFileError, load_model
+    """The study's robot (robocal.model.catalog.find_model); its error as a StudyError."""
+    from robocal.model.catalog import find_model
+    from robocal.model.files import ModelFileError
 
-    path = Path(name_or_path)
     try:
-        if path.suffix in (".yaml", ".yml") or path.exists():
-            return load_model(path)
-        return robot(name_or_path)
-    except FileNotFoundError:
-        raise StudyError(f"model file {path} does not exist") from None
-    except (KeyError, ModelFileError) as err:
-        raise StudyError(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+        return find_model(name_or_path)
+    except ModelFileError as err:
+        raise StudyError(str(err)) from None
 
 
 def _make_device(spec: DeviceSpec, p_tool_target: Array, index: int):

@@ -37,7 +37,7 @@ def _usage(data_path: str, targets: npt.NDArray[np.float64]) -> None:
     folds = rc.cross_validate(calib, data, folds=5)
     rc.write_measurements(data, "copy.csv")
 
-    comp = rc.compensate(result, targets, frame="measurement")
+    comp = rc.compensate_targets(result, targets, frame="measurement")
     q_cmd: npt.NDArray[np.float64] = comp.q
     built: rc.Model = rc.build_model([{"axis": [0, 0, 1], "point": [0, 0, 0]}])
     urdf: rc.Model = rc.model_from_urdf("robot.urdf", measure="position")

@@ -26,11 +26,17 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from robocal.cli.options import Decimal, Force, Json, Sep, out_option, parse_vector, resolve_model
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 from robocal.model.files import strict_json
 from robocal.units import unit_factor
 
 __all__ = ["register"]
+
+#: the calibration (a result folder or a model file) that compensate, filter and export read
+CALIBRATION = typer.Argument(
+    metavar="CALIBRATION", help="calibration directory (result.json) or model .yaml", show_default=False
+)
 
 
 def _load(source: Path):
@@ -58,59 +64,73 @@ def _load(source: Path):
     raise fail(problem + (" (a calibration directory or a model file)" if problem.endswith("exist") else ""))
 
 
-def _parse_q0(text: str, dof: int, factor: np.ndarray) -> np.ndarray:
-    try:
-        values = np.array([float(v) for v in text.replace(",", " ").split()])
-    except ValueError:
-        raise fail(f"--q0 {text!r}: joint values must be numbers separated by commas or spaces") from None
-    if values.shape != (dof,):
-        raise fail(f"--q0 has {len(values)} values but the robot has {dof} joints")
-    return values * factor
+TargetsOption = Annotated[
+    Path | None,
+    typer.Option("--targets", metavar="FILE", help="CSV of Cartesian targets name,x,y,z[,qw,qx,qy,qz]"),
+]
+ProgramOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--program",
+        metavar="FILE",
+        help="CSV joint program q1..qN (+ optional name) from the nominal model",
+    ),
+]
+FrameOption = Annotated[
+    str,
+    typer.Option("--frame", metavar="base|measurement", help="base | measurement: the frame of the targets"),
+]
+LengthUnitOption = Annotated[
+    str,
+    typer.Option("--length-unit", metavar="m|mm|um", help="m | mm | um: target positions, prismatic joints"),
+]
+AngleUnitOption = Annotated[
+    str,
+    typer.Option(
+        "--angle-unit",
+        metavar="rad|deg",
+        help="rad | deg: joint values in --program, --q0 and the output",
+    ),
+]
+KindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--kind",
+        metavar="position|pose|axis",
+        help="position | pose | axis (default from the file / robot)",
+    ),
+]
+NominalOption = Annotated[
+    str | None,
+    typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
+]
+Q0Option = Annotated[
+    str | None,
+    typer.Option(
+        "--q0", metavar='"q1,...,qn"', help='configuration choosing the branch, e.g. "0,-90,90,0,90,0"'
+    ),
+]
 
 
 def compensate_command(
-    source: Annotated[Path, typer.Argument(help="calibration directory (result.json) or model .yaml")],
-    targets: Annotated[
-        Path | None, typer.Option("--targets", help="CSV of Cartesian targets name,x,y,z[,qw,qx,qy,qz]")
-    ] = None,
-    program: Annotated[
-        Path | None,
-        typer.Option("--program", help="CSV joint program q1..qN (+ optional name) from the nominal model"),
-    ] = None,
-    out: Annotated[Path | None, typer.Option("-o", "--out", help="output file: .csv or .json")] = None,
-    frame: Annotated[
-        str, typer.Option("--frame", help="base | measurement: the frame of the targets")
-    ] = "base",
-    length_unit: Annotated[
-        str, typer.Option("--length-unit", help="m | mm | um: target positions, prismatic joints")
-    ] = "m",
-    angle_unit: Annotated[
-        str, typer.Option("--angle-unit", help="rad | deg: joint values in --program, --q0 and the output")
-    ] = "rad",
-    kind: Annotated[
-        str | None, typer.Option("--kind", help="position | pose | axis (default from the file / robot)")
-    ] = None,
-    nominal: Annotated[
-        str | None, typer.Option("--nominal", help="the controller's model: catalog name or .yaml")
-    ] = None,
-    q0: Annotated[
-        str | None, typer.Option("--q0", help='configuration choosing the branch, e.g. "0,-90,90,0,90,0"')
-    ] = None,
-    sep: Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")] = None,
-    decimal: Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')] = ".",
-    as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    source: Annotated[Path, CALIBRATION],
+    targets: TargetsOption = None,
+    program: ProgramOption = None,
+    out: Annotated[Path | None, out_option("output file: .csv or .json")] = None,
+    frame: FrameOption = "base",
+    length_unit: LengthUnitOption = "m",
+    angle_unit: AngleUnitOption = "rad",
+    kind: KindOption = None,
+    nominal: NominalOption = None,
+    q0: Q0Option = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    as_json: Json = False,
+    force: Force = False,
 ) -> None:
     """Corrected joint commands that bring the calibrated robot onto an off-line program's targets."""
     if out is not None:
         refuse_overwrite(out, force, "output file")
-    from robocal.compensate.commands import (
-        TargetFileError,
-        compensate,
-        filter_program,
-        read_program,
-        read_targets,
-    )
     from robocal.identify.calibrate import CalibrationResult
 
     if (targets is None) == (program is None):
@@ -131,53 +151,20 @@ def compensate_command(
         raise fail(
             f"--frame measurement needs a calibration directory (its identified frame); {source} is a model"
         )
-    nominal_model = None
-    if nominal is not None:
-        from robocal.cli import resolve_model
-
-        nominal_model = resolve_model(nominal)
+    nominal_model = None if nominal is None else resolve_model(nominal)
     angle_f = unit_factor(angle_unit, "angle", "--angle-unit")
     length_f = unit_factor(length_unit, "length", "--length-unit")
     factor = np.array([angle_f if t == "revolute" else length_f for t in model.joint_types])
-    q_start = None if q0 is None else _parse_q0(q0, model.dof, factor)
-    try:
-        if targets is not None:
-            tgt = read_targets(targets, length_unit=length_unit, sep=sep, decimal=decimal)
-            if kind == "position" and tgt.kind == "pose":
-                values = tgt.values[:, :3, 3]
-            elif kind in ("pose", "axis") and tgt.kind == "position":
-                raise fail(f"--kind {kind} needs orientation columns qw,qx,qy,qz in {targets}")
-            else:
-                values = tgt.values
-            with console.status(f"compensating {len(tgt.names)} targets ..."):
-                result = compensate(
-                    calibrated,
-                    values,
-                    nominal_model,
-                    kind=kind or "auto",
-                    frame=frame,
-                    q0=q_start,
-                    names=tgt.names,
-                )
-            source_file = targets
-        else:
-            names, q = read_program(
-                program,
-                model.dof,
-                angle_unit=angle_unit,
-                length_unit=length_unit,
-                joint_types=model.joint_types,
-                sep=sep,
-                decimal=decimal,
-            )
-            with console.status(f"filtering {len(names)} program points ..."):
-                result = filter_program(calibrated, q, nominal_model, kind=kind, names=names)
-            source_file = program
-    except TargetFileError as err:
-        raise fail(str(err)) from None
-    except ValueError as err:
-        raise fail(f"{source_file}: {err}") from None
-
+    q_start = (
+        None if q0 is None else parse_vector(q0, model.dof, "--q0", f"{model.dof} joint values") * factor
+    )
+    reader = dict(length_unit=length_unit, angle_unit=angle_unit, sep=sep, decimal=decimal)
+    if targets is not None:
+        result, source_file = _compensate_targets(
+            calibrated, targets, nominal_model, kind, frame, q_start, reader
+        )
+    else:
+        result, source_file = _filter_program(calibrated, model, program, nominal_model, kind, reader)
     if out is not None:
         result.write(out, angle_unit=angle_unit, length_unit=length_unit)
     if as_json:
@@ -195,6 +182,52 @@ def compensate_command(
             markup=True,
         )
         raise typer.Exit(code=1)
+
+
+def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: str, q_start, reader: dict):
+    """``--targets``: joint commands for Cartesian targets; the result and the file read."""
+    from robocal.compensate.compensation import TargetFileError, compensate_targets, read_targets
+
+    try:
+        tgt = read_targets(
+            targets, length_unit=reader["length_unit"], sep=reader["sep"], decimal=reader["decimal"]
+        )
+        if kind == "position" and tgt.kind == "pose":
+            values = tgt.values[:, :3, 3]
+        elif kind in ("pose", "axis") and tgt.kind == "position":
+            raise fail(f"--kind {kind} needs orientation columns qw,qx,qy,qz in {targets}")
+        else:
+            values = tgt.values
+        with console.status(f"compensating {len(tgt.names)} targets ..."):
+            result = compensate_targets(
+                calibrated,
+                values,
+                nominal_model,
+                kind=kind or "auto",
+                frame=frame,
+                q0=q_start,
+                names=tgt.names,
+            )
+    except TargetFileError as err:
+        raise fail(str(err)) from None
+    except ValueError as err:
+        raise fail(f"{targets}: {err}") from None
+    return result, targets
+
+
+def _filter_program(calibrated, model, program: Path, nominal_model, kind, reader: dict):
+    """``--program``: a nominal joint program corrected; the result and the file read."""
+    from robocal.compensate.compensation import TargetFileError, filter_program, read_program
+
+    try:
+        names, q = read_program(program, model.dof, joint_types=model.joint_types, **reader)
+        with console.status(f"filtering {len(names)} program points ..."):
+            result = filter_program(calibrated, q, nominal_model, kind=kind, names=names)
+    except TargetFileError as err:
+        raise fail(str(err)) from None
+    except ValueError as err:
+        raise fail(f"{program}: {err}") from None
+    return result, program
 
 
 def _print(result, robot: str, source: Path) -> None:

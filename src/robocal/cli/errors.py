@@ -130,6 +130,12 @@ def report(exc: BaseException) -> int:
 class RobocalGroup(TyperGroup):
     """The ``robocal`` app's group: any exception a command lets through becomes one line."""
 
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        from robocal.cli.options import tidy_help
+
+        tidy_help(self)  # every subcommand is built by now: no `<bool>` shown for a flag
+
     def invoke(self, ctx):  # type: ignore[override]
         try:
             return super().invoke(ctx)

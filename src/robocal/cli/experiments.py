@@ -7,6 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
+from robocal.cli.options import Force, Json, out_option
 from robocal.console import fail, refuse_overwrite
 from robocal.model.files import strict_json
 
@@ -42,18 +43,25 @@ def _write_md(md: Path, name: str, numbers: dict[str, Any], quick: bool) -> str:
 
 
 def reproduce_command(
-    name: Annotated[str, typer.Argument(help="seed000 | seed001 | seed003 | all")],
-    out: Annotated[Path | None, typer.Option("--out", help="directory for the report and files")] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
+    name: Annotated[
+        str, typer.Argument(metavar="seed000|seed001|seed003|all", help="the experiment", show_default=False)
+    ],
+    out: Annotated[Path | None, out_option("directory for the report and files", "DIR")] = None,
+    as_json: Json = False,
     quick: Annotated[bool, typer.Option("--quick", help="a smaller, faster run")] = False,
     md: Annotated[
-        Path | None, typer.Option("--md", help="write NAME.md (the seed's and robocal's numbers) here")
+        Path | None,
+        typer.Option("--md", metavar="DIR", help="write NAME.md (the seed's and robocal's numbers) here"),
     ] = None,
     readme: Annotated[
         Path | None,
-        typer.Option("--readme", help="rewrite this README's '<!-- reproduce:NAME -->' blocks (with --md)"),
+        typer.Option(
+            "--readme",
+            metavar="FILE",
+            help="rewrite this README's '<!-- reproduce:NAME -->' blocks (with --md)",
+        ),
     ] = None,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    force: Force = False,
 ) -> None:
     """Reproduce a seed's experiment and print its published numbers next to robocal's.
 

@@ -3,7 +3,7 @@
     robocal export urdf DIR [--urdf ORIGINAL.urdf] [--tip LINK] [--device-link NAME]
                             [--tool-link NAME] -o OUT.urdf
     robocal export ur-kinematics DIR [--base-rz-pi] -o calibration.yaml
-    robocal filter PROGRAM --calibration DIR [--tool x,y,z,rx,ry,rz] [--probe x,y,z]
+    robocal filter DIR PROGRAM [--tool x,y,z,rx,ry,rz] [--probe x,y,z]
                            [--config-dat PATH] [--strict] -o OUT
 
 ``DIR`` is a calibration directory (``model.yaml`` + ``result.json``) or a model file.
@@ -23,34 +23,47 @@ from typing import Annotated
 
 import typer
 
+from robocal.cli.compensate import CALIBRATION
+from robocal.cli.options import CONTEXT, Force, out_option, parse_vector, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe, warn
 
 __all__ = ["register"]
 
-export_app = typer.Typer(help="Export a calibration: calibrated URDF, UR kinematics.", no_args_is_help=True)
+export_app = typer.Typer(
+    help="Export a calibration: calibrated URDF, UR kinematics.",
+    no_args_is_help=True,
+    context_settings=CONTEXT,
+)
 
 
 @export_app.command("urdf")
 def urdf_command(
-    source: Annotated[Path, typer.Argument(help="calibration directory (result.json) or model .yaml")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="the URDF to write")],
+    source: Annotated[Path, CALIBRATION],
+    out: Annotated[Path, out_option("the URDF to write")],
     urdf: Annotated[
-        Path | None, typer.Option("--urdf", help="the URDF the model was built from (kept but for origins)")
+        Path | None,
+        typer.Option(
+            "--urdf", metavar="FILE", help="the URDF the model was built from (kept but for origins)"
+        ),
     ] = None,
     tip: Annotated[
-        str | None, typer.Option("--tip", help="link at the model's flange (default: last)")
+        str | None, typer.Option("--tip", metavar="LINK", help="link at the model's flange (default: last)")
     ] = None,
     device_link: Annotated[
-        str | None, typer.Option("--device-link", help="add the device frame as a new root link of this name")
+        str | None,
+        typer.Option(
+            "--device-link", metavar="NAME", help="add the device frame as a new root link of this name"
+        ),
     ] = None,
     tool_link: Annotated[
-        str | None, typer.Option("--tool-link", help="add the measured tool as a link of this name")
+        str | None,
+        typer.Option("--tool-link", metavar="NAME", help="add the measured tool as a link of this name"),
     ] = None,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    force: Force = False,
 ) -> None:
     """A URDF whose forward kinematics are the calibrated model's (joint offsets folded into origins)."""
     refuse_overwrite(out, force, "URDF")
-    from robocal.compensate.cli import _load
+    from robocal.cli.compensate import _load
     from robocal.compensate.export import export_urdf
     from robocal.identify.calibrate import CalibrationResult
     from robocal.model.files import atomic_write_text
@@ -76,20 +89,20 @@ def urdf_command(
 
 @export_app.command("ur-kinematics")
 def ur_kinematics_command(
-    source: Annotated[Path, typer.Argument(help="calibration directory (result.json) or model .yaml")],
-    out: Annotated[Path, typer.Option("-o", "--out", help="the YAML to write")],
+    source: Annotated[Path, CALIBRATION],
+    out: Annotated[Path, out_option("the YAML to write")],
     base_rz_pi: Annotated[
         bool,
         typer.Option(
             "--base-rz-pi", help="the model's base is a ROS base_link (the UR base turned by 180 deg about z)"
         ),
     ] = False,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    force: Force = False,
 ) -> None:
     """The calibrated kinematics as a UR description default_kinematics.yaml."""
     refuse_overwrite(out, force, "kinematics file")
     from robocal import spatial
-    from robocal.compensate.cli import _load
+    from robocal.cli.compensate import _load
     from robocal.compensate.export import export_ur_kinematics, left_out
 
     calibrated = _load(source)
@@ -122,62 +135,85 @@ def _frame_option(text: str | None, what: str):
         return None
     from robocal import spatial
 
-    try:
-        v = [float(s) for s in text.replace(",", " ").split()]
-    except ValueError:
-        v = []
-    if len(v) != 6:
-        raise fail(f"{what} {text!r}: give x,y,z,rx,ry,rz (m, rotation vector in rad)")
+    v = parse_vector(text, 6, what, "x,y,z,rx,ry,rz: m, rotation vector in rad")
     return spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
 
 
 def _probe_option(text: str | None):
+    """``--probe``: ``"x,y,z"`` (m) on the flange, or a whole frame ``"x,y,z,rx,ry,rz"``."""
     if text is None:
         return None
-    try:
-        v = [float(s) for s in text.replace(",", " ").split()]
-    except ValueError:
-        v = []
-    if len(v) == 3:
-        return v
-    return _frame_option(text, "--probe")
+    v = parse_vector(text, (3, 6), "--probe", "x,y,z in m, or x,y,z,rx,ry,rz")
+    return list(v) if len(v) == 3 else _frame_option(text, "--probe")
+
+
+ProgramOption = Annotated[
+    Path,
+    typer.Argument(
+        metavar="PROGRAM", help="robot program: .script, .src (+ .dat), .mod, .csv", show_default=False
+    ),
+]
+ToolOption = Annotated[
+    str | None,
+    typer.Option(
+        "--tool",
+        metavar='"x,y,z,rx,ry,rz"',
+        help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)",
+    ),
+]
+BaseOption = Annotated[
+    str | None,
+    typer.Option(
+        "--base", metavar='"x,y,z,rx,ry,rz"', help="the targets' frame in the robot base: x,y,z,rx,ry,rz"
+    ),
+]
+ProbeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--probe",
+        metavar='"x,y,z[,rx,ry,rz]"',
+        help="the calibration's measured tool as built: x,y,z (m) on the flange",
+    ),
+]
+NominalOption = Annotated[
+    str | None,
+    typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
+]
+LengthUnitOption = Annotated[str, typer.Option("--length-unit", metavar="m|mm", help="CSV programs: m | mm")]
+AngleUnitOption = Annotated[
+    str, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
+]
+StrictOption = Annotated[
+    bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
+]
+ConfigDatOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--config-dat",
+        metavar="FILE",
+        help="KRL: $config.dat of TOOL_DATA/BASE_DATA (default: next to it)",
+    ),
+]
 
 
 def filter_command(
-    program: Annotated[Path, typer.Argument(help="robot program: .script, .src (+ .dat), .mod, .csv")],
-    calibration: Annotated[
-        Path, typer.Option("--calibration", help="calibration directory (result.json) or model .yaml")
-    ],
-    out: Annotated[Path, typer.Option("-o", "--out", help="the filtered program (KRL: and its .dat)")],
-    tool: Annotated[
-        str | None, typer.Option("--tool", help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)")
-    ] = None,
-    base: Annotated[
-        str | None, typer.Option("--base", help="the targets' frame in the robot base: x,y,z,rx,ry,rz")
-    ] = None,
-    probe: Annotated[
-        str | None,
-        typer.Option("--probe", help="the calibration's measured tool as built: x,y,z (m) on the flange"),
-    ] = None,
-    nominal: Annotated[
-        str | None, typer.Option("--nominal", help="the controller's model: catalog name or .yaml")
-    ] = None,
-    length_unit: Annotated[str, typer.Option("--length-unit", help="CSV programs: m | mm")] = "m",
-    angle_unit: Annotated[str, typer.Option("--angle-unit", help="CSV programs: rad | deg")] = "rad",
-    strict: Annotated[
-        bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
-    ] = False,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
-    config_dat: Annotated[
-        Path | None,
-        typer.Option("--config-dat", help="KRL: $config.dat of TOOL_DATA/BASE_DATA (default: next to it)"),
-    ] = None,
+    calibration: Annotated[Path, CALIBRATION],
+    program: ProgramOption,
+    out: Annotated[Path, out_option("the filtered program (KRL: and its .dat)")],
+    tool: ToolOption = None,
+    base: BaseOption = None,
+    probe: ProbeOption = None,
+    nominal: NominalOption = None,
+    length_unit: LengthUnitOption = "m",
+    angle_unit: AngleUnitOption = "rad",
+    strict: StrictOption = False,
+    force: Force = False,
+    config_dat: ConfigDatOption = None,
 ) -> None:
     """Correct every target of a robot program through a calibration; everything else stays byte-identical."""
     refuse_overwrite(out, force, "program")
-    import numpy as np
 
-    from robocal.compensate.cli import _load
+    from robocal.cli.compensate import _load
     from robocal.compensate.programs import ProgramError, filter_program_file, language_of
 
     if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
@@ -191,11 +227,7 @@ def filter_command(
     if language_of(out) != language and not (language == "krl" and out.suffix.lower() == ".src"):
         raise fail(f"-o {out}: write a {language} program with the suffix of {program.name}")
     calibrated = _load(calibration)
-    nominal_model = None
-    if nominal is not None:
-        from robocal.cli import resolve_model
-
-        nominal_model = resolve_model(nominal)
+    nominal_model = None if nominal is None else resolve_model(nominal)
     try:
         result = filter_program_file(
             program,
@@ -214,6 +246,15 @@ def filter_command(
         raise fail(str(err)) from None
     except ValueError as err:
         raise fail(f"{program}: {err}") from None
+    _print_filtered(result, program, out, language, tool is None and config_dat is None)
+    if strict and result.problems:
+        raise typer.Exit(code=1)
+
+
+def _print_filtered(result, program: Path, out: Path, language: str, no_frames_given: bool) -> None:
+    """What ``filter`` corrected, wrote and left untouched."""
+    import numpy as np
+
     n = len(result.targets)
     ok = np.isfinite(result.error_after_mm) & result.reachable
     console.print(
@@ -229,8 +270,7 @@ def filter_command(
     )
     written = [out] + ([out.with_suffix(".dat")] if len(result.texts) > 1 else [])
     console.print(f"wrote {', '.join(map(str, written))}", highlight=False)
-    has_config = config_dat is not None or (program.parent / "$config.dat").is_file()
-    if language == "krl" and tool is None and not has_config:
+    if language == "krl" and no_frames_given and not (program.parent / "$config.dat").is_file():
         err_console.print(
             "[yellow]note:[/] no $config.dat next to the program: TOOL_DATA/BASE_DATA are not read and the "
             "targets are taken as flange poses in the robot base; give --config-dat or --tool/--base",
@@ -245,8 +285,6 @@ def filter_command(
         )
     for p in result.problems:
         warn(p)
-    if strict and result.problems:
-        raise typer.Exit(code=1)
 
 
 def register(app: typer.Typer) -> None:

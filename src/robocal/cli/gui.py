@@ -13,7 +13,7 @@ __all__ = ["register"]
 
 
 def gui_command(
-    port: Annotated[int, typer.Option("--port", help="port on localhost")] = 8050,
+    port: Annotated[int, typer.Option("--port", metavar="PORT", help="port on localhost")] = 8050,
     no_browser: Annotated[bool, typer.Option("--no-browser", help="do not open a browser window")] = False,
 ) -> None:
     """The model builder and the calibration in a browser window (localhost, offline; Ctrl-C stops it)."""

@@ -1,9 +1,9 @@
 """``robocal iso9283 LOG``: the fourteen ISO 9283 characteristics of a measurement log,
-and the ``robocal simulate ROBOT --log LOG`` generator of a simulated log.
+and the ``robocal simulate ROBOT --log -o LOG`` generator of a simulated log.
 
 Commands:
-    robocal iso9283 LOG [--band 0.1mm] [--html FILE] [--json] [--force]
-    robocal simulate ROBOT --log LOG.csv [--seed 1] [--noise 0.005mm] [--force]
+    robocal iso9283 LOG [--band 0.1mm] [-o FILE.html] [--json] [--force]
+    robocal simulate ROBOT --log -o LOG.csv [--seed 1] [--noise 0.005mm] [--force]
 """
 
 from __future__ import annotations
@@ -16,25 +16,33 @@ import typer
 import yaml
 from rich.table import Table
 
+from robocal.cli.options import Force, out_option, resolve_model
 from robocal.console import console, fail, refuse_overwrite
 
 __all__ = ["iso9283_command", "register", "simulate_log_command"]
 
 
 def iso9283_command(
-    log: Annotated[Path, typer.Argument(help="ISO 9283 measurement log (CSV, docs/iso9283.md)")],
+    log: Annotated[
+        Path,
+        typer.Argument(
+            metavar="LOG", help="ISO 9283 measurement log (CSV, docs/iso9283.md)", show_default=False
+        ),
+    ],
     band: Annotated[
         str | None,
         typer.Option(
+            "--band",
+            metavar="LENGTH",
             help="limit band of stabilisation, overshoot and positioning time, e.g. 0.1mm "
-            "(default: the log's limit_band_mm, else 0.1mm)"
+            "(default: the log's limit_band_mm, else 0.1mm)",
         ),
     ] = None,
-    html_out: Annotated[Path | None, typer.Option("--html", help="also write a small HTML report")] = None,
+    out: Annotated[Path | None, out_option("also write a small HTML report to this file")] = None,
     as_json: Annotated[
         bool, typer.Option("--json", help="print JSON (mm, deg, s) instead of the table")
     ] = False,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing --html file")] = False,
+    force: Force = False,
 ) -> None:
     """The fourteen ISO 9283 characteristics of a measurement log (those it cannot support: why)."""
     from robocal.evaluate.iso9283_log import Iso9283LogError, read_iso9283_log
@@ -42,8 +50,8 @@ def iso9283_command(
     from robocal.measure.simulate import parse_quantity_option
     from robocal.model.files import atomic_write_text
 
-    if html_out is not None:
-        refuse_overwrite(html_out, force, "report")
+    if out is not None:
+        refuse_overwrite(out, force, "report")
     try:
         band_m = None if band is None else parse_quantity_option(band, "length", "--band")
         if band_m is not None and not band_m > 0:
@@ -54,8 +62,8 @@ def iso9283_command(
         raise fail(str(str(err))) from None
     except ValueError as err:
         raise fail(str(f"{log}: {err}" if str(log) not in str(err) else str(err))) from None
-    if html_out is not None:
-        atomic_write_text(html_out, results_html(results, f"ISO 9283 characteristics of {log.name}"))
+    if out is not None:
+        atomic_write_text(out, results_html(results, f"ISO 9283 characteristics of {log.name}"))
     if as_json:
         print(json.dumps(results.to_dict(), indent=1, allow_nan=False))
         return
@@ -68,13 +76,12 @@ def iso9283_command(
     console.print(table)
     measured = sum(r.measured for r in results.rows)
     console.print(f"{measured} of 14 measured; limit band {results.band * 1e3:g} mm", highlight=False)
-    if html_out is not None:
-        console.print(f"wrote {str(html_out)!s}", highlight=False)
+    if out is not None:
+        console.print(f"wrote {str(out)!s}", highlight=False)
 
 
 def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | None, force: bool) -> None:
     """Write a simulated ISO 9283 log of ROBOT and its truth (``LOG.truth.yaml``)."""
-    from robocal.cli import resolve_model  # late import: robocal.cli imports this module
     from robocal.evaluate.iso9283_log import write_iso9283_log
     from robocal.evaluate.iso9283_sim import LogErrors, simulate_log
     from robocal.measure.simulate import parse_quantity_option
@@ -101,7 +108,7 @@ def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | N
         highlight=False,
         soft_wrap=True,
     )
-    console.print(str(f"next: robocal iso9283 {log} --html {log.with_suffix('.html')}"), highlight=False)
+    console.print(str(f"next: robocal iso9283 {log} -o {log.with_suffix('.html')}"), highlight=False)
 
 
 def register(app: typer.Typer) -> None:

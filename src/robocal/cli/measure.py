@@ -1,14 +1,14 @@
 """Command-line commands of the measurement step (registered on the ``robocal`` app).
 
 Commands:
-    robocal data check FILE [--robot NAME] [--length-unit mm] [--angle-unit deg] [--sep ";"]
+    robocal data check FILE [ROBOT] [--length-unit mm] [--angle-unit deg] [--sep ";"]
                        [--decimal ","] [--columns "q1=shoulder_pan_joint,..."]
                        [--orientation euler:XYZ:deg] [--limits error|warn|ignore]
         every problem of a measurement file (exit code 1 if any error), or a summary
     robocal simulate ROBOT --poses POSES.csv --device laser-tracker --noise 0.02mm --seed 1
                      -o meas.csv
         simulated measurements of a robot with drawn errors, and their truth beside them
-    robocal simulate ROBOT --log LOG.csv [--seed 1] [--noise 0.005mm]
+    robocal simulate ROBOT --log -o LOG.csv [--seed 1] [--noise 0.005mm]
         a simulated ISO 9283 measurement log and its truth (robocal.evaluate.iso9283_sim)
 """
 
@@ -27,6 +27,23 @@ from rich.table import Table
 from rich.text import Text
 
 from robocal import spatial
+from robocal.cli.options import (
+    CONTEXT,
+    AngleUnit,
+    Columns,
+    Decimal,
+    Force,
+    Incomplete,
+    LengthUnit,
+    Limits,
+    Orientation,
+    Robot,
+    Sep,
+    as_cli_text,
+    out_option,
+    parse_vector,
+    resolve_model,
+)
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
 from robocal.measure.devices import DEVICES, make_device
 
@@ -40,73 +57,13 @@ __all__ = ["register"]
 MAX_LENGTH_TOL = 0.1
 MAX_ANGLE_TOL = math.radians(10.0)
 
-# The reader's options on every command that reads measurements, and its messages in
-# their command-line spelling.
-LengthUnit = Annotated[
-    str,
-    typer.Option(
-        "--length-unit", help="m | mm | um: positions, standard deviations and prismatic joints in the file"
-    ),
-]
-AngleUnit = Annotated[
-    str, typer.Option("--angle-unit", help="rad | deg: revolute joints and orientation angles in the file")
-]
-Columns = Annotated[
-    str | None, typer.Option("--columns", help='renames, e.g. "q1=shoulder_pan_joint,x=measurement_x"')
-]
-Sep = Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")]
-Decimal = Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')]
-Orientation = Annotated[
-    str, typer.Option("--orientation", help="auto | none | quaternion | rotvec | euler:SEQ[:UNIT]")
-]
-Incomplete = Annotated[
-    str,
-    typer.Option(
-        "--incomplete", help="rows with an empty or bad cell: error | drop (left out, with a warning)"
-    ),
-]
-Limits = Annotated[
-    str, typer.Option("--limits", help="joint values beyond the model's limits: error | warn | ignore")
-]
-
-
-_API_OPTION = re.compile(
-    r"\b(decimal|angle_unit|length_unit|orientation|sep|limits|measure|incomplete)=('[^']*')"
+data_app = typer.Typer(
+    help="Measurement files: check them before a calibration.", no_args_is_help=True, context_settings=CONTEXT
 )
-_API_COLUMNS = re.compile(r"columns=\{'(\w+)': '([^']*)'\}")
-
-
-def _shell_word(text: str) -> str:
-    return text if re.fullmatch(r"[\w.:+-]+", text) else f'"{text}"'
-
-
-def as_cli_text(message: str) -> str:
-    """A reader's message with its keyword arguments (``decimal=','``, ``columns={'q1':
-    'j1'}``) written as the command-line options that do the same."""
-    message = _API_OPTION.sub(lambda m: f"--{m[1].replace('_', '-')} {_shell_word(m[2][1:-1])}", message)
-    message = _API_COLUMNS.sub(lambda m: f"--columns '{m[1]}={m[2]}'", message)
-    return message.replace(" in columns=)", " in --columns)")
-
-
-data_app = typer.Typer(help="Measurement files: check them before a calibration.", no_args_is_help=True)
 
 
 def _model(name: str | None):
-    if name is None:
-        return None
-    from robocal.cli import resolve_model  # late import: robocal.cli imports this module
-
-    return resolve_model(name)
-
-
-def _numbers(text: str, count: int, option: str) -> np.ndarray:
-    try:
-        values = [float(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        raise fail(f"{option} {text!r}: expected {count} numbers separated by commas or spaces") from None
-    if len(values) != count:
-        raise fail(f"{option} {text!r}: expected {count} numbers, got {len(values)}")
-    return np.array(values)
+    return None if name is None else resolve_model(name)
 
 
 # ------------------------------------------------------------------ data check
@@ -184,9 +141,14 @@ def _summary(data: Measurements, path: Path, model, length_unit: str, angle_unit
 
 @data_app.command("check")
 def data_check(
-    file: Annotated[Path, typer.Argument(help="measurement or poses CSV file")],
+    file: Annotated[Path, typer.Argument(metavar="FILE", help="measurement or poses CSV file")],
     robot: Annotated[
-        str | None, typer.Option("--robot", help="catalog name or model file (joint count, types, limits)")
+        str | None,
+        typer.Argument(
+            metavar="ROBOT",
+            help="catalog name (robocal robots) or model file (.yaml): checks joint count, types, limits",
+            show_default=False,
+        ),
     ] = None,
     length_unit: LengthUnit = "m",
     angle_unit: AngleUnit = "rad",
@@ -236,129 +198,97 @@ def data_check(
 
 
 # -------------------------------------------------------------------- simulate
+NOISE_HELP = (
+    "the device's main noise, 1σ with a unit, e.g. 0.02mm: laser-tracker per axis (no distance term), "
+    "optical-cmm per marker coordinate, camera across the line of sight (3x along it), plate touching "
+    "error, pen in the paper plane (1/10 of it out of the plane); default: the device's own"
+)
+
+
+PosesOption = Annotated[
+    Path | None, typer.Option("--poses", metavar="FILE", help="poses CSV: joint columns q1..qN (rad, m)")
+]
+OutOption = Annotated[Path | None, out_option("measurements CSV to write (with --log: the ISO 9283 log)")]
+DeviceOption = Annotated[
+    str, typer.Option("--device", metavar="DEVICE", help=f"one of: {', '.join(DEVICES)}")
+]
+SeedOption = Annotated[
+    int | None, typer.Option("--seed", min=0, metavar="N", help="seed of the drawn errors and the noise")
+]
+LengthTolOption = Annotated[
+    str, typer.Option("--length-tol", metavar="LENGTH", help="tolerance of length parameters, e.g. 0.5mm")
+]
+AngleTolOption = Annotated[
+    str, typer.Option("--angle-tol", metavar="ANGLE", help="tolerance of angle parameters, e.g. 0.05deg")
+]
+TolOption = Annotated[
+    list[str] | None,
+    typer.Option("--tol", metavar="NAME=VALUE", help="per-parameter tolerance, e.g. theta2=0.2deg"),
+]
+DistributionOption = Annotated[
+    str,
+    typer.Option("--distribution", metavar="uniform|normal", help="uniform in ±tol, or normal (σ = tol)"),
+]
+DevicePoseOption = Annotated[
+    str | None,
+    typer.Option(
+        "--device-pose",
+        metavar='"x,y,z,roll,pitch,yaw"',
+        help="device pose in the robot base, mm and deg (Rz Ry Rx)",
+    ),
+]
+ToolOffsetOption = Annotated[
+    str | None,
+    typer.Option("--tool-offset", metavar='"x,y,z"', help="observed point in the tool frame, mm"),
+]
+TrainOption = Annotated[
+    float | None,
+    typer.Option("--train", metavar="FRACTION", help="fraction of rows labelled train (the rest test)"),
+]
+LogOption = Annotated[
+    bool, typer.Option("--log", help="instead: write a simulated ISO 9283 log (docs/iso9283.md) to -o")
+]
+
+
 def simulate_command(
-    robot: Annotated[str, typer.Argument(help="catalog name or model file (the nominal model)")],
-    poses: Annotated[
-        Path | None, typer.Option("--poses", help="poses CSV: joint columns q1..qN (rad, m)")
-    ] = None,
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="measurements CSV to write")] = None,
-    device: Annotated[str, typer.Option(help=f"one of: {', '.join(DEVICES)}")] = "laser-tracker",
-    noise: Annotated[
-        str | None,
-        typer.Option(
-            help="the device's main noise, 1-sigma with a unit, e.g. 0.02mm: laser-tracker per axis "
-            "(no distance term), optical-cmm per marker coordinate, camera across the line of sight "
-            "(3x along it), plate touching error, pen in the paper plane (1/10 of it out of the plane); "
-            "default: the device's own (robocal.measure.devices)"
-        ),
-    ] = None,
-    seed: Annotated[int | None, typer.Option(min=0, help="seed of the drawn errors and the noise")] = None,
-    length_tol: Annotated[str, typer.Option(help="tolerance of length parameters, e.g. 0.5mm")] = "0.5mm",
-    angle_tol: Annotated[str, typer.Option(help="tolerance of angle parameters, e.g. 0.05deg")] = "0.05deg",
-    tol: Annotated[
-        list[str] | None, typer.Option(help="per-parameter tolerance NAME=VALUE, e.g. theta2=0.2deg")
-    ] = None,
-    distribution: Annotated[str, typer.Option(help="uniform (in ±tol) or normal (sigma = tol)")] = "uniform",
-    device_pose: Annotated[
-        str | None,
-        typer.Option(help="device pose in the robot base: 'x,y,z,roll,pitch,yaw' in mm and deg (Rz Ry Rx)"),
-    ] = None,
-    tool_offset: Annotated[
-        str | None, typer.Option(help="observed point in the tool frame: 'x,y,z' in mm")
-    ] = None,
-    train: Annotated[
-        float | None, typer.Option(help="fraction of rows labelled train (the rest test)")
-    ] = None,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
-    log: Annotated[
-        Path | None,
-        typer.Option("--log", help="instead: write a simulated ISO 9283 log (docs/iso9283.md) to this CSV"),
-    ] = None,
+    robot: Robot,
+    poses: PosesOption = None,
+    out: OutOption = None,
+    device: DeviceOption = "laser-tracker",
+    noise: Annotated[str | None, typer.Option("--noise", metavar="LENGTH", help=NOISE_HELP)] = None,
+    seed: SeedOption = None,
+    length_tol: LengthTolOption = "0.5mm",
+    angle_tol: AngleTolOption = "0.05deg",
+    tol: TolOption = None,
+    distribution: DistributionOption = "uniform",
+    device_pose: DevicePoseOption = None,
+    tool_offset: ToolOffsetOption = None,
+    train: TrainOption = None,
+    force: Force = False,
+    log: LogOption = False,
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
-    if log is not None:
-        if poses is not None or output is not None:
-            raise fail("--log writes an ISO 9283 log of its own test poses: drop --poses and -o")
-        from robocal.evaluate.iso9283_commands import simulate_log_command
+    if log:
+        if poses is not None or out is None:
+            raise fail("--log writes an ISO 9283 log of its own test poses to -o FILE: drop --poses")
+        from robocal.cli.iso9283 import simulate_log_command
 
-        return simulate_log_command(robot, log, seed, noise, force)
-    if poses is None or output is None:
-        raise fail("give --poses POSES.csv and -o OUTPUT.csv (or --log LOG.csv for an ISO 9283 log)")
-    from robocal.measure.dataset import MAX_SIGMA, MeasurementFileError, read_measurements
-    from robocal.measure.simulate import (
-        VirtualRobot,
-        draw_true_model,
-        parse_quantity_option,
-        save_simulation,
-        simulate,
-    )
+        return simulate_log_command(robot, out, seed, noise, force)
+    if poses is None or out is None:
+        raise fail("give --poses POSES.csv and -o OUT.csv (or --log -o LOG.csv for an ISO 9283 log)")
+    from robocal.measure.dataset import MeasurementFileError
 
-    refuse_overwrite(output, force, "measurement file")
+    refuse_overwrite(out, force, "measurement file")
     model = _model(robot)
     if device not in DEVICES:
-        raise fail(f"unknown device {device!r}; known: {', '.join(DEVICES)}")
+        raise fail(f"--device: unknown device {device!r}; known: {', '.join(DEVICES)}")
     if distribution not in ("uniform", "normal"):
         raise fail(f"--distribution must be uniform or normal, got {distribution!r}")
-    kwargs = {}
-    if device_pose is not None:
-        v = _numbers(device_pose, 6, "--device-pose")
-        T_base_device = spatial.homogeneous(spatial.euler_to_matrix(np.radians(v[3:]), "xyz"), v[:3] / 1000)
-        kwargs["T_device_base"] = spatial.inverse(T_base_device)
-    if tool_offset is not None:
-        kwargs["p_tool_target"] = _numbers(tool_offset, 3, "--tool-offset") / 1000
-    tolerances = {}
-    for item in tol or []:
-        if "=" not in item:
-            raise fail(f"--tol {item!r}: expected NAME=VALUE, e.g. theta2=0.2deg")
-        name, value = item.split("=", 1)
-        tolerances[name.strip()] = value.strip()
+    tolerances = _tolerances(tol or [])
     try:
-        dev = make_device(device, **kwargs)
-        if noise is not None:
-            sigma = parse_quantity_option(noise, "length", "--noise")
-            if not 0 <= sigma <= MAX_SIGMA:
-                raise ValueError(
-                    f"--noise {noise}: a standard deviation between 0 and {MAX_SIGMA * 1e3:g} mm"
-                )
-            dev = dev.with_noise(sigma)
-        q = read_measurements(poses, model=model)
-        if q.position is not None:
-            err_console.print(
-                f"[yellow]note:[/] {safe(poses)} has measured positions; only its joint values are used",
-                highlight=False,
-                markup=True,
-            )
-        model_rng = np.random.default_rng(None if seed is None else [seed, 1])
-        length = parse_quantity_option(length_tol, "length", "--length-tol")
-        angle = parse_quantity_option(angle_tol, "angle", "--angle-tol")
-        if not 0 <= length <= MAX_LENGTH_TOL:
-            raise ValueError(f"--length-tol {length_tol}: between 0 and {MAX_LENGTH_TOL * 1e3:g} mm")
-        if not 0 <= angle <= MAX_ANGLE_TOL:
-            raise ValueError(f"--angle-tol {angle_tol}: between 0 and {math.degrees(MAX_ANGLE_TOL):g} deg")
-        for name, value in tolerances.items():
-            if not re.search(r"[A-Za-zµμ°]\s*$", value) and float(value or "nan") != 0.0:
-                raise ValueError(f"--tol {name}={value}: give the unit, e.g. {name}={value}mm or {value}deg")
-        true = draw_true_model(
-            model,
-            tolerances,
-            length=length,
-            angle=angle,
-            distribution=distribution,  # type: ignore[arg-type]
-            seed=model_rng,
-        )
-        vr = VirtualRobot(model, true, dev)
-        with np.errstate(all="ignore"):
-            data = simulate(vr, q, seed)
-        arrays = [a for a in (data.position, data.orientation, data.sigma) if a is not None]
-        if not all(np.all(np.isfinite(a)) for a in arrays):
-            raise ValueError(
-                "the simulated measurements are not finite: the --tol, --length-tol, --angle-tol or --noise "
-                "values are too large for this robot; give those of a real robot, e.g. 0.5mm and 0.05deg"
-            )
-        if train is not None:
-            if not 0 < train <= 1:
-                raise ValueError(f"--train {train}: expected a fraction in (0, 1]")
-            data = data.with_split(max(1, round(train * data.n)), seed)
+        dev = _device(device, noise, device_pose, tool_offset)
+        true, length, angle = _true_model(model, tolerances, length_tol, angle_tol, distribution, seed)
+        vr, data = _simulate(model, true, dev, poses, seed, train)
         info = {
             "command": "robocal simulate",
             "poses": str(poses),
@@ -368,7 +298,9 @@ def simulate_command(
             "distribution": distribution,
             "model_seed": "none" if seed is None else f"[{seed}, 1]",
         }
-        data_path, truth = save_simulation(vr, data, output, seed, **info)
+        from robocal.measure.simulate import save_simulation
+
+        data_path, truth = save_simulation(vr, data, out, seed, **info)
     except MeasurementFileError as err:
         raise fail(str(err)) from None
     except (ValueError, KeyError) as err:
@@ -385,6 +317,93 @@ def simulate_command(
         highlight=False,
         soft_wrap=True,
     )
+
+
+def _tolerances(items: list[str]) -> dict[str, str]:
+    """``--tol NAME=VALUE`` options as a dict."""
+    tolerances = {}
+    for item in items:
+        if "=" not in item:
+            raise fail(f"--tol {item!r}: expected NAME=VALUE, e.g. theta2=0.2deg")
+        name, value = item.split("=", 1)
+        tolerances[name.strip()] = value.strip()
+    return tolerances
+
+
+def _device(device: str, noise: str | None, device_pose: str | None, tool_offset: str | None):
+    """The measuring device of ``--device`` with ``--noise``, ``--device-pose``, ``--tool-offset``."""
+    from robocal.measure.dataset import MAX_SIGMA
+    from robocal.measure.simulate import parse_quantity_option
+
+    kwargs = {}
+    if device_pose is not None:
+        v = parse_vector(device_pose, 6, "--device-pose", "x,y,z,roll,pitch,yaw in mm and deg")
+        T_base_device = spatial.homogeneous(spatial.euler_to_matrix(np.radians(v[3:]), "xyz"), v[:3] / 1000)
+        kwargs["T_device_base"] = spatial.inverse(T_base_device)
+    if tool_offset is not None:
+        kwargs["p_tool_target"] = parse_vector(tool_offset, 3, "--tool-offset", "x,y,z in mm") / 1000
+    dev = make_device(device, **kwargs)
+    if noise is not None:
+        sigma = parse_quantity_option(noise, "length", "--noise")
+        if not 0 <= sigma <= MAX_SIGMA:
+            raise ValueError(f"--noise {noise}: a standard deviation between 0 and {MAX_SIGMA * 1e3:g} mm")
+        dev = dev.with_noise(sigma)
+    return dev
+
+
+def _true_model(
+    model, tolerances: dict, length_tol: str, angle_tol: str, distribution: str, seed: int | None
+):
+    """The drawn true robot, and the length and angle tolerances in m and rad."""
+    from robocal.measure.simulate import draw_true_model, parse_quantity_option
+
+    length = parse_quantity_option(length_tol, "length", "--length-tol")
+    angle = parse_quantity_option(angle_tol, "angle", "--angle-tol")
+    if not 0 <= length <= MAX_LENGTH_TOL:
+        raise ValueError(f"--length-tol {length_tol}: between 0 and {MAX_LENGTH_TOL * 1e3:g} mm")
+    if not 0 <= angle <= MAX_ANGLE_TOL:
+        raise ValueError(f"--angle-tol {angle_tol}: between 0 and {math.degrees(MAX_ANGLE_TOL):g} deg")
+    for name, value in tolerances.items():
+        if not re.search(r"[A-Za-zµμ°]\s*$", value) and float(value or "nan") != 0.0:
+            raise ValueError(f"--tol {name}={value}: give the unit, e.g. {name}={value}mm or {value}deg")
+    model_rng = np.random.default_rng(None if seed is None else [seed, 1])
+    true = draw_true_model(
+        model,
+        tolerances,
+        length=length,
+        angle=angle,
+        distribution=distribution,
+        seed=model_rng,  # type: ignore[arg-type]
+    )
+    return true, length, angle
+
+
+def _simulate(model, true, dev, poses: Path, seed: int | None, train: float | None):
+    """The virtual robot and its simulated measurements at the poses of ``--poses``."""
+    from robocal.measure.dataset import read_measurements
+    from robocal.measure.simulate import VirtualRobot, simulate
+
+    q = read_measurements(poses, model=model)
+    if q.position is not None:
+        err_console.print(
+            f"[yellow]note:[/] {safe(poses)} has measured positions; only its joint values are used",
+            highlight=False,
+            markup=True,
+        )
+    vr = VirtualRobot(model, true, dev)
+    with np.errstate(all="ignore"):
+        data = simulate(vr, q, seed)
+    arrays = [a for a in (data.position, data.orientation, data.sigma) if a is not None]
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        raise ValueError(
+            "the simulated measurements are not finite: the --tol, --length-tol, --angle-tol or --noise "
+            "values are too large for this robot; give those of a real robot, e.g. 0.5mm and 0.05deg"
+        )
+    if train is not None:
+        if not 0 < train <= 1:
+            raise ValueError(f"--train {train}: expected a fraction in (0, 1]")
+        data = data.with_split(max(1, round(train * data.n)), seed)
+    return vr, data
 
 
 def _deviations(model, true):

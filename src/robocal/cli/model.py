@@ -9,6 +9,7 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
+from robocal.cli.options import CONTEXT, Force, Robot, measure_option, out_option, resolve_model
 from robocal.console import console, fail, input_problem, refuse_overwrite, safe, warn
 
 __all__ = ["register"]
@@ -25,36 +26,44 @@ def _is_ur_kinematics(path: Path) -> bool:
     return isinstance(data, dict) and isinstance(data.get("kinematics"), dict)
 
 
-model_app = typer.Typer(help="Build, view and check calibration models.", no_args_is_help=True)
+model_app = typer.Typer(
+    help="Build, view and check calibration models.", no_args_is_help=True, context_settings=CONTEXT
+)
+
+
+GeometryOption = Annotated[
+    Path,
+    typer.Argument(
+        metavar="GEOMETRY",
+        help="joint-geometry YAML file, URDF file, or a model (catalog name or model YAML file) whose "
+        "joint geometry is read from its chain (rc.calibration_model)",
+    ),
+]
+MeasureOption = Annotated[
+    str | None, measure_option("the measured quantities (default: the file's, else pose)")
+]
+TipOption = Annotated[
+    str | None, typer.Option("--tip", metavar="LINK", help="URDF: frame to end the chain at")
+]
 
 
 @model_app.command("build")
 def build_command(
-    geometry: Annotated[
-        Path,
-        typer.Argument(
-            help="joint-geometry YAML file, URDF file, or a model (catalog name or model YAML file) whose "
-            "joint geometry is read from its chain (rc.calibration_model)"
-        ),
-    ],
-    output: Annotated[Path, typer.Option("-o", "--output", help="model file to write (YAML)")],
-    measure: Annotated[
-        str | None, typer.Option("--measure", help="position | pose (default: the file's, else pose)")
-    ] = None,
-    tip: Annotated[str | None, typer.Option("--tip", help="URDF: frame to end the chain at")] = None,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    geometry: GeometryOption,
+    out: Annotated[Path, out_option("model file to write (YAML)")],
+    measure: MeasureOption = None,
+    tip: TipOption = None,
+    force: Force = False,
 ) -> None:
     """Build a complete, minimal, singularity-free model from joint geometry (seed 000)."""
-    if output is not None:
-        refuse_overwrite(output, force, "model file")
+    refuse_overwrite(out, force, "model file")
     from robocal.model.builder import GeometryError, load_geometry
     from robocal.model.files import save_model
     from robocal.model.urdf import URDFError, build_from_urdf
 
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
-    from robocal.cli import _is_geometry_file, resolve_model
-    from robocal.model.catalog import robots
+    from robocal.model.catalog import is_geometry_file, robots
 
     catalog = not geometry.is_file() and str(geometry).lower() in robots()
     if not geometry.is_file() and not catalog:
@@ -72,7 +81,7 @@ def build_command(
                 result = build_from_ur_kinematics(geometry, measure=measure or "pose")
             except URKinematicsError as err:
                 raise fail(str(err)) from None
-        elif catalog or not _is_geometry_file(geometry):  # a chain: build from its joint geometry
+        elif catalog or not is_geometry_file(geometry):  # a chain: build from its joint geometry
             from robocal.model.complete import build_complete
 
             chain = resolve_model(str(geometry))
@@ -103,39 +112,36 @@ def build_command(
     )
     for warning in result.warnings:
         warn(warning)
-    save_model(model, output)
-    console.print(f"wrote {output}", highlight=False)
+    save_model(model, out)
+    console.print(f"wrote {out}", highlight=False)
 
 
 @model_app.command("show")
 def show_command(
-    model_name: Annotated[str, typer.Argument(help="catalog name or model file")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write")],
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    robot: Robot,
+    out: Annotated[Path, out_option("HTML file to write")],
+    force: Force = False,
 ) -> None:
     """Write a self-contained interactive 3D view of a model with its parameter table."""
-    if output is not None:
-        refuse_overwrite(output, force, "view")
-    from robocal.cli import resolve_model
+    refuse_overwrite(out, force, "view")
     from robocal.model.view import write_model_view
 
-    model = resolve_model(model_name)
-    write_model_view(model, output)
-    console.print(f"wrote {output}", highlight=False)
+    model = resolve_model(robot)
+    write_model_view(model, out)
+    console.print(f"wrote {out}", highlight=False)
 
 
 @model_app.command("check")
 def check_command(
-    model_name: Annotated[str, typer.Argument(help="catalog name or model file")],
-    measure: Annotated[str, typer.Option("--measure", help="position | pose")] = "pose",
+    robot: Robot,
+    measure: Annotated[str, measure_option("the measured quantities")] = "pose",
 ) -> None:
     """Check a model for parameterisation singularities and discontinuities (exit 1 if any)."""
-    from robocal.cli import resolve_model
     from robocal.model.singularity import check_model
 
     if measure not in ("position", "pose"):
         raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
-    model = resolve_model(model_name)
+    model = resolve_model(robot)
     result = check_model(model, measure)
     table = Table(title=f"{model.name}: link parameterisations", title_justify="left")
     for col in ("link", "parameters", "places", "rank", "verdict"):

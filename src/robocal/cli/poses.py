@@ -24,6 +24,8 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from robocal.cli import options
+from robocal.cli.options import Force, Robot, out_option, parse_vector, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
 
 __all__ = ["MAX_POOL", "MAX_POSES", "register"]
@@ -44,58 +46,64 @@ class Method(StrEnum):
 def _region(text: str | None) -> np.ndarray | None:
     if text is None:
         return None
-    try:
-        v = [float(x) for x in text.replace(";", ",").split(",")]
-    except ValueError:
-        raise fail(
-            f"--region {text!r}: expected six numbers in mm, 'xmin,ymin,zmin,xmax,ymax,zmax'"
-        ) from None
-    if len(v) != 6:
-        raise fail(f"--region {text!r}: expected six numbers in mm, got {len(v)}")
-    box = np.array(v).reshape(2, 3) * 1e-3
-    if not np.all(np.isfinite(box)):
-        raise fail(f"--region {text!r}: expected six finite numbers in mm")
+    what = "six numbers in mm, 'xmin,ymin,zmin,xmax,ymax,zmax'"
+    box = parse_vector(text, 6, "--region", what).reshape(2, 3) * 1e-3
     if np.any(box[0] >= box[1]):
         raise fail(f"--region {text!r}: each minimum must be below its maximum")
     return box
 
 
+MethodOption = Annotated[
+    Method,
+    typer.Option("--method", metavar="random|optimal|iso9283|diagonal", help="how to choose the poses"),
+]
+NOption = Annotated[
+    int | None,
+    typer.Option(
+        "--n",
+        min=1,
+        max=MAX_POSES,
+        metavar="N",
+        help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)",
+    ),
+]
+IndexOption = Annotated[
+    str, typer.Option("--index", metavar="O1..O5", help="index maximised by --method optimal")
+]
+PoolOption = Annotated[
+    int,
+    typer.Option("--pool", min=1, max=MAX_POOL, metavar="N", help="candidate pool size for --method optimal"),
+]
+RowsOption = Annotated[
+    str, typer.Option("--rows", metavar="position|pose", help="the quantities that will be measured")
+]
+KindOption = Annotated[
+    str | None,
+    typer.Option("--kind", metavar="position|pose|axis", help="iso9283/diagonal: the IK constraint"),
+]
+RegionOption = Annotated[
+    str | None,
+    typer.Option("--region", metavar='"xmin,ymin,zmin,xmax,ymax,zmax"', help="box the cube must lie in, mm"),
+]
+
+
 def poses_command(
-    robot: Annotated[str, typer.Argument(help="catalog name or model file")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="poses CSV to write (SI units)")],
-    method: Annotated[Method, typer.Option("--method", help="how to choose the poses")] = Method.random,
-    n: Annotated[
-        int | None,
-        typer.Option(
-            "--n",
-            min=1,
-            max=MAX_POSES,
-            help="number of poses (random/optimal: 30, diagonal: 118; iso9283: 5 fixed)",
-        ),
-    ] = None,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="random seed")] = 0,
-    index: Annotated[str, typer.Option("--index", help="index maximised by --method optimal: O1..O5")] = "O1",
-    pool: Annotated[
-        int, typer.Option("--pool", min=1, max=MAX_POOL, help="candidate pool size for --method optimal")
-    ] = 2000,
-    rows: Annotated[str, typer.Option("--rows", help="measured quantities: position or pose")] = "position",
-    kind: Annotated[
-        str | None,
-        typer.Option("--kind", help="iso9283/diagonal IK constraint: pose, axis or position"),
-    ] = None,
-    region: Annotated[
-        str | None,
-        typer.Option("--region", help='box the cube must lie in, mm: "xmin,ymin,zmin,xmax,ymax,zmax"'),
-    ] = None,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    robot: Robot,
+    out: Annotated[Path, out_option("poses CSV to write (SI units)")],
+    method: MethodOption = Method.random,
+    n: NOption = None,
+    seed: Annotated[int, options.seed()] = 0,
+    index: IndexOption = "O1",
+    pool: PoolOption = 2000,
+    rows: RowsOption = "position",
+    kind: KindOption = None,
+    region: RegionOption = None,
+    force: Force = False,
 ) -> None:
     """Choose poses to measure and write them as a poses CSV (joint columns only, rad/m)."""
-    if output is not None:
-        refuse_overwrite(output, force, "poses file")
-    from robocal.cli import resolve_model  # late import: robocal.cli imports this module
-    from robocal.identify.observability import identifiable_parameters, observability, select_poses
-    from robocal.measure.poses import diagonal_plane_poses, iso9283_poses, random_poses, write_poses
+    from robocal.measure.poses import write_poses
 
+    refuse_overwrite(out, force, "poses file")
     m = resolve_model(robot)
     index = index.upper()
     if index not in ("O1", "O2", "O3", "O4", "O5"):
@@ -104,68 +112,87 @@ def poses_command(
         raise fail(f"--rows {rows!r}: expected 'position' or 'pose'")
     if kind is not None and kind not in ("pose", "axis", "position"):
         raise fail(f"--kind {kind!r}: expected 'pose', 'axis' or 'position'")
-    if n is not None and n < 1:
-        raise fail(f"--n must be at least 1, got {n}")
     box = _region(region)
     meta = {"robot": m.name, "method": method.value, "seed": str(seed)}
     try:
         if method is Method.random:
+            from robocal.measure.poses import random_poses
+
             q = random_poses(m, n or 30, seed=seed)
         elif method is Method.optimal:
-            count = n or 30
-            if pool < count:
-                raise fail(f"--pool {pool} is smaller than --n {count}")
-            candidates = random_poses(m, pool, seed=seed)
-            sub = identifiable_parameters(m, candidates, rows=rows)  # type: ignore[arg-type]
-            with console.status(f"selecting {count} of {pool} poses by {index}..."):
-                sel = select_poses(m, candidates, count, index=index, rows=rows, params=sub.kept)  # type: ignore[arg-type]
-            q = sel.q
-            baseline = observability(m, candidates[:count], rows=rows, params=sel.params)  # type: ignore[arg-type]
-            table = Table(title=f"observability of {count} poses ({len(sel.params)} identifiable parameters)")
-            for col in ("index", "optimal", f"first {count} of the pool"):
-                table.add_column(col, justify="right")
-            for name in ("O1", "O2", "O3", "O4", "O5"):
-                table.add_row(name, f"{sel.indices_all[name]:.4g}", f"{baseline[name]:.4g}")
-            console.print(table)
-            meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
-            for d in sub.dropped:
-                console.print(f"[dim]not identifiable: {safe(d)}[/]", highlight=False, markup=True)
+            q = _optimal(m, n or 30, pool, index, rows, seed, meta)
         elif method is Method.iso9283:
-            if n not in (None, 5):
-                err_console.print(
-                    "[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True
-                )
-            with console.status("searching the largest ISO 9283 cube..."):
-                iso = iso9283_poses(m, kind=kind, seed=seed, region=box)  # type: ignore[arg-type]
-            q = iso.q
-            c = iso.cube
-            console.print(
-                f"cube centre [{', '.join(f'{v * 1e3:.1f}' for v in c.center)}] mm, "
-                f"side {c.side * 1e3:.1f} mm, "
-                f"plane C1-C2-C7-C8, constraint {iso.info['kind']}",
-                highlight=False,
-            )
-            meta.update(
-                {
-                    "cube_center_mm": " ".join(f"{v * 1e3:.3f}" for v in c.center),
-                    "cube_side_mm": f"{c.side * 1e3:.3f}",
-                }
-            )
+            q = _iso9283(m, n, kind, box, seed, meta)
         else:
-            with console.status("building the diagonal-plane poses..."):
-                ps = diagonal_plane_poses(m, n=n or 118, kind=kind or "position", region=box, seed=seed)  # type: ignore[arg-type]
-            if not ps.reachable.all():
-                raise fail(f"{int((~ps.reachable).sum())} of the diagonal-plane poses are not reachable")
-            q = ps.q
-            console.print(
-                f"{len(q)} poses ({ps.info['boundary_poses']} near the boundary), smallest joint change "
-                f"between consecutive poses {np.degrees(ps.info['min_joint_change_rad']):.1f} deg",
-                highlight=False,
-            )
+            q = _diagonal(m, n or 118, kind, box, seed)
     except ValueError as err:
         raise fail(str(err)) from None
-    path = write_poses(output, q, model=m, metadata=meta)
+    path = write_poses(out, q, model=m, metadata=meta)
     console.print(f"wrote {len(q)} poses of {m.name} to {path}", highlight=False)
+
+
+def _optimal(m, count: int, pool: int, index: str, rows: str, seed: int, meta: dict) -> np.ndarray:
+    """``--method optimal``: ``count`` poses of a random pool maximising ``index``; the
+    observability table printed."""
+    from robocal.identify.observability import identifiable_parameters, observability, select_poses
+    from robocal.measure.poses import random_poses
+
+    if pool < count:
+        raise fail(f"--pool {pool} is smaller than --n {count}")
+    candidates = random_poses(m, pool, seed=seed)
+    sub = identifiable_parameters(m, candidates, rows=rows)  # type: ignore[arg-type]
+    with console.status(f"selecting {count} of {pool} poses by {index}..."):
+        sel = select_poses(m, candidates, count, index=index, rows=rows, params=sub.kept)  # type: ignore[arg-type]
+    baseline = observability(m, candidates[:count], rows=rows, params=sel.params)  # type: ignore[arg-type]
+    table = Table(title=f"observability of {count} poses ({len(sel.params)} identifiable parameters)")
+    for col in ("index", "optimal", f"first {count} of the pool"):
+        table.add_column(col, justify="right")
+    for name in ("O1", "O2", "O3", "O4", "O5"):
+        table.add_row(name, f"{sel.indices_all[name]:.4g}", f"{baseline[name]:.4g}")
+    console.print(table)
+    meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
+    for d in sub.dropped:
+        console.print(f"[dim]not identifiable: {safe(d)}[/]", highlight=False, markup=True)
+    return sel.q
+
+
+def _iso9283(m, n: int | None, kind: str | None, box, seed: int, meta: dict) -> np.ndarray:
+    """``--method iso9283``: P1..P5 on the largest cube's diagonal plane."""
+    from robocal.measure.poses import iso9283_poses
+
+    if n not in (None, 5):
+        err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True)
+    with console.status("searching the largest ISO 9283 cube..."):
+        iso = iso9283_poses(m, kind=kind, seed=seed, region=box)  # type: ignore[arg-type]
+    c = iso.cube
+    console.print(
+        f"cube centre [{', '.join(f'{v * 1e3:.1f}' for v in c.center)}] mm, side {c.side * 1e3:.1f} mm, "
+        f"plane C1-C2-C7-C8, constraint {iso.info['kind']}",
+        highlight=False,
+    )
+    meta.update(
+        {
+            "cube_center_mm": " ".join(f"{v * 1e3:.3f}" for v in c.center),
+            "cube_side_mm": f"{c.side * 1e3:.3f}",
+        }
+    )
+    return iso.q
+
+
+def _diagonal(m, n: int, kind: str | None, box, seed: int) -> np.ndarray:
+    """``--method diagonal``: the thesis' poses on the cube's diagonal planes (seed 003)."""
+    from robocal.measure.poses import diagonal_plane_poses
+
+    with console.status("building the diagonal-plane poses..."):
+        ps = diagonal_plane_poses(m, n=n, kind=kind or "position", region=box, seed=seed)  # type: ignore[arg-type]
+    if not ps.reachable.all():
+        raise fail(f"{int((~ps.reachable).sum())} of the diagonal-plane poses are not reachable")
+    console.print(
+        f"{len(ps.q)} poses ({ps.info['boundary_poses']} near the boundary), smallest joint change "
+        f"between consecutive poses {np.degrees(ps.info['min_joint_change_rad']):.1f} deg",
+        highlight=False,
+    )
+    return ps.q
 
 
 def register(app: typer.Typer) -> None:

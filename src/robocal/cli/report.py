@@ -8,17 +8,22 @@ from typing import Annotated
 
 import typer
 
-from robocal.console import console, fail, refuse_overwrite
-from robocal.measure.commands import (
+from robocal.cli import options
+from robocal.cli.options import (
     AngleUnit,
     Columns,
     Decimal,
+    Force,
     Incomplete,
+    Json,
     LengthUnit,
     Limits,
     Orientation,
     Sep,
+    out_option,
 )
+from robocal.cli.validate import CALIBRATION_DIR
+from robocal.console import console, fail, refuse_overwrite
 from robocal.model.files import strict_json
 
 __all__ = ["register"]
@@ -26,14 +31,13 @@ __all__ = ["register"]
 
 def report_command(
     ctx: typer.Context,
-    directory: Annotated[
-        Path, typer.Argument(help="a calibration output directory (result.json, model.yaml)")
-    ],
-    output: Annotated[Path, typer.Option("-o", "--output", help="HTML file to write")] = Path("report.html"),
+    directory: Annotated[Path, CALIBRATION_DIR],
+    out: Annotated[Path, out_option("HTML file to write")] = Path("report.html"),
     data_path: Annotated[
         Path | None,
         typer.Option(
             "--data",
+            metavar="FILE",
             help="calibration measurements (default: DIR/train.csv if present, else the calibration's own "
             "file, read with its options and split as calibrated)",
         ),
@@ -42,11 +46,12 @@ def report_command(
         Path | None,
         typer.Option(
             "--test-data",
+            metavar="FILE",
             help="held-out measurements (default: DIR/test.csv if present, else the held-out rows of the "
             "calibration's own file)",
         ),
     ] = None,
-    title: Annotated[str | None, typer.Option("--title", help="the report's heading")] = None,
+    title: Annotated[str | None, typer.Option("--title", metavar="TEXT", help="the report's heading")] = None,
     length_unit: LengthUnit = "m",
     angle_unit: AngleUnit = "rad",
     columns: Columns = None,
@@ -55,30 +60,45 @@ def report_command(
     orientation: Orientation = "auto",
     limits: Limits = "error",
     incomplete: Incomplete = "error",
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    force: Force = False,
     iso9283_log: Annotated[
         Path | None,
         typer.Option(
-            "--iso9283", help="add the ISO 9283 characteristics of a measurement log (docs/iso9283.md)"
+            "--iso9283",
+            metavar="FILE",
+            help="add the ISO 9283 characteristics of a measurement log (docs/iso9283.md)",
         ),
     ] = None,
 ) -> None:
     """Write the self-contained HTML report of a calibration (works offline)."""
-    if output is not None:
-        refuse_overwrite(output, force, "report")
+    refuse_overwrite(out, force, "report")
+    from robocal.cli.reading import load_result
     from robocal.evaluate.report import write_report
-    from robocal.identify.commands import _read, load_result, own_data
-    from robocal.identify.provenance import READER_DEFAULTS
 
     result = load_result(directory)
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
+    data, test = _data_sets(ctx, directory, result, data_path, test_path, values)
+    evaluation = _evaluation(directory, iso9283_log)
+    try:
+        with console.status("writing the report ..."):
+            path = write_report(result, out, data=data, test_data=test, evaluation=evaluation, title=title)
+    except ValueError as err:
+        raise fail(str(err)) from None
+    console.print(f"wrote {path}", highlight=False)
+
+
+def _data_sets(ctx: typer.Context, directory: Path, result, data_path, test_path, values: dict):
+    """The report's calibration and held-out measurements: given with --data/--test-data, else
+    DIR/train.csv and DIR/test.csv, else the calibration's own file split as calibrated."""
+    from robocal.cli.reading import own_data, read_data
+    from robocal.identify.provenance import READER_DEFAULTS
 
     def read(path: Path | None, default: str):
         if path is None:
             path = directory / default
-            return _read(path, result.model, **READER_DEFAULTS) if path.is_file() else None
-        return _read(path, result.model, **values)
+            return read_data(path, result.model, **READER_DEFAULTS) if path.is_file() else None
+        return read_data(path, result.model, **values)
 
     data = test = None
     if data_path is not None or not (directory / "train.csv").is_file():
@@ -92,6 +112,11 @@ def report_command(
         data = read(None, "train.csv")
     if test_path is not None or test is None:
         test = read(test_path, "test.csv")
+    return data, test
+
+
+def _evaluation(directory: Path, iso9283_log: Path | None) -> dict | None:
+    """DIR/evaluation.json, with the ISO 9283 characteristics of ``--iso9283`` added."""
     evaluation = None
     ev_path = directory / "evaluation.json"
     if ev_path.is_file():
@@ -110,31 +135,29 @@ def report_command(
         except ValueError as err:
             raise fail(str(err)) from None
         evaluation = {**(evaluation or {}), "iso9283": iso}
-    try:
-        with console.status("writing the report ..."):
-            path = write_report(result, output, data=data, test_data=test, evaluation=evaluation, title=title)
-    except ValueError as err:
-        raise fail(str(err)) from None
-    console.print(f"wrote {path}", highlight=False)
+    return evaluation
 
 
 def demo_command(
-    robot: Annotated[str, typer.Option("--robot", help="catalog robot of the virtual twin")] = "ur10",
+    robot: Annotated[
+        str, typer.Argument(metavar="ROBOT", help="catalog robot of the virtual twin (robocal robots)")
+    ] = "ur10",
     out: Annotated[
         Path | None,
-        typer.Option(
-            "--out",
-            help="directory for the calibration, data and report (default: robocal-demo in your home "
+        out_option(
+            "directory for the calibration, data and report (default: robocal-demo in your home "
             "directory, never the working directory, which may be a checkout)",
+            "DIR",
         ),
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="seeds the whole demo")] = 0,
-    poses: Annotated[
-        int, typer.Option("--poses", max=10_000, help="calibration poses (O1-optimal; at most 10 000)")
+    seed: Annotated[int, options.seed("seeds the whole demo")] = 0,
+    n: Annotated[
+        int,
+        typer.Option("--n", max=10_000, metavar="N", help="calibration poses (O1-optimal; at most 10 000)"),
     ] = 50,
     quick: Annotated[bool, typer.Option("--quick", help="fewer poses and cycles: a faster run")] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="print the numbers as JSON")] = False,
-    force: Annotated[bool, typer.Option("--force", help="overwrite an existing output")] = False,
+    as_json: Json = False,
+    force: Force = False,
 ) -> None:
     """Calibrate a virtual robot end to end and write the report (under a minute)."""
     from robocal.demo import run_demo
@@ -143,13 +166,13 @@ def demo_command(
     # the options first: a bad one is the error, whatever an earlier demo left in --out
     if robot not in robots():
         raise fail(f"unknown robot {robot!r}; choose one of {', '.join(robots())}")
-    if poses < 10:
-        raise fail(f"--poses {poses}: a calibration needs at least 10 poses")
+    if n < 10:
+        raise fail(f"--n {n}: a calibration needs at least 10 poses")
     if out is None:
         out = Path.home() / "robocal-demo"
     refuse_overwrite(out, force, "demo folder")
     try:
-        numbers = run_demo(robot, out, seed=seed, n_calibration=poses, quick=quick, verbose=not as_json)
+        numbers = run_demo(robot, out, seed=seed, n_calibration=n, quick=quick, verbose=not as_json)
     except ValueError as err:
         raise fail(f"demo on {robot}: {err}") from None
     if as_json:

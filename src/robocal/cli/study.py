@@ -3,7 +3,7 @@
 Commands:
     robocal study CONFIG.yaml --out DIR [--workers N | --scheduler ADDR] [--robots N] [--force]
         run or resume a study; the last line printed is ``calibrations/s: <number>``
-    robocal fleet DIR --robot NAME [--out OUT] [--pattern "*.csv"] [read options] [--force]
+    robocal fleet ROBOT DIR [-o OUT] [--pattern "*.csv"] [read options] [--force]
         calibrate every measurement file of a folder; the last line is ``calibrations/s: <number>``
 """
 
@@ -12,27 +12,35 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 from rich.text import Text
 
+from robocal.cli.calibrate import Chain, Compliance, Method, Residual, Tool
+from robocal.cli.options import (
+    AngleUnit,
+    Columns,
+    Decimal,
+    Incomplete,
+    Json,
+    LengthUnit,
+    Limits,
+    NoProgress,
+    Orientation,
+    Robot,
+    Scheduler,
+    Sep,
+    Workers,
+    as_cli_text,
+    out_option,
+    parse_vector,
+    resolve_model,
+)
 from robocal.console import console, err_console, fail, input_problem, safe
 from robocal.model.files import strict_json
 
 __all__ = ["register"]
-
-Workers = Annotated[
-    int | None,
-    typer.Option(
-        "--workers", help="Dask worker processes on this machine (default: one per core; 0: no Dask)"
-    ),
-]
-Scheduler = Annotated[
-    str | None, typer.Option("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
-]
-NoProgress = Annotated[bool, typer.Option("--no-progress", help="no progress bar")]
 
 
 def _progress(enabled: bool, what: str):
@@ -59,19 +67,18 @@ def _mm(stats: dict | None, key: str = "mean") -> str:
 
 
 def study_command(
-    config: Annotated[Path, typer.Argument(help="study configuration (YAML)")],
-    out: Annotated[Path, typer.Option("--out", help="study directory (results.csv, summary.json/png)")],
+    config: Annotated[Path, typer.Argument(metavar="CONFIG", help="study configuration (YAML)")],
+    out: Annotated[Path, out_option("study directory (results.csv, summary.json/png)", "DIR")],
     workers: Workers = None,
     scheduler: Scheduler = None,
     robots: Annotated[
-        int | None, typer.Option("--robots", help="only the first N robots (same seeds as the full study)")
+        int | None,
+        typer.Option("--robots", metavar="N", help="only the first N robots (same seeds as the full study)"),
     ] = None,
     force: Annotated[
         bool, typer.Option("--force", help="--out holds another study: delete its results and start over")
     ] = False,
-    as_json: Annotated[
-        bool, typer.Option("--json", help="print the summary as JSON before the last line")
-    ] = False,
+    as_json: Json = False,
     no_progress: NoProgress = False,
 ) -> None:
     """Monte Carlo study: virtual robots x pose sets x devices, each simulated, calibrated and
@@ -102,27 +109,36 @@ def study_command(
     if as_json:
         print(strict_json(run.summary))
     else:
-        table = Table(
-            title=f"{cfg.name}: {run.total} cases (RMS: mean over the robots; true: against the true robot)",
-            title_justify="left",
+        console.print(_study_table(cfg, run))
+    _print_study_end(run)
+
+
+def _study_table(cfg, run) -> Table:
+    """The study's summary: one row per pose set and device."""
+    table = Table(
+        title=f"{cfg.name}: {run.total} cases (RMS: mean over the robots; true: against the true robot)",
+        title_justify="left",
+    )
+    table.add_column("pose set", no_wrap=True)
+    table.add_column("device", no_wrap=True)
+    for col in ("ok", "not conv.", "failed", "errors", "true RMS mm", "p95 mm", "val RMS mm"):
+        table.add_column(col, justify="right")
+    for g in run.summary["groups"]:
+        table.add_row(
+            g["pose_set"],
+            g["device"],
+            str(g["ok"]),
+            str(g["not_converged"]),
+            str(g.get("failed", 0)),  # refused by the calibration's guards (see the message column)
+            str(g["errors"]),
+            _mm(g.get("true_rms_mm")),
+            _mm(g.get("true_rms_mm"), "p95"),
+            _mm(g.get("val_rms_mm")),
         )
-        table.add_column("pose set", no_wrap=True)
-        table.add_column("device", no_wrap=True)
-        for col in ("ok", "not conv.", "failed", "errors", "true RMS mm", "p95 mm", "val RMS mm"):
-            table.add_column(col, justify="right")
-        for g in run.summary["groups"]:
-            table.add_row(
-                g["pose_set"],
-                g["device"],
-                str(g["ok"]),
-                str(g["not_converged"]),
-                str(g.get("failed", 0)),  # refused by the calibration's guards (see the message column)
-                str(g["errors"]),
-                _mm(g.get("true_rms_mm")),
-                _mm(g.get("true_rms_mm"), "p95"),
-                _mm(g.get("val_rms_mm")),
-            )
-        console.print(table)
+    return table
+
+
+def _print_study_end(run) -> None:
     where = f"{run.workers} Dask worker(s)" if run.workers else "this process"
     console.print(
         f"wrote {run.out / 'results.csv'}, {run.out / 'summary.json'} and {run.out / 'summary.png'}; "
@@ -136,58 +152,49 @@ def study_command(
     console.print(f"calibrations/s: {run.calibrations_per_second:.1f}", highlight=False)
 
 
+DirectoryOption = Annotated[
+    Path,
+    typer.Argument(metavar="DIR", help="folder of measurement files, one per robot", show_default=False),
+]
+ForceOption = Annotated[
+    bool, typer.Option("--force", help="recalibrate every file and replace the previous results")
+]
+
+
 def fleet_command(
-    directory: Annotated[Path, typer.Argument(help="folder of measurement files, one per robot")],
-    robot_name: Annotated[str | None, typer.Option("--robot", help="catalog robot")] = None,
-    model_path: Annotated[Path | None, typer.Option("--model", help="model YAML file")] = None,
-    chain: Annotated[
-        str | None,
-        typer.Option(
-            "--chain",
-            help="complete (default with --robot): each robot's complete model (rc.calibration_model); "
-            "catalog: the catalog's chain as published (e.g. plain DH)",
-        ),
-    ] = None,
-    out: Annotated[Path | None, typer.Option("--out", help="output folder (default DIR/calibrated)")] = None,
-    pattern: Annotated[str, typer.Option("--pattern", help="which files of DIR")] = "*.csv",
-    method: Annotated[str, typer.Option("--method", help="lm | pinv | bounded | influence")] = "lm",
-    tool: Annotated[str | None, typer.Option("--tool", help='tool point start value in mm, "x,y,z"')] = None,
-    compliance: Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")] = False,
-    residual: Annotated[
-        str,
-        typer.Option(
-            "--residual",
-            help="auto (default): cross-validation on each file's calibration poses chooses the physics and "
-            "the learned joint angle errors, as robocal calibrate does; joint_fourier; none",
-        ),
-    ] = "auto",
-    length_unit: Annotated[str, typer.Option("--length-unit", help="m | mm | um")] = "m",
-    angle_unit: Annotated[str, typer.Option("--angle-unit", help="rad | deg")] = "rad",
-    columns: Annotated[str | None, typer.Option("--columns", help='renames, "q1=a,x=b"')] = None,
-    sep: Annotated[str | None, typer.Option("--sep", help="column separator (default: sniffed)")] = None,
-    decimal: Annotated[str, typer.Option("--decimal", help='decimal mark: "." or ","')] = ".",
-    orientation: Annotated[
-        str, typer.Option("--orientation", help="auto | none | quaternion | ...")
-    ] = "auto",
+    robot: Robot,
+    directory: DirectoryOption,
+    chain: Chain = None,
+    out: Annotated[Path | None, out_option("output folder (default DIR/calibrated)", "DIR")] = None,
+    pattern: Annotated[str, typer.Option("--pattern", metavar="GLOB", help="which files of DIR")] = "*.csv",
+    method: Method = "lm",
+    tool: Tool = None,
+    compliance: Compliance = False,
+    residual: Residual = "auto",
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
+    columns: Columns = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    orientation: Orientation = "auto",
+    limits: Limits = "error",
+    incomplete: Incomplete = "error",
     workers: Workers = None,
     scheduler: Scheduler = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="recalibrate every file and replace the previous results")
-    ] = False,
+    force: ForceOption = False,
     no_progress: NoProgress = False,
 ) -> None:
     """Calibrate every measurement file of a folder (one robot each); resumes from OUT/fleet.csv."""
-    from robocal.cli import resolve_model
+    from robocal.model.catalog import is_model_path
     from robocal.study import StudyError, run_fleet
 
-    if (robot_name is None) == (model_path is None):
-        raise fail("give exactly one of --robot NAME or --model FILE")
+    from_catalog = not is_model_path(robot)
     if chain not in (None, "complete", "catalog"):
         raise fail(f"--chain {chain!r}: complete or catalog")
-    if model_path is not None and chain == "catalog":
-        raise fail("--chain catalog is for --robot NAME; --model FILE calibrates the file's chain as it is")
-    model = resolve_model(robot_name if robot_name is not None else str(model_path))
-    complete = chain == "complete" or (chain is None and robot_name is not None)
+    if not from_catalog and chain == "catalog":
+        raise fail("--chain catalog is for a catalog ROBOT; a model file's chain is calibrated as it is")
+    model = resolve_model(robot)
+    complete = chain == "complete" or (chain is None and from_catalog)
     if complete:
         console.print(
             f"model: the complete model built from {model.name}'s joint geometry (rc.calibration_model; "
@@ -198,21 +205,9 @@ def fleet_command(
         raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
     calibrate_options: dict = {"method": method, "compliance": compliance, "residual": residual}
     if tool is not None:
-        try:
-            guess = np.array([float(v) for v in tool.replace(",", " ").split()]) * 1e-3
-        except ValueError:
-            raise fail(f"--tool {tool!r}: three numbers in mm") from None
-        if guess.shape != (3,):
-            raise fail(f"--tool {tool!r}: three numbers in mm")
-        calibrate_options["tool_guess"] = guess
-    read_options = dict(
-        length_unit=length_unit,
-        angle_unit=angle_unit,
-        columns=columns,
-        sep=sep,
-        decimal=decimal,
-        orientation=orientation,
-    )
+        calibrate_options["tool_guess"] = parse_vector(tool, 3, "--tool", "x,y,z in mm") * 1e-3
+    read_options = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep)
+    read_options |= dict(decimal=decimal, orientation=orientation, limits=limits, incomplete=incomplete)
     bar, update = _progress(not no_progress, "fleet")
     try:
         if bar is not None:
@@ -235,6 +230,11 @@ def fleet_command(
     finally:
         if bar is not None:
             bar.stop()
+    _print_fleet(run, model, directory)
+
+
+def _print_fleet(run, model, directory: Path) -> None:
+    """The fleet's table, its failures and skipped files, and where it wrote."""
     table = Table(title=f"{model.name} fleet: {directory}", title_justify="left")
     for col in ("file", "status", "poses", "RMS before mm", "RMS after mm", "held-out RMS mm"):
         table.add_column(col, justify="left" if col in ("file", "status") else "right")
@@ -252,7 +252,9 @@ def fleet_command(
     for row in run.rows:
         if row["status"] != "ok" and row["message"]:
             err_console.print(
-                f"[red]{safe(row['file'])}:[/] {safe(row['message'])}", highlight=False, markup=True
+                f"[red]{safe(row['file'])}:[/] {safe(as_cli_text(row['message']))}",
+                highlight=False,
+                markup=True,
             )
     for name in run.skipped:
         err_console.print(

@@ -7,12 +7,12 @@ from robocal._lazy import lazy_package
 lazy_package(
     __name__,
     {
-        "robocal.compensate.commands": (
+        "robocal.compensate.compensation": (
             "Compensation",
             "PathCompensation",
             "TargetFileError",
             "Targets",
-            "compensate",
+            "compensate_targets",
             "compensate_cartesian_path",
             "compensate_path",
             "filter_program",
@@ -28,9 +28,9 @@ __all__ = [
     "PathCompensation",
     "TargetFileError",
     "Targets",
-    "compensate",
     "compensate_cartesian_path",
     "compensate_path",
+    "compensate_targets",
     "filter_program",
     "nominal_model",
     "read_program",

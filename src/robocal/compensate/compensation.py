@@ -3,7 +3,7 @@
 A calibrated model tells where the real robot goes for given joint values; this module
 inverts it: the joint commands that bring the real robot onto Cartesian targets.
 
-* :func:`compensate` — Cartesian targets (positions ``(n, 3)`` or tool frames
+* :func:`compensate_targets` — Cartesian targets (positions ``(n, 3)`` or tool frames
   ``(n, 4, 4)``, in the robot's base frame or in the measurement/cell frame identified
   by the calibration) -> joint commands.  First the *nominal* solution: the batched
   damped least-squares IK (:func:`robocal.measure.ik.solve_ik`) on the nominal model,
@@ -77,9 +77,9 @@ __all__ = [
     "PathCompensation",
     "TargetFileError",
     "Targets",
-    "compensate",
     "compensate_cartesian_path",
     "compensate_path",
+    "compensate_targets",
     "filter_program",
     "nominal_model",
     "read_program",
@@ -482,7 +482,7 @@ def _correct(
     )
 
 
-def compensate(
+def compensate_targets(
     calibrated: Calibrated,
     targets: ArrayLike,
     nominal_model: Model | None = None,
@@ -605,7 +605,7 @@ def filter_program(
         kind: what to keep of the nominal tool frame: ``"pose"`` (default for 6 or more
             joints), ``"axis"`` (position and tool axis; default for 5 joints) or
             ``"position"`` (default for fewer).
-        Other arguments: as for :func:`compensate`.
+        Other arguments: as for :func:`compensate_targets`.
     """
     setup = _setup(calibrated, nominal_model, joint_effects)
     q = _program(q_program, setup.real.dof, "q_program")
@@ -735,7 +735,7 @@ def compensate_path(
         damping: added to ``J Jᵀ`` in eq. 5.22 (m², rad²) against singular samples.
         max_correction_step: a change of the correction between neighbouring samples
             larger than this (rad or m) is reported as a jump.
-        Other arguments: as for :func:`compensate`.
+        Other arguments: as for :func:`compensate_targets`.
     """
     setup = _setup(calibrated, nominal_model, joint_effects)
     q_nom = _program(q_path, setup.real.dof, "q_path")

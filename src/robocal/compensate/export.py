@@ -141,7 +141,7 @@ def export_urdf(
             (the new root) and at the measured tool.
         samples: configurations for sizing what is left out.
     """
-    from robocal.compensate.commands import nominal_model
+    from robocal.compensate.compensation import nominal_model
 
     if isinstance(calibrated, CalibrationResult):
         model = calibrated.model

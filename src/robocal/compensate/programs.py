@@ -6,12 +6,12 @@ numbers and nothing else changed: every other byte (comments, formatting, other
 statements, the numbers of targets that need no correction) is kept.  A program filtered
 with a nominal calibration (calibrated = nominal) is byte-identical to its input.
 
-Corrections (:mod:`robocal.compensate.commands`):
+Corrections (:mod:`robocal.compensate.compensation`):
 
 * a **joint target** ``q`` becomes the joint values that put the real (calibrated) tool
-  where the nominal model puts it at ``q`` (:func:`~robocal.compensate.commands.filter_program`);
+  where the nominal model puts it at ``q`` (:func:`~robocal.compensate.compensation.filter_program`);
 * a **Cartesian target** ``P`` becomes ``P' = nominal.fk(q')`` with ``q'`` the joint
-  values at which the real robot reaches ``P`` (:func:`~robocal.compensate.commands.compensate`):
+  values at which the real robot reaches ``P`` (:func:`~robocal.compensate.compensation.compensate`):
   the controller, commanded ``P'``, solves its nominal IK to ``q'`` and the real robot
   lands on ``P``.  The IK branch is that of the configuration the robot comes from:
   the previous target in execution order (motions to named targets count where they
@@ -896,7 +896,7 @@ def _robot_models(
     calibrated: CalibrationResult | Model, nominal: Model | None, tool: Array | None, probe: ArrayLike | None
 ) -> tuple[Model, Model, Callable[[Array], Array | None] | None]:
     """(real, nominal) robot models with the program's tool, and the joint effects."""
-    from robocal.compensate.commands import nominal_model
+    from robocal.compensate.compensation import nominal_model
 
     if isinstance(calibrated, CalibrationResult):
         real = calibrated.model
@@ -1049,7 +1049,7 @@ def filter_program_text(
             identified tool absorbed robot geometry, e.g. ``d6``; about 2 mm can be lost).
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
-    from robocal.compensate.commands import compensate, filter_program
+    from robocal.compensate.compensation import compensate_targets, filter_program
 
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     dof = model.dof
@@ -1165,13 +1165,13 @@ def filter_program_text(
             goal = T[:3, 3][None] if position_only else T[None]
             kind = "position" if position_only else "pose"
             opts = {"joint_effects": effects, "tol": tol, "tol_angle": tol}
-            res = compensate(real, goal, nom, kind=kind, q0=q_prev, **opts)
+            res = compensate_targets(real, goal, nom, kind=kind, q0=q_prev, **opts)
             config_kept = True
             if not (res.nominal_reachable[0] and _config_ok(targets[i], res.q_nominal[0], nom)):
                 # the written configuration (KUKA S/T, ABB cf/cfx) chooses the branch: starts within it
                 starts = _config_starts(targets[i], nom, rng, 24)
                 for q_start in starts:
-                    trial = compensate(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
+                    trial = compensate_targets(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
                     if trial.nominal_reachable[0] and _config_ok(targets[i], trial.q_nominal[0], nom):
                         res = trial
                         break

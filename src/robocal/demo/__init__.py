@@ -13,7 +13,7 @@ give way under gravity, measured by a laser tracker.  The demo
    9283 test cube with P1-P5 and two test paths in its diagonal plane;
 4. simulates the measurements, calibrates (geometry + joint compliance, and a
    geometric-only calibration for comparison), validates on the held-out poses;
-5. compensates the ISO poses and paths (``rc.compensate`` when robocal has it, else
+5. compensates the ISO poses and paths (``rc.compensate_targets`` when robocal has it, else
    the demo's own compensation by inverse kinematics on the calibrated model) and
    measures ISO 9283 AP, RP, AT and RT with nominal and with compensated commands;
 6. writes the calibration, the data, ``evaluation.json`` and the HTML report.
@@ -133,7 +133,7 @@ def compensate_positions(result, targets: ArrayLike, q_start: ArrayLike) -> tupl
     """Compensated joint commands ``(n, dof)`` for tool-point ``targets`` ``(n, 3)`` (m,
     robot base frame), starting from the nominal commands ``q_start`` ``(n, dof)``.
 
-    Uses ``robocal.compensate`` when this robocal has it (and it accepts these
+    Uses ``robocal.compensate_targets`` when this robocal has it (and it accepts these
     arguments); otherwise inverse kinematics on the calibrated model, joint effects
     included.  Returns the commands and a description of the method used.
     """
@@ -142,26 +142,26 @@ def compensate_positions(result, targets: ArrayLike, q_start: ArrayLike) -> tupl
     targets = np.atleast_2d(np.asarray(targets, dtype=float))
     q_start = np.atleast_2d(np.asarray(q_start, dtype=float))
     note = ""
-    if hasattr(rc, "compensate"):
+    if hasattr(rc, "compensate_targets"):
         for call in (
-            lambda: rc.compensate(result, targets, q0=q_start),
-            lambda: rc.compensate(result, targets),
+            lambda: rc.compensate_targets(result, targets, q0=q_start),
+            lambda: rc.compensate_targets(result, targets),
         ):
             try:
                 out = call()
             except TypeError as err:
-                note = f"rc.compensate did not accept (result, targets): {err}"
+                note = f"rc.compensate_targets did not accept (result, targets): {err}"
                 continue
             except ValueError as err:
-                note = f"rc.compensate failed: {err}"
+                note = f"rc.compensate_targets failed: {err}"
                 break
             q = np.asarray(getattr(out, "q", out), dtype=float)
             if q.shape == q_start.shape and np.all(np.isfinite(q)):
                 status = ""
                 if not getattr(out, "success", True):
                     status = f" ({getattr(out, 'message', 'not every target reached')})"
-                return q, "robocal.compensate: inverse kinematics of the calibrated model" + status
-            note = f"rc.compensate returned shape {q.shape}, expected {q_start.shape}"
+                return q, "robocal.compensate_targets: inverse kinematics of the calibrated model" + status
+            note = f"rc.compensate_targets returned shape {q.shape}, expected {q_start.shape}"
             break
     method = "inverse kinematics on the calibrated model (joint effects included)"
     return _ik_compensation(result, targets, q_start), method + (f"; {note}" if note else "")

@@ -23,7 +23,7 @@ simulation:
 4. **Verification** — the arm is commanded to six other points (verification points
    1–6) and along a different trajectory, a Cartesian cubic spline through five
    waypoints (seed eq. 3), with the nominal model's IK ("before") and with
-   :func:`robocal.compensate.compensate` on the calibrated model ("after"); a Vicon
+   :func:`robocal.compensate.compensate_targets` on the calibrated model ("after"); a Vicon
    camera (0.28 mm across, 0.84 mm along its line of sight) measures where the tip
    went.  Mean errors with 95 % confidence intervals of the mean
    (t-distribution) and the improvement ``(before − after) / before`` in %, like the
@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.compensate import compensate, compensate_cartesian_path
+from robocal.compensate import compensate_cartesian_path, compensate_targets
 from robocal.experiments.seed001_report import _differences, _plot, _print, _report, _sweep_row
 from robocal.experiments.seed001_setup import (
     BACKLASH_DEG,
@@ -153,7 +153,7 @@ def _board_run(
     try:
         data = calibration_data(true, board, backlash, seeds[0])
         result = calibrate(nominal, data, method="bounded", frame=board.T_device_base, tool=None)
-        points = compensate(result, P, nominal, q0=q_points_nominal)
+        points = compensate_targets(result, P, nominal, q0=q_points_nominal)
         spline = compensate_cartesian_path(result, S, nominal, q0=Q_BRANCH, kind="position")
     except (CalibrationGuardError, ValueError, RuntimeError, np.linalg.LinAlgError) as err:
         # CalibrationGuardError is a ValueError: named for the reader

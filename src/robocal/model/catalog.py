@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import difflib
+import os
+import stat
 from functools import cache
 from importlib import resources
+from pathlib import Path
 
 from robocal.model.chain import Model
-from robocal.model.files import load_model
+from robocal.model.files import ModelFileError, load_model, read_yaml
 
-__all__ = ["robot", "robots"]
+__all__ = ["find_model", "is_geometry_file", "is_model_path", "robot", "robots"]
 
 
 def _directory():
@@ -36,3 +39,65 @@ def robot(name: str) -> Model:
         raise KeyError(f"unknown robot {name!r}.{hint} Available: {', '.join(names)}")
     with resources.as_file(_directory() / f"{name}.yaml") as path:
         return load_model(path)
+
+
+def find_model(name_or_path: str | os.PathLike[str]) -> Model:
+    """The one model lookup of robocal: a catalog robot by name (``"ur10"``, any case), or a
+    model file by path (a ``.yaml``/``.yml`` name, or any path that exists).
+
+    Raises:
+        ModelFileError: one line naming the input: no name given, an unknown robot (with the
+            closest names), a missing or unreadable file, a joint-geometry file given where a
+            model is expected (with the command that builds one), a malformed model file.
+    """
+    text = os.fspath(name_or_path)
+    if not text.strip():
+        raise ModelFileError("no robot given: a catalog name (robocal robots) or a model file")
+    path = Path(text)
+    if not is_model_path(text):
+        try:
+            return robot(text)
+        except KeyError as err:
+            raise ModelFileError(str(err.args[0])) from None
+    problem = _file_problem(path)
+    if problem is not None:
+        raise ModelFileError(f"model file {problem}")
+    if is_geometry_file(path):
+        raise ModelFileError(
+            f"{path} is a joint-geometry file: build a model from it first, "
+            f"e.g. robocal model build {path} -o model.yaml"
+        )
+    return load_model(path)
+
+
+def is_model_path(name_or_path: str | os.PathLike[str]) -> bool:
+    """Whether :func:`find_model` reads ``name_or_path`` as a file (a ``.yaml``/``.yml`` name or
+    an existing path) rather than as a catalog name."""
+    path = Path(name_or_path)
+    return path.suffix in (".yaml", ".yml") or path.exists()
+
+
+def _file_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be read as a model file, or None (a FIFO or a device is named as
+    such: reading one would never end)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return f"{path} does not exist"
+    except OSError as err:
+        return f"{path}: {err.strerror or err}"
+    if stat.S_ISDIR(mode):
+        return f"{path} is a directory; give a model file"
+    if not stat.S_ISREG(mode):
+        return f"{path} is not a regular file (a pipe, socket or device): save it to a file and give its path"
+    return None
+
+
+def is_geometry_file(path: str | os.PathLike[str]) -> bool:
+    """Whether a YAML file holds joint geometry for the builder (``joints:``) rather than a
+    model (``steps:``); False for a file that cannot be read (the model loader reports it)."""
+    try:  # read_yaml: the size and entry limits are checked before the file is parsed
+        data = read_yaml(path, "model")
+    except (OSError, ModelFileError):
+        return False
+    return isinstance(data, dict) and "joints" in data and "steps" not in data

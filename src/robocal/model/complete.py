@@ -155,7 +155,7 @@ def calibration_model(model_or_name: Model | str, measure: Measure = "position")
     parameter change to describe it.
 
     ``rc.robot(name)`` still returns the catalog's chain as published (e.g. plain DH),
-    which is what a controller uses; ``robocal calibrate --robot NAME`` calibrates this
+    which is what a controller uses; ``robocal calibrate NAME`` calibrates this
     model by default (``--chain catalog`` for the published chain).
 
     Args:

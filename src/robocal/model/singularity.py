@@ -380,7 +380,7 @@ def parameterisation_warnings(model: Model, measure: Literal["position", "pose"]
     target = repr(catalog) if catalog else "model"
     fixes = [f"rc.calibration_model({target}, {measure!r})"]
     if catalog:
-        fixes.append(f"robocal calibrate --robot {catalog} (its default, --chain complete)")
+        fixes.append(f"robocal calibrate {catalog} (its default, --chain complete)")
     fixes.append(f"robocal model build {catalog or 'MODEL.yaml'} -o complete.yaml")
     return [
         f"the {model.name} chain cannot describe every small deviation of the real robot at its nominal "

@@ -5,7 +5,7 @@ preview shows the parsed table in mm and degrees, or the reader's message with i
 row and column); a run is a :class:`robocal.apps.gui.jobs.CalibrationJob` in a child
 process, polled by a ``dcc.Interval``; the results are read back with
 ``CalibrationResult.load`` and shown with ``rc.validate``; the report, the
-compensation (``rc.compensate``) and the exports (``robocal.compensate.export``) work
+compensation (``rc.compensate_targets``) and the exports (``robocal.compensate.export``) work
 on the saved result.
 """
 
@@ -382,10 +382,12 @@ def _start_run(page: _Page, *args: Any) -> tuple:
         s = _float(seed, "seed")
         tool_mm = None
         if (tool or "").strip():
-            parts = [p for p in tool.replace(";", " ").replace(",", " ").split() if p]
-            if len(parts) != 3:
-                raise ValueError(f"tool start: three numbers in mm, e.g. 0, 0, 109 (not {tool!r})")
-            tool_mm = tuple(_float(p, "tool start") for p in parts)
+            from robocal.spatial import parse_vector
+
+            try:
+                tool_mm = tuple(parse_vector(tool, 3))
+            except ValueError as err:
+                raise ValueError(f"tool start: {err}, in mm, e.g. 0, 0, 109 (not {tool!r})") from None
         noise_mm = _float(noise, "device noise")
         if noise_mm is not None and not noise_mm > 0:
             raise ValueError("device noise: a positive standard deviation in mm")

@@ -220,7 +220,7 @@ def _float(text: str | None, what: str) -> float | None:
 
 def _compensate(result, contents: str, filename: str | None, unit: str, frame: str):
     import robocal as rc
-    from robocal.compensate.commands import read_targets
+    from robocal.compensate.compensation import read_targets
 
     name = Path(filename or "targets.csv").name
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
@@ -230,7 +230,7 @@ def _compensate(result, contents: str, filename: str | None, unit: str, frame: s
             targets = read_targets(path, length_unit=unit)
         except ValueError as err:
             raise ValueError(str(err).replace(str(path), name)) from None
-    comp = rc.compensate(result, targets.values, names=targets.names, frame=frame)
+    comp = rc.compensate_targets(result, targets.values, names=targets.names, frame=frame)
     s = comp.summary()
     before, after = s["error_before_mm"], s["error_after_mm"]
     message = (

@@ -1,0 +1,5 @@
+"""``python -m robocal.cli``: the ``robocal`` command."""
+
+from robocal.cli.app import main
+
+main()

@@ -1,0 +1,174 @@
+"""``robocal validate DIR``: error statistics of a calibrated model on (held-out) measurements."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from robocal.cli.options import (
+    AngleUnit,
+    Columns,
+    Decimal,
+    Incomplete,
+    Json,
+    LengthUnit,
+    Limits,
+    Orientation,
+    Sep,
+    as_cli_text,
+)
+from robocal.cli.reading import load_result, own_data, read_data
+from robocal.console import console, fail, safe
+from robocal.model.files import strict_json
+
+__all__ = ["register"]
+
+CALIBRATION_DIR = typer.Argument(
+    metavar="CALIBRATION", help="a calibration output directory (model.yaml, result.json)", show_default=False
+)
+
+
+def _stats_table(title: str, stats) -> Table:
+    table = Table(title=title, title_justify="left")
+    for col in ("poses", "mean mm", "RMS mm", "p95 mm", "max mm", "|x| |y| |z| mean mm", "frame"):
+        table.add_column(col, justify="right")
+    axes = " ".join(f"{v * 1e3:.4f}" for v in stats.axis_mean_abs)
+    table.add_row(
+        str(stats.n),
+        f"{stats.mean * 1e3:.4f}",
+        f"{stats.rms * 1e3:.4f}",
+        f"{stats.p95 * 1e3:.4f}",
+        f"{stats.max * 1e3:.4f}",
+        axes,
+        stats.frame,
+    )
+    return table
+
+
+def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
+    """Lines under a validation table (how the device frame was obtained unless
+    ``frame_note`` is False, the error the calibration expected) and a warning when the
+    error is far from what it should be."""
+    frames = {
+        "calibrated": "the device frame identified by the calibration was used as it is",
+        "refit": "the device frame was refitted to this data (--refit-frame)",
+    }
+    notes = [frames.get(stats.frame, "")] if frame_note else []
+    if stats.expected_rms is not None:
+        notes.append(
+            f"the calibration expected an RMS error of {stats.expected_rms * 1e3:.4g} mm here "
+            f"({stats.parameter_rms * 1e3:.3g} mm from its parameter"
+            + (" and learned-residual" if result.model.residual is not None else "")
+            + " uncertainty, the rest "
+            + {
+                "sigma": "the data's stated noise",
+                "sigma+unmodelled": "the data's stated noise and the error its residuals showed beyond noise",
+                "residual model": "the noise and error the learned residual left unexplained",
+            }.get(stats.scatter or "", "the scatter of its own residuals")
+            + f"); measured {stats.rms * 1e3:.4g} mm"
+        )
+    warning = None
+    if stats.mean > max(20 * result.rms_after, 5e-3):
+        warning = (
+            f"the mean error is {stats.mean / max(result.rms_after, 1e-12):.0f}x the calibration's own "
+            f"RMS residual ({result.rms_after * 1e3:.3g} mm)"
+            + (": if the device was moved since, add --refit-frame;" if stats.frame == "calibrated" else ":")
+            + " otherwise check the robot, the units and the column mapping"
+        )
+    elif stats.worse_than_expected:
+        warning = (
+            f"the error is {stats.rms / stats.expected_rms:.3g}x what the calibration expected: a robot "
+            "or device that changed since, or errors the model does not represent in poses unlike the "
+            "calibration's"
+        )
+    if warning:
+        notes.append(f"[yellow]warning:[/] {safe(warning)}")
+    return notes, warning
+
+
+def _own_rows(rows, all_rows: bool, directory: Path, path: Path):
+    """The rows of the calibration's own file that ``validate`` uses: the held-out ones (all
+    with ``--all-rows``), a note saying which, and their label."""
+    if rows.test is None and not all_rows:
+        raise fail(
+            f"{directory}: the calibration used every row of {path.name}: give held-out "
+            "measurements with --data (or --all-rows to see the error on the calibration poses)"
+        )
+    if all_rows:
+        note = f"every row of the calibration's own file ({rows.every.n}), its {rows.train.n} calibration"
+        return rows.every, note + " rows included", "all"
+    note = (
+        f"the {rows.test.n} held-out rows of the calibration's own file (split by {rows.how}; "
+        f"its {rows.train.n} calibration rows left out; --all-rows: every row)"
+    )
+    return rows.test, note, "test" if rows.how == "the file's set column" else "held-out"
+
+
+def validate_command(
+    ctx: typer.Context,
+    directory: Annotated[Path, CALIBRATION_DIR],
+    data_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--data",
+            metavar="FILE",
+            help="measurement CSV file (default: the calibration's own file, read with its options; "
+            "its held-out rows)",
+        ),
+    ] = None,
+    refit_frame: Annotated[
+        bool, typer.Option("--refit-frame", help="the device was moved: refit its frame only")
+    ] = False,
+    as_json: Json = False,
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
+    columns: Columns = None,
+    sep: Sep = None,
+    decimal: Decimal = ".",
+    orientation: Orientation = "auto",
+    limits: Limits = "error",
+    incomplete: Incomplete = "error",
+    all_rows: Annotated[
+        bool, typer.Option("--all-rows", help="validate every row, also those marked train in a set column")
+    ] = False,
+) -> None:
+    """Error statistics of a calibrated model on (held-out) measurements."""
+    import robocal as rc
+
+    result = load_result(directory)
+    values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
+    values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
+    notes, extra = [], {}
+    own = own_data(ctx, directory, result, data_path, values)
+    if own is not None:
+        data_path, rows = own
+        data, note, extra["rows"] = _own_rows(rows, all_rows, directory, data_path)
+        notes.append(note)
+    else:
+        data = read_data(data_path, result.model, **values)
+    if own is None and data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
+        data = data.split_rows("test")
+        notes.append(f"the {data.n} rows marked test in the file's set column (--all-rows: every row)")
+        extra["rows"] = "test"
+    try:
+        stats = rc.validate(result, data, refit_frame=refit_frame)
+    except ValueError as err:
+        raise fail(f"{data_path}: {as_cli_text(str(err))}") from None
+    more_notes, warning = _validation_notes(stats, result)
+    notes += more_notes
+    if warning:
+        extra["warning"] = warning
+    if as_json:
+        print(strict_json(stats.to_dict() | extra))
+        return
+    console.print(_stats_table(f"{result.model.name} on {data_path.name} ({data.n} poses)", stats))
+    for note in filter(None, notes):
+        console.print(note, highlight=False, markup=True)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``validate`` to the ``robocal`` app."""
+    app.command("validate")(validate_command)
