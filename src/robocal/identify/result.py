@@ -471,7 +471,7 @@ class CalibrationResult:
         """
         from robocal.identify.result_io import save_result
 
-        return save_result(self, directory, also)
+        return self.replace(run_id=save_result(self, directory, also))
 
     @classmethod
     def load(cls, directory: str | Path) -> CalibrationResult:
@@ -481,6 +481,9 @@ class CalibrationResult:
             ValueError: the folder holds no complete, consistent result (the message names
                 the file and what is wrong).
         """
-        from robocal.identify.result_io import load_result
+        from robocal.identify.result_io import load_result_fields
 
-        return load_result(directory)
+        fields = load_result_fields(directory)  # result_io builds no result: no import circle
+        fields["warnings"] = tuple(CalibrationWarning(code, text) for code, text in fields["warnings"])
+        fields["diagnostics"] = Diagnostics(**fields["diagnostics"])
+        return cls(**fields)

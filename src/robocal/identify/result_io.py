@@ -6,6 +6,8 @@ written under their older ``metadata`` keys: ``warnings`` as texts, ``residuals_
 ``fit_to_noise``, ``cv``, ``provenance``, ``validation``...), so results saved by an
 earlier robocal load, and a file that is not a result is refused with its path and the
 field that is wrong.  Lengths in the file are in mm where the key says so, SI otherwise.
+This module does not import :mod:`robocal.identify.result` (which calls it): it reads and
+writes a result's fields, and the result class builds itself from them.
 """
 
 from __future__ import annotations
@@ -23,11 +25,10 @@ import numpy as np
 from robocal.identify.effects import parameter_unit
 from robocal.identify.guards import FitToNoise
 from robocal.identify.observability import Dropped
-from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
 from robocal.model.dynamics import Payload
 from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model, strict_json
 
-__all__ = ["RESULT_FILES", "file_hash", "load_result", "metadata_dict", "result_dict", "save_result"]
+__all__ = ["RESULT_FILES", "file_hash", "load_result_fields", "metadata_dict", "result_dict", "save_result"]
 
 #: the files of a calibration result folder (written and replaced together)
 RESULT_FILES = (
@@ -55,7 +56,7 @@ _FIELDS = {
 
 
 def _version() -> str:
-    from robocal import __version__
+    from robocal._version import __version__
 
     return __version__
 
@@ -69,7 +70,7 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def metadata_dict(result: CalibrationResult) -> dict[str, Any]:
+def metadata_dict(result: Any) -> dict[str, Any]:
     """The result's diagnostics, warnings, provenance and records under their
     ``result.json`` keys (the older ``metadata`` dict)."""
     d = result.diagnostics
@@ -108,7 +109,7 @@ def _payload_dict(payload: Payload) -> dict[str, Any]:
     return out
 
 
-def result_dict(result: CalibrationResult) -> dict[str, Any]:
+def result_dict(result: Any) -> dict[str, Any]:
     """The content of ``result.json`` (JSON types; lengths in mm where a key says so)."""
     r = result
     rot = {s.name: s.is_rotation for s in (r.measurement_chain or r.model).steps}
@@ -170,11 +171,8 @@ def result_dict(result: CalibrationResult) -> dict[str, Any]:
     }
 
 
-def save_result(
-    result: CalibrationResult, directory: str | Path, also: Callable[[Path], object] | None = None
-) -> CalibrationResult:
-    """:meth:`CalibrationResult.save`: the files as one transaction; returns the result
-    with the run id of the files."""
+def save_result(result: Any, directory: str | Path, also: Callable[[Path], object] | None = None) -> str:
+    """:meth:`CalibrationResult.save`: the files as one transaction; returns their run id."""
     from robocal.outdir import transaction
 
     with transaction(directory, RESULT_FILES) as stage:
@@ -185,11 +183,12 @@ def save_result(
         atomic_write_text(stage.path / "result.json", text)
         if also is not None:
             also(stage.path)
-    return result.replace(run_id=stage.run_id)
+    return stage.run_id
 
 
-def load_result(directory: str | Path) -> CalibrationResult:
-    """:meth:`CalibrationResult.load`."""
+def load_result_fields(directory: str | Path) -> dict[str, Any]:
+    """:meth:`CalibrationResult.load`: the result's fields read from ``directory`` (its
+    ``warnings`` as ``(code, message)`` pairs and its ``diagnostics`` as keywords)."""
     from robocal.outdir import check_consistent
 
     directory = Path(directory)
@@ -221,20 +220,20 @@ def load_result(directory: str | Path) -> CalibrationResult:
         raise ValueError(f"{path}: not a calibration result written by robocal ({what})") from None
 
 
-def _warnings(data: dict[str, Any]) -> tuple[CalibrationWarning, ...]:
+def _warnings(data: dict[str, Any]) -> tuple[tuple[str, str], ...]:
     texts = [str(w) for w in data.get("warnings", [])]
     codes = data.get("warning_codes")
     if not isinstance(codes, list) or len(codes) != len(texts):  # an older file: no codes
         codes = ["unknown"] * len(texts)
-    return tuple(CalibrationWarning(str(c), t) for c, t in zip(codes, texts, strict=True))
+    return tuple((str(c), t) for c, t in zip(codes, texts, strict=True))
 
 
-def _diagnostics(data: dict[str, Any]) -> Diagnostics:
+def _diagnostics(data: dict[str, Any]) -> dict[str, Any]:
     noise = data.get("fit_to_noise")
     at_bounds = data.get("at_bounds")
     passes = data.get("load_passes")
     rms = data.get("residual_rms_after_mm")
-    return Diagnostics(
+    return dict(
         solve_seconds=float(data.get("solve_seconds", 0.0)),
         evaluations=int(data.get("evaluations", 0)),
         level=int(data.get("level", 2)),
@@ -249,7 +248,7 @@ def _diagnostics(data: dict[str, Any]) -> Diagnostics:
     )
 
 
-def _from_dict(directory: Path, data: dict[str, Any]) -> CalibrationResult:
+def _from_dict(directory: Path, data: dict[str, Any]) -> dict[str, Any]:
     from robocal.identify.provenance import Provenance
 
     model = load_model(directory / "model.yaml")
@@ -264,7 +263,7 @@ def _from_dict(directory: Path, data: dict[str, Any]) -> CalibrationResult:
         model = dataclasses.replace(model, residual=model.residual.with_covariance_upper(upper))
     residuals = data.get("residuals_mm")
     cross = data.get("residual_cross_covariance")
-    return CalibrationResult(
+    return dict(
         model=model,
         T_device_base=np.array(data["frame"]["T_device_base"], dtype=float).reshape(4, 4),
         measure=data["measure"],
