@@ -40,6 +40,34 @@ def _commands(command=None, path=()):
         yield " ".join(path), command
 
 
+def _argument_problems(where: str, p) -> list[str]:
+    problems = []
+    if not p.metavar:
+        problems.append(f"{where}: an argument without a metavar")
+    if not p.help:
+        problems.append(f"{where}: an argument without help")
+    if p.name == "robot" and p.metavar != "ROBOT":
+        problems.append(f"{where}: the robot argument is spelled {p.metavar}, not ROBOT")
+    return problems
+
+
+def _option_problems(where: str, p, names: list[str]) -> list[str]:
+    problems = [f"{where}: {n} (robocal spells it {FORBIDDEN[n]})" for n in names if n in FORBIDDEN]
+    if not p.help:
+        problems.append(f"{where}: {'/'.join(names)} has no help")
+    if p.is_flag and p.metavar not in (None, ""):
+        problems.append(f"{where}: the flag {names[-1]} shows a metavar")
+    if not p.is_flag and not p.metavar:
+        problems.append(f"{where}: {names[-1]} has no metavar saying what it takes")
+    if p.name == "out" and sorted(p.opts) != ["--out", "-o"]:
+        problems.append(f"{where}: an output is -o/--out, not {'/'.join(p.opts)}")
+    if "-o" in p.opts and p.name != "out":
+        problems.append(f"{where}: -o is the output, not {p.name}")
+    if p.name == "robot":
+        problems.append(f"{where}: the robot is the ROBOT argument, not an option")
+    return problems
+
+
 def _problems(commands) -> list[str]:
     problems: list[str] = []
     long_names: dict[str, set[str]] = defaultdict(set)
@@ -47,30 +75,10 @@ def _problems(commands) -> list[str]:
         for p in command.params:
             where = f"robocal {path}: {p.name}"
             if p.param_type_name == "argument":
-                if not p.metavar:
-                    problems.append(f"{where}: an argument without a metavar")
-                if not p.help:
-                    problems.append(f"{where}: an argument without help")
-                if p.name == "robot" and p.metavar != "ROBOT":
-                    problems.append(f"{where}: the robot argument is spelled {p.metavar}, not ROBOT")
+                problems += _argument_problems(where, p)
                 continue
             names = [*p.opts, *p.secondary_opts]
-            for name in names:
-                if name in FORBIDDEN:
-                    problems.append(f"{where}: {name} (robocal spells it {FORBIDDEN[name]})")
-            if not p.help:
-                problems.append(f"{where}: {'/'.join(names)} has no help")
-            if p.is_flag:
-                if p.metavar not in (None, ""):
-                    problems.append(f"{where}: the flag {names[-1]} shows a metavar")
-            elif not p.metavar:
-                problems.append(f"{where}: {names[-1]} has no metavar saying what it takes")
-            if p.name == "out" and sorted(p.opts) != ["--out", "-o"]:
-                problems.append(f"{where}: an output is -o/--out, not {'/'.join(p.opts)}")
-            if "-o" in p.opts and p.name != "out":
-                problems.append(f"{where}: -o is the output, not {p.name}")
-            if p.name == "robot":
-                problems.append(f"{where}: the robot is the ROBOT argument, not an option")
+            problems += _option_problems(where, p, names)
             long_names[p.name].add("/".join(sorted(n for n in names if n.startswith("--"))))
     for dest, spellings in long_names.items():
         if len(spellings) > 1:

@@ -428,7 +428,7 @@ def _names(names: Sequence[str] | None, n: int) -> tuple[str, ...]:
     return out
 
 
-def _correct(
+def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed through
     setup: _Setup,
     T: Array,
     kind: TargetKind,
@@ -482,7 +482,7 @@ def _correct(
     )
 
 
-def compensate_targets(
+def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in README and docs
     calibrated: Calibrated,
     targets: ArrayLike,
     nominal_model: Model | None = None,
@@ -576,7 +576,7 @@ def _program(q: ArrayLike, dof: int, what: str) -> Array:
     return qa
 
 
-def filter_program(
+def filter_program(  # noqa: PLR0913 - public keyword options, documented in README and docs
     calibrated: Calibrated,
     q_program: ArrayLike,
     nominal_model: Model | None = None,
@@ -696,7 +696,7 @@ def _eq522(
     return q
 
 
-def compensate_path(
+def compensate_path(  # noqa: PLR0913 - public keyword options, documented in README and docs
     calibrated: Calibrated,
     q_path: ArrayLike,
     nominal_model: Model | None = None,
