@@ -41,10 +41,12 @@ __all__ = [
     "Chunk",
     "CsvError",
     "Head",
+    "cells_with_offsets",
     "iter_chunks",
     "read_head",
     "row_at",
     "short",
+    "sniff",
     "split_rows",
     "to_numbers",
 ]
@@ -274,6 +276,21 @@ def iter_chunks(head: Head, *, chunk_bytes: int = CHUNK_BYTES) -> Iterator[Chunk
                     problems.append((i, "ragged", message))
             problems.sort()
             yield Chunk(rows, np.array(nos, dtype=np.int64), np.array(offs, dtype=np.int64), problems)
+
+
+def sniff(header_text: str, candidates: Sequence[str] = (",", ";", "\t")) -> str:
+    """The most frequent of ``candidates`` in a header line (the first on a tie)."""
+    return max(candidates, key=header_text.count)
+
+
+def cells_with_offsets(line: str, sep: str) -> list[tuple[str, int]]:
+    """The cells of ``line`` split at ``sep`` (no quoting), each with its offset in the
+    line: for files edited in place, whose numbers are replaced where they stand."""
+    out, start = [], 0
+    for cell in line.split(sep):
+        out.append((cell, start))
+        start += len(cell) + len(sep)
+    return out
 
 
 def row_at(head: Head, offset: int) -> list[str]:

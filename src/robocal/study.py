@@ -56,6 +56,7 @@ import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from robocal import csvfile
 from robocal.model.chain import Model
 from robocal.model.files import (
     Count,
@@ -720,7 +721,7 @@ class _Table:
             )
         good: list[str] = [lines[0]]
         for i, line in enumerate(lines[1:], start=2):
-            cells = next(csv.reader([line]), [])
+            cells = csvfile.split_rows([line.rstrip("\r\n")], ",")[0][0]
             complete = line.endswith("\n") and len(cells) == len(self.columns)
             if not complete:
                 if i == len(lines):  # cut short by a crash: drop it

@@ -594,10 +594,12 @@ def _plot(numbers: dict[str, Any], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize="small")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(path)
+    from robocal.outdir import atomic_write_figure
+
+    try:
+        atomic_write_figure(fig, path, dpi=100)
+    finally:
+        plt.close(fig)
 
 
 def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> dict[str, Any]:

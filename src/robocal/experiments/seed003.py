@@ -951,8 +951,6 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "seed003.json", strict_json(numbers, indent=2, default=str) + "\n")
     atomic_write_text(out / "seed003.md", _markdown(numbers))
-    import os
-    import tempfile
 
     import matplotlib
 
@@ -968,11 +966,9 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     ax.set_title("Katana 450, thesis circle: tracking error after calibration and eq. 5.22")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(prefix=".seed003_circle.", suffix=".png", dir=out)
-    os.close(fd)
+    from robocal.outdir import atomic_write_figure
+
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, out / "seed003_circle.png")
+        atomic_write_figure(fig, out / "seed003_circle.png", dpi=110)
     finally:
         plt.close(fig)
-        Path(tmp).unlink(missing_ok=True)

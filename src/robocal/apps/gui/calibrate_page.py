@@ -25,6 +25,7 @@ import numpy as np
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
 from robocal.apps.gui.jobs import CalibrationJob, JobRunner, read_options
+from robocal.outdir import atomic_write_bytes, atomic_write_text
 
 __all__ = ["layout", "register"]
 
@@ -388,7 +389,7 @@ def register(app: Dash, workdir: Path) -> None:
             if not built:
                 raise ValueError("no model built yet: build one on the builder page (build → model file)")
             path = workdir / "built_model.yaml"
-            path.write_text(built["text"], encoding="utf-8")
+            atomic_write_text(path, built["text"])
             return rc.load_model(path)
         return rc.calibration_model(choice, measure)
 
@@ -415,7 +416,7 @@ def register(app: Dash, workdir: Path) -> None:
         token = f"{uuid.uuid4().hex[:12]}/{name}"
         target = workdir / "data" / token
         target.parent.mkdir(parents=True)
-        target.write_bytes(data)
+        atomic_write_bytes(target, data)
         return f"{name} ({len(data):,} bytes)", token
 
     @app.callback(
@@ -626,7 +627,7 @@ def _compensate(result, contents: str, filename: str | None, unit: str, frame: s
     name = Path(filename or "targets.csv").name
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
         path = Path(tmp) / name
-        path.write_bytes(_decode_bytes(contents))
+        atomic_write_bytes(path, _decode_bytes(contents))
         try:
             targets = read_targets(path, length_unit=unit)
         except ValueError as err:
