@@ -198,7 +198,7 @@ def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
 
     from PIL import Image
 
-    from robocal.study import run_study
+    from robocal.study import StudyError, read_study_summary, run_study
 
     out = tmp_path / "s"
     first = run_study(_study_config(2), out, workers=0)
@@ -216,6 +216,10 @@ def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
     summary = json.loads((out / "summary.json").read_text())
     assert third.resumed == 3 and summary["groups"][0]["cases"] == 3
     assert Image.open(out / "summary.png").info["Description"] == f"robocal run: {summary['run_id']}"
+    assert read_study_summary(out) == summary and outdir.read_run_id(out / "summary.png") == summary["run_id"]
+    (out / "summary.png").write_bytes(before["summary.png"])  # the plot of the earlier run: refused
+    with pytest.raises(StudyError, match=r"summary\.json is run [0-9a-f]+ but .*summary\.png is run"):
+        read_study_summary(out)
 
 
 # ------------------------------------------------------------------ the report carries its result's run id

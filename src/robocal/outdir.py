@@ -55,7 +55,6 @@ import time
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 __all__ = [
     "STEPS",
@@ -63,7 +62,6 @@ __all__ = [
     "FolderMixedError",
     "Stage",
     "atomic_write_bytes",
-    "atomic_write_figure",
     "atomic_write_text",
     "check_consistent",
     "check_not_busy",
@@ -117,9 +115,12 @@ def run_id_meta(run_id: str) -> str:
 
 def read_run_id(path: Path) -> str | None:
     """The run id of a file written by a transaction: ``result.json``'s ``run_id``, an HTML
-    report's ``<meta name="robocal-run">`` in its first 4 kB, or a ``# robocal run: ID``
-    line among the first lines of a text file; None when it has none."""
+    report's ``<meta name="robocal-run">`` in its first 4 kB, a PNG's ``Description``
+    (``robocal run: ID``), or a ``# robocal run: ID`` line among the first lines of a
+    text file; None when it has none."""
     path = Path(path)
+    if path.suffix == ".png":
+        return _png_run_id(path)
     if path.suffix in (".html", ".htm"):
         try:
             with open(path, encoding="utf-8", errors="replace") as fh:
@@ -142,6 +143,30 @@ def read_run_id(path: Path) -> str | None:
                 match = _RUN_LINE.match(fh.readline(200))
                 if match:
                     return match.group(1)
+    except OSError:
+        return None
+    return None
+
+
+def _png_run_id(path: Path) -> str | None:
+    """The run id in a PNG's ``tEXt`` ``Description`` (``robocal run: ID``), read from
+    the chunks before the image data; None when it has none."""
+    import struct
+
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(8) != b"\x89PNG\r\n\x1a\n":
+                return None
+            while len(head := fh.read(8)) == 8:
+                length, kind = struct.unpack(">I4s", head)
+                if kind == b"IDAT" or length > 1 << 20:
+                    return None
+                data = fh.read(length)
+                fh.read(4)  # the CRC
+                key, _, text = data.partition(b"\x00")
+                if kind == b"tEXt" and key == b"Description":
+                    match = _RUN_LINE.match("# " + text.decode("latin-1"))
+                    return match.group(1) if match else None
     except OSError:
         return None
     return None
@@ -495,18 +520,6 @@ def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
-
-
-def atomic_write_figure(fig: Any, path: str | os.PathLike[str], **savefig: Any) -> Path:
-    """Write a matplotlib figure to ``path`` whole (rendered in memory, then
-    :func:`atomic_write_bytes`); ``savefig`` are ``Figure.savefig``'s options (the format
-    is taken from the suffix unless given)."""
-    import io
-
-    buf = io.BytesIO()
-    savefig.setdefault("format", Path(path).suffix.lstrip(".") or "png")
-    fig.savefig(buf, **savefig)
-    return atomic_write_bytes(path, buf.getvalue())
 
 
 # ------------------------------------------------------------------ sets of files beside each other

@@ -77,6 +77,7 @@ def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | N
     from robocal.evaluate.iso9283_log import save_simulated_log
     from robocal.evaluate.iso9283_sim import LogErrors, simulate_log
     from robocal.measure.simulate import parse_quantity_option
+
     refuse_overwrite(log, force, "log")
     model = resolve_model(robot)
     try:

@@ -61,7 +61,7 @@ from robocal.measure.paths import cubic_spline, joint_path
 from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
 from robocal.model.catalog import robot
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text, strict_json
+from robocal.model.files import strict_json
 
 __all__ = [
     "BOARDS",
@@ -571,9 +571,9 @@ def _report(numbers: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _plot(numbers: dict[str, Any], path: Path) -> None:
+def _plot(numbers: dict[str, Any]) -> bytes:
     """Errors along the spline before and after, per board, for the table arm (like the
-    seed's Fig. 10a)."""
+    seed's Fig. 10a), as PNG bytes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -594,12 +594,14 @@ def _plot(numbers: dict[str, Any], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize="small")
     fig.tight_layout()
-    from robocal.outdir import atomic_write_figure
+    import io
 
+    buf = io.BytesIO()
     try:
-        atomic_write_figure(fig, path, dpi=100)
+        fig.savefig(buf, format="png", dpi=100)
     finally:
         plt.close(fig)
+    return buf.getvalue()
 
 
 def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> dict[str, Any]:
@@ -636,9 +638,15 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "results.json", strict_json(numbers, indent=2) + "\n")
-        atomic_write_text(out / "report.md", _report(numbers))
-        _plot(numbers, out / "trajectory_errors.png")
+        from robocal.outdir import write_together
+
+        write_together(  # the numbers, their report and their plot: all of this run or none
+            {
+                out / "results.json": (strict_json(numbers, indent=2) + "\n").encode("utf-8"),
+                out / "report.md": _report(numbers).encode("utf-8"),
+                out / "trajectory_errors.png": _plot(numbers),
+            }
+        )
         if verbose:
             from robocal.console import console
 
