@@ -1109,3 +1109,23 @@ def test_simulated_log_and_truth_carry_one_run_id_and_a_mix_is_refused(tmp_path,
     (tmp_path / "iso.truth.yaml").write_text(other)  # the truth of another simulation run
     with pytest.raises(Iso9283LogError, match=r"iso\.truth\.yaml.*iso\.csv is run.*different simulations"):
         load_log_truth(log)
+
+
+def test_a_short_row_before_the_set_column_and_a_long_label(tmp_path):
+    """A row cut short before the ``set`` column is ragged (left out by drop), and a label
+    longer than 'train' is not cut to it ('trainee' is refused, not read as 'train')."""
+    import warnings
+
+    from robocal.measure.dataset import MeasurementFileError, read_measurements
+
+    path = tmp_path / "d.csv"
+    path.write_text("q1,q2,set\n1,2,train\n3\n4,5,test\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_measurements(path, dof=2, incomplete="drop")
+    assert data.n == 2 and data.split.tolist() == ["train", "test"]
+    path.write_text("q1,q2,set\n1,2,train\n4,5,trainee\n")
+    with pytest.raises(
+        MeasurementFileError, match=r"row 3, column 'set': 'trainee' is not a train/test label"
+    ):
+        read_measurements(path, dof=2)

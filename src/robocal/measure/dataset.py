@@ -662,7 +662,7 @@ class _Reader:
                     bad_cells[rows[m]] = True
                 parts[k].append(values)
             if set_k is not None:
-                cells = [r[set_k].strip().lower() if r else "" for r in chunk.rows]
+                cells = [r[set_k].strip().lower() if len(r) > set_k else "" for r in chunk.rows]
                 valid = np.array([c in ("train", "test") for c in cells], dtype=bool)
                 for i in np.flatnonzero(ok & ~valid):
                     raw = chunk.rows[i][set_k].strip()
