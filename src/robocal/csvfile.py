@@ -28,7 +28,6 @@ module makes need the file's own line numbers and cells.
 from __future__ import annotations
 
 import csv
-import math
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -344,11 +343,3 @@ def to_numbers(
         values[bad] = np.nan
         problems.sort()
     return values, problems
-
-
-def is_finite_number(text: str) -> bool:
-    """Whether ``text`` reads as a finite float."""
-    try:
-        return math.isfinite(float(text))
-    except ValueError:
-        return False

@@ -33,6 +33,10 @@ models; a KRL ``.src`` and its ``.dat``; a study's ``summary.json`` and ``summar
 written by :func:`file_set` / :func:`write_together`: temporary names beside them, then
 one rename each, the earlier files put back should a rename fail.
 
+Every file robocal writes goes through :func:`atomic_write_bytes` (a temporary file
+beside it, then one rename): this module holds the one atomic writer, which
+:mod:`robocal.model.files` re-exports.
+
 For tests: the environment variable ``ROBOCAL_TEST_KILL_AT`` names a write step
 (:data:`STEPS`) at which the process kills itself with SIGKILL, to check that every
 interruption leaves a complete result; ``ROBOCAL_TEST_NO_EXCHANGE=1`` takes the two-rename

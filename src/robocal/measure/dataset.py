@@ -90,8 +90,8 @@ MAX_MEDIAN_DISTANCE = 50.0
 MIN_MEDIAN_DISTANCE = 0.005
 #: Revolute joint values beyond this (rad) in magnitude look like degrees.
 MAX_REVOLUTE_RAD = 4.0 * math.pi
-#: Largest measurement file read (bytes): about five million poses; reading takes about
-#: ten times the file's size in memory.
+#: Largest measurement file read (bytes): about five million poses; the file is read in
+#: chunks (:mod:`robocal.csvfile`), its numbers kept as arrays: about twice their size in memory.
 MAX_FILE_BYTES = 512 * 1024 * 1024
 #: A stated measurement noise (1σ, m) must lie in [MIN_SIGMA, MAX_SIGMA]: 0 or a tiny σ
 #: makes the weights infinite, a huge one makes them vanish
