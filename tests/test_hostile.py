@@ -837,3 +837,294 @@ def test_an_unwritable_folder_is_one_line(base, tmp_path, monkeypatch):
     )
     assert result.exit_code == 2
     assert "permission denied" in result.stderr and result.stderr.count("\n") == 1, result.stderr
+
+
+# ------------------------------------------------------------------ session 6: readers and writers
+def _one_error_line(result) -> str:
+    assert "Traceback" not in result.output, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    errors = [ln for ln in result.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and result.stderr.rstrip("\n").endswith(errors[0]), result.stderr
+    return errors[0]
+
+
+def _many_chunks(base: Path, where: Path, bad: dict[int, tuple[int, str]]) -> tuple[Path, list[str]]:
+    """meas.csv's rows repeated (each shifted, so no two are equal) until the file spans
+    several of the reader's chunks, with ``bad`` cells (data row -> (column, text))."""
+    from robocal import csvfile
+
+    lines = _body(base)
+    header, rows = lines[0], [ln.split(",") for ln in lines[1:]]
+    out = [header]
+    k = 0
+    while sum(map(len, out)) < 3 * csvfile.CHUNK_BYTES:
+        for cells in rows:
+            shifted = [repr(float(c) + 1e-9 * k) if j < 6 else c for j, c in enumerate(cells)]
+            out.append(",".join(shifted))
+            k += 1
+    for row, (col, text) in bad.items():
+        cells = out[row].split(",")
+        cells[col] = text
+        out[row] = ",".join(cells)
+    path = where / "d.csv"
+    path.write_text("\n".join(out) + "\n")
+    return path, out
+
+
+def test_a_large_file_with_bad_cells_in_several_columns_names_each(base, tmp_path):
+    """Bad cells in several columns and in several chunks: every one is found (not only the
+    first of each column), the first named in the one error line; with --incomplete drop
+    exactly those rows are left out."""
+    from robocal import csvfile
+    from robocal.measure.dataset import check_measurements, read_measurements
+
+    bad = {5: (2, "abc"), 900: (7, ""), 2500: (0, "nan"), 2501: (4, "x"), 4000: (8, "1;5")}
+    path, lines = _many_chunks(base, tmp_path, bad)
+    assert path.stat().st_size > 2 * csvfile.CHUNK_BYTES
+    found = [
+        (p.row, p.column, p.code) for p in check_measurements(path, robot("ur10")) if p.severity == "error"
+    ]
+    assert found == [
+        (6, "q3", "not-a-number"),
+        (901, "y", "empty"),
+        (2501, "q1", "not-finite"),
+        (2502, "q5", "not-a-number"),
+        (4001, "z", "not-a-number"),
+    ]
+    with time_limit():
+        result = CliRunner().invoke(
+            app, [*CAL[:4], str(path), "--out", str(tmp_path / "out"), "--residual", "none"]
+        )
+    assert result.exit_code == 2
+    line = _one_error_line(result)
+    assert f"{path}: row 2501, column 'q1': value 'nan' is not finite" in line, line
+    assert "and 4 more problem(s)" in line, line
+    assert not (tmp_path / "out").exists()
+    with pytest.warns(UserWarning, match="5 warning"):
+        data = read_measurements(path, model=robot("ur10"), incomplete="drop")
+    assert data.n == len(lines) - 1 - len(bad) and data.metadata["rows_left_out"] == "5"
+
+
+def test_a_large_file_with_ragged_rows_and_incomplete_drop(base, tmp_path):
+    from robocal.measure.dataset import read_measurements
+
+    path, lines = _many_chunks(base, tmp_path, {})
+    text = path.read_text().splitlines()
+    text[10] += ",1.0"  # a row with a cell too many
+    text[3000] = ",".join(text[3000].split(",")[:4])  # a row cut short
+    path.write_text("\n".join(text) + "\n")
+    result = CliRunner().invoke(
+        app, [*CAL[:4], str(path), "--out", str(tmp_path / "out"), "--residual", "none"]
+    )
+    assert result.exit_code == 2
+    width = len(lines[0].split(","))
+    assert f"{path}: row 11: has {width + 1} cells but the header has {width}" in _one_error_line(result)
+    with pytest.warns(UserWarning, match="2 warning"):
+        data = read_measurements(path, model=robot("ur10"), incomplete="drop")
+    assert data.n == len(lines) - 3
+
+
+def test_a_million_bad_cells_are_counted_not_listed(tmp_path):
+    """Problems beyond the first 1000 of a kind cost one line, not one object each."""
+    from robocal.measure.dataset import MAX_LISTED, check_measurements, read_measurements
+
+    path = tmp_path / "d.csv"
+    path.write_text("q1,q2\n" + "x,1\n" * 5000 + "1,2\n")
+    problems = check_measurements(path, dof=2)
+    assert len(problems) == MAX_LISTED + 1
+    summary = [p for p in problems if p.row is None]
+    assert len(summary) == 1 and summary[0].message.startswith("and 4000 more row(s)"), summary
+    assert summary[0].column == "q1" and summary[0].severity == "error"
+    with pytest.warns(UserWarning):
+        data = read_measurements(path, dof=2, incomplete="drop")
+    assert data.n == 1 and data.metadata["rows_left_out"] == "5000"
+
+
+MEMORY_CASES = [
+    pytest.param("pose+sigma+set", "drop", 20_000, id="pose-drop-20k"),
+    *(
+        pytest.param(kind, incomplete, 100_000, id=f"{kind}-{incomplete}-100k", marks=pytest.mark.slow)
+        for kind in ("position", "pose+sigma+set")
+        for incomplete in ("error", "drop")
+    ),
+]
+
+
+@pytest.mark.parametrize(("kind", "incomplete", "n"), MEMORY_CASES)
+def test_reading_memory_is_bounded_by_the_numbers(tmp_path, kind, incomplete, n):
+    """Peak memory (tracemalloc) of reading a file with bad cells, in each combination of
+    options that changes the path taken, is at most 3x its numbers (as float64, or the
+    arrays returned when larger: rotation matrices for quaternions)."""
+    import io
+    import tracemalloc
+    import warnings
+
+    from robocal.measure.dataset import read_measurements
+
+    rng = np.random.default_rng(0)
+    cols = {f"q{j + 1}": rng.uniform(-3, 3, n) for j in range(6)}
+    cols.update(x=rng.uniform(-1, 1, n), y=rng.uniform(-1, 1, n), z=rng.uniform(-1, 1, n))
+    if kind != "position":
+        quat = rng.normal(size=(n, 4))
+        quat /= np.linalg.norm(quat, axis=1, keepdims=True)
+        cols.update(qw=quat[:, 0], qx=quat[:, 1], qy=quat[:, 2], qz=quat[:, 3])
+        cols.update(sx=np.full(n, 1e-5), sy=np.full(n, 1e-5), sz=np.full(n, 1e-5))
+    table = np.column_stack(list(cols.values()))
+    buf = io.StringIO()
+    np.savetxt(buf, table, fmt="%.17g", delimiter=",")
+    lines = buf.getvalue().splitlines()
+    if kind != "position":
+        lines = [ln + (",train" if i % 2 else ",test") for i, ln in enumerate(lines)]
+    for i in range(7, n, 5000):  # a bad cell now and then, in changing columns
+        cells = lines[i].split(",")
+        cells[i % 9] = "" if i % 2 else "bad"
+        lines[i] = ",".join(cells)
+    header = ",".join(cols) + (",set" if kind != "position" else "")
+    path = tmp_path / "d.csv"
+    path.write_text(header + "\n" + "\n".join(lines) + "\n")
+    del lines, table
+    tracemalloc.start()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                data = read_measurements(path, dof=6, incomplete=incomplete)
+            except ValueError:
+                data = None
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    width = len(cols)
+    numbers = n * width * 8  # the file's numbers as float64
+    assert (data is None) == (incomplete == "error")
+    if data is not None:
+        kept = [a for a in (data.q, data.position, data.orientation, data.sigma) if a is not None]
+        assert data.n == n - len(range(7, n, 5000))
+        numbers = max(numbers, sum(a.nbytes for a in kept))
+    print(f"{kind} {incomplete}: peak {peak / 1e6:.2f} MB for {numbers / 1e6:.2f} MB, {peak / numbers:.2f}x")
+    assert peak <= 3 * numbers, f"peak {peak / 1e6:.1f} MB for {numbers / 1e6:.1f} MB of numbers"
+
+
+def _krl_pair(tmp_path: Path) -> Path:
+    examples = Path(__file__).resolve().parents[1] / "examples" / "programs"
+    folder = tmp_path / "in"
+    folder.mkdir()
+    for name in ("pick.src", "pick.dat", "$config.dat"):
+        (folder / name).write_bytes((examples / name).read_bytes())
+    return folder / "pick.src"
+
+
+def test_krl_pair_killed_between_its_renames_is_refused(tmp_path):
+    """kill -9 between the .dat's and the .src's rename (the test hook): the new .dat beside
+    the earlier .src is refused by the next reader, naming both files; filtering again repairs."""
+    import subprocess
+    import sys
+    import textwrap
+
+    import robocal as rc
+    from robocal.compensate.programs import filter_program_file, krl_run_id
+
+    program = _krl_pair(tmp_path)
+    out = tmp_path / "out" / "pick.src"
+    filter_program_file(program, rc.robot("kr16"), out)
+    before = out.read_text(encoding="latin-1")
+    script = textwrap.dedent(
+        f"""
+        import robocal as rc
+        from robocal.compensate.programs import filter_program_file
+        filter_program_file({str(program)!r}, rc.robot("kr16"), {str(out)!r})
+        """
+    )
+    env = dict(os.environ, ROBOCAL_TEST_KILL_AT="set-renaming")
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, timeout=120)
+    assert proc.returncode == -9, proc.stderr.decode()
+    assert out.read_text(encoding="latin-1") == before  # the .src was not renamed yet ...
+    dat = out.with_suffix(".dat").read_text(encoding="latin-1")
+    assert krl_run_id(dat) != krl_run_id(before)  # ... the .dat was
+    rc.save_model(rc.robot("kr16"), tmp_path / "kr16.yaml")
+    result = CliRunner().invoke(
+        app,
+        ["filter", str(out), "--calibration", str(tmp_path / "kr16.yaml"), "-o", str(tmp_path / "again.src")],
+    )
+    assert result.exit_code == 2, result.output
+    line = _one_error_line(result)
+    assert str(out) in line and str(out.with_suffix(".dat")) in line and "not written together" in line, line
+    assert not (tmp_path / "again.src").exists()
+    filter_program_file(program, rc.robot("kr16"), out)  # writing again repairs the pair
+    assert krl_run_id(out.read_text(encoding="latin-1")) == krl_run_id(
+        out.with_suffix(".dat").read_text(encoding="latin-1")
+    )
+    assert not [p for p in out.parent.iterdir() if p.name.endswith(".tmp")]  # leftovers removed
+
+
+@pytest.fixture(scope="module")
+def iso_log(tmp_path_factory) -> Path:
+    """A simulated ISO 9283 log of a UR10 and its truth, written by ``robocal simulate --log``."""
+    log = tmp_path_factory.mktemp("iso") / "iso.csv"
+    result = CliRunner().invoke(app, ["simulate", "ur10", "--log", str(log), "--seed", "1"])
+    assert result.exit_code == 0, result.output
+    return log
+
+
+@pytest.mark.parametrize("first", [pytest.param(True, marks=pytest.mark.slow), False])
+def test_a_full_disk_during_simulate_log_writes_neither_file(tmp_path, monkeypatch, first, iso_log):
+    """ENOSPC on the truth's rename: the log is not left without (or beside another) truth."""
+    from robocal.evaluate.iso9283_log import load_log_truth
+
+    log = tmp_path / "iso.csv"
+    if not first:
+        for name in ("iso.csv", "iso.truth.yaml"):
+            shutil.copy(iso_log.with_name(name), tmp_path / name)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    real = os.replace
+
+    def replace(src, dst, *args, **kwargs):
+        if Path(dst).name == "iso.truth.yaml":
+            raise OSError(errno.ENOSPC, "No space left on device", str(dst))
+        return real(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with time_limit(60):
+        result = CliRunner().invoke(app, ["simulate", "ur10", "--log", str(log), "--seed", "2", "--force"])
+    monkeypatch.undo()
+    assert result.exit_code == 2, result.output
+    assert "iso.truth.yaml: the disk is full" in _one_error_line(result)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before  # the earlier pair, or nothing
+    if not first:
+        assert load_log_truth(log)  # still one run
+
+
+def test_simulated_log_and_truth_carry_one_run_id_and_a_mix_is_refused(tmp_path, iso_log):
+    from robocal.evaluate.iso9283_log import Iso9283LogError, load_log_truth, read_iso9283_log
+    from robocal.outdir import new_run_id, read_run_id, run_id_line
+
+    truth = iso_log.with_name("iso.truth.yaml")
+    assert read_run_id(iso_log) == read_run_id(truth) is not None
+    assert "robocal run" not in read_iso9283_log(iso_log).conditions
+    assert load_log_truth(iso_log)["AD_mm_expected"] >= 0
+    log = tmp_path / "iso.csv"
+    shutil.copy(iso_log, log)
+    other = truth.read_text().replace(run_id_line(read_run_id(truth)), run_id_line(new_run_id()))
+    (tmp_path / "iso.truth.yaml").write_text(other)  # the truth of another simulation run
+    with pytest.raises(Iso9283LogError, match=r"iso\.truth\.yaml.*iso\.csv is run.*different simulations"):
+        load_log_truth(log)
+
+
+def test_a_short_row_before_the_set_column_and_a_long_label(tmp_path):
+    """A row cut short before the ``set`` column is ragged (left out by drop), and a label
+    longer than 'train' is not cut to it ('trainee' is refused, not read as 'train')."""
+    import warnings
+
+    from robocal.measure.dataset import MeasurementFileError, read_measurements
+
+    path = tmp_path / "d.csv"
+    path.write_text("q1,q2,set\n1,2,train\n3\n4,5,test\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        data = read_measurements(path, dof=2, incomplete="drop")
+    assert data.n == 2 and data.split.tolist() == ["train", "test"]
+    path.write_text("q1,q2,set\n1,2,train\n4,5,trainee\n")
+    with pytest.raises(
+        MeasurementFileError, match=r"row 3, column 'set': 'trainee' is not a train/test label"
+    ):
+        read_measurements(path, dof=2)

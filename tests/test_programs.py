@@ -21,6 +21,15 @@ runner = CliRunner()
 PROBE = np.array([0.0, 0.0, 0.1])
 
 
+def _unstamped(written: bytes) -> bytes:
+    """A written KRL file without its ``;robocal run: ID`` line (the pair's run id), which
+    must be there exactly once."""
+    lines = written.splitlines(keepends=True)
+    stamps = [ln for ln in lines if ln.startswith(b";robocal run: ")]
+    assert len(stamps) == 1, stamps
+    return b"".join(ln for ln in lines if ln not in stamps)
+
+
 @pytest.mark.parametrize(
     ("program", "robot", "options"),
     [
@@ -33,9 +42,11 @@ PROBE = np.array([0.0, 0.0, 0.1])
 def test_nominal_calibration_leaves_every_language_byte_identical(tmp_path, program, robot, options):
     out = tmp_path / program
     result = filter_program_file(EXAMPLES / program, rc.robot(robot), out, **options)
-    assert out.read_bytes() == (EXAMPLES / program).read_bytes()
-    if program.endswith(".src"):
-        assert out.with_suffix(".dat").read_bytes() == (EXAMPLES / "pick.dat").read_bytes()
+    if program.endswith(".src"):  # byte-identical but for the pair's run id line
+        assert _unstamped(out.read_bytes()) == (EXAMPLES / program).read_bytes()
+        assert _unstamped(out.with_suffix(".dat").read_bytes()) == (EXAMPLES / "pick.dat").read_bytes()
+    else:
+        assert out.read_bytes() == (EXAMPLES / program).read_bytes()
     assert len(result.targets) >= 3 and not result.changed.any()
     assert result.reachable.all(), result.problems
 
@@ -348,15 +359,15 @@ def test_krl_crlf_latin1_kept_and_angles_within_180(tmp_path):
     (tmp_path / "p.dat").write_bytes(dat)
     nominal = rc.robot("kr16")
     filter_program_file(tmp_path / "p.src", nominal, tmp_path / "out" / "p.src")
-    assert (tmp_path / "out" / "p.src").read_bytes() == src
-    assert (tmp_path / "out" / "p.dat").read_bytes() == dat
+    assert _unstamped((tmp_path / "out" / "p.src").read_bytes()) == src
+    assert _unstamped((tmp_path / "out" / "p.dat").read_bytes()) == dat
     moved = nominal.with_free_values(nominal.free_values + 1e-3)
     res = filter_program_file(tmp_path / "p.src", moved, tmp_path / "out2" / "p.src", nominal=nominal)
     assert res.changed.sum() == 7 and not res.problems
     new = (tmp_path / "out2" / "p.dat").read_bytes()
-    assert new.count(b"\r\n") == dat.count(b"\r\n")
+    assert new.count(b"\r\n") == dat.count(b"\r\n") + 1  # the run id line, CRLF too
     new_src = (tmp_path / "out2" / "p.src").read_bytes()
-    assert new_src.count(b"\r\n") == src.count(b"\r\n") and "; Ä small".encode("latin-1") in new_src
+    assert new_src.count(b"\r\n") == src.count(b"\r\n") + 1 and "; Ä small".encode("latin-1") in new_src
     import re
 
     for name, value in re.findall(rb"\b([ABC]) (-?\d+\.\d+)", new + new_src):

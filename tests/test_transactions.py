@@ -126,7 +126,6 @@ def _krl_program(folder: Path) -> Path:
 @pytest.mark.parametrize("fail", ["write-dat", "rename-dat", "rename-src"])
 def test_filtered_krl_program_is_written_both_or_neither(tmp_path, monkeypatch, fail):
     from robocal.compensate.programs import filter_program_file
-    from robocal.model import files
 
     kr16 = rc.robot("kr16")
     program = _krl_program(tmp_path / "in")
@@ -136,22 +135,32 @@ def test_filtered_krl_program_is_written_both_or_neither(tmp_path, monkeypatch, 
     out.with_suffix(".dat").write_text("; its earlier data\n")
     before = _snapshot(out.parent)
     if fail == "write-dat":
-        real = files.atomic_write_bytes
+        real = outdir.atomic_write_bytes
 
         def write(path, data):
             if ".pick.dat." in Path(path).name:
                 raise OSError(errno.ENOSPC, "No space left on device")
             return real(path, data)
 
-        monkeypatch.setattr(files, "atomic_write_bytes", write)
+        monkeypatch.setattr(outdir, "atomic_write_bytes", write)
     else:
         _fail_replace_onto(monkeypatch, "pick.dat" if fail == "rename-dat" else "pick.src")
     with pytest.raises(OSError):
         filter_program_file(program, kr16, out)
     monkeypatch.undo()
     assert _snapshot(out.parent) == before
-    filter_program_file(program, kr16, out)  # and then it works
-    assert _snapshot(out.parent) == {n: (EXAMPLES / n).read_bytes() for n in ("pick.dat", "pick.src")}
+    filter_program_file(program, kr16, out)  # and then it works, the pair stamped with one run id
+    from robocal.compensate.programs import krl_run_id
+
+    written = {n: b.decode("latin-1") for n, b in _snapshot(out.parent).items()}
+    assert sorted(written) == ["pick.dat", "pick.src"]
+    run_ids = {krl_run_id(text) for text in written.values()}
+    assert len(run_ids) == 1 and None not in run_ids
+    for name, text in written.items():  # the same program as the example, but for the stamp
+        stamp = f";robocal run: {run_ids.pop() if run_ids else krl_run_id(text)}"
+        lines = [ln for ln in text.splitlines() if not ln.startswith(";robocal run: ")]
+        assert lines == (EXAMPLES / name).read_bytes().decode("latin-1").splitlines(), name
+        assert stamp in text
 
 
 def test_failed_first_filter_leaves_neither_file(tmp_path, monkeypatch):
@@ -189,7 +198,7 @@ def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
 
     from PIL import Image
 
-    from robocal.study import run_study
+    from robocal.study import StudyError, read_study_summary, run_study
 
     out = tmp_path / "s"
     first = run_study(_study_config(2), out, workers=0)
@@ -207,6 +216,10 @@ def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
     summary = json.loads((out / "summary.json").read_text())
     assert third.resumed == 3 and summary["groups"][0]["cases"] == 3
     assert Image.open(out / "summary.png").info["Description"] == f"robocal run: {summary['run_id']}"
+    assert read_study_summary(out) == summary and outdir.read_run_id(out / "summary.png") == summary["run_id"]
+    (out / "summary.png").write_bytes(before["summary.png"])  # the plot of the earlier run: refused
+    with pytest.raises(StudyError, match=r"summary\.json is run [0-9a-f]+ but .*summary\.png is run"):
+        read_study_summary(out)
 
 
 # ------------------------------------------------------------------ the report carries its result's run id

@@ -33,6 +33,10 @@ models; a KRL ``.src`` and its ``.dat``; a study's ``summary.json`` and ``summar
 written by :func:`file_set` / :func:`write_together`: temporary names beside them, then
 one rename each, the earlier files put back should a rename fail.
 
+Every file robocal writes goes through :func:`atomic_write_bytes` (a temporary file
+beside it, then one rename): this module holds the one atomic writer, which
+:mod:`robocal.model.files` re-exports.
+
 For tests: the environment variable ``ROBOCAL_TEST_KILL_AT`` names a write step
 (:data:`STEPS`) at which the process kills itself with SIGKILL, to check that every
 interruption leaves a complete result; ``ROBOCAL_TEST_NO_EXCHANGE=1`` takes the two-rename
@@ -50,6 +54,7 @@ import re
 import secrets
 import shutil
 import signal
+import tempfile
 import time
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
@@ -60,6 +65,8 @@ __all__ = [
     "FolderBusyError",
     "FolderMixedError",
     "Stage",
+    "atomic_write_bytes",
+    "atomic_write_text",
     "check_consistent",
     "check_not_busy",
     "file_set",
@@ -112,9 +119,12 @@ def run_id_meta(run_id: str) -> str:
 
 def read_run_id(path: Path) -> str | None:
     """The run id of a file written by a transaction: ``result.json``'s ``run_id``, an HTML
-    report's ``<meta name="robocal-run">`` in its first 4 kB, or a ``# robocal run: ID``
-    line among the first lines of a text file; None when it has none."""
+    report's ``<meta name="robocal-run">`` in its first 4 kB, a PNG's ``Description``
+    (``robocal run: ID``), or a ``# robocal run: ID`` line among the first lines of a
+    text file; None when it has none."""
     path = Path(path)
+    if path.suffix == ".png":
+        return _png_run_id(path)
     if path.suffix in (".html", ".htm"):
         try:
             with open(path, encoding="utf-8", errors="replace") as fh:
@@ -137,6 +147,30 @@ def read_run_id(path: Path) -> str | None:
                 match = _RUN_LINE.match(fh.readline(200))
                 if match:
                     return match.group(1)
+    except OSError:
+        return None
+    return None
+
+
+def _png_run_id(path: Path) -> str | None:
+    """The run id in a PNG's ``tEXt`` ``Description`` (``robocal run: ID``), read from
+    the chunks before the image data; None when it has none."""
+    import struct
+
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(8) != b"\x89PNG\r\n\x1a\n":
+                return None
+            while len(head := fh.read(8)) == 8:
+                length, kind = struct.unpack(">I4s", head)
+                if kind == b"IDAT" or length > 1 << 20:
+                    return None
+                data = fh.read(length)
+                fh.read(4)  # the CRC
+                key, _, text = data.partition(b"\x00")
+                if kind == b"tEXt" and key == b"Description":
+                    match = _RUN_LINE.match("# " + text.decode("latin-1"))
+                    return match.group(1) if match else None
     except OSError:
         return None
     return None
@@ -433,10 +467,69 @@ def write_files(stage: Stage, files: dict[str, str | bytes]) -> None:
         (stage.path / name).write_bytes(data)
 
 
+# ------------------------------------------------------------------ the one atomic writer
+def _read_umask() -> int:
+    mask = os.umask(0)  # the only way to read it; set back at once (at import, before any threads)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename (never half-written)."""
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def remove_stale_temporaries(path: Path) -> None:
+    """Remove the ``.NAME.<pid>.*.tmp`` files that writers of ``path`` killed before their
+    rename left behind (those whose process is gone)."""
+    prefix = f".{path.name}."
+    try:
+        names = [n for n in os.listdir(path.parent) if n.startswith(prefix) and n.endswith(".tmp")]
+    except OSError:
+        return
+    for name in names:
+        pid = name[len(prefix) :].split(".", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:  # its writer is gone
+            with contextlib.suppress(OSError):
+                os.unlink(path.parent / name)
+        except (PermissionError, OverflowError):
+            continue
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file and a rename (never half-written)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        # mkstemp makes the file private (0600); give it the permissions of a normal new file
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        os.replace(tmp, path)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        if err.filename is None:  # a failed write() (disk full) names no file: name the target
+            raise OSError(err.errno, err.strerror, str(path)) from None
+        raise
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
 # ------------------------------------------------------------------ sets of files beside each other
 def _temporary_beside(path: Path, kind: str) -> Path:
     """``.NAME.<pid>.<random>.KIND.tmp`` beside ``path`` (removed by
-    :func:`robocal.model.files.atomic_write_bytes` once its process is gone)."""
+    :func:`atomic_write_bytes` once its process is gone)."""
     return path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.{kind}.tmp")
 
 
@@ -485,11 +578,9 @@ def file_set(paths: Sequence[str | os.PathLike[str]], *, wait_s: float = 1.0) ->
         raise ValueError(f"the same file is given twice among {', '.join(map(str, paths))}")
     for target in targets:
         target.parent.mkdir(parents=True, exist_ok=True)
-    from robocal.model.files import _remove_stale_temporaries  # those of killed writers
-
     with _lock(targets[0], wait_s):
         for target in targets:
-            _remove_stale_temporaries(target)
+            remove_stale_temporaries(target)  # those of killed writers
         temporaries = [_temporary_beside(t, "new") for t in targets]
         try:
             yield temporaries
@@ -505,8 +596,6 @@ def file_set(paths: Sequence[str | os.PathLike[str]], *, wait_s: float = 1.0) ->
 
 def write_together(files: dict[Path, bytes], *, wait_s: float = 1.0) -> None:
     """Write ``files`` (path -> content) all or none (see :func:`file_set`)."""
-    from robocal.model.files import atomic_write_bytes
-
     paths = list(files)
     with file_set(paths, wait_s=wait_s) as temporaries:
         for path, tmp in zip(paths, temporaries, strict=True):

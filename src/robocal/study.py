@@ -56,6 +56,7 @@ import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from robocal import csvfile
 from robocal.model.chain import Model
 from robocal.model.files import (
     Count,
@@ -79,6 +80,7 @@ __all__ = [
     "StudyError",
     "StudyRun",
     "load_study_config",
+    "read_study_summary",
     "run_fleet",
     "run_study",
     "study_cases",
@@ -716,7 +718,7 @@ class _Table:
             )
         good: list[str] = [lines[0]]
         for i, line in enumerate(lines[1:], start=2):
-            cells = next(csv.reader([line]), [])
+            cells = csvfile.split_rows([line.rstrip("\r\n")], ",")[0][0]
             complete = line.endswith("\n") and len(cells) == len(self.columns)
             if not complete:
                 if i == len(lines):  # cut short by a crash: drop it
@@ -1066,6 +1068,36 @@ def _summarise(config: StudyConfig, rows: Iterable[Mapping[str, str]]) -> dict[s
             groups.append(entry)
     robot = config.robot if config.robot is not None else f"built from {config.geometry}"
     return {"study": config.name, "robot": robot, "robots": config.robots, "groups": groups}
+
+
+def read_study_summary(out: str | Path) -> dict[str, Any]:
+    """A study's ``summary.json``; refuses a ``summary.png`` of another run beside it (a
+    run killed between the two renames, or a file copied in by hand).
+
+    Raises:
+        StudyError: naming both files and their run ids, or ``summary.json`` when it is
+            missing or not a summary.
+    """
+    import json
+
+    from robocal.outdir import read_run_id
+
+    out = Path(out)
+    path, png = out / "summary.json", out / "summary.png"
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        raise StudyError(f"{path}: cannot read the study summary ({err.__class__.__name__})") from None
+    if not isinstance(summary, dict):
+        raise StudyError(f"{path}: not a study summary")
+    want = summary.get("run_id")
+    got = read_run_id(png) if png.is_file() else want
+    if got != want:
+        raise StudyError(
+            f"{path} is run {want or 'none'} but {png} is run {got or 'none'}: the two were not written "
+            "together; run the study again (it resumes) to write both"
+        )
+    return summary
 
 
 def _summary_png(config: StudyConfig, rows: Iterable[Mapping[str, str]], run_id: str) -> bytes:

@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-import yaml
 from rich.table import Table
 
 from robocal.cli.options import Force, out_option, resolve_model
@@ -82,10 +81,9 @@ def iso9283_command(
 
 def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | None, force: bool) -> None:
     """Write a simulated ISO 9283 log of ROBOT and its truth (``LOG.truth.yaml``)."""
-    from robocal.evaluate.iso9283_log import write_iso9283_log
+    from robocal.evaluate.iso9283_log import save_simulated_log
     from robocal.evaluate.iso9283_sim import LogErrors, simulate_log
     from robocal.measure.simulate import parse_quantity_option
-    from robocal.model.files import atomic_write_text
 
     refuse_overwrite(log, force, "log")
     model = resolve_model(robot)
@@ -99,9 +97,7 @@ def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | N
         sim = simulate_log(model, errors=errors, seed=0 if seed is None else seed)
     except ValueError as err:
         raise fail(str(str(err))) from None
-    truth_path = log.with_name(log.stem + ".truth.yaml")
-    write_iso9283_log(sim.log, log)
-    atomic_write_text(truth_path, yaml.safe_dump(sim.truth, sort_keys=False))
+    _, truth_path = save_simulated_log(sim.log, sim.truth, log)  # both or neither
     console.print(
         str(f"wrote {log} ({sim.log.n} samples, tests: {', '.join(sim.log.tests())})")
         + str(f" and the truth {truth_path}"),

@@ -64,7 +64,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal import spatial
+from robocal import csvfile, spatial
 from robocal.identify.calibrate import CalibrationResult
 from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.paths import joint_path
@@ -860,63 +860,53 @@ class Targets:
     kind: TargetKind
 
 
-def _read_table(
-    path: str | Path, sep: str | None, decimal: str
-) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header and data rows (with their 1-based line numbers) of a CSV file; ``#`` lines
-    and blank lines are skipped."""
-    path = Path(path)
+def _read_head(path: Path, sep: str | None, decimal: str) -> csvfile.Head:
+    """The header of a targets file (:mod:`robocal.csvfile`: ``#`` lines and blank lines
+    are skipped, the separator is sniffed among ``, ; tab``)."""
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        head = csvfile.read_head(path, sep=sep, decimal=decimal, candidates=(",", ";", "\t"), spaces=False)
     except OSError as err:
         raise TargetFileError(f"{path}: cannot read: {err.strerror or err}") from None
-    lines = [
-        (k + 1, line)
-        for k, line in enumerate(text.splitlines())
-        if line.strip() and not line.lstrip().startswith("#")
-    ]
-    if not lines:
-        raise TargetFileError(f"{path}: no header line")
-    if sep is None:
-        head = lines[0][1]
-        sep = max([",", ";", "\t"], key=head.count) if any(c in head for c in ",;\t") else ","
-    if decimal == "," and sep == ",":
+    except csvfile.CsvError as err:
+        what = "no header line" if err.message.startswith("no header row") else err.message
+        raise TargetFileError(f"{path}: {what}") from None
+    if decimal == "," and head.sep == ",":
         raise TargetFileError(f"{path}: decimal comma needs another separator (--sep ';')")
-    rows = list(csv.reader([line for _, line in lines], delimiter=sep))
-    header = [h.strip().lower() for h in rows[0]]
-    data = [(lines[k][0], [c.strip() for c in row]) for k, row in enumerate(rows) if k > 0]
-    return header, data
+    return head
 
 
-def _number(text: str, decimal: str, path: Path, line: int, col: str) -> float:
-    t = text.replace(decimal, ".") if decimal != "." else text
-    try:
-        v = float(t)
-    except ValueError:
-        raise TargetFileError(f"{path}, row {line}, column {col!r}: {text!r} is not a number") from None
-    if not math.isfinite(v):
-        raise TargetFileError(f"{path}, row {line}, column {col!r}: {text!r} is not finite")
-    return v
-
-
-def _columns(
-    header: list[str], data: list[tuple[int, list[str]]], path: Path, cols: list[str], decimal: str
-) -> Array:
-    idx = [header.index(c) for c in cols]
-    out = np.empty((len(data), len(cols)))
-    for r, (line, row) in enumerate(data):
-        if len(row) != len(header):
-            raise TargetFileError(f"{path}, row {line}: {len(row)} fields, the header has {len(header)}")
-        for k, (c, j) in enumerate(zip(cols, idx, strict=True)):
-            out[r, k] = _number(row[j], decimal, path, line, c)
-    return out
-
-
-def _row_names(header: list[str], data: list[tuple[int, list[str]]]) -> tuple[str, ...]:
-    if "name" in header:
-        j = header.index("name")
-        return tuple(row[j] if len(row) > j and row[j] else str(line) for line, row in data)
-    return tuple(str(k + 1) for k in range(len(data)))
+def _read_columns(
+    head: csvfile.Head, header: list[str], cols: list[str], decimal: str
+) -> tuple[Array, tuple[str, ...], list[int]]:
+    """``(n, len(cols))`` numbers of columns ``cols``, the row names (the ``name`` column,
+    else the line number) and the line numbers, chunk by chunk; the first bad row or cell
+    is an error naming it."""
+    path, idx = head.path, [header.index(c) for c in cols]
+    name_k = header.index("name") if "name" in header else None
+    blocks: list[Array] = []
+    names: list[str] = []
+    lines: list[int] = []
+    for chunk in csvfile.iter_chunks(head):
+        for i, code, message in chunk.problems[:1]:
+            width = len(chunk.rows[i])
+            what = message if code != "ragged" else f"{width} fields, the header has {len(header)}"
+            raise TargetFileError(f"{path}, row {chunk.line[i]}: {what}")
+        block = np.empty((len(chunk), len(cols)))
+        for c, (col, k) in enumerate(zip(cols, idx, strict=True)):
+            block[:, c], problems = csvfile.to_numbers([r[k] for r in chunk.rows], decimal)
+            for m, code, _ in problems[:1]:
+                text = chunk.rows[m][k].strip()
+                what = "is not finite" if code == "not-finite" else "is not a number"
+                raise TargetFileError(f"{path}, row {chunk.line[m]}, column {col!r}: {text!r} {what}")
+        blocks.append(block)
+        lines += chunk.line.tolist()
+        if name_k is not None:
+            rows_lines = zip(chunk.rows, chunk.line.tolist(), strict=True)
+            names += [r[name_k].strip() or str(no) for r, no in rows_lines]
+    values = np.concatenate(blocks) if blocks else np.zeros((0, len(cols)))
+    if name_k is None:
+        names = [str(k + 1) for k in range(len(values))]
+    return values, tuple(names), lines
 
 
 def read_targets(
@@ -939,26 +929,27 @@ def read_targets(
         length = unit_factor(length_unit, "length", "length_unit")
     except ValueError as err:
         raise TargetFileError(f"{path}: {err}") from None
-    header, data = _read_table(path, sep, decimal)
+    head = _read_head(path, sep, decimal)
+    header = [h.lower() for h in head.header]
     missing = [c for c in ("x", "y", "z") if c not in header]
     if missing:
         raise TargetFileError(f"{path}: missing column(s) {', '.join(missing)} (header: {', '.join(header)})")
-    if not data:
-        raise TargetFileError(f"{path}: no targets")
     quat_cols = ["qw", "qx", "qy", "qz"]
     has_q = [c in header for c in quat_cols]
+    values, names, lines = _read_columns(head, header, ["x", "y", "z"] + quat_cols * all(has_q), decimal)
+    if not len(values):
+        raise TargetFileError(f"{path}: no targets")
     if any(has_q) and not all(has_q):
         absent = ", ".join(c for c in quat_cols if c not in header)
         raise TargetFileError(f"{path}: orientation needs all of qw, qx, qy, qz; missing {absent}")
-    p = _columns(header, data, path, ["x", "y", "z"], decimal) * length
-    names = _row_names(header, data)
+    p = values[:, :3] * length
     if not all(has_q):
         return Targets(names, p, "position")
-    quat = _columns(header, data, path, quat_cols, decimal)
+    quat = values[:, 3:]
     norm = np.linalg.norm(quat, axis=1)
     bad = np.flatnonzero(norm < 1e-9)
     if len(bad):
-        raise TargetFileError(f"{path}, row {data[int(bad[0])][0]}, columns qw..qz: the quaternion is zero")
+        raise TargetFileError(f"{path}, row {lines[int(bad[0])]}, columns qw..qz: the quaternion is zero")
     T = spatial.homogeneous(spatial.quaternion_to_matrix(quat / norm[:, None]), p)
     return Targets(names, T, "pose")
 
@@ -983,7 +974,8 @@ def read_program(
         angle, length = _factors(angle_unit, length_unit)
     except ValueError as err:
         raise TargetFileError(f"{path}: {err}") from None
-    header, data = _read_table(path, sep, decimal)
+    head = _read_head(path, sep, decimal)
+    header = [h.lower() for h in head.header]
     cols = [f"q{j + 1}" for j in range(dof)]
     missing = [c for c in cols if c not in header]
     if missing:
@@ -991,9 +983,9 @@ def read_program(
     extra = [h for h in header if h.startswith("q") and h[1:].isdigit() and int(h[1:]) > dof]
     if extra:
         raise TargetFileError(f"{path}: joint column(s) {', '.join(extra)} but the robot has {dof} joints")
-    if not data:
+    q, names, _ = _read_columns(head, header, cols, decimal)
+    if not len(q):
         raise TargetFileError(f"{path}: no rows")
-    q = _columns(header, data, path, cols, decimal)
     types = list(joint_types) if joint_types is not None else ["revolute"] * dof
     f = np.array([angle if t == "revolute" else length for t in types])
-    return _row_names(header, data), q * f
+    return names, q * f

@@ -67,7 +67,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal import spatial
+from robocal import csvfile, spatial
 from robocal.identify.calibrate import CalibrationResult
 from robocal.identify.problem import frame_steps
 from robocal.model.chain import Model, Role
@@ -612,16 +612,14 @@ def _parse_csv(text: str, dof: int, path: str) -> list[ProgramTarget]:
         if not body.strip() or body.lstrip().startswith("#"):
             continue
         if header is None:
-            sep = max([",", ";", "\t"], key=body.count)
-            header = [h.strip().lower() for h in body.split(sep)]
+            sep = csvfile.sniff(body)
+            header = [h.strip().lower() for h, _ in csvfile.cells_with_offsets(body, sep)]
             quat = [c in header for c in ("qw", "qx", "qy", "qz")]
             if any(quat) and not all(quat):
                 raise ProgramError(f"{path}: line {k + 1}: orientation needs all of qw, qx, qy, qz")
             continue
-        cells, offs, c = body.split(sep), [], start
-        for cell in cells:
-            offs.append(c)
-            c += len(cell) + 1
+        split = csvfile.cells_with_offsets(body, sep)
+        cells, offs = [c for c, _ in split], [start + o for _, o in split]
         if len(cells) != len(header):
             raise ProgramError(f"{path}: line {k + 1}: {len(cells)} fields, the header has {len(header)}")
 
@@ -1242,6 +1240,39 @@ def _read(path: Path) -> tuple[str, str]:
         return data.decode("latin-1"), "latin-1"
 
 
+#: the comment line that stamps a KRL .src and its .dat as written together
+_KRL_RUN = re.compile(r"^;robocal run: ([0-9a-f]{8,64})[ \t]*\r?$", re.MULTILINE)
+
+
+def krl_run_id(text: str) -> str | None:
+    """The run id a KRL file written by robocal carries (``;robocal run: ID``), or None."""
+    match = _KRL_RUN.search(text)
+    return match.group(1) if match else None
+
+
+def stamp_krl(text: str, run_id: str) -> str:
+    """``text`` with one ``;robocal run: ID`` comment line (an earlier one removed),
+    after the leading ``&ACCESS``/``&REL`` lines, which must stay first."""
+    newline = "\r\n" if "\r\n" in text else "\n"
+    lines = [ln for ln in text.splitlines(keepends=True) if not _KRL_RUN.match(ln.rstrip("\n"))]
+    k = 0
+    while k < len(lines) and lines[k].lstrip().startswith("&"):
+        k += 1
+    lines.insert(k, f";robocal run: {run_id}{newline}")
+    return "".join(lines)
+
+
+def _check_krl_pair(src: Path, src_text: str, dat: Path, dat_text: str) -> None:
+    """Refuse a KRL .src and .dat of different runs (a write killed between the two
+    renames, or files copied together by hand): their targets would not match."""
+    a, b = krl_run_id(src_text), krl_run_id(dat_text)
+    if a != b:
+        raise ProgramError(
+            f"{src} (robocal run {a or 'none'}) and {dat} (robocal run {b or 'none'}) were not written "
+            "together: a write was interrupted or one file was replaced; filter the original program again"
+        )
+
+
 def filter_program_file(
     path: str | Path,
     calibrated: CalibrationResult | Model,
@@ -1266,6 +1297,7 @@ def filter_program_file(
     dat = path.with_suffix(".dat")
     if language == "krl" and path.suffix.lower() == ".src" and dat.is_file():
         texts[str(dat)], encodings[str(dat)] = _read(dat)
+        _check_krl_pair(path, texts[str(path)], dat, texts[str(dat)])
     if language == "krl":
         cfg = Path(config_dat) if config_dat is not None else path.parent / "$config.dat"
         if config_dat is not None and not cfg.is_file():
@@ -1274,12 +1306,17 @@ def filter_program_file(
             options["config_dat"] = (str(cfg), _read(cfg)[0])
     result = filter_program_text(texts, language, calibrated, **options)
     if out is not None:
-        from robocal.outdir import write_together
+        from robocal.outdir import new_run_id, write_together
 
         out = Path(out)
         files = {}
+        run_id = new_run_id()
         for label, text in result.texts.items():
             target = out if label == str(path) else out.with_suffix(Path(label).suffix)
+            if language == "krl":  # the pair carries one run id: a mix is refused when read
+                text = stamp_krl(text, run_id)
             files[target] = text.encode(encodings[label])
-        write_together(files)  # KRL: the .src and its .dat both or neither
+        # KRL: the .src and its .dat both or neither; the .dat renamed first, so that a
+        # process killed in between leaves no new .src without its .dat
+        write_together(dict(sorted(files.items(), key=lambda item: item[0].suffix.lower() != ".dat")))
     return result

@@ -30,7 +30,6 @@ A run may hold a single sample (a static measurement) or a time record.
 
 from __future__ import annotations
 
-import csv
 import io
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +38,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from robocal import spatial
+from robocal import csvfile, spatial
+from robocal.outdir import atomic_write_text, new_run_id, read_run_id, run_id_line, write_together
 
 __all__ = [
     "COLUMNS",
@@ -175,18 +175,6 @@ class Iso9283Log:
         return spatial.homogeneous(R[index], p)
 
 
-def _header(lines: list[str]) -> tuple[dict[str, str], int]:
-    conditions: dict[str, str] = {}
-    k = 0
-    while k < len(lines) and (lines[k].startswith("#") or not lines[k].strip()):
-        text = lines[k].lstrip("#").strip()
-        if ":" in text:
-            key, value = text.split(":", 1)
-            conditions[key.strip()] = value.strip()
-        k += 1
-    return conditions, k
-
-
 def _fail(path: str, line: int | None, column: str | None, message: str) -> Iso9283LogError:
     where = path + (f" row {line}" if line is not None else "") + (f" column {column}" if column else "")
     return Iso9283LogError(f"{where}: {message}")
@@ -197,6 +185,57 @@ def _short(value: object) -> str:
     return repr(text if len(text) <= 40 else text[:37] + "...")
 
 
+def _read_head(path: str | Path) -> csvfile.Head:
+    name = str(path)
+    try:
+        return csvfile.read_head(path, sep=",", strict=True)
+    except FileNotFoundError:
+        raise Iso9283LogError(f"{name}: no such file") from None
+    except csvfile.CsvError as err:
+        if "UTF-8" in err.message:
+            raise Iso9283LogError(f"{name}: not UTF-8 text (a log is a UTF-8 CSV file)") from None
+        if err.message.startswith("no header row"):
+            what = "no header line (the file is empty or holds only comments)"
+            raise _fail(name, None, None, what) from None
+        raise _fail(name, err.line, None, err.message) from None
+
+
+def _read_body(
+    head: csvfile.Head,
+) -> tuple[dict[str, Array], dict[str, NDArray[np.str_]], NDArray[np.int64]]:
+    """The numeric columns, the text columns (stripped) and each row's line number,
+    read chunk by chunk (:mod:`robocal.csvfile`); the first bad row or cell is an error."""
+    name, header = str(head.path), head.header
+    numeric = [c for c in header if c not in _TEXT]
+    numbers: dict[str, list[Array]] = {c: [] for c in numeric}
+    words: dict[str, list[NDArray[np.str_]]] = {c: [] for c in _TEXT if c in header}
+    lines: list[NDArray[np.int64]] = []
+    for chunk in csvfile.iter_chunks(head):
+        for i, code, message in chunk.problems[:1]:
+            what = (
+                f"{len(chunk.rows[i])} fields, but the header has {len(header)}"
+                if code == "ragged"
+                else "not a CSV table: " + message.removeprefix("cannot be read as CSV: ")
+            )
+            raise _fail(name, int(chunk.line[i]), None, what)
+        for c in numeric:
+            k = header.index(c)
+            num, problems = csvfile.to_numbers([r[k] for r in chunk.rows])
+            for m, code, _ in problems[:1]:
+                raw = chunk.rows[m][k].strip()
+                what = "empty" if code == "empty" else f"{_short(raw)} is not a finite number"
+                raise _fail(name, int(chunk.line[m]), c, what)
+            numbers[c].append(num)
+        for c in words:
+            k = header.index(c)
+            words[c].append(np.array([r[k].strip() for r in chunk.rows], dtype=str))
+        lines.append(chunk.line)
+    n = sum(len(x) for x in lines)
+    values = {c: np.concatenate(v) if v else np.zeros(0) for c, v in numbers.items()}
+    texts = {c: np.concatenate(words[c]) if words.get(c) else np.full(n, "") for c in _TEXT}
+    return values, texts, np.concatenate(lines) if lines else np.zeros(0, dtype=np.int64)
+
+
 def read_iso9283_log(path: str | Path) -> Iso9283Log:
     """Read an ISO 9283 log (see the module docstring).
 
@@ -205,121 +244,28 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
             first problem.
     """
     name = str(path)
-    lines = _read_lines(path)
-    conditions, skip = _header(lines)
-    if skip >= len(lines):
-        raise _fail(name, None, None, "no header line (the file is empty or holds only comments)")
-    table, where = _records(name, lines, skip)
-    header = [c.strip() for c in table[0]] if table else []
-    _check_header(name, header, where[0] if where else None)
-    body = table[1:]
-    for k, r in enumerate(body):
-        if len(r) != len(header):
-            raise _fail(name, where[k + 1], None, f"{len(r)} fields, but the header has {len(header)}")
-    df = pd.DataFrame(body, columns=header, dtype=str)
-    if len(df) == 0:
-        raise _fail(name, None, None, "no data rows")
-    line = np.array(where[1:], dtype=int)
-    values = _numeric_columns(name, df, line)
-    texts = _text_columns(name, df, line)
-    _check_cycles_and_time(name, values, texts, line)
-    mm = 1e-3
-    pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
-    cmd = np.column_stack([values[c] for c in ("cmd_x_mm", "cmd_y_mm", "cmd_z_mm")]) * mm
-    R = Rc = None
-    if "a_deg" in values:
-        R = spatial.euler_to_matrix(
-            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[:3]])), ANGLES
-        )
-        Rc = spatial.euler_to_matrix(
-            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[3:]])), ANGLES
-        )
-    force = np.column_stack([values[c] for c in FORCE_COLUMNS]) if "fx_N" in values else None
-    return Iso9283Log(
-        source=name,
-        conditions=conditions,
-        time=values["time_s"],
-        test=texts["test"],
-        cycle=values["cycle"].astype(int),
-        target=texts["target"],
-        group=texts["group"],
-        position=pos,
-        commanded=cmd,
-        rotation=R,
-        commanded_rotation=Rc,
-        force=force,
-        line=line,
-    )
-
-
-def _read_lines(path: str | Path) -> list[str]:
-    name = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise Iso9283LogError(f"{name}: no such file") from None
-    except UnicodeDecodeError:
-        raise Iso9283LogError(f"{name}: not UTF-8 text (a log is a UTF-8 CSV file)") from None
-    except OSError as err:
-        raise Iso9283LogError(
-            f"{name}: cannot read the file ({err.strerror or err.__class__.__name__})"
-        ) from None
-    return text.splitlines()
-
-
-def _records(name: str, lines: list[str], skip: int) -> tuple[list[list[str]], list[int]]:
-    """The CSV records after the ``skip`` header lines (blank lines skipped) and the line
-    number of each in the file."""
-    table: list[list[str]] = []
-    where: list[int] = []  # line number of every record in the file
-    reader = csv.reader(io.StringIO("\n".join(lines[skip:])), strict=True)
-    try:
-        for record in reader:
-            if record:  # blank lines are skipped
-                table.append(record)
-                where.append(skip + reader.line_num)
-    except csv.Error as err:
-        raise _fail(name, skip + reader.line_num, None, f"not a CSV table: {err}") from None
-    return table, where
-
-
-def _check_header(name: str, header: list[str], at: int | None) -> None:
+    head = _read_head(path)
+    conditions, header, first = dict(head.metadata), head.header, head.header_line
+    conditions.pop("robocal run", None)  # the run id of a simulated log and its truth, not a condition
     if len(header) == 1 and (";" in header[0] or "\t" in header[0]):
-        raise _fail(name, at, None, "the header has one column: columns must be separated by commas")
+        raise _fail(name, first, None, "the header has one column: columns must be separated by commas")
     seen = [c for k, c in enumerate(header) if c in header[:k]]
     if seen:
-        raise _fail(name, at, None, f"duplicate column {_short(seen[0])}")
+        raise _fail(name, first, None, f"duplicate column {_short(seen[0])}")
     unknown = [c for c in header if c not in COLUMNS]
     if unknown:
-        raise _fail(name, at, None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})")
+        raise _fail(name, first, None, f"unknown column {_short(unknown[0])} (columns: {', '.join(COLUMNS)})")
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
-        raise _fail(name, at, None, f"missing column(s) {', '.join(missing)}")
+        raise _fail(name, first, None, f"missing column(s) {', '.join(missing)}")
     for group_cols, what in ((ORIENTATION_COLUMNS, "orientation"), (FORCE_COLUMNS, "load")):
         have = [c for c in group_cols if c in header]
         if have and len(have) != len(group_cols):
             lacking = [c for c in group_cols if c not in header]
-            raise _fail(name, at, None, f"{what} columns come all or none: missing {', '.join(lacking)}")
-
-
-def _numeric_columns(name: str, df: pd.DataFrame, line: NDArray[np.int_]) -> dict[str, np.ndarray]:
-    values: dict[str, np.ndarray] = {}
-    for c in [c for c in df.columns if c not in _TEXT]:
-        raw = df[c].str.strip()
-        num = pd.to_numeric(raw, errors="coerce").to_numpy(dtype=float)
-        bad = ~np.isfinite(num)
-        if bad.any():
-            i = int(np.argmax(bad))
-            what = "empty" if raw.iloc[i] == "" else f"{_short(raw.iloc[i])} is not a finite number"
-            raise _fail(name, int(line[i]), c, what)
-        values[c] = num
-    return values
-
-
-def _text_columns(name: str, df: pd.DataFrame, line: NDArray[np.int_]) -> dict[str, np.ndarray]:
-    texts = {
-        c: df[c].str.strip().to_numpy(dtype=str) if c in df.columns else np.full(len(df), "") for c in _TEXT
-    }
+            raise _fail(name, first, None, f"{what} columns come all or none: missing {', '.join(lacking)}")
+    values, texts, line = _read_body(head)
+    if len(line) == 0:
+        raise _fail(name, None, None, "no data rows")
     for c in ("test", "target"):
         empty = texts[c] == ""
         if empty.any():
@@ -330,12 +276,6 @@ def _text_columns(name: str, df: pd.DataFrame, line: NDArray[np.int_]) -> dict[s
         raise _fail(
             name, int(line[i]), "test", f"{_short(texts['test'][i])} is not one of {', '.join(TESTS)}"
         )
-    return texts
-
-
-def _check_cycles_and_time(
-    name: str, values: dict[str, np.ndarray], texts: dict[str, np.ndarray], line: NDArray[np.int_]
-) -> None:
     cyc = values["cycle"]
     bad_cycle = (cyc < 1) | (cyc != np.round(cyc))
     if bad_cycle.any():
@@ -353,13 +293,45 @@ def _check_cycles_and_time(
                 "time_s",
                 f"time goes back within test {test} ({t[i]:g} s after {t[i - 1]:g} s)",
             )
+    mm = 1e-3
+    pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
+    cmd = np.column_stack([values[c] for c in ("cmd_x_mm", "cmd_y_mm", "cmd_z_mm")]) * mm
+    R = Rc = None
+    if "a_deg" in values:
+        R = spatial.euler_to_matrix(
+            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[:3]])), ANGLES
+        )
+        Rc = spatial.euler_to_matrix(
+            np.radians(np.column_stack([values[c] for c in ORIENTATION_COLUMNS[3:]])), ANGLES
+        )
+    force = np.column_stack([values[c] for c in FORCE_COLUMNS]) if "fx_N" in values else None
+    return Iso9283Log(
+        source=name,
+        conditions=conditions,
+        time=t,
+        test=texts["test"],
+        cycle=cyc.astype(int),
+        target=texts["target"],
+        group=texts["group"],
+        position=pos,
+        commanded=cmd,
+        rotation=R,
+        commanded_rotation=Rc,
+        force=force,
+        line=line,
+    )
 
 
-def log_text(log: Iso9283Log, decimals: int = 6) -> str:
-    """The CSV text of ``log`` (header comments, then the table; mm, deg, s, N)."""
+def log_text(log: Iso9283Log, decimals: int = 6, run_id: str | None = None) -> str:
+    """The CSV text of ``log`` (header comments, then the table; mm, deg, s, N);
+    ``run_id`` stamps it as one file of a set (a ``# robocal run: ID`` first line)."""
     out = io.StringIO()
+    if run_id is not None:
+        out.write(run_id_line(run_id))
     out.write("# robocal ISO 9283 measurement log (docs/iso9283.md)\n")
     for k, v in log.conditions.items():
+        if k == "robocal run":
+            continue
         out.write(f"# {k}: {v}\n".replace("\r", " "))
     cols: dict[str, object] = {
         "time_s": np.round(log.time, 6),
@@ -388,6 +360,59 @@ def log_text(log: Iso9283Log, decimals: int = 6) -> str:
 
 def write_iso9283_log(log: Iso9283Log, path: str | Path) -> Path:
     """Write ``log`` to ``path`` whole (through a temporary file)."""
-    from robocal.model.files import atomic_write_text
-
     return atomic_write_text(path, log_text(log))
+
+
+def log_truth_path(path: str | Path) -> Path:
+    """``LOG.csv`` -> ``LOG.truth.yaml`` (beside the log)."""
+    path = Path(path)
+    return path.with_name(path.stem + ".truth.yaml")
+
+
+def save_simulated_log(log: Iso9283Log, truth: dict, path: str | Path) -> tuple[Path, Path]:
+    """Write a simulated log and its truth (``LOG.truth.yaml``) both or neither
+    (:func:`robocal.outdir.file_set`), stamped with one run id.
+
+    Returns:
+        The log and truth paths.
+    """
+    import yaml
+
+    path = Path(path)
+    run_id = new_run_id()
+    truth_text = run_id_line(run_id) + yaml.safe_dump(truth, sort_keys=False)
+    write_together(
+        {
+            path: log_text(log, run_id=run_id).encode("utf-8"),
+            log_truth_path(path): truth_text.encode("utf-8"),
+        }
+    )
+    return path, log_truth_path(path)
+
+
+def load_log_truth(path: str | Path) -> dict:
+    """The truth of a simulated log (``LOG.csv`` or ``LOG.truth.yaml``); refuses a truth
+    and log of different simulation runs (a run killed between its renames).
+
+    Raises:
+        Iso9283LogError: naming both files when their run ids differ, or the truth file
+            when it cannot be read.
+    """
+    import yaml
+
+    path = Path(path)
+    truth_file = path if path.name.endswith(".truth.yaml") else log_truth_path(path)
+    log_file = truth_file.with_name(truth_file.name.removesuffix(".truth.yaml") + ".csv")
+    want, got = read_run_id(truth_file), read_run_id(log_file)
+    if log_file.is_file() and want != got:
+        raise Iso9283LogError(
+            f"{truth_file}: the truth is of simulation run {want or 'none'} but {log_file} is run "
+            f"{got or 'none'}: these files come from different simulations; simulate again"
+        )
+    try:
+        doc = yaml.safe_load(truth_file.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise Iso9283LogError(f"{truth_file}: cannot read the truth ({err.__class__.__name__})") from None
+    if not isinstance(doc, dict):
+        raise Iso9283LogError(f"{truth_file}: not a truth file (no mapping)")
+    return doc

@@ -301,17 +301,21 @@ def _write(out: Path, numbers: dict[str, Any], reports: dict[str, Any]) -> None:
     from robocal.evaluate.report import write_report
     from robocal.model.files import atomic_write_text, save_model
     from robocal.model.view import write_model_view
+    from robocal.outdir import transaction
 
-    out.mkdir(parents=True, exist_ok=True)
-    for name, (model, results, (train, test)) in reports.items():
-        save_model(model, out / f"{name}_built.yaml")
-        write_model_view(model, out / f"{name}_model.html")  # the seed's Figs. 5-6
-        result = results["built (seed 000)"]
-        write_report(
-            result,
-            out / f"{name}_report.html",
-            data=train,
-            test_data=test,
-            title=f"seed 000: {name} built model, 15 pose measurements",
-        )
-    atomic_write_text(out / "seed000.json", strict_json(numbers, indent=2, default=float) + "\n")
+    kinds = ("built.yaml", "model.html", "report.html")
+    owned = ["seed000.json", *(f"{name}_{kind}" for name in reports for kind in kinds)]
+    with transaction(out, owned) as stage:  # the folder swapped in whole: all of this run or none
+        where = stage.path
+        for name, (model, results, (train, test)) in reports.items():
+            save_model(model, where / f"{name}_built.yaml")
+            write_model_view(model, where / f"{name}_model.html")  # the seed's Figs. 5-6
+            result = results["built (seed 000)"]
+            write_report(
+                result,
+                where / f"{name}_report.html",
+                data=train,
+                test_data=test,
+                title=f"seed 000: {name} built model, 15 pose measurements",
+            )
+        atomic_write_text(where / "seed000.json", strict_json(numbers, indent=2, default=float) + "\n")

@@ -77,7 +77,7 @@ from robocal.measure.ik import solve_ik
 from robocal.measure.paths import joint_path
 from robocal.measure.simulate import VirtualRobot, simulate
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text, strict_json
+from robocal.model.files import strict_json
 
 __all__ = [
     "BOARDS",
@@ -235,9 +235,15 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "results.json", strict_json(numbers, indent=2) + "\n")
-        atomic_write_text(out / "report.md", _report(numbers))
-        _plot(numbers, out / "trajectory_errors.png")
+        from robocal.outdir import write_together
+
+        write_together(  # the numbers, their report and their plot: all of this run or none
+            {
+                out / "results.json": (strict_json(numbers, indent=2) + "\n").encode("utf-8"),
+                out / "report.md": _report(numbers).encode("utf-8"),
+                out / "trajectory_errors.png": _plot(numbers),
+            }
+        )
         if verbose:
             from robocal.console import console
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -276,9 +275,9 @@ def _report(numbers: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _plot(numbers: dict[str, Any], path: Path) -> None:
+def _plot(numbers: dict[str, Any]) -> bytes:
     """Errors along the spline before and after, per board, for the table arm (like the
-    seed's Fig. 10a)."""
+    seed's Fig. 10a), as PNG bytes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -299,7 +298,11 @@ def _plot(numbers: dict[str, Any], path: Path) -> None:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize="small")
     fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(path)
+    import io
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=100)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()

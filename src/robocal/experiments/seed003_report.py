@@ -269,13 +269,7 @@ def _markdown(numbers: dict[str, Any]) -> str:
 
 
 def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> None:
-    from robocal.model.files import atomic_write_text
-
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "seed003.json", strict_json(numbers, indent=2, default=str) + "\n")
-    atomic_write_text(out / "seed003.md", _markdown(numbers))
-    import os
-    import tempfile
 
     import matplotlib
 
@@ -291,11 +285,19 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     ax.set_title("Katana 450, thesis circle: tracking error after calibration and eq. 5.22")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(prefix=".seed003_circle.", suffix=".png", dir=out)
-    os.close(fd)
+    import io
+
+    from robocal.outdir import write_together
+
+    buf = io.BytesIO()
     try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, out / "seed003_circle.png")
+        fig.savefig(buf, format="png", dpi=110)
     finally:
         plt.close(fig)
-        Path(tmp).unlink(missing_ok=True)
+    write_together(  # the numbers, their report and their plot: all of this run or none
+        {
+            out / "seed003.json": (strict_json(numbers, indent=2, default=str) + "\n").encode("utf-8"),
+            out / "seed003.md": _markdown(numbers).encode("utf-8"),
+            out / "seed003_circle.png": buf.getvalue(),
+        }
+    )

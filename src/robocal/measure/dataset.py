@@ -61,7 +61,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal import spatial
+from robocal import csvfile, spatial
 from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text, csv_text
 from robocal.units import unit_factor
@@ -89,8 +89,8 @@ MAX_MEDIAN_DISTANCE = 50.0
 MIN_MEDIAN_DISTANCE = 0.005
 #: Revolute joint values beyond this (rad) in magnitude look like degrees.
 MAX_REVOLUTE_RAD = 4.0 * math.pi
-#: Largest measurement file read (bytes): about five million poses; reading takes about
-#: ten times the file's size in memory.
+#: Largest measurement file read (bytes): about five million poses; the file is read in
+#: chunks (:mod:`robocal.csvfile`), its numbers kept as arrays: about twice their size in memory.
 MAX_FILE_BYTES = 512 * 1024 * 1024
 #: A stated measurement noise (1σ, m) must lie in [MIN_SIGMA, MAX_SIGMA]: 0 or a tiny σ
 #: makes the weights infinite, a huge one makes them vanish
@@ -120,6 +120,7 @@ PROBLEM_CODES = {
     "quaternion": "a quaternion whose norm is not 1",
     "sigma": "a standard deviation that is negative, zero or out of range",
     "range": "a position farther than any device measures (more than 10 km)",
+    "more": "further problems of several kinds in one column, beyond the first ones listed",
 }
 #: A measured position farther than this from the device (m) is a wrong cell, not a reach
 MAX_POSITION = 1e4
@@ -405,81 +406,19 @@ def _parse_columns(columns: Mapping[str, str] | Sequence[str] | str | None) -> d
     return out
 
 
-def _short(cell: str, limit: int = 40) -> str:
-    """A cell for a message: quoted, and cut to ``limit`` characters."""
-    return repr(cell) if len(cell) <= limit else repr(cell[:limit]) + f"... ({len(cell)} characters)"
-
-
-_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+_short = csvfile.short
 
 
 #: Problems that make a row incomplete: with ``incomplete="drop"`` the row is left out.
 INCOMPLETE_CODES = frozenset({"empty", "not-a-number", "not-finite", "ragged"})
 IncompleteMode = Literal["error", "drop"]
 
+#: Problems of one kind listed at most (one more line counts the rest): a file with a
+#: million bad cells must not cost a million messages' memory.
+MAX_LISTED = 1000
+
 #: Names a separator may be given by (on a command line a tab is hard to type).
 SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "semicolon": ";", "comma": ","}
-
-
-#: Files larger than this are read in chunks into arrays (memory about 2x the numbers
-#: instead of 20x as text); they are checked up to the first problem of each column
-LARGE_FILE_BYTES = 8 * 1024 * 1024
-
-
-def _head_text(path: Path, size: int = 1 << 16) -> str:
-    """The first lines of a file (up to ``size`` bytes, whole lines) as text."""
-    with open(path, "rb") as fh:
-        head = fh.read(size)
-    cut = head.rfind(b"\n")
-    return head[: cut + 1 if cut >= 0 else len(head)].decode("utf-8-sig")
-
-
-def _is_utf8(raw: bytes) -> bool:
-    try:
-        raw.decode("utf-8")
-    except UnicodeDecodeError:
-        return False
-    return True
-
-
-class _CompactRows:
-    """The rows of a large file: numbers per column (``numbers[k]``), a column's first
-    problem (``failed[k]``: code, message, line), the lower-case labels of a text column
-    (``labels[k]``) and each row's byte offset, from which a row's cells are read again
-    for a message."""
-
-    def __init__(self, path: Path, sep: str, width: int) -> None:
-        self.path, self.sep, self.width = path, sep, width
-        self.numbers: dict[int, Array] = {}
-        self.failed: dict[int, tuple[str, str, int]] = {}
-        self.labels: dict[int, NDArray[np.str_]] = {}
-        self.offsets = np.zeros(0, dtype=np.int64)
-
-    def __len__(self) -> int:
-        return len(self.offsets)
-
-    def __getitem__(self, i: int) -> list[str]:
-        with open(self.path, "rb") as fh:
-            fh.seek(int(self.offsets[i]))
-            line = fh.readline().decode("utf-8", errors="replace")
-        return next(_csv_rows([line.strip() if self.sep == " " else line], self.sep), [])
-
-
-_EXCEL_SEP = re.compile(r"^\ufeff?sep=(.)\s*$")
-
-
-def _encoding_hint(path: Path) -> str | None:
-    """What a file that is not UTF-8 most likely is, from its first bytes."""
-    with open(path, "rb") as fh:
-        head = fh.read(4)
-    if head.startswith((b"\xff\xfe", b"\xfe\xff")):
-        return "it is UTF-16 (byte-order mark); save it as UTF-8 (CSV UTF-8 in Excel)"
-    return None
-
-
-def _csv_rows(lines: Sequence[str], sep: str):
-    """csv rows of ``lines``; a space separator means runs of spaces."""
-    return csv.reader(lines, delimiter=sep, skipinitialspace=sep == " ")
 
 
 class _Reader:
@@ -523,13 +462,11 @@ class _Reader:
         self.orientation = _parse_orientation(orientation)
         self.extra_names = list(extra)
         self.incomplete = incomplete
-        self.dropped_lines: set[int] = set()
         self.problems: list[Problem] = []
 
     # -- problem helpers
     def error(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
         if self.incomplete == "drop" and code in INCOMPLETE_CODES and row is not None:
-            self.dropped_lines.add(row)
             self.warn(code, f"{message}; row left out (incomplete='drop')", row, column)
             return
         if code in INCOMPLETE_CODES and row is not None:
@@ -555,59 +492,18 @@ class _Reader:
                 f"{path.stat().st_size} bytes is more than the {MAX_FILE_BYTES} a measurement file may have",
             )
             return None
-        # a large file is read in chunks, its numbers kept as arrays (bounded memory); a
-        # small one as text, every problem of every row listed
-        large = path.exists() and path.stat().st_size > LARGE_FILE_BYTES and self.incomplete == "error"
         try:
-            text = _head_text(path) if large else path.read_text(encoding="utf-8-sig")
+            head = csvfile.read_head(path, sep=self.sep, decimal=self.decimal)
         except FileNotFoundError:
             self.error("file", "file not found")
             return None
-        except UnicodeDecodeError as err:
-            self.error("file", f"cannot be read as UTF-8 text: {_encoding_hint(path) or err}")
+        except csvfile.CsvError as err:
+            self.error(err.code, err.message, err.line)
             return None
-        except OSError as err:
-            self.error("file", f"cannot be read: {err.strerror or err}")
-            return None
-        if "\x00" in text[:4096] and text[:4096].count("\x00") > len(text[:4096]) // 4:
-            self.error(
-                "file",
-                "cannot be read as UTF-8 text: it looks like UTF-16 (a NUL byte between the "
-                "characters); save it as UTF-8 (CSV UTF-8 in Excel)",
-            )
-            return None
-        lines = text.splitlines()
-        metadata: dict[str, str] = {}
-        first = 0
-        while first < len(lines) and (lines[first].startswith("#") or not lines[first].strip()):
-            line = lines[first].lstrip("#").strip()
-            if ":" in line:
-                key, value = line.split(":", 1)
-                metadata[key.strip()] = value.strip()
-            first += 1
-        sep = self.sep
-        excel_sep = _EXCEL_SEP.match(lines[first]) if first < len(lines) else None
-        if excel_sep:  # Excel's "sep=;" line names the separator
-            if sep is None:
-                sep = excel_sep.group(1)
-            first += 1
-        if first >= len(lines):
-            self.error("header", "no header row (the file is empty or only has comments)")
-            return None
-        self.header_line = first + 1
-        if sep is None:
-            header_text = lines[first]
-            sep = max((";", "\t", ","), key=header_text.count)
-            if sep == self.decimal:
-                sep = ";"
-            if not header_text.count(sep) and len(header_text.split()) > 1:
-                sep = " "  # columns separated by runs of spaces
-        try:
-            header = [h.strip() for h in next(_csv_rows([lines[first].strip()], sep))]
-        except csv.Error as err:
-            self.error("header", f"the header cannot be read as CSV: {err}", self.header_line)
-            return None
-        self.header = header
+        self.head = head
+        metadata = dict(head.metadata)
+        self.header_line = head.header_line
+        self.header = header = head.header
         where: dict[str, int] = {}
         for k, name in enumerate(header):
             if name in where:
@@ -622,41 +518,19 @@ class _Reader:
                 where[name] = k
         self.where = where
 
-        if large:
-            rows = self._stream_body(first + 1, sep)
-            if rows is None:
-                return None
-            unreadable: list[int] = []
-        else:
-            body = [(i + 1, ln) for i, ln in enumerate(lines[first + 1 :], start=first + 1) if ln.strip()]
-            body = [(no, ln) for no, ln in body if not ln.lstrip().startswith("#")]
-            rows, unreadable = self._split_lines(body, sep)
-            self.line_no = np.array([no for no, _ in body], dtype=int)
-        self.rows = rows
-
         cols = self._resolve_columns()
         if cols is None:
             return None
-        if not rows:
+        if not self._stream(cols):
+            return None
+        if not len(self.line_no):
             self.error("no-data", "no data rows after the header", self.header_line)
             return None
-
-        # ragged rows: reported once, their cells are not looked at again
-        good = np.ones(len(rows), dtype=bool)
-        good[unreadable] = False
-        for i, r in enumerate(rows if not isinstance(rows, _CompactRows) else ()):  # compact: not ragged
-            if len(r) != len(header) and i not in unreadable:
-                good[i] = False
-                self.error(
-                    "ragged",
-                    f"has {len(r)} cells but the header has {len(header)} (separator {sep!r})",
-                    int(self.line_no[i]),
-                )
-        self.good = good
+        good = self.good
 
         joint_cols, joint_scale = cols["joints"], cols["joint_scale"]
         q = self._numbers(joint_cols)
-        q *= joint_scale  # in place: a large file's arrays are not copied
+        q *= joint_scale  # in place: the arrays are not copied
         position = sigma = orientation = temperature = None
         if cols["position"]:
             position = self._numbers(cols["position"])
@@ -665,7 +539,7 @@ class _Reader:
             sigma = self._numbers(cols["sigma"])
             sigma *= self.L
             bad = good[:, None] & np.isfinite(sigma) & ((sigma < MIN_SIGMA) | (sigma > MAX_SIGMA))
-            for i, c in np.argwhere(bad):
+            for i, c in self._listed(np.argwhere(bad), "sigma", cols["sigma"][0]):
                 cell = self._cell(i, cols["sigma"][c])
                 self.error(
                     "sigma",
@@ -686,25 +560,31 @@ class _Reader:
 
         if ori_values is not None:
             orientation = self._orientation(ori_values, ori_cols, cols["orientation_kind"])
+            del ori_values  # the rotation matrices are kept, not the columns they were made from
 
         if position is not None:
             self._check_length_unit(position, cols["position"])
         self._check_joints(q, joint_cols)
-        self._check_duplicates(cols, q, position, ori_values, sigma, split)
+        ori_flat = None if orientation is None else orientation.reshape(len(orientation), 9)  # a view
+        self._check_duplicates(q, position, ori_flat, sigma, split)
 
         if not self.ok:
             return None
-        if self.dropped_lines:  # incomplete='drop': the rows with a missing or bad value go
-            keep = ~np.isin(self.line_no, sorted(self.dropped_lines))
-            if not keep.any():
+        dropped = int(self.incomplete_rows.sum()) if self.incomplete == "drop" else 0
+        if dropped:  # incomplete='drop': the rows with a missing or bad value go
+            if dropped == len(self.line_no):
                 self.error("no-data", "every data row has a missing or bad value")
                 return None
-            q, position, sigma, split, temperature = (
-                None if a is None else a[keep] for a in (q, position, sigma, split, temperature)
-            )
+            keep = ~self.incomplete_rows
+            # one array at a time, so that each earlier one is freed before the next is copied
+            q = q[keep]
+            position = None if position is None else position[keep]
+            sigma = None if sigma is None else sigma[keep]
+            split = None if split is None else split[keep]
+            temperature = None if temperature is None else temperature[keep]
             orientation = None if orientation is None else orientation[keep]
             extra = {name: values[keep] for name, values in extra.items()}
-            metadata["rows_left_out"] = str(len(self.dropped_lines))
+            metadata["rows_left_out"] = str(dropped)
         joint_names = tuple(metadata.pop("joints", "").split())
         if len(joint_names) != len(joint_cols):
             joint_names = tuple(joint_cols)
@@ -729,128 +609,117 @@ class _Reader:
             metadata=metadata,
         )
 
-    def _split_lines(self, body: list[tuple[int, str]], sep: str) -> tuple[list[list[str]], list[int]]:
-        """One row of cells per line; a line the csv module cannot read (a cell over its
-        field limit) is reported and left out.  A quote opened on one line does not
-        swallow the next lines: every line is its own row."""
-        lines = [ln.strip() if sep == " " else ln for _, ln in body]
-        try:
-            rows = list(_csv_rows(lines, sep))
-            if len(rows) == len(lines):
-                return rows, []
-        except csv.Error:
-            pass
-        rows, unreadable = [], []
-        for i, (no, ln) in enumerate(body):
-            try:
-                rows.append(next(_csv_rows([ln.strip() if sep == " " else ln], sep), []))
-            except csv.Error as err:
-                rows.append([])
-                unreadable.append(i)
-                self.error("file", f"cannot be read as CSV: {err}", no)
-        return rows, unreadable
+    def _listed(self, items, code: str, column: str | None, severity: Severity = "error"):
+        """The first :data:`MAX_LISTED` of ``items`` (problems of one kind); one line counts
+        the rest, so that a file with a million bad cells costs no more memory."""
+        self._summary(code, len(items) - MAX_LISTED, column, severity)
+        return items[:MAX_LISTED]
 
-    def _stream_body(self, skip: int, sep: str) -> _CompactRows | None:
-        """Read the rows after the first ``skip`` lines chunk by chunk into per-column
-        arrays (:class:`_CompactRows`); sets ``self.line_no``.  A ragged or unreadable row
-        stops the reading (None, the problem reported)."""
-        store = _CompactRows(self.path, sep, len(self.header))
-        numbers: list[list[Array]] = [[] for _ in self.header]
-        labels: list[list[Array] | None] = [None for _ in self.header]
-        line_nos: list[Array] = []
-        offsets: list[Array] = []
-        with open(self.path, "rb") as fh:
-            offset = 0
-            for _ in range(skip):
-                offset += len(fh.readline())
-            no = skip
-            while chunk := fh.readlines(1 << 20):  # about 12 000 rows at a time
-                nos, offs, texts = [], [], []
-                for raw in chunk:
-                    no += 1
-                    if raw.strip() and not raw.lstrip().startswith(b"#"):
-                        nos.append(no)
-                        offs.append(offset)
-                        texts.append(raw)
-                    offset += len(raw)
-                try:
-                    lines = [t.decode("utf-8") for t in texts]
-                except UnicodeDecodeError:
-                    bad = next(n for n, t in zip(nos, texts, strict=True) if not _is_utf8(t))
-                    self.error("file", "cannot be read as UTF-8 text", bad)
-                    return None
-                rows = self._chunk_rows(lines, nos, sep)
-                if rows is None:
-                    return None
-                for k in range(len(self.header)):
-                    cells = [r[k].strip() for r in rows]
-                    self._chunk_column(k, cells, nos, not line_nos, numbers, labels, store)
-                line_nos.append(np.array(nos, dtype=np.int64))
-                offsets.append(np.array(offs, dtype=np.int64))
-        self.line_no = np.concatenate(line_nos) if line_nos else np.zeros(0, dtype=np.int64)
-        store.offsets = np.concatenate(offsets) if offsets else np.zeros(0, dtype=np.int64)
-        for k in range(len(self.header)):
-            if k not in store.failed:
-                store.numbers[k] = np.concatenate(numbers[k]) if numbers[k] else np.zeros(0)
-            if labels[k]:
-                store.labels[k] = np.concatenate(labels[k])
-        return store
+    def _summary(self, code: str, more: int, column: str | None, severity: Severity) -> None:
+        if more > 0:
+            message = f"and {more} more row(s) with such problems (only the first {MAX_LISTED} are listed)"
+            if severity == "warning":
+                message += "; left out (incomplete='drop')"
+            self.problems.append(Problem(severity, code, message, str(self.path), None, column))
 
-    def _chunk_rows(self, lines: list[str], nos: list[int], sep: str) -> list[list[str]] | None:
-        width = len(self.header)
-        try:
-            rows = list(_csv_rows([ln.strip() if sep == " " else ln for ln in lines], sep))
-        except csv.Error:
-            rows = []
-        if len(rows) != len(lines):  # a quote opened on one line: every line is its own row
-            rows = []
-            for no, ln in zip(nos, lines, strict=True):
-                try:
-                    rows.append(next(_csv_rows([ln.strip() if sep == " " else ln], sep), []))
-                except csv.Error as err:
-                    self.error("file", f"cannot be read as CSV: {err}", no)
-                    return None
-        for no, r in zip(nos, rows, strict=True):
-            if len(r) != width:
-                self.error("ragged", f"has {len(r)} cells but the header has {width} (separator {sep!r})", no)
-                return None
-        return rows
+    def _stream(self, cols: dict) -> bool:
+        """Read the rows chunk by chunk (:mod:`robocal.csvfile`), keeping for each column
+        in use its numbers (NaN where a cell is bad), its problems (the first
+        :data:`MAX_LISTED`), and for the ``set`` column its labels; sets ``line_no``,
+        ``offsets``, ``good`` (rows that could be split into cells) and
+        ``incomplete_rows``.  False when a row cannot be read at all."""
+        names = [*cols["joints"], *cols["position"], *cols["sigma"], *cols["orientation"],
+                 *cols["temperature"], *cols["extra"]]  # fmt: skip
+        numeric = list(dict.fromkeys(self.where[n] for n in names))
+        set_k = self.where[cols["set"]] if cols["set"] else None
+        parts: dict[int, list[Array]] = {k: [] for k in numeric}
+        found: dict[int, list[tuple[str, str, int]]] = {k: [] for k in [*numeric, -1, -2]}
+        counts: dict[int, int] = {}
+        labels: list[NDArray[np.str_]] = []
+        line_no, offsets, good, incomplete = [], [], [], []
 
-    def _chunk_column(
-        self, k: int, cells: list[str], nos: list[int], first: bool, numbers, labels, store
-    ) -> None:
-        """Convert column ``k`` of a chunk: its numbers are kept; at its first problem the
-        column is marked failed (the problem kept for :meth:`_numbers`) and, when that is in
-        the first chunk, its cells are kept as labels (a train/test column)."""
-        if k not in store.failed:
-            text = [c.replace(",", ".") for c in cells] if self.decimal == "," else cells
-            try:
-                values = np.fromiter(map(float, text), dtype=float, count=len(text))
-            except ValueError:
-                for no, c, t in zip(nos, cells, text, strict=True):
-                    try:
-                        float(t)
-                    except ValueError:
-                        hint = ""
-                        if self.decimal == "." and _DECIMAL_COMMA.match(c):
-                            hint = "; it looks like a decimal comma: pass decimal=','"
-                        store.failed[k] = (
-                            ("empty", "empty cell (missing value)", no)
-                            if not c
-                            else ("not-a-number", f"{_short(c)} is not a number{hint}", no)
-                        )
-                        break
-            else:
-                finite = np.isfinite(values)
-                if finite.all():
-                    numbers[k].append(values)
-                    return
-                m = int(np.flatnonzero(~finite)[0])
-                store.failed[k] = ("not-finite", f"value {_short(cells[m])} is not finite", nos[m])
-            numbers[k] = []
-            labels[k] = [] if first else None
-        if labels[k] is not None:
-            labels[k].append(np.array([c.lower() for c in cells], dtype="<U5"))
+        def note(k: int, code: str, message: str, line: int) -> None:
+            counts[k] = counts.get(k, 0) + 1
+            if counts[k] <= MAX_LISTED:
+                found[k].append((code, message, line))
+
+        for chunk in csvfile.iter_chunks(self.head):
+            ok = np.ones(len(chunk), dtype=bool)
+            for i, code, message in chunk.problems:
+                ok[i] = False
+                note(-1, code, message, int(chunk.line[i]))
+            rows = np.flatnonzero(ok)
+            bad_cells = ~ok
+            for k in numeric:
+                values = np.full(len(chunk), np.nan)
+                values[rows], problems = csvfile.to_numbers([chunk.rows[i][k] for i in rows], self.decimal)
+                for m, code, message in problems:
+                    note(k, code, message, int(chunk.line[rows[m]]))
+                    bad_cells[rows[m]] = True
+                parts[k].append(values)
+            if set_k is not None:
+                cells = [r[set_k].strip().lower() if len(r) > set_k else "" for r in chunk.rows]
+                valid = np.array([c in ("train", "test") for c in cells], dtype=bool)
+                for i in np.flatnonzero(ok & ~valid):
+                    raw = chunk.rows[i][set_k].strip()
+                    message = f"{_short(raw)} is not a train/test label (expected 'train' or 'test')"
+                    note(-2, "split", message, int(chunk.line[i]))
+                kept = [c if v else "" for c, v in zip(cells, valid, strict=True)]
+                labels.append(np.array(kept, dtype="<U5"))
+            line_no.append(chunk.line)
+            offsets.append(chunk.offset)
+            good.append(ok)
+            incomplete.append(bad_cells)
+        self.line_no = np.concatenate(line_no) if line_no else np.zeros(0, dtype=np.int64)
+        self.offsets = np.concatenate(offsets) if offsets else np.zeros(0, dtype=np.int64)
+        self.good = np.concatenate(good) if good else np.zeros(0, dtype=bool)
+        self.incomplete_rows = np.concatenate(incomplete) if incomplete else np.zeros(0, dtype=bool)
+        del line_no, offsets, good, incomplete
+        self.columns: dict[int, Array] = {}
+        for k in numeric:  # column by column: one column's chunks are freed before the next is joined
+            self.columns[k] = np.concatenate(parts.pop(k)) if self.line_no.size else np.zeros(0)
+        self.labels = np.concatenate(labels) if labels else np.zeros(0, dtype="<U5")
+        self.found, self.counts = found, counts
+        self.uses = {k: sum(self.where[n] == k for n in names) for k in numeric}
+        for code, message, line in found[-1]:
+            self.error(code, message, line)
+        self._more_rows(-1, None)
+        return not any(code == "file" for code, _, _ in found[-1])
+
+    def _more_rows(self, k: int, column: str | None) -> None:
+        """One line for the problems of column ``k`` beyond the first :data:`MAX_LISTED`."""
+        codes = {code for code, _, _ in self.found[k]}
+        drop = self.incomplete == "drop" and k != -2 and codes <= INCOMPLETE_CODES
+        code = next(iter(codes)) if len(codes) == 1 else "more"
+        self._summary(code, self.counts.get(k, 0) - MAX_LISTED, column, "warning" if drop else "error")
+
+    # -- cells
+    def _cell(self, i: int, name: str) -> str:
+        """Row ``i``'s cell of column ``name`` as written (read again from the file)."""
+        cells = csvfile.row_at(self.head, int(self.offsets[i]))
+        k = self.where[name]
+        return cells[k].strip() if k < len(cells) else ""
+
+    def _numbers(self, names: Sequence[str]) -> Array:
+        """``(n, len(names))`` floats; bad cells (reported) are NaN.  Each column's array
+        is handed over at its last use, so that no column is held twice."""
+        out = np.empty((len(self.line_no), len(names)))
+        for c, name in enumerate(names):
+            k = self.where[name]
+            for code, message, line in self.found[k]:
+                self.error(code, message, line, name)
+            self._more_rows(k, name)
+            self.found[k] = []
+            self.counts[k] = 0
+            self.uses[k] -= 1
+            out[:, c] = self.columns[k] if self.uses[k] else self.columns.pop(k)
+        return out
+
+    def _split(self, name: str) -> NDArray[np.str_]:
+        for code, message, line in self.found[-2]:
+            self.error(code, message, line, name)
+        self._more_rows(-2, name)
+        return self.labels
 
     def _header_text(self, limit: int = 20) -> str:
         shown = ", ".join(self.header[:limit])
@@ -993,108 +862,11 @@ class _Reader:
             "extra": [n for n in self.extra_names if n in self.where],
         }
 
-    # -- cells
-    def _cell(self, i: int, name: str) -> str:
-        r = self.rows[i]
-        k = self.where[name]
-        return r[k].strip() if k < len(r) else ""
-
-    def _numbers(self, names: Sequence[str]) -> Array:
-        """``(n, len(names))`` floats; bad cells are reported and left NaN."""
-        if isinstance(self.rows, _CompactRows):
-            return self._compact_numbers(names)
-        n = len(self.rows)
-        out = np.full((n, len(names)), np.nan)
-        good = np.flatnonzero(self.good)
-        for c, name in enumerate(names):
-            k = self.where[name]
-            cells = [self.rows[i][k].strip() for i in good]
-            if self.decimal == ",":
-                cells = [s.replace(",", ".") for s in cells]
-            try:
-                values = np.array(cells).astype(float) if cells else np.zeros(0)
-            except ValueError:
-                values = np.full(len(cells), np.nan)
-                for m, (i, s) in enumerate(zip(good, cells, strict=True)):
-                    try:
-                        values[m] = float(s)
-                    except ValueError:
-                        raw = self.rows[i][k].strip()
-                        if not raw:
-                            self.error("empty", "empty cell (missing value)", int(self.line_no[i]), name)
-                            continue
-                        hint = ""
-                        if self.decimal == "." and _DECIMAL_COMMA.match(raw):
-                            hint = "; it looks like a decimal comma: pass decimal=','"
-                        self.error(
-                            "not-a-number", f"{_short(raw)} is not a number{hint}", int(self.line_no[i]), name
-                        )
-                    else:
-                        if not math.isfinite(values[m]):
-                            values[m] = np.nan  # reported below
-                            self.error(
-                                "not-finite", f"value {_short(s)} is not finite", int(self.line_no[i]), name
-                            )
-                out[good, c] = values
-                continue
-            bad = ~np.isfinite(values)
-            for m in np.flatnonzero(bad):
-                i = good[m]
-                self.error(
-                    "not-finite",
-                    f"value {_short(self.rows[i][k].strip())} is not finite",
-                    int(self.line_no[i]),
-                    name,
-                )
-            out[good, c] = values
-        return out
-
-    def _compact_numbers(self, names: Sequence[str]) -> Array:
-        store = self.rows
-        out = np.full((len(store), len(names)), np.nan)
-        for c, name in enumerate(names):
-            k = self.where[name]
-            if k in store.failed:
-                code, message, no = store.failed[k]
-                self.error(code, message + " (a large file is checked up to the first problem)", no, name)
-            else:  # each column is asked for once (one role each): its array is handed over
-                out[:, c] = store.numbers.pop(k)
-        return out
-
-    def _split(self, name: str) -> NDArray[np.str_] | None:
-        k = self.where[name]
-        if isinstance(self.rows, _CompactRows):
-            labels = self.rows.labels.get(k)
-            if labels is None:  # numbers, or text from a later chunk on: the first row is wrong
-                labels = np.full(len(self.rows), "", dtype="<U5")
-                bad = np.zeros(len(labels), dtype=bool)
-                bad[:1] = True
-            else:
-                bad = ~np.isin(labels, ("train", "test"))
-            for i in np.flatnonzero(bad)[:1]:
-                self.error(
-                    "split",
-                    f"{_short(self._cell(int(i), name))} is not a train/test label "
-                    "(expected 'train' or 'test')",
-                    int(self.line_no[i]),
-                    name,
-                )
-            return labels
-        labels = np.array([r[k].strip().lower() if k < len(r) else "" for r in self.rows], dtype="<U5")
-        for i in np.flatnonzero(self.good & ~np.isin(labels, ("train", "test"))):
-            self.error(
-                "split",
-                f"{_short(self.rows[i][k].strip())} is not a train/test label (expected 'train' or 'test')",
-                int(self.line_no[i]),
-                name,
-            )
-        return labels
-
     def _orientation(self, values: Array, names: list[str], kind: str) -> Array | None:
         ok = self.good & np.all(np.isfinite(values), axis=1)
         if kind == "quaternion":
             norm = np.linalg.norm(values, axis=1)
-            for i in np.flatnonzero(ok & (np.abs(norm - 1.0) > 1e-2)):
+            for i in self._listed(np.flatnonzero(ok & (np.abs(norm - 1.0) > 1e-2)), "quaternion", names[0]):
                 self.error(
                     "quaternion",
                     f"quaternion ({', '.join(names)}) has norm {norm[i]:.6g}, not 1",
@@ -1193,7 +965,9 @@ class _Reader:
         lim = model.joint_limits
         outside = (q < lim[:, 0]) | (q > lim[:, 1])
         report = self.error if self.limits == "error" else self.warn
-        for i, j in np.argwhere(outside):
+        for i, j in self._listed(
+            np.argwhere(outside), "limits", names[0], "warning" if self.limits == "warn" else "error"
+        ):
             kind = model.joint_types[j]
             unit, scale = (self.angle_unit, self.A) if kind == "revolute" else (self.length_unit, self.L)
             lo, hi = lim[j] / scale
@@ -1206,7 +980,7 @@ class _Reader:
                 names[j],
             )
 
-    def _check_duplicates(self, cols, q, position, ori_values, sigma, split) -> None:
+    def _check_duplicates(self, q, position, ori_values, sigma, split) -> None:
         parts = [q] + [a for a in (position, ori_values, sigma) if a is not None]
         if split is not None:
             parts.append((split == "train")[:, None].astype(float))
@@ -1228,13 +1002,16 @@ class _Reader:
         hs = h[order]
         is_start = np.r_[True, hs[1:] != hs[:-1]]
         run_first = order[np.flatnonzero(is_start)][np.cumsum(is_start) - 1]  # first row of each run
-        pairs = []
-        for k in np.flatnonzero(~is_start):
-            i, i0 = usable[order[k]], usable[run_first[k]]
-            if all(np.array_equal(a[i], a[i0]) for a in parts):
-                pairs.append((i, i0))
+        later = np.flatnonzero(~is_start)
+        rows, firsts = usable[order[later]], usable[run_first[later]]
+        same = np.ones(len(later), dtype=bool)
+        for a in parts:
+            same &= np.all(a[rows] == a[firsts], axis=1)
+        pairs = np.stack([rows[same], firsts[same]], axis=1)
+        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
         joints_only = position is None
-        for i, i0 in sorted(pairs):
+        code = "repeated-pose" if joints_only else "duplicate"
+        for i, i0 in self._listed(pairs, code, None, "warning" if joints_only else "error"):
             if joints_only:
                 self.warn(
                     "repeated-pose",

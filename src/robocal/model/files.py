@@ -47,11 +47,9 @@ Lengths and angles are in ``units`` (default m and rad).  Files written by
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -60,10 +58,13 @@ from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, mode
 
 from robocal.model import conventions
 from robocal.model.chain import Body, Joint, JointEffects, Model, Role, Step
+from robocal.outdir import atomic_write_bytes, atomic_write_text  # the one atomic writer, re-exported
 from robocal.units import ANGLE_UNITS, LENGTH_UNITS, STIFFNESS_UNITS
 
 __all__ = [
     "ModelFileError",
+    "atomic_write_bytes",
+    "atomic_write_text",
     "csv_text",
     "load_model",
     "model_from_dict",
@@ -518,15 +519,6 @@ def _effects_to_dict(e: JointEffects) -> dict[str, Any]:
     return out
 
 
-def _read_umask() -> int:
-    mask = os.umask(0)  # the only way to read it; set back at once (at import, before any threads)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()
-
-
 def _finite(value: Any) -> Any:
     """``value`` with every non-finite float replaced by None (JSON has no NaN/Infinity)."""
     if isinstance(value, float) or (hasattr(value, "dtype") and getattr(value, "ndim", 1) == 0):
@@ -572,55 +564,6 @@ def csv_text(cell: str) -> str:
 def csv_untext(cell: str) -> str:
     """The text :func:`csv_text` was given (its leading ``'`` removed)."""
     return cell[1:] if cell.startswith("'") and cell[1:].startswith(_FORMULA_START) else cell
-
-
-def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename (never half-written)."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
-
-
-def _remove_stale_temporaries(path: Path) -> None:
-    """Remove the ``.NAME.<pid>.*.tmp`` files that writers of ``path`` killed before their
-    rename left behind (those whose process is gone)."""
-    prefix = f".{path.name}."
-    try:
-        names = [n for n in os.listdir(path.parent) if n.startswith(prefix) and n.endswith(".tmp")]
-    except OSError:
-        return
-    for name in names:
-        pid = name[len(prefix) :].split(".", 1)[0]
-        if not pid.isdigit() or int(pid) == os.getpid():
-            continue
-        try:
-            os.kill(int(pid), 0)
-        except ProcessLookupError:  # its writer is gone
-            with contextlib.suppress(OSError):
-                os.unlink(path.parent / name)
-        except (PermissionError, OverflowError):
-            continue
-
-
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file and a rename (never half-written)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale_temporaries(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        # mkstemp makes the file private (0600); give it the permissions of a normal new file
-        os.chmod(tmp, 0o666 & ~_UMASK)
-        os.replace(tmp, path)
-    except OSError as err:
-        Path(tmp).unlink(missing_ok=True)
-        if err.filename is None:  # a failed write() (disk full) names no file: name the target
-            raise OSError(err.errno, err.strerror, str(path)) from None
-        raise
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def save_model(model: Model, path: str | os.PathLike[str], run_id: str | None = None) -> Path:

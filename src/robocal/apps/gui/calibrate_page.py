@@ -31,6 +31,7 @@ from robocal.apps.gui.calibrate_views import (
     results_view,
 )
 from robocal.apps.gui.jobs import CalibrationJob, JobRunner, read_options
+from robocal.outdir import atomic_write_bytes, atomic_write_text
 
 __all__ = ["layout", "register"]
 
@@ -309,7 +310,7 @@ class _Page:
             if not built:
                 raise ValueError("no model built yet: build one on the builder page (build → model file)")
             path = self.workdir / "built_model.yaml"
-            path.write_text(built["text"], encoding="utf-8")
+            atomic_write_text(path, built["text"])
             return rc.load_model(path)
         return rc.calibration_model(choice, measure)
 
@@ -330,7 +331,7 @@ def _upload(page: _Page, contents, filename):
     token = f"{uuid.uuid4().hex[:12]}/{name}"
     target = page.workdir / "data" / token
     target.parent.mkdir(parents=True)
-    target.write_bytes(data)
+    atomic_write_bytes(target, data)
     return f"{name} ({len(data):,} bytes)", token
 
 

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 from dash import dcc, html
 
+from robocal.outdir import atomic_write_bytes
+
 PREVIEW_ROWS = 12
 
 
@@ -225,7 +227,7 @@ def _compensate(result, contents: str, filename: str | None, unit: str, frame: s
     name = Path(filename or "targets.csv").name
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
         path = Path(tmp) / name
-        path.write_bytes(_decode_bytes(contents))
+        atomic_write_bytes(path, _decode_bytes(contents))
         try:
             targets = read_targets(path, length_unit=unit)
         except ValueError as err:

@@ -28,6 +28,7 @@ import yaml
 from robocal import spatial
 from robocal.model.builder import BuildResult, Geometry, GeometryError, JointGeometry, Tcp, load_geometry
 from robocal.model.conventions import SCHROER_SETS
+from robocal.outdir import atomic_write_text
 
 __all__ = [
     "JOINT_FIELDS",
@@ -203,7 +204,7 @@ def _load_text(text: str, label: str) -> Geometry:
     the messages name ``label`` instead of the temporary file."""
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
         path = Path(tmp) / "geometry.yaml"
-        path.write_text(text, encoding="utf-8")
+        atomic_write_text(path, text)
         try:
             return load_geometry(path)
         except GeometryError as err:
@@ -298,7 +299,7 @@ def form_from_urdf(text: str, label: str = "the URDF") -> BuilderForm:
 
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
         path = Path(tmp) / "robot.urdf"
-        path.write_text(text, encoding="utf-8")
+        atomic_write_text(path, text)
         try:
             name, joints, tcp = geometry_from_urdf(path)
         except URDFError as err:
