@@ -893,7 +893,7 @@ def test_a_large_file_with_bad_cells_in_several_columns_names_each(base, tmp_pat
     ]
     with time_limit():
         result = CliRunner().invoke(
-            app, [*CAL[:4], str(path), "--out", str(tmp_path / "out"), "--residual", "none"]
+            app, [*CAL[:3], str(path), "--out", str(tmp_path / "out"), "--residual", "none"]
         )
     assert result.exit_code == 2
     line = _one_error_line(result)
@@ -914,7 +914,7 @@ def test_a_large_file_with_ragged_rows_and_incomplete_drop(base, tmp_path):
     text[3000] = ",".join(text[3000].split(",")[:4])  # a row cut short
     path.write_text("\n".join(text) + "\n")
     result = CliRunner().invoke(
-        app, [*CAL[:4], str(path), "--out", str(tmp_path / "out"), "--residual", "none"]
+        app, [*CAL[:3], str(path), "--out", str(tmp_path / "out"), "--residual", "none"]
     )
     assert result.exit_code == 2
     width = len(lines[0].split(","))
@@ -1044,7 +1044,7 @@ def test_krl_pair_killed_between_its_renames_is_refused(tmp_path):
     rc.save_model(rc.robot("kr16"), tmp_path / "kr16.yaml")
     result = CliRunner().invoke(
         app,
-        ["filter", str(out), "--calibration", str(tmp_path / "kr16.yaml"), "-o", str(tmp_path / "again.src")],
+        ["filter", str(tmp_path / "kr16.yaml"), str(out), "-o", str(tmp_path / "again.src")],
     )
     assert result.exit_code == 2, result.output
     line = _one_error_line(result)
@@ -1061,7 +1061,7 @@ def test_krl_pair_killed_between_its_renames_is_refused(tmp_path):
 def iso_log(tmp_path_factory) -> Path:
     """A simulated ISO 9283 log of a UR10 and its truth, written by ``robocal simulate --log``."""
     log = tmp_path_factory.mktemp("iso") / "iso.csv"
-    result = CliRunner().invoke(app, ["simulate", "ur10", "--log", str(log), "--seed", "1"])
+    result = CliRunner().invoke(app, ["simulate", "ur10", "--log", "-o", str(log), "--seed", "1"])
     assert result.exit_code == 0, result.output
     return log
 
@@ -1085,7 +1085,9 @@ def test_a_full_disk_during_simulate_log_writes_neither_file(tmp_path, monkeypat
 
     monkeypatch.setattr(os, "replace", replace)
     with time_limit(60):
-        result = CliRunner().invoke(app, ["simulate", "ur10", "--log", str(log), "--seed", "2", "--force"])
+        result = CliRunner().invoke(
+            app, ["simulate", "ur10", "--log", "-o", str(log), "--seed", "2", "--force"]
+        )
     monkeypatch.undo()
     assert result.exit_code == 2, result.output
     assert "iso.truth.yaml: the disk is full" in _one_error_line(result)
