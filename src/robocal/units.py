@@ -19,6 +19,7 @@ __all__ = [
     "STANDARD_GRAVITY",
     "STIFFNESS_UNITS",
     "UnitKind",
+    "joint_unit_factors",
     "unit_factor",
 ]
 
@@ -67,3 +68,9 @@ def unit_factor(unit: str, kind: UnitKind, where: str) -> float:
         article = "an" if kind[0] in "aeiou" else "a"
         known = ", ".join(table)
         raise ValueError(f"{where} must be {article} {kind} unit, one of {known}; got {unit!r}") from None
+
+
+def joint_unit_factors(angle_unit: str, length_unit: str) -> tuple[float, float]:
+    """rad per ``angle_unit`` and m per ``length_unit``: the factors of revolute and
+    prismatic joint values in a file (errors name ``angle_unit`` / ``length_unit``)."""
+    return unit_factor(angle_unit, "angle", "angle_unit"), unit_factor(length_unit, "length", "length_unit")

@@ -186,7 +186,8 @@ def compensate_command(
 
 def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: str, q_start, reader: dict):
     """``--targets``: joint commands for Cartesian targets; the result and the file read."""
-    from robocal.compensate.compensation import TargetFileError, compensate_targets, read_targets
+    from robocal.compensate.compensation import compensate_targets
+    from robocal.compensate.target_files import TargetFileError, read_targets
 
     try:
         tgt = read_targets(
@@ -217,7 +218,8 @@ def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: s
 
 def _filter_program(calibrated, model, program: Path, nominal_model, kind, reader: dict):
     """``--program``: a nominal joint program corrected; the result and the file read."""
-    from robocal.compensate.compensation import TargetFileError, filter_program, read_program
+    from robocal.compensate.compensation import filter_program
+    from robocal.compensate.target_files import TargetFileError, read_program
 
     try:
         names, q = read_program(program, model.dof, joint_types=model.joint_types, **reader)

@@ -7,19 +7,10 @@ from robocal._lazy import lazy_package
 lazy_package(
     __name__,
     {
-        "robocal.compensate.compensation": (
-            "Compensation",
-            "PathCompensation",
-            "TargetFileError",
-            "Targets",
-            "compensate_targets",
-            "compensate_cartesian_path",
-            "compensate_path",
-            "filter_program",
-            "nominal_model",
-            "read_program",
-            "read_targets",
-        ),
+        "robocal.compensate.compensation": ("compensate_targets", "filter_program", "nominal_model"),
+        "robocal.compensate.result": ("Compensation",),
+        "robocal.compensate.paths": ("PathCompensation", "compensate_cartesian_path", "compensate_path"),
+        "robocal.compensate.target_files": ("TargetFileError", "Targets", "read_program", "read_targets"),
     },
 )
 

@@ -222,7 +222,7 @@ def _float(text: str | None, what: str) -> float | None:
 
 def _compensate(result, contents: str, filename: str | None, unit: str, frame: str):
     import robocal as rc
-    from robocal.compensate.compensation import read_targets
+    from robocal.compensate.target_files import read_targets
 
     name = Path(filename or "targets.csv").name
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
