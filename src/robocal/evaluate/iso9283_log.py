@@ -236,19 +236,9 @@ def _read_body(
     return values, texts, np.concatenate(lines) if lines else np.zeros(0, dtype=np.int64)
 
 
-def read_iso9283_log(path: str | Path) -> Iso9283Log:
-    """Read an ISO 9283 log (see the module docstring).
-
-    Raises:
-        Iso9283LogError: one line naming the file, row (line number) and column of the
-            first problem.
-    """
-    name = str(path)
-    head = _read_head(path)
-    conditions, header, first = dict(head.metadata), head.header, head.header_line
-    conditions.pop("robocal run", None)  # the run id of a simulated log and its truth, not a condition
-    if len(header) == 1 and (";" in header[0] or "\t" in header[0]):
-        raise _fail(name, first, None, "the header has one column: columns must be separated by commas")
+def _check_header(name: str, header: list[str], first: int) -> None:
+    """The log's columns: no duplicates, none unknown, the required ones, orientation and
+    load columns all or none."""
     seen = [c for k, c in enumerate(header) if c in header[:k]]
     if seen:
         raise _fail(name, first, None, f"duplicate column {_short(seen[0])}")
@@ -263,9 +253,11 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
         if have and len(have) != len(group_cols):
             lacking = [c for c in group_cols if c not in header]
             raise _fail(name, first, None, f"{what} columns come all or none: missing {', '.join(lacking)}")
-    values, texts, line = _read_body(head)
-    if len(line) == 0:
-        raise _fail(name, None, None, "no data rows")
+
+
+def _check_rows(name: str, values: dict[str, Array], texts: dict[str, NDArray], line: NDArray[np.int_]) -> None:
+    """Every row: test and target named, a known test, whole cycle numbers >= 1, time not
+    going back within a test."""
     for c in ("test", "target"):
         empty = texts[c] == ""
         if empty.any():
@@ -293,6 +285,27 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
                 "time_s",
                 f"time goes back within test {test} ({t[i]:g} s after {t[i - 1]:g} s)",
             )
+
+
+def read_iso9283_log(path: str | Path) -> Iso9283Log:
+    """Read an ISO 9283 log (see the module docstring).
+
+    Raises:
+        Iso9283LogError: one line naming the file, row (line number) and column of the
+            first problem.
+    """
+    name = str(path)
+    head = _read_head(path)
+    conditions, header, first = dict(head.metadata), head.header, head.header_line
+    conditions.pop("robocal run", None)  # the run id of a simulated log and its truth, not a condition
+    if len(header) == 1 and (";" in header[0] or "\t" in header[0]):
+        raise _fail(name, first, None, "the header has one column: columns must be separated by commas")
+    _check_header(name, header, first)
+    values, texts, line = _read_body(head)
+    if len(line) == 0:
+        raise _fail(name, None, None, "no data rows")
+    _check_rows(name, values, texts, line)
+    t, cyc = values["time_s"], values["cycle"]
     mm = 1e-3
     pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
     cmd = np.column_stack([values[c] for c in ("cmd_x_mm", "cmd_y_mm", "cmd_z_mm")]) * mm
