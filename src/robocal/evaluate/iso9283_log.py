@@ -255,7 +255,9 @@ def _check_header(name: str, header: list[str], first: int) -> None:
             raise _fail(name, first, None, f"{what} columns come all or none: missing {', '.join(lacking)}")
 
 
-def _check_rows(name: str, values: dict[str, Array], texts: dict[str, NDArray], line: NDArray[np.int_]) -> None:
+def _check_rows(
+    name: str, values: dict[str, Array], texts: dict[str, NDArray], line: NDArray[np.int_]
+) -> None:
     """Every row: test and target named, a known test, whole cycle numbers >= 1, time not
     going back within a test."""
     for c in ("test", "target"):
