@@ -1,0 +1,137 @@
+"""Run ids: every file of one result carries the same id, so that a reader can refuse a
+folder or a set of files that mixes two runs (:func:`check_consistent`).
+
+``result.json`` keeps it as ``"run_id"``; YAML and CSV files as a ``# robocal run: ID``
+comment line among their first lines; the HTML report as ``<meta name="robocal-run"
+content="ID">``; a PNG in its ``tEXt`` ``Description`` (``robocal run: ID``).  Written by
+the transactions of :mod:`robocal.outdir`.
+"""
+
+from __future__ import annotations
+
+import re
+import secrets
+from collections.abc import Collection
+from pathlib import Path
+
+__all__ = [
+    "FolderMixedError",
+    "check_consistent",
+    "is_run_id",
+    "new_run_id",
+    "read_run_id",
+    "run_id_line",
+    "run_id_meta",
+]
+
+_RUN_LINE = re.compile(r"^# robocal run: ([0-9a-f]{8,64})\s*$")
+_RUN_META = re.compile(r'<meta name="robocal-run" content="([0-9a-f]{8,64})">')
+_RUN_ID = re.compile(r"[0-9a-f]{8,64}")
+
+
+class FolderMixedError(ValueError):
+    """The files of a result folder come from different runs (the message names them)."""
+
+
+def new_run_id() -> str:
+    """A fresh run id (32 hex digits)."""
+    return secrets.token_hex(16)
+
+
+def run_id_line(run_id: str) -> str:
+    """The comment line that stamps a YAML or CSV file with ``run_id``."""
+    return f"# robocal run: {run_id}\n"
+
+
+def is_run_id(value: object) -> bool:
+    """Whether ``value`` is a run id (hex text, as :func:`new_run_id` makes)."""
+    return isinstance(value, str) and _RUN_ID.fullmatch(value) is not None
+
+
+def run_id_meta(run_id: str) -> str:
+    """The ``<meta>`` element that stamps an HTML report with ``run_id`` (a run id is hex)."""
+    if not _RUN_ID.fullmatch(run_id):
+        raise ValueError(f"not a run id: {run_id!r}")
+    return f'<meta name="robocal-run" content="{run_id}">'
+
+
+def read_run_id(path: Path) -> str | None:
+    """The run id of a file written by a transaction: ``result.json``'s ``run_id``, an HTML
+    report's ``<meta name="robocal-run">`` in its first 4 kB, a PNG's ``Description``
+    (``robocal run: ID``), or a ``# robocal run: ID`` line among the first lines of a
+    text file; None when it has none."""
+    path = Path(path)
+    if path.suffix == ".png":
+        return _png_run_id(path)
+    if path.suffix in (".html", ".htm"):
+        try:
+            with open(path, encoding="utf-8", errors="replace") as fh:
+                match = _RUN_META.search(fh.read(4096))
+        except OSError:
+            return None
+        return match.group(1) if match else None
+    if path.suffix == ".json":
+        import json
+
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        value = data.get("run_id") if isinstance(data, dict) else None
+        return value if isinstance(value, str) else None
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for _ in range(5):
+                match = _RUN_LINE.match(fh.readline(200))
+                if match:
+                    return match.group(1)
+    except OSError:
+        return None
+    return None
+
+
+def _png_run_id(path: Path) -> str | None:
+    """The run id in a PNG's ``tEXt`` ``Description`` (``robocal run: ID``), read from
+    the chunks before the image data; None when it has none."""
+    import struct
+
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(8) != b"\x89PNG\r\n\x1a\n":
+                return None
+            while len(head := fh.read(8)) == 8:
+                length, kind = struct.unpack(">I4s", head)
+                if kind == b"IDAT" or length > 1 << 20:
+                    return None
+                data = fh.read(length)
+                fh.read(4)  # the CRC
+                key, _, text = data.partition(b"\x00")
+                if kind == b"tEXt" and key == b"Description":
+                    match = _RUN_LINE.match("# " + text.decode("latin-1"))
+                    return match.group(1) if match else None
+    except OSError:
+        return None
+    return None
+
+
+def check_consistent(directory: Path, files: Collection[str], anchor: str = "result.json") -> None:
+    """Raise :class:`FolderMixedError` when the files of a result folder disagree.
+
+    ``anchor``'s run id (None for a folder written before run ids) must be the run id of
+    every other file of ``files`` present in ``directory``; the message names each file that
+    differs and its run id.
+    """
+    directory = Path(directory)
+    want = read_run_id(directory / anchor)
+    bad = []
+    for name in files:
+        if name == anchor or not (directory / name).is_file():
+            continue
+        got = read_run_id(directory / name)
+        if got != want:
+            bad.append(f"{name} (run {got or 'none'})")
+    if bad:
+        raise FolderMixedError(
+            f"{directory}: the files come from different runs: {anchor} is run {want or 'none'} but "
+            f"{', '.join(bad)}; calibrate again into this folder (--force) or a new one"
+        )
