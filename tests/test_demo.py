@@ -93,6 +93,12 @@ def test_demo_command_runs_end_to_end(tmp_path):
     res = runner.invoke(app, ["report", str(out), "-o", str(tmp_path / "again.html")])
     assert res.exit_code == 0, res.output
     assert "<section id='iso9283'>" in (tmp_path / "again.html").read_text(encoding="utf-8")
+    # validate without --data: the held-out poses written beside the result
+    res = runner.invoke(app, ["validate", str(out), "--json"])
+    assert res.exit_code == 0, res.output
+    stats = json.loads(res.output)
+    assert stats["n"] == numbers["held_out"]["after"]["n"]
+    assert abs(stats["mean_mm"] - held["after"]["mean_mm"]) < 1e-6
 
 
 def test_demo_rejects_unknown_robots():

@@ -142,6 +142,9 @@ def validate_command(
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     notes, extra = [], {}
+    if data_path is None and result.provenance is None and (directory / "test.csv").is_file():
+        data_path = directory / "test.csv"  # the held-out poses written with the result (robocal demo)
+        notes.append(f"the held-out poses written with the calibration ({data_path.name})")
     own = own_data(ctx, directory, result, data_path, values)
     if own is not None:
         data_path, rows = own
