@@ -41,7 +41,6 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "measure/dataset.py",
         "measure/pose_commands.py",
         "measure/simulate.py",
-        "model/chain.py",
         "model/files.py",
         "model/kernels.py",
         "outdir.py",
