@@ -34,7 +34,6 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "identify/calibrate.py",
         "identify/commands.py",
         "identify/guards.py",  # 501 lines: layers moves residual_variance out of it
-        "identify/observability.py",  # layers moves its identifiable subset to model/rank.py
         "identify/residual.py",
         "identify/solvers.py",
         "measure/commands.py",
