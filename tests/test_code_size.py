@@ -39,7 +39,6 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "measure/commands.py",
         "measure/dataset.py",
         "measure/pose_commands.py",
-        "measure/simulate.py",
         "model/files.py",
         "model/kernels.py",
         "outdir.py",
