@@ -35,7 +35,6 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "identify/commands.py",
         "identify/guards.py",  # 501 lines: layers moves residual_variance out of it
         "identify/residual.py",
-        "identify/solvers.py",
         "measure/commands.py",
         "measure/dataset.py",
         "measure/pose_commands.py",
