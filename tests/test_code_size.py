@@ -31,7 +31,6 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "compensate/programs.py",
         "evaluate/commands.py",
         "evaluate/report.py",
-        "identify/calibrate.py",
         "identify/commands.py",
         "identify/guards.py",  # 501 lines: layers moves residual_variance out of it
         "identify/residual.py",
