@@ -31,17 +31,12 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "compensate/programs.py",
         "evaluate/commands.py",
         "evaluate/report.py",
-        "identify/calibrate.py",
         "identify/commands.py",
         "identify/guards.py",  # 501 lines: layers moves residual_variance out of it
-        "identify/observability.py",  # layers moves its identifiable subset to model/rank.py
         "identify/residual.py",
-        "identify/solvers.py",
         "measure/commands.py",
         "measure/dataset.py",
         "measure/pose_commands.py",
-        "measure/simulate.py",
-        "model/chain.py",
         "model/files.py",
         "model/kernels.py",
         "outdir.py",

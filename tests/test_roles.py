@@ -94,7 +94,7 @@ def test_no_role_is_told_by_a_name_prefix_any_more():
         r"""startswith\(\s*\(?\s*(?:["'](?:tcp_|frame_|frame0_|compliance_|radial_compliance_|clearance_|"""
         r"""backlash_)|[A-Z_]*PREFIX)"""
     )
-    allowed = {"model/chain.py", "model/joints.py"}  # Role.from_name, effect_of
+    allowed = {"model/steps.py", "model/joints.py"}  # Role.from_name, effect_of
     found = [
         f"{path.relative_to(SRC)}:{n}"
         for path in sorted(SRC.rglob("*.py"))

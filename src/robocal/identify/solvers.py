@@ -215,22 +215,15 @@ def levenberg_marquardt_batch(
                             np.zeros(K, dtype=np.intp), max_evaluations, histories)  # fmt: skip
     while len(ids):
         D = np.maximum(D, _column_norms(J))
-        Js = J / D[:, None, :]
-        JsT = Js.transpose(0, 2, 1)
-        A = JsT @ Js
-        g = (JsT @ r[:, :, None])[..., 0]
-        fresh = np.isnan(mu)
-        if fresh.any():
-            mu[fresh] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
+        A, g = _scaled_normal_equations(J, r, D)
+        _start_damping(mu, A)
         step, mu = _damped_steps(A, g, mu)
         predicted = -np.sum(step * (2.0 * g + (A @ step[:, :, None])[..., 0]), axis=1)
         small_step = _norms(step) <= tolerance * (_norms(D * x) + tolerance)
         converged = (predicted <= tolerance * cost) | small_step | (cost == 0.0)
         stop = converged | (evaluations >= max_evaluations)
         if stop.any():  # record the stopped ones, keep the others
-            f, k = np.flatnonzero(stop), ids[stop]
-            done.x[k], done.r[k], done.J[k] = x[f], r[f], J[f]
-            done.success[k], done.evaluations[k] = converged[f], evaluations[f]
+            _record(done, ids, stop, x, r, J, converged, evaluations)
             going = ~stop
             ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted = (
                 a[going] for a in (ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted)
@@ -243,24 +236,70 @@ def levenberg_marquardt_batch(
         cost_new = _squares(r_new)
         rho = (cost - cost_new) / predicted
         better = rho > 0
-        if better.all():
-            x, r, J, cost = x_new, r_new, J_new, cost_new
-        else:
-            x = np.where(better[:, None], x_new, x)
-            r = np.where(better[:, None], r_new, r)
-            J = np.where(better[:, None, None], J_new, J)
-            cost = np.where(better, cost_new, cost)
-        if better.all():
-            mu = mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = np.full_like(nu, 2.0)
-        else:
-            with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
-                mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
-            nu = np.where(better, 2.0, nu * 2.0)
+        x, r, J, cost = _accepted(better, (x, r, J, cost), (x_new, r_new, J_new, cost_new))
+        mu, nu = _nielsen_damping(better, rho, mu, nu)
         for k, c in zip(ids[better].tolist(), cost_new[better].tolist(), strict=True):
             histories[k].append(math.sqrt(c / m))
     done.iterations[:] = [len(h) for h in histories]
     return done
+
+
+def _scaled_normal_equations(J: Array, r: Array, D: Array) -> tuple[Array, Array]:
+    """``A = J_sᵀJ_s`` ``(k, p, p)`` and ``g = J_sᵀ r`` ``(k, p)`` with ``J_s = J D⁻¹`` for the
+    Jacobians ``J`` ``(k, m, p)``, residuals ``r`` ``(k, m)`` and column scales ``D`` ``(k, p)``."""
+    Js = J / D[:, None, :]
+    JsT = Js.transpose(0, 2, 1)
+    return JsT @ Js, (JsT @ r[:, :, None])[..., 0]
+
+
+def _start_damping(mu: Array, A: Array) -> None:
+    """In place: ``μ`` of the problems without one yet (NaN) is ``1e-6`` times the largest
+    diagonal of their ``A`` (Nielsen's choice for a good start)."""
+    fresh = np.isnan(mu)
+    if fresh.any():
+        mu[fresh] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
+
+
+def _record(
+    done: BatchSolveResult,
+    ids: NDArray[np.intp],
+    stop: NDArray[np.bool_],
+    x: Array,
+    r: Array,
+    J: Array,
+    converged: NDArray[np.bool_],
+    evaluations: NDArray[np.intp],
+) -> None:
+    """Write the state of the problems that ``stop`` into ``done`` (at their batch indices)."""
+    f, k = np.flatnonzero(stop), ids[stop]
+    done.x[k], done.r[k], done.J[k] = x[f], r[f], J[f]
+    done.success[k], done.evaluations[k] = converged[f], evaluations[f]
+
+
+def _accepted(
+    better: NDArray[np.bool_], old: tuple[Array, Array, Array, Array], new: tuple[Array, Array, Array, Array]
+) -> tuple[Array, Array, Array, Array]:
+    """``(x, r, J, cost)``: the trial point's where its step was ``better``, else the old."""
+    if better.all():
+        return new
+    x, r, J, cost = old
+    x_new, r_new, J_new, cost_new = new
+    return (
+        np.where(better[:, None], x_new, x),
+        np.where(better[:, None], r_new, r),
+        np.where(better[:, None, None], J_new, J),
+        np.where(better, cost_new, cost),
+    )
+
+
+def _nielsen_damping(better: NDArray[np.bool_], rho: Array, mu: Array, nu: Array) -> tuple[Array, Array]:
+    """Nielsen's update of ``(μ, ν)``: ``μ·max(1/3, 1 − (2ρ − 1)³)`` and ``ν = 2`` after an
+    accepted step, ``μ·ν`` and ``2ν`` after a refused one."""
+    if better.all():
+        return mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), np.full_like(nu, 2.0)
+    with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
+        mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
+    return mu, np.where(better, 2.0, nu * 2.0)
 
 
 def _squares(r: Array) -> Array:

@@ -2,14 +2,15 @@
 
 The pieces:
 
-* :func:`draw_true_model`: a "real" robot drawn around a nominal model, every free
-  parameter deviating by a random amount within its tolerance (default ±0.5 mm for
-  lengths and ±0.05° for angles, **uniform** in ±tol; ``distribution="normal"`` draws
-  normal errors with 1-sigma = tol).  Per-parameter overrides by name.
-* Joint effects: callables ``effect(model, q) -> (n, dof, 3)`` perturbations
-  (δα, δβ, δθ) passed to ``true_model.fk(q, perturbations=...)`` (seed 003 eq. 5.9;
-  see :mod:`robocal.model.chain`).  Two examples: :class:`EncoderNoise` and
-  :class:`PayloadCompliance` (a gravity-proportional joint deflection); clearance,
+* :func:`draw_true_model` (:mod:`robocal.measure.true_model`): a "real" robot drawn around a
+  nominal model, every free parameter deviating by a random amount within its tolerance
+  (default ±0.5 mm for lengths and ±0.05° for angles, **uniform** in ±tol;
+  ``distribution="normal"`` draws normal errors with 1-sigma = tol).  Per-parameter
+  overrides by name.
+* Joint effects (:mod:`robocal.measure.joint_effects`): callables ``effect(model, q) ->
+  (n, dof, 3)`` perturbations (δα, δβ, δθ) passed to ``true_model.fk(q, perturbations=...)``
+  (seed 003 eq. 5.9; see :mod:`robocal.model.chain`).  Two examples: :class:`EncoderNoise`
+  and :class:`PayloadCompliance` (a gravity-proportional joint deflection); clearance,
   backlash and full compliance models plug in the same way.
 * :class:`VirtualRobot`: nominal model (what the controller believes), true model,
   device and joint effects; :func:`simulate` commands it to joint values ``q`` and
@@ -22,12 +23,10 @@ The pieces:
 
 from __future__ import annotations
 
-import math
-import re
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import yaml
@@ -35,10 +34,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal.measure.dataset import Measurements, write_measurements
 from robocal.measure.devices import Device, device_from_dict
+from robocal.measure.joint_effects import EncoderNoise, JointEffect, PayloadCompliance, effect_from_dict
+from robocal.measure.true_model import draw_true_model, parse_quantity, parse_quantity_option
 from robocal.model.chain import Model
 from robocal.model.files import atomic_write_text, load_model, save_model
 from robocal.outdir import FolderMixedError, file_set, new_run_id, read_run_id, run_id_line
-from robocal.units import ANGLE_UNITS, LENGTH_UNITS, SPELLINGS
 
 __all__ = [
     "EncoderNoise",
@@ -56,213 +56,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-#: ``effect(model, q (n, dof)) -> (n, dof, 3)`` joint perturbations (δα, δβ, δθ) in rad
-#: (δθ in m for a prismatic joint).
-JointEffect = Callable[[Model, Array], Array]
-
-_QUANTITY = re.compile(r"^\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*([A-Za-zµμ°]*)\s*$")
-
-
-def parse_quantity_option(value: str, kind: Literal["length", "angle"], option: str) -> float:
-    """A command-line length (m) or angle (rad): text that must carry its unit
-    (``0.02mm``, ``0.05deg``); a bare number is an error, since on a command line it is
-    as likely meant in mm or degrees as in SI units."""
-    m = _QUANTITY.match(value)
-    if m is not None and not m.group(2) and float(m.group(1)) != 0.0:
-        example = f"{value}mm" if kind == "length" else f"{value}deg"
-        raise ValueError(f"{option} {value}: give the unit, e.g. {example}")
-    try:
-        return parse_quantity(value, kind)
-    except ValueError as err:
-        raise ValueError(f"{option}: {err}") from None
-
-
-def parse_quantity(value: str | float, kind: Literal["length", "angle"]) -> float:
-    """A length (m) or angle (rad) from a number (already SI) or text with a unit.
-
-    Lengths: ``m``, ``mm``, ``um``/``µm``; angles: ``rad``, ``mrad``, ``urad``,
-    ``deg``/``°``.  ``parse_quantity("0.02mm", "length") == 2e-5``.  A bare number in
-    text is SI.
-    """
-    if not isinstance(value, str):
-        out = float(value)
-    else:
-        m = _QUANTITY.match(value)
-        units = LENGTH_UNITS if kind == "length" else ANGLE_UNITS
-        unit = SPELLINGS.get(m.group(2), m.group(2)) if m is not None else None
-        if m is None or (unit and unit not in units):
-            raise ValueError(
-                f"{value!r} is not a {kind} such as {'0.02mm' if kind == 'length' else '0.05deg'} "
-                f"(units: {', '.join(units)})"
-            )
-        out = float(m.group(1)) * units.get(unit, 1.0)
-    if not math.isfinite(out):
-        raise ValueError(f"{kind} {value!r} is not finite")
-    return out
-
-
-# ------------------------------------------------------------------- true models
-def draw_true_model(
-    model: Model,
-    tolerances: Mapping[str, float | str] | None = None,
-    *,
-    length: float | str = 0.5e-3,
-    angle: float | str = math.radians(0.05),
-    distribution: Literal["uniform", "normal"] = "uniform",
-    seed: int | np.random.Generator | None = None,
-    params: Literal["free", "all"] | Iterable[str] = "free",
-) -> Model:
-    """A model whose parameters deviate randomly from ``model``'s (the "real" robot).
-
-    Args:
-        model: the nominal model.
-        tolerances: per-parameter tolerances by name, SI numbers or text with a unit,
-            e.g. ``{"theta2": "0.2deg", "d1": 1e-3}``; they override ``length`` and
-            ``angle`` and also select a fixed parameter when ``params="free"``.
-        length: tolerance of length parameters (m, or text such as ``"0.5mm"``).
-        angle: tolerance of angle parameters (rad, or text such as ``"0.05deg"``).
-        distribution: ``"uniform"``: deviation uniform in ``[-tol, tol]``;
-            ``"normal"``: normal with standard deviation ``tol``.
-        seed: seed or Generator; the same seed gives the same model.
-        params: which parameters deviate: ``"free"`` (default; the ones identification
-            may change), ``"all"``, or a list of names.
-
-    Returns:
-        A new model with the same structure (free flags, bounds, joints) and drawn values.
-    """
-    if distribution not in ("uniform", "normal"):
-        raise ValueError(f"distribution must be 'uniform' or 'normal', got {distribution!r}")
-    tol_len = parse_quantity(length, "length")
-    tol_ang = parse_quantity(angle, "angle")
-    overrides: dict[str, float] = {}
-    for name, value in (tolerances or {}).items():
-        step = model.step(name)  # KeyError naming the parameter and the model
-        overrides[name] = parse_quantity(value, "angle" if step.is_rotation else "length")
-    if params == "free":
-        names = [*model.free_names, *(n for n in overrides if n not in model.free_names)]
-    elif params == "all":
-        names = list(model.names)
-    else:
-        names = list(params)
-        for n in names:
-            model.step(n)
-    tol = np.array(
-        [overrides.get(n, tol_ang if model.step(n).is_rotation else tol_len) for n in names], dtype=float
-    )
-    if np.any(tol < 0):
-        raise ValueError("tolerances must be >= 0")
-    rng = np.random.default_rng(seed)
-    if distribution == "uniform":
-        delta = rng.uniform(-1.0, 1.0, len(names)) * tol
-    else:
-        delta = rng.standard_normal(len(names)) * tol
-    values = model.values
-    index = {n: i for i, n in enumerate(model.names)}
-    return model.with_values({n: values[index[n]] + d for n, d in zip(names, delta, strict=True)})
-
-
-# ------------------------------------------------------------------ joint effects
-@dataclass(frozen=True)
-class EncoderNoise:
-    """Joint effect: normal joint-reading errors δθ with 1-sigma ``sigma`` (rad, m for a
-    prismatic joint), drawn from ``seed`` (the same q count gives the same errors)."""
-
-    sigma: float
-    seed: int = 0
-
-    def __call__(self, model: Model, q: Array) -> Array:
-        q = np.atleast_2d(q)
-        d = np.zeros((len(q), model.dof, 3))
-        d[:, :, 2] = np.random.default_rng(self.seed).normal(0.0, self.sigma, (len(q), model.dof))
-        return d
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"type": "encoder-noise", "sigma": float(self.sigma), "seed": int(self.seed)}
-
-
-@dataclass(frozen=True)
-class PayloadCompliance:
-    """Joint effect: joints deflected by the gravity moment of a payload at the tool.
-
-    For each joint j with a stiffness ``k_j`` (N·m/rad; N/m for a prismatic joint) the
-    payload ``mass`` (kg) at ``p_tool_load`` (m, tool frame) under ``gravity`` (m/s²,
-    base frame) exerts the moment ``τ_j = a_j · ((c − o_j) × m g)`` about the joint axis
-    (unit ``a_j`` through ``o_j``; a force ``a_j · m g`` for a prismatic joint), and the
-    joint gives way by ``δθ_j = τ_j / k_j``.  The link masses are ignored: a first
-    example of the hook (seed 003 ch. 5 computes the full moments by Newton-Euler).
-
-    Attributes:
-        mass: payload (kg).
-        stiffness: by joint name or 1-based joint number, e.g. ``{2: 5e4}``.
-        p_tool_load: payload centre in the tool frame (m).
-        gravity: gravity vector in the base frame (m/s²).
-    """
-
-    mass: float
-    stiffness: Mapping[str | int, float]
-    p_tool_load: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
-
-    def _joints(self, model: Model) -> list[tuple[int, float]]:
-        out = []
-        for key, k in self.stiffness.items():
-            if isinstance(key, str):
-                if key not in model.joint_names:
-                    raise KeyError(f"PayloadCompliance: model {model.name!r} has no joint {key!r}")
-                j = model.joint_names.index(key)
-            else:
-                j = int(key) - 1
-                if not 0 <= j < model.dof:
-                    raise KeyError(f"PayloadCompliance: joint number {key} is not in 1..{model.dof}")
-            if not (math.isfinite(k) and k > 0):
-                raise ValueError(f"PayloadCompliance: stiffness of joint {key} must be > 0, got {k}")
-            out.append((j, float(k)))
-        return out
-
-    def __call__(self, model: Model, q: Array) -> Array:
-        q = np.atleast_2d(q)
-        frames = model.joint_frames(q)  # (n, dof, 4, 4), origin on each joint axis
-        T = model.fk(q)
-        c = T[:, :3, :3] @ np.asarray(self.p_tool_load, dtype=float) + T[:, :3, 3]
-        force = self.mass * np.asarray(self.gravity, dtype=float)
-        axes = [s.axis for s in model.steps if s.joint is not None]
-        d = np.zeros((len(q), model.dof, 3))
-        for j, k in self._joints(model):
-            a = frames[:, j, :3, axes[j]]
-            if model.joint_types[j] == "revolute":
-                moment = np.cross(c - frames[:, j, :3, 3], force)
-                d[:, j, 2] = np.einsum("ni,ni->n", a, moment) / k
-            else:
-                d[:, j, 2] = a @ force / k
-        return d
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "type": "payload-compliance",
-            "mass": float(self.mass),
-            "stiffness": {k: float(v) for k, v in self.stiffness.items()},
-            "p_tool_load": [float(v) for v in self.p_tool_load],
-            "gravity": [float(v) for v in self.gravity],
-        }
-
-
-_EFFECTS: dict[str, type] = {"encoder-noise": EncoderNoise, "payload-compliance": PayloadCompliance}
-
-
-def _effect_from_dict(data: Mapping[str, Any]) -> JointEffect | None:
-    data = dict(data)
-    if data.get("type") == "joint-tilting":  # seed 003's joint model (robocal.model.joints)
-        from robocal.model.joints import JointTilting
-
-        return JointTilting.from_dict(data)
-    cls = _EFFECTS.get(data.pop("type", None))
-    if cls is None:
-        return None
-    for key in ("p_tool_load", "gravity"):
-        if key in data:
-            data[key] = tuple(data[key])
-    return cls(**data)
 
 
 # ------------------------------------------------------------------ virtual robot
@@ -542,7 +335,7 @@ def load_truth(path: str | Path) -> Truth:
     effects, descriptions = [], []
     for item in doc.get("joint_effects") or []:
         descriptions.append(str(item.get("description", item.get("type"))))
-        effect = _effect_from_dict({k: v for k, v in item.items() if k != "description"})
+        effect = effect_from_dict({k: v for k, v in item.items() if k != "description"})
         if effect is not None:
             effects.append(effect)
     return Truth(

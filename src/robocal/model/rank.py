@@ -150,6 +150,45 @@ def identifiable_subset(
         threshold: smallest |scaled coefficient| listed as an absorber.
         explain: compute the absorbers (skip for a rank decision only).
     """
+    J, names, prefer = _checked(J, names, order, prefer)
+    p = len(names)
+    norm = np.linalg.norm(J, axis=0)
+    zero = norm <= 1e-12 * max(norm.max(initial=0.0), 1e-300)
+    Js = J / np.where(zero, 1.0, norm)
+    rank_pref = {n: k for k, n in enumerate(prefer)}
+    ordered = _column_order(names, [k for k in range(p) if not zero[k]], rank_pref, order)
+    if not ordered:
+        dropped = tuple(Dropped(names[k], "no effect") for k in range(p))
+        return IdentifiableSubset((), dropped, 0, names, np.zeros(p))
+    if order == "pivoted":
+        n_preferred = sum(1 for k in ordered if names[k] in rank_pref) if prefer else None
+        cols, rank, rel = _pivoted_rank(Js[:, ordered], ordered, n_preferred, 1e-6 if rtol is None else rtol)
+        kept_cols, red_cols, coef = cols[:rank], cols[rank:], None
+    else:
+        keep, coef, rel = _sequential_rank_test(Js[:, ordered], 1e-7 if rtol is None else rtol)
+        cols = ordered
+        kept_cols = [c for c, k in zip(ordered, keep, strict=True) if k]
+        red_cols = [c for c, k in zip(ordered, keep, strict=True) if not k]
+        rank = len(kept_cols)
+    dropped = {k: Dropped(names[k], "no effect") for k in range(p) if zero[k]}
+    if red_cols:
+        if explain and coef is None and kept_cols:
+            coef = np.linalg.lstsq(Js[:, kept_cols], Js[:, red_cols], rcond=None)[0]
+        if not explain or coef is None:
+            dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
+        else:
+            dropped.update(_absorbers(Js, norm, names, kept_cols, red_cols, coef, threshold))
+    kept = tuple(names[k] for k in sorted(kept_cols))
+    pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
+    r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
+    return IdentifiableSubset(kept, tuple(dropped[k] for k in sorted(dropped)), rank, pivots, r_diag)
+
+
+def _checked(
+    J: ArrayLike, names: Sequence[str], order: str, prefer: Sequence[str] | None
+) -> tuple[Array, tuple[str, ...], tuple[str, ...]]:
+    """The Jacobian as floats, the names and preferred names as tuples; ValueError for a wrong
+    shape, NaN/inf or an unknown ``order``, KeyError for a preferred name not among ``names``."""
     J = np.asarray(J, dtype=float)
     names = tuple(names)
     if J.ndim != 2 or J.shape[1] != len(names):
@@ -158,69 +197,66 @@ def identifiable_subset(
         raise ValueError("Jacobian contains NaN or inf")
     if order not in ("pivoted", "preference"):
         raise ValueError(f"order must be 'pivoted' or 'preference', got {order!r}")
-    p = len(names)
-    norm = np.linalg.norm(J, axis=0)
-    zero = norm <= 1e-12 * max(norm.max(initial=0.0), 1e-300)
-    Js = J / np.where(zero, 1.0, norm)
     prefer = tuple(prefer or ())
     unknown = [n for n in prefer if n not in names]
     if unknown:
         raise KeyError(f"preferred parameter(s) {unknown} are not among the Jacobian's columns")
-    rank_pref = {n: k for k, n in enumerate(prefer)}
-    live = [k for k in range(p) if not zero[k]]
-    if order == "pivoted":  # preferred first, then the rest latest-first
-        ordered = sorted(live, key=lambda k: (0, rank_pref[names[k]]) if names[k] in rank_pref else (1, -k))
-    else:  # preferred first, then the rest in column order
-        ordered = sorted(live, key=lambda k: (0, rank_pref[names[k]]) if names[k] in rank_pref else (1, k))
-    if not ordered:
-        dropped = tuple(Dropped(names[k], "no effect") for k in range(p))
-        return IdentifiableSubset((), dropped, 0, names, np.zeros(p))
-    if order == "pivoted":
-        tol = 1e-6 if rtol is None else rtol
-        # a relative weight of 1e-9 decreasing along `ordered` breaks (numerical) ties
-        # between redundant columns in favour of the earlier one; real norm differences
-        # are larger
-        A = Js[:, ordered] * (1.0 + 1e-9 * np.linspace(1.0, 0.0, len(ordered)))
-        if prefer:
-            # QR of the preferred block first, then of the rest projected off it, so that
-            # a preferred column is never displaced by a later one with a larger norm
-            piv = _two_stage_pivots(A, sum(1 for k in ordered if names[k] in rank_pref))
-        else:
-            piv = scipy.linalg.qr(A, mode="economic", pivoting=True)[2]
-        d = np.abs(np.diag(scipy.linalg.qr(A[:, piv], mode="r")[0]))
-        d = np.r_[d, np.zeros(len(piv) - len(d))]
-        rel = d / d[0] if d[0] > 0 else d
-        rank = int(np.sum(rel > tol))
-        cols = [ordered[k] for k in piv]
-        kept_cols, red_cols = cols[:rank], cols[rank:]
-        coef = None
+    return J, names, prefer
+
+
+def _column_order(
+    names: tuple[str, ...], live: list[int], rank_pref: dict[str, int], order: str
+) -> list[int]:
+    """The columns with an effect (``live``) in the order the rank test considers them: the
+    preferred first (in ``prefer``'s order), then the rest latest-first (``"pivoted"``) or in
+    column order (``"preference"``)."""
+    sign = -1 if order == "pivoted" else 1
+    return sorted(live, key=lambda k: (0, rank_pref[names[k]]) if names[k] in rank_pref else (1, sign * k))
+
+
+def _pivoted_rank(
+    Js: Array, ordered: list[int], n_preferred: int | None, tol: float
+) -> tuple[list[int], int, Array]:
+    """Column-pivoted QR of the unit-norm columns ``Js`` (already in ``ordered`` order): the
+    columns in pivot order, the rank and the relative diagonal ``|R_kk| / |R_00|``.
+    ``n_preferred``: how many of the first columns are preferred (None: no preference)."""
+    # a relative weight of 1e-9 decreasing along `ordered` breaks (numerical) ties
+    # between redundant columns in favour of the earlier one; real norm differences
+    # are larger
+    A = Js * (1.0 + 1e-9 * np.linspace(1.0, 0.0, len(ordered)))
+    if n_preferred is not None:
+        # QR of the preferred block first, then of the rest projected off it, so that
+        # a preferred column is never displaced by a later one with a larger norm
+        piv = _two_stage_pivots(A, n_preferred)
     else:
-        tol = 1e-7 if rtol is None else rtol
-        keep, coef, rel = _sequential_rank_test(Js[:, ordered], tol)
-        cols = ordered
-        kept_cols = [c for c, k in zip(ordered, keep, strict=True) if k]
-        red_cols = [c for c, k in zip(ordered, keep, strict=True) if not k]
-        rank = len(kept_cols)
-    dropped = {k: Dropped(names[k], "no effect") for k in range(p) if zero[k]}
-    if red_cols:
-        K = Js[:, kept_cols]
-        if explain and coef is None:
-            coef = np.linalg.lstsq(K, Js[:, red_cols], rcond=None)[0] if kept_cols else None
-        if not explain or coef is None:
-            dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
-        else:
-            residuals = np.linalg.norm(Js[:, red_cols] - K @ coef, axis=0).tolist()
-            # in the Jacobian's units; listed: scaled |coefficient| above the threshold, largest first
-            units = coef * norm[red_cols] / norm[kept_cols][:, None]
-            ranked = np.argsort(-np.abs(coef), axis=0, kind="stable").T.tolist()
-            listed, units = (np.abs(coef) > threshold).T.tolist(), units.T.tolist()
-            for j, c in enumerate(red_cols):
-                absorbers = tuple((names[kept_cols[k]], units[j][k]) for k in ranked[j] if listed[j][k])
-                dropped[c] = Dropped(names[c], "redundant", absorbers, residuals[j])
-    kept = tuple(names[k] for k in sorted(kept_cols))
-    pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
-    r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
-    return IdentifiableSubset(kept, tuple(dropped[k] for k in sorted(dropped)), rank, pivots, r_diag)
+        piv = scipy.linalg.qr(A, mode="economic", pivoting=True)[2]
+    d = np.abs(np.diag(scipy.linalg.qr(A[:, piv], mode="r")[0]))
+    d = np.r_[d, np.zeros(len(piv) - len(d))]
+    rel = d / d[0] if d[0] > 0 else d
+    return [ordered[k] for k in piv], int(np.sum(rel > tol)), rel
+
+
+def _absorbers(
+    Js: Array,
+    norm: Array,
+    names: tuple[str, ...],
+    kept_cols: list[int],
+    red_cols: list[int],
+    coef: Array,
+    threshold: float,
+) -> dict[int, Dropped]:
+    """Each redundant column's :class:`Dropped` with its absorbers: the kept parameters whose
+    least-squares coefficient ``coef`` (on unit-norm columns) exceeds ``threshold``, largest
+    first, converted back to the Jacobian's units."""
+    residuals = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0).tolist()
+    units = coef * norm[red_cols] / norm[kept_cols][:, None]
+    ranked = np.argsort(-np.abs(coef), axis=0, kind="stable").T.tolist()
+    listed, units = (np.abs(coef) > threshold).T.tolist(), units.T.tolist()
+    out = {}
+    for j, c in enumerate(red_cols):
+        absorbers = tuple((names[kept_cols[k]], units[j][k]) for k in ranked[j] if listed[j][k])
+        out[c] = Dropped(names[c], "redundant", absorbers, residuals[j])
+    return out
 
 
 def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array]:

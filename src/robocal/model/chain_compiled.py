@@ -1,0 +1,133 @@
+"""The compiled (numba) path of a chain's kinematics: loading :mod:`robocal.model.kernels` on
+first use and packing a chain's plan and values for its functions.
+
+The kernels compute what :mod:`robocal.model.chain_batch` computes with numpy (same shapes
+and units: m, rad).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.model.chain_plan import Plan
+
+__all__ = ["evaluate_compiled", "kernel_data", "kernel_evaluate", "kernel_forward", "load_kernels"]
+
+Array = NDArray[np.float64]
+FLOAT64 = np.dtype(np.float64)
+KERNELS: list = []  # the kernels module once imported (a list: no `global` statement needed)
+
+
+def load_kernels(compiled: bool | None):
+    """The compiled kernels module when they are to be used, else None (numpy).
+
+    ``compiled``: True requires them, False never uses them, None uses them when numba is
+    installed.  The module (and numba) is imported on first use only.
+    """
+    if compiled is False:
+        return None
+    if KERNELS:
+        return KERNELS[0]
+    try:
+        from robocal.model import kernels
+    except ImportError:
+        if compiled:
+            raise
+        return None
+    KERNELS.append(kernels)
+    return kernels
+
+
+def kernel_data(kernels, plan: Plan, dof: int, values: Array) -> tuple[Array, Array, Array]:
+    """Segment transforms, local step frames and joint offsets for parameter ``values``."""
+    values = np.ascontiguousarray(values, dtype=float)
+    seg, local = kernels.segment_data(values, plan.step_axis, plan.step_rot, plan.step_joint, dof)
+    return seg, local, values[plan.joint_steps]
+
+
+def _perturbations(d: Array | None, dof: int) -> tuple[Array, bool]:
+    if d is None:
+        return np.zeros((1, dof, 3)), False
+    return np.ascontiguousarray(d, dtype=float), True
+
+
+def kernel_forward(
+    kernels, plan: Plan, data: tuple[Array, Array, Array], q: Array, d: Array | None, keep_anchors: bool
+) -> tuple[Array, Array]:
+    """:func:`robocal.model.kernels.forward` of ``q`` ``(n, dof)`` with :func:`kernel_data`
+    ``data``: the tool frames ``(n, 4, 4)`` and, with ``keep_anchors``, the joint frames."""
+    seg, _, offsets = data
+    pert, has_pert = _perturbations(d, len(plan.joint_steps))
+    return kernels.forward(
+        np.ascontiguousarray(q),
+        pert,
+        has_pert,
+        seg,
+        offsets,
+        plan.joint_axis_array,
+        plan.joint_rot_array,
+        keep_anchors,
+    )
+
+
+def kernel_evaluate(
+    kernels,
+    plan: Plan,
+    data: tuple[Array, Array, Array],
+    q: Array,
+    d: Array | None,
+    steps: NDArray[np.intp],
+    rows: int,
+    joint_columns: bool = False,
+    perturbation_columns: bool = False,
+) -> tuple[Array, Array, Array]:
+    """:func:`robocal.model.kernels.evaluate`: ``T (n, 4, 4)``, the columns of ``steps``
+    ``(n * rows, m)`` and the joint/perturbation columns ``(n * rows, dof, 3)``."""
+    seg, local, offsets = data
+    pert, has_pert = _perturbations(d, len(plan.joint_steps))
+    return kernels.evaluate(
+        np.ascontiguousarray(q),
+        pert,
+        has_pert,
+        seg,
+        local,
+        offsets,
+        plan.joint_axis_array,
+        plan.joint_rot_array,
+        plan.anchor_of,
+        plan.step_axis,
+        plan.step_rot,
+        np.ascontiguousarray(steps, dtype=np.intp),
+        plan.joint_steps,
+        rows,
+        joint_columns or perturbation_columns,
+        perturbation_columns,
+    )
+
+
+def evaluate_compiled(
+    kernels,
+    plan: Plan,
+    data: tuple[Array, Array, Array],
+    q: Array,
+    d: Array | None,
+    free: NDArray[np.intp],
+    rows: str,
+    jacobian: bool,
+    joint_columns: bool,
+    perturbation_columns: bool,
+) -> tuple[Array, ...]:
+    """:meth:`robocal.model.chain.Model.evaluate` by the compiled kernels (same returns);
+    ``free``: the step indices of the Jacobian's columns (empty without ``jacobian``)."""
+    if not jacobian and not joint_columns and not perturbation_columns:
+        return kernel_forward(kernels, plan, data, q, d, keep_anchors=False)[0], None
+    T, J, P = kernel_evaluate(
+        kernels, plan, data, q, d, free, 6 if rows == "pose" else 3, joint_columns, perturbation_columns
+    )
+    out: tuple[Array, ...] = (T, J if jacobian else None)
+    if joint_columns:
+        out += (np.ascontiguousarray(P[:, :, 2]),)
+    if perturbation_columns:
+        out += (P,)
+    return out
