@@ -20,28 +20,15 @@ MAX_MODULE_LINES = 500
 MAX_FUNCTION_LINES = 80
 _LONG = re.compile(r"#\s*long:\s*\S.{5,}")
 
-# TEMPORARY (lint, session 6): modules other helpers are reshaping in parallel (pipeline,
-# report, cli, txn, perf, layers). The lead empties this list at merge: each module then meets
-# the limits or carries `# long:` comments. Paths relative to src/robocal.
+# TEMPORARY (session 6): modules still being split in parallel; the list can only shrink (the
+# test below fails for an entry that no longer exists or is within the limits).
 OWNED_ELSEWHERE_TEMPORARY = frozenset(
     {
-        "compensate/cli.py",
-        "compensate/commands.py",
-        "compensate/export_cli.py",
         "compensate/programs.py",
-        "evaluate/commands.py",
-        "evaluate/report.py",
-        "identify/commands.py",
-        "identify/guards.py",  # 501 lines: layers moves residual_variance out of it
         "identify/residual.py",
-        "measure/commands.py",
         "measure/dataset.py",
-        "measure/pose_commands.py",
-        "model/files.py",
         "model/kernels.py",
-        "outdir.py",
         "study.py",
-        "study_commands.py",
     }
 )
 
