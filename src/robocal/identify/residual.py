@@ -12,9 +12,13 @@ evidence (type-II maximum likelihood).  Everything is in the *whitened* coordina
 whatever the prior; the evidence's gradient is analytic (MacKay 1992: ``∂(−log E)/∂log s_k
 = ½(1 − Σ_kk/s_k − μ_k²/s_k)``, ``∂(−log E)/∂log σ² = ½(N − γ − |r − Aμ|²/σ²)``).
 
-Memory: the design is never held whole; ``G = AᵀA`` and ``Aᵀr`` are accumulated over
-chunks of poses, so memory is ``O(m²)`` plus one chunk whatever the number of poses
-(m = joints · 2H: 576 for 6 joints at 48 harmonics, 2.7 MB).
+Memory and time: the design is never held whole; ``G = AᵀA`` and ``Aᵀr`` are accumulated
+over chunks of poses from per-joint blocks (:func:`_gram`), so memory is ``O(m²)`` plus one
+chunk whatever the number of poses (m = joints · 2H: 576 for 6 joints at 48 harmonics,
+2.7 MB); one pass at the largest H serves every candidate H (:func:`_grams`).  With fewer
+equations than coefficients the design ``(N, m)`` is kept instead and the evidence is
+maximised in its dual form (``N x N`` factorisations, :func:`_nll_and_grad_dual`), the same
+function.
 
 Model choice (:func:`cross_validate_residual`): k folds of the *training* poses; in each
 fold the physical model is calibrated again on the other folds, and each candidate —
@@ -102,21 +106,57 @@ def _one_blas_thread():
     return threadpool_limits(1, user_api="blas")
 
 
+@dataclass(frozen=True)
+class _Normal:
+    """What the evidence of one residual layout needs: ``G = AᵀA``, ``b = Aᵀr``, ``rᵀr``, the
+    number of equations ``N``; with few equations (``N`` well below ``m``) also the design
+    itself, ``A`` ``(N, m)`` and ``r`` ``(N,)`` in an orthonormal basis of the complement
+    of the physical columns, for the evidence's dual form (:func:`_nll_and_grad_dual`)."""
+
+    G: Array
+    b: Array
+    rr: float
+    N: int
+    A: Array | None = None
+    r: Array | None = None
+
+
 def _grams(
     q: Array, r: Array, P: Array, template: JointAngleResidual, harmonics: Sequence[int], J: Array | None
-) -> dict[int, tuple[Array, Array, float, int]]:
+) -> dict[int, _Normal]:
     """:func:`_gram` for each number of harmonics in ``harmonics`` from one pass at the
     largest: the basis of H harmonics is the first ``2H`` columns of each joint's basis of
-    more (the fade depends on the angles only), so its ``G`` and ``b`` are a sub-block."""
+    more (the fade depends on the angles only), so its ``G`` and ``b`` are a sub-block.
+    With fewer equations than coefficients the design is kept (:class:`_Normal`)."""
     top = max(harmonics)
-    big = dataclasses.replace(template, harmonics=top, coefficients=np.zeros(len(template.joints) * 2 * top),
-                              covariance=np.zeros((len(template.joints) * 2 * top,) * 2))  # fmt: skip
-    G, b, rr, N = _gram(q, r, P, big, J)
+    m = len(template.joints) * 2 * top
+    big = dataclasses.replace(template, harmonics=top, coefficients=np.zeros(m), covariance=np.zeros((m, m)))
+    if r.size < m:
+        A, y = _complement_design(q, r, P, big, J)
+        G, b, rr, N = A.T @ A, A.T @ y, float(y @ y), len(y)
+    else:
+        (G, b, rr, N), A, y = _gram(q, r, P, big, J), None, None
     out = {}
     for H in harmonics:
         keep = (np.arange(len(template.joints))[:, None] * 2 * top + np.arange(2 * H)).reshape(-1)
-        out[H] = (G[np.ix_(keep, keep)], b[keep], rr, N)
+        out[H] = _Normal(G[np.ix_(keep, keep)], b[keep], rr, N, None if A is None else A[:, keep], y)
     return out
+
+
+def _complement_design(
+    q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None
+) -> tuple[Array, Array]:
+    """The design ``(N, m)`` and the residuals ``(N,)`` in an orthonormal basis ``U`` of the
+    complement of ``J``'s columns (``N = 3n − p``; all equations without ``J``): ``UᵀA``
+    gives :func:`_gram`'s ``G``, ``b`` and ``rᵀr`` exactly.  For few poses only (it is
+    ``(3n, m)``)."""
+    A = template.design(q, P).reshape(-1, template.size)
+    y = r.reshape(-1)
+    if J is None:
+        return A, y
+    J2 = J.reshape(-1, J.shape[-1])
+    U = np.linalg.qr(J2, mode="complete")[0][:, J2.shape[1] :]
+    return U.T @ A, U.T @ y
 
 
 def _gram_blocks(
@@ -209,6 +249,40 @@ def _nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: A
     return float(nll), grad
 
 
+def _nll_and_grad_dual(theta: Array, A: Array, r: Array, rr: float, N: int, groups: Array, freq: Array):
+    """:func:`_nll_and_grad` from the design ``A`` ``(N, m)`` and residuals ``r`` ``(N,)``
+    instead of ``G`` and ``b``, through the ``(N, N)`` matrix ``M = I + Ã Ãᵀ/σ²``
+    (``Ã = A S^½``): ``det K = det M``, ``K⁻¹ = I − Ãᵀ M⁻¹ Ã/σ²`` (Woodbury).  The same
+    function; cheaper when ``N`` is well below ``m`` (60 poses and 48 harmonics: 155 x 155
+    instead of 576 x 576)."""
+    k = len(theta) - 2
+    log_s = _prior(theta, groups, freq)
+    noise2 = float(np.exp(2.0 * theta[-1]))
+    At = A * np.exp(0.5 * log_s)
+    M = (At @ At.T) / noise2
+    M[np.diag_indices_from(M)] += 1.0
+    L = cholesky(M, lower=True, check_finite=False)
+    W = solve_triangular(L, At, lower=True, check_finite=False)
+    kinv_diag = 1.0 - np.einsum("ij,ij->j", W, W) / noise2  # diag of K⁻¹ = Σ_kk / s_k
+    v = At.T @ cho_solve((L, True), r, check_finite=False) / noise2  # μ / s^½
+    Atr = At.T @ r
+    nll = 0.5 * (rr / noise2 - Atr @ v / noise2 + 2.0 * np.log(np.diag(L)).sum() + N * np.log(noise2))
+    g_s = 0.5 * (1.0 - kinv_diag - v**2)
+    gamma = float(np.sum(1.0 - kinv_diag))
+    e = r - At @ v
+    misfit = float(e @ e)
+    grad = np.empty_like(theta)
+    grad[:k] = 2.0 * np.bincount(groups, weights=g_s, minlength=k)
+    grad[k] = float(np.sum(g_s * _spectrum(theta[k], freq)[1]))
+    grad[-1] = 2.0 * 0.5 * (N - gamma - misfit / noise2)
+    return float(nll), grad
+
+
+def _dual_is_cheaper(N: int, m: int) -> bool:
+    """The dual form's operations (``2N²m + N³/3``) below the primal's (``2m³/3``)."""
+    return 2.0 * N * N * m + N**3 / 3.0 < 2.0 * m**3 / 3.0
+
+
 def _inverse_lower(L: Array) -> Array:
     """``L⁻¹`` of a lower-triangular Cholesky factor (LAPACK's triangular inverse: a third of
     the work of solving against the identity)."""
@@ -247,7 +321,7 @@ def fit_joint_fourier(
     hyper: Hyper | None = None,
     J: Array | None = None,
     start: Hyper | None = None,
-    gram: tuple[Array, Array, float, int] | None = None,
+    gram: _Normal | None = None,
 ) -> tuple[JointAngleResidual, Hyper]:
     """Fit per-joint Fourier angle errors to position residuals.
 
@@ -263,28 +337,25 @@ def fit_joint_fourier(
             estimated parameters): fit jointly with them (see :func:`_gram`).
         start: start values of the evidence maximisation (e.g. the hyperparameters found
             on all poses, for a CV fold); default a neutral start.
-        gram: :func:`_gram` of these arguments when already computed (:func:`_grams`).
+        gram: the normal equations of these arguments when already computed (:func:`_grams`).
 
     Returns the residual model and its hyperparameters.
     """
     template = _template(joint_names, joint_index, harmonics, q)
-    G, b, rr, N = _gram(q, residuals, P, template, J) if gram is None else gram
+    if gram is None:
+        gram = _grams(q, residuals, P, template, [harmonics], J)[harmonics]
     with _one_blas_thread():
-        model, hyper = _fit(template, G, b, rr, N, hyper, start)
+        model, hyper = _fit(template, gram, hyper, start)
     rms = np.sqrt(np.mean(model.angle_errors(q) ** 2, axis=0))
     return dataclasses.replace(model, angle_rms=tuple(float(v) for v in rms)), hyper
 
 
 def _fit(
-    template: JointAngleResidual,
-    G: Array,
-    b: Array,
-    rr: float,
-    N: int,
-    hyper: Hyper | None,
-    start: Hyper | None,
+    template: JointAngleResidual, normal: _Normal, hyper: Hyper | None, start: Hyper | None
 ) -> tuple[JointAngleResidual, Hyper]:
-    """:func:`fit_joint_fourier` from its Gram matrix (without ``angle_rms``)."""
+    """:func:`fit_joint_fourier` from its normal equations (without ``angle_rms``); the
+    evidence in its dual form when that is cheaper."""
+    G, b, rr, N = normal.G, normal.b, normal.rr, normal.N
     joint_names, joint_index, harmonics = template.joints, template.joint_index, template.harmonics
     groups, freq = _layout(template)
     k = len(joint_names)
@@ -300,8 +371,11 @@ def _fit(
             (np.log(1e-4), np.log(2.0)),
             (np.log(1e-7), np.log(1e-2)),
         ]
+        fun, data = _nll_and_grad, (G, b)
+        if normal.A is not None and _dual_is_cheaper(*normal.A.shape):
+            fun, data = _nll_and_grad_dual, (normal.A, normal.r)
         opt = minimize(
-            _nll_and_grad, theta0, args=(G, b, rr, N, groups, freq), jac=True, method="L-BFGS-B",
+            fun, theta0, args=(*data, rr, N, groups, freq), jac=True, method="L-BFGS-B",
             bounds=bounds, options={"maxiter": 200, "ftol": 1e-8},
         )  # fmt: skip
         theta = opt.x
