@@ -38,8 +38,18 @@ import robocal as rc
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import readme_table
-from bench_peers import _median_time
 from bench_real_accuracy import DATA, PROBE, read
+
+
+def _median_time(fn, repeats: int) -> tuple[float, float, object]:
+    """Median CPU and wall seconds of ``fn()`` over ``repeats`` calls, and its last result."""
+    cpu, wall, out = [], [], None
+    for _ in range(repeats):
+        c, w = time.process_time(), time.perf_counter()
+        out = fn()
+        cpu.append(time.process_time() - c)
+        wall.append(time.perf_counter() - w)
+    return float(np.median(cpu)), float(np.median(wall)), out
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -58,25 +68,25 @@ def main(argv: list[str] | None = None) -> None:
         f"{platform.python_version()}, numpy {np.__version__}, "
         f"BLAS threads {os.environ['OPENBLAS_NUM_THREADS']}"
     )
-    t_phys, physics = _median_time(
+    t_phys, w_phys, physics = _median_time(
         lambda: rc.calibrate(model, train, tool_guess=PROBE, compliance=True), args.repeats
     )
-    t_hybrid, hybrid = _median_time(
+    t_hybrid, w_hybrid, hybrid = _median_time(
         lambda: rc.calibrate(model, train, tool_guess=PROBE, residual="auto"), args.repeats
     )
     learned = hybrid.model.residual
     chosen = hybrid.metadata["cv"]["chosen"]
     print(
-        f"fit, 1,000 poses: physics (complete + compliance) {t_phys:.3f} s; "
+        f"fit, 1,000 poses (CPU): physics (complete + compliance) {t_phys:.3f} s; "
         f"default hybrid path {t_hybrid:.2f} s ({t_hybrid / t_phys:.0f}x the physics; chosen: {chosen})"
     )
     q = data.q[:10000]
     hybrid.predict(q[:10])
-    t_pred, _ = _median_time(lambda: hybrid.predict(q), args.repeats)
-    t_pred_phys, _ = _median_time(lambda: physics.predict(q), args.repeats)
+    t_pred, w_pred, _ = _median_time(lambda: hybrid.predict(q), args.repeats)
+    t_pred_phys, w_pred_phys, _ = _median_time(lambda: physics.predict(q), args.repeats)
     size = 0 if learned is None else learned.size
     print(
-        f"prediction, 10,000 poses: hybrid {t_pred / len(q) * 1e6:.2f} µs/pose, physics "
+        f"prediction, 10,000 poses (CPU): hybrid {t_pred / len(q) * 1e6:.2f} µs/pose, physics "
         f"{t_pred_phys / len(q) * 1e6:.2f} µs/pose ({t_pred / t_pred_phys:.2f}x); residual size m = {size}"
     )
     big: dict[str, tuple[float, float, float, str]] = {}
@@ -88,19 +98,21 @@ def main(argv: list[str] | None = None) -> None:
             f"{rss / 1e6:.0f} MB{'; chosen: ' + chosen_big if chosen_big else ''}"
         )
     wall, cpu, rss, chosen_big = big["hybrid"]
-    verdict = "met" if min(wall, cpu) <= 30 else "MISSED"
+    verdict = "met" if cpu <= 30 else "MISSED"  # CPU: on a shared machine the wall time waits for a core
     print(f"target (issue 20): hybrid fit on 10,000 poses <= 30 s: {verdict}")
     if args.md:
         pw, pc, prss, _ = big["physics"]
         rows = [
-            ["fit, 1,000 poses (wall, median)", f"{t_phys:.2f} s", f"{t_hybrid:.2f} s",
-             f"{t_hybrid / t_phys:.0f}×", ""],
+            ["fit, 1,000 poses, CPU (wall), median", f"{t_phys:.2f} s ({w_phys:.2f} s)",
+             f"{t_hybrid:.2f} s ({w_hybrid:.2f} s)", f"{t_hybrid / t_phys:.0f}×", ""],
             ["fit, 10,000 poses, CPU (wall)", f"{pc:.1f} s ({pw:.1f} s)", f"{cpu:.1f} s ({wall:.1f} s)",
              f"{cpu / pc:.1f}×", f"≤ 30 s {verdict}"],
             ["peak resident memory, 10,000 poses (data alone "
              f"{big['data only'][2] / 1e6:.0f} MB)", f"{prss / 1e6:.0f} MB", f"{rss / 1e6:.0f} MB", "", ""],
-            ["prediction, 10,000 poses, µs per pose", f"{t_pred_phys / len(q) * 1e6:.2f}",
-             f"{t_pred / len(q) * 1e6:.2f}", f"{t_pred / t_pred_phys:.1f}×", ""],
+            ["prediction, 10,000 poses, µs per pose, CPU (wall)",
+             f"{t_pred_phys / len(q) * 1e6:.2f} ({w_pred_phys / len(q) * 1e6:.2f})",
+             f"{t_pred / len(q) * 1e6:.2f} ({w_pred / len(q) * 1e6:.2f})",
+             f"{t_pred / t_pred_phys:.1f}×", ""],
         ]  # fmt: skip
         header = ["real UR10 (series A)", "physics (complete + compliance)", "hybrid (`residual=\"auto\"`)",
                   "ratio", "target (issue 20)"]  # fmt: skip
