@@ -209,7 +209,8 @@ def main() -> None:
         header = ["UR10, µs per configuration, CPU (wall)", "compiled", "numpy", "speed-up", "Pinocchio",
                   "target (issue 20)"]  # fmt: skip
         body = [
-            f"`python benchmarks/bench_kernels.py --rounds {rounds} --md README.md` (minimum over "
+            f"`python benchmarks/bench_kernels.py --rounds {rounds}{' --cold' * args.cold} --md README.md` "
+            f"(minimum over "
             f"{rounds} rounds; CPU time of the thread, wall time in brackets):",
             "",
             *readme_table.markdown_table(header, rows),
