@@ -86,3 +86,15 @@ def test_the_correction_from_angle_errors_is_the_design_times_the_coefficients()
     learned = dataclasses.replace(template, coefficients=c)
     expected = np.einsum("nrm,m->nr", learned.design(q, P), learned.coefficients)
     np.testing.assert_allclose(_apply(learned, q, P), expected, rtol=0, atol=1e-13)
+
+
+def test_angle_errors_sum_the_basis():
+    """The angle errors summed harmonic by harmonic equal the basis times the coefficients,
+    with and without the fade outside the covered angles."""
+    q, _, _, _ = _problem(500, 6)
+    for covered in (None, q[:100]):
+        template = _template(JOINTS, [0, 1, 2, 4], 7, covered)
+        c = np.random.default_rng(7).normal(0, 1e-4, template.size)
+        learned = dataclasses.replace(template, coefficients=c)
+        expected = np.einsum("nkh,kh->nk", learned.basis(q), c.reshape(4, -1))
+        np.testing.assert_allclose(learned.angle_errors(q), expected, rtol=0, atol=1e-15)
