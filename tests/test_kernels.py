@@ -92,6 +92,21 @@ def test_identification_jacobian_and_fused_evaluation(case, rows):
                     close(a, b)
 
 
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_block_kernels_over_several_blocks(name):
+    """The structure-of-arrays kernels (batch FK, the identification Jacobian without
+    perturbations) over two full blocks of poses and a partial one."""
+    from robocal.model.kernels import _BLOCK
+
+    model = MODELS[name]()
+    q = np.random.default_rng(3).uniform(-2.5, 2.5, (2 * _BLOCK + 3, model.dof))
+    close(model.fk(q, compiled=True), model.fk(q, compiled=False))
+    for rows in ("position", "pose"):
+        for a, b in zip(model.fk_jacobian(q, rows, compiled=True), model.fk_jacobian(q, rows, compiled=False),
+                        strict=True):  # fmt: skip
+            close(a, b)
+
+
 def test_joint_jacobian_and_perturbation_jacobian(case):
     model, q, pert, _ = case
     from robocal.model import chain

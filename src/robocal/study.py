@@ -80,6 +80,7 @@ __all__ = [
     "StudyError",
     "StudyRun",
     "load_study_config",
+    "local_cluster",
     "read_study_summary",
     "run_fleet",
     "run_study",
@@ -197,6 +198,23 @@ class _Validation(BaseModel):
     seed: Count | None = None
 
 
+class _Dask(BaseModel):
+    """Where a study runs, unless the call (``--scheduler``/``--workers``) says otherwise."""
+
+    model_config = _Config
+    scheduler: str | None = Field(default=None, min_length=1)
+    workers: Count | None = Field(default=None, ge=0, le=4096)  # 0: this process
+
+    @field_validator("scheduler")
+    @classmethod
+    def _address(cls, value: str | None) -> str | None:
+        import re
+
+        if value is not None and not re.fullmatch(r"[a-z][a-z0-9+.-]*://\S+|[^\s:/]+:\d+", value):
+            raise ValueError(f"{value!r} is not a Dask scheduler address (e.g. tcp://host:8786)")
+        return value
+
+
 #: Calibrations a study may have (robots x pose sets x devices): a million take about a
 #: quarter of an hour with the batched engine and its table about 0.3 GB
 MAX_STUDY_CASES = 1_000_000
@@ -222,6 +240,8 @@ class StudyConfig(BaseModel):
         engine: auto                # auto | batched | calibrate
         residual: none              # none | auto | joint_fourier (rc.calibrate's; not none: engine calibrate)
         chunk: 50                   # robots per task
+        dask: {scheduler: "tcp://host:8786"}   # an existing Dask cluster (or {workers: 2}:
+                                    # a local one); default a local cluster, one worker per core
     """
 
     model_config = _Config
@@ -243,6 +263,7 @@ class StudyConfig(BaseModel):
     engine: Literal["auto", "batched", "calibrate"] = "auto"
     residual: Literal["none", "auto", "joint_fourier"] = "none"
     chunk: Count = Field(default=50, ge=1, le=100_000)
+    dask: _Dask = _Dask()
 
     @model_validator(mode="after")
     def _size(self) -> StudyConfig:
@@ -790,8 +811,9 @@ def _config_text(config: StudyConfig) -> str:
 
 
 def _identity(dumped: Mapping[str, Any]) -> dict[str, Any]:
-    """The part of a configuration that decides the rows (not how many robots, nor the chunking)."""
-    return {k: v for k, v in dumped.items() if k not in ("robots", "chunk")}
+    """The part of a configuration that decides the rows (not how many robots, the chunking, nor
+    where it runs)."""
+    return {k: v for k, v in dumped.items() if k not in ("robots", "chunk", "dask")}
 
 
 def _chunks(prep: _Prepared, todo: Sequence[Case], size: int) -> list[_Chunk]:
@@ -806,12 +828,77 @@ def _chunks(prep: _Prepared, todo: Sequence[Case], size: int) -> list[_Chunk]:
 
 
 def _warm_up() -> bool:
+    import contextlib
+
     import robocal.identify.calibrate
     import robocal.identify.validate
     import robocal.measure.poses
     import robocal.measure.simulate  # noqa: F401
 
+    with contextlib.suppress(ImportError):  # numba and the compiled kernels (~0.3 s per process)
+        pass
     return True
+
+
+def _prime(fn: Callable, item: Any) -> bool:
+    """Run ``fn(item)`` and drop the result: the first task of a process pays the cached
+    kernels' loading and the chain's plans (0.25 s, twice a later task of 50 robots)."""
+    try:
+        fn(item)
+    except Exception:  # the real task reports it
+        return False
+    return True
+
+
+def local_cluster(workers: int | None = None):
+    """A Dask ``LocalCluster`` set up for robocal's tasks: ``workers`` single-threaded worker
+    processes (default one per core), no dashboard, and the settings below (use it as
+    ``Client(local_cluster(2))``; :func:`run_study` makes one unless given a client or a
+    scheduler address)."""
+    import logging
+
+    import dask
+    from distributed import LocalCluster
+
+    n = workers if workers is not None else (os.cpu_count() or 1)
+    # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's
+    # mmap threshold at 128 KiB: every Jacobian-sized array is then mmapped and
+    # page-faulted afresh, and freed heap is given back at once, ~1.5x slower here
+    # (benchmarks/bench_throughput.py --malloc).  Arrays up to 16 MiB come from the
+    # heap instead, and up to 64 MiB of freed heap is kept.  (The nanny sets these
+    # variables in this process before it spawns a worker: put them back after.)
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    environ["MALLOC_MMAP_THRESHOLD_"] = 16 << 20
+    environ["MALLOC_TRIM_THRESHOLD_"] = 64 << 20
+    environ.setdefault("OPENBLAS_NUM_THREADS", 1)  # one core per worker: BLAS threads only contend
+    environ.setdefault("OMP_NUM_THREADS", 1)
+    environ.setdefault("MKL_NUM_THREADS", 1)
+    saved = {k: os.environ.get(k) for k in environ}
+    settings = {
+        "distributed.nanny.pre-spawn-environ": environ,
+        # the statistical profiler feeds the dashboard (off here) and samples the
+        # task's stack every 10 ms: ~15 % of a worker's time in this code
+        "distributed.worker.profile.enabled": False,
+        # each worker holds its next task while computing one (the default 1.1 hands a
+        # single-threaded worker its next task only when it asks: a scheduler round trip
+        # between tasks); the tasks are few and of equal size
+        "distributed.scheduler.worker-saturation": 2.0,
+    }
+    try:
+        with dask.config.set(settings):
+            return LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,  # not the workers' shutdown chatter
+            )
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 class _Executor:
@@ -823,50 +910,19 @@ class _Executor:
         self.workers = 0
         if scheduler is None and workers == 0:
             return
-        import logging
-
-        from distributed import Client, LocalCluster
+        from distributed import Client
 
         if scheduler is not None:
-            self.client = Client(scheduler, timeout="30s")
+            try:
+                self.client = Client(scheduler, timeout="30s")
+            except (OSError, ValueError) as err:  # unreachable, or not an address Dask knows
+                raise StudyError(f"Dask scheduler {scheduler}: {' '.join(str(err).split())}") from None
             self.workers = len(self.client.scheduler_info().get("workers", {}))
         else:
-            import dask
-
             n = workers if workers is not None else (os.cpu_count() or 1)
             if n < 1:
                 raise StudyError(f"workers={n}: give 1 or more (0 runs in this process)")
-            # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's
-            # mmap threshold at 128 KiB: every Jacobian-sized array is then mmapped and
-            # page-faulted afresh, and freed heap is given back at once, ~1.5x slower here
-            # (benchmarks/bench_throughput.py --malloc).  Arrays up to 16 MiB come from the
-            # heap instead, and up to 64 MiB of freed heap is kept.  (The nanny sets these
-            # variables in this process before it spawns a worker: put them back after.)
-            environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-            environ["MALLOC_MMAP_THRESHOLD_"] = 16 << 20
-            environ["MALLOC_TRIM_THRESHOLD_"] = 64 << 20
-            saved = {k: os.environ.get(k) for k in environ}
-            settings = {
-                "distributed.nanny.pre-spawn-environ": environ,
-                # the statistical profiler feeds the dashboard (off here) and samples the
-                # task's stack every 10 ms: ~15 % of a worker's time in this code
-                "distributed.worker.profile.enabled": False,
-            }
-            try:
-                with dask.config.set(settings):
-                    self.cluster = LocalCluster(
-                        n_workers=n,
-                        threads_per_worker=1,
-                        processes=True,
-                        dashboard_address=None,
-                        silence_logs=logging.CRITICAL,  # not the workers' shutdown chatter
-                    )
-            finally:
-                for k, v in saved.items():
-                    if v is None:
-                        os.environ.pop(k, None)
-                    else:
-                        os.environ[k] = v
+            self.cluster = local_cluster(n)
             self.client = Client(self.cluster)
             self.workers = n
         self.warm_up()
@@ -875,6 +931,11 @@ class _Executor:
         """Import robocal on every worker now, not inside the first task (excluded from timing)."""
         if self.client is not None:
             self.client.run(_warm_up)
+
+    def prime(self, fn: Callable, item: Any) -> None:
+        """Run ``fn(item)`` once on every worker (a small task: start-up, not throughput)."""
+        if self.client is not None:
+            self.client.run(_prime, fn, item)
 
     def map(self, fn: Callable, items: Sequence, on_error: Callable) -> Iterator[tuple[Any, Any]]:
         """``(item, fn(item))`` as they complete; a failed task yields ``(item, on_error(item, exc))``."""
@@ -920,9 +981,10 @@ def run_study(
         config: a :class:`StudyConfig` or the path of its YAML file.
         out: the study directory: ``study.yaml`` (the configuration), ``results.csv``
             (one row per case, :data:`RESULT_COLUMNS`), ``summary.json``, ``summary.png``.
-        workers: Dask worker processes of a local cluster (default: one per core);
-            0 runs in this process.
-        scheduler: address of a running Dask scheduler (instead of a local cluster).
+        workers: Dask worker processes of a local cluster (default: the study file's
+            ``dask.workers``, else one per core); 0 runs in this process.
+        scheduler: address of a running Dask scheduler (instead of a local cluster;
+            default: the study file's ``dask.scheduler``).
         force: start over when ``out`` holds a study with another configuration (its
             results are deleted); without it such a directory is refused.
         robots: run only the first N robots of the configuration (a smaller study with
@@ -971,12 +1033,17 @@ def run_study(
     todo = [c for c in cases if c.key not in done]
     chunks = _chunks(prep, todo, config.chunk)
     t0 = time.perf_counter()
+    if scheduler is None and workers is None:  # the call decides, else the study file
+        scheduler, workers = config.dask.scheduler, config.dask.workers
     executor = _Executor(workers, scheduler) if client is None else None
     if client is not None:
         executor = _Executor(0, None)
         executor.client = client
         executor.workers = len(client.scheduler_info().get("workers", {}))
         executor.warm_up()
+    if chunks:  # one robot on every worker before the clock starts
+        first = chunks[0]
+        executor.prime(_run_chunk, _Chunk(first.prepared, first.pose_set, first.device, first.robots[:1]))
     startup = time.perf_counter() - t0
     computed = errors = finished = 0
 

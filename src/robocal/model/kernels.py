@@ -178,55 +178,24 @@ def forward(q, pert, has_pert, seg, offsets, joint_axis, joint_rot, keep_anchors
     return T, frames
 
 
+_BLOCK = 256  # poses per block of forward_batch: its frames (3 x 4 x 256 doubles, 24 KB) stay in L1
+
+
 @_jit
 def forward_batch(qt, seg, offsets, joint_axis, joint_rot):
     """Tool frames ``(n, 4, 4)`` of many configurations, ``qt`` ``(dof, n)`` (q transposed).
 
-    Structure of arrays: the frame's rows are ``(3, 4, n)`` with the poses innermost, each
-    joint and segment one loop over the poses that LLVM vectorises (as numpy's batched code,
-    without its temporaries and passes over memory)."""
-    dof, n = qt.shape
-    F = np.empty((3, 4, n))
-    for r in range(3):
-        for c in range(4):
-            v = seg[0, r, c]
-            for p in range(n):
-                F[r, c, p] = v
-    for j in range(dof):
-        k = joint_axis[j]
-        i1 = (k + 1) % 3
-        i2 = (k + 2) % 3
-        off = offsets[j]
-        if joint_rot[j]:
-            for p in range(n):
-                s, c = _sincos(qt[j, p] + off)
-                for r in range(3):
-                    fi = F[r, i1, p]
-                    fj = F[r, i2, p]
-                    F[r, i1, p] = fi * c + fj * s
-                    F[r, i2, p] = fj * c - fi * s
-        else:
-            for p in range(n):
-                t = qt[j, p] + off
-                for r in range(3):
-                    F[r, 3, p] += F[r, k, p] * t
-        S = seg[j + 1]
-        for r in range(3):
-            for p in range(n):
-                f0, f1, f2, f3 = F[r, 0, p], F[r, 1, p], F[r, 2, p], F[r, 3, p]
-                F[r, 0, p] = f0 * S[0, 0] + f1 * S[1, 0] + f2 * S[2, 0]
-                F[r, 1, p] = f0 * S[0, 1] + f1 * S[1, 1] + f2 * S[2, 1]
-                F[r, 2, p] = f0 * S[0, 2] + f1 * S[1, 2] + f2 * S[2, 2]
-                F[r, 3, p] = f0 * S[0, 3] + f1 * S[1, 3] + f2 * S[2, 3] + f3
+    Structure of arrays over a block of poses: the frames' rows are ``(3, 4, block)`` with the
+    poses innermost, each joint and segment one loop over the block that LLVM vectorises (as
+    numpy's batched code, without its temporaries and passes over memory); a block small
+    enough for the L1 cache keeps the time per pose flat in n and under other processes'
+    cache traffic."""
+    n = qt.shape[1]
     T = np.empty((n, 4, 4))
-    for p in range(n):
-        for r in range(3):
-            for c in range(4):
-                T[p, r, c] = F[r, c, p]
-        T[p, 3, 0] = 0.0
-        T[p, 3, 1] = 0.0
-        T[p, 3, 2] = 0.0
-        T[p, 3, 3] = 1.0
+    F = np.empty((3, 4, _BLOCK))
+    A = np.empty((1, 3, 4, _BLOCK))
+    for start in range(0, n, _BLOCK):
+        _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, min(_BLOCK, n - start), F, A, T, False)
     return T
 
 
@@ -301,8 +270,173 @@ def evaluate(
     (chain order); and ``P (n * rows, dof, 3)``: with ``want_joint`` the joint columns in
     ``P[..., 2]``, with ``want_tilt`` also the tilt columns (δα, δβ) in ``P[..., :2]``
     (empty when neither).  Formulas: :meth:`~robocal.model.chain.Model._columns` and
-    :meth:`~robocal.model.chain.Model._tilt_columns`.
+    :meth:`~robocal.model.chain.Model._tilt_columns`.  Without perturbations and joint
+    columns (the identification Jacobian) by blocks of poses (:func:`_columns_batch`), else
+    pose by pose.
     """
+    if not (has_pert or want_joint or want_tilt):
+        return _columns_batch(
+            q, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis, step_rot, columns, rows
+        )
+    return _evaluate_poses(
+        q, pert, has_pert, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis, step_rot,
+        columns, joint_steps, rows, want_joint, want_tilt,
+    )  # fmt: skip
+
+
+@_jit
+def _column_constants(local, step_axis, steps):
+    """Per step of ``steps``: its axis ``a_l`` and ``a_l × o_l`` in its anchor's frame."""
+    m = steps.shape[0]
+    a_loc = np.empty((m, 3))
+    c_loc = np.empty((m, 3))
+    for c in range(m):
+        s = steps[c]
+        k = step_axis[s]
+        for r in range(3):
+            a_loc[c, r] = local[s, r, k]
+        o0, o1, o2 = local[s, 0, 3], local[s, 1, 3], local[s, 2, 3]
+        c_loc[c, 0] = a_loc[c, 1] * o2 - a_loc[c, 2] * o1
+        c_loc[c, 1] = a_loc[c, 2] * o0 - a_loc[c, 0] * o2
+        c_loc[c, 2] = a_loc[c, 0] * o1 - a_loc[c, 1] * o0
+    return a_loc, c_loc
+
+
+@_jit
+def _columns_batch(
+    q, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis, step_rot, columns, rows
+):
+    """:func:`evaluate` without perturbations or joint columns, by blocks of ``_BLOCK`` poses
+    in structure-of-arrays form (poses innermost: LLVM vectorises every loop over them, as in
+    :func:`forward_batch`); the same formulas as :func:`_evaluate_poses`."""
+    n, dof = q.shape
+    m = columns.shape[0]
+    qt = np.ascontiguousarray(q.T)
+    T = np.empty((n, 4, 4))
+    J = np.empty((n * rows, m))
+    a_loc, c_loc = _column_constants(local, step_axis, columns)
+    F = np.empty((3, 4, _BLOCK))
+    A = np.empty((dof + 1, 3, 4, _BLOCK))  # the anchors: the base (identity), then after each joint
+    D = np.empty((dof + 1, 3, _BLOCK))  # the tool point seen from each anchor, in its axes
+    Jb = np.empty((m, rows, _BLOCK))
+    for start in range(0, n, _BLOCK):
+        b = min(_BLOCK, n - start)
+        _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, True)
+        for a in range(dof + 1):
+            for p in range(b):
+                d0 = F[0, 3, p] - A[a, 0, 3, p]
+                d1 = F[1, 3, p] - A[a, 1, 3, p]
+                d2 = F[2, 3, p] - A[a, 2, 3, p]
+                for r in range(3):
+                    D[a, r, p] = A[a, 0, r, p] * d0 + A[a, 1, r, p] * d1 + A[a, 2, r, p] * d2
+        for c in range(m):
+            s = columns[c]
+            a = anchor_of[s]
+            al0, al1, al2 = a_loc[c, 0], a_loc[c, 1], a_loc[c, 2]
+            if step_rot[s]:
+                cl0, cl1, cl2 = c_loc[c, 0], c_loc[c, 1], c_loc[c, 2]
+                for p in range(b):
+                    v0 = al1 * D[a, 2, p] - al2 * D[a, 1, p] - cl0
+                    v1 = al2 * D[a, 0, p] - al0 * D[a, 2, p] - cl1
+                    v2 = al0 * D[a, 1, p] - al1 * D[a, 0, p] - cl2
+                    for r in range(3):
+                        Jb[c, r, p] = A[a, r, 0, p] * v0 + A[a, r, 1, p] * v1 + A[a, r, 2, p] * v2
+                if rows == 6:
+                    for r in range(3):
+                        for p in range(b):
+                            Jb[c, 3 + r, p] = A[a, r, 0, p] * al0 + A[a, r, 1, p] * al1 + A[a, r, 2, p] * al2
+            else:
+                for r in range(3):
+                    for p in range(b):
+                        Jb[c, r, p] = A[a, r, 0, p] * al0 + A[a, r, 1, p] * al1 + A[a, r, 2, p] * al2
+                if rows == 6:
+                    for r in range(3):
+                        for p in range(b):
+                            Jb[c, 3 + r, p] = 0.0
+        for p in range(b):
+            row = (start + p) * rows
+            for r in range(rows):
+                for c in range(m):
+                    J[row + r, c] = Jb[c, r, p]
+    return T, J, np.zeros((0, dof, 3))
+
+
+@_jit
+def _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, keep):
+    """Poses ``start .. start + b``: the tool frames into ``F`` ``(3, 4, block)`` and ``T``; with
+    ``keep`` the anchors (the base, then the frame after each joint) into ``A``
+    ``(dof + 1, 3, 4, block)``."""
+    dof = qt.shape[0]
+    for r in range(3):
+        for c in range(4):
+            v = seg[0, r, c]
+            e = 1.0 if r == c else 0.0
+            for p in range(b):
+                F[r, c, p] = v
+            if keep:
+                for p in range(b):
+                    A[0, r, c, p] = e
+    for j in range(dof):
+        k = joint_axis[j]
+        i1 = (k + 1) % 3
+        i2 = (k + 2) % 3
+        off = offsets[j]
+        if joint_rot[j]:
+            for p in range(b):
+                s, c = _sincos(qt[j, start + p] + off)
+                for r in range(3):
+                    fi = F[r, i1, p]
+                    fj = F[r, i2, p]
+                    F[r, i1, p] = fi * c + fj * s
+                    F[r, i2, p] = fj * c - fi * s
+        else:
+            for p in range(b):
+                t = qt[j, start + p] + off
+                for r in range(3):
+                    F[r, 3, p] += F[r, k, p] * t
+        if keep:
+            for r in range(3):
+                for c in range(4):
+                    for p in range(b):
+                        A[j + 1, r, c, p] = F[r, c, p]
+        S = seg[j + 1]
+        for r in range(3):
+            for p in range(b):
+                f0, f1, f2, f3 = F[r, 0, p], F[r, 1, p], F[r, 2, p], F[r, 3, p]
+                F[r, 0, p] = f0 * S[0, 0] + f1 * S[1, 0] + f2 * S[2, 0]
+                F[r, 1, p] = f0 * S[0, 1] + f1 * S[1, 1] + f2 * S[2, 1]
+                F[r, 2, p] = f0 * S[0, 2] + f1 * S[1, 2] + f2 * S[2, 2]
+                F[r, 3, p] = f0 * S[0, 3] + f1 * S[1, 3] + f2 * S[2, 3] + f3
+    for p in range(b):
+        for r in range(3):
+            for c in range(4):
+                T[start + p, r, c] = F[r, c, p]
+        T[start + p, 3, 0] = 0.0
+        T[start + p, 3, 1] = 0.0
+        T[start + p, 3, 2] = 0.0
+        T[start + p, 3, 3] = 1.0
+
+
+@_jit
+def _evaluate_poses(
+    q,
+    pert,
+    has_pert,
+    seg,
+    local,
+    offsets,
+    joint_axis,
+    joint_rot,
+    anchor_of,
+    step_axis,
+    step_rot,
+    columns,
+    joint_steps,
+    rows,
+    want_joint,
+    want_tilt,
+):
+    """:func:`evaluate` pose by pose, the frames in registers (perturbations and joint columns)."""
     n, dof = q.shape
     m = columns.shape[0]
     T = np.zeros((n, 4, 4))
