@@ -82,11 +82,13 @@ def kernel_evaluate(
     joint_columns: bool = False,
     perturbation_columns: bool = False,
 ) -> tuple[Array, Array, Array]:
-    """:func:`robocal.model.kernels.evaluate`: ``T (n, 4, 4)``, the columns of ``steps``
-    ``(n * rows, m)`` and the joint/perturbation columns ``(n * rows, dof, 3)``."""
+    """:func:`robocal.model.kernels_evaluate.evaluate`: ``T (n, 4, 4)``, the columns of
+    ``steps`` ``(n * rows, m)`` and the joint/perturbation columns ``(n * rows, dof, 3)``."""
+    from robocal.model.kernels_evaluate import evaluate as fused  # numba: loaded with ``kernels``
+
     seg, local, offsets = data
     pert, has_pert = _perturbations(d, len(plan.joint_steps))
-    return kernels.evaluate(
+    return fused(
         np.ascontiguousarray(q),
         pert,
         has_pert,
