@@ -27,7 +27,6 @@ OWNED_ELSEWHERE_TEMPORARY = frozenset(
         "compensate/programs.py",
         "identify/residual.py",
         "measure/dataset.py",
-        "study.py",
     }
 )
 

@@ -278,14 +278,14 @@ def test_study_refuses_another_configuration_without_force(tmp_path):
 
 
 def test_failing_case_reports_its_input_and_is_retried(tmp_path, monkeypatch):
-    original = study._simulate_case
+    original = study.tasks._simulate_case
 
     def broken(chunk, k):
         if k == 1 and chunk.pose_set == "r15":
             raise ValueError("the virtual tracker lost the beam")
         return original(chunk, k)
 
-    monkeypatch.setattr(study, "_simulate_case", broken)
+    monkeypatch.setattr(study.tasks, "_simulate_case", broken)
     out = tmp_path / "s"
     run = run_study(_config(robots=3), out, workers=0)
     assert run.errors == 1
@@ -295,7 +295,7 @@ def test_failing_case_reports_its_input_and_is_retried(tmp_path, monkeypatch):
     assert (
         "robot 1" in bad[0]["message"] and "'r15'" in bad[0]["message"] and "[3, 0, 1]" in bad[0]["message"]
     )
-    monkeypatch.setattr(study, "_simulate_case", original)
+    monkeypatch.setattr(study.tasks, "_simulate_case", original)
     again = run_study(_config(robots=3), out, workers=0)
     assert again.computed == 1 and again.errors == 0
     assert (
@@ -307,7 +307,7 @@ def test_a_failed_task_becomes_error_rows(tmp_path, monkeypatch):
     def crash(chunk):
         raise MemoryError("worker ran out of memory")
 
-    monkeypatch.setattr(study, "_run_chunk", crash)
+    monkeypatch.setattr(study.run, "_run_chunk", crash)  # as run_study submits it
     run = run_study(_config(robots=2), tmp_path / "s", workers=0)
     rows = _rows(tmp_path / "s" / "results.csv")
     assert run.errors == 4 and all(r["status"] == "error" for r in rows)

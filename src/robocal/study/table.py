@@ -1,0 +1,76 @@
+"""The results tables of studies and fleets: append-only CSV journals (:class:`_Table`)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robocal import csvfile
+from robocal.model.files import atomic_write_text, csv_text, csv_untext
+from robocal.study.config import StudyError
+
+
+class _Table:
+    """An append-only CSV journal: a row is flushed to disk as soon as it is known.
+
+    On opening, rows already there are read (a last line cut short by a crash is
+    dropped, and the file rewritten atomically without it); :meth:`append` adds rows
+    and ``fsync``s them.
+    """
+
+    def __init__(self, path: Path, columns: Sequence[str], key: str) -> None:
+        self.path, self.columns, self.key = path, tuple(columns), key
+        self.rows: dict[str, dict[str, str]] = {}
+        if path.exists():
+            self._load()
+        else:
+            atomic_write_text(path, ",".join(self.columns) + "\n")
+
+    def _load(self) -> None:
+        text = self.path.read_text(encoding="utf-8")
+        lines = text.splitlines(keepends=True)
+        if not lines or lines[0].strip() != ",".join(self.columns):
+            raise StudyError(
+                f"{self.path}: not a robocal results table of this version (header differs); "
+                "use --force to start over"
+            )
+        good: list[str] = [lines[0]]
+        for i, line in enumerate(lines[1:], start=2):
+            cells = csvfile.split_rows([line.rstrip("\r\n")], ",")[0][0]
+            complete = line.endswith("\n") and len(cells) == len(self.columns)
+            if not complete:
+                if i == len(lines):  # cut short by a crash: drop it
+                    break
+                raise StudyError(f"{self.path}: row {i} has {len(cells)} cells, expected {len(self.columns)}")
+            row = dict(zip(self.columns, cells, strict=True))
+            self.rows[csv_untext(row[self.key])] = row
+            good.append(line)
+        if len(good) != len(lines):
+            atomic_write_text(self.path, "".join(good))
+
+    def append(self, rows: Iterable[Mapping[str, Any]]) -> None:
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        new = []
+        for row in rows:
+            cells = [_cell(row.get(c, "")) for c in self.columns]
+            writer.writerow(cells)
+            new.append(dict(zip(self.columns, cells, strict=True)))
+        with open(self.path, "a", encoding="utf-8") as fh:
+            fh.write(buf.getvalue())
+            fh.flush()
+            os.fsync(fh.fileno())
+        for row in new:
+            self.rows[csv_untext(row[self.key])] = row
+
+
+def _cell(value: Any) -> str:
+    if isinstance(value, float | np.floating):
+        return repr(float(value))
+    return csv_text(str(value))  # a file name or message is never run as a spreadsheet formula
