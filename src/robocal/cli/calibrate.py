@@ -27,7 +27,7 @@ from robocal.cli.options import (
     measure_option,
     out_option,
     parse_vector,
-    resolve_model,
+    robot_and_chain,
 )
 from robocal.cli.reading import read_data
 from robocal.cli.validate import _stats_table, _validation_notes
@@ -139,14 +139,7 @@ def calibrate_command(
     report: Report = False,
 ) -> None:
     """Identify the robot's parameters from measurements; write the calibrated model."""
-    from robocal.model.catalog import is_model_path
-
-    from_catalog = not is_model_path(robot)
-    if chain not in (None, "complete", "catalog"):
-        raise fail(f"--chain {chain!r}: complete or catalog")
-    if not from_catalog and chain == "catalog":
-        raise fail("--chain catalog is for a catalog ROBOT; a model file's chain is calibrated as it is")
-    model = resolve_model(robot)
+    model, from_catalog = robot_and_chain(robot, chain)
     _check_out(out, force)
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)

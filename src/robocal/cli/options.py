@@ -52,6 +52,7 @@ __all__ = [
     "out_option",
     "parse_vector",
     "resolve_model",
+    "robot_and_chain",
     "seed",
     "tidy_help",
 ]
@@ -177,6 +178,19 @@ def resolve_model(name_or_path: str | Path) -> Model:
         return find_model(name_or_path)
     except ModelFileError as err:
         raise fail(str(err)) from None
+
+
+def robot_and_chain(robot: str, chain: str | None) -> tuple[Model, bool]:
+    """ROBOT's model and whether it came from the catalog, with ``--chain`` checked
+    (``complete`` or ``catalog``; ``catalog`` only for a catalog robot)."""
+    from robocal.model.catalog import is_model_path
+
+    from_catalog = not is_model_path(robot)
+    if chain not in (None, "complete", "catalog"):
+        raise fail(f"--chain {chain!r}: complete or catalog")
+    if not from_catalog and chain == "catalog":
+        raise fail("--chain catalog is for a catalog ROBOT; a model file's chain is calibrated as it is")
+    return resolve_model(robot), from_catalog
 
 
 def parse_vector(text: str, count: int | tuple[int, ...] | None, option: str, what: str = "") -> np.ndarray:

@@ -35,7 +35,7 @@ from robocal.cli.options import (
     as_cli_text,
     out_option,
     parse_vector,
-    resolve_model,
+    robot_and_chain,
 )
 from robocal.console import console, err_console, fail, input_problem, safe
 from robocal.model.files import strict_json
@@ -185,15 +185,9 @@ def fleet_command(
     no_progress: NoProgress = False,
 ) -> None:
     """Calibrate every measurement file of a folder (one robot each); resumes from OUT/fleet.csv."""
-    from robocal.model.catalog import is_model_path
     from robocal.study import StudyError, run_fleet
 
-    from_catalog = not is_model_path(robot)
-    if chain not in (None, "complete", "catalog"):
-        raise fail(f"--chain {chain!r}: complete or catalog")
-    if not from_catalog and chain == "catalog":
-        raise fail("--chain catalog is for a catalog ROBOT; a model file's chain is calibrated as it is")
-    model = resolve_model(robot)
+    model, from_catalog = robot_and_chain(robot, chain)
     complete = chain == "complete" or (chain is None and from_catalog)
     if complete:
         console.print(
