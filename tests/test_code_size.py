@@ -25,7 +25,6 @@ _LONG = re.compile(r"#\s*long:\s*\S.{5,}")
 OWNED_ELSEWHERE_TEMPORARY = frozenset(
     {
         "identify/residual.py",
-        "measure/dataset.py",
         "study.py",
     }
 )
