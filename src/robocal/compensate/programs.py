@@ -63,7 +63,7 @@ from numpy.typing import ArrayLike
 
 from robocal.compensate import program_filter as steps
 
-# (noqa: F401) the parsers, units and configuration rules, re-exported for the tests that check them
+# the names marked F401 below (parsers, units, configuration rules) are re-exported for the tests
 from robocal.compensate.program_config import _cfx, _cfx_bits, _config_ok, _status, _status_bits  # noqa: F401
 from robocal.compensate.program_csv import _parse_csv  # noqa: F401
 from robocal.compensate.program_frames import _robot_models

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.measure.dataset_columns import (
-    _short,
-)
+from robocal.measure.dataset_columns import _short
 from robocal.measure.measurements import (
     MAX_MEDIAN_DISTANCE,
     MAX_POSITION,
