@@ -20,16 +20,6 @@ MAX_MODULE_LINES = 500
 MAX_FUNCTION_LINES = 80
 _LONG = re.compile(r"#\s*long:\s*\S.{5,}")
 
-# TEMPORARY (session 6): modules still being split in parallel; the list can only shrink (the
-# test below fails for an entry that no longer exists or is within the limits).
-OWNED_ELSEWHERE_TEMPORARY = frozenset(
-    {
-        "compensate/programs.py",
-        "measure/dataset.py",
-    }
-)
-
-
 def _has_reason(lines: list[str], *line_numbers: int) -> bool:
     return any(1 <= n <= len(lines) and _LONG.search(lines[n - 1]) for n in line_numbers)
 
@@ -55,18 +45,11 @@ def _modules() -> list[str]:
     return sorted(p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py"))
 
 
-@pytest.mark.parametrize("module", [m for m in _modules() if m not in OWNED_ELSEWHERE_TEMPORARY])
+@pytest.mark.parametrize("module", _modules())
 def test_module_and_functions_are_within_limits(module):
     problems = oversized(PACKAGE / module)
     hint = " (split it, or say why: `# long: ...`)"
     assert not problems, f"src/robocal/{module}: " + "; ".join(problems) + hint
-
-
-def test_the_temporary_list_names_existing_modules_still_over_the_limits():
-    """A module that moved, or now meets the limits, leaves the list (no stale entry)."""
-    assert set(_modules()) >= OWNED_ELSEWHERE_TEMPORARY
-    within = sorted(m for m in OWNED_ELSEWHERE_TEMPORARY if not oversized(PACKAGE / m))
-    assert not within, f"within the limits now, remove from OWNED_ELSEWHERE_TEMPORARY: {within}"
 
 
 def test_the_checker_finds_long_code_and_accepts_reasons(tmp_path):

@@ -1,0 +1,153 @@
+"""Arm configurations written in programs: KUKA status/turn and ABB ``cf1, cf4, cf6, cfx``."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from robocal.compensate.program_syntax import (
+    Array,
+    ProgramTarget,
+)
+from robocal.model.chain import Model
+
+# ---------------------------------------------------------------------- configurations
+_EPS_DEG = 1e-6  # degrees: an axis at a boundary (0, ±90 ...) meets either side
+_EPS_M = 1e-6  # m: a wrist centre on a boundary (axis 1, the lower arm's line) meets either side
+
+
+def _axis_line(F: Array, model: Model, j: int) -> tuple[Array, Array]:
+    """A point (m) and the unit direction of joint ``j``'s axis in the base frame."""
+    axis = [s for s in model.steps if s.joint is not None][j].axis
+    return F[j][:3, 3], F[j][:3, axis]
+
+
+def _wrist_centre(F: Array, model: Model) -> Array:
+    """The wrist centre (m): the point of axis 5 nearest axis 4 (where they cross)."""
+    p4, a4 = _axis_line(F, model, 3)
+    p5, a5 = _axis_line(F, model, 4)
+    c = float(a4 @ a5)
+    d = p5 - p4
+    if abs(1 - c * c) < 1e-12:
+        return p5
+    t = (c * (a4 @ d) - a5 @ d) / (1 - c * c)
+    return p5 + t * a5
+
+
+def _arm_sides(model: Model, q: Array) -> tuple[float, float]:
+    """Where the wrist centre is, as signed distances (m; ~0 on a boundary).
+
+    ``front``: in front of axis 1 (> 0) or behind it (overhead), measured along the
+    direction the wrist centre has from axis 1 at the zero position, turned with axis 1.
+    ``elbow``: ``((p3 - p2) x (w - p3)) . a3`` — > 0 when axis 3 is beyond the angle that
+    stretches the arm (wrist centre on the line of axes 2 and 3), i.e. elbow up."""
+    F = model.joint_frames(q)
+    F0 = model.joint_frames(np.zeros(model.dof))
+    p1, a1 = _axis_line(F0, model, 0)
+    h0 = _wrist_centre(F0, model) - p1
+    h0 -= (h0 @ a1) * a1
+    front = 0.0
+    w = _wrist_centre(F, model)
+    if np.linalg.norm(h0) > 1e-9:
+        local = F0[0][:3, :3].T @ (h0 / np.linalg.norm(h0))
+        front = float((w - F[0][:3, 3]) @ (F[0][:3, :3] @ local))
+    p2, _ = _axis_line(F, model, 1)
+    p3, a3 = _axis_line(F, model, 2)
+    elbow = float(np.cross(p3 - p2, w - p3) @ a3)
+    return front, elbow
+
+
+def _digit(value: float, eps: float, negative_bit: int) -> set[int]:
+    """The bit values a signed quantity allows: ``negative_bit`` when < 0 (both near 0)."""
+    if abs(value) < eps:
+        return {0, 1}
+    return {negative_bit if value < 0 else 1 - negative_bit}
+
+
+def _status_bits(model: Model, q: Array) -> list[set[int]]:
+    """KUKA status bits 0, 1, 2 that joint values ``q`` (rad) allow: bit 0 set when the
+    wrist centre is behind axis 1 (overhead), bit 1 set when A3 >= phi (the angle that
+    stretches the arm; elbow up), bit 2 set when A5 <= 0."""
+    front, elbow = _arm_sides(model, q)
+    a5 = math.degrees(q[4])
+    return [_digit(front, _EPS_M, 1), _digit(elbow, _EPS_M, 0), _digit(a5, _EPS_DEG, 1)]
+
+
+def _cfx_bits(model: Model, q: Array) -> list[set[int]]:
+    """ABB ``cfx`` = 4 b2 + 2 b1 + b0 for a 6-axis arm: b2 set when the wrist centre is
+    behind axis 1, b1 set when it is behind the lower arm (elbow down), b0 set when axis 5
+    is negative."""
+    front, elbow = _arm_sides(model, q)
+    a5 = math.degrees(q[4])
+    return [_digit(a5, _EPS_DEG, 1), _digit(elbow, _EPS_M, 1), _digit(front, _EPS_M, 1)]
+
+
+def _status(model: Model, q: Array) -> int:
+    """KUKA status ``S`` (bits 0-2, see :func:`_status_bits`) of joint values ``q`` (rad)."""
+    return sum(min(b) << k for k, b in enumerate(_status_bits(model, q)))
+
+
+def _cfx(model: Model, q: Array) -> int:
+    """ABB ``cfx`` (see :func:`_cfx_bits`) of joint values ``q`` (rad)."""
+    return sum(min(b) << k for k, b in enumerate(_cfx_bits(model, q)))
+
+
+def _config_changes(t: ProgramTarget, q: Array, model: Model | None = None) -> list[str]:
+    """How joint values ``q`` (rad) differ from the target's written configuration: one
+    entry per bit or digit (``[]``: they meet it).  Without ``model`` the status / cfx
+    is not checked."""
+    if t.config is None or len(q) < 6:
+        return []
+    deg = np.degrees(q[:6])
+    eps = _EPS_DEG
+    out = []
+    if t.style == "krl":
+        turn, status = t.config
+        if turn is not None:
+            for j in range(6):
+                if abs(deg[j]) >= eps and (deg[j] < 0) != bool(turn >> j & 1):
+                    out.append(f"T bit {j} (A{j + 1} {'<' if deg[j] < 0 else '>='} 0)")
+        if status is not None and model is not None:
+            names = ("overhead", "A3 >= phi", "A5 <= 0")
+            for k, allowed in enumerate(_status_bits(model, q)):
+                if status >> k & 1 not in allowed:
+                    out.append(f"S bit {k} ({names[k]}) {status >> k & 1} -> {min(allowed)}")
+        return out
+    for j, cf, name in zip((0, 3, 5), t.config[:3], ("cf1", "cf4", "cf6"), strict=True):
+        if not math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0):
+            out.append(f"{name} {cf} -> {math.floor(deg[j] / 90.0)}")
+    if len(t.config) > 3 and model is not None:
+        cfx = t.config[3]
+        bits = _cfx_bits(model, q)
+        if not 0 <= cfx < 8 or any(cfx >> k & 1 not in b for k, b in enumerate(bits)):
+            out.append(f"cfx {cfx} -> {sum(min(b) << k for k, b in enumerate(bits))}")
+    return out
+
+
+def _config_ok(t: ProgramTarget, q: Array, model: Model | None = None) -> bool:
+    """Whether joint values ``q`` (rad) meet the target's written configuration."""
+    return not _config_changes(t, q, model)
+
+
+def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: int) -> Array:
+    """``(n, dof)`` starting configurations within the limits that meet the configuration."""
+    lim = model.joint_limits
+    lo, hi = np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi)
+    q = rng.uniform(lo, hi, (n, model.dof))
+    if t.config is None or model.dof < 6:
+        return q
+    if t.style == "krl":
+        turn, status = t.config
+        for j in range(6):
+            if turn is not None:
+                negative = bool(turn >> j & 1)
+                q[:, j] = np.where(negative, -np.abs(q[:, j]), np.abs(q[:, j]))
+        if status is not None:
+            q[:, 4] = np.where(status >> 2 & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
+    else:
+        for j, cf in zip((0, 3, 5), t.config[:3], strict=True):
+            q[:, j] = np.radians(90.0 * (cf + rng.uniform(0.1, 0.9, n)))
+        if len(t.config) > 3:
+            q[:, 4] = np.where(t.config[3] & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
+    return np.clip(q, lim[:, 0], lim[:, 1])

@@ -1,0 +1,290 @@
+"""The program filter's steps: parse every file, build the robot for each target's tool and
+base, correct joint targets and then Cartesian targets in execution order, and write the
+numbers that moved (see :func:`robocal.compensate.programs.filter_program_text`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal import spatial
+from robocal.compensate.program_config import _config_changes, _config_ok, _config_starts
+from robocal.compensate.program_csv import _parse_csv
+from robocal.compensate.program_frames import _program_frames, _report_other_frames, _robot_models
+from robocal.compensate.program_krl import _parse_krl
+from robocal.compensate.program_rapid import _parse_rapid
+from robocal.compensate.program_syntax import (
+    Array,
+    Language,
+    ProgramError,
+    ProgramTarget,
+    Unsupported,
+    _decimals,
+)
+from robocal.compensate.program_urscript import _parse_urscript
+from robocal.compensate.program_values import _UNITS, _format, _Units, _write_values
+from robocal.identify.calibrate import CalibrationResult
+from robocal.model.chain import Model
+from robocal.units import unit_factor
+
+
+@dataclass
+class _Parsed:
+    """Everything read from a program's files."""
+
+    targets: list[ProgramTarget] = field(default_factory=list)
+    unsupported: list[Unsupported] = field(default_factory=list)
+    found_tool: Array | None = None
+    events: list[tuple[int, int, str]] = field(default_factory=list)  # (file, position, name) of motions
+    rapid_data: dict[str, dict] = field(default_factory=dict)
+
+
+@dataclass
+class _Corrections:
+    """The corrected values and figures per target, filled in by the correction steps."""
+
+    new_values: list[Array]
+    before: Array
+    after: Array
+    reach: NDArray[np.bool_]
+    kept: NDArray[np.bool_]
+    problems: list[str]
+    reported: set[int] = field(default_factory=set)  # targets whose configuration change is reported
+
+    @classmethod
+    def start(cls, values: list[Array], problems: list[str]) -> _Corrections:
+        n = len(values)
+        return cls(
+            new_values=list(values),
+            before=np.full(n, np.nan),
+            after=np.full(n, np.nan),
+            reach=np.ones(n, dtype=bool),
+            kept=np.ones(n, dtype=bool),
+            problems=problems,
+        )
+
+
+FramesOf = Callable[[int], tuple[Model, Model, Array]]
+
+
+def parse_program(texts: dict[str, str], language: Language, dof: int) -> _Parsed:
+    """Parse every file of a program; KRL motions to names declared elsewhere are unsupported."""
+    parsed = _Parsed()
+    krl_used: list[tuple[str, str, int, str]] = []
+    for f, (label, text) in enumerate(texts.items()):
+        uses: list[tuple[int, str]] = []
+        parsed.rapid_data[label] = {"tools": {}, "wobjs": {}, "moves": []}
+        if language == "urscript":
+            t, u, parsed.found_tool = _parse_urscript(text, dof, label, uses)
+        elif language == "krl":
+            t, u, used = _parse_krl(text, dof, label, uses)
+            krl_used += [(label, *x) for x in used]
+        elif language == "rapid":
+            t, u, parsed.found_tool = _parse_rapid(text, dof, label, uses, parsed.rapid_data[label])
+        elif language == "csv":
+            t, u = _parse_csv(text, dof, label), []
+        else:
+            raise ValueError(f"unknown language {language!r}")
+        parsed.targets += t
+        parsed.unsupported += u
+        parsed.events += [(f, pos, name) for pos, name in uses]
+    declared = {t.name.upper() for t in parsed.targets}
+    for label, name, line, statement in krl_used:
+        if name.upper() not in declared:
+            parsed.unsupported.append(
+                Unsupported(label, line, statement, f"{name} is declared outside the program")
+            )
+    return parsed
+
+
+def check_probe(
+    targets: list[ProgramTarget], calibrated: CalibrationResult | Model, probe: ArrayLike | None
+) -> None:
+    """Refuse Cartesian targets with a position-only calibration and no probe as built."""
+    if probe is None and getattr(calibrated, "measure", "") == "position":
+        pose = next((t for t in targets if t.kind == "pose"), None)
+        if pose is not None:
+            raise ProgramError(
+                f"{pose.file}: line {pose.line}: Cartesian target {pose.name} and a calibration that "
+                "measured positions only: give the probe as built with --probe x,y,z (m)"
+            )
+
+
+def program_units(language: Language, length_unit: str, angle_unit: str) -> _Units:
+    """The units of the program's numbers (CSV: as given; others: the language's)."""
+    if language != "csv":
+        return _UNITS[language]
+    lf = unit_factor(length_unit, "length", "length_unit")
+    af = unit_factor(angle_unit, "angle", "angle_unit")
+    return _Units(lf, af, 7 if lf == 1.0 else 4, 7 if af == 1.0 else 5)
+
+
+def frames_of_targets(
+    texts: dict[str, str],
+    language: Language,
+    parsed: _Parsed,
+    calibrated: CalibrationResult | Model,
+    nominal: Model | None,
+    tool: ArrayLike | None,
+    base: ArrayLike | None,
+    probe: ArrayLike | None,
+    config_dat: tuple[str, str] | None,
+    problems: list[str],
+) -> FramesOf:
+    """``frames_of(i)``: the (real, nominal) models with target ``i``'s tool, and its base."""
+    T_tool = np.asarray(tool, dtype=float) if tool is not None else parsed.found_tool
+    B = np.eye(4) if base is None else np.asarray(base, dtype=float)
+    frame_at = _program_frames(texts, language, parsed.rapid_data, config_dat, problems)
+    label_of = list(texts)
+    cache: dict[bytes, tuple[Model, Model]] = {}
+
+    def frames_of(i: int) -> tuple[Model, Model, Array]:
+        t = parsed.targets[i]
+        runs = [(label_of[f], pos) for f, pos, name in parsed.events if name.upper() == t.name.upper()]
+        T_i, B_i = frame_at(*(runs[0] if runs else (t.file, t.tokens[0].start)))
+        if tool is None or base is None:
+            _report_other_frames(t, runs, (T_i, B_i), frame_at, texts, problems)
+        T_i = T_tool if tool is not None or T_i is None else T_i
+        B_i = B if base is not None or B_i is None else B_i
+        key = b"" if T_i is None else np.asarray(T_i).tobytes()
+        if key not in cache:
+            cache[key] = _robot_models(calibrated, nominal, T_i, probe)[:2]
+        return (*cache[key], B_i)
+
+    return frames_of
+
+
+def correct_joint_targets(
+    values: list[Array], joint_idx: list[int], frames_of: FramesOf, effects, tol: float, c: _Corrections
+) -> None:
+    """Filter the joint targets, grouped by the tool of their motion."""
+    from robocal.compensate.compensation import filter_program
+
+    groups: dict[int, list[int]] = {}
+    for i in joint_idx:
+        groups.setdefault(id(frames_of(i)[0]), []).append(i)
+    for idx in groups.values():
+        real_g, nom_g, _ = frames_of(idx[0])
+        q = np.array([values[i] for i in idx])
+        res = filter_program(real_g, q, nom_g, joint_effects=effects, tol=tol, tol_angle=tol)
+        for k, i in enumerate(idx):
+            c.new_values[i] = res.q[k]
+        c.before[idx], c.after[idx] = res.error_before * 1e3, res.error_after * 1e3
+        c.reach[idx], c.kept[idx] = res.reachable, res.branch_kept
+
+
+def execution_order(texts: dict[str, str], parsed: _Parsed) -> list[int]:
+    """Target indices in execution order: motions to named targets where they run, literal
+    targets where they stand, declared targets never moved to at the end (file order)."""
+    targets, events = parsed.targets, parsed.events
+    files = {label: f for f, label in enumerate(texts)}
+    by_name = {t.name.upper(): i for i, t in enumerate(targets)}
+    used_names = {name.upper() for _, _, name in events}
+    order = sorted(
+        [(f, pos, by_name[name.upper()]) for f, pos, name in events if name.upper() in by_name]
+        + [
+            (files[t.file], t.tokens[0].start, i)
+            for i, t in enumerate(targets)
+            if t.name.upper() not in used_names
+        ]
+    )
+    return list(dict.fromkeys(i for _, _, i in order))
+
+
+def _solve_pose(t: ProgramTarget, real: Model, nom: Model, goal: Array, kind: str, q_prev: Array, rng, opts):
+    """Compensate one Cartesian target from ``q_prev``; when the nominal solution misses the
+    written configuration (KUKA S/T, ABB cf/cfx), starts within it choose the branch.
+    Returns the result and the change description (None: the configuration is met or not
+    written)."""
+    from robocal.compensate.compensation import compensate_targets
+
+    res = compensate_targets(real, goal, nom, kind=kind, q0=q_prev, **opts)
+    if res.nominal_reachable[0] and _config_ok(t, res.q_nominal[0], nom):
+        return res, None
+    for q_start in _config_starts(t, nom, rng, 24):
+        trial = compensate_targets(real, goal, nom, kind=kind, q0=q_start, restarts=0, **opts)
+        if trial.nominal_reachable[0] and _config_ok(t, trial.q_nominal[0], nom):
+            return trial, None
+    if t.config is not None and res.reachable[0]:
+        return res, ", ".join(_config_changes(t, res.q_nominal[0], nom))
+    return res, None
+
+
+def correct_pose_targets(
+    sequence: list[int],
+    targets: list[ProgramTarget],
+    values: list[Array],
+    q_start: Array,
+    frames_of: FramesOf,
+    effects,
+    tol: float,
+    c: _Corrections,
+) -> None:
+    """Compensate the Cartesian targets in execution order; each one's branch is the
+    configuration the robot comes from (the previous target)."""
+    q_prev = q_start
+    rng = np.random.default_rng(0)
+    opts = {"joint_effects": effects, "tol": tol, "tol_angle": tol}
+    for i in sequence:
+        t = targets[i]
+        if t.kind == "joint":
+            q_prev = values[i]
+            continue
+        real, nom, B_i = frames_of(i)
+        T = B_i @ values[i]
+        position_only = len(t.tokens) == 3
+        goal = T[:3, 3][None] if position_only else T[None]
+        res, changes = _solve_pose(
+            t, real, nom, goal, "position" if position_only else "pose", q_prev, rng, opts
+        )
+        config_kept = changes is None
+        if not config_kept:
+            c.problems.append(
+                f"{t.file}: line {t.line}: target {t.name}: reachable only in another "
+                f"configuration ({changes}); left as written"
+            )
+            c.reported.add(i)
+        q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
+        corrected = spatial.inverse(B_i) @ nom.fk(res.q)[0]
+        c.new_values[i] = corrected if res.reachable[0] and config_kept else values[i]
+        c.before[i], c.after[i] = res.error_before[0] * 1e3, res.error_after[0] * 1e3
+        c.reach[i], c.kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0]) and config_kept
+
+
+def rewrite_texts(
+    texts: dict[str, str], targets: list[ProgramTarget], units: _Units, types, c: _Corrections
+) -> tuple[dict[str, str], NDArray[np.bool_]]:
+    """The texts with the numbers that moved rewritten (file by file, last first), and which
+    targets changed; a number within its written resolution is kept as written."""
+    changed = np.zeros(len(targets), dtype=bool)
+    edits: dict[str, list[tuple[int, int, str]]] = {label: [] for label in texts}
+    for i, t in enumerate(targets):
+        if not c.reach[i]:
+            continue
+        for tok, (v, d) in zip(t.tokens, _write_values(t, units, c.new_values[i], types), strict=True):
+            if abs(v - tok.value) <= 0.5 * 10.0 ** (-max(_decimals(tok.text), d)):
+                continue  # below the written resolution: keep the token as written
+            edits[t.file].append((tok.start, tok.end, _format(v, tok.text, d)))
+            changed[i] = True
+    out = {}
+    for label, text in texts.items():
+        for s, e, new in sorted(edits[label], reverse=True):
+            text = text[:s] + new + text[e:]
+        out[label] = text
+    return out, changed
+
+
+def report_unreached(targets: list[ProgramTarget], c: _Corrections) -> None:
+    """A problem per target the calibrated robot cannot reach or reaches in another branch."""
+    for i, t in enumerate(targets):
+        if not c.reach[i]:
+            c.problems.append(
+                f"{t.file}: line {t.line}: target {t.name}: not reachable by the calibrated robot"
+            )
+        elif not c.kept[i] and i not in c.reported:
+            c.problems.append(
+                f"{t.file}: line {t.line}: target {t.name}: the correction changes the configuration"
+            )

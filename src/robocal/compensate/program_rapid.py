@@ -1,0 +1,186 @@
+"""ABB RAPID targets: ``robtarget``/``jointtarget`` literals, Moves, ``tooldata`` and ``wobjdata``."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+
+from robocal import spatial
+from robocal.compensate.program_syntax import (
+    Array,
+    ProgramError,
+    ProgramTarget,
+    Unsupported,
+    _line_of,
+    _matching,
+    _split_args,
+    _tokens,
+)
+
+# ---------------------------------------------------------------------- RAPID
+_RAPID_DECL = re.compile(
+    r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+(\w+)\s*:=\s*\[", re.I
+)
+_RAPID_MOVE = re.compile(r"^[ \t]*(MoveJ|MoveL|MoveC|MoveAbsJ)\b([^;]*);", re.M | re.I)
+
+
+def _rapid_groups(text: str, b: int, path: str) -> tuple[list[tuple[int, int]], int]:
+    """The top-level ``[...]`` groups inside the bracket at ``b``, and its end."""
+    end = _matching(text, b, "[", "]")
+    if end < 0:
+        raise ProgramError(f"{path}: line {_line_of(text, b)}: unclosed '['")
+    groups, k = [], b + 1
+    while k < end - 1:
+        if text[k] == "[":
+            e = _matching(text, k, "[", "]")
+            groups.append((k, e))
+            k = e
+        else:
+            k += 1
+    return groups, end
+
+
+def _rapid_target(text: str, b: int, kind: str, dof: int, name: str, path: str) -> tuple[ProgramTarget, int]:
+    groups, end = _rapid_groups(text, b, path)
+    line = _line_of(text, b)
+    if kind == "robtarget":
+        if len(groups) < 2:
+            raise ProgramError(f"{path}: line {line}: robtarget {name} needs [[x,y,z],[q1,q2,q3,q4],...]")
+        toks = _tokens(text, *groups[0]) + _tokens(text, *groups[1])
+        if len(toks) != 7:
+            raise ProgramError(f"{path}: line {line}: robtarget {name}: trans and rot need 3 + 4 numbers")
+        config = None
+        if len(groups) >= 3:
+            cf = [t.value for t in _tokens(text, *groups[2])]
+            if len(cf) == 4 and all(v == int(v) for v in cf):
+                config = tuple(int(v) for v in cf)
+        return ProgramTarget(name, line, "pose", path, tuple(toks), "rapid", config), end
+    if not groups:
+        raise ProgramError(f"{path}: line {line}: jointtarget {name} needs [[j1..j6],[eax..]]")
+    toks = _tokens(text, *groups[0])
+    if len(toks) < dof:
+        raise ProgramError(
+            f"{path}: line {line}: jointtarget {name}: {len(toks)} axes for a {dof}-joint robot"
+        )
+    return ProgramTarget(name, line, "joint", path, tuple(toks[:dof]), "rapid"), end
+
+
+def _rapid_pose(text: str, b: int, path: str, what: str) -> Array | None:
+    """The frame ``[[x,y,z],[q1,q2,q3,q4]]`` (mm, quaternion scalar first) at ``b`` in m."""
+    inner, _ = _rapid_groups(text, b, path)
+    if len(inner) < 2:
+        return None
+    p = [t.value for t in _tokens(text, *inner[0])]
+    qv = [t.value for t in _tokens(text, *inner[1])]
+    if len(p) != 3 or len(qv) != 4:
+        return None
+    norm = float(np.linalg.norm(qv))
+    if not (math.isfinite(norm) and norm > 1e-9 and all(map(math.isfinite, p))):
+        raise ProgramError(f"{path}: line {_line_of(text, b)}: {what} is not a frame")
+    R = spatial.quaternion_to_matrix(np.array(qv) / norm)
+    return spatial.homogeneous(R, np.array(p) * 1e-3)
+
+
+def _rapid_move_frames(text: str, m: re.Match) -> tuple[str | None, str | None]:
+    """The tool and work object (names, upper case) a Move statement names."""
+    args = [text[a:b].strip() for a, b in _split_args(text, m.start(2), m.end(2))]
+    positional = [a for a in args if a and not a.startswith("\\")]
+    k = {"movec": 4}.get(m.group(1).lower(), 3)
+    tool = None
+    if len(positional) > k:
+        word = re.match(r"\w+", positional[k])
+        tool = word.group() if word else None
+    wobj = re.search(r"\\WObj\s*:=\s*(\w+)", m.group(2), re.I)
+    return tool, (wobj.group(1) if wobj else None)
+
+
+def _parse_rapid(
+    text: str, dof: int, path: str, uses: list | None = None, data: dict | None = None
+) -> tuple[list[ProgramTarget], list[Unsupported], Array | None]:
+    targets, tool = _rapid_declarations(text, dof, path, data)
+    unsupported: list[Unsupported] = []
+    _rapid_moves(text, dof, path, uses, data, targets, unsupported)
+    targets.sort(key=lambda t: t.tokens[0].start)
+    return targets, unsupported, tool
+
+
+def _rapid_declarations(
+    text: str, dof: int, path: str, data: dict | None
+) -> tuple[list[ProgramTarget], Array | None]:
+    """The declared targets and the last tool; ``data`` collects tooldata and wobjdata frames."""
+    targets: list[ProgramTarget] = []
+    tool = None
+    for m in _RAPID_DECL.finditer(text):
+        kind, name = m.group(1).lower(), m.group(2)
+        b = m.end() - 1
+        if kind == "tooldata":
+            groups, _ = _rapid_groups(text, b, path)
+            if groups:
+                frame = _rapid_pose(text, groups[0][0], path, f"tooldata {name}: tframe")
+                if frame is not None:
+                    tool = frame
+                    if data is not None:
+                        data["tools"][name.upper()] = frame
+            continue
+        if kind == "wobjdata":
+            groups, _ = _rapid_groups(text, b, path)
+            frames = [
+                _rapid_pose(text, g[0], path, f"wobjdata {name}: {w}")
+                for g, w in zip(groups[:2], ("uframe", "oframe"), strict=False)
+            ]
+            if len(frames) != 2 or any(f is None for f in frames):
+                line = _line_of(text, b)
+                raise ProgramError(f"{path}: line {line}: wobjdata {name} needs uframe and oframe")
+            if data is not None:
+                data["wobjs"][name.upper()] = frames[0] @ frames[1]
+            continue
+        t, _ = _rapid_target(text, b, kind, dof, name, path)
+        targets.append(t)
+    return targets, tool
+
+
+def _rapid_moves(
+    text: str,
+    dof: int,
+    path: str,
+    uses: list | None,
+    data: dict | None,
+    targets: list[ProgramTarget],
+    unsupported: list[Unsupported],
+) -> None:
+    """The Move statements: literal targets into ``targets``, named ones into ``uses``."""
+    for m in _RAPID_MOVE.finditer(text):
+        cmd = m.group(1)
+        line = _line_of(text, m.start())
+        if data is not None:
+            data["moves"].append((m.start(), m.end(), line, *_rapid_move_frames(text, m)))
+        args = m.group(2)
+        offset = m.start(2)
+        k = 0
+        count = 0
+        wanted = 2 if cmd.lower() == "movec" else 1
+        kind = "jointtarget" if cmd.lower() == "moveabsj" else "robtarget"
+        while count < wanted:
+            arg_text = args[k:].lstrip()
+            pos = offset + len(args) - len(arg_text)
+            if arg_text.startswith("["):
+                t, end = _rapid_target(text, pos, kind, dof, f"line {line}", path)
+                targets.append(t)
+                k = end - offset
+            else:
+                first = re.match(r"[\\\w]+", arg_text)
+                if first is None or first.group().startswith("\\") or "(" in arg_text.split(",")[0]:
+                    unsupported.append(
+                        Unsupported(path, line, m.group(0).strip(), "target is not a name or literal")
+                    )
+                    break
+                k = len(args) - len(arg_text) + first.end()
+                if uses is not None:
+                    uses.append((pos, first.group()))
+            count += 1
+            comma = args.find(",", k)
+            if comma < 0:
+                break
+            k = comma + 1

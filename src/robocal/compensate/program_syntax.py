@@ -1,0 +1,152 @@
+"""The pieces every program language shares: targets, number tokens, the result, text helpers."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.units import ANGLE_UNITS
+
+Array = NDArray[np.float64]
+Language = Literal["urscript", "krl", "rapid", "csv"]
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_NUM_RE = re.compile(_NUM)
+DEG = ANGLE_UNITS["deg"]
+
+
+class ProgramError(ValueError):
+    """A program that cannot be read; the message names the file, the line and what."""
+
+
+@dataclass(frozen=True)
+class _Token:
+    start: int  # character offsets in the text
+    end: int
+    text: str
+
+    @property
+    def value(self) -> float:
+        return float(self.text)
+
+
+@dataclass(frozen=True)
+class ProgramTarget:
+    """One target of a program.
+
+    Attributes:
+        name: the target's name (variable, declaration) or ``"line N"``.
+        line: 1-based line in its file.
+        kind: ``"joint"`` or ``"pose"``.
+        file: which file of the program (``.src`` or ``.dat`` for KRL).
+        tokens: the number tokens, in the order the format gives them.
+        style: how the numbers map to SI (``"urscript"``, ``"krl"``, ``"rapid"``,
+            ``"csv"``).
+        config: the written configuration the IK must meet: KUKA ``(T, S)`` (turn: bit
+            ``j`` set when axis ``j + 1`` is negative; status: see :func:`_status`;
+            either ``None`` when not written), ABB ``(cf1, cf4, cf6, cfx)`` (the
+            quadrants ``floor(axis / 90°)`` of axes 1, 4, 6; ``cfx`` see :func:`_cfx`);
+            ``None`` when not given.
+    """
+
+    name: str
+    line: int
+    kind: Literal["joint", "pose"]
+    file: str
+    tokens: tuple[_Token, ...]
+    style: str
+    config: tuple[int | None, ...] | None = None
+
+
+@dataclass(frozen=True)
+class Unsupported:
+    """A motion statement outside the supported grammar, left untouched."""
+
+    file: str
+    line: int
+    text: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class FilteredProgram:
+    """A filtered program.
+
+    Attributes:
+        texts: ``{file label: corrected text}`` (one entry; two for KRL ``.src`` + ``.dat``).
+        targets: every target found, in file order.
+        q: ``(n,)`` list of corrected joint values per target (rad, m) — the joints the
+            robot will move to.
+        error_before_mm, error_after_mm: ``(n,)`` predicted position error of the real
+            robot (mm) unfiltered and filtered.
+        reachable, branch_kept: ``(n,)`` per target.
+        changed: ``(n,)`` whether the target's text was rewritten.
+        unsupported: motion statements left untouched.
+        language: the language.
+    """
+
+    texts: dict[str, str]
+    targets: tuple[ProgramTarget, ...]
+    error_before_mm: Array
+    error_after_mm: Array
+    reachable: NDArray[np.bool_]
+    branch_kept: NDArray[np.bool_]
+    changed: NDArray[np.bool_]
+    unsupported: tuple[Unsupported, ...] = ()
+    language: str = ""
+    problems: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(self.reachable & self.branch_kept))
+
+
+# ---------------------------------------------------------------------- helpers
+def _line_of(text: str, pos: int) -> int:
+    return text.count("\n", 0, pos) + 1
+
+
+def _tokens(text: str, start: int, end: int) -> list[_Token]:
+    return [_Token(start + m.start(), start + m.end(), m.group()) for m in _NUM_RE.finditer(text[start:end])]
+
+
+def _matching(text: str, i: int, open_: str, close: str) -> int:
+    """Index after the bracket closing the one at ``i``."""
+    depth = 0
+    for k in range(i, len(text)):
+        if text[k] == open_:
+            depth += 1
+        elif text[k] == close:
+            depth -= 1
+            if depth == 0:
+                return k + 1
+    return -1
+
+
+def _decimals(token: str) -> int:
+    mant = token.split("e")[0].split("E")[0]
+    return len(mant.split(".")[1]) if "." in mant else 0
+
+
+def _split_args(text: str, start: int, end: int) -> list[tuple[int, int]]:
+    out, depth, s = [], 0, start
+    for k in range(start, end):
+        c = text[k]
+        if c in "([":
+            depth += 1
+        elif c in ")]":
+            depth -= 1
+        elif c == "," and depth == 0:
+            out.append((s, k))
+            s = k + 1
+    out.append((s, end))
+    return out
+
+
+def _line_text(text: str, pos: int) -> str:
+    a = text.rfind("\n", 0, pos) + 1
+    b = text.find("\n", pos)
+    return text[a : b if b >= 0 else len(text)].strip()

@@ -1,0 +1,104 @@
+"""URScript targets: ``movej/movel/...`` literals and named ``p[...]``/``[...]`` values, ``set_tcp``."""
+
+from __future__ import annotations
+
+import math
+import re
+
+from robocal import spatial
+from robocal.compensate.program_syntax import (
+    _NUM,
+    Array,
+    ProgramError,
+    ProgramTarget,
+    Unsupported,
+    _line_of,
+    _line_text,
+    _matching,
+    _split_args,
+    _Token,
+    _tokens,
+)
+
+# ---------------------------------------------------------------------- URScript
+_UR_MOVE = re.compile(r"\b(movej|movel|movep|movec|servoj)\s*\(")
+_UR_ASSIGN = re.compile(r"^[ \t]*(?:(?:global|local)\s+)?([A-Za-z_]\w*)\s*=\s*(p?)\[", re.M)
+_UR_TCP = re.compile(r"\bset_tcp\s*\(\s*p\[")
+
+
+def _ur_literal(text: str, i: int, dof: int, what: str, path: str) -> tuple[str, list[_Token], int] | None:
+    """At ``i`` a ``p[...]`` (pose) or ``[...]`` (joint list): kind, tokens, end."""
+    pose = text[i] == "p"
+    b = i + 1 if pose else i
+    end = _matching(text, b, "[", "]")
+    if end < 0:
+        raise ProgramError(f"{path}: line {_line_of(text, i)}: unclosed '[' in {what}")
+    inner = text[b + 1 : end - 1]
+    parts = [s.strip() for s in inner.split(",")]
+    if not all(re.fullmatch(_NUM, s) for s in parts):
+        return None
+    toks = _tokens(text, b + 1, end - 1)
+    if pose and len(toks) != 6:
+        raise ProgramError(
+            f"{path}: line {_line_of(text, i)}: a pose p[...] needs 6 numbers, got {len(toks)}"
+        )
+    if not pose and len(toks) != dof:
+        return None
+    return ("pose" if pose else "joint"), toks, end
+
+
+def _parse_urscript(
+    text: str, dof: int, path: str, uses: list | None = None
+) -> tuple[list[ProgramTarget], list[Unsupported], Array | None]:
+    targets: list[ProgramTarget] = []
+    unsupported: list[Unsupported] = []
+    names: set[str] = set()
+    for m in _UR_ASSIGN.finditer(text):
+        i = m.end() - 1 - len(m.group(2))
+        lit = _ur_literal(text, i, dof, f"the assignment to {m.group(1)}", path)
+        if lit is not None:
+            kind, toks, _ = lit
+            names.add(m.group(1))
+            targets.append(ProgramTarget(m.group(1), _line_of(text, i), kind, path, tuple(toks), "urscript"))
+    for m in _UR_MOVE.finditer(text):
+        call_end = _matching(text, m.end() - 1, "(", ")")
+        line = _line_of(text, m.start())
+        if call_end < 0:
+            raise ProgramError(f"{path}: line {line}: unclosed '(' in {m.group(1)}")
+        args = _split_args(text, m.end(), call_end - 1)
+        n_targets = 2 if m.group(1) == "movec" else 1
+        for a_start, a_end in args[:n_targets]:
+            arg = text[a_start:a_end]
+            stripped = arg.strip()
+            first = a_start + len(arg) - len(arg.lstrip())
+            if stripped.startswith(("p[", "[")):
+                lit = _ur_literal(text, first, dof, m.group(1), path)
+                if lit is None:
+                    unsupported.append(
+                        Unsupported(
+                            path,
+                            line,
+                            _line_text(text, m.start()),
+                            f"target is not a pose p[...] nor {dof} joint values",
+                        )
+                    )
+                    continue
+                kind, toks, _ = lit
+                targets.append(ProgramTarget(f"line {line}", line, kind, path, tuple(toks), "urscript"))
+            elif re.fullmatch(r"[A-Za-z_]\w*", stripped) and stripped in names:
+                if uses is not None:  # corrected where it is assigned; executed here
+                    uses.append((a_start, stripped))
+            else:
+                reason = f"target {stripped!r} is not a literal nor a variable assigned a literal"
+                unsupported.append(Unsupported(path, line, _line_text(text, m.start()), reason))
+    tool = None
+    m = _UR_TCP.search(text)
+    if m:
+        lit = _ur_literal(text, m.end() - 2, dof, "set_tcp", path)
+        if lit is not None:
+            v = [t.value for t in lit[1]]
+            if not all(map(math.isfinite, v)):
+                raise ProgramError(f"{path}: line {_line_of(text, m.start())}: set_tcp: not finite numbers")
+            tool = spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
+    targets.sort(key=lambda t: t.tokens[0].start)
+    return targets, unsupported, tool

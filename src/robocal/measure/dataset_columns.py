@@ -1,0 +1,268 @@
+"""Which columns of a measurement file hold what: ``columns=`` renames, the ``orientation=``
+spec, and the reader's column resolution (joints, position, sigma, orientation, ...)."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from robocal import csvfile
+from robocal.measure.measurements import (
+    _ANGLES,
+    _KNOWN,
+    _POSITION,
+    _QUATERNION,
+    _SIGMA,
+)
+from robocal.units import unit_factor
+
+
+@dataclass(frozen=True)
+class _Orientation:
+    kind: Literal["auto", "none", "quaternion", "rotvec", "euler"]
+    seq: str = ""
+    unit: str | None = None
+
+
+def _parse_orientation(spec: str) -> _Orientation:
+    text = str(spec).strip()
+    low = text.lower()
+    if low in ("auto", "none", "rotvec"):
+        return _Orientation(low)  # type: ignore[arg-type]
+    if low in ("quaternion", "quat"):
+        return _Orientation("quaternion")
+    if low.startswith("euler"):
+        parts = text.split(":")
+        if len(parts) not in (2, 3) or parts[0].lower() != "euler":
+            raise ValueError(f"orientation={spec!r}: expected 'euler:SEQ' or 'euler:SEQ:deg'")
+        seq = parts[1]
+        if not re.fullmatch(r"[xyz]{3}|[XYZ]{3}", seq) or seq[0] == seq[1] or seq[1] == seq[2]:
+            raise ValueError(
+                f"orientation={spec!r}: Euler sequence {seq!r} must be three axes, all upper case "
+                "(intrinsic, e.g. 'XYZ') or all lower case (extrinsic, e.g. 'xyz'), no axis twice in a row"
+            )
+        unit = parts[2].lower() if len(parts) == 3 else None
+        if unit is not None:
+            unit_factor(unit, "angle", f"orientation={spec!r}")
+        return _Orientation("euler", seq, unit)
+    raise ValueError(
+        f"orientation={spec!r}: expected 'auto', 'none', 'quaternion', 'rotvec', 'euler:SEQ' "
+        "or 'euler:SEQ:UNIT'"
+    )
+
+
+def _parse_columns(columns: Mapping[str, str] | Sequence[str] | str | None) -> dict[str, str]:
+    """Renames robocal name -> file column from a mapping, ``["q1=a", ...]`` or ``"q1=a,q2=b"``."""
+    if columns is None:
+        return {}
+    if isinstance(columns, Mapping):
+        return {str(k).strip(): str(v).strip() for k, v in columns.items()}
+    items = columns.split(",") if isinstance(columns, str) else list(columns)
+    out = {}
+    for item in items:
+        if not str(item).strip():
+            continue
+        if "=" not in item:
+            raise ValueError(f"column rename {item!r} must look like 'q1=shoulder_pan_joint'")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+_short = csvfile.short
+
+
+#: Problems that make a row incomplete: with ``incomplete="drop"`` the row is left out.
+INCOMPLETE_CODES = frozenset({"empty", "not-a-number", "not-finite", "ragged"})
+IncompleteMode = Literal["error", "drop"]
+
+#: Problems of one kind listed at most (one more line counts the rest): a file with a
+#: million bad cells must not cost a million messages' memory.
+MAX_LISTED = 1000
+
+#: Names a separator may be given by (on a command line a tab is hard to type).
+SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "semicolon": ";", "comma": ","}
+
+
+_JOINT_LIKE = re.compile(r"q(\d+)$")
+
+
+class _ColumnResolver:
+    """The reader's column resolution: which header columns hold the joints, the position,
+    sigma, orientation, temperature, set and extra values (``columns=`` renames applied).
+    Mixed into :class:`robocal.measure.dataset_reader._Reader`, whose header and problem
+    list it uses."""
+
+    def _header_text(self, limit: int = 20) -> str:
+        shown = ", ".join(self.header[:limit])
+        return shown + (f", ... ({len(self.header)} columns)" if len(self.header) > limit else "")
+
+    def _col(self, name: str) -> str:
+        return self.rename.get(name, name)
+
+    def _has(self, name: str) -> bool:
+        return self._col(name) in self.where
+
+    def _resolve_columns(self) -> dict | None:
+        self._check_renames()
+        if self.model is not None:
+            joints, dof = self._model_joints(), self.model.dof
+        else:
+            joints, dof = self._counted_joints()
+        self._check_extra_joints(dof)
+        types = self.model.joint_types if self.model is not None else ("revolute",) * len(joints)
+        joint_scale = np.array([self.A if t == "revolute" else self.L for t in types[: len(joints)]])
+        position = self._group(_POSITION, "a position")
+        sigma = self._group(_SIGMA, "a per-row standard deviation")
+        ori_cols, kind = self._orientation_columns()
+        if ori_cols and not position:
+            self.error(
+                "columns",
+                "orientation columns without position columns x, y, z",
+                self.header_line,
+                ori_cols[0],
+            )
+        for name in self.extra_names:
+            if name not in self.where:
+                self.error(
+                    "columns",
+                    f"column {name!r} (asked for in extra=) is not in the header",
+                    self.header_line,
+                    name,
+                )
+        if not self.ok:
+            return None
+        return {
+            "joints": joints,
+            "joint_scale": joint_scale,
+            "position": position,
+            "sigma": sigma,
+            "orientation": ori_cols,
+            "orientation_kind": kind,
+            "temperature": [self._col("temperature")] if self._has("temperature") else [],
+            "set": self._col("set") if self._has("set") else None,
+            "extra": [n for n in self.extra_names if n in self.where],
+        }
+
+    def _check_renames(self) -> None:
+        """``columns=``: every key a robocal column name (else ValueError), every target in the header."""
+        model = self.model
+        known_keys = set(_KNOWN) | set(model.joint_names if model else ())
+        for key, target in self.rename.items():
+            if not (key in known_keys or _JOINT_LIKE.match(key)):
+                raise ValueError(
+                    f"columns: {key!r} is not a robocal column name (q1.., x y z, qw qx qy qz, "
+                    f"rx ry rz, sx sy sz, set, temperature{', model joint names' if model else ''})"
+                )
+            if target not in self.where:
+                self.error(
+                    "columns",
+                    f"column {target!r} (given for {key!r} in columns=) is not in the header; header: "
+                    f"{self._header_text()}",
+                    self.header_line,
+                    target,
+                )
+
+    def _model_joints(self) -> list[str]:
+        """The model's joint columns (``q<j>`` or the joint's name, renames first)."""
+        model = self.model
+        joints: list[str] = []
+        missing = []
+        for j, jname in enumerate(model.joint_names):
+            candidates = [self.rename.get(f"q{j + 1}"), self.rename.get(jname), f"q{j + 1}", jname]
+            found = next((c for c in candidates if c is not None and c in self.where), None)
+            if found is None:
+                missing.append(f"q{j + 1} ({jname})")
+            else:
+                joints.append(found)
+        if missing:
+            self.error(
+                "missing-joint",
+                f"missing joint column(s) {', '.join(missing)}: model {model.name!r} has "
+                f"{model.dof} joints ({', '.join(model.joint_names)}); rename with e.g. "
+                f"columns={{'q1': '<file column>'}}; header is {self._header_text()}",
+                self.header_line,
+            )
+        return joints
+
+    def _counted_joints(self) -> tuple[list[str], int]:
+        """Without a model: ``q1..q<dof>`` (``dof`` given, else counted while present)."""
+        hl = self.header_line
+        dof = self.dof
+        if dof is None:
+            dof = 0
+            while self._has(f"q{dof + 1}"):
+                dof += 1
+        missing = [f"q{j + 1}" for j in range(dof) if not self._has(f"q{j + 1}")]
+        if missing:
+            self.error(
+                "missing-joint", f"missing joint column(s) {', '.join(missing)} (expected {dof} joints)", hl
+            )
+        joints = [self._col(f"q{j + 1}") for j in range(dof) if self._has(f"q{j + 1}")]
+        if dof == 0:
+            self.error(
+                "missing-joint",
+                "no joint columns: expected q1, q2, ... (or renames such as "
+                f"columns={{'q1': 'shoulder_pan_joint'}}); header is {self._header_text()}",
+                hl,
+            )
+        return joints, dof
+
+    def _check_extra_joints(self, dof: int) -> None:
+        """Joint-like columns beyond the model's or the counted joints."""
+        model, hl = self.model, self.header_line
+        if model is not None:
+            expected = f"model {model.name!r} has {dof} joints ({', '.join(model.joint_names)})"
+        elif self.dof is not None:
+            expected = f"dof={dof} joints expected"
+        else:
+            expected = f"joints are read as q1..q{dof} while present, and q{dof + 1} is missing"
+        for name in self.header:
+            m = _JOINT_LIKE.match(name)
+            if m and int(m.group(1)) > dof and name not in self.rename.values():
+                self.error("extra-joint", f"extra joint column {name!r}: {expected}", hl, name)
+        for key in self.rename:
+            m = _JOINT_LIKE.match(key)
+            if m and int(m.group(1)) > dof:
+                self.error(
+                    "extra-joint",
+                    f"extra joint column {self.rename[key]!r} (given for {key!r}): {expected}",
+                    hl,
+                    self.rename[key],
+                )
+
+    def _group(self, names: Sequence[str], what: str, required: bool = False) -> list[str]:
+        """The columns of a group that is all present or all absent (``required``: present)."""
+        present = [n for n in names if self._has(n)]
+        if (present and len(present) < len(names)) or (required and not present):
+            absent = [self._col(n) for n in names if not self._has(n)]
+            listed = ", ".join(map(self._col, names))
+            self.error(
+                "columns",
+                f"{what} needs columns {listed}; missing {', '.join(absent)}",
+                self.header_line,
+                absent[0],
+            )
+            return []
+        return [self._col(n) for n in names] if present else []
+
+    def _orientation_columns(self) -> tuple[list[str], str]:
+        """The orientation columns and how to read them (``orientation=``)."""
+        ori = self.orientation
+        if ori.kind == "auto":
+            if any(self._has(n) for n in _QUATERNION):
+                return self._group(_QUATERNION, "a quaternion"), "quaternion"
+            if any(self._has(n) for n in _ANGLES):
+                return self._group(_ANGLES, "a rotation vector"), "rotvec"
+        elif ori.kind == "quaternion":
+            return self._group(_QUATERNION, "orientation='quaternion'", True), "quaternion"
+        elif ori.kind == "rotvec":
+            return self._group(_ANGLES, "orientation='rotvec'", True), "rotvec"
+        elif ori.kind == "euler":
+            cols = self._group(_ANGLES, f"orientation='euler:{ori.seq}'", True)
+            return cols, f"euler:{ori.seq}:{ori.unit or self.angle_unit}"
+        return [], ""
