@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import difflib
 import os
-import stat
 from functools import cache
 from importlib import resources
 from pathlib import Path
@@ -59,7 +58,9 @@ def find_model(name_or_path: str | os.PathLike[str]) -> Model:
             return robot(text)
         except KeyError as err:
             raise ModelFileError(str(err.args[0])) from None
-    problem = _file_problem(path)
+    from robocal.console import input_problem  # the one check of an input path
+
+    problem = input_problem(path, "model file")
     if problem is not None:
         raise ModelFileError(f"model file {problem}")
     if is_geometry_file(path):
@@ -75,22 +76,6 @@ def is_model_path(name_or_path: str | os.PathLike[str]) -> bool:
     an existing path) rather than as a catalog name."""
     path = Path(name_or_path)
     return path.suffix in (".yaml", ".yml") or path.exists()
-
-
-def _file_problem(path: Path) -> str | None:
-    """Why ``path`` cannot be read as a model file, or None (a FIFO or a device is named as
-    such: reading one would never end)."""
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        return f"{path} does not exist"
-    except OSError as err:
-        return f"{path}: {err.strerror or err}"
-    if stat.S_ISDIR(mode):
-        return f"{path} is a directory; give a model file"
-    if not stat.S_ISREG(mode):
-        return f"{path} is not a regular file (a pipe, socket or device): save it to a file and give its path"
-    return None
 
 
 def is_geometry_file(path: str | os.PathLike[str]) -> bool:
