@@ -10,9 +10,8 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
-from robocal.demo import GravityCompliance, complete_model
 from robocal.evaluate.report import before_validation, build_report, start_chain, write_report
-from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
+from robocal.measure import random_poses, simulate
 from tests.browser import chromium
 
 runner = CliRunner()
@@ -30,18 +29,9 @@ SECTIONS = (
 
 
 @pytest.fixture(scope="module")
-def calibration():
-    model = complete_model("ur10")
-    true = draw_true_model(model, length=1e-3, angle=np.radians(0.1), seed=4)
-    robot = VirtualRobot(
-        model,
-        true,
-        LaserTracker(p_tool_target=np.array([0, 0, 0.1])),
-        GravityCompliance({"shoulder_lift": 4e-6, "elbow": 6e-6}),
-    )
-    train = simulate(robot, random_poses(model, 40, seed=1), seed=1)
+def calibration(compliant_ur10):
+    model, robot, train, result = compliant_ur10
     test = simulate(robot, random_poses(model, 60, seed=2), seed=2)
-    result = rc.calibrate(model, train, tool_guess=[0, 0, 0.1], compliance=["shoulder_lift", "elbow"])
     return result, train, test
 
 

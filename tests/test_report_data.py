@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.demo import GravityCompliance, complete_model
 from robocal.evaluate.report import (
     ReportData,
     ReportOptions,
@@ -30,24 +29,15 @@ from robocal.evaluate.report import (
 )
 from robocal.evaluate.report import figures as fg
 from robocal.identify.result import CalibrationWarning
-from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
+from robocal.measure import random_poses, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def twin():
-    model = complete_model("ur10")
-    true = draw_true_model(model, length=1e-3, angle=np.radians(0.1), seed=4)
-    robot = VirtualRobot(
-        model,
-        true,
-        LaserTracker(p_tool_target=np.array([0, 0, 0.1])),
-        GravityCompliance({"shoulder_lift": 4e-6, "elbow": 6e-6}),
-    )
-    train = simulate(robot, random_poses(model, 40, seed=1), seed=1)
+def twin(compliant_ur10):
+    model, robot, train, result = compliant_ur10
     test = simulate(robot, random_poses(model, 30, seed=2), seed=2)
-    result = rc.calibrate(model, train, tool_guess=[0, 0, 0.1], compliance=["shoulder_lift", "elbow"])
     geometric = rc.calibrate(model, train, tool_guess=[0, 0, 0.1])
     return result, geometric, train, test
 
