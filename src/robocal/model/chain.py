@@ -327,9 +327,7 @@ class Model:
     ) -> tuple[Array, Array, Array]:
         """:func:`robocal.model.chain_compiled.kernel_evaluate` for parameter ``values``."""
         data = self._kernel_data(kernels, values)
-        return kernel_evaluate(
-            kernels, self._plan, data, q, d, steps, rows, joint_columns, perturbation_columns
-        )
+        return kernel_evaluate(self._plan, data, q, d, steps, rows, joint_columns, perturbation_columns)
 
     def _columns(
         self,

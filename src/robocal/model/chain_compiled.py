@@ -72,7 +72,6 @@ def kernel_forward(
 
 
 def kernel_evaluate(
-    kernels,
     plan: Plan,
     data: tuple[Array, Array, Array],
     q: Array,
@@ -84,7 +83,7 @@ def kernel_evaluate(
 ) -> tuple[Array, Array, Array]:
     """:func:`robocal.model.kernels_evaluate.evaluate`: ``T (n, 4, 4)``, the columns of
     ``steps`` ``(n * rows, m)`` and the joint/perturbation columns ``(n * rows, dof, 3)``."""
-    from robocal.model.kernels_evaluate import evaluate as fused  # numba: loaded with ``kernels``
+    from robocal.model.kernels_evaluate import evaluate as fused  # numba: loaded by load_kernels
 
     seg, local, offsets = data
     pert, has_pert = _perturbations(d, len(plan.joint_steps))
@@ -125,7 +124,7 @@ def evaluate_compiled(
     if not jacobian and not joint_columns and not perturbation_columns:
         return kernel_forward(kernels, plan, data, q, d, keep_anchors=False)[0], None
     T, J, P = kernel_evaluate(
-        kernels, plan, data, q, d, free, 6 if rows == "pose" else 3, joint_columns, perturbation_columns
+        plan, data, q, d, free, 6 if rows == "pose" else 3, joint_columns, perturbation_columns
     )
     out: tuple[Array, ...] = (T, J if jacobian else None)
     if joint_columns:
