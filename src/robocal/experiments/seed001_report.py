@@ -298,11 +298,6 @@ def _plot(numbers: dict[str, Any]) -> bytes:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize="small")
     fig.tight_layout()
-    import io
+    from robocal.outdir import figure_png
 
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=100)
-    finally:
-        plt.close(fig)
-    return buf.getvalue()
+    return figure_png(fig, dpi=100)

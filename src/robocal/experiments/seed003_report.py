@@ -285,19 +285,13 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     ax.set_title("Katana 450, thesis circle: tracking error after calibration and eq. 5.22")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    import io
+    from robocal.outdir import figure_png, write_together
 
-    from robocal.outdir import write_together
-
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=110)
-    finally:
-        plt.close(fig)
+    png = figure_png(fig, dpi=110)
     write_together(  # the numbers, their report and their plot: all of this run or none
         {
             out / "seed003.json": (strict_json(numbers, indent=2, default=str) + "\n").encode("utf-8"),
             out / "seed003.md": _markdown(numbers).encode("utf-8"),
-            out / "seed003_circle.png": buf.getvalue(),
+            out / "seed003_circle.png": png,
         }
     )

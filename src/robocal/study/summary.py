@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import io
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -13,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.model.files import strict_json
-from robocal.outdir import new_run_id, write_together
+from robocal.outdir import figure_png, new_run_id, write_together
 from robocal.study.config import StudyConfig, StudyError
 
 Array = NDArray[np.float64]
@@ -122,10 +121,7 @@ def _summary_png(config: StudyConfig, rows: Iterable[Mapping[str, str]], run_id:
     ax.set_title(f"{config.name}: {config.robots} virtual robots ({robot})", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Description": f"robocal run: {run_id}"})
-    plt.close(fig)
-    return buf.getvalue()
+    return figure_png(fig, run_id=run_id)
 
 
 def write_summary(
