@@ -58,7 +58,6 @@ import time
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from robocal.run_ids import (  # re-exported: the run ids of the files a transaction writes
     FolderMixedError,
@@ -79,7 +78,6 @@ __all__ = [
     "atomic_write_text",
     "check_consistent",
     "check_not_busy",
-    "figure_png",
     "file_set",
     "is_run_id",
     "new_run_id",
@@ -500,19 +498,3 @@ def write_together(files: dict[Path, bytes], *, wait_s: float = 1.0) -> None:
         for path, tmp in zip(paths, temporaries, strict=True):
             atomic_write_bytes(tmp, files[path])
 
-
-def figure_png(fig: Any, *, dpi: float | None = None, run_id: str | None = None) -> bytes:
-    """A matplotlib figure as PNG bytes (for :func:`write_together` or
-    :func:`atomic_write_bytes`), stamped with ``run_id`` (:func:`read_run_id` reads it back);
-    the figure is closed."""
-    import io
-
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    try:
-        metadata = None if run_id is None else {"Description": f"robocal run: {run_id}"}
-        fig.savefig(buf, format="png", dpi=dpi, metadata=metadata)
-    finally:
-        plt.close(fig)
-    return buf.getvalue()

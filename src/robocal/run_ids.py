@@ -13,10 +13,12 @@ import re
 import secrets
 from collections.abc import Collection
 from pathlib import Path
+from typing import Any
 
 __all__ = [
     "FolderMixedError",
     "check_consistent",
+    "figure_png",
     "is_run_id",
     "new_run_id",
     "read_run_id",
@@ -135,3 +137,20 @@ def check_consistent(directory: Path, files: Collection[str], anchor: str = "res
             f"{directory}: the files come from different runs: {anchor} is run {want or 'none'} but "
             f"{', '.join(bad)}; calibrate again into this folder (--force) or a new one"
         )
+
+
+def figure_png(fig: Any, *, dpi: float | None = None, run_id: str | None = None) -> bytes:
+    """A matplotlib figure as PNG bytes (for :func:`robocal.outdir.write_together` or
+    :func:`~robocal.outdir.atomic_write_bytes`), stamped with ``run_id`` (read back by
+    :func:`read_run_id`); the figure is closed."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    try:
+        metadata = None if run_id is None else {"Description": f"robocal run: {run_id}"}
+        fig.savefig(buf, format="png", dpi=dpi, metadata=metadata)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()

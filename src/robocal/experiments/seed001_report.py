@@ -298,6 +298,6 @@ def _plot(numbers: dict[str, Any]) -> bytes:
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize="small")
     fig.tight_layout()
-    from robocal.outdir import figure_png
+    from robocal.run_ids import figure_png
 
     return figure_png(fig, dpi=100)

@@ -285,7 +285,8 @@ def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> No
     ax.set_title("Katana 450, thesis circle: tracking error after calibration and eq. 5.22")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    from robocal.outdir import figure_png, write_together
+    from robocal.outdir import write_together
+    from robocal.run_ids import figure_png
 
     png = figure_png(fig, dpi=110)
     write_together(  # the numbers, their report and their plot: all of this run or none
