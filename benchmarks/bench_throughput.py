@@ -32,6 +32,13 @@ kernels at warm-up and calibrate one robot before the clock starts (reported as 
 Each worker also holds its next task while computing one (``worker-saturation`` 2; the
 default hands a single-threaded worker its next task only after a scheduler round trip).
 The study's prepared model (23 KB pickled) and BLAS threads (one per worker) were not it.
+What kept two workers at 1.74–1.78x after that: the main process (client and scheduler)
+took ~7 % of the two cores and Dask's housekeeping woke every process (the event-loop
+watchdog every 20 ms, the system monitor every 500 ms, the memory monitor every 100 ms);
+robocal's local cluster now runs them every 0.5–2 s and turns work stealing off (equal
+tasks), and the tasks format their own CSV rows: the workers' CPU per robot fell ~4 %,
+the main process's by a third, 1.76x -> 1.85x for 800 robots.  Shrinking the last tasks
+(guided scheduling) was tried and cost more than the idle tail it saved.
 
 Run: ``python benchmarks/bench_throughput.py [--robots 400] [--rounds 3] [--model built|dh|both]
 [--md README.md]`` (about two minutes for both models; ``--md`` writes the README's

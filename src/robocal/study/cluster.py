@@ -66,6 +66,14 @@ def local_cluster(workers: int | None = None):
         # single-threaded worker its next task only when it asks: a scheduler round trip
         # between tasks); the tasks are few and of equal size
         "distributed.scheduler.worker-saturation": 2.0,
+        # housekeeping that wakes every process on two cores shared by the workers, the
+        # scheduler and this client: the event-loop watchdog (every 20 ms), the system
+        # monitor (psutil, every 500 ms) and the memory monitor (every 100 ms); less often
+        "distributed.admin.tick.interval": "500ms",
+        "distributed.admin.system-monitor.interval": "2s",
+        "distributed.worker.memory.monitor-interval": "1s",
+        # equal tasks, one per worker core at a time: nothing to steal
+        "distributed.scheduler.work-stealing": False,
     }
     try:
         with dask.config.set(settings):

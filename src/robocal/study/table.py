@@ -55,19 +55,26 @@ class _Table:
             atomic_write_text(self.path, "".join(good))
 
     def append(self, rows: Iterable[Mapping[str, Any]]) -> None:
+        self.append_cells(table_cells(rows, self.columns))
+
+    def append_cells(self, cells: Sequence[Sequence[str]]) -> None:
+        """Append rows already formatted by :func:`table_cells` for these columns."""
         buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        new = []
-        for row in rows:
-            cells = [_cell(row.get(c, "")) for c in self.columns]
-            writer.writerow(cells)
-            new.append(dict(zip(self.columns, cells, strict=True)))
+        csv.writer(buf, lineterminator="\n").writerows(cells)
         with open(self.path, "a", encoding="utf-8") as fh:
             fh.write(buf.getvalue())
             fh.flush()
             os.fsync(fh.fileno())
-        for row in new:
+        for row_cells in cells:
+            row = dict(zip(self.columns, row_cells, strict=True))
             self.rows[csv_untext(row[self.key])] = row
+
+
+def table_cells(rows: Iterable[Mapping[str, Any]], columns: Sequence[str]) -> list[list[str]]:
+    """The rows as a table's text cells in ``columns`` order (a missing value is empty);
+    a task formats its own rows, on its worker, so the process writing the table does
+    little more than write."""
+    return [[_cell(row.get(c, "")) for c in columns] for row in rows]
 
 
 def _cell(value: Any) -> str:
