@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from robocal.identify.guards import CalibrationGuardError, check_solution, fit_to_noise
 from robocal.identify.problem import Problem
 from robocal.identify.result import CalibrationResult, CalibrationWarning
+from robocal.identify.stages import median
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
 
@@ -51,10 +52,12 @@ def outlier_poses(errors: Array, sigma: Array | None, factor: float = 5.0) -> li
     ``factor`` times the median residual (and ``factor`` times the 3D noise when the data
     states it): a residual of a well fitted pose is rarely over 3x the median (3D
     Gaussian), so these are measurement glitches or poses the model cannot reach."""
-    limit = factor * float(np.median(errors))
+    if len(errors) < 10:
+        return []
+    limit = factor * median(errors)
     if sigma is not None:
         limit = max(limit, factor * float(np.sqrt(np.mean(np.sum(sigma**2, axis=1)))))
-    return [int(i) for i in np.flatnonzero(errors > limit)] if len(errors) >= 10 else []
+    return [int(i) for i in np.flatnonzero(errors > limit)]
 
 
 def _distance_objective(problem: Problem, x0: Array, x: Array) -> dict[str, Any]:

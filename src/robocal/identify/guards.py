@@ -106,6 +106,18 @@ def _transform_key(x: Any) -> Any:
     return (a.shape, a.tobytes())
 
 
+def _distinct_rows(q: Array) -> Array:
+    """The distinct rows of ``q`` ``(n, dof)``, sorted (``np.unique(q, axis=0)``, whose
+    structured-array path costs ~100 µs at 100 poses; a lexicographic sort ~10 µs)."""
+    if len(q) < 2:
+        return np.array(q)
+    ordered = q[np.lexsort(q.T[::-1])]
+    new = np.empty(len(q), dtype=bool)
+    new[0] = True
+    np.any(ordered[1:] != ordered[:-1], axis=1, out=new[1:])
+    return ordered[new]
+
+
 _GENERIC: dict[Any, tuple[frozenset[str], float]] = {}  # the last few _generic answers
 
 
@@ -235,7 +247,7 @@ def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes
     """
     rows = 3 if measure == "position" else 6
     generic, length = _generic(model, measure, frame, tool, tool_guess, reference_poses, seed)
-    distinct = np.unique(data.q, axis=0)
+    distinct = _distinct_rows(data.q)
     if rows * len(distinct) < len(generic):
         raise CalibrationGuardError(
             f"{len(distinct)} distinct poses give {rows * len(distinct)} equations for the {len(generic)} "

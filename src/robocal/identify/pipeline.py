@@ -127,7 +127,7 @@ def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
     """The chosen method's settings (each method takes only its own)."""
     o, method = run.options, run.method
     solver: dict[str, Any] = {"max_iterations": o.setup.max_iterations}
-    if method == "lm":
+    if method == "lm" and o.loss.loss != "linear":  # where a robust loss starts to down-weight
         f_scale = o.loss.f_scale * float(np.median(run.problem.weights.reshape(run.data.n, -1)[:, :3]))
         solver |= {"loss": o.loss.loss, "f_scale": f_scale}
     elif method in ("pinv", "influence"):
@@ -234,22 +234,24 @@ def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     """The calibrated measurement chain, the calibrated robot (tool appended, the given
     model's free flags) and ``T_device_base`` (4x4)."""
     chain = run.problem.chain
-    values = run.problem.values(run.x)
-    calibrated_chain = chain.with_values(dict(zip(chain.names, values, strict=True)))
+    x_chain = run.x[: len(run.x) - run.problem.n_effects]  # only the unknowns changed
+    calibrated_chain = chain.with_values(dict(zip(chain.free_names, x_chain.tolist(), strict=True)))
     frame_names = set(chain.names_with_role(Role.DEVICE))
     frame_steps_ = calibrated_chain.steps[: len(frame_names)]  # the frame steps come first
     T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
     free_before = {s.name: s.free for s in run.given_model.steps}
     robot_steps = tuple(
-        s if s.free == free_before.get(s.name, True) else dataclasses.replace(s, free=not s.free)
+        s if s.free == free_before.get(s.name, True) else s._with_free(not s.free)
         for s in calibrated_chain.steps
         if s.name not in frame_names
     )
     given = run.given_model
-    calibrated = dataclasses.replace(given, steps=robot_steps, notes=(given.notes + " calibrated").strip())
+    notes = (given.notes + " calibrated").strip()
     if run.plan.mode == "none":
-        calibrated = dataclasses.replace(calibrated, joint_effects=())
-    elif run.plan.kinds:
+        calibrated = dataclasses.replace(given, steps=robot_steps, notes=notes, joint_effects=())
+    else:
+        calibrated = dataclasses.replace(given, steps=robot_steps, notes=notes)
+    if run.plan.mode != "none" and run.plan.kinds:
         from robocal.model.joints import effects_from_values
 
         estimated = dict(zip(run.problem.free_names, run.x, strict=True))
@@ -282,7 +284,7 @@ def _assemble(run: Run, t_start: float) -> CalibrationResult:
         iterations=run.fit.iterations, seconds=time.perf_counter() - t_start, measurement_chain=chain,
         compliance={
             effect[1]: float(v)
-            for name, v in zip(names, x, strict=True)
+            for name, v in zip(problem.effect_names, x[len(x) - problem.n_effects :], strict=True)
             if (effect := effect_of(name)) is not None and effect[0] == "compliance"
         },
         gravity=effects.gravity, payload=effects.payload, residuals=r_plain,

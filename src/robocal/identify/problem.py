@@ -24,6 +24,7 @@ coefficients are unknowns (``effect_basis``: clearance, backlash, compliance...,
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -154,7 +155,7 @@ class Problem:
     def free_names(self) -> tuple[str, ...]:
         return self.chain.free_names + tuple(self.effect_names)
 
-    @property
+    @functools.cached_property
     def free_scale(self) -> Array:
         """Tool displacement (m) per unit of each unknown: 1 for lengths, the robot's size
         for angles, size times the basis' largest value for effect coefficients."""
@@ -196,9 +197,13 @@ class Problem:
 
     def values(self, x: Array) -> Array:
         """All chain parameter values for the unknowns ``x``."""
-        v = self.chain.values
+        v = self._chain_values.copy()
         v[self.chain.free_mask] = x[: len(x) - self.n_effects]
         return v
+
+    @functools.cached_property
+    def _chain_values(self) -> Array:
+        return self.chain.values
 
     def perturbations(self, x: Array) -> Array | None:
         """Joint perturbations ``(n, dof, 3)``: the known ones plus the effect

@@ -33,6 +33,7 @@ from robocal.model.chain import Role
 __all__ = [
     "identifiable_set",
     "initial_frames_and_tools",
+    "median",
     "normal_inverse",
     "poorly_identifiable",
     "preference_order",
@@ -163,21 +164,54 @@ def tool_displacement_scale(J_position: Array) -> Array:
     """``(..., p)`` the largest displacement (m) of the measured point per unit of each
     unknown over the poses, from the unweighted position rows of the Jacobian
     ``(..., n, 3, p)`` (:meth:`robocal.identify.problem.Problem.effect_scale`)."""
-    return np.sqrt(np.max(np.sum(J_position**2, axis=-2), axis=-2))
+    return np.sqrt(np.einsum("...nrp,...nrp->...np", J_position, J_position).max(axis=-2))
 
 
 # ---------------------------------------------------------------------- screening
 def normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
     """``J`` with unit-norm columns, the column norms, and the eigenvalues and inverse of
-    the normalised normal matrix ``JnᵀJn`` (from one symmetric eigendecomposition; the
-    inverse is meaningful only when the smallest eigenvalue is well above round-off)."""
-    norms = np.linalg.norm(J, axis=0)
+    the normalised normal matrix ``JnᵀJn`` (the inverse is meaningful only when the
+    smallest eigenvalue is well above round-off).
+
+    The eigenvalues come from LAPACK's symmetric eigenvalue routine without vectors and
+    the inverse from a Cholesky factorisation (together a third of one full
+    eigendecomposition at 27 unknowns); a numerically singular matrix (smallest
+    eigenvalue below 1e-14 of the largest, or a failed factorisation) gets the inverse
+    from the eigendecomposition instead."""
+    norms = np.sqrt(np.einsum("ij,ij->j", J, J))
     norms[norms == 0] = 1.0
     Jn = J / norms
-    lam, V = np.linalg.eigh(Jn.T @ Jn)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = (V / lam) @ V.T
+    A = Jn.T @ Jn
+    lam = np.linalg.eigvalsh(A)
+    inverse = _positive_definite_inverse(A) if len(lam) and lam[0] > 1e-14 * lam[-1] else None
+    if inverse is None:
+        lam, V = np.linalg.eigh(A)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = (V / lam) @ V.T
     return Jn, norms, lam, inverse
+
+
+def _positive_definite_inverse(A: Array) -> Array | None:
+    """The inverse of a symmetric positive definite ``A`` ``(p, p)`` by LAPACK's Cholesky
+    routines (``potrf``/``potri``; numpy has no such inverse), or None when ``A`` is not
+    positive definite."""
+    from scipy.linalg import lapack
+
+    factor, info = lapack.dpotrf(A, lower=False, clean=False)
+    if info != 0:
+        return None
+    upper, info = lapack.dpotri(factor, lower=False)
+    if info != 0:
+        return None
+    return np.triu(upper) + np.triu(upper, 1).T
+
+
+def median(v: Array) -> float:
+    """The median of a short non-empty vector ``(n,)`` (numpy's ``median`` costs ~30 µs of
+    set-up here)."""
+    s = np.sort(v)
+    n = len(s)
+    return 0.5 * float(s[(n - 1) // 2] + s[n // 2])
 
 
 def screen_unidentifiable(
@@ -216,7 +250,7 @@ def screen_unidentifiable(
         s2 = 1.0 if known_noise else float(e @ e) / max(len(r) - int(keep.sum()), 1)
         move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[keep]
         worst = int(np.argmax(move))
-        if move[worst] <= margin * max(max_std, max_std_ratio * float(np.median(move))):
+        if move[worst] <= margin * max(max_std, max_std_ratio * median(move)):
             break
         column = int(np.flatnonzero(keep)[worst])
         out.append((column, float(move[worst])))
@@ -240,13 +274,17 @@ def uncertainty(
     which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
     UR10 with an optical CMM twice)."""
     m, p = J.shape
-    position = np.tile(np.arange(rows) < 3, m // rows)
-    row_s2 = np.empty(m)
-    for group, known in ((position, known_noise), (~position, False)):
-        if group.any():
-            dof = group.sum() - p * group.sum() / m
-            row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known)
-    s2 = float(row_s2[0])
+    if rows == 3:  # positions only: one group
+        s2 = float(residual_variance(float(r @ r), m - p, known_noise))
+        row_s2 = None
+    else:
+        position = np.tile(np.arange(rows) < 3, m // rows)
+        row_s2 = np.empty(m)
+        for group, known in ((position, known_noise), (~position, False)):
+            if group.any():
+                dof = group.sum() - p * group.sum() / m
+                row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known)
+        s2 = float(row_s2[0])
     Jn, norms, lam, inverse = normal_inverse(J)
     if len(lam) and lam[0] > 1e-12 * lam[-1]:
         # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvalues give
@@ -256,14 +294,15 @@ def uncertainty(
         sv = np.linalg.svd(Jn, compute_uv=False)
         cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
         inverse = np.linalg.pinv(Jn.T @ Jn)
-    if np.all(row_s2 == s2):
+    if row_s2 is None or np.all(row_s2 == s2):
         cov = s2 * inverse / np.outer(norms, norms)
     else:
         middle = Jn.T @ (Jn * row_s2[:, None])
         cov = inverse @ middle @ inverse / np.outer(norms, norms)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    outer = np.outer(std, std)
     with np.errstate(invalid="ignore", divide="ignore"):
-        corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
+        corr = np.where(outer > 0, cov / outer, 0.0)
     return s2, cov, std, corr, cond
 
 
@@ -279,7 +318,7 @@ def poorly_identifiable(
         return None
     move = std * scale
     worst = int(np.argmax(move))
-    if move[worst] <= max(max_std, max_std_ratio * float(np.median(move))):
+    if move[worst] <= max(max_std, max_std_ratio * median(move)):
         return None
     return worst, float(move[worst])
 

@@ -274,7 +274,10 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     disagrees (possible only with about as many rows as columns) the exact sequential
     Gram-Schmidt (:func:`_gram_schmidt`) decides.
     """
-    diag = np.abs(np.diag(np.linalg.qr(A, mode="r")))
+    # LAPACK's QR directly: numpy's and scipy's wrappers cost more than the factorisation
+    # itself at 300 x 36
+    qr = scipy.linalg.lapack.dgeqrf(A)[0] if A.size else np.zeros(A.shape)
+    diag = np.abs(np.diagonal(qr))
     diag = np.concatenate([diag, np.zeros(A.shape[1] - len(diag))])
     keep = diag > tolerance
     coefs = _absorbing(A, keep, tolerance)
@@ -297,10 +300,10 @@ def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> Array | N
     if not K.shape[1]:
         return None
     try:
-        coefs = scipy.linalg.cho_solve(scipy.linalg.cho_factor(K.T @ K), K.T @ D)
+        coefs = np.linalg.solve(K.T @ K, K.T @ D)
         if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance):
             return coefs
-    except np.linalg.LinAlgError:
+    except np.linalg.LinAlgError:  # exactly singular
         pass
     coefs = np.linalg.lstsq(K, D, rcond=None)[0]
     return coefs if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance) else None
