@@ -35,5 +35,5 @@ def test_the_machine_line_names_processor_cores_and_load():
 
 def test_the_readme_has_the_benchmarks_blocks():
     readme = Path(__file__).resolve().parents[1] / "README.md"
-    for name in ("kernels", "residual", "throughput"):
+    for name in ("kernels", "residual", "throughput", "calibrate"):
         assert readme_table.check(readme, name) is None, name

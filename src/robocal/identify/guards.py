@@ -221,7 +221,8 @@ def check_data(model: Model, data: Measurements) -> list[str]:
 
 
 def _still_joints(model: Model, q: Array) -> list[str]:
-    return [model.joint_names[j] for j in range(model.dof) if np.ptp(q[:, j]) < 1e-9]
+    still = np.flatnonzero(np.ptp(q, axis=0) < 1e-9)
+    return [model.joint_names[j] for j in still.tolist()] if still.size else []
 
 
 def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes them

@@ -274,9 +274,10 @@ class Problem:
     def fix(self, names: list[str]) -> Problem:
         """The same problem with some unknowns fixed at their current start values
         (a fixed effect coefficient's perturbation joins the known perturbations)."""
-        effect_keep = [k for k, n in enumerate(self.effect_names) if n not in set(names)]
-        effect_drop = [k for k, n in enumerate(self.effect_names) if n in set(names)]
-        chain = self.chain.fixed([n for n in names if n in set(self.chain.names)])
+        named = set(names)
+        effect_keep = [k for k, n in enumerate(self.effect_names) if n not in named]
+        effect_drop = [k for k, n in enumerate(self.effect_names) if n in named]
+        chain = self.chain.fixed(named & set(self.chain.names))
         known = self.known_perturbations
         if effect_drop and np.any(self.effect_start[effect_drop]):
             fixed = np.tensordot(self.effect_start[effect_drop], self.effect_basis[effect_drop], axes=1)
@@ -296,6 +297,6 @@ class Problem:
         x0 = self.x0
         cached = self._cache.get((x0.tobytes(), True))
         if cached is not None:
-            keep = np.array([name not in set(names) for name in self.free_names], dtype=bool)
+            keep = np.array([name not in named for name in self.free_names], dtype=bool)
             fixed._cache[(x0[keep].tobytes(), True)] = (cached[0], cached[1][:, keep])
         return fixed

@@ -146,7 +146,8 @@ def preference_order(names: Sequence[str], roles: Mapping[str, Role]) -> list[st
     names it lacks, the joint-effect coefficients, come last)."""
     device = [x for x in names if roles.get(x) is Role.DEVICE]
     order = device + [x for x in names if roles.get(x) is Role.TOOL]
-    return order + [x for x in names if x not in set(order)]
+    first = set(order)
+    return order + [x for x in names if x not in first]
 
 
 def identifiable_set(

@@ -198,7 +198,8 @@ def _checked(
     if order not in ("pivoted", "preference"):
         raise ValueError(f"order must be 'pivoted' or 'preference', got {order!r}")
     prefer = tuple(prefer or ())
-    unknown = [n for n in prefer if n not in names]
+    known = set(names)
+    unknown = [n for n in prefer if n not in known]
     if unknown:
         raise KeyError(f"preferred parameter(s) {unknown} are not among the Jacobian's columns")
     return J, names, prefer
