@@ -189,7 +189,7 @@ class Model:
             if i is None:
                 raise KeyError(f"model {self.name!r} has no parameter {name!r}")
             steps[i] = steps[i]._with_value(value)
-        return dataclasses.replace(self, steps=tuple(steps))
+        return self._sharing_structure(dataclasses.replace(self, steps=tuple(steps)), same_free=True)
 
     def with_free(self, names: Iterable[str] | None = None, free: bool = True) -> Model:
         """A new model with the named parameters (all when ``names`` is None) freed or fixed."""
@@ -198,7 +198,18 @@ class Model:
         if unknown:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
         steps = tuple(s._with_free(free) if s.name in selected else s for s in self.steps)
-        return dataclasses.replace(self, steps=steps)
+        return self._sharing_structure(dataclasses.replace(self, steps=steps), same_free=False)
+
+    #: cached properties that depend only on the steps' names, motions, joints and roles
+    _STRUCTURE = ("names", "roles", "_index", "_plan")
+
+    def _sharing_structure(self, derived: Model, same_free: bool) -> Model:
+        """``derived`` (this model with other values, or other free flags when not ``free``)
+        with this model's structure already worked out (the solvers derive several models
+        per calibration; each would otherwise rebuild its plan, names and index)."""
+        shared = self._STRUCTURE + (("free_mask", "free_names") if same_free else ())
+        derived.__dict__.update({k: self.__dict__[k] for k in shared if k in self.__dict__})
+        return derived
 
     def fixed(self, names: Iterable[str]) -> Model:
         """A new model with the named parameters fixed (not identified)."""
