@@ -3,8 +3,10 @@ device frame and the tool of :func:`robocal.identify.stages.initial_frames_and_t
 
 The fits work on a few hundred numbers (3x3 cross-covariances, one 3-vector per pose); in
 numpy each of the ~20 calls of a round costs more than its arithmetic (200 µs for one
-100-pose robot).  Here one call runs every round for every robot, pose by pose, with LAPACK's
-SVD (numba's ``np.linalg.svd``) for the 3x3 matrices.  The numpy implementation is the
+100-pose robot).  Here one call runs every round for every robot.  The sums over the poses
+that the fits need are linear in the unknowns of the other fit, so they are taken once
+(:func:`_moments`) and each round works on 3x3x3 moments: its cost is the SVDs (LAPACK's,
+numba's ``np.linalg.svd``), independent of the pose count.  The numpy implementation is the
 reference (``tests/test_start_kernels.py`` holds the kernel to it to 1e-12).
 
 Compiled with ``cache=True`` (see :mod:`robocal.model.kernels`); this module imports numba,
@@ -46,54 +48,79 @@ def _det3(A):
 
 
 @_jit
-def _centred_cross_covariance(T_flange, y, t_tool, P, p0, q0):
-    """The cross-covariance ``(3, 3)`` of the tool points ``P = R_f t_tool + p_f`` (written
-    to ``P`` ``(n, 3)``) and ``y`` ``(n, 3)`` about their means (written to ``p0``, ``q0``)."""
+def _moments(T_flange, y, orientation, has_orientation, m3, m33, m333, m3333):
+    """The pose sums of one robot the fits need, with the flange rotations ``R_i``, positions
+    ``p_i`` (``T_flange`` ``(n, 4, 4)``) and the measured points ``y`` ``(n, 3)`` about their
+    mean ``q0`` (``d_i = y_i - q0``), all divided by ``n``:
+
+    * ``m3`` ``(3, 3)``: ``q0``, ``p̄ = mean p_i`` and ``S = mean R_iᵀ p_i``;
+    * ``m33`` ``(2, 3, 3)``: ``R̄ = mean R_i`` and ``B = mean p_i d_iᵀ``;
+    * ``m333`` ``(3, 3, 3)``: ``A[c] = mean R_i[:, c] d_iᵀ``;
+    * ``m3333`` ``(3, 3, 3, 3)`` (pose data): ``D[r, j, k, c] = mean R_i[j, r] O_i[k, c]``
+      with the measured rotations ``O_i`` ``(n, 3, 3)``.
+    """
     n = y.shape[0]
-    p0[:] = 0.0
-    q0[:] = 0.0
+    m3[:] = 0.0
+    m33[:] = 0.0
+    m333[:] = 0.0
+    m3333[:] = 0.0
     for i in range(n):
-        for r in range(3):
-            v = T_flange[i, r, 3]
-            for c in range(3):
-                v += T_flange[i, r, c] * t_tool[c]
-            P[i, r] = v
-            p0[r] += v
-            q0[r] += y[i, r]
-    p0 /= n
-    q0 /= n
-    H = np.zeros((3, 3))
+        for k in range(3):
+            m3[0, k] += y[i, k]
+    m3[0] /= n
+    d = np.empty(3)
     for i in range(n):
+        for k in range(3):
+            d[k] = y[i, k] - m3[0, k]
         for r in range(3):
-            a = P[i, r] - p0[r]
+            p = T_flange[i, r, 3]
+            m3[1, r] += p
             for c in range(3):
-                H[r, c] += a * (y[i, c] - q0[c])
-    return H / n
+                R = T_flange[i, r, c]
+                m33[0, r, c] += R
+                m3[2, c] += R * p
+                for k in range(3):
+                    m333[c, r, k] += R * d[k]
+            for k in range(3):
+                m33[1, r, k] += p * d[k]
+        if has_orientation:
+            for r in range(3):
+                for j in range(3):
+                    R = T_flange[i, j, r]
+                    for k in range(3):
+                        for c in range(3):
+                            m3333[r, j, k, c] += R * orientation[i, k, c]
+    m3[1:] /= n
+    m33 /= n
+    m333 /= n
+    m3333 /= n
 
 
 @_jit
-def _rigid_fit(T_flange, y, t_tool, P, T_out):
+def _rigid_fit(m3, m33, m333, t_tool, T_out):
     """Kabsch/Horn: ``T_out`` <- the rigid transform mapping the tool points
-    ``R_f t_tool + p_f`` onto ``y`` ``(n, 3)`` (least squares, unweighted; ``P`` ``(n, 3)``
-    scratch).  Returns OK, SVD_FAILED (non-finite cross-covariance) or COLLINEAR."""
-    p0 = np.empty(3)
-    q0 = np.empty(3)
-    H = _centred_cross_covariance(T_flange, y, t_tool, P, p0, q0)
+    ``P_i = R_i t_tool + p_i`` onto the measured ``y_i`` (least squares, unweighted).
+    Their cross-covariance ``mean (P_i - p0)(y_i - q0)ᵀ`` is ``Σ_c t_c A[c] + B`` and
+    ``p0 = R̄ t + p̄`` (:func:`_moments`).
+    Returns OK, SVD_FAILED (non-finite cross-covariance) or COLLINEAR."""
+    H = m33[1].copy()
+    p0 = m3[1].copy()
+    for c in range(3):
+        H += t_tool[c] * m333[c]
+        for r in range(3):
+            p0[r] += m33[0, r, c] * t_tool[c]
     if not _finite3(H):
         return SVD_FAILED
     U, s, Vt = np.linalg.svd(H)
     if s[1] <= 1e-12 * max(s[0], 1e-300):
         return COLLINEAR
     d = np.sign(_det3(Vt) * _det3(U))  # det(V Uᵀ): V's last column flipped for a reflection
-    R = np.empty((3, 3))
     for r in range(3):
+        t = m3[0, r]
         for c in range(3):
-            R[r, c] = Vt[0, r] * U[c, 0] + Vt[1, r] * U[c, 1] + d * Vt[2, r] * U[c, 2]
-    for r in range(3):
-        t = q0[r]
-        for c in range(3):
-            T_out[r, c] = R[r, c]
-            t -= R[r, c] * p0[c]
+            R = Vt[0, r] * U[c, 0] + Vt[1, r] * U[c, 1] + d * Vt[2, r] * U[c, 2]
+            T_out[r, c] = R
+            t -= R * p0[c]
         T_out[r, 3] = t
         T_out[3, r] = 0.0
     T_out[3, 3] = 1.0
@@ -101,46 +128,35 @@ def _rigid_fit(T_flange, y, t_tool, P, T_out):
 
 
 @_jit
-def _tool_point(T_flange, y, T_frame, T_tool):
-    """``T_tool[:3, 3]`` <- the mean over the poses of ``R_fᵀ (R0ᵀ (y - t0) - p_f)``: the
-    least-squares tool point of ``y = R0 (R_f t + p_f) + t0`` (device frame ``R0, t0``)."""
-    n = y.shape[0]
-    t = np.zeros(3)
-    b = np.zeros(3)
-    for i in range(n):
-        for c in range(3):
-            v = 0.0
-            for r in range(3):
-                v += (y[i, r] - T_frame[r, 3]) * T_frame[r, c]
-            b[c] = v - T_flange[i, c, 3]
-        for c in range(3):
-            t[c] += T_flange[i, 0, c] * b[0] + T_flange[i, 1, c] * b[1] + T_flange[i, 2, c] * b[2]
+def _tool_point(m3, m33, m333, T_frame, T_tool):
+    """``T_tool[:3, 3]`` <- the least-squares tool point of ``y_i = R0 (R_i t + p_i) + t0``
+    (device frame ``R0, t0``): ``mean R_iᵀ (R0ᵀ (y_i - t0) - p_i)``, which is
+    ``Σ_jk R0[k, j] A[c, j, k] + R̄ᵀ R0ᵀ (q0 - t0) - S`` (:func:`_moments`)."""
+    e = np.zeros(3)  # R0ᵀ (q0 - t0)
+    for j in range(3):
+        for k in range(3):
+            e[j] += T_frame[k, j] * (m3[0, k] - T_frame[k, 3])
     for c in range(3):
-        T_tool[c, 3] = t[c] / n
+        t = -m3[2, c]
+        for j in range(3):
+            t += m33[0, j, c] * e[j]
+            for k in range(3):
+                t += T_frame[k, j] * m333[c, j, k]
+        T_tool[c, 3] = t
 
 
 @_jit
-def _tool_rotation(T_flange, orientation, T_frame, T_tool):
-    """``T_tool[:3, :3]`` <- the nearest rotation to ``Σ (R0 R_f)ᵀ R_measured``.
+def _tool_rotation(m3333, T_frame, T_tool):
+    """``T_tool[:3, :3]`` <- the nearest rotation to ``M = mean (R0 R_i)ᵀ O_i``, which is
+    ``M[r, c] = Σ_jk R0[k, j] D[r, j, k, c]`` (:func:`_moments`).
     Returns OK or SVD_FAILED (non-finite sum)."""
-    n = orientation.shape[0]
     M = np.zeros((3, 3))
-    R = np.zeros((3, 3))
-    for i in range(n):
-        for r in range(3):  # R = R0 R_f
-            for c in range(3):
-                R[r, c] = (
-                    T_frame[r, 0] * T_flange[i, 0, c]
-                    + T_frame[r, 1] * T_flange[i, 1, c]
-                    + T_frame[r, 2] * T_flange[i, 2, c]
-                )
-        for r in range(3):
-            for c in range(3):
-                M[r, c] += (
-                    R[0, r] * orientation[i, 0, c]
-                    + R[1, r] * orientation[i, 1, c]
-                    + R[2, r] * orientation[i, 2, c]
-                )
+    for r in range(3):
+        for j in range(3):
+            for k in range(3):
+                R0 = T_frame[k, j]
+                for c in range(3):
+                    M[r, c] += R0 * m3333[r, j, k, c]
     if not _finite3(M):
         return SVD_FAILED
     U, _, Vt = np.linalg.svd(M)
@@ -165,36 +181,45 @@ def frames_and_tools(
     inf and the frame is fitted), SVD_FAILED or ``COLLINEAR + k`` (the first robot ``k`` of
     the first round whose points are (nearly) collinear); the fits are then incomplete.
     """
-    if fit_frame and not _all_finite(position):
+    if fit_frame and not np.isfinite(position).all():
         return NON_FINITE_POINTS
-    P = np.empty((position.shape[1], 3))
+    K = position.shape[0]
+    m3, m33 = np.empty((K, 3, 3)), np.empty((K, 2, 3, 3))
+    m333, m3333 = np.empty((K, 3, 3, 3)), np.empty((K, 3, 3, 3, 3) if has_orientation else (K, 0, 0, 0, 0))
+    if fit_frame or fit_tool:
+        for k in range(K):
+            _moments(
+                T_flange[k],
+                position[k],
+                orientation[k % len(orientation)],
+                has_orientation and fit_tool,
+                m3[k],
+                m33[k],
+                m333[k],
+                m3333[k],
+            )
     for _ in range(rounds if (fit_frame and fit_tool) else 1):
         if fit_frame:
-            status = _fit_frames(T_flange, position, T_tool, P, T_frame)
+            status = _fit_frames(m3, m33, m333, T_tool, T_frame)
             if status != OK:
                 return status
         if fit_tool:
-            for k in range(position.shape[0]):
-                _tool_point(T_flange[k], position[k], T_frame[k], T_tool[k])
+            for k in range(K):
+                _tool_point(m3[k], m33[k], m333[k], T_frame[k], T_tool[k])
                 if has_orientation:
-                    status = _tool_rotation(T_flange[k], orientation[k], T_frame[k], T_tool[k])
+                    status = _tool_rotation(m3333[k], T_frame[k], T_tool[k])
                     if status != OK:
                         return status
     return OK
 
 
 @_jit
-def _all_finite(x):
-    return np.isfinite(x).all()
-
-
-@_jit
-def _fit_frames(T_flange, position, T_tool, P, T_frame):
+def _fit_frames(m3, m33, m333, T_tool, T_frame):
     """Every robot's device frame (:func:`_rigid_fit`); a failed SVD is reported before a
     collinear robot, the first collinear one as ``COLLINEAR + k`` (as numpy's batch did)."""
     failed, collinear = False, -1
-    for k in range(position.shape[0]):
-        status = _rigid_fit(T_flange[k], position[k], T_tool[k, :3, 3], P, T_frame[k])
+    for k in range(len(m3)):
+        status = _rigid_fit(m3[k], m33[k], m333[k], T_tool[k, :3, 3], T_frame[k])
         failed |= status == SVD_FAILED
         if status == COLLINEAR and collinear < 0:
             collinear = k
