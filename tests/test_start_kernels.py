@@ -185,3 +185,52 @@ def test_errors_are_numpys():
     nan_flange[0, 3, 0, 0] = np.nan
     with pytest.raises(np.linalg.LinAlgError, match="SVD did not converge"):
         initial_frames_and_tools(nan_flange, position)
+
+
+# ---------------------------------------------------------------------- the 3x3 SVD by Jacobi
+def _lapack_nearest(A):
+    U, s, Vt = np.linalg.svd(A)
+    if np.linalg.det(U @ Vt) < 0:
+        U[:, -1] *= -1
+    return U @ Vt, s
+
+
+def test_jacobi_nearest_rotation_matches_lapack():
+    """Random 3x3 matrices over ten decades, rank 2, nearly rotations, and equal smaller
+    singular values: the same polar factor and singular values as LAPACK's SVD."""
+    from robocal.identify.start_kernels import _nearest_rotation
+
+    rng = np.random.default_rng(11)
+    for trial in range(2000):
+        A = rng.normal(size=(3, 3)) * 10.0 ** rng.uniform(-5, 5)
+        if trial % 4 == 1:
+            A[:, 2] = 0.3 * A[:, 0] - A[:, 1]
+        elif trial % 4 == 2:
+            A = rc.spatial.rotvec_to_matrix(rng.normal(size=3)) * 100 + rng.normal(size=(3, 3)) * 1e-3
+        elif trial % 4 == 3:
+            Q1, Q2 = (rc.spatial.rotvec_to_matrix(rng.normal(size=3)) for _ in range(2))
+            A = Q1 @ np.diag([3.0, 1.0, 1.0 + 1e-14]) @ Q2
+        R = np.full((3, 3), np.nan)
+        s0, s1 = _nearest_rotation(A, R)
+        R_ref, s_ref = _lapack_nearest(A)
+        np.testing.assert_allclose([s0, s1], s_ref[:2], rtol=1e-13, atol=0)
+        np.testing.assert_allclose(R, R_ref, rtol=0, atol=1e-12)
+    R = np.full((3, 3), np.nan)
+    assert _nearest_rotation(np.outer([1.0, 2, 3], [0.5, 0, 1]), R)[1] <= 1e-12  # rank 1: not written
+    assert np.isnan(R).all()
+    assert _nearest_rotation(np.zeros((3, 3)), R) == (0.0, 0.0)
+
+
+def test_far_device_and_degenerate_orientation_sums():
+    """A device 30 m away (sums reassociated over large coordinates keep 1e-12), and
+    orientation sums of rank below 2 (LAPACK decides the rotation, as numpy's did)."""
+    T_flange, position, orientation, _, _ = measurements(2, 40, seed=6)
+    far = position + np.array([30.0, -20.0, 5.0])
+    close(initial_frames_and_tools(T_flange, far), reference(T_flange, far))
+    args = dict(orientation=np.zeros_like(orientation), fit_frame=False)
+    close(initial_frames_and_tools(T_flange, position, **args), reference(T_flange, position, **args))
+    # rank 1: the rotation is not determined (LAPACK's choice); it is still a rotation
+    rank1 = np.broadcast_to(np.diag([1.0, 0, 0]), orientation.shape)
+    R = initial_frames_and_tools(T_flange, position, orientation=rank1)[1][:, :3, :3]
+    np.testing.assert_allclose(R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
