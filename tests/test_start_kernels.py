@@ -234,3 +234,19 @@ def test_far_device_and_degenerate_orientation_sums():
     R = initial_frames_and_tools(T_flange, position, orientation=rank1)[1][:, :3, :3]
     np.testing.assert_allclose(R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
     np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("spread, collinear", [(1e-10, False), (1e-15, True)])
+def test_collinearity_threshold_is_numpys(spread, collinear):
+    """Measured points on a line up to ``spread`` (relative): s1/s0 ≈ spread against the
+    threshold 1e-12 of both implementations."""
+    T_flange, _, _, _, _ = measurements(1, 30, seed=8)
+    rng = np.random.default_rng(1)
+    y = np.linspace(-1.0, 1.0, 30)[:, None] * [0.6, 0.0, 0.8] + spread * rng.normal(size=(30, 3))
+    for f in (initial_frames_and_tools, reference):
+        if collinear:
+            with pytest.raises(ValueError, match="collinear"):
+                f(T_flange, y[None], fit_tool=False)
+        else:
+            T_frame, _ = f(T_flange, y[None], fit_tool=False)
+            assert np.isfinite(T_frame).all()
