@@ -250,3 +250,15 @@ def test_collinearity_threshold_is_numpys(spread, collinear):
         else:
             T_frame, _ = f(T_flange, y[None], fit_tool=False)
             assert np.isfinite(T_frame).all()
+
+
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")  # numpy's mean of nothing
+def test_no_robots_and_no_poses_as_numpy():
+    for K, n in ((0, 5), (2, 0)):
+        T_flange, y = np.tile(np.eye(4), (K, n, 1, 1)), np.zeros((K, n, 3))
+        tool_only = dict(orientation=np.zeros((K, n, 3, 3)), fit_frame=False)
+        for kw in ({"fit_frame": False}, tool_only, {} if K == 0 else None):
+            if kw is not None:
+                close(initial_frames_and_tools(T_flange, y, **kw), reference(T_flange, y, **kw))
+    with pytest.raises(np.linalg.LinAlgError, match="SVD did not converge"):  # the mean of no points
+        initial_frames_and_tools(np.zeros((1, 0, 4, 4)), np.zeros((1, 0, 3)))

@@ -122,13 +122,13 @@ def _nearest_rotation(A, R):
 def _moments(T_flange, y, orientation, has_orientation, m3, m33, m333, m3333):
     """The pose sums of one robot the fits need, with the flange rotations ``R_i``, positions
     ``p_i`` (``T_flange`` ``(n, 4, 4)``) and the measured points ``y`` ``(n, 3)`` about their
-    mean ``q0`` (``d_i = y_i - q0``), all divided by ``n``:
+    mean ``q0`` (``d_i = y_i - q0``), all divided by ``n`` but the last:
 
     * ``m3`` ``(3, 3)``: ``q0``, ``p̄ = mean p_i`` and ``S = mean R_iᵀ p_i``;
     * ``m33`` ``(2, 3, 3)``: ``R̄ = mean R_i`` and ``B = mean p_i d_iᵀ``;
     * ``m333`` ``(3, 3, 3)``: ``A[c] = mean R_i[:, c] d_iᵀ``;
-    * ``m3333`` ``(3, 3, 3, 3)`` (pose data): ``D[r, j, k, c] = mean R_i[j, r] O_i[k, c]``
-      with the measured rotations ``O_i`` ``(n, 3, 3)``.
+    * ``m3333`` ``(3, 3, 3, 3)`` (pose data): ``D[r, j, k, c] = Σ R_i[j, r] O_i[k, c]`` with
+      the measured rotations ``O_i`` ``(n, 3, 3)`` (a sum: none for no poses, as numpy's).
     """
     n = y.shape[0]
     m3[:] = 0.0
@@ -164,7 +164,6 @@ def _moments(T_flange, y, orientation, has_orientation, m3, m33, m333, m3333):
     m3[1:] /= n
     m33 /= n
     m333 /= n
-    m3333 /= n
 
 
 @_jit
@@ -217,7 +216,7 @@ def _tool_point(m3, m33, m333, T_frame, T_tool):
 
 @_jit
 def _tool_rotation(m3333, T_frame, T_tool):
-    """``T_tool[:3, :3]`` <- the nearest rotation to ``M = mean (R0 R_i)ᵀ O_i``, which is
+    """``T_tool[:3, :3]`` <- the nearest rotation to ``M = Σ (R0 R_i)ᵀ O_i``, which is
     ``M[r, c] = Σ_jk R0[k, j] D[r, j, k, c]`` (:func:`_moments`).
     Returns OK or SVD_FAILED (non-finite sum)."""
     M = np.zeros((3, 3))
