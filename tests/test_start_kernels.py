@@ -262,3 +262,16 @@ def test_no_robots_and_no_poses_as_numpy():
                 close(initial_frames_and_tools(T_flange, y, **kw), reference(T_flange, y, **kw))
     with pytest.raises(np.linalg.LinAlgError, match="SVD did not converge"):  # the mean of no points
         initial_frames_and_tools(np.zeros((1, 0, 4, 4)), np.zeros((1, 0, 3)))
+
+
+def test_shapes_are_checked_or_broadcast_as_numpy():
+    T_flange, position, orientation, _, _ = measurements(3, 10, seed=9)
+    one = position[:1]  # one robot's points for all three (broadcast, as numpy's fits did)
+    close(initial_frames_and_tools(T_flange, one), reference(T_flange, one))
+    for bad in (position[:, :9], position[..., :2]):
+        with pytest.raises(ValueError):
+            initial_frames_and_tools(T_flange, bad)
+    with pytest.raises(ValueError):
+        initial_frames_and_tools(T_flange, position, orientation=orientation[:, :9])
+    with pytest.raises(ValueError, match=r"T_flange must have shape \(K, n, 4, 4\)"):
+        initial_frames_and_tools(T_flange[..., :3, :], position)

@@ -85,13 +85,15 @@ def initial_frames_and_tools(
     """
     from robocal.identify import start_kernels as sk  # numba: imported on first use
 
-    K = T_flange.shape[0]
+    K, n = T_flange.shape[:2]
+    if T_flange.shape[2:] != (4, 4):
+        raise ValueError(f"T_flange must have shape (K, n, 4, 4), got {T_flange.shape}")
     T_tool, T_frame = _frames(T_tool, K), _frames(T_frame, K)
     has_orientation = orientation is not None
-    status = sk.frames_and_tools(
+    status = sk.frames_and_tools(  # the kernel reads (K, n, ...) arrays unchecked: broadcast here
         np.ascontiguousarray(T_flange, dtype=float),
-        np.ascontiguousarray(position, dtype=float),
-        np.ascontiguousarray(orientation, dtype=float) if has_orientation else _NO_ORIENTATION,
+        _pose_array(position, (K, n, 3)),
+        _pose_array(orientation, (K, n, 3, 3)) if has_orientation else _NO_ORIENTATION,
         has_orientation,
         T_frame,
         T_tool,
@@ -112,6 +114,12 @@ def initial_frames_and_tools(
 
 
 _NO_ORIENTATION = np.zeros((1, 1, 3, 3))
+
+
+def _pose_array(x: ArrayLike, shape: tuple[int, ...]) -> Array:
+    """``x`` as a C-contiguous float array of ``shape`` (broadcast, as numpy's fits did)."""
+    x = np.asarray(x, dtype=float)
+    return np.ascontiguousarray(x if x.shape == shape else np.broadcast_to(x, shape))
 
 
 def _frames(T: Array | None, K: int) -> Array:
