@@ -56,7 +56,7 @@ def reference(
     fit_tool=True,
     rounds=4,
 ):
-    """initial_frames_and_tools as numpy computed it before the kernel (robocal 0.x, session 6)."""
+    """initial_frames_and_tools as numpy computed it before the kernel (main at e55c00d)."""
     K, n = T_flange.shape[:2]
     T_tool = np.array(np.broadcast_to(np.eye(4) if T_tool is None else T_tool, (K, 4, 4)), dtype=float)
     T_frame = np.array(np.broadcast_to(np.eye(4) if T_frame is None else T_frame, (K, 4, 4)), dtype=float)
