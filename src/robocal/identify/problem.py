@@ -45,7 +45,24 @@ TOOL_PREFIX = "tcp_"
 def frame_steps(T: Array, prefix: str, free: bool, role: Role | None = None) -> list[Step]:
     """A rigid transform as six steps Tx Ty Tz Rz Ry Rx (intrinsic ZYX angles)."""
     rz, ry, rx = spatial.zyx_angles(T[:3, :3])
-    return frame6(prefix, *T[:3, 3], rz, ry, rx, free=free, role=role)
+    return _valued(_frame_template(prefix, free, role), (*T[:3, 3].tolist(), rz, ry, rx))
+
+
+@functools.lru_cache(maxsize=16)
+def _frame_template(prefix: str, free: bool, role: Role | None) -> tuple[Step, ...]:
+    """The six steps of :func:`frame6` at zero (steps are immutable: every calibration's
+    measurement chain starts from the same ones and sets their values)."""
+    return tuple(frame6(prefix, free=free, role=role))
+
+
+@functools.lru_cache(maxsize=4)
+def _tool_point_template() -> tuple[Step, ...]:
+    names = [f"{TOOL_PREFIX}{c}" for c in "xyz"]
+    return tuple(sequence(("Tx", "Ty", "Tz"), (0.0, 0.0, 0.0), names, role=Role.TOOL))
+
+
+def _valued(template: tuple[Step, ...], values) -> list[Step]:
+    return [step._with_value(v) for step, v in zip(template, values, strict=True)]
 
 
 def measurement_chain(
@@ -56,15 +73,14 @@ def measurement_chain(
     if fit_frame or not np.allclose(T_device_base, np.eye(4)):
         before += frame_steps(T_device_base, "frame0", free=False, role=Role.DEVICE)
     if fit_frame:
-        before += frame6("frame", free=True, role=Role.DEVICE)
+        before += _frame_template("frame", True, Role.DEVICE)
     after: list[Step] = []
     if tool is not None:
         T_tool = np.asarray(tool, dtype=float)
         if measure == "pose":
             after += frame_steps(T_tool, "tcp", free=True, role=Role.TOOL)
         else:
-            names = [f"{TOOL_PREFIX}{c}" for c in "xyz"]
-            after += sequence(("Tx", "Ty", "Tz"), T_tool[:3, 3], names, role=Role.TOOL)
+            after += _valued(_tool_point_template(), T_tool[:3, 3].tolist())
     clash = {s.name for s in before + after} & set(robot.names)
     if clash:
         raise ValueError(

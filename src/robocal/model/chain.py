@@ -189,7 +189,7 @@ class Model:
             if i is None:
                 raise KeyError(f"model {self.name!r} has no parameter {name!r}")
             steps[i] = steps[i]._with_value(value)
-        return self._sharing_structure(dataclasses.replace(self, steps=tuple(steps)), same_free=True)
+        return self._derived(tuple(steps), same_free=True)
 
     def with_free(self, names: Iterable[str] | None = None, free: bool = True) -> Model:
         """A new model with the named parameters (all when ``names`` is None) freed or fixed."""
@@ -198,16 +198,21 @@ class Model:
         if unknown:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
         steps = tuple(s._with_free(free) if s.name in selected else s for s in self.steps)
-        return self._sharing_structure(dataclasses.replace(self, steps=steps), same_free=False)
+        return self._derived(steps, same_free=False)
 
     #: cached properties that depend only on the steps' names, motions, joints and roles
     _STRUCTURE = ("names", "roles", "_index", "_plan")
 
-    def _sharing_structure(self, derived: Model, same_free: bool) -> Model:
-        """``derived`` (this model with other values, or other free flags when not ``free``)
-        with this model's structure already worked out (the solvers derive several models
-        per calibration; each would otherwise rebuild its plan, names and index)."""
+    def _derived(self, steps: tuple[Step, ...], same_free: bool) -> Model:
+        """This model with ``steps`` that differ from its own only in their values (or, unless
+        ``same_free``, their free flags), each already checked (:meth:`Step._with_value`):
+        the chain's invariants hold, so the copy skips ``__post_init__``, and it starts with
+        this model's structure worked out (the solvers derive several models per
+        calibration; each would otherwise rebuild its plan, names and index)."""
+        derived = object.__new__(Model)
+        fields = {f.name: self.__dict__[f.name] for f in dataclasses.fields(self)}
         shared = self._STRUCTURE + (("free_mask", "free_names") if same_free else ())
+        derived.__dict__.update(fields, steps=steps)
         derived.__dict__.update({k: self.__dict__[k] for k in shared if k in self.__dict__})
         return derived
 
