@@ -190,14 +190,110 @@ def levenberg_marquardt_batch(
 
     A problem stops when the predicted decrease of its next step is below ``tolerance``
     times its cost, or the step is below ``tolerance`` relative to the scaled
-    parameters, or after ``max_evaluations`` evaluations.
+    parameters, or after ``max_evaluations`` evaluations; unconverged also when no damping
+    makes its normal matrix positive definite (NaN or inf in its Jacobian).
+
+    Compiled: an iteration is one call of :func:`robocal.identify.lm_kernels.propose`
+    (scaling, normal equations, damped Cholesky step, stop tests), the evaluation, and one
+    of :func:`~robocal.identify.lm_kernels.accept` (gain ratio, acceptance, damping);
+    the problems keep their state at their batch indices, and only ``JᵀJ`` and ``Jᵀr`` of
+    each point, not its Jacobian, are kept between calls.  It agrees with the numpy
+    iteration (:func:`_levenberg_marquardt_batch_numpy`, used without numba) to
+    round-off: ``JᵀJ`` is formed before the scaling, so Jacobian entries must stay within
+    about 1e±150 (beyond, their squares over- or underflow).
 
     Args:
         evaluate: ``evaluate(x, which)`` → weighted residuals ``(k, m)`` and Jacobians
             ``(k, m, p)`` of problems ``which`` ``(k,)`` (indices into the batch) at
-            ``x`` ``(k, p)``.
+            ``x`` ``(k, p)``.  The arrays it returns are kept (not copied) for the result:
+            it must not write into them afterwards.
         x0: ``(K, p)`` start values.
     """
+    x = np.array(x0, dtype=float)
+    kernels = _lm_kernels()
+    if kernels is None:
+        return _levenberg_marquardt_batch_numpy(
+            evaluate, x, max_evaluations=max_evaluations, tolerance=tolerance
+        )
+    K, p = x.shape
+    ids = np.arange(K)  # the problems still running are ids[:n] (batch order); state at batch indices
+    r, J = evaluate(x, ids)
+    r, J, Jc, transposed = _packed(r, J)
+    m = max(r.shape[1], 1)
+    cost, G, Jr = np.empty(K), np.empty((K, p, p)), np.empty((K, p))  # Σ r², JᵀJ, Jᵀr at x
+    kernels.start(r, Jc, transposed, cost, G, Jr)
+    histories = [[math.sqrt(c / m)] for c in cost.tolist()]
+    last = [(r, J, k) for k in range(K)]  # each problem's evaluation at x: (r, J, row)
+    D, mu, nu = np.zeros((K, p)), np.full(K, np.nan), np.full(K, 2.0)
+    evaluations, success = np.ones(K, dtype=np.intp), np.zeros(K, dtype=bool)
+    x_new, predicted, rms = np.empty((K, p)), np.empty(K), np.empty(K)
+    accepted = np.empty((2, K), dtype=np.intp)  # the accepted problems' (batch index, row)
+    tolerance, max_evaluations = float(tolerance), int(max_evaluations)
+    n = K
+    while True:
+        n = kernels.propose(ids, n, x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
+                            x_new, predicted)  # fmt: skip
+        if not n:
+            break
+        r, J = evaluate(x_new[:n], ids[:n].copy())
+        r, J, Jc, transposed = _packed(r, J)
+        count = kernels.accept(ids, n, x_new, r, Jc, transposed, x, cost, G, Jr, mu, nu, predicted,
+                               evaluations, accepted, rms)  # fmt: skip
+        for k, i, value in zip(*accepted[:, :count].tolist(), rms[:count].tolist(), strict=True):
+            histories[k].append(value)
+            last[k] = (r, J, i)
+    r, J = _gathered(last)
+    iterations = np.array([len(h) for h in histories], dtype=np.intp)
+    return BatchSolveResult(x, r, J, success, iterations, evaluations, max_evaluations, histories)
+
+
+def _packed(r, J) -> tuple[Array, Array, Array, bool]:
+    """Residuals ``(n, m)`` and Jacobians ``(n, m, p)`` as float64, and the Jacobians as the
+    kernels take them: C-ordered ``(n, m, p)``, or ``(n, p, m)`` (``True``: each transposed,
+    the Fortran order numpy's column stacks and the chain's Jacobians come in)."""
+    r, J = np.ascontiguousarray(r, dtype=np.float64), np.asarray(J, dtype=np.float64)
+    if J.flags.c_contiguous:
+        return r, J, J, False
+    Jt = J.transpose(0, 2, 1)
+    if Jt.flags.c_contiguous:
+        return r, J, Jt, True
+    return r, J, np.ascontiguousarray(J), False
+
+
+def _gathered(last: list[tuple[Array, Array, int]]) -> tuple[Array, Array]:
+    """``(K, m)`` residuals and ``(K, m, p)`` Jacobians from each problem's ``(r, J, row)``
+    (one problem's first rows: no copy)."""
+    if len(last) == 1 and last[0][2] == 0 and len(last[0][0]) == 1:
+        return last[0][0], last[0][1]
+    return np.stack([r[i] for r, _, i in last]), np.stack([J[i] for _, J, i in last])
+
+
+#: the compiled kernels (robocal.identify.lm_kernels) once imported; a list: no `global` needed
+_KERNELS: list = []
+
+
+def _lm_kernels():
+    """:mod:`robocal.identify.lm_kernels`, imported on first use (it imports numba); None
+    without numba (then the numpy iteration runs)."""
+    if not _KERNELS:
+        try:
+            from robocal.identify import lm_kernels
+        except ImportError:  # pragma: no cover - numba is a dependency
+            return None
+        _KERNELS.append(lm_kernels)
+    return _KERNELS[0]
+
+
+def _levenberg_marquardt_batch_numpy(
+    evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
+    x0: Array,
+    *,
+    max_evaluations: int = 200,
+    tolerance: float = 1e-10,
+) -> BatchSolveResult:
+    """:func:`levenberg_marquardt_batch` in numpy (the same iteration, one numpy call per
+    operation on the batch): the reference the compiled kernels are tested against, and
+    the path without numba."""
     x = np.array(x0, dtype=float)
     K = len(x)
     ids = np.arange(K)  # the problems still running; their state below, compacted as they stop

@@ -1,0 +1,185 @@
+"""Levenberg-Marquardt: the compiled iteration (robocal.identify.lm_kernels) against its numpy
+reference (``robocal.identify.solvers._levenberg_marquardt_batch_numpy``), in the same run.
+
+The problem is ``bench_calibrate``'s: a 100-pose UR10 (27 unknowns, 300 weighted residuals),
+captured where ``rc.calibrate`` calls the solver.  Rows (per call):
+
+* one evaluation (residuals + Jacobian at a new point): what the solver cannot save;
+* ``solvers.solve`` with the problem's cache emptied before each call (its three
+  evaluations computed), and with the start point cached as the pipeline leaves it;
+* ``rc.calibrate`` end to end;
+* the batched engine of a study (:class:`robocal.identify.batch`, 50 robots at once);
+* the first call of a new process (numba loading the kernels from its cache).
+
+Minimum over rounds of the mean of a batch of calls, as CPU time of this thread
+(``time.thread_time``, one BLAS thread); numpy and compiled rounds interleaved.  The two
+iterations are checked to give the same solution, iterations and evaluations first.
+
+Run: ``python benchmarks/bench_lm.py [--rounds 7]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+import timeit
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import robocal as rc
+import robocal.identify.batch as batch_engine
+import robocal.identify.pipeline as pipeline
+from bench_calibrate import problem
+from robocal.identify import solvers
+
+FIRST_CALL = """
+import time
+import numpy as np
+from robocal.identify.solvers import levenberg_marquardt
+class P:
+    t = np.linspace(0.0, 2.0, 40)
+    y = 1.5 * np.exp(-0.7 * t) + 0.2
+    def residual(self, x):
+        return x[0] * np.exp(x[1] * self.t) + x[2] - self.y
+    def jacobian(self, x):
+        e = np.exp(x[1] * self.t)
+        return np.column_stack([e, x[0] * self.t * e, np.ones_like(self.t)])
+t0 = time.perf_counter()
+levenberg_marquardt(P(), np.array([1.0, 0.0, 0.0]))
+t1 = time.perf_counter()
+levenberg_marquardt(P(), np.array([1.0, 0.0, 0.0]))
+print(t1 - t0, time.perf_counter() - t1)
+"""
+
+
+class _Numpy:
+    """Within: the numpy iteration in place of the compiled one (the solver, the engine)."""
+
+    def __enter__(self):
+        self.saved = solvers.levenberg_marquardt_batch, batch_engine.levenberg_marquardt_batch
+        solvers.levenberg_marquardt_batch = solvers._levenberg_marquardt_batch_numpy
+        batch_engine.levenberg_marquardt_batch = solvers._levenberg_marquardt_batch_numpy
+
+    def __exit__(self, *exc):
+        solvers.levenberg_marquardt_batch, batch_engine.levenberg_marquardt_batch = self.saved
+
+
+def best(fns: dict, rounds: int, budget: float = 0.1) -> dict[str, float]:
+    """CPU seconds per call of each function: the minimum over ``rounds`` (interleaved) of
+    the mean of a batch of calls."""
+    number = {}
+    for name, fn in fns.items():
+        fn()
+        number[name] = max(1, int(budget / max(timeit.timeit(fn, number=1), 1e-7)))
+    out = dict.fromkeys(fns, float("inf"))
+    for _ in range(rounds):
+        for name, fn in fns.items():
+            t = time.thread_time()
+            for _ in range(number[name]):
+                fn()
+            out[name] = min(out[name], (time.thread_time() - t) / number[name])
+    return out
+
+
+def captured_problem(model, data):
+    """The problem, start values and options ``rc.calibrate`` hands the solver."""
+    calls = []
+    solve = pipeline.solve
+
+    def spy(prob, x0, method="lm", **options):
+        calls.append((prob, np.array(x0), method, options))
+        return solve(prob, x0, method, **options)
+
+    pipeline.solve = spy
+    try:
+        rc.calibrate(model, data)
+    finally:
+        pipeline.solve = solve
+    return calls[0]
+
+
+def check_same(prob, x0, method, options) -> None:
+    prob._cache.clear()
+    fast = solvers.solve(prob, x0, method, **options)
+    with _Numpy():
+        prob._cache.clear()
+        ref = solvers.solve(prob, x0, method, **options)
+    assert (fast.iterations, fast.evaluations, fast.success) == (ref.iterations, ref.evaluations, ref.success)
+    np.testing.assert_allclose(fast.x, ref.x, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fast.history, ref.history, rtol=1e-9)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=7)
+    args = parser.parse_args()
+    model, data = problem(100, 1)
+    prob, x0, method, options = captured_problem(model, data)
+    check_same(prob, x0, method, options)
+    points = iter(x0 + 1e-9 * np.random.default_rng(0).normal(size=(100_000, len(x0))))
+
+    def evaluation():
+        x = next(points)
+        prob._cache.clear()
+        prob.residual(x)
+        prob.jacobian(x)
+
+    def cold():
+        prob._cache.clear()
+        return solvers.solve(prob, x0, method, **options)
+
+    def warm():  # the pipeline leaves the start point's evaluation in the problem's cache
+        prob._cache.clear()
+        prob.residual(x0)
+        return solvers.solve(prob, x0, method, **options)
+
+    def numpy(fn):
+        def run():
+            with _Numpy():
+                return fn()
+
+        return run
+
+    def calibrate():
+        return rc.calibrate(model, data)
+
+    rows = {
+        "evaluation (r + J at a new point)": {"": evaluation},
+        "solve, 3 evaluations": {"numpy": numpy(cold), "compiled": cold},
+        "solve, start point cached + its evaluation": {"numpy": numpy(warm), "compiled": warm},
+        "rc.calibrate end to end": {"numpy": numpy(calibrate), "compiled": calibrate},
+    }
+    fleet = fleet_fn(50)
+    rows["batched engine, 50 robots (per robot)"] = {"numpy": numpy(fleet), "compiled": fleet}
+    print(f"LM on the 100-pose UR10 ({len(x0)} unknowns), CPU µs per call, min of {args.rounds} rounds")
+    print(f"{'':46s} {'numpy':>9s} {'compiled':>9s} {'ratio':>6s}")
+    for name, fns in rows.items():
+        t = best(fns, args.rounds)
+        per = 50 if name.startswith("batched") else 1
+        if "" in t:
+            print(f"{name:46s} {t[''] * 1e6:9.1f}")
+        else:
+            print(f"{name:46s} {t['numpy'] * 1e6 / per:9.1f} {t['compiled'] * 1e6 / per:9.1f} "
+                  f"{t['numpy'] / t['compiled']:5.2f}x")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", FIRST_CALL], capture_output=True, text=True, check=True)
+    first, second = (float(v) for v in out.stdout.split())
+    print(f"first call in a new process (kernels from numba's cache): {first * 1e3:.0f} ms "
+          f"(second {second * 1e6:.0f} µs)")  # fmt: skip
+
+
+def fleet_fn(robots: int):
+    """The batched engine (a study's) on ``robots`` virtual UR10s of ``problem``'s kind."""
+    model = problem(100, 1)[0]
+    datas = [problem(100, seed)[1] for seed in range(1, robots + 1)]
+    return lambda: batch_engine.calibrate_batch(model, datas)
+
+
+if __name__ == "__main__":
+    main()
