@@ -1,5 +1,5 @@
 """Levenberg-Marquardt: the compiled iteration (robocal.identify.lm_kernels) against its numpy
-reference (``robocal.identify.solvers._levenberg_marquardt_batch_numpy``), in the same run.
+reference (``robocal.identify.lm_numpy.levenberg_marquardt_batch_numpy``), in the same run.
 
 The problem is ``bench_calibrate``'s: a 100-pose UR10 (27 unknowns, 300 weighted residuals),
 captured where ``rc.calibrate`` calls the solver.  Rows (per call):
@@ -38,6 +38,7 @@ import robocal.identify.batch as batch_engine
 import robocal.identify.pipeline as pipeline
 from bench_calibrate import problem
 from robocal.identify import solvers
+from robocal.identify.lm_numpy import levenberg_marquardt_batch_numpy
 
 FIRST_CALL = """
 import time
@@ -64,8 +65,8 @@ class _Numpy:
 
     def __enter__(self):
         self.saved = solvers.levenberg_marquardt_batch, batch_engine.levenberg_marquardt_batch
-        solvers.levenberg_marquardt_batch = solvers._levenberg_marquardt_batch_numpy
-        batch_engine.levenberg_marquardt_batch = solvers._levenberg_marquardt_batch_numpy
+        solvers.levenberg_marquardt_batch = levenberg_marquardt_batch_numpy
+        batch_engine.levenberg_marquardt_batch = levenberg_marquardt_batch_numpy
 
     def __exit__(self, *exc):
         solvers.levenberg_marquardt_batch, batch_engine.levenberg_marquardt_batch = self.saved

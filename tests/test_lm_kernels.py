@@ -1,5 +1,5 @@
 """The compiled Levenberg-Marquardt iteration (robocal.identify.lm_kernels) against its numpy
-reference (robocal.identify.solvers._levenberg_marquardt_batch_numpy): the same steps, stops,
+reference (robocal.identify.lm_numpy.levenberg_marquardt_batch_numpy): the same steps, stops,
 histories and solutions, for one problem and for a batch whose problems stop at different
 iterations; and the damped Cholesky step where the damped matrix is not positive definite."""
 
@@ -9,12 +9,8 @@ import numpy as np
 import pytest
 
 from robocal.identify import lm_kernels
-from robocal.identify.solvers import (
-    _damped_steps,
-    _levenberg_marquardt_batch_numpy,
-    levenberg_marquardt,
-    levenberg_marquardt_batch,
-)
+from robocal.identify.lm_numpy import damped_steps, levenberg_marquardt_batch_numpy
+from robocal.identify.solvers import levenberg_marquardt, levenberg_marquardt_batch
 
 
 class _Exponentials:
@@ -77,7 +73,7 @@ def test_a_batch_stopping_at_different_iterations_follows_the_numpy_iteration(fo
     x0 = np.array([[1.0, 0.0, 0.0], [2.0, -1.0, 0.5], [0.5, 0.3, -0.2], [5.0, -3.0, 2.0], [3.0, -2.0, 1.0]])
     calls_fast, calls_ref = [], []
     fast = levenberg_marquardt_batch(_batch_evaluate(problems, calls_fast, fortran), x0, max_evaluations=200)
-    ref = _levenberg_marquardt_batch_numpy(_batch_evaluate(problems, calls_ref), x0, max_evaluations=200)
+    ref = levenberg_marquardt_batch_numpy(_batch_evaluate(problems, calls_ref), x0, max_evaluations=200)
     _assert_same(fast, ref)
     assert fast.success.all() and len(set(fast.evaluations.tolist())) > 2  # stopped at different times
     # the same evaluations: the same problems, packed in the same order, at the same points
@@ -91,7 +87,7 @@ def test_one_problem_with_refused_steps_follows_the_numpy_iteration():
     x0 = np.array([[-1.2, 1.0]])
     evaluate = _batch_evaluate([problem])
     fast = levenberg_marquardt_batch(evaluate, x0, max_evaluations=500, tolerance=1e-12)
-    ref = _levenberg_marquardt_batch_numpy(evaluate, x0, max_evaluations=500, tolerance=1e-12)
+    ref = levenberg_marquardt_batch_numpy(evaluate, x0, max_evaluations=500, tolerance=1e-12)
     _assert_same(fast, ref)
     assert fast.success[0] and fast.evaluations[0] > fast.iterations[0] + 1  # some steps were refused
     np.testing.assert_allclose(fast.x[0], [1.0, 1.0], atol=1e-6)
@@ -108,7 +104,7 @@ def test_budget_stops_and_mixed_outcomes_follow_the_numpy_iteration():
         for problem, x0 in zip(problems, x0s, strict=True):
             evaluate = _batch_evaluate([problem])
             fast = levenberg_marquardt_batch(evaluate, x0[None], max_evaluations=budget)
-            ref = _levenberg_marquardt_batch_numpy(evaluate, x0[None], max_evaluations=budget)
+            ref = levenberg_marquardt_batch_numpy(evaluate, x0[None], max_evaluations=budget)
             _assert_same(fast, ref, rtol=1e-8)
             assert fast.evaluations[0] <= budget
             assert fast.result(0).message == ref.result(0).message
@@ -122,7 +118,7 @@ def test_a_singular_normal_matrix_is_damped_as_in_numpy():
     evaluate = _batch_evaluate(problems)
     _assert_same(
         levenberg_marquardt_batch(evaluate, x0, max_evaluations=400),
-        _levenberg_marquardt_batch_numpy(evaluate, x0, max_evaluations=400),
+        levenberg_marquardt_batch_numpy(evaluate, x0, max_evaluations=400),
         rtol=1e-7,
     )
 
@@ -130,7 +126,7 @@ def test_a_singular_normal_matrix_is_damped_as_in_numpy():
         return np.ones((len(x), 5)), np.zeros((len(x), 5, 2))
 
     fast = levenberg_marquardt_batch(flat, np.array([[1.0, 2.0]]))
-    ref = _levenberg_marquardt_batch_numpy(flat, np.array([[1.0, 2.0]]))
+    ref = levenberg_marquardt_batch_numpy(flat, np.array([[1.0, 2.0]]))
     _assert_same(fast, ref)
     assert fast.success[0] and fast.evaluations[0] == 1
 
@@ -141,7 +137,7 @@ def test_the_damped_step_raises_the_damping_until_positive_definite_as_numpy():
     cases = [(A, 1e-6), (np.zeros((3, 3)), 0.0), (A @ A.T, 1e-3)]
     for M, mu in cases:
         g = rng.normal(size=3)
-        step_ref, mu_ref = _damped_steps(M[None], g[None], np.array([mu]))
+        step_ref, mu_ref = damped_steps(M[None], g[None], np.array([mu]))
         step = np.empty(3)
         mu_fast = lm_kernels.damped_step(M, g, mu, np.empty((3, 3)), np.zeros((3, 3)), step)
         assert mu_fast == mu_ref[0]

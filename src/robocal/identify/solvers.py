@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from robocal.identify.lm_numpy import BatchSolveResult, levenberg_marquardt_batch_numpy
 from robocal.identify.solve_result import SolveResult
 
 __all__ = [
@@ -99,69 +99,6 @@ def levenberg_marquardt(
     return fit.result(0)
 
 
-@dataclass
-class BatchSolveResult:
-    """What :func:`levenberg_marquardt_batch` returns for ``K`` problems.
-
-    Attributes:
-        x: ``(K, p)`` the solutions; r, J: weighted residuals ``(K, m)`` and Jacobians
-            ``(K, m, p)`` there.
-        success: ``(K,)`` converged; iterations: ``(K,)`` accepted steps + 1;
-            evaluations: ``(K,)`` residual-and-Jacobian evaluations.
-        max_evaluations: the budget (for the message of a fit that ran out of it).
-    """
-
-    x: Array
-    r: Array
-    J: Array
-    success: NDArray[np.bool_]
-    iterations: NDArray[np.intp]
-    evaluations: NDArray[np.intp]
-    max_evaluations: int
-    histories: list[list[float]] = field(default_factory=list)
-
-    def message(self, k: int) -> str:
-        if self.success[k]:
-            return "converged: the next step would not improve the fit"
-        return f"no convergence in {self.max_evaluations} evaluations"
-
-    def result(self, k: int) -> SolveResult:
-        """Problem ``k``'s :class:`SolveResult`."""
-        return SolveResult(
-            self.x[k].copy(),
-            bool(self.success[k]),
-            self.message(k),
-            int(self.iterations[k]),
-            int(self.evaluations[k]),
-            self.histories[k],
-            self.r[k],
-            self.J[k],
-        )
-
-
-def _damped_steps(A: Array, g: Array, mu: Array) -> tuple[Array, Array]:
-    """Steps ``δ = −(A + μI)⁻¹ g`` for a stack of normal matrices ``A`` ``(k, p, p)``,
-    raising ``μ`` ``(k,)`` tenfold (at least to 1e-12) where ``A + μI`` is not positive
-    definite (its Cholesky factorisation fails)."""
-    eye = np.eye(A.shape[-1])
-    mu = mu.copy()
-    damped = A + mu[:, None, None] * eye
-    try:
-        np.linalg.cholesky(damped)
-    except np.linalg.LinAlgError:  # some are not positive definite: one at a time (rare)
-        for i in range(len(A)):
-            while True:
-                try:
-                    np.linalg.cholesky(damped[i])
-                    break
-                except np.linalg.LinAlgError:
-                    mu[i] = max(mu[i] * 10.0, 1e-12)
-                    damped[i] = A[i] + mu[i] * eye
-    # numpy has no batched triangular solve: one batched LU solve of the positive definite
-    # matrices (as accurate here, and cheaper than two general solves with the factor)
-    return np.linalg.solve(damped, -g[..., None])[..., 0], mu
-
-
 def levenberg_marquardt_batch(
     evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
     x0: Array,
@@ -193,14 +130,11 @@ def levenberg_marquardt_batch(
     parameters, or after ``max_evaluations`` evaluations; unconverged also when no damping
     makes its normal matrix positive definite (NaN or inf in its Jacobian).
 
-    Compiled: an iteration is one call of :func:`robocal.identify.lm_kernels.propose`
-    (scaling, normal equations, damped Cholesky step, stop tests), the evaluation, and one
-    of :func:`~robocal.identify.lm_kernels.accept` (gain ratio, acceptance, damping);
-    the problems keep their state at their batch indices, and only ``JᵀJ`` and ``Jᵀr`` of
-    each point, not its Jacobian, are kept between calls.  It agrees with the numpy
-    iteration (:func:`_levenberg_marquardt_batch_numpy`, used without numba) to
-    round-off: ``JᵀJ`` is formed before the scaling, so Jacobian entries must stay within
-    about 1e±150 (beyond, their squares over- or underflow).
+    Compiled (:mod:`robocal.identify.lm_kernels`): an iteration is one kernel call before
+    the evaluation (scaling, normal equations, damped Cholesky step, stop tests) and one
+    after it (gain ratio, acceptance, damping).  It agrees with the numpy iteration
+    (:mod:`robocal.identify.lm_numpy`, used without numba) to round-off; ``JᵀJ`` is formed
+    before the scaling, so Jacobian entries must stay within about 1e±150.
 
     Args:
         evaluate: ``evaluate(x, which)`` → weighted residuals ``(k, m)`` and Jacobians
@@ -211,8 +145,8 @@ def levenberg_marquardt_batch(
     """
     x = np.array(x0, dtype=float)
     kernels = _lm_kernels()
-    if kernels is None:
-        return _levenberg_marquardt_batch_numpy(
+    if kernels is None:  # without numba
+        return levenberg_marquardt_batch_numpy(
             evaluate, x, max_evaluations=max_evaluations, tolerance=tolerance
         )
     K, p = x.shape
@@ -224,9 +158,8 @@ def levenberg_marquardt_batch(
     kernels.start(r, Jc, transposed, cost, G, Jr)
     histories = [[math.sqrt(c / m)] for c in cost.tolist()]
     last = [(r, J, k) for k in range(K)]  # each problem's evaluation at x: (r, J, row)
-    D, mu, nu = np.zeros((K, p)), np.full(K, np.nan), np.full(K, 2.0)
-    evaluations, success = np.ones(K, dtype=np.intp), np.zeros(K, dtype=bool)
-    x_new, predicted, rms = np.empty((K, p)), np.empty(K), np.empty(K)
+    D, mu, nu, x_new = np.zeros((K, p)), np.full(K, np.nan), np.full(K, 2.0), np.empty((K, p))
+    evaluations, success, predicted, rms = np.ones(K, np.intp), np.zeros(K, bool), np.empty(K), np.empty(K)
     accepted = np.empty((2, K), dtype=np.intp)  # the accepted problems' (batch index, row)
     tolerance, max_evaluations = float(tolerance), int(max_evaluations)
     n = K
@@ -282,135 +215,6 @@ def _lm_kernels():
             return None
         _KERNELS.append(lm_kernels)
     return _KERNELS[0]
-
-
-def _levenberg_marquardt_batch_numpy(
-    evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
-    x0: Array,
-    *,
-    max_evaluations: int = 200,
-    tolerance: float = 1e-10,
-) -> BatchSolveResult:
-    """:func:`levenberg_marquardt_batch` in numpy (the same iteration, one numpy call per
-    operation on the batch): the reference the compiled kernels are tested against, and
-    the path without numba."""
-    x = np.array(x0, dtype=float)
-    K = len(x)
-    ids = np.arange(K)  # the problems still running; their state below, compacted as they stop
-    r, J = evaluate(x, ids)
-    r, J = np.array(r, dtype=float), np.array(J, dtype=float)
-    m = max(r.shape[1], 1)
-    cost = _squares(r)
-    histories = [[math.sqrt(c / m)] for c in cost.tolist()]
-    D = _column_norms(J)
-    D[D == 0] = 1.0
-    mu = np.full(K, np.nan)
-    nu = np.full(K, 2.0)
-    evaluations = np.ones(K, dtype=np.intp)
-    done = BatchSolveResult(x.copy(), r.copy(), J.copy(), np.zeros(K, dtype=bool), np.zeros(K, dtype=np.intp),
-                            np.zeros(K, dtype=np.intp), max_evaluations, histories)  # fmt: skip
-    while len(ids):
-        D = np.maximum(D, _column_norms(J))
-        A, g = _scaled_normal_equations(J, r, D)
-        _start_damping(mu, A)
-        step, mu = _damped_steps(A, g, mu)
-        predicted = -np.sum(step * (2.0 * g + (A @ step[:, :, None])[..., 0]), axis=1)
-        small_step = _norms(step) <= tolerance * (_norms(D * x) + tolerance)
-        converged = (predicted <= tolerance * cost) | small_step | (cost == 0.0)
-        stop = converged | (evaluations >= max_evaluations)
-        if stop.any():  # record the stopped ones, keep the others
-            _record(done, ids, stop, x, r, J, converged, evaluations)
-            going = ~stop
-            ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted = (
-                a[going] for a in (ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted)
-            )
-            if not len(ids):
-                break
-        x_new = x + step / D
-        r_new, J_new = evaluate(x_new, ids)
-        evaluations = evaluations + 1
-        cost_new = _squares(r_new)
-        rho = (cost - cost_new) / predicted
-        better = rho > 0
-        x, r, J, cost = _accepted(better, (x, r, J, cost), (x_new, r_new, J_new, cost_new))
-        mu, nu = _nielsen_damping(better, rho, mu, nu)
-        for k, c in zip(ids[better].tolist(), cost_new[better].tolist(), strict=True):
-            histories[k].append(math.sqrt(c / m))
-    done.iterations[:] = [len(h) for h in histories]
-    return done
-
-
-def _scaled_normal_equations(J: Array, r: Array, D: Array) -> tuple[Array, Array]:
-    """``A = J_sᵀJ_s`` ``(k, p, p)`` and ``g = J_sᵀ r`` ``(k, p)`` with ``J_s = J D⁻¹`` for the
-    Jacobians ``J`` ``(k, m, p)``, residuals ``r`` ``(k, m)`` and column scales ``D`` ``(k, p)``."""
-    Js = J / D[:, None, :]
-    JsT = Js.transpose(0, 2, 1)
-    return JsT @ Js, (JsT @ r[:, :, None])[..., 0]
-
-
-def _start_damping(mu: Array, A: Array) -> None:
-    """In place: ``μ`` of the problems without one yet (NaN) is ``1e-6`` times the largest
-    diagonal of their ``A`` (Nielsen's choice for a good start)."""
-    fresh = np.isnan(mu)
-    if fresh.any():
-        mu[fresh] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
-
-
-def _record(
-    done: BatchSolveResult,
-    ids: NDArray[np.intp],
-    stop: NDArray[np.bool_],
-    x: Array,
-    r: Array,
-    J: Array,
-    converged: NDArray[np.bool_],
-    evaluations: NDArray[np.intp],
-) -> None:
-    """Write the state of the problems that ``stop`` into ``done`` (at their batch indices)."""
-    f, k = np.flatnonzero(stop), ids[stop]
-    done.x[k], done.r[k], done.J[k] = x[f], r[f], J[f]
-    done.success[k], done.evaluations[k] = converged[f], evaluations[f]
-
-
-def _accepted(
-    better: NDArray[np.bool_], old: tuple[Array, Array, Array, Array], new: tuple[Array, Array, Array, Array]
-) -> tuple[Array, Array, Array, Array]:
-    """``(x, r, J, cost)``: the trial point's where its step was ``better``, else the old."""
-    if better.all():
-        return new
-    x, r, J, cost = old
-    x_new, r_new, J_new, cost_new = new
-    return (
-        np.where(better[:, None], x_new, x),
-        np.where(better[:, None], r_new, r),
-        np.where(better[:, None, None], J_new, J),
-        np.where(better, cost_new, cost),
-    )
-
-
-def _nielsen_damping(better: NDArray[np.bool_], rho: Array, mu: Array, nu: Array) -> tuple[Array, Array]:
-    """Nielsen's update of ``(μ, ν)``: ``μ·max(1/3, 1 − (2ρ − 1)³)`` and ``ν = 2`` after an
-    accepted step, ``μ·ν`` and ``2ν`` after a refused one."""
-    if better.all():
-        return mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), np.full_like(nu, 2.0)
-    with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
-        mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
-    return mu, np.where(better, 2.0, nu * 2.0)
-
-
-def _squares(r: Array) -> Array:
-    """``(k,)`` sums of squares of the rows of ``r`` ``(k, m)``."""
-    return np.einsum("km,km->k", r, r)
-
-
-def _norms(v: Array) -> Array:
-    """``(k,)`` Euclidean norms of the rows of ``v`` ``(k, p)``."""
-    return np.sqrt(np.einsum("kp,kp->k", v, v))
-
-
-def _column_norms(J: Array) -> Array:
-    """``(k, p)`` Euclidean norms of the columns of a stack of matrices ``J`` ``(k, m, p)``."""
-    return np.sqrt(np.einsum("kmp,kmp->kp", J, J))
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100) -> SolveResult:
