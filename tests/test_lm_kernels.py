@@ -158,4 +158,4 @@ def test_a_jacobian_with_nan_stops_unconverged_instead_of_looping():
 
     fit = levenberg_marquardt_batch(evaluate, np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
     assert fit.success.tolist() == [True, False]
-    assert fit.evaluations[1] == 1 and fit.result(1).message.startswith("no convergence")
+    assert fit.evaluations[1] == 1 and fit.result(1).message.startswith("stopped: NaN or inf")

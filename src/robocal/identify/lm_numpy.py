@@ -49,6 +49,8 @@ class BatchSolveResult:
     def message(self, k: int) -> str:
         if self.success[k]:
             return "converged: the next step would not improve the fit"
+        if self.evaluations[k] < self.max_evaluations:  # the compiled iteration's stop
+            return "stopped: NaN or inf in the Jacobian (no damping makes the step solvable)"
         return f"no convergence in {self.max_evaluations} evaluations"
 
     def result(self, k: int) -> SolveResult:
