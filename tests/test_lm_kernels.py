@@ -110,6 +110,15 @@ def test_budget_stops_and_mixed_outcomes_follow_the_numpy_iteration():
             assert fast.result(0).message == ref.result(0).message
 
 
+def test_an_empty_batch_returns_an_empty_result():
+    def evaluate(x, which):
+        return np.zeros((len(x), 4)), np.zeros((len(x), 4, 2))
+
+    fit = levenberg_marquardt_batch(evaluate, np.zeros((0, 2)))
+    assert fit.x.shape == (0, 2) and fit.J.shape == (0, 4, 2) and fit.histories == []
+    assert fit.success.shape == fit.iterations.shape == fit.evaluations.shape == (0,)
+
+
 def test_a_singular_normal_matrix_is_damped_as_in_numpy():
     """Two equal columns: only the damping keeps the normal matrix positive definite; a zero
     Jacobian: the start damping is 0 and is raised to 1e-12."""

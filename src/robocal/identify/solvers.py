@@ -175,7 +175,7 @@ def levenberg_marquardt_batch(
         for k, i, value in zip(*accepted[:, :count].tolist(), rms[:count].tolist(), strict=True):
             histories[k].append(value)
             last[k] = (r, J, i)
-    r, J = _gathered(last)
+    r, J = _gathered(last, r, J)
     iterations = np.array([len(h) for h in histories], dtype=np.intp)
     return BatchSolveResult(x, r, J, success, iterations, evaluations, max_evaluations, histories)
 
@@ -193,9 +193,11 @@ def _packed(r, J) -> tuple[Array, Array, Array, bool]:
     return r, J, np.ascontiguousarray(J), False
 
 
-def _gathered(last: list[tuple[Array, Array, int]]) -> tuple[Array, Array]:
+def _gathered(last: list[tuple[Array, Array, int]], r: Array, J: Array) -> tuple[Array, Array]:
     """``(K, m)`` residuals and ``(K, m, p)`` Jacobians from each problem's ``(r, J, row)``
-    (one problem's first rows: no copy)."""
+    (one problem's first rows: no copy; no problems: ``r``, ``J``)."""
+    if not last:
+        return r, J
     if len(last) == 1 and last[0][2] == 0 and len(last[0][0]) == 1:
         return last[0][0], last[0][1]
     return np.stack([r[i] for r, _, i in last]), np.stack([J[i] for _, J, i in last])
