@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from robocal.identify.lm_numpy import BatchSolveResult, levenberg_marquardt_batch_numpy
 from robocal.identify.solve_result import SolveResult
 
 __all__ = [
@@ -99,69 +99,6 @@ def levenberg_marquardt(
     return fit.result(0)
 
 
-@dataclass
-class BatchSolveResult:
-    """What :func:`levenberg_marquardt_batch` returns for ``K`` problems.
-
-    Attributes:
-        x: ``(K, p)`` the solutions; r, J: weighted residuals ``(K, m)`` and Jacobians
-            ``(K, m, p)`` there.
-        success: ``(K,)`` converged; iterations: ``(K,)`` accepted steps + 1;
-            evaluations: ``(K,)`` residual-and-Jacobian evaluations.
-        max_evaluations: the budget (for the message of a fit that ran out of it).
-    """
-
-    x: Array
-    r: Array
-    J: Array
-    success: NDArray[np.bool_]
-    iterations: NDArray[np.intp]
-    evaluations: NDArray[np.intp]
-    max_evaluations: int
-    histories: list[list[float]] = field(default_factory=list)
-
-    def message(self, k: int) -> str:
-        if self.success[k]:
-            return "converged: the next step would not improve the fit"
-        return f"no convergence in {self.max_evaluations} evaluations"
-
-    def result(self, k: int) -> SolveResult:
-        """Problem ``k``'s :class:`SolveResult`."""
-        return SolveResult(
-            self.x[k].copy(),
-            bool(self.success[k]),
-            self.message(k),
-            int(self.iterations[k]),
-            int(self.evaluations[k]),
-            self.histories[k],
-            self.r[k],
-            self.J[k],
-        )
-
-
-def _damped_steps(A: Array, g: Array, mu: Array) -> tuple[Array, Array]:
-    """Steps ``δ = −(A + μI)⁻¹ g`` for a stack of normal matrices ``A`` ``(k, p, p)``,
-    raising ``μ`` ``(k,)`` tenfold (at least to 1e-12) where ``A + μI`` is not positive
-    definite (its Cholesky factorisation fails)."""
-    eye = np.eye(A.shape[-1])
-    mu = mu.copy()
-    damped = A + mu[:, None, None] * eye
-    try:
-        np.linalg.cholesky(damped)
-    except np.linalg.LinAlgError:  # some are not positive definite: one at a time (rare)
-        for i in range(len(A)):
-            while True:
-                try:
-                    np.linalg.cholesky(damped[i])
-                    break
-                except np.linalg.LinAlgError:
-                    mu[i] = max(mu[i] * 10.0, 1e-12)
-                    damped[i] = A[i] + mu[i] * eye
-    # numpy has no batched triangular solve: one batched LU solve of the positive definite
-    # matrices (as accurate here, and cheaper than two general solves with the factor)
-    return np.linalg.solve(damped, -g[..., None])[..., 0], mu
-
-
 def levenberg_marquardt_batch(
     evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
     x0: Array,
@@ -190,131 +127,96 @@ def levenberg_marquardt_batch(
 
     A problem stops when the predicted decrease of its next step is below ``tolerance``
     times its cost, or the step is below ``tolerance`` relative to the scaled
-    parameters, or after ``max_evaluations`` evaluations.
+    parameters, or after ``max_evaluations`` evaluations; unconverged also when no damping
+    makes its normal matrix positive definite (NaN or inf in its Jacobian).
+
+    Compiled (:mod:`robocal.identify.lm_kernels`): an iteration is one kernel call before
+    the evaluation (scaling, normal equations, damped Cholesky step, stop tests) and one
+    after it (gain ratio, acceptance, damping).  It agrees with the numpy iteration
+    (:mod:`robocal.identify.lm_numpy`, used without numba) to round-off; ``JᵀJ`` is formed
+    before the scaling, so Jacobian entries must stay within about 1e±150.
 
     Args:
         evaluate: ``evaluate(x, which)`` → weighted residuals ``(k, m)`` and Jacobians
             ``(k, m, p)`` of problems ``which`` ``(k,)`` (indices into the batch) at
-            ``x`` ``(k, p)``.
+            ``x`` ``(k, p)``.  The arrays it returns are kept (not copied) for the result:
+            it must not write into them afterwards.
         x0: ``(K, p)`` start values.
     """
     x = np.array(x0, dtype=float)
-    K = len(x)
-    ids = np.arange(K)  # the problems still running; their state below, compacted as they stop
+    kernels = _lm_kernels()
+    if kernels is None:  # without numba
+        return levenberg_marquardt_batch_numpy(
+            evaluate, x, max_evaluations=max_evaluations, tolerance=tolerance
+        )
+    K, p = x.shape
+    ids = np.arange(K)  # the problems still running are ids[:n] (batch order); state at batch indices
     r, J = evaluate(x, ids)
-    r, J = np.array(r, dtype=float), np.array(J, dtype=float)
+    r, J, Jc, transposed = _packed(r, J)
     m = max(r.shape[1], 1)
-    cost = _squares(r)
+    cost, G, Jr = np.empty(K), np.empty((K, p, p)), np.empty((K, p))  # Σ r², JᵀJ, Jᵀr at x
+    kernels.start(r, Jc, transposed, cost, G, Jr)
     histories = [[math.sqrt(c / m)] for c in cost.tolist()]
-    D = _column_norms(J)
-    D[D == 0] = 1.0
-    mu = np.full(K, np.nan)
-    nu = np.full(K, 2.0)
-    evaluations = np.ones(K, dtype=np.intp)
-    done = BatchSolveResult(x.copy(), r.copy(), J.copy(), np.zeros(K, dtype=bool), np.zeros(K, dtype=np.intp),
-                            np.zeros(K, dtype=np.intp), max_evaluations, histories)  # fmt: skip
-    while len(ids):
-        D = np.maximum(D, _column_norms(J))
-        A, g = _scaled_normal_equations(J, r, D)
-        _start_damping(mu, A)
-        step, mu = _damped_steps(A, g, mu)
-        predicted = -np.sum(step * (2.0 * g + (A @ step[:, :, None])[..., 0]), axis=1)
-        small_step = _norms(step) <= tolerance * (_norms(D * x) + tolerance)
-        converged = (predicted <= tolerance * cost) | small_step | (cost == 0.0)
-        stop = converged | (evaluations >= max_evaluations)
-        if stop.any():  # record the stopped ones, keep the others
-            _record(done, ids, stop, x, r, J, converged, evaluations)
-            going = ~stop
-            ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted = (
-                a[going] for a in (ids, x, r, J, cost, D, mu, nu, evaluations, step, predicted)
-            )
-            if not len(ids):
-                break
-        x_new = x + step / D
-        r_new, J_new = evaluate(x_new, ids)
-        evaluations = evaluations + 1
-        cost_new = _squares(r_new)
-        rho = (cost - cost_new) / predicted
-        better = rho > 0
-        x, r, J, cost = _accepted(better, (x, r, J, cost), (x_new, r_new, J_new, cost_new))
-        mu, nu = _nielsen_damping(better, rho, mu, nu)
-        for k, c in zip(ids[better].tolist(), cost_new[better].tolist(), strict=True):
-            histories[k].append(math.sqrt(c / m))
-    done.iterations[:] = [len(h) for h in histories]
-    return done
+    last = [(r, J, k) for k in range(K)]  # each problem's evaluation at x: (r, J, row)
+    D, mu, nu, x_new = np.zeros((K, p)), np.full(K, np.nan), np.full(K, 2.0), np.empty((K, p))
+    evaluations, success, predicted, rms = np.ones(K, np.intp), np.zeros(K, bool), np.empty(K), np.empty(K)
+    accepted = np.empty((2, K), dtype=np.intp)  # the accepted problems' (batch index, row)
+    tolerance, max_evaluations = float(tolerance), int(max_evaluations)
+    n = K
+    while True:
+        n = kernels.propose(ids, n, x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
+                            x_new, predicted)  # fmt: skip
+        if not n:
+            break
+        r, J = evaluate(x_new[:n], ids[:n].copy())
+        r, J, Jc, transposed = _packed(r, J)
+        count = kernels.accept(ids, n, x_new, r, Jc, transposed, x, cost, G, Jr, mu, nu, predicted,
+                               evaluations, accepted, rms)  # fmt: skip
+        for k, i, value in zip(*accepted[:, :count].tolist(), rms[:count].tolist(), strict=True):
+            histories[k].append(value)
+            last[k] = (r, J, i)
+    r, J = _gathered(last, r, J)
+    iterations = np.array([len(h) for h in histories], dtype=np.intp)
+    return BatchSolveResult(x, r, J, success, iterations, evaluations, max_evaluations, histories)
 
 
-def _scaled_normal_equations(J: Array, r: Array, D: Array) -> tuple[Array, Array]:
-    """``A = J_sᵀJ_s`` ``(k, p, p)`` and ``g = J_sᵀ r`` ``(k, p)`` with ``J_s = J D⁻¹`` for the
-    Jacobians ``J`` ``(k, m, p)``, residuals ``r`` ``(k, m)`` and column scales ``D`` ``(k, p)``."""
-    Js = J / D[:, None, :]
-    JsT = Js.transpose(0, 2, 1)
-    return JsT @ Js, (JsT @ r[:, :, None])[..., 0]
+def _packed(r, J) -> tuple[Array, Array, Array, bool]:
+    """Residuals ``(n, m)`` and Jacobians ``(n, m, p)`` as float64, and the Jacobians as the
+    kernels take them: C-ordered ``(n, m, p)``, or ``(n, p, m)`` (``True``: each transposed,
+    the Fortran order numpy's column stacks and the chain's Jacobians come in)."""
+    r, J = np.ascontiguousarray(r, dtype=np.float64), np.asarray(J, dtype=np.float64)
+    if J.flags.c_contiguous:
+        return r, J, J, False
+    Jt = J.transpose(0, 2, 1)
+    if Jt.flags.c_contiguous:
+        return r, J, Jt, True
+    return r, J, np.ascontiguousarray(J), False
 
 
-def _start_damping(mu: Array, A: Array) -> None:
-    """In place: ``μ`` of the problems without one yet (NaN) is ``1e-6`` times the largest
-    diagonal of their ``A`` (Nielsen's choice for a good start)."""
-    fresh = np.isnan(mu)
-    if fresh.any():
-        mu[fresh] = 1e-6 * np.max(np.diagonal(A[fresh], axis1=1, axis2=2), axis=1)
+def _gathered(last: list[tuple[Array, Array, int]], r: Array, J: Array) -> tuple[Array, Array]:
+    """``(K, m)`` residuals and ``(K, m, p)`` Jacobians from each problem's ``(r, J, row)``
+    (one problem's first rows: no copy; no problems: ``r``, ``J``)."""
+    if not last:
+        return r, J
+    if len(last) == 1 and last[0][2] == 0 and len(last[0][0]) == 1:
+        return last[0][0], last[0][1]
+    return np.stack([r[i] for r, _, i in last]), np.stack([J[i] for _, J, i in last])
 
 
-def _record(
-    done: BatchSolveResult,
-    ids: NDArray[np.intp],
-    stop: NDArray[np.bool_],
-    x: Array,
-    r: Array,
-    J: Array,
-    converged: NDArray[np.bool_],
-    evaluations: NDArray[np.intp],
-) -> None:
-    """Write the state of the problems that ``stop`` into ``done`` (at their batch indices)."""
-    f, k = np.flatnonzero(stop), ids[stop]
-    done.x[k], done.r[k], done.J[k] = x[f], r[f], J[f]
-    done.success[k], done.evaluations[k] = converged[f], evaluations[f]
+#: the compiled kernels (robocal.identify.lm_kernels) once imported; a list: no `global` needed
+_KERNELS: list = []
 
 
-def _accepted(
-    better: NDArray[np.bool_], old: tuple[Array, Array, Array, Array], new: tuple[Array, Array, Array, Array]
-) -> tuple[Array, Array, Array, Array]:
-    """``(x, r, J, cost)``: the trial point's where its step was ``better``, else the old."""
-    if better.all():
-        return new
-    x, r, J, cost = old
-    x_new, r_new, J_new, cost_new = new
-    return (
-        np.where(better[:, None], x_new, x),
-        np.where(better[:, None], r_new, r),
-        np.where(better[:, None, None], J_new, J),
-        np.where(better, cost_new, cost),
-    )
-
-
-def _nielsen_damping(better: NDArray[np.bool_], rho: Array, mu: Array, nu: Array) -> tuple[Array, Array]:
-    """Nielsen's update of ``(μ, ν)``: ``μ·max(1/3, 1 − (2ρ − 1)³)`` and ``ν = 2`` after an
-    accepted step, ``μ·ν`` and ``2ν`` after a refused one."""
-    if better.all():
-        return mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), np.full_like(nu, 2.0)
-    with np.errstate(over="ignore", invalid="ignore"):  # the unused branch of a refused step
-        mu = np.where(better, mu * np.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), mu * nu)
-    return mu, np.where(better, 2.0, nu * 2.0)
-
-
-def _squares(r: Array) -> Array:
-    """``(k,)`` sums of squares of the rows of ``r`` ``(k, m)``."""
-    return np.einsum("km,km->k", r, r)
-
-
-def _norms(v: Array) -> Array:
-    """``(k,)`` Euclidean norms of the rows of ``v`` ``(k, p)``."""
-    return np.sqrt(np.einsum("kp,kp->k", v, v))
-
-
-def _column_norms(J: Array) -> Array:
-    """``(k, p)`` Euclidean norms of the columns of a stack of matrices ``J`` ``(k, m, p)``."""
-    return np.sqrt(np.einsum("kmp,kmp->kp", J, J))
+def _lm_kernels():
+    """:mod:`robocal.identify.lm_kernels`, imported on first use (it imports numba); None
+    without numba (then the numpy iteration runs)."""
+    if not _KERNELS:
+        try:
+            from robocal.identify import lm_kernels
+        except ImportError:  # pragma: no cover - numba is a dependency
+            return None
+        _KERNELS.append(lm_kernels)
+    return _KERNELS[0]
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100) -> SolveResult:
