@@ -36,7 +36,6 @@ step dp/dvalue = a and dω/dvalue = 0, with ``a`` and ``o`` in base coordinates.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -45,7 +44,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.model import chain_batch
+from robocal.model import chain_batch, chain_plan
 from robocal.model.chain_batch import perturbation_layout, to_homogeneous
 from robocal.model.chain_compiled import (
     FLOAT64,
@@ -62,6 +61,8 @@ from robocal.model.steps import Body, Joint, JointEffects, JointType, Role, Step
 __all__ = ["Body", "Joint", "JointEffects", "Model", "Role", "Step"]
 
 Array = NDArray[np.float64]
+#: cached properties of a model that depend only on its steps' names, motions, joints and roles
+_STRUCTURE = ("names", "roles", "_index", "_plan")
 # the old private names (robocal.model.dynamics imports them from here; tests patch _kernels)
 _elementaries = elementaries
 _kernels = load_kernels
@@ -92,15 +93,11 @@ class Model:
         object.__setattr__(self, "joint_effects", tuple(self.joint_effects))
         check_chain(self.name, self.steps, self.bodies, self.joint_effects)
 
-    def __hash__(self) -> int:
-        """The fields' hash (as the dataclass's), kept: a model of 48 steps takes ~40 µs to
-        hash, and caches keyed by the model (the generic identifiable set) hash it per call."""
-        cached = self.__dict__.get("_hash")
-        if cached is None:
+    def __hash__(self) -> int:  # the dataclass's, kept: 48 steps take ~40 µs to hash
+        if "_hash" not in self.__dict__:  # (caches keyed by the model hash it per call)
             fields = (self.name, self.steps, self.bodies, self.title, self.source, self.notes)
-            cached = hash((*fields, self.joint_effects))
-            object.__setattr__(self, "_hash", cached)
-        return cached
+            object.__setattr__(self, "_hash", hash((*fields, self.joint_effects)))
+        return self.__dict__["_hash"]
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -200,21 +197,11 @@ class Model:
         steps = tuple(s._with_free(free) if s.name in selected else s for s in self.steps)
         return self._derived(steps, same_free=False)
 
-    #: cached properties that depend only on the steps' names, motions, joints and roles
-    _STRUCTURE = ("names", "roles", "_index", "_plan")
-
     def _derived(self, steps: tuple[Step, ...], same_free: bool) -> Model:
-        """This model with ``steps`` that differ from its own only in their values (or, unless
-        ``same_free``, their free flags), each already checked (:meth:`Step._with_value`):
-        the chain's invariants hold, so the copy skips ``__post_init__``, and it starts with
-        this model's structure worked out (the solvers derive several models per
-        calibration; each would otherwise rebuild its plan, names and index)."""
-        derived = object.__new__(Model)
-        fields = {f.name: self.__dict__[f.name] for f in dataclasses.fields(self)}
-        shared = self._STRUCTURE + (("free_mask", "free_names") if same_free else ())
-        derived.__dict__.update(fields, steps=steps)
-        derived.__dict__.update({k: self.__dict__[k] for k in shared if k in self.__dict__})
-        return derived
+        """This model with ``steps`` that differ only in values (and free flags unless
+        ``same_free``), each already checked: :func:`~robocal.model.chain_plan.derived_copy`."""
+        shared = _STRUCTURE + (("free_mask", "free_names") if same_free else ())
+        return chain_plan.derived_copy(self, steps, shared)
 
     def fixed(self, names: Iterable[str]) -> Model:
         """A new model with the named parameters fixed (not identified)."""

@@ -6,8 +6,10 @@ of them are joints, so models that differ in values share one (cached by structu
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -174,3 +176,16 @@ def check_perturbations(perturbations: ArrayLike | None, n: int, dof: int) -> Ar
     if d.shape != (n, dof, 3):
         raise ValueError(f"joint perturbations shaped {d.shape}; expected ({n}, {dof}, 3)")
     return d
+
+
+def derived_copy(model: Any, steps: tuple, shared: tuple[str, ...]) -> Any:
+    """A copy of the (frozen dataclass) ``model`` with other ``steps`` whose names, motions
+    and joints are its own, each already checked (``Step._with_value``): the chain's
+    invariants hold, so the copy skips ``__post_init__``, and it keeps the ``shared`` cached
+    properties of ``model`` (its plan, names, index...) instead of working them out again.
+    The solvers derive several models per calibration."""
+    derived = object.__new__(type(model))
+    fields = {f.name: model.__dict__[f.name] for f in dataclasses.fields(model)}
+    derived.__dict__.update(fields, steps=steps)
+    derived.__dict__.update({k: model.__dict__[k] for k in shared if k in model.__dict__})
+    return derived
