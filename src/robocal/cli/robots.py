@@ -4,6 +4,7 @@ and degrees) and ``robocal fk ROBOT --q "q1,...,qn"`` (the tool pose at joint va
 from __future__ import annotations
 
 import math
+import warnings
 from typing import TYPE_CHECKING, Annotated
 
 import typer
@@ -115,7 +116,9 @@ def fk(
     T = m.fk(qv, compiled=False)  # one pose: numpy's 60 µs beat numba's import and cache load
     quat = spatial.matrix_to_quaternion(T[:3, :3])
     rpy = spatial.matrix_to_euler(T[:3, :3], "xyz")
-    zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")
+    with warnings.catch_warnings():  # gimbal lock (e.g. a tool along the base z): angle 3 is 0
+        warnings.simplefilter("ignore", UserWarning)
+        zxz = spatial.matrix_to_euler(T[:3, :3], "ZXZ")
     if as_json:
         print(
             strict_json(
