@@ -749,7 +749,7 @@ def test_an_unexpected_exception_is_one_line_and_a_traceback_file(monkeypatch, t
 
 # ------------------------------------------------------------------ CSV formula cells
 def test_formula_cells_are_neutralised_in_csv_outputs(tmp_path):
-    from robocal.model.files import csv_text, csv_untext
+    from robocal.safe_output import csv_text, csv_untext
 
     for cell, written in [
         ('=HYPERLINK("x")', '\'=HYPERLINK("x")'),

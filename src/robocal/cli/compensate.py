@@ -28,7 +28,7 @@ from rich.table import Table
 
 from robocal.cli.options import Decimal, Force, Json, Sep, out_option, parse_vector, resolve_model
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 from robocal.units import unit_factor
 
 __all__ = ["register"]

@@ -9,7 +9,7 @@ import typer
 
 from robocal.cli.options import Force, Json, out_option
 from robocal.console import fail, refuse_overwrite
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 __all__ = ["register"]
 

@@ -24,7 +24,7 @@ from robocal.cli.options import (
 )
 from robocal.cli.validate import CALIBRATION_DIR
 from robocal.console import console, fail, refuse_overwrite
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 __all__ = ["register"]
 

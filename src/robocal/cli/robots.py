@@ -107,7 +107,7 @@ def fk(
 ) -> None:
     """Tool pose of a robot at the given joint values (rad and m unless --deg)."""
     from robocal import spatial
-    from robocal.model.files import strict_json
+    from robocal.safe_output import strict_json
 
     m = resolve_model(robot)
     qv = _parse_q(q, m, deg)

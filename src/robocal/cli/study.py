@@ -38,7 +38,7 @@ from robocal.cli.options import (
     robot_and_chain,
 )
 from robocal.console import console, err_console, fail, input_problem, safe
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 __all__ = ["register"]
 

@@ -22,7 +22,7 @@ from robocal.cli.options import (
 )
 from robocal.cli.reading import load_result, own_data, read_data
 from robocal.console import console, fail, safe
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 __all__ = ["register"]
 

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from robocal.identify.calibrate import CalibrationResult
 from robocal.measure.ik import TargetKind
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text, csv_text, strict_json
+from robocal.model.files import atomic_write_text
+from robocal.safe_output import csv_text, strict_json
 from robocal.units import joint_unit_factors
 
 __all__ = ["Compensation"]
@@ -206,5 +207,3 @@ def _fmt(v: float, digits: int = 12) -> str:
     if not math.isfinite(v):
         return "nan"
     return f"{v:.{digits}g}"
-
-

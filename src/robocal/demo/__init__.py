@@ -451,7 +451,8 @@ class _Demo:
             return
         from robocal.evaluate.report import write_report
         from robocal.measure.dataset import write_measurements
-        from robocal.model.files import atomic_write_text, save_model, strict_json
+        from robocal.model.files import atomic_write_text, save_model
+        from robocal.safe_output import strict_json
 
         result = self.result.with_records(source="robocal demo", robot=self.robot, seed=self.seed)
         ev = self.ev

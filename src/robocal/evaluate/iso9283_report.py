@@ -53,6 +53,7 @@ from robocal.evaluate.iso9283_eval_pose import (
     _visits,
 )
 from robocal.evaluate.iso9283_log import Iso9283Log
+from robocal.safe_output import finite_or_none
 
 __all__ = [
     "Characteristic",
@@ -77,7 +78,7 @@ class Iso9283Results:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (mm, deg, s, %); a value that could not be computed is None."""
-        return _finite(
+        return finite_or_none(
             {
                 "source": self.source,
                 "conditions": dict(self.conditions),
@@ -97,17 +98,6 @@ class Iso9283Results:
                 ],
             }
         )
-
-
-def _finite(value: Any) -> Any:
-    """``value`` with every non-finite float replaced by None (valid JSON)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 # ------------------------------------------------------------------ all

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 __all__ = ["SEED_NUMBERS", "SEED_SETS", "run", "seed_rule"]
 

@@ -77,7 +77,7 @@ from robocal.measure.ik import solve_ik
 from robocal.measure.paths import joint_path
 from robocal.measure.simulate import VirtualRobot, simulate
 from robocal.model.chain import Model
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 __all__ = [
     "BOARDS",

@@ -13,7 +13,7 @@ from robocal.experiments.seed003_setup import (
     STATIC_METHODS,
     THESIS,
 )
-from robocal.model.files import strict_json
+from robocal.safe_output import strict_json
 
 
 def _table(title: str, rows: dict[str, dict[str, list[float]]], thesis: dict | None = None):

@@ -26,7 +26,8 @@ from robocal.identify.effects import parameter_unit
 from robocal.identify.guards import FitToNoise
 from robocal.identify.observability import Dropped
 from robocal.model.dynamics import Payload
-from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model, strict_json
+from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model
+from robocal.safe_output import strict_json
 
 __all__ = ["RESULT_FILES", "file_hash", "load_result_fields", "metadata_dict", "result_dict", "save_result"]
 

@@ -13,7 +13,8 @@ from robocal.measure.measurements import (
     Array,
     Measurements,
 )
-from robocal.model.files import atomic_write_text, csv_text
+from robocal.model.files import atomic_write_text
+from robocal.safe_output import csv_text
 
 
 def _fmt(v: float) -> str:

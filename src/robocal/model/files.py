@@ -48,7 +48,6 @@ Lengths and angles are in ``units`` (default m and rad).  Files written by
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -66,13 +65,11 @@ __all__ = [
     "ModelFileError",
     "atomic_write_bytes",
     "atomic_write_text",
-    "csv_text",
     "load_model",
     "model_from_dict",
     "model_to_dict",
     "read_yaml",
     "save_model",
-    "strict_json",
 ]
 
 FORMAT_VERSION = 1
@@ -387,53 +384,6 @@ def _effects_to_dict(e: JointEffects) -> dict[str, Any]:
     if e.shaft_length is not None:
         out["shaft_length"] = e.shaft_length
     return out
-
-
-def _finite(value: Any) -> Any:
-    """``value`` with every non-finite float replaced by None (JSON has no NaN/Infinity)."""
-    if isinstance(value, float) or (hasattr(value, "dtype") and getattr(value, "ndim", 1) == 0):
-        try:  # a float or a numpy scalar
-            number = float(value)
-        except (TypeError, ValueError):
-            return value
-        if isinstance(value, float) or value.dtype.kind == "f":
-            return number if math.isfinite(number) else None
-        return value.item()
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
-
-
-def strict_json(value: Any, **kwargs: Any) -> str:
-    """``json.dumps`` that writes strict JSON: a non-finite float (NaN, ±inf) becomes
-    ``null`` instead of the ``NaN``/``Infinity`` that other JSON readers refuse."""
-    import json
-
-    return json.dumps(_finite(value), allow_nan=False, **kwargs)
-
-
-_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-
-
-def csv_text(cell: str) -> str:
-    """A text cell for a CSV file that a spreadsheet will not run as a formula: a cell
-    that starts with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return and is not a
-    number gets a leading ``'`` (the usual convention, OWASP "CSV injection"); numbers
-    such as ``-0.5`` are written as they are."""
-    if not cell.startswith(_FORMULA_START):
-        return cell
-    try:
-        float(cell)
-    except ValueError:
-        return "'" + cell
-    return cell
-
-
-def csv_untext(cell: str) -> str:
-    """The text :func:`csv_text` was given (its leading ``'`` removed)."""
-    return cell[1:] if cell.startswith("'") and cell[1:].startswith(_FORMULA_START) else cell
 
 
 def save_model(model: Model, path: str | os.PathLike[str], run_id: str | None = None) -> Path:

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.model.files import strict_json
 from robocal.outdir import new_run_id, write_together
 from robocal.run_ids import figure_png
+from robocal.safe_output import strict_json
 from robocal.study.config import StudyConfig, StudyError
 
 Array = NDArray[np.float64]

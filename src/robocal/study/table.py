@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from robocal import csvfile
-from robocal.model.files import atomic_write_text, csv_text, csv_untext
+from robocal.model.files import atomic_write_text
+from robocal.safe_output import csv_text, csv_untext
 from robocal.study.config import StudyError
 
 
