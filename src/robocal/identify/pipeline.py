@@ -246,11 +246,9 @@ def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
         if s.name not in frame_names
     )
     given = run.given_model
-    notes = (given.notes + " calibrated").strip()
-    if run.plan.mode == "none":
-        calibrated = dataclasses.replace(given, steps=robot_steps, notes=notes, joint_effects=())
-    else:
-        calibrated = dataclasses.replace(given, steps=robot_steps, notes=notes)
+    joint_effects = () if run.plan.mode == "none" else given.joint_effects
+    calibrated = dataclasses.replace(given, steps=robot_steps, notes=(given.notes + " calibrated").strip(),
+                                     joint_effects=joint_effects)  # fmt: skip
     if run.plan.mode != "none" and run.plan.kinds:
         from robocal.model.joints import effects_from_values
 
