@@ -203,20 +203,14 @@ def _gathered(last: list[tuple[Array, Array, int]], r: Array, J: Array) -> tuple
     return np.stack([r[i] for r, _, i in last]), np.stack([J[i] for _, J, i in last])
 
 
-#: the compiled kernels (robocal.identify.lm_kernels) once imported; a list: no `global` needed
-_KERNELS: list = []
-
-
 def _lm_kernels():
-    """:mod:`robocal.identify.lm_kernels`, imported on first use (it imports numba); None
-    without numba (then the numpy iteration runs)."""
-    if not _KERNELS:
-        try:
-            from robocal.identify import lm_kernels
-        except ImportError:  # pragma: no cover - numba is a dependency
-            return None
-        _KERNELS.append(lm_kernels)
-    return _KERNELS[0]
+    """:mod:`robocal.identify.lm_kernels`, imported on first use (it imports numba; Python
+    keeps the module once imported); None without numba (then the numpy iteration runs)."""
+    try:
+        from robocal.identify import lm_kernels
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return None
+    return lm_kernels
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100) -> SolveResult:
