@@ -175,37 +175,18 @@ def normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
     the normalised normal matrix ``JnᵀJn`` (the inverse is meaningful only when the
     smallest eigenvalue is well above round-off).
 
-    The eigenvalues come from LAPACK's symmetric eigenvalue routine without vectors and
-    the inverse from a Cholesky factorisation (together a third of one full
-    eigendecomposition at 27 unknowns); a numerically singular matrix (smallest
-    eigenvalue below 1e-14 of the largest, or a failed factorisation) gets the inverse
-    from the eigendecomposition instead."""
-    norms = np.sqrt(np.einsum("ij,ij->j", J, J))
-    norms[norms == 0] = 1.0
-    Jn = J / norms
-    A = Jn.T @ Jn
-    lam = np.linalg.eigvalsh(A)
-    inverse = _positive_definite_inverse(A) if len(lam) and lam[0] > 1e-14 * lam[-1] else None
-    if inverse is None:
-        lam, V = np.linalg.eigh(A)
+    Compiled (:func:`robocal.identify.stage_kernels.normal_inverse`: eigenvalues without
+    vectors, the inverse from a Cholesky factorisation); a numerically singular matrix
+    (smallest eigenvalue at most 1e-14 of the largest, or a failed factorisation) gets
+    the inverse from the eigendecomposition instead."""
+    from robocal.identify import stage_kernels as sk  # numba: imported on first use
+
+    Jn, norms, lam, inverse, ok = sk.normal_inverse(np.ascontiguousarray(J, dtype=float))
+    if not ok:
+        lam, V = np.linalg.eigh(Jn.T @ Jn)
         with np.errstate(divide="ignore", invalid="ignore"):
             inverse = (V / lam) @ V.T
     return Jn, norms, lam, inverse
-
-
-def _positive_definite_inverse(A: Array) -> Array | None:
-    """The inverse of a symmetric positive definite ``A`` ``(p, p)`` by LAPACK's Cholesky
-    routines (``potrf``/``potri``; numpy has no such inverse), or None when ``A`` is not
-    positive definite."""
-    from scipy.linalg import lapack
-
-    factor, info = lapack.dpotrf(A, lower=False, clean=False)
-    if info != 0:
-        return None
-    upper, info = lapack.dpotri(factor, lower=False)
-    if info != 0:
-        return None
-    return np.triu(upper) + np.triu(upper, 1).T
 
 
 def median(v: Array) -> float:
@@ -238,26 +219,20 @@ def screen_unidentifiable(
     DH: θ5, α5 and d5, a5 at σ of millimetres to decimetres; 16-24 evaluations instead
     of 3 on simulated DH UR10s).  Worst first, re-evaluated after each (correlated
     unknowns often become determined once their partner is fixed); borderline cases are
-    left to the pruning after the fit.
+    left to the pruning after the fit.  A numerically singular problem is left to the
+    fit and its checks.  Compiled: :func:`robocal.identify.stage_kernels.screen`.
     """
-    keep = np.ones(J.shape[1], dtype=bool)
-    out: list[tuple[int, float]] = []
-    while keep.sum() > 1:
-        Jn, norms, lam, inverse = normal_inverse(J[:, keep])
-        if lam[0] <= 1e-14 * lam[-1]:  # numerically singular: the fit and its checks decide
-            break
-        e = r - Jn @ (inverse @ (Jn.T @ r))  # the residual after one Gauss-Newton step
-        # with a stated noise (weights 1/σ) its variance is 1: far from the solution the
-        # one-step residual still holds nonlinear error (2° errors inflated σ 10-50x)
-        s2 = 1.0 if known_noise else float(e @ e) / max(len(r) - int(keep.sum()), 1)
-        move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[keep]
-        worst = int(np.argmax(move))
-        if move[worst] <= margin * max(max_std, max_std_ratio * median(move)):
-            break
-        column = int(np.flatnonzero(keep)[worst])
-        out.append((column, float(move[worst])))
-        keep[column] = False
-    return out
+    from robocal.identify import stage_kernels as sk
+
+    p = J.shape[1]
+    columns, sigmas = np.empty(p, dtype=np.intp), np.empty(p)
+    r, J = np.ascontiguousarray(r, dtype=float), np.ascontiguousarray(J, dtype=float)
+    count = sk.screen(r, J, np.asarray(scale, dtype=float), float(max_std), float(max_std_ratio),
+                      float(margin), bool(known_noise), columns, sigmas)  # fmt: skip
+    # count < 0: a factorisation failed where the eigenvalues said it would not (round-off
+    # at the singularity threshold): stop there, as for a singular matrix
+    count = count if count >= 0 else -1 - count
+    return list(zip(columns[:count].tolist(), sigmas[:count].tolist(), strict=True))
 
 
 # ---------------------------------------------------------------------- uncertainty and pruning
@@ -274,38 +249,47 @@ def uncertainty(
     noise ratio: each group gets its own σ̂² (its share of the degrees of freedom) and
     the covariance is the sandwich (JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹ of the weighted rows,
     which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
-    UR10 with an optical CMM twice)."""
+    UR10 with an optical CMM twice).  Compiled
+    (:func:`robocal.identify.stage_kernels.covariance`) unless the normal matrix is nearly
+    singular (eigenvalue ratio ≤ 1e-12): then the condition number comes from the singular
+    values and the inverse is the pseudo-inverse."""
+    from robocal.identify import stage_kernels as sk
+
     m, p = J.shape
-    if rows == 3:  # positions only: one group
-        s2 = float(residual_variance(float(r @ r), m - p, known_noise))
-        row_s2 = None
-    else:
-        position = np.tile(np.arange(rows) < 3, m // rows)
-        row_s2 = np.empty(m)
-        for group, known in ((position, known_noise), (~position, False)):
-            if group.any():
-                dof = group.sum() - p * group.sum() / m
-                row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known)
-        s2 = float(row_s2[0])
-    Jn, norms, lam, inverse = normal_inverse(J)
-    if len(lam) and lam[0] > 1e-12 * lam[-1]:
-        # cond(Jn) < 1e6: the normal matrix keeps enough digits, and its eigenvalues give
-        # the condition number
-        cond = math.sqrt(lam[-1] / lam[0])
-    else:  # nearly singular: singular values of Jn itself
-        sv = np.linalg.svd(Jn, compute_uv=False)
-        cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
-        inverse = np.linalg.pinv(Jn.T @ Jn)
-    if row_s2 is None or np.all(row_s2 == s2):
-        cov = s2 * inverse / np.outer(norms, norms)
-    else:
-        middle = Jn.T @ (Jn * row_s2[:, None])
-        cov = inverse @ middle @ inverse / np.outer(norms, norms)
+    row_s2 = _row_variances(r, m, p, rows, known_noise)
+    s2 = float(row_s2[0]) if m else 1.0
+    uniform = rows == 3 or bool(np.all(row_s2 == s2))
+    J = np.ascontiguousarray(J, dtype=float)
+    cov, std, corr, lam, ok = sk.covariance(J, row_s2, uniform)
+    if ok:  # cond(Jn) < 1e6: the normal matrix keeps enough digits, and gives the condition number
+        return s2, cov, std, corr, math.sqrt(lam[-1] / lam[0])
+    Jn, norms, _, _ = normal_inverse(J)
+    sv = np.linalg.svd(Jn, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
+    inverse = np.linalg.pinv(Jn.T @ Jn)
+    if not uniform:
+        inverse = inverse @ (Jn.T @ (Jn * row_s2[:, None])) @ inverse
+    cov = (s2 * inverse if uniform else inverse) / np.outer(norms, norms)
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
     outer = np.outer(std, std)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.where(outer > 0, cov / outer, 0.0)
     return s2, cov, std, corr, cond
+
+
+def _row_variances(r: Array, m: int, p: int, rows: int, known_noise: bool) -> Array:
+    """``(m,)`` the variance factor of each row (:func:`residual_variance`): one for
+    positions; for poses one per group (positions, orientations), each with its share of
+    the degrees of freedom."""
+    if rows == 3:  # positions only: one group
+        return np.full(m, residual_variance(float(r @ r), m - p, known_noise))
+    position = np.tile(np.arange(rows) < 3, m // rows)
+    row_s2 = np.empty(m)
+    for group, known in ((position, known_noise), (~position, False)):
+        if group.any():
+            dof = group.sum() - p * group.sum() / m
+            row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known)
+    return row_s2
 
 
 def poorly_identifiable(
@@ -325,19 +309,21 @@ def poorly_identifiable(
     return worst, float(move[worst])
 
 
-def residual_variance(chi2: ArrayLike, dof: ArrayLike, known: ArrayLike, significance: float = 1e-3) -> Array:
+def residual_variance(chi2: float, dof: float, known: bool, significance: float = 1e-3) -> float:
     """The variance factor of weighted residuals for a covariance, ``χ²/dof`` or 1.
 
     With weights 1/σ from a stated noise (``known``) the factor is 1 — the Cramér–Rao
     covariance — unless a χ² test rejects the stated noise at ``significance`` (either
     way): a few degrees of freedom cannot estimate it, and a model that explains the
-    data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``.
-    Arrays broadcast (the batched study engine).
+    data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``
+    (``dof`` at least 1).
     """
     import scipy.special
 
-    chi2, dof = np.asarray(chi2, dtype=float), np.maximum(np.asarray(dof, dtype=float), 1.0)
-    estimated = chi2 / dof
-    upper = scipy.special.chdtrc(dof, chi2)  # P(χ² >= observed)
-    rejected = (upper < significance) | (1.0 - upper < significance)
-    return np.where(np.asarray(known, dtype=bool) & ~rejected, 1.0, estimated)
+    dof = max(float(dof), 1.0)
+    estimated = float(chi2) / dof
+    if not known:
+        return estimated
+    upper = float(scipy.special.chdtrc(dof, float(chi2)))  # P(χ² >= observed)
+    rejected = upper < significance or 1.0 - upper < significance
+    return estimated if rejected else 1.0
