@@ -115,9 +115,10 @@ def test_sequential_rank_test_matches_gram_schmidt_on_random_deficient_matrices(
         if trial % 3 == 0:  # some exact copies and zero-ish mixes, as in kinematic Jacobians
             A[:, -1] = A[:, 0]
         A /= np.linalg.norm(A, axis=0)
-        keep, coefs, _ = _sequential_rank_test(A, 1e-7)
+        keep, coefs, _, left = _sequential_rank_test(A, 1e-7)
         np.testing.assert_array_equal(keep, _gram_schmidt(A, 1e-7), err_msg=f"trial {trial}")
         np.testing.assert_allclose(A[:, keep] @ coefs, A[:, ~keep], atol=1e-6)
+        np.testing.assert_allclose(left, np.linalg.norm(A[:, keep] @ coefs - A[:, ~keep], axis=0), atol=1e-12)
         assert keep.sum() == np.linalg.matrix_rank(A)
 
 

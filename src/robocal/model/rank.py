@@ -165,7 +165,7 @@ def identifiable_subset(
         cols, rank, rel = _pivoted_rank(Js[:, ordered], ordered, n_preferred, 1e-6 if rtol is None else rtol)
         kept_cols, red_cols, coef = cols[:rank], cols[rank:], None
     else:
-        keep, coef, rel = _sequential_rank_test(Js[:, ordered], 1e-7 if rtol is None else rtol)
+        keep, coef, rel, unexplained = _sequential_rank_test(Js[:, ordered], 1e-7 if rtol is None else rtol)
         cols = ordered
         kept_cols = [c for c, k in zip(ordered, keep, strict=True) if k]
         red_cols = [c for c, k in zip(ordered, keep, strict=True) if not k]
@@ -174,10 +174,11 @@ def identifiable_subset(
     if red_cols:
         if explain and coef is None and kept_cols:
             coef = np.linalg.lstsq(Js[:, kept_cols], Js[:, red_cols], rcond=None)[0]
+            unexplained = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0)
         if not explain or coef is None:
             dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
         else:
-            dropped.update(_absorbers(Js, norm, names, kept_cols, red_cols, coef, threshold))
+            dropped.update(_absorbers(norm, names, kept_cols, red_cols, coef, unexplained, threshold))
     kept = tuple(names[k] for k in sorted(kept_cols))
     pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
     r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
@@ -238,18 +239,19 @@ def _pivoted_rank(
 
 
 def _absorbers(
-    Js: Array,
     norm: Array,
     names: tuple[str, ...],
     kept_cols: list[int],
     red_cols: list[int],
     coef: Array,
+    unexplained: Array,
     threshold: float,
 ) -> dict[int, Dropped]:
     """Each redundant column's :class:`Dropped` with its absorbers: the kept parameters whose
     least-squares coefficient ``coef`` (on unit-norm columns) exceeds ``threshold``, largest
-    first, converted back to the Jacobian's units."""
-    residuals = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0).tolist()
+    first, converted back to the Jacobian's units; ``unexplained``: the norm of what the
+    fit leaves of each (unit-norm) redundant column."""
+    residuals = unexplained.tolist()
     units = coef * norm[red_cols] / norm[kept_cols][:, None]
     ranked = np.argsort(-np.abs(coef), axis=0, kind="stable").T.tolist()
     listed, units = (np.abs(coef) > threshold).T.tolist(), units.T.tolist()
@@ -260,12 +262,13 @@ def _absorbers(
     return out
 
 
-def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array]:
+def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array, Array]:
     """Keep each unit-norm column of ``A`` (in order) unless it lies within ``tolerance``
     of the span of the kept ones before it.
 
     Returns the mask of kept columns, the coefficients ``(kept, dropped)`` of every
-    dropped column in the kept ones, and ``|R_kk|`` along the columns.
+    dropped column in the kept ones, ``|R_kk|`` along the columns, and the norm of what
+    the coefficients leave of each dropped column.
 
     One unpivoted QR answers it for all columns: ``|R_kk|`` is the part of column k
     orthogonal to all the columns before it.  A kept column passes against a span that
@@ -281,33 +284,42 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     diag = np.abs(np.diagonal(qr))
     diag = np.concatenate([diag, np.zeros(A.shape[1] - len(diag))])
     keep = diag > tolerance
-    coefs = _absorbing(A, keep, tolerance)
-    if coefs is None:
+    # A = QR with orthonormal Q: the fit of the dropped columns in the kept ones, and what it
+    # leaves, are the same for the columns of R (p x p instead of m x p: a tenth of the work)
+    fit = _absorbing(np.triu(qr[: min(A.shape)]), keep, tolerance)
+    if fit is None:
         keep = _gram_schmidt(A, tolerance)
-        coefs = _absorbing(A, keep, tolerance)
-        if coefs is None:  # cannot happen: Gram-Schmidt keeps a basis of the span
+        fit = _absorbing(A, keep, tolerance)
+        if fit is None:  # cannot happen: Gram-Schmidt keeps a basis of the span
             coefs = np.linalg.lstsq(A[:, keep], A[:, ~keep], rcond=None)[0]
-    return keep, coefs, diag
+            fit = coefs, np.linalg.norm(A[:, ~keep] - A[:, keep] @ coefs, axis=0)
+    return keep, fit[0], diag, fit[1]
 
 
-def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> Array | None:
-    """Coefficients of the dropped (unit-norm) columns in the kept ones, or None if some
-    dropped column is not within ``tolerance`` of their span.  Normal equations first (a
-    fraction of the cost of an SVD least-squares fit; fine unless the kept columns are
-    badly conditioned, which the check of the fit then catches), the SVD fit otherwise."""
-    K, D = A[:, keep], A[:, ~keep]
-    if not D.shape[1]:
-        return np.zeros((K.shape[1], 0))
-    if not K.shape[1]:
+def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> tuple[Array, Array] | None:
+    """Coefficients of the dropped (unit-norm) columns in the kept ones and the norms of
+    what they leave of each, or None if some dropped column is not within ``tolerance`` of
+    their span.  Normal equations first (compiled:
+    :func:`robocal.model.rank_kernels.absorbing`; a fraction of the cost of an SVD
+    least-squares fit; fine unless the kept columns are badly conditioned, which the check
+    of the fit then catches), the SVD fit otherwise."""
+    from robocal.model import rank_kernels  # numba: imported on first use
+
+    n_kept = int(keep.sum())
+    if n_kept == len(keep):
+        return np.zeros((n_kept, 0)), np.zeros(0)
+    if not n_kept:
         return None
     try:
-        coefs = np.linalg.solve(K.T @ K, K.T @ D)
-        if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance):
-            return coefs
+        coefs, left = rank_kernels.absorbing(np.ascontiguousarray(A), keep)
+        if np.all(left <= tolerance):
+            return coefs, left
     except np.linalg.LinAlgError:  # exactly singular
         pass
+    K, D = A[:, keep], A[:, ~keep]
     coefs = np.linalg.lstsq(K, D, rcond=None)[0]
-    return coefs if np.all(np.linalg.norm(D - K @ coefs, axis=0) <= tolerance) else None
+    left = np.linalg.norm(D - K @ coefs, axis=0)
+    return (coefs, left) if np.all(left <= tolerance) else None
 
 
 def _gram_schmidt(A: Array, tolerance: float) -> NDArray[np.bool_]:
