@@ -152,31 +152,38 @@ class CalibrationResult:
 
     # ------------------------------------------------------------------ new results from this one
     def replace(self, **changes: Any) -> CalibrationResult:
-        """This result with some fields changed (``dataclasses.replace``)."""
-        return dataclasses.replace(self, **changes)
+        """This result with some fields changed (as ``dataclasses.replace``, but the other
+        fields are copied rather than passed through ``__init__`` again: a result has no
+        checks to repeat, and a calibration derives several; TypeError for an unknown field)."""
+        unknown = changes.keys() - _RESULT_FIELDS
+        if unknown:
+            raise TypeError(f"CalibrationResult has no field(s) {', '.join(sorted(unknown))}")
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__, **changes)
+        return new
 
     def with_warnings(self, *warnings: CalibrationWarning | str, code: str = "unknown") -> CalibrationResult:
         """This result with more warnings (a text becomes a warning of ``code``)."""
         extra = tuple(
             w if isinstance(w, CalibrationWarning) else CalibrationWarning(code, w) for w in warnings
         )
-        return dataclasses.replace(self, warnings=self.warnings + extra)
+        return self.replace(warnings=self.warnings + extra)
 
     def with_provenance(self, provenance: Provenance | None, **records: Any) -> CalibrationResult:
         """This result with where its data came from (and further ``records``)."""
-        return dataclasses.replace(self, provenance=provenance, records={**self.records, **records})
+        return self.replace(provenance=provenance, records={**self.records, **records})
 
     def with_validation(self, validation: Mapping[str, Any]) -> CalibrationResult:
         """This result with its held-out statistics (``rc.validate(...).to_dict()``)."""
-        return dataclasses.replace(self, validation=dict(validation))
+        return self.replace(validation=dict(validation))
 
     def with_records(self, **records: Any) -> CalibrationResult:
         """This result with further facts (``source``, ``seed``... written to result.json)."""
-        return dataclasses.replace(self, records={**self.records, **records})
+        return self.replace(records={**self.records, **records})
 
     def with_diagnostics(self, **changes: Any) -> CalibrationResult:
         """This result with some :class:`Diagnostics` fields changed."""
-        return dataclasses.replace(self, diagnostics=dataclasses.replace(self.diagnostics, **changes))
+        return self.replace(diagnostics=dataclasses.replace(self.diagnostics, **changes))
 
     # ------------------------------------------------------------------ views
     @property
@@ -487,3 +494,6 @@ class CalibrationResult:
         fields["warnings"] = tuple(CalibrationWarning(code, text) for code, text in fields["warnings"])
         fields["diagnostics"] = Diagnostics(**fields["diagnostics"])
         return cls(**fields)
+
+
+_RESULT_FIELDS = frozenset(f.name for f in dataclasses.fields(CalibrationResult))
