@@ -15,10 +15,10 @@ lists the problems still running, in batch order; the trial points and the evalu
 one iteration are packed in that order (row ``i`` is problem ``ids[i]``).
 
 Written by hand (no library offers this iteration over a batch with a callback between its
-halves); the Cholesky factorisation is written out because a failed one is the test for
-positive definiteness here (numba's ``np.linalg.cholesky`` raises, which a kernel cannot
-catch cheaply).  Compiled with ``cache=True`` (see :mod:`robocal.model.kernels`); this module
-imports numba, so :mod:`robocal.identify.solvers` imports it on first use only.
+halves); the Cholesky factorisation (:func:`robocal.model.rank_kernels.cholesky`) is written
+out because a failed one is the test for positive definiteness here.  Compiled with
+``cache=True`` (see :mod:`robocal.model.kernels`); this module imports numba, so
+:mod:`robocal.identify.solvers` imports it on first use only.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ import math
 
 import numba
 import numpy as np
+
+from robocal.model.rank_kernels import cholesky as _cholesky
 
 __all__ = ["accept", "damped_step", "propose", "start"]
 
@@ -37,27 +39,6 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 # μ is raised tenfold while A + μI is not positive definite; past this it never will be
 # (A holds NaN or inf): the problem stops unconverged instead of looping for ever
 _MU_LIMIT = 1e300
-
-
-@_jit
-def _cholesky(M, L):
-    """Lower factor ``L`` of ``M`` ``(p, p)`` (only the lower triangle of ``M`` is read);
-    False when ``M`` is not positive definite (a pivot is not > 0, or NaN; as LAPACK's potrf)."""
-    p = M.shape[0]
-    for j in range(p):
-        s = M[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, p):
-            t = M[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / d
-    return True
 
 
 @_jit

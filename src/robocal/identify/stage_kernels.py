@@ -11,7 +11,7 @@ versions they replace are the reference ``tests/test_stage_kernels.py`` holds th
 The inverse of the normal matrix comes from a Cholesky factorisation written out here:
 numba offers no ``potri`` and its ``np.linalg.cholesky`` raises on a matrix that is not
 positive definite, which a kernel cannot catch cheaply (the factorisation is
-:func:`robocal.identify.lm_kernels._cholesky`).  Compiled with ``cache=True`` (see
+:func:`robocal.model.rank_kernels.cholesky`).  Compiled with ``cache=True`` (see
 :mod:`robocal.model.kernels`); this module imports numba, so :mod:`robocal.identify.stages`
 imports it on first use only.
 """
@@ -23,7 +23,7 @@ import math
 import numba
 import numpy as np
 
-from robocal.identify.lm_kernels import _cholesky
+from robocal.model.rank_kernels import cholesky
 
 __all__ = ["covariance", "normal_inverse", "screen"]
 
@@ -39,7 +39,7 @@ def _spd_inverse(A, inverse):
     (``A⁻¹ = L⁻ᵀ L⁻¹``); False when ``A`` is not positive definite."""
     p = A.shape[0]
     L = np.zeros((p, p))
-    if not _cholesky(A, L):
+    if not cholesky(A, L):
         return False
     Li = np.zeros((p, p))  # L⁻¹, lower triangular, by forward substitution
     for j in range(p):

@@ -274,19 +274,20 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     orthogonal to all the columns before it.  A kept column passes against a span that
     includes the dropped columns, so it passes against the kept ones alone too; a
     dropped column still enters the QR as a (numerically random) direction, so its
-    verdict is checked by a least-squares fit in the kept columns, and if the check
-    disagrees (possible only with about as many rows as columns) the exact sequential
-    Gram-Schmidt (:func:`_gram_schmidt`) decides.
+    verdict is checked by a least-squares fit in the kept columns (the normal equations
+    of ``R``, compiled: :func:`robocal.model.rank_kernels.sequential_test`; an SVD fit when
+    they fail), and if the check disagrees (possible only with about as many rows as
+    columns) the exact sequential Gram-Schmidt (:func:`_gram_schmidt`) decides.
     """
+    from robocal.model import rank_kernels  # numba: imported on first use
+
     # LAPACK's QR directly: numpy's and scipy's wrappers cost more than the factorisation
     # itself at 300 x 36
     qr = scipy.linalg.lapack.dgeqrf(A)[0] if A.size else np.zeros(A.shape)
-    diag = np.abs(np.diagonal(qr))
-    diag = np.concatenate([diag, np.zeros(A.shape[1] - len(diag))])
-    keep = diag > tolerance
-    # A = QR with orthonormal Q: the fit of the dropped columns in the kept ones, and what it
-    # leaves, are the same for the columns of R (p x p instead of m x p: a tenth of the work)
-    fit = _absorbing(np.triu(qr[: min(A.shape)]), keep, tolerance)
+    diag, keep, coefs, left, ok = rank_kernels.sequential_test(qr, tolerance)
+    if ok and np.all(left <= tolerance):
+        return keep, coefs, diag, left
+    fit = _absorbing(A, keep, tolerance)
     if fit is None:
         keep = _gram_schmidt(A, tolerance)
         fit = _absorbing(A, keep, tolerance)
@@ -297,26 +298,14 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
 
 
 def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> tuple[Array, Array] | None:
-    """Coefficients of the dropped (unit-norm) columns in the kept ones and the norms of
-    what they leave of each, or None if some dropped column is not within ``tolerance`` of
-    their span.  Normal equations first (compiled:
-    :func:`robocal.model.rank_kernels.absorbing`; a fraction of the cost of an SVD
-    least-squares fit; fine unless the kept columns are badly conditioned, which the check
-    of the fit then catches), the SVD fit otherwise."""
-    from robocal.model import rank_kernels  # numba: imported on first use
-
-    n_kept = int(keep.sum())
-    if n_kept == len(keep):
-        return np.zeros((n_kept, 0)), np.zeros(0)
-    if not n_kept:
-        return None
-    try:
-        coefs, left = rank_kernels.absorbing(np.ascontiguousarray(A), keep)
-        if np.all(left <= tolerance):
-            return coefs, left
-    except np.linalg.LinAlgError:  # exactly singular
-        pass
+    """Coefficients of the dropped (unit-norm) columns of ``A`` in the kept ones by an SVD
+    least-squares fit, and the norms of what they leave of each; None if some dropped
+    column is not within ``tolerance`` of their span (or none is kept)."""
     K, D = A[:, keep], A[:, ~keep]
+    if not D.shape[1]:
+        return np.zeros((K.shape[1], 0)), np.zeros(0)
+    if not K.shape[1]:
+        return None
     coefs = np.linalg.lstsq(K, D, rcond=None)[0]
     left = np.linalg.norm(D - K @ coefs, axis=0)
     return (coefs, left) if np.all(left <= tolerance) else None
