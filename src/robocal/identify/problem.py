@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from robocal import spatial
 from robocal.model.chain import Model, Role, Step
+from robocal.model.chain_plan import derived_copy
 from robocal.model.conventions import frame6, sequence
 
 __all__ = ["FRAME_PREFIX", "TOOL_PREFIX", "Problem", "frame_steps", "measurement_chain"]
@@ -89,8 +90,10 @@ def measurement_chain(
             "the device frame: calibrate from the model.yaml next to it; otherwise rename those steps"
         )
     steps = (*before, *robot.steps, *after)
-    name = robot.name + "+measurement"
-    return dataclasses.replace(robot, name=name, steps=steps, bodies=(), joint_effects=(), residual=None)
+    # the robot's steps are checked, the added ones come from checked templates and their
+    # names were checked against the robot's above: the chain's invariants hold
+    return derived_copy(robot, steps, (), name=robot.name + "+measurement", bodies=(), joint_effects=(),
+                        residual=None)  # fmt: skip
 
 
 @dataclass

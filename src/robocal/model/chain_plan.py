@@ -178,14 +178,16 @@ def check_perturbations(perturbations: ArrayLike | None, n: int, dof: int) -> Ar
     return d
 
 
-def derived_copy(model: Any, steps: tuple, shared: tuple[str, ...]) -> Any:
-    """A copy of the (frozen dataclass) ``model`` with other ``steps`` whose names, motions
-    and joints are its own, each already checked (``Step._with_value``): the chain's
-    invariants hold, so the copy skips ``__post_init__``, and it keeps the ``shared`` cached
-    properties of ``model`` (its plan, names, index...) instead of working them out again.
-    The solvers derive several models per calibration."""
+def derived_copy(model: Any, steps: tuple, shared: tuple[str, ...], **changes: Any) -> Any:
+    """A copy of the (frozen dataclass) ``model`` with other ``steps`` (and fields
+    ``changes``) that the caller knows keep the chain's invariants — checked steps, unique
+    names, bodies and joint effects on its own frames and joints (:func:`check_chain`) — so
+    the copy skips ``__post_init__``; it keeps the ``shared`` cached properties of ``model``
+    (its plan, names, index...) instead of working them out again (only for steps whose
+    names, motions and joints are ``model``'s own).  The solvers derive several models per
+    calibration."""
     derived = object.__new__(type(model))
     fields = {f.name: model.__dict__[f.name] for f in dataclasses.fields(model)}
-    derived.__dict__.update(fields, steps=steps)
+    derived.__dict__.update(fields, steps=steps, **changes)
     derived.__dict__.update({k: model.__dict__[k] for k in shared if k in model.__dict__})
     return derived
