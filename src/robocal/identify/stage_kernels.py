@@ -72,8 +72,11 @@ def normal_inverse(J):
         for i in range(m):
             s += J[i, j] * J[i, j]
         norms[j] = math.sqrt(s) if s > 0.0 else 1.0
-    Jn = J / norms
-    A = np.dot(Jn.T, Jn)
+    Jn = np.empty((m, p))
+    for i in range(m):
+        for j in range(p):
+            Jn[i, j] = J[i, j] / norms[j]
+    A = np.dot(Jn.T, Jn)  # BLAS: the one product here large enough to need it
     lam = np.linalg.eigvalsh(A)
     inverse = np.empty((p, p))
     ok = p > 0 and lam[0] > SINGULAR * lam[p - 1] and _spd_inverse(A, inverse)
@@ -82,9 +85,46 @@ def normal_inverse(J):
 
 @_jit
 def _median(v):
-    s = np.sort(v)
+    """The median of a short vector, by insertion sort (numba's ``np.sort`` costs most of
+    a second of compilation)."""
+    s = v.copy()
     n = len(s)
+    for i in range(1, n):
+        x = s[i]
+        j = i - 1
+        while j >= 0 and s[j] > x:
+            s[j + 1] = s[j]
+            j -= 1
+        s[j + 1] = x
     return 0.5 * (s[(n - 1) // 2] + s[n // 2])
+
+
+@_jit
+def _squares(e):
+    s = 0.0
+    for x in e:
+        s += x * x
+    return s
+
+
+@_jit
+def _one_step_residual(r, Jn, inverse):
+    """``r − Jn A⁻¹ Jnᵀ r``: the residual after one Gauss-Newton step (loops: numba's
+    matrix-vector products in several memory layouts cost seconds of compilation)."""
+    m, p = Jn.shape
+    g = np.zeros(p)
+    for i in range(m):
+        for a in range(p):
+            g[a] += Jn[i, a] * r[i]
+    step = np.zeros(p)
+    for a in range(p):
+        for b in range(p):
+            step[a] += inverse[a, b] * g[b]
+    e = r.copy()
+    for i in range(m):
+        for a in range(p):
+            e[i] -= Jn[i, a] * step[a]
+    return e
 
 
 @_jit
@@ -99,15 +139,26 @@ def screen(r, J, scale, max_std, max_std_ratio, margin, known_noise, columns, si
     keep = np.ones(p, dtype=np.bool_)
     count = 0
     while p - count > 1:
-        live = np.flatnonzero(keep)
-        Jn, norms, lam, inverse, ok = normal_inverse(np.ascontiguousarray(J[:, live]))
+        live = np.empty(p - count, dtype=np.intp)
+        k = 0
+        for a in range(p):
+            if keep[a]:
+                live[k] = a
+                k += 1
+        Jk = np.empty((m, len(live)))
+        for i in range(m):
+            for a in range(len(live)):
+                Jk[i, a] = J[i, live[a]]
+        Jn, norms, lam, inverse, ok = normal_inverse(Jk)
         if lam[0] <= SINGULAR * lam[len(lam) - 1]:  # the fit and its checks decide
             break
         if not ok:
             return -1 - count
-        e = r - np.dot(Jn, np.dot(inverse, np.dot(Jn.T, r)))  # after one Gauss-Newton step
-        s2 = 1.0 if known_noise else np.dot(e, e) / max(m - len(live), 1)
-        move = np.sqrt(s2 * np.diag(inverse)) / norms * scale[live]
+        e = _one_step_residual(r, Jn, inverse)
+        s2 = 1.0 if known_noise else _squares(e) / max(m - len(live), 1)
+        move = np.empty(len(live))
+        for a in range(len(live)):
+            move[a] = math.sqrt(s2 * inverse[a, a]) / norms[a] * scale[live[a]]
         worst = np.argmax(move)
         if move[worst] <= margin * max(max_std, max_std_ratio * _median(move)):
             break
@@ -119,32 +170,50 @@ def screen(r, J, scale, max_std, max_std_ratio, margin, known_noise, columns, si
 
 
 @_jit
+def _sandwich(Jn, row_s2, inverse):
+    """``A⁻¹ Jnᵀ diag(σ̂²) Jn A⁻¹`` ``(p, p)`` (loops, as :func:`_one_step_residual`)."""
+    m, p = Jn.shape
+    middle = np.zeros((p, p))
+    for i in range(m):
+        for a in range(p):
+            w = Jn[i, a] * row_s2[i]
+            for b in range(p):
+                middle[a, b] += w * Jn[i, b]
+    left = np.zeros((p, p))
+    for a in range(p):
+        for k in range(p):
+            for b in range(p):
+                left[a, b] += inverse[a, k] * middle[k, b]
+    out = np.zeros((p, p))
+    for a in range(p):
+        for k in range(p):
+            for b in range(p):
+                out[a, b] += left[a, k] * inverse[k, b]
+    return out
+
+
+@_jit
 def covariance(J, row_s2, uniform):
     """Covariance, standard deviations, correlations and the normal matrix's eigenvalues of
     a fit with weighted Jacobian ``J`` ``(m, p)`` and variance factors ``row_s2`` ``(m,)``
     per row (``uniform``: all equal, σ̂²(JᵀJ)⁻¹; otherwise the sandwich
     ``(JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹``).  The last value is False when the normal matrix's
     eigenvalue ratio is ≤ 1e-12 or it is not positive definite (the caller uses the SVD)."""
-    m, p = J.shape
+    p = J.shape[1]
     Jn, norms, lam, inverse, ok = normal_inverse(J)
-    cov = np.empty((p, p))
     std = np.empty(p)
     corr = np.zeros((p, p))
     if not ok or not lam[0] > 1e-12 * lam[p - 1]:
-        return cov, std, corr, lam, False
-    if uniform:
-        cov[:, :] = row_s2[0] * inverse
-    else:
-        middle = np.dot(Jn.T, Jn * row_s2.reshape(m, 1))
-        cov[:, :] = np.dot(np.dot(inverse, middle), inverse)
-    for i in range(p):
-        for j in range(p):
-            cov[i, j] /= norms[i] * norms[j]
-    for i in range(p):
-        std[i] = math.sqrt(max(cov[i, i], 0.0))
-    for i in range(p):
-        for j in range(p):
-            outer = std[i] * std[j]
+        return np.empty((p, p)), std, corr, lam, False
+    cov = row_s2[0] * inverse if uniform else _sandwich(Jn, row_s2, inverse)
+    for a in range(p):
+        for b in range(p):
+            cov[a, b] /= norms[a] * norms[b]
+    for a in range(p):
+        std[a] = math.sqrt(max(cov[a, a], 0.0))
+    for a in range(p):
+        for b in range(p):
+            outer = std[a] * std[b]
             if outer > 0.0:
-                corr[i, j] = cov[i, j] / outer
+                corr[a, b] = cov[a, b] / outer
     return cov, std, corr, lam, True

@@ -61,6 +61,55 @@ def _columns(qr, cols, d):
 
 
 @_jit
+def _products(X, Y):
+    """``XᵀY`` of two small ``(d, ·)`` matrices (loops: numba's BLAS products in several
+    memory layouts cost seconds of compilation, and these are p x p)."""
+    out = np.zeros((X.shape[1], Y.shape[1]))
+    for i in range(X.shape[0]):
+        for a in range(X.shape[1]):
+            x = X[i, a]
+            for b in range(Y.shape[1]):
+                out[a, b] += x * Y[i, b]
+    return out
+
+
+@_jit
+def _split(keep):
+    """The indices of the True and of the False entries of ``keep`` (loops: numba's
+    ``flatnonzero`` costs a fifth of a second to compile)."""
+    n = 0
+    for k in range(len(keep)):
+        n += keep[k]
+    true, false = np.empty(n, dtype=np.intp), np.empty(len(keep) - n, dtype=np.intp)
+    a = b = 0
+    for k in range(len(keep)):
+        if keep[k]:
+            true[a] = k
+            a += 1
+        else:
+            false[b] = k
+            b += 1
+    return true, false
+
+
+@_jit
+def _cholesky_solve(L, B, X):
+    """``X`` ``(n, k)`` with ``L Lᵀ X = B`` for the lower factor ``L`` ``(n, n)``."""
+    n = L.shape[0]
+    for j in range(B.shape[1]):  # L y = b, then Lᵀ x = y
+        for i in range(n):
+            t = B[i, j]
+            for k in range(i):
+                t -= L[i, k] * X[k, j]
+            X[i, j] = t / L[i, i]
+        for i in range(n - 1, -1, -1):
+            t = X[i, j]
+            for k in range(i + 1, n):
+                t -= L[k, i] * X[k, j]
+            X[i, j] = t / L[i, i]
+
+
+@_jit
 def sequential_test(qr, tolerance):
     """The sequential rank test from ``qr`` ``(m, p)``, LAPACK's packed QR (``geqrf``) of
     unit-norm columns in test order: ``|R_kk|`` ``(p,)`` (0 past ``min(m, p)``), the mask
@@ -74,7 +123,7 @@ def sequential_test(qr, tolerance):
     for k in range(d):
         diag[k] = abs(qr[k, k])
     keep = diag > tolerance
-    kept, dropped = np.flatnonzero(keep), np.flatnonzero(~keep)
+    kept, dropped = _split(keep)
     coefs = np.zeros((len(kept), len(dropped)))
     left = np.zeros(len(dropped))
     if len(dropped) == 0:
@@ -82,26 +131,18 @@ def sequential_test(qr, tolerance):
     if len(kept) == 0:
         return diag, keep, coefs, left, False
     RK, RD = _columns(qr, kept, d), _columns(qr, dropped, d)
-    L = np.zeros((len(kept), len(kept)))
-    if not cholesky(np.dot(RK.T, RK), L):
-        return diag, keep, coefs, left, False
-    B = np.dot(RK.T, RD)
     n = len(kept)
-    for j in range(len(dropped)):  # L y = b, then Lᵀ c = y
-        for i in range(n):
-            t = B[i, j]
-            for k in range(i):
-                t -= L[i, k] * coefs[k, j]
-            coefs[i, j] = t / L[i, i]
-        for i in range(n - 1, -1, -1):
-            t = coefs[i, j]
-            for k in range(i + 1, n):
-                t -= L[k, i] * coefs[k, j]
-            coefs[i, j] = t / L[i, i]
-    rest = RD - np.dot(RK, coefs)
-    for j in range(len(dropped)):
+    G, B = _products(RK, RK), _products(RK, RD)
+    L = np.zeros((n, n))
+    if not cholesky(G, L):
+        return diag, keep, coefs, left, False
+    _cholesky_solve(L, B, coefs)
+    for j in range(len(dropped)):  # what the fit leaves: RD − RK coefs
         s = 0.0
         for i in range(d):
-            s += rest[i, j] * rest[i, j]
+            t = RD[i, j]
+            for k in range(n):
+                t -= RK[i, k] * coefs[k, j]
+            s += t * t
         left[j] = math.sqrt(s)
     return diag, keep, coefs, left, True
