@@ -200,9 +200,10 @@ def check_data(model: Model, data: Measurements) -> list[str]:
         )
     q, y = data.q, data.position
     for what, a in (("joint values", q), ("positions", y)):
+        if np.isfinite(a).all():  # the rows are looked for only when some is bad
+            continue
         bad = np.flatnonzero(~np.all(np.isfinite(a.reshape(len(a), -1)), axis=1))
-        if bad.size:
-            raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
+        raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
     if data.n == 0:
         raise CalibrationGuardError("no measured poses")
     if not np.any(q != q[0]):
