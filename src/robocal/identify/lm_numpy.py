@@ -1,8 +1,9 @@
 """What :func:`robocal.identify.solvers.levenberg_marquardt_batch` returns
 (:class:`BatchSolveResult`) and its iteration in numpy: the reference its compiled kernels
-(:mod:`robocal.identify.lm_kernels`) are tested against (``tests/test_lm_kernels.py``), and
-the path without numba.  (Here rather than in :mod:`~robocal.identify.solvers`, which
-imports both, so that neither imports the other.)
+(:mod:`robocal.identify.lm_kernels`) are tested against (``tests/test_lm_kernels.py``,
+``benchmarks/bench_lm.py``).  (The result is here rather than in
+:mod:`~robocal.identify.solvers`, which imports it, so that the reference needs nothing of
+the solvers.)
 
 Each operation is one numpy call on the stack of running problems; the problems that stop are
 compacted out.  For the small matrices of a calibration (hundreds of rows, tens of columns)

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from robocal.identify.lm_numpy import BatchSolveResult, levenberg_marquardt_batch_numpy
+from robocal.identify.lm_numpy import BatchSolveResult
 from robocal.identify.solve_result import SolveResult
 
 __all__ = [
@@ -133,7 +133,7 @@ def levenberg_marquardt_batch(
     Compiled (:mod:`robocal.identify.lm_kernels`): an iteration is one kernel call before
     the evaluation (scaling, normal equations, damped Cholesky step, stop tests) and one
     after it (gain ratio, acceptance, damping).  It agrees with the numpy iteration
-    (:mod:`robocal.identify.lm_numpy`, used without numba) to round-off; ``JᵀJ`` is formed
+    (:mod:`robocal.identify.lm_numpy`, the tests' reference) to round-off; ``JᵀJ`` is formed
     before the scaling, so Jacobian entries must stay within about 1e±150.
 
     Args:
@@ -143,12 +143,9 @@ def levenberg_marquardt_batch(
             it must not write into them afterwards.
         x0: ``(K, p)`` start values.
     """
+    from robocal.identify import lm_kernels as kernels  # numba: imported on first use
+
     x = np.array(x0, dtype=float)
-    kernels = _lm_kernels()
-    if kernels is None:  # without numba
-        return levenberg_marquardt_batch_numpy(
-            evaluate, x, max_evaluations=max_evaluations, tolerance=tolerance
-        )
     K, p = x.shape
     ids = np.arange(K)  # the problems still running are ids[:n] (batch order); state at batch indices
     r, J = evaluate(x, ids)
@@ -201,16 +198,6 @@ def _gathered(last: list[tuple[Array, Array, int]], r: Array, J: Array) -> tuple
     if len(last) == 1 and last[0][2] == 0 and len(last[0][0]) == 1:
         return last[0][0], last[0][1]
     return np.stack([r[i] for r, _, i in last]), np.stack([J[i] for _, J, i in last])
-
-
-def _lm_kernels():
-    """:mod:`robocal.identify.lm_kernels`, imported on first use (it imports numba; Python
-    keeps the module once imported); None without numba (then the numpy iteration runs)."""
-    try:
-        from robocal.identify import lm_kernels
-    except ImportError:  # pragma: no cover - numba is a dependency
-        return None
-    return lm_kernels
 
 
 def _pinv(problem, x0: Array, *, resolution: float = 1e-5, max_iterations: int = 100) -> SolveResult:
