@@ -57,7 +57,8 @@ def damped_step(A, g, mu, M, L, step):
             break
         mu = max(mu * 10.0, 1e-12)
         if not mu < _MU_LIMIT:
-            step[:] = np.nan
+            for a in range(p):
+                step[a] = np.nan
             return np.nan
     for i in range(p):  # L y = −g, then Lᵀ step = y
         t = -g[i]
@@ -77,14 +78,29 @@ def _normal_equations(J, r, i, transposed, G, Jr):
     """``G = JᵢᵀJᵢ`` ``(p, p)`` and ``Jr = Jᵢᵀrᵢ`` ``(p,)`` of problem row ``i`` of a stack of
     Jacobians ``J``: ``(n, m, p)``, or ``(n, p, m)`` (each one transposed) with
     ``transposed`` (both C-ordered: a BLAS product without a copy)."""
+    # the products are copied into G and Jr by loops: numba's slice assignment compiles
+    # its shape checks and error messages (a second per kernel module)
     if transposed:
         Jt = J[i]
-        G[:, :] = np.dot(Jt, Jt.T)
-        Jr[:] = np.dot(Jt, r[i])
+        _copy2(np.dot(Jt, Jt.T), G)
+        _copy1(np.dot(Jt, r[i]), Jr)
     else:
         Ji = J[i]
-        G[:, :] = np.dot(Ji.T, Ji)
-        Jr[:] = np.dot(Ji.T, r[i])
+        _copy2(np.dot(Ji.T, Ji), G)
+        _copy1(np.dot(Ji.T, r[i]), Jr)
+
+
+@_jit
+def _copy2(src, dst):
+    for a in range(dst.shape[0]):
+        for b in range(dst.shape[1]):
+            dst[a, b] = src[a, b]
+
+
+@_jit
+def _copy1(src, dst):
+    for a in range(dst.shape[0]):
+        dst[a] = src[a]
 
 
 @_jit
@@ -200,7 +216,7 @@ def accept(  # noqa: PLR0913
         c = _squares(r_new, i)
         rho = (cost[k] - c) / predicted[k]
         if rho > 0.0:
-            x[k] = x_new[i]
+            _copy1(x_new[i], x[k])
             cost[k] = c
             _normal_equations(J_new, r_new, i, transposed, G[k], Jr[k])
             mu[k] *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)

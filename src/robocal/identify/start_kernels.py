@@ -29,6 +29,22 @@ _jit = numba.njit(cache=True, nogil=True)
 OK, NON_FINITE_POINTS, SVD_FAILED, COLLINEAR = 0, 1, 2, 3
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _divide(a, n):
+    """``a /= n`` in place, for a 1-D view (loops: numba's in-place array operators compile
+    their shape checks and error messages); NaN for ``n = 0``, as numpy's."""
+    for i in range(len(a)):
+        a[i] /= n
+
+
+@_jit
+def _all_finite(a):
+    for x in a.ravel():  # noqa: SIM110 - a loop compiles; all() of a generator does not
+        if not np.isfinite(x):
+            return False
+    return True
+
+
 @_jit
 def _finite3(A):
     for i in range(3):
@@ -131,14 +147,10 @@ def _moments(T_flange, y, orientation, has_orientation, m3, m33, m333, m3333):
       the measured rotations ``O_i`` ``(n, 3, 3)`` (a sum: none for no poses, as numpy's).
     """
     n = y.shape[0]
-    m3[:] = 0.0
-    m33[:] = 0.0
-    m333[:] = 0.0
-    m3333[:] = 0.0
     for i in range(n):
         for k in range(3):
             m3[0, k] += y[i, k]
-    m3[0] /= n
+    _divide(m3[0].ravel(), n)
     d = np.empty(3)
     for i in range(n):
         for k in range(3):
@@ -161,9 +173,9 @@ def _moments(T_flange, y, orientation, has_orientation, m3, m33, m333, m3333):
                     for k in range(3):
                         for c in range(3):
                             m3333[r, j, k, c] += R * orientation[i, k, c]
-    m3[1:] /= n
-    m33 /= n
-    m333 /= n
+    _divide(m3[1:].ravel(), n)
+    _divide(m33.ravel(), n)
+    _divide(m333.ravel(), n)
 
 
 @_jit
@@ -236,7 +248,9 @@ def _tool_rotation(m3333, T_frame, T_tool):
         for r in range(3):
             for c in range(3):
                 R[r, c] = U[r, 0] * Vt[0, c] + U[r, 1] * Vt[1, c] + d * U[r, 2] * Vt[2, c]
-    T_tool[:3, :3] = R
+    for r in range(3):  # loops: numba's slice assignment compiles its shape checks
+        for c in range(3):
+            T_tool[r, c] = R[r, c]
     return OK
 
 
@@ -254,11 +268,12 @@ def frames_and_tools(
     inf and the frame is fitted), SVD_FAILED or ``COLLINEAR + k`` (the first robot ``k`` of
     the first round whose points are (nearly) collinear); the fits are then incomplete.
     """
-    if fit_frame and not np.isfinite(position).all():
+    if fit_frame and not _all_finite(position):
         return NON_FINITE_POINTS
     K = position.shape[0]
-    m3, m33 = np.empty((K, 3, 3)), np.empty((K, 2, 3, 3))
-    m333, m3333 = np.empty((K, 3, 3, 3)), np.empty((K, 3, 3, 3, 3) if has_orientation else (K, 0, 0, 0, 0))
+    d = 3 if has_orientation else 0  # m3333 only for pose data
+    m3, m33 = np.zeros((K, 3, 3)), np.zeros((K, 2, 3, 3))  # the sums of _moments
+    m333, m3333 = np.zeros((K, 3, 3, 3)), np.zeros((K, d, d, d, d))
     if fit_frame or fit_tool:
         for k in range(K):
             _moments(

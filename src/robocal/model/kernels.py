@@ -107,9 +107,9 @@ def segment_data(values, step_axis, step_rot, step_joint, dof):
     cur = np.eye(4)
     a = 0
     for i in range(P):
-        local[i] = cur
+        _copy44(cur, local[i])
         if step_joint[i]:
-            seg[a] = cur
+            _copy44(cur, seg[a])
             a += 1
             cur = np.eye(4)
         elif step_rot[i]:
@@ -118,8 +118,17 @@ def segment_data(values, step_axis, step_rot, step_joint, dof):
             k = step_axis[i]
             for r in range(3):
                 cur[r, 3] += cur[r, k] * values[i]
-    seg[a] = cur
+    _copy44(cur, seg[a])
     return seg, local
+
+
+@_jit
+def _copy44(src, dst):
+    """``dst[...] = src`` for 4 x 4 frames (a loop: numba's slice assignment compiles its
+    shape checks and error messages, a third of a second)."""
+    for r in range(4):
+        for c in range(4):
+            dst[r, c] = src[r, c]
 
 
 @_jit
