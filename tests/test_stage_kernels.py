@@ -154,3 +154,17 @@ def test_rank_test_fit_matches_numpy(seed):
     assert np.all(left < 1e-7)  # the dropped columns lie in the span of the kept ones
     nothing_kept = sequential_test(np.zeros((5, 3)), 1e-7)
     assert not nothing_kept[4] and not nothing_kept[1].any()
+
+
+def test_kernel_cache_check_names_the_kernels_without_machine_code(monkeypatch):
+    """The first-use notice: a kernel whose cache index is empty (never compiled, or
+    compiled for another source) is listed; a cached one is not."""
+    from robocal.identify import kernel_cache
+    from robocal.model import kernels
+
+    monkeypatch.setattr(kernel_cache, "KERNELS", (("robocal.model.kernels", "forward"),))
+    cache_file = kernels.forward._cache._cache_file
+    monkeypatch.setattr(cache_file, "_load_index", lambda: {})
+    assert kernel_cache.kernels_to_compile() == ["robocal.model.kernels.forward"]
+    monkeypatch.setattr(cache_file, "_load_index", lambda: {"a signature": "its machine code"})
+    assert kernel_cache.kernels_to_compile() == []

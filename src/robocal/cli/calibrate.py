@@ -259,10 +259,13 @@ def _effects(effects: str | None):
 def _calibrate(model, train, data_path: Path, settings: dict):
     """rc.calibrate with a spinner; the data's problem as one line naming the file."""
     import robocal as rc
+    from robocal.identify.kernel_cache import FIRST_USE_NOTICE, kernels_to_compile
 
     what = settings["method"] + (
         ", choosing the model by cross-validation" if settings["residual"] != "none" else ""
     )
+    if kernels_to_compile():
+        console.print(FIRST_USE_NOTICE, style="dim", highlight=False)
     try:
         with console.status(f"calibrating {model.name} on {train.n} poses ({what}) ..."):
             return rc.calibrate(model, train, **settings)

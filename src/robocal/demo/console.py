@@ -118,7 +118,10 @@ class Steps:
         from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
         from robocal.console import console
+        from robocal.identify.kernel_cache import FIRST_USE_NOTICE, kernels_to_compile
 
+        if kernels_to_compile():
+            console.print(FIRST_USE_NOTICE, style="dim", highlight=False)
         with Progress(
             SpinnerColumn(),
             TextColumn("[progress.description]{task.description}"),
