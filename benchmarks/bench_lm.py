@@ -16,7 +16,8 @@ Minimum over rounds of the mean of a batch of calls, as CPU time of this thread
 (``time.thread_time``, one BLAS thread); numpy and compiled rounds interleaved.  The two
 iterations are checked to give the same solution, iterations and evaluations first.
 
-Run: ``python benchmarks/bench_lm.py [--rounds 7]``.
+Run: ``python benchmarks/bench_lm.py [--rounds 7] [--md README.md]`` (``--md`` writes the README's
+``<!-- bench:lm -->`` block).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import readme_table
 import robocal as rc
 import robocal.identify.batch as batch_engine
 import robocal.identify.pipeline as pipeline
@@ -200,7 +202,11 @@ def check_same(prob, x0, method, options) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--md", metavar="README", help="write the README's bench:lm block")
     args = parser.parse_args()
+    if args.md and (why := readme_table.check(args.md, "lm")):
+        parser.error(why)
+    load_start = readme_table.load()
     model, data = problem(100, 1)
     prob, x0, method, options = captured_problem(model, data)
     check_same(prob, x0, method, options)
@@ -243,20 +249,33 @@ def main() -> None:
         "numpy": lambda: fleet_solve.run(levenberg_marquardt_batch_numpy),
         "compiled": lambda: fleet_solve.run(solvers.levenberg_marquardt_batch),
     }
-    print(f"LM on the 100-pose UR10 ({len(x0)} unknowns), CPU µs per call, min of {args.rounds} rounds")
+    title = f"LM on the 100-pose UR10 ({len(x0)} unknowns), CPU µs per call, min of {args.rounds} rounds"
+    print(title)
     print(f"{'':46s} {'numpy':>9s} {'compiled':>9s} {'ratio':>6s}")
+    table = []
     for name, fns in rows.items():
         t = best(fns, args.rounds)
         per = 50 if name.startswith("batched") else 1
         if "" in t:
             print(f"{name:46s} {t[''] * 1e6:9.1f}")
+            table.append([name, "", f"{t[''] * 1e6:.1f}", ""])
         else:
-            print(f"{name:46s} {t['numpy'] * 1e6 / per:9.1f} {t['compiled'] * 1e6 / per:9.1f} "
-                  f"{t['numpy'] / t['compiled']:5.2f}x")  # fmt: skip
+            numpy_us, compiled_us = t["numpy"] * 1e6 / per, t["compiled"] * 1e6 / per
+            ratio = t["numpy"] / t["compiled"]
+            print(f"{name:46s} {numpy_us:9.1f} {compiled_us:9.1f} {ratio:5.2f}x")
+            table.append([name, f"{numpy_us:.1f}", f"{compiled_us:.1f}", f"{ratio:.2f}×"])
     out = subprocess.run([sys.executable, "-c", FIRST_CALL], capture_output=True, text=True, check=True)
     first, second = (float(v) for v in out.stdout.split())
-    print(f"first call in a new process (kernels from numba's cache): {first * 1e3:.0f} ms "
-          f"(second {second * 1e6:.0f} µs)")  # fmt: skip
+    first_line = (f"First call in a new process (kernels from numba's cache): {first * 1e3:.0f} ms "
+                  f"(second {second * 1e6:.0f} µs).")  # fmt: skip
+    print(first_line)
+    if args.md:
+        body = [
+            f"`python benchmarks/bench_lm.py --rounds {args.rounds} --md README.md` — {title}:", "",
+            *readme_table.markdown_table(["", "numpy", "compiled", "ratio"], table), "",
+            first_line, "", readme_table.machine(load_start),
+        ]  # fmt: skip
+        readme_table.write_block(args.md, "lm", "\n".join(body))
 
 
 def fleet_fn(robots: int):

@@ -11,7 +11,8 @@
 Per-call times: the minimum over rounds of timeit batches (CPU time of this thread, one BLAS
 thread).  Both implementations' results are checked to agree to 1e-12 before timing.
 
-Run: ``python benchmarks/bench_start_values.py [--rounds 15] [--cold]``.
+Run: ``python benchmarks/bench_start_values.py [--rounds 15] [--cold] [--md README.md]`` (``--md``
+writes the README's ``<!-- bench:start_values -->`` block).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the numpy reference: tests/
 from tests.test_start_kernels import reference
 
+import readme_table
 import robocal as rc
 from bench_calibrate import problem
 from robocal.identify import problem_setup, stages
@@ -78,7 +80,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--cold", action="store_true", help="also time a compilation from scratch")
+    parser.add_argument("--md", metavar="README", help="write the README's bench:start_values block")
     args = parser.parse_args()
+    if args.md and (why := readme_table.check(args.md, "start_values")):
+        parser.error(why)
+    load_start = readme_table.load()
     model, data = problem(100, 1)
     T1, y1 = model.fk(data.q)[None], data.position[None]
     rng = np.random.default_rng(0)
@@ -92,8 +98,10 @@ def main() -> None:
         "K=50, position": (T50, y50, {"T_tool": tool}),
         "K=50, pose": (T50, y50, {"orientation": O50}),
     }
-    print(f"start values, 100 poses (CPU time per call, min of {args.rounds} rounds)")
+    title = f"start values, 100 poses (CPU time per call, min of {args.rounds} rounds)"
+    print(title)
     print(f"{'case':16s} {'numpy':>10s} {'kernel':>10s} {'speed-up':>9s}")
+    table = []
     for name, (T, y, kw) in cases.items():
         new, ref = stages.initial_frames_and_tools(T, y, **kw), reference(T, y, **kw)
         for a, b in zip(new, ref, strict=True):
@@ -101,6 +109,7 @@ def main() -> None:
         t_ref = per_call(lambda T=T, y=y, kw=kw: reference(T, y, **kw), args.rounds)
         t_new = per_call(lambda T=T, y=y, kw=kw: stages.initial_frames_and_tools(T, y, **kw), args.rounds)
         print(f"{name:16s} {t_ref * 1e6:8.1f}µs {t_new * 1e6:8.1f}µs {t_ref / t_new:8.1f}x")
+        table.append([name, f"{t_ref * 1e6:.1f} µs", f"{t_new * 1e6:.1f} µs", f"{t_ref / t_new:.1f}×"])
 
     def calibrate() -> None:
         rc.calibrate(model, data)
@@ -115,14 +124,24 @@ def main() -> None:
     finally:
         problem_setup.initial_frames_and_tools = compiled
     a, b = min(times["numpy"]), min(times["kernel"])
-    print(
-        f"rc.calibrate, bench_calibrate problem(100, 1): numpy start values {a * 1e3:.3f} ms, "
-        f"kernel {b * 1e3:.3f} ms (saved {(a - b) * 1e6:.0f} µs, {a / b:.3f}x)"
-    )
-    print(f"first call in a new process (kernel from numba's cache): {first_call(None) * 1e3:.0f} ms wall")
+    lines = [
+        f"`rc.calibrate` (the `bench_calibrate` problem): with the numpy start values {a * 1e3:.3f} ms, "
+        f"with the kernel {b * 1e3:.3f} ms (saved {(a - b) * 1e6:.0f} µs, {a / b:.3f}×).",
+        f"First call in a new process (kernel from numba's cache): {first_call(None) * 1e3:.0f} ms wall.",
+    ]
     if args.cold:
         with tempfile.TemporaryDirectory() as cache:
-            print(f"first call, compiling the kernel from scratch: {first_call(cache):.1f} s wall")
+            lines.append(f"First call, compiling the kernel from scratch: {first_call(cache):.1f} s wall.")
+    print(*lines, sep="\n")
+    if args.md:
+        command = f"python benchmarks/bench_start_values.py --rounds {args.rounds}"
+        command += " --cold --md README.md" if args.cold else " --md README.md"
+        body = [
+            f"`{command}` — {title}:",
+            "", *readme_table.markdown_table(["case", "numpy", "kernel", "speed-up"], table), "",
+            " ".join(lines), "", readme_table.machine(load_start),
+        ]  # fmt: skip
+        readme_table.write_block(args.md, "start_values", "\n".join(body))
 
 
 if __name__ == "__main__":
