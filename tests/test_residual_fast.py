@@ -98,3 +98,27 @@ def test_angle_errors_sum_the_basis():
         learned = dataclasses.replace(template, coefficients=c)
         expected = np.einsum("nkh,kh->nk", learned.basis(q), c.reshape(4, -1))
         np.testing.assert_allclose(learned.angle_errors(q), expected, rtol=0, atol=1e-15)
+
+
+def test_position_covariance_and_cross_map_are_the_design_products():
+    """A C Aᵀ per pose through the per-joint basis covariance (in chunks of poses), and
+    A Xᵀ without the design, against the design itself (with the fade and without)."""
+    q, _, P, _ = _problem(300, 7)
+    template = _template(JOINTS, [0, 1, 2, 4], 5, q)
+    rng = np.random.default_rng(8)
+    F = rng.normal(size=(template.size, template.size))
+    learned = dataclasses.replace(template, covariance=F @ F.T * 1e-10)
+    X = rng.normal(size=(7, template.size))
+    for covered in (learned, dataclasses.replace(learned, coverage=None)):
+        A = covered.design(q, P[:, :3])
+        expected = (A @ covered.covariance) @ np.swapaxes(A, 1, 2)
+        if covered.coverage is not None:  # the fade's missing-variance term, as the method adds it
+            cols = P[:, :3, list(covered.joint_index), 2]
+            rms = np.asarray(covered.amplitudes if covered.angle_rms is None else covered.angle_rms)
+            missing = (1.0 - covered.fade(q) ** 2) * rms**2
+            expected = expected + np.einsum("nrk,nk,nsk->nrs", cols, missing, cols)
+        got = covered.position_covariance(q, P)
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+        M = covered._basis_covariance(covered.basis(q), chunk=64)  # several chunks
+        np.testing.assert_allclose(M, covered._basis_covariance(covered.basis(q)), rtol=1e-12, atol=0)
+        np.testing.assert_allclose(covered.coefficient_map(q, P, X), A @ X.T, rtol=1e-10, atol=1e-14)

@@ -322,9 +322,9 @@ class CalibrationResult:
         if self.model.residual is not None:  # the learned residual, fitted jointly with the parameters
             P = chain.perturbation_jacobian(q, "position", perturbations)
             cov = cov + self.model.residual.position_covariance(q, P)
-            if self.residual_cross_covariance is not None:
-                A = self.model.residual.design(q, P[:, :3])
-                cross = (J @ self.residual_cross_covariance[idx]) @ np.swapaxes(A, 1, 2)
+            if self.residual_cross_covariance is not None:  # J X Aᵀ, A the residual's design
+                W = self.model.residual.coefficient_map(q, P, self.residual_cross_covariance[idx])
+                cross = J @ np.swapaxes(W, 1, 2)
                 cov = cov + cross + np.swapaxes(cross, 1, 2)
         return cov
 
