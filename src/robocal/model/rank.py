@@ -251,15 +251,16 @@ def _absorbers(
     least-squares coefficient ``coef`` (on unit-norm columns) exceeds ``threshold``, largest
     first, converted back to the Jacobian's units; ``unexplained``: the norm of what the
     fit leaves of each (unit-norm) redundant column."""
+    size = np.abs(coef)
+    k, j = np.nonzero(size > threshold)  # the listed (kept, redundant) pairs: a few of them
+    order = np.lexsort((k, -size[k, j], j))  # by redundant column, largest first, ties in order
+    k, j = k[order], j[order]
+    units = (coef[k, j] * norm[np.asarray(red_cols)[j]] / norm[np.asarray(kept_cols)[k]]).tolist()
+    listed: list[list[tuple[str, float]]] = [[] for _ in red_cols]
+    for kk, jj, u in zip(k.tolist(), j.tolist(), units, strict=True):
+        listed[jj].append((names[kept_cols[kk]], u))
     residuals = unexplained.tolist()
-    units = coef * norm[red_cols] / norm[kept_cols][:, None]
-    ranked = np.argsort(-np.abs(coef), axis=0, kind="stable").T.tolist()
-    listed, units = (np.abs(coef) > threshold).T.tolist(), units.T.tolist()
-    out = {}
-    for j, c in enumerate(red_cols):
-        absorbers = tuple((names[kept_cols[k]], units[j][k]) for k in ranked[j] if listed[j][k])
-        out[c] = Dropped(names[c], "redundant", absorbers, residuals[j])
-    return out
+    return {c: Dropped(names[c], "redundant", tuple(listed[i]), residuals[i]) for i, c in enumerate(red_cols)}
 
 
 def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array, Array]:
