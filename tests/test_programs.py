@@ -416,6 +416,24 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     assert runner.invoke(app, [*args, str(tmp_path / "b.script"), "--strict"]).exit_code == 1
 
 
+@pytest.mark.parametrize(
+    ("option", "value", "hint"),
+    [("--probe", "0,0,109", "0,0,0.109"), ("--tool", "0,0,109,0,0,1.5", "0,0,0.109,0,0,1.5")],
+)
+def test_filter_refuses_a_tool_given_in_millimetres(cell, tmp_path, option, value, hint):
+    """calibrate's --tool takes mm, filter's --probe and --tool take m: 109 "m" from the
+    flange is refused in one line with the value in metres, and nothing is written."""
+    _, _, result, _ = cell
+    folder = tmp_path / "cal"
+    result.save(folder)
+    out = tmp_path / "pick.script"
+    args = ["filter", str(folder), str(EXAMPLES / "pick.script"), option, value, "-o", str(out)]
+    res = runner.invoke(app, args)
+    text = " ".join(res.output.split())
+    assert res.exit_code == 2 and not out.exists()
+    assert f"{option} '{value}': 109 m from the flange" in text and hint in text and "Traceback" not in text
+
+
 @pytest.mark.parametrize("language", ["krl", "rapid"])
 def test_written_configuration_chooses_the_branch(language):
     """The same Cartesian target in two configurations (A5/axis 4 and 6 flipped): each

@@ -129,6 +129,11 @@ def ur_kinematics_command(
         err_console.print(f"[yellow]note:[/] {safe(m.note)}", highlight=False, markup=True)
 
 
+# a tool this far from the flange is a length given in mm where these options take m
+# (calibrate's --tool takes mm): refused rather than filtered with a tool metres long
+_TOOL_REACH_M = 5.0
+
+
 def _frame_option(text: str | None, what: str):
     """``"x,y,z,rx,ry,rz"`` (m, rotation vector in rad) -> a 4x4 transform."""
     if text is None:
@@ -136,6 +141,8 @@ def _frame_option(text: str | None, what: str):
     from robocal import spatial
 
     v = parse_vector(text, 6, what, "x,y,z,rx,ry,rz: m, rotation vector in rad")
+    if what != "--base":
+        _check_reach(v, text, what)
     return spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
 
 
@@ -144,7 +151,24 @@ def _probe_option(text: str | None):
     if text is None:
         return None
     v = parse_vector(text, (3, 6), "--probe", "x,y,z in m, or x,y,z,rx,ry,rz")
-    return list(v) if len(v) == 3 else _frame_option(text, "--probe")
+    if len(v) == 6:
+        return _frame_option(text, "--probe")
+    _check_reach(v, text, "--probe")
+    return list(v)
+
+
+def _check_reach(v, text: str, what: str) -> None:
+    """Exit 2 for a tool point (``v[:3]``, m; a rotation vector may follow) farther than
+    :data:`_TOOL_REACH_M` from the flange."""
+    import numpy as np
+
+    distance = float(np.linalg.norm(v[:3]))
+    if distance > _TOOL_REACH_M:
+        mm = ",".join([f"{x / 1000:g}" for x in v[:3]] + [f"{x:g}" for x in v[3:]])
+        raise fail(
+            f"{what} {text!r}: {distance:g} m from the flange; {what} takes metres "
+            f"(for millimetres: {mm})"
+        )
 
 
 ProgramOption = Annotated[
