@@ -122,6 +122,11 @@ def create_app(workdir: Path):
 
 def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") -> None:
     """Run the app on ``host:port`` until Ctrl-C; open the browser unless told not to."""
+    import signal
+
+    # Ctrl-C (SIGINT) stops the server even when it was started with SIGINT ignored (a
+    # background job of a script inherits that): interrupting it is how it ends
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     workdir = Path(tempfile.mkdtemp(prefix="robocal-gui-"))
     atexit.register(shutil.rmtree, workdir, ignore_errors=True)
     app = create_app(workdir)
