@@ -132,3 +132,23 @@ def test_demo_writes_to_the_home_directory_by_default_never_the_working_director
     (earlier / "report.html").write_text("an earlier demo")
     res = runner.invoke(app, ["demo"])
     assert res.exit_code == 2 and str(earlier) in " ".join(res.output.split()) and "--force" in res.output
+
+
+def test_the_log_reuses_the_tool_test_cube_moved_to_the_flange():
+    """The simulated ISO log's cube is the demo's test cube (robot with its tool) moved back
+    by the fixed tool orientation times the tool offset: the bare robot reaches its ISO
+    poses, and each flange position plus R·tool is the tool's."""
+    from robocal.demo import _Demo
+    from robocal.measure.poses import iso9283_poses
+
+    demo = _Demo("ur10", 0, True, 5)
+    demo.build_model()
+    demo.draw_robot()
+    demo.plan_poses(20, 20)
+    cube = demo._flange_cube()
+    assert cube is not None and cube.side == demo.iso.cube.side
+    flange = iso9283_poses(demo.nominal, cube, seed=0)
+    R = np.asarray(demo.iso.orientation)
+    np.testing.assert_allclose(flange.positions + R @ demo.tool, demo.iso.positions, atol=1e-12)
+    T = demo.nominal.fk(flange.q)
+    np.testing.assert_allclose(T[:, :3, 3], flange.positions, atol=1e-6)  # reached

@@ -312,6 +312,18 @@ class _Demo:
         effects = [GravityCompliance(self.compliance), EncoderNoise(self.encoder, noise_seed)]
         return VirtualRobot(self.nominal, self.true, self.tracker, effects)
 
+    def _flange_cube(self):
+        """The ISO test cube of the robot with its tool (:meth:`plan_poses`) moved back by
+        the fixed tool orientation times the tool offset: a flange pose of that cube is a
+        tool pose of the tool's cube in the same configuration, so the bare robot reaches
+        it as well (only for a fixed full orientation; None otherwise: a search)."""
+        if self.iso is None or self.iso.cube is None or self.iso.info.get("kind") != "pose":
+            return None
+        from robocal.measure.poses import Cube
+
+        centre = self.iso.cube.center - np.asarray(self.iso.orientation) @ self.tool
+        return Cube(center=centre, side=self.iso.cube.side)
+
     def plan_poses(self, n_calibration: int, n_validation: int) -> None:
         from robocal.identify.observability import select_poses
         from robocal.measure.poses import iso9283_poses, random_poses
@@ -460,7 +472,11 @@ class _Demo:
             from robocal.evaluate.iso9283_report import evaluate_log
             from robocal.evaluate.iso9283_sim import simulate_log
 
-            ev["iso9283"] = evaluate_log(simulate_log(self.nominal, seed=self.seed).log).to_dict()
+            try:  # the test cube of the poses above, for the bare robot: no second search (~1.5 s)
+                log = simulate_log(self.nominal, seed=self.seed, cube=self._flange_cube())
+            except ValueError:  # its IK missed a pose of the moved cube: a cube of its own
+                log = simulate_log(self.nominal, seed=self.seed)
+            ev["iso9283"] = evaluate_log(log.log).to_dict()
         ev["timings_s"] = dict(timings)
 
         def the_rest(stage: Path) -> None:  # written with the result, all or nothing
