@@ -14,7 +14,7 @@ from robocal.model.chain import Model
 from robocal.study.cluster import _Executor, executor_for
 from robocal.study.config import StudyError
 from robocal.study.table import _Table
-from robocal.study.tasks import _fill_fit, _stats
+from robocal.study.tasks import FIT_COLUMNS, _fill_fit, _stats
 
 #: Columns of ``fleet.csv``.
 FLEET_COLUMNS = (
@@ -24,15 +24,7 @@ FLEET_COLUMNS = (
     "message",
     "n_poses",
     "n_params",
-    "rms_before_mm",
-    "rms_after_mm",
-    "residual_std_mm",
-    "condition_number",
-    "val_n",
-    "val_mean_mm",
-    "val_rms_mm",
-    "val_p95_mm",
-    "val_max_mm",
+    *FIT_COLUMNS,
     "seconds",
     "result_dir",
 )

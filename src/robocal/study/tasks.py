@@ -15,6 +15,20 @@ from robocal.study.prepare import _Prepared
 
 Array = NDArray[np.float64]
 
+#: Columns of a fit and its held-out validation (:func:`_fill_fit`, :func:`_stats`), shared by
+#: a study's results and a fleet's.
+FIT_COLUMNS = (
+    "rms_before_mm",
+    "rms_after_mm",
+    "residual_std_mm",
+    "condition_number",
+    "val_n",
+    "val_mean_mm",
+    "val_rms_mm",
+    "val_p95_mm",
+    "val_max_mm",
+)
+
 #: Columns of ``results.csv`` (one row per case; lengths in mm).
 RESULT_COLUMNS = (
     "case",
@@ -28,15 +42,7 @@ RESULT_COLUMNS = (
     "n_params",
     "dropped",
     "iterations",
-    "rms_before_mm",
-    "rms_after_mm",
-    "residual_std_mm",
-    "condition_number",
-    "val_n",
-    "val_mean_mm",
-    "val_rms_mm",
-    "val_p95_mm",
-    "val_max_mm",
+    *FIT_COLUMNS,
     "true_rms_mm",
     "true_max_mm",
     "seconds",
