@@ -48,11 +48,7 @@ class BatchSolveResult:
     histories: list[list[float]] = field(default_factory=list)
 
     def message(self, k: int) -> str:
-        if self.success[k]:
-            return "converged: the next step would not improve the fit"
-        if self.evaluations[k] < self.max_evaluations:  # the compiled iteration's stop
-            return "stopped: NaN or inf in the Jacobian (no damping makes the step solvable)"
-        return f"no convergence in {self.max_evaluations} evaluations"
+        return lm_message(bool(self.success[k]), int(self.evaluations[k]), self.max_evaluations)
 
     def result(self, k: int) -> SolveResult:
         """Problem ``k``'s :class:`SolveResult`."""
@@ -66,6 +62,15 @@ class BatchSolveResult:
             self.r[k],
             self.J[k],
         )
+
+
+def lm_message(success: bool, evaluations: int, max_evaluations: int) -> str:
+    """Why a Levenberg-Marquardt fit stopped."""
+    if success:
+        return "converged: the next step would not improve the fit"
+    if evaluations < max_evaluations:  # the compiled iteration's stop
+        return "stopped: NaN or inf in the Jacobian (no damping makes the step solvable)"
+    return f"no convergence in {max_evaluations} evaluations"
 
 
 def levenberg_marquardt_batch_numpy(

@@ -31,11 +31,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
+from robocal.identify import fused
 from robocal.identify.bounds import bounded_method_bounds, parameters_at_bounds
 from robocal.identify.diagnose import diagnose, parameterisation_warnings
 from robocal.identify.effects import effect_plan, effects_to_hold
 from robocal.identify.guards import check_data, check_rank
-from robocal.identify.observability import Dropped
+from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.options import CalibrationOptions
 from robocal.identify.problem_setup import LEVELS, Run, build_problem, parse_level, without_measured_tool
 from robocal.identify.result import CalibrationResult, Diagnostics
@@ -103,12 +104,26 @@ def _identifiable(run: Run, hold: dict | None) -> None:
     """The identifiable set, preferring the frame, then the tool, then the robot in chain
     order (one factorisation of the scaled Jacobian at the start values); the rank guard;
     joint effects the caller holds."""
-    problem, setup = run.problem, run.options.setup
-    names = problem.free_names
-    selection = identifiable_set(problem.scaled_jacobian(problem.x0), names, roles=problem.chain.roles)
+    problem = run.problem
+    selection = identifiable_set(problem.scaled_jacobian(problem.x0), problem.free_names,
+                                 roles=problem.chain.roles)  # fmt: skip
+    _rank_guard(run, selection)
+    _fix_unidentifiable(run, selection, hold)
+    run.solver = _solver_options(run, selection.dropped)
+
+
+def _rank_guard(run: Run, selection: IdentifiableSubset) -> None:
+    """The rank guard's warnings (or its refusal) for the identifiable set."""
+    setup = run.options.setup
     for text in check_rank(run.given_model, run.data, measure=run.measure, frame=setup.frame, tool=setup.tool,
-                           tool_guess=setup.tool_guess, kept=selection.kept, candidates=names):  # fmt: skip
+                           tool_guess=setup.tool_guess, kept=selection.kept,
+                           candidates=run.problem.free_names):  # fmt: skip
         run.warn("rank", text)
+
+
+def _fix_unidentifiable(run: Run, selection: IdentifiableSubset, hold: dict | None) -> None:
+    """The problem with the unidentifiable unknowns and the held joint effects fixed."""
+    problem = run.problem
     if selection.dropped:
         problem = problem.fix([d.name for d in selection.dropped])
     held = [
@@ -120,7 +135,6 @@ def _identifiable(run: Run, hold: dict | None) -> None:
         problem = problem.fix([d.name for d in held])
     run.problem, run.x0 = problem, problem.x0
     run.dropped = list(selection.dropped) + held
-    run.solver = _solver_options(run, selection.dropped)
 
 
 def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
@@ -297,16 +311,33 @@ def _calibrate_once(
 ) -> CalibrationResult:
     """Stages 2-8 for the joint loads of ``load_model``'s geometry."""
     build_problem(run, load_model)
-    _identifiable(run, hold)
-    _screen(run)
-    _solve(run, run.x0)
-    _prune(run)
+    if not _fused(run, hold):
+        _identifiable(run, hold)
+        _screen(run)
+        _solve(run, run.x0)
+        _prune(run)
     _hold_effects(run)
     result = _assemble(run, t_start)
     bounds = run.solver.get("bounds") if run.method == "bounded" else None
     at_bounds = None if bounds is None else parameters_at_bounds(result.names, run.x, *bounds)
     return diagnose(result, run.problem, run.data, run.warnings, run.known_noise, run.options.loss.loss,
                     run.x0, at_bounds, run.orientation_hint)  # fmt: skip
+
+
+def _fused(run: Run, hold: dict | None) -> bool:
+    """Stages 4-6 as compiled calls (:mod:`robocal.identify.fused`) where they apply; False
+    where they do not (the staged functions run them)."""
+    first = fused.rank_test(run) if fused.applies(run) else None
+    if first is None:
+        return False
+    _rank_guard(run, first.selection)
+    run.solver = _solver_options(run, first.selection.dropped)  # lm's: the problem does not matter
+    if not fused.fit(run, first):  # a nearly singular covariance: the staged SVD path
+        _fix_unidentifiable(run, first.selection, hold)
+        _screen(run)
+        _solve(run, run.x0)
+        _prune(run)
+    return True
 
 
 def calibrate_physics(

@@ -31,6 +31,7 @@ from robocal.identify.observability import IdentifiableSubset, identifiable_subs
 from robocal.model.chain import Role
 
 __all__ = [
+    "chi2_bounds",
     "identifiable_set",
     "initial_frames_and_tools",
     "median",
@@ -318,12 +319,19 @@ def residual_variance(chi2: float, dof: float, known: bool, significance: float 
     data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``
     (``dof`` at least 1).
     """
-    import scipy.special
-
     dof = max(float(dof), 1.0)
     estimated = float(chi2) / dof
     if not known:
         return estimated
-    upper = float(scipy.special.chdtrc(dof, float(chi2)))  # P(χ² >= observed)
-    rejected = upper < significance or 1.0 - upper < significance
-    return estimated if rejected else 1.0
+    low, high = chi2_bounds(np.array([dof]), significance)
+    return 1.0 if low[0] <= chi2 <= high[0] else estimated
+
+
+def chi2_bounds(dof: Array, significance: float = 1e-3) -> tuple[Array, Array]:
+    """The χ² values ``(k,)`` below and above which :func:`residual_variance` rejects a stated
+    noise for ``dof`` ``(k,)`` degrees of freedom: ``P(χ² ≤ low) = P(χ² ≥ high) =
+    significance`` (the compiled fit, :mod:`robocal.identify.fused_kernels`, takes them as
+    tables: numba cannot call scipy.special)."""
+    import scipy.special
+
+    return scipy.special.chdtri(dof, 1.0 - significance), scipy.special.chdtri(dof, significance)

@@ -17,7 +17,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Dropped", "IdentifiableSubset", "identifiable_subset"]
+__all__ = ["Dropped", "IdentifiableSubset", "identifiable_subset", "preference_subset"]
 
 Array = NDArray[np.float64]
 
@@ -160,29 +160,68 @@ def identifiable_subset(
     if not ordered:
         dropped = tuple(Dropped(names[k], "no effect") for k in range(p))
         return IdentifiableSubset((), dropped, 0, names, np.zeros(p))
-    if order == "pivoted":
-        n_preferred = sum(1 for k in ordered if names[k] in rank_pref) if prefer else None
-        cols, rank, rel = _pivoted_rank(Js[:, ordered], ordered, n_preferred, 1e-6 if rtol is None else rtol)
-        kept_cols, red_cols, coef = cols[:rank], cols[rank:], None
-    else:
-        keep, coef, rel, unexplained = _sequential_rank_test(Js[:, ordered], 1e-7 if rtol is None else rtol)
-        cols = ordered
-        kept_cols = [c for c, k in zip(ordered, keep, strict=True) if k]
-        red_cols = [c for c, k in zip(ordered, keep, strict=True) if not k]
-        rank = len(kept_cols)
+    if order == "preference":
+        return preference_subset(Js[:, ordered], ordered, norm, zero, names, rtol=rtol, threshold=threshold,
+                                 explain=explain)  # fmt: skip
+    n_preferred = sum(1 for k in ordered if names[k] in rank_pref) if prefer else None
+    cols, rank, rel = _pivoted_rank(Js[:, ordered], ordered, n_preferred, 1e-6 if rtol is None else rtol)
+    kept_cols, red_cols = cols[:rank], cols[rank:]
+    coef = unexplained = None
+    if red_cols and explain and kept_cols:
+        coef = np.linalg.lstsq(Js[:, kept_cols], Js[:, red_cols], rcond=None)[0]
+        unexplained = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0)
+    return _subset(names, norm, zero, cols, kept_cols, red_cols, rel, (coef, unexplained, threshold))
+
+
+def preference_subset(
+    A: Array,
+    ordered: Sequence[int],
+    norm: Array,
+    zero: NDArray[np.bool_],
+    names: tuple[str, ...],
+    *,
+    rtol: float | None = None,
+    threshold: float = 0.05,
+    explain: bool = True,
+) -> IdentifiableSubset:
+    """:func:`identifiable_subset` with ``order="preference"`` from its unit-norm columns
+    ``A`` ``(m, k)``, already in test order (the columns ``ordered`` of the Jacobian, whose
+    column norms are ``norm`` ``(p,)`` and zero ones ``zero``): the sequential rank test
+    (:func:`_sequential_rank_test`) and the absorbers of the dropped columns."""
+    keep, coef, rel, unexplained = _sequential_rank_test(A, 1e-7 if rtol is None else rtol)
+    kept_cols = [c for c, k in zip(ordered, keep.tolist(), strict=True) if k]
+    red_cols = [c for c, k in zip(ordered, keep.tolist(), strict=True) if not k]
+    return _subset(names, norm, zero, list(ordered), kept_cols, red_cols, rel,
+                   (coef, unexplained, threshold) if explain else (None, None, threshold))  # fmt: skip
+
+
+def _subset(
+    names: tuple[str, ...],
+    norm: Array,
+    zero: NDArray[np.bool_],
+    cols: list[int],
+    kept_cols: list[int],
+    red_cols: list[int],
+    rel: Array,
+    absorbing: tuple[Array | None, Array | None, float],
+) -> IdentifiableSubset:
+    """The :class:`IdentifiableSubset` of a rank test: columns ``cols`` in test order, the
+    kept and the redundant ones, ``|R_kk|`` along ``cols``; ``absorbing``: the redundant
+    columns' coefficients in the kept ones and what they leave (None: not explained) and
+    the smallest listed coefficient."""
+    p = len(names)
+    coef, unexplained, threshold = absorbing
     dropped = {k: Dropped(names[k], "no effect") for k in range(p) if zero[k]}
     if red_cols:
-        if explain and coef is None and kept_cols:
-            coef = np.linalg.lstsq(Js[:, kept_cols], Js[:, red_cols], rcond=None)[0]
-            unexplained = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0)
-        if not explain or coef is None:
+        if coef is None:
             dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
         else:
             dropped.update(_absorbers(norm, names, kept_cols, red_cols, coef, unexplained, threshold))
     kept = tuple(names[k] for k in sorted(kept_cols))
     pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
     r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
-    return IdentifiableSubset(kept, tuple(dropped[k] for k in sorted(dropped)), rank, pivots, r_diag)
+    dropped_in_order = tuple(dropped[k] for k in sorted(dropped))
+    return IdentifiableSubset(kept, dropped_in_order, len(kept_cols), pivots, r_diag)
 
 
 def _checked(

@@ -1,0 +1,113 @@
+"""The compiled stages (robocal.identify.fused) against the staged pipeline they replace
+for position calibrations with Levenberg-Marquardt: the same identifiable set, screened and
+pruned unknowns, estimates, σ, fit and checks, to round-off."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import robocal as rc
+from robocal.identify import fused, fused_kernels
+from robocal.identify.options import Pruning, Weights
+from robocal.identify.stages import chi2_bounds, residual_variance
+from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
+from robocal.measure.poses import random_poses
+
+TOOL = np.array([0.05, 0.0, 0.109])
+
+
+def _data(name: str, n: int, seed: int, sigma: float = 20e-6):
+    model = rc.robot(name)
+    device = LaserTracker(p_tool_target=TOOL, sigma=sigma)
+    true = draw_true_model(model, seed=seed)
+    poses = random_poses(model, n, seed=seed + 1)
+    return model, simulate(VirtualRobot(model, true, device), poses, seed=seed + 2)
+
+
+def _staged(monkeypatch, model, data, **options):
+    with monkeypatch.context() as m:
+        m.setattr(fused, "applies", lambda run: False)
+        return rc.calibrate(model, data, **options)
+
+
+def _assert_same(fused_result, staged):
+    a, b = fused_result, staged
+    assert a.names == b.names
+    def dropped(r):
+        return [(d.name, d.reason, d.absorbed_by) for d in r.dropped], [d.sigma or 0.0 for d in r.dropped]
+
+    assert dropped(a)[0] == dropped(b)[0]
+    np.testing.assert_allclose(dropped(a)[1], dropped(b)[1], rtol=1e-9)
+    np.testing.assert_allclose(a.estimates, b.estimates, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(a.std, b.std, rtol=1e-9)
+    np.testing.assert_allclose(a.covariance, b.covariance, rtol=1e-8, atol=1e-30)
+    np.testing.assert_allclose(a.residuals, b.residuals, rtol=1e-9, atol=1e-13)
+    assert a.condition_number == pytest.approx(b.condition_number, rel=1e-9)
+    assert (a.success, a.message, a.iterations) == (b.success, b.message, b.iterations)
+    assert a.diagnostics.evaluations == b.diagnostics.evaluations
+    assert [(w.code, w.message) for w in a.warnings] == [(w.code, w.message) for w in b.warnings]
+
+
+@pytest.mark.parametrize(
+    ("name", "n", "seed", "options"),
+    [
+        ("ur10", 40, 1, {}),  # stated noise: the χ² test decides the variance
+        ("ur10", 60, 2, {"weights": Weights("none")}),  # the variance estimated
+        ("puma560", 50, 3, {}),
+        # tight thresholds: unknowns screened before the fit and pruned after it
+        ("ur10", 30, 4, {"pruning": Pruning(max_std=1e-7, max_std_ratio=1.3)}),
+        ("irb2400", 80, 5, {"level": 1}),
+    ],
+)
+def test_fused_stages_agree_with_the_staged_pipeline(monkeypatch, name, n, seed, options):
+    model, data = _data(name, n, seed)
+    calls = []
+    original = fused.fit
+    monkeypatch.setattr(fused, "fit", lambda run, first: calls.append(1) or original(run, first))
+    result = rc.calibrate(model, data, **options)
+    assert calls, "the compiled stages did not run"
+    _assert_same(result, _staged(monkeypatch, model, data, **options))
+    if options.get("pruning"):
+        assert sum(d.reason == "poorly identifiable" for d in result.dropped) >= 2
+
+
+def test_singular_covariance_falls_back_to_the_staged_functions(monkeypatch):
+    """A status other than OK (a nearly singular covariance) leaves the state to the
+    staged screening, fit and pruning: the same result."""
+    model, data = _data("ur10", 40, 6)
+    monkeypatch.setattr(fused_kernels, "OK", -1)  # every fused fit reports "not OK"
+    result = rc.calibrate(model, data)
+    _assert_same(result, _staged(monkeypatch, model, data))
+
+
+def test_fused_stages_apply_only_to_position_lm_without_joint_effects():
+    model, data = _data("ur10", 30, 7)
+    seen = []
+    original = fused.applies
+
+    def spy(run):
+        seen.append(original(run))
+        return seen[-1]
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(fused, "applies", spy)
+        rc.calibrate(model, data)
+        rc.calibrate(model, data, loss="soft_l1")
+        rc.calibrate(model, data, method="pinv")
+    assert seen == [True, False, False]
+
+
+def test_chi2_bounds_give_the_tail_probabilities_test():
+    """The variance factor's χ² test by the bounds equals the test by tail probabilities."""
+    import scipy.special
+
+    rng = np.random.default_rng(0)
+    for dof in (1.0, 4.0, 57.0, 2961.0):
+        low, high = chi2_bounds(np.array([dof]))
+        assert scipy.special.chdtrc(dof, high[0]) == pytest.approx(1e-3)
+        assert scipy.special.chdtrc(dof, low[0]) == pytest.approx(1 - 1e-3)
+        for chi2 in dof * rng.uniform(0.0, 3.0, 50):
+            upper = scipy.special.chdtrc(dof, chi2)
+            rejected = upper < 1e-3 or 1 - upper < 1e-3
+            assert residual_variance(chi2, dof, True) == (chi2 / dof if rejected else 1.0)
