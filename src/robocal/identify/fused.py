@@ -25,7 +25,8 @@ from robocal.identify.lm_numpy import lm_message
 from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.problem_setup import Run
 from robocal.identify.solve_result import SolveResult
-from robocal.identify.stages import chi2_bounds, preference_order
+from robocal.identify.stages import chi2_bounds
+from robocal.model.chain import Role
 from robocal.model.rank import preference_subset
 
 __all__ = ["FirstPass", "applies", "fit", "rank_test"]
@@ -73,15 +74,20 @@ def rank_test(run: Run) -> FirstPass | None:
     problem = run.problem
     chain = problem.chain
     names = problem.free_names
-    column = {name: k for k, name in enumerate(names)}
-    preference = np.array([column[n] for n in preference_order(names, chain.roles)], dtype=np.intp)
     T, r, J, norm, zero, ordered, At, finite = kernels.first_pass(
-        _chain_data(run), chain.values, np.flatnonzero(chain.free_mask), problem.free_scale, preference
+        _chain_data(run), chain.values, np.flatnonzero(chain.free_mask), problem.free_scale, _preference(chain)
     )
     if not finite or not len(ordered):
         return None
     selection = preference_subset(At.T, ordered.tolist(), norm, zero, names)
     return FirstPass((T, r, J), selection)
+
+
+def _preference(chain) -> NDArray[np.intp]:
+    """The free columns in :func:`~robocal.identify.stages.preference_order`: the device
+    frame's, then the tool's, then the others in chain order."""
+    rank = [0 if s.role is Role.DEVICE else 1 if s.role is Role.TOOL else 2 for s in chain.steps if s.free]
+    return np.argsort(np.array(rank), kind="stable")
 
 
 @functools.lru_cache(maxsize=64)

@@ -83,8 +83,10 @@ def first_pass(data, values, free_steps, free_scale, preference):
     the norms ``(p,)`` of the scaled Jacobian's columns (weighted, each unknown as a tool
     displacement: ``free_scale``), which of them are zero (≤ 1e-12 of the largest), the
     non-zero columns in ``preference`` order, those columns with unit norm as a
-    ``(k, m)`` array (the transpose of the ``(m, k)`` matrix the QR takes, in Fortran
-    order) and whether the Jacobian is finite (as :func:`robocal.model.rank.identifiable_subset`)."""
+    ``(k, m)`` array (the transpose of the ``(m, k)`` matrix the test takes, in Fortran
+    order) and whether the Jacobian is finite (as :func:`robocal.model.rank.identifiable_subset`).
+    The QR stays with LAPACK's ``geqrf`` outside: numba's ``qr`` also forms ``Q``, which
+    doubles its cost (100 µs against 50 µs for the 300 x 36 columns of a UR10)."""
     T, r, J = _evaluate(data, values, free_steps)
     weights = data[2]
     m, p = J.shape

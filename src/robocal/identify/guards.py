@@ -249,6 +249,8 @@ def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes
     """
     rows = 3 if measure == "position" else 6
     generic, length = _generic(model, measure, frame, tool, tool_guess, reference_poses, seed)
+    if kept is not None and candidates is not None and generic <= set(kept):
+        return []  # every parameter varied poses determine is determined (so are the equations)
     distinct = _distinct_rows(data.q)
     if rows * len(distinct) < len(generic):
         raise CalibrationGuardError(

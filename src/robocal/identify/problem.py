@@ -294,6 +294,13 @@ class Problem:
         """The same problem with some unknowns fixed at their current start values
         (a fixed effect coefficient's perturbation joins the known perturbations)."""
         named = set(names)
+        if not self.n_effects:  # the chain alone changes: a copy without __post_init__'s checks
+            fixed = object.__new__(Problem)
+            fixed.__dict__.update(self.__dict__)
+            fixed.chain, fixed._cache = self.chain.fixed(named), {}
+            fixed.__dict__.pop("free_scale", None)
+            fixed.__dict__.pop("_chain_values", None)
+            return self._keep_start(fixed, named)
         effect_keep = [k for k, n in enumerate(self.effect_names) if n not in named]
         effect_drop = [k for k, n in enumerate(self.effect_names) if n in named]
         chain = self.chain.fixed(named & set(self.chain.names))
@@ -311,8 +318,14 @@ class Problem:
             effect_start=self.effect_start[effect_keep],
             _cache={},
         )
-        # at the start values the fixed problem predicts the same frames, and its Jacobian
-        # is this one's without the fixed columns: keep that evaluation (a solver starts there)
+        return self._keep_start(fixed, named)
+
+    def _keep_start(self, fixed: Problem, named: set[str]) -> Problem:
+        """``fixed`` with this problem's evaluation at the start values, if cached: there
+        the fixed problem predicts the same frames, and its Jacobian is this one's without
+        the fixed columns (a solver starts there)."""
+        if not self._cache:
+            return fixed
         x0 = self.x0
         cached = self._cache.get((x0.tobytes(), True))
         if cached is not None:
