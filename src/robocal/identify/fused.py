@@ -74,8 +74,9 @@ def rank_test(run: Run) -> FirstPass | None:
     problem = run.problem
     chain = problem.chain
     names = problem.free_names
+    free_steps = np.flatnonzero(chain.free_mask)
     T, r, J, norm, zero, ordered, At, finite = kernels.first_pass(
-        _chain_data(run), chain.values, np.flatnonzero(chain.free_mask), problem.free_scale, _preference(chain)
+        _chain_data(run), chain.values, free_steps, problem.free_scale, _preference(chain)
     )
     if not finite or not len(ordered):
         return None
