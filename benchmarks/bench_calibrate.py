@@ -146,21 +146,24 @@ def baseline(result, data, fk: str = "robocal", solver: str = "lm"):
     return seconds, rms, n_calls, one
 
 
-#: the stages of ``rc.calibrate`` (robocal/identify/pipeline.py), timed apart by
-#: :func:`stage_times`
+#: the stages of ``rc.calibrate`` (robocal/identify/pipeline.py; this calibration takes the
+#: compiled stages of robocal/identify/fused.py), timed apart by :func:`stage_times`
 STAGES = (
-    "_check_inputs", "build_problem", "_identifiable", "_screen", "_solve", "_prune", "_hold_effects",
-    "_assemble", "diagnose",
+    ("pipeline", "_check_inputs"), ("pipeline", "build_problem"), ("fused", "rank_test"),
+    ("pipeline", "_rank_guard"), ("fused", "fit"), ("pipeline", "_fused"), ("pipeline", "_hold_effects"),
+    ("pipeline", "_assemble"), ("pipeline", "diagnose"),
 )  # fmt: skip
 
 
 def stage_times(model, data, calls: int = 300) -> tuple[dict[str, float], float]:
-    """CPU time per call (s) of each stage of ``rc.calibrate`` (exclusive: a refit inside
-    ``_prune`` counts as ``_solve``) and of the whole call, over ``calls`` calls.  The
-    stages are wrapped for this measurement only (the wrappers cost ~1 µs each)."""
-    from robocal.identify import pipeline
+    """CPU time per call (s) of each stage of ``rc.calibrate`` (exclusive: ``_fused`` is what
+    its two compiled stages and the rank guard leave) and of the whole call, over ``calls``
+    calls.  The stages are wrapped for this measurement only (the wrappers cost ~1 µs each)."""
+    from robocal.identify import fused, pipeline
 
-    spent = dict.fromkeys(STAGES, 0.0)
+    modules = {"pipeline": pipeline, "fused": fused}
+    label = {stage: stage[1] if stage[0] == "pipeline" else ".".join(stage) for stage in STAGES}
+    spent = dict.fromkeys(label.values(), 0.0)
     children: list[float] = []
 
     def timed(name, fn):
@@ -177,17 +180,17 @@ def stage_times(model, data, calls: int = 300) -> tuple[dict[str, float], float]
 
         return wrapper
 
-    originals = {name: getattr(pipeline, name) for name in STAGES}
+    originals = {stage: getattr(modules[stage[0]], stage[1]) for stage in STAGES}
     try:
-        for name, fn in originals.items():
-            setattr(pipeline, name, timed(name, fn))
+        for stage, fn in originals.items():
+            setattr(modules[stage[0]], stage[1], timed(label[stage], fn))
         t = CLOCK()
         for _ in range(calls):
             rc.calibrate(model, data)
         total = (CLOCK() - t) / calls
     finally:
-        for name, fn in originals.items():
-            setattr(pipeline, name, fn)
+        for stage, fn in originals.items():
+            setattr(modules[stage[0]], stage[1], fn)
     return {name: v / calls for name, v in spent.items()}, total
 
 
@@ -249,7 +252,7 @@ def main(argv=None) -> int:
     header = ["method", f"CPU time (median, {args.repeats} interleaved rounds)", "RMS residual", "ratio"]
     table = readme_table.markdown_table(header, rows)
     stage_table = readme_table.markdown_table(
-        ["stage of `rc.calibrate` (identify/pipeline.py)", "CPU µs per call"],
+        ["stage of `rc.calibrate` (identify/pipeline.py, identify/fused.py)", "CPU µs per call"],
         [[f"`{name}`", f"{v * 1e6:.0f}"] for name, v in stages.items()]
         + [["all (a tight loop of 300 calls, stages timed)", f"{t_loop * 1e6:.0f}"]],
     )

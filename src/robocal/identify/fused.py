@@ -76,7 +76,7 @@ def rank_test(run: Run) -> FirstPass | None:
     names = problem.free_names
     free_steps = np.flatnonzero(chain.free_mask)
     T, r, J, norm, zero, ordered, At, finite = kernels.first_pass(
-        _chain_data(run), chain.values, free_steps, problem.free_scale, _preference(chain)
+        _chain_data(run), chain.values, free_steps, float(problem.length_scale), _preference(chain)
     )
     if not finite or not len(ordered):
         return None
@@ -126,8 +126,8 @@ def fit(run: Run, first: FirstPass) -> bool:
     if status != kernels.OK:
         return False
     run.solve_seconds += time.perf_counter() - t
-    later = zip(np.r_[screened, pruned].tolist(), np.r_[screened_sigma, pruned_sigma].tolist(), strict=True)
-    poor = [Dropped(names[c], "poorly identifiable", sigma=s) for c, s in later]
+    columns, sigmas = screened.tolist() + pruned.tolist(), screened_sigma.tolist() + pruned_sigma.tolist()
+    poor = [Dropped(names[c], "poorly identifiable", sigma=s) for c, s in zip(columns, sigmas, strict=True)]
     run.dropped = list(first.selection.dropped) + poor
     run.problem = problem.fix([d.name for d in run.dropped])
     T, _, J, rw, Jw = last

@@ -76,20 +76,24 @@ def _weighted(r, J, weights):
 
 
 @_jit
-def first_pass(data, values, free_steps, free_scale, preference):
+def first_pass(data, values, free_steps, length_scale, preference):
     """The evaluation at the start values and the rank test's columns.
 
     Returns the tool frames, the unweighted residuals ``(m,)`` and Jacobian ``(m, p)``,
     the norms ``(p,)`` of the scaled Jacobian's columns (weighted, each unknown as a tool
-    displacement: ``free_scale``), which of them are zero (≤ 1e-12 of the largest), the
+    displacement: angles times the robot's size ``length_scale``, as
+    :attr:`robocal.identify.problem.Problem.free_scale`), which of them are zero (≤ 1e-12 of the largest), the
     non-zero columns in ``preference`` order, those columns with unit norm as a
     ``(k, m)`` array (the transpose of the ``(m, k)`` matrix the test takes, in Fortran
     order) and whether the Jacobian is finite (as :func:`robocal.model.rank.identifiable_subset`).
     The QR stays with LAPACK's ``geqrf`` outside: numba's ``qr`` also forms ``Q``, which
     doubles its cost (100 µs against 50 µs for the 300 x 36 columns of a UR10)."""
     T, r, J = _evaluate(data, values, free_steps)
-    weights = data[2]
+    weights, step_rot = data[2], data[4]
     m, p = J.shape
+    free_scale = np.empty(p)
+    for a in range(p):
+        free_scale[a] = length_scale if step_rot[free_steps[a]] else 1.0
     norm = np.zeros(p)
     finite = True
     for i in range(m):

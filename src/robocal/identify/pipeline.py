@@ -24,6 +24,7 @@ the calibrated geometry.  The residual model (:func:`robocal.calibrate` with
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from typing import Any
 
@@ -275,6 +276,12 @@ def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     return calibrated_chain, calibrated, T_device_base
 
 
+def _mean_square(r: Array) -> float:
+    """The mean squared position error of residuals ``(n, rows)`` (m²)."""
+    p = np.ascontiguousarray(r[:, :3]).reshape(-1)
+    return float(p @ p) / len(r)
+
+
 def _assemble(run: Run, t_start: float) -> CalibrationResult:
     """The frozen result of this pass (warnings and diagnostics added by :func:`diagnose`)."""
     problem, x, n = run.problem, run.x, run.data.n
@@ -282,6 +289,7 @@ def _assemble(run: Run, t_start: float) -> CalibrationResult:
     r_plain = problem.residual(x, weighted=False).reshape(n, problem.rows)
     r_start = problem.residual(run.x0, weighted=False).reshape(n, problem.rows)
     _, cov, std, corr, cond = run.covariance
+    after = _mean_square(r_plain)
     chain, calibrated, T_device_base = _calibrated_models(run)
     effects = run.options.joint_effects
     level = run.level if run.level is not None else (3 if run.plan.mode != "none" else 2)
@@ -289,9 +297,8 @@ def _assemble(run: Run, t_start: float) -> CalibrationResult:
         model=calibrated, T_device_base=T_device_base, measure=run.measure, method=run.method,
         names=names, estimates=x, nominal=run.x0, std=std, covariance=cov, correlation=corr,
         dropped=tuple(run.dropped),
-        residual_std=float(np.sqrt(np.sum(r_plain[:, :3] ** 2) / max(3 * n - len(x), 1))),
-        rms_before=float(np.sqrt(np.mean(np.sum(r_start[:, :3] ** 2, axis=1)))),
-        rms_after=float(np.sqrt(np.mean(np.sum(r_plain[:, :3] ** 2, axis=1)))),
+        residual_std=math.sqrt(after * n / max(3 * n - len(x), 1)),
+        rms_before=math.sqrt(_mean_square(r_start)), rms_after=math.sqrt(after),
         condition_number=cond, n=n, success=run.fit.success, message=run.fit.message,
         iterations=run.fit.iterations, seconds=time.perf_counter() - t_start, measurement_chain=chain,
         compliance={
