@@ -320,9 +320,7 @@ def _calibrate_once(
     build_problem(run, load_model)
     if not _fused(run, hold):
         _identifiable(run, hold)
-        _screen(run)
-        _solve(run, run.x0)
-        _prune(run)
+        _fit_staged(run)
     _hold_effects(run)
     result = _assemble(run, t_start)
     bounds = run.solver.get("bounds") if run.method == "bounded" else None
@@ -341,10 +339,15 @@ def _fused(run: Run, hold: dict | None) -> bool:
     run.solver = _solver_options(run, first.selection.dropped)  # lm's: the problem does not matter
     if not fused.fit(run, first):  # a nearly singular covariance: the staged SVD path
         _fix_unidentifiable(run, first.selection, hold)
-        _screen(run)
-        _solve(run, run.x0)
-        _prune(run)
+        _fit_staged(run)
     return True
+
+
+def _fit_staged(run: Run) -> None:
+    """Stages 5-6 by the staged functions: screening, the fit, pruning."""
+    _screen(run)
+    _solve(run, run.x0)
+    _prune(run)
 
 
 def calibrate_physics(
