@@ -111,3 +111,19 @@ def test_chi2_bounds_give_the_tail_probabilities_test():
             upper = scipy.special.chdtrc(dof, chi2)
             rejected = upper < 1e-3 or 1 - upper < 1e-3
             assert residual_variance(chi2, dof, True) == (chi2 / dof if rejected else 1.0)
+
+
+
+def test_fused_kernels_pass_no_constants_to_the_shared_kernels():
+    # numba compiles a kernel called with a constant (False, 3) a second time for that
+    # literal: seconds of first-use compilation the staged path's Python calls would not
+    # share (a warm cache hides it, so the source is checked)
+    import ast
+    import inspect
+
+    shared = {"evaluate", "segment_data", "start", "propose", "accept", "screen", "covariance", "_median"}
+    tree = ast.parse(inspect.getsource(fused_kernels))
+    calls = [c for c in ast.walk(tree) if isinstance(c, ast.Call) and getattr(c.func, "id", None) in shared]
+    assert {c.func.id for c in calls} >= shared - {"_median"}
+    constants = [(c.func.id, c.lineno) for c in calls for a in c.args if isinstance(a, ast.Constant)]
+    assert not constants

@@ -35,13 +35,29 @@ from robocal.model.kernels_evaluate import evaluate
 __all__ = ["OK", "SINGULAR", "first_pass", "fit"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+# inlined into the caller by numba (see _fit_once)
+_inline = numba.njit(inline="always", cache=True, nogil=True, error_model="numpy")
 
 OK = 0  # the fit's statuses
 SINGULAR = 1  # a covariance's normal matrix is nearly singular: the staged pipeline takes over
 NOT_FINITE = 2  # the first Jacobian has NaN or inf (the staged rank test says so)
 
 
-@_jit
+# A kernel called with a constant (``False``, ``3``) is compiled for that constant (numba
+# types it as a literal), apart from the run-time booleans and integers the staged pipeline
+# passes from Python: seconds of compilation twice over.  The kernels this module shares
+# with the staged pipeline get their flags through these, typed as run-time values.
+@numba.njit("boolean(boolean)", cache=True, nogil=True)
+def _flag(value):
+    return value
+
+
+@numba.njit("intp(intp)", cache=True, nogil=True)
+def _count(value):
+    return value
+
+
+@_inline
 def _evaluate(data, values, columns):
     """Tool frames ``(n, 4, 4)``, predicted minus measured positions ``(3n,)`` and the
     unweighted Jacobian columns ``(3n, len(columns))`` of the chain at ``values``."""
@@ -52,8 +68,9 @@ def _evaluate(data, values, columns):
     for j in range(len(joint_steps)):
         offsets[j] = values[joint_steps[j]]
     pert = np.zeros((1, dof, 3))
-    T, J, _ = evaluate(q, pert, False, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis,
-                       step_rot, columns, joint_steps, 3, False, False)  # fmt: skip
+    no = _flag(False)
+    T, J, _ = evaluate(q, pert, no, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis,
+                       step_rot, columns, joint_steps, _count(3), no, no)  # fmt: skip
     r = np.empty(3 * n)
     for i in range(n):
         for c in range(3):
@@ -151,49 +168,6 @@ def _values(values0, free_steps, live, x):
 
 
 @_jit
-def _solve(data, values0, free_steps, live, x0, start_eval, max_evaluations, tolerance):
-    """:func:`robocal.identify.solvers.levenberg_marquardt_batch` for one problem, the
-    evaluations inside: from ``x0`` (``start_eval``: the evaluation there) over the
-    unknowns ``live``.  Returns the solution, success, evaluations, the RMS history and the
-    last accepted evaluation (frames, unweighted and weighted residuals and Jacobian)."""
-    weights = data[2]
-    p = len(live)
-    columns = np.empty(p, dtype=np.intp)
-    for a in range(p):
-        columns[a] = free_steps[live[a]]
-    T, r, J = start_eval
-    rw, Jw = _weighted(r, J, weights)
-    x = np.empty((1, p))
-    for a in range(p):
-        x[0, a] = x0[a]
-    ids = np.zeros(1, dtype=np.intp)
-    cost, G, Jr = np.empty(1), np.empty((1, p, p)), np.empty((1, p))
-    start(rw, Jw, False, cost, G, Jr)
-    m = max(rw.shape[1], 1)
-    history = np.empty(max_evaluations + 1)
-    history[0] = math.sqrt(cost[0] / m)
-    h = 1
-    D, mu, nu, x_new = np.zeros((1, p)), np.full(1, np.nan), np.full(1, 2.0), np.empty((1, p))
-    evaluations, success = np.ones(1, dtype=np.intp), np.zeros(1, dtype=np.bool_)
-    predicted, rms, accepted = np.empty(1), np.empty(1), np.empty((2, 1), dtype=np.intp)
-    last = (T, r, J, rw, Jw)
-    while True:
-        n = propose(ids, 1, x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
-                    x_new, predicted)  # fmt: skip
-        if n == 0:
-            break
-        T2, r2, J2 = _evaluate(data, _values(values0, free_steps, live, x_new[0]), columns)
-        rw2, Jw2 = _weighted(r2, J2, weights)
-        count = accept(ids, n, x_new, rw2, Jw2, False, x, cost, G, Jr, mu, nu, predicted, evaluations,
-                       accepted, rms)  # fmt: skip
-        if count:
-            history[h] = rms[0]
-            h += 1
-            last = (T2, r2, J2, rw2, Jw2)
-    return x[0].copy(), success[0], evaluations[0], history[:h].copy(), last
-
-
-@_jit
 def _uncertainty(rw, Jw, chi2_low, chi2_high, known_noise):
     """:func:`robocal.identify.stages.uncertainty` of position rows: σ̂², covariance,
     standard deviations, correlations, condition number and whether the normal matrix is
@@ -206,7 +180,7 @@ def _uncertainty(rw, Jw, chi2_low, chi2_high, known_noise):
     s2 = chi2 / max(float(m - p), 1.0)
     if known_noise and chi2_low[p] <= chi2 <= chi2_high[p]:
         s2 = 1.0
-    cov, std, corr, lam, ok = covariance(Jw, np.full(m, s2), True)
+    cov, std, corr, lam, ok = covariance(Jw, np.full(m, s2), _flag(True))
     cond = math.sqrt(lam[p - 1] / lam[0]) if ok else math.inf
     return s2, cov, std, corr, cond, ok
 
@@ -219,20 +193,58 @@ def _without(a, k):
     return out
 
 
-@_jit
+@_inline
 def _fit_once(data, values0, free_steps, live, x0, first, settings, chi2_bounds):
     """One fit from ``x0`` over ``live`` (``first``: the evaluation at the start values, all
     free columns; ``settings``: ``(budget, tolerance, known_noise)``) and its covariance:
-    :func:`_solve`'s returns, then :func:`_uncertainty`'s."""
+    :func:`robocal.identify.solvers.levenberg_marquardt_batch` for one problem, the
+    evaluations inside, then :func:`_uncertainty`.  Returns the solution, success,
+    evaluations, the RMS history, the last accepted evaluation (frames, unweighted and
+    weighted residuals and Jacobian), the covariance and whether it is regular.
+
+    Inlined (as :func:`_evaluate`): numba links the code of every compiled function a
+    kernel calls into it and optimises the whole again, so each level of functions above
+    the chain evaluation costs 1-2 s of first-use compilation."""
     budget, tolerance, known_noise = settings
-    T0, r0, J0 = first
-    start_eval = (T0, r0, _columns_of(J0, live))
-    x, success, evaluations, history, last = _solve(
-        data, values0, free_steps, live, x0, start_eval, budget * (len(live) + 1), tolerance
-    )
+    weights = data[2]
+    p = len(live)
+    max_evaluations = budget * (p + 1)
+    columns = np.empty(p, dtype=np.intp)
+    for a in range(p):
+        columns[a] = free_steps[live[a]]
+    T, r, J = first[0], first[1], _columns_of(first[2], live)
+    rw, Jw = _weighted(r, J, weights)
+    x = np.empty((1, p))
+    for a in range(p):
+        x[0, a] = x0[a]
+    ids = np.zeros(1, dtype=np.intp)
+    cost, G, Jr = np.empty(1), np.empty((1, p, p)), np.empty((1, p))
+    no = _flag(False)
+    start(rw, Jw, no, cost, G, Jr)
+    history = np.empty(max_evaluations + 1)
+    history[0] = math.sqrt(cost[0] / max(rw.shape[1], 1))
+    h = 1
+    D, mu, nu, x_new = np.zeros((1, p)), np.full(1, np.nan), np.full(1, 2.0), np.empty((1, p))
+    evaluations, success = np.ones(1, dtype=np.intp), np.zeros(1, dtype=np.bool_)
+    predicted, rms, accepted = np.empty(1), np.empty(1), np.empty((2, 1), dtype=np.intp)
+    last = (T, r, J, rw, Jw)
+    while True:
+        n = propose(ids, _count(1), x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
+                    x_new, predicted)  # fmt: skip
+        if n == 0:
+            break
+        T2, r2, J2 = _evaluate(data, _values(values0, free_steps, live, x_new[0]), columns)
+        rw2, Jw2 = _weighted(r2, J2, weights)
+        count = accept(ids, n, x_new, rw2, Jw2, no, x, cost, G, Jr, mu, nu, predicted, evaluations,
+                       accepted, rms)  # fmt: skip
+        if count:
+            history[h] = rms[0]
+            h += 1
+            last = (T2, r2, J2, rw2, Jw2)
     low, high = chi2_bounds
     s2, cov, std, corr, cond, ok = _uncertainty(last[3][0], last[4][0], low, high, known_noise)
-    return x, success, evaluations, history, last, (s2, cov, std, corr, cond), ok
+    return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), last, (s2, cov, std, corr, cond),
+            ok)  # fmt: skip
 
 
 @_jit
