@@ -10,6 +10,7 @@ their bounds, an RMS error that rose under seed 001's objective) and diagnostics
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -55,9 +56,9 @@ def outlier_poses(errors: Array, sigma: Array | None, factor: float = 5.0) -> li
     if len(errors) < 10:
         return []
     limit = factor * median(errors)
-    if sigma is not None:
-        limit = max(limit, factor * float(np.sqrt(np.mean(np.sum(sigma**2, axis=1)))))
-    return [int(i) for i in np.flatnonzero(errors > limit)]
+    if sigma is not None:  # the 3D noise: √ of the mean of Σσ² over the poses
+        limit = max(limit, factor * math.sqrt(float(np.vdot(sigma, sigma)) / len(sigma)))
+    return np.flatnonzero(errors > limit).tolist()
 
 
 def _distance_objective(problem: Problem, x0: Array, x: Array) -> dict[str, Any]:

@@ -1,6 +1,6 @@
 """Numerical guards: stop a calibration with an explanation instead of a silent bad model.
 
-Two checks around :func:`robocal.calibrate`:
+Checks around :func:`robocal.calibrate`:
 
 * :func:`check_problem` before the fit — the data cannot determine the model:
   non-finite values, all poses the same, measured positions that never change, fewer
@@ -19,9 +19,8 @@ Two checks around :func:`robocal.calibrate`:
   uncertainties, or parameters moved further from their start than any manufacturing
   error (a sign of data from another robot, wrong units or a wrong joint order).
 
-Both raise :class:`CalibrationGuardError` (a ``ValueError``) whose message says what is
-wrong and what to do; :func:`check_problem` returns warnings (strings) for doubtful but
-usable data.
+They raise :class:`CalibrationGuardError` (a ``ValueError``) saying what is wrong and what
+to do; :func:`check_problem` returns warnings (strings) for doubtful but usable data.
 """
 
 from __future__ import annotations
@@ -200,30 +199,31 @@ def check_data(model: Model, data: Measurements) -> list[str]:
         )
     q, y = data.q, data.position
     for what, a in (("joint values", q), ("positions", y)):
-        if np.isfinite(a).all():  # the rows are looked for only when some is bad
+        if math.isfinite(float(np.sum(a))) or np.isfinite(a).all():  # a finite sum: all finite
             continue
         bad = np.flatnonzero(~np.all(np.isfinite(a.reshape(len(a), -1)), axis=1))
         raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
     if data.n == 0:
         raise CalibrationGuardError("no measured poses")
-    if not np.any(q != q[0]):
+    q_range = q.max(axis=0) - q.min(axis=0)  # (dof,) rad or m
+    if not q_range.any():
         raise CalibrationGuardError(
             f"all {data.n} poses have the same joint values ({', '.join(f'{v:.6g}' for v in q[0])}): "
             "a calibration needs poses that move the joints"
         )
-    spread = float(np.max(np.ptp(y, axis=0)))
+    spread = float(np.max(y.max(axis=0) - y.min(axis=0)))
     if spread < 1e-9:
         raise CalibrationGuardError(
             f"the measured positions do not change over {data.n} poses (spread {spread * 1e3:.3g} mm): "
             "is the device following the target?"
         )
-    still = _still_joints(model, q)
+    still = _still_joints(model, q_range)
     return [f"joint(s) {', '.join(still)} do not move in the data"] if still else []
 
 
-def _still_joints(model: Model, q: Array) -> list[str]:
-    still = np.flatnonzero(np.ptp(q, axis=0) < 1e-9)
-    return [model.joint_names[j] for j in still.tolist()] if still.size else []
+def _still_joints(model: Model, q_range: Array) -> list[str]:
+    """The joints whose range ``q_range`` ``(dof,)`` in the data is nil."""
+    return [model.joint_names[j] for j in np.flatnonzero(q_range < 1e-9).tolist()]
 
 
 def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes them
@@ -294,7 +294,7 @@ def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes
         f"the {len(generic)} parameters that varied poses determine; "
         f"undetermined: {'; '.join(parts)}{more}"
     )
-    still = _still_joints(model, data.q)
+    still = _still_joints(model, np.ptp(data.q, axis=0))
     if still:
         text += f"; joint(s) {', '.join(still)} never move"
     text += ": add poses that move every joint over its range (or allow_rank_deficient=True to fix them)"
@@ -327,7 +327,8 @@ def check_solution(
     max_angle_change: float = math.radians(15.0),
     require_convergence: bool = False,
 ) -> list[str]:
-    """Check a :class:`~robocal.identify.calibrate.CalibrationResult` (after fitting).
+    """Check a :class:`~robocal.identify.calibrate.CalibrationResult` (after fitting); returns
+    warnings (not converged).
 
     Args:
         result: the calibration result.
@@ -338,9 +339,6 @@ def check_solution(
         require_convergence: a fit that did not converge is an error (by default a
             warning: a solver that stopped at its iteration limit may still have
             improved the model, which the divergence check verifies).
-
-    Returns:
-        Warnings (not converged).
 
     Raises:
         CalibrationGuardError: not converged, diverged (RMS error after the fit larger
@@ -357,18 +355,21 @@ def check_solution(
             raise CalibrationGuardError(text)
         warnings.append(text)
     values = np.concatenate([np.atleast_1d(result.estimates), [result.rms_after, result.rms_before]])
-    if not np.all(np.isfinite(values)):
+    if not math.isfinite(float(np.sum(values))) and not np.all(np.isfinite(values)):
         bad = [n for n, v in zip(result.names, result.estimates, strict=True) if not math.isfinite(v)]
         raise CalibrationGuardError(
             "the fit produced non-finite values" + (f" for {', '.join(bad)}" if bad else "")
         )
-    if not np.all(np.isfinite(result.std)):
+    if not math.isfinite(float(np.sum(result.std))) and not np.all(np.isfinite(result.std)):
         bad = [n for n, v in zip(result.names, result.std, strict=True) if not math.isfinite(v)]
         raise CalibrationGuardError(f"the uncertainty of {', '.join(bad)} is not finite: the fit is singular")
     if (diverged := _diverged(result)) is not None:
         raise CalibrationGuardError(
             f"the fit diverged: {diverged}; check units, joint order and the start values"
         )
+    limit = min(max_length_change, max_angle_change)
+    if not np.any(np.abs(np.asarray(result.estimates) - result.nominal) > limit):
+        return warnings  # no change large enough to look at each
     rot = {}
     chain = result.measurement_chain or result.model
     for s in chain.steps:
@@ -483,9 +484,9 @@ def fit_to_noise(
     s = np.asarray(sigma, dtype=float).reshape(-1, 3)
     m = r.size
     dof = max(m - float(n_estimated), 1.0)
-    chi2 = float(np.sum((r / np.maximum(s, 1e-300)) ** 2))
-    noise_ms = float(np.mean(np.sum(s**2, axis=1))) * dof / m
-    ms = float(np.mean(np.sum(r**2, axis=1)))
+    chi2, n = float(np.vdot(z := r / np.maximum(s, 1e-300), z)), len(r)
+    noise_ms = float(np.vdot(s, s)) / n * dof / m  # mean over the poses of Σσ², (m - p) / m of it
+    ms = float(np.vdot(r, r)) / n
     p_value = float(scipy.special.chdtrc(dof, chi2))  # the χ² survival function
     return FitToNoise(
         ratio=math.sqrt(chi2 / dof),

@@ -50,6 +50,7 @@ from robocal.identify.stages import (
 )
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model, Role
+from robocal.model.chain_plan import derived_copy
 from robocal.model.joints import effect_of
 
 __all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
@@ -248,22 +249,20 @@ def _hold_effects(run: Run) -> None:
 def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     """The calibrated measurement chain, the calibrated robot (tool appended, the given
     model's free flags) and ``T_device_base`` (4x4)."""
-    chain = run.problem.chain
-    x_chain = run.x[: len(run.x) - run.problem.n_effects]  # only the unknowns changed
-    calibrated_chain = chain.with_values(dict(zip(chain.free_names, x_chain.tolist(), strict=True)))
-    frame_names = set(chain.names_with_role(Role.DEVICE))
-    frame_steps_ = calibrated_chain.steps[: len(frame_names)]  # the frame steps come first
+    chain, given = run.problem.chain, run.given_model
+    calibrated_chain = chain.with_free_values(run.x[: len(run.x) - run.problem.n_effects])
+    n_frame = len(chain.names_with_role(Role.DEVICE))  # the frame steps come first
+    frame_steps_ = calibrated_chain.steps[:n_frame]
     T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
-    free_before = {s.name: s.free for s in run.given_model.steps}
+    free_before = {s.name: s.free for s in given.steps}  # the tool's steps: free
     robot_steps = tuple(
         s if s.free == free_before.get(s.name, True) else s._with_free(not s.free)
-        for s in calibrated_chain.steps
-        if s.name not in frame_names
+        for s in calibrated_chain.steps[n_frame:]
     )
-    given = run.given_model
-    joint_effects = () if run.plan.mode == "none" else given.joint_effects
-    calibrated = dataclasses.replace(given, steps=robot_steps, notes=(given.notes + " calibrated").strip(),
-                                     joint_effects=joint_effects)  # fmt: skip
+    # the given robot's checked steps with checked values, and the measured tool's
+    effects = () if run.plan.mode == "none" else given.joint_effects
+    notes = (given.notes + " calibrated").strip()
+    calibrated = derived_copy(given, robot_steps, (), notes=notes, joint_effects=effects)
     if run.plan.mode != "none" and run.plan.kinds:
         from robocal.model.joints import effects_from_values
 
