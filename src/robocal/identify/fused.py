@@ -38,10 +38,12 @@ TOLERANCE = 1e-10  # the Levenberg-Marquardt tolerance of robocal.identify.solve
 @dataclass(frozen=True)
 class FirstPass:
     """The evaluation at the start values (frames ``(n, 4, 4)``, unweighted residuals
-    ``(3n,)`` and Jacobian ``(3n, p)``) and the rank test's identifiable set."""
+    ``(3n,)`` and Jacobian ``(3n, p)``), the rank test's identifiable set and the
+    problem's ``data`` tuple of :mod:`robocal.identify.fused_kernels`."""
 
     evaluation: tuple[Array, Array, Array]
     selection: IdentifiableSubset
+    data: tuple
 
 
 def applies(run: Run) -> bool:
@@ -75,13 +77,14 @@ def rank_test(run: Run) -> FirstPass | None:
     chain = problem.chain
     names = problem.free_names
     free_steps = np.flatnonzero(chain.free_mask)
+    data = _chain_data(run)
     T, r, J, norm, zero, ordered, At, finite = kernels.first_pass(
-        _chain_data(run), chain.values, free_steps, float(problem.length_scale), _preference(chain)
+        data, chain.values, free_steps, float(problem.length_scale), _preference(chain)
     )
     if not finite or not len(ordered):
         return None
     selection = preference_subset(At.T, ordered.tolist(), norm, zero, names)
-    return FirstPass((T, r, J), selection)
+    return FirstPass((T, r, J), selection, data)
 
 
 def _preference(chain) -> NDArray[np.intp]:
@@ -120,7 +123,7 @@ def fit(run: Run, first: FirstPass) -> bool:
     budget = int(run.solver["max_iterations"])
     t = time.perf_counter()
     (status, screened, screened_sigma, pruned, pruned_sigma, live, x0, x, success, evaluations, total,
-     history, last, covariance) = kernels.fit(_chain_data(run), problem.chain.values,
+     history, last, covariance) = kernels.fit(first.data, problem.chain.values,
                                               np.flatnonzero(problem.chain.free_mask), live, first.evaluation,
                                               screening, bounds, budget, TOLERANCE)  # fmt: skip
     if status != kernels.OK:

@@ -173,10 +173,10 @@ class Model:
     def with_free_values(self, x: ArrayLike) -> Model:
         """A new model whose free parameters take the values ``x`` (SI, shape ``(p,)``)."""
         x = np.asarray(x, dtype=float)
-        p = int(self.free_mask.sum())
-        if x.shape != (p,):
+        if x.shape != (p := len(self.free_names),):
             raise ValueError(f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}")
-        return self.with_values(dict(zip(self.free_names, x.tolist(), strict=True)))
+        values = iter(x.tolist())
+        return self._derived(tuple(s._with_value(next(values)) if s.free else s for s in self.steps), True)
 
     def with_values(self, values: Mapping[str, float]) -> Model:
         """A new model with the named parameters set to new values (SI)."""
