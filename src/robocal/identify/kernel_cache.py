@@ -1,6 +1,6 @@
 """Whether robocal's compiled kernels are in numba's on-disk cache.
 
-The first calibration after installation compiles them (numba, ``cache=True``): about 40 s
+The first calibration after installation compiles them (numba, ``cache=True``): about 30 s
 on a 2-core machine, once; later processes load the machine code in a fraction of a
 second.  :func:`kernels_to_compile` lets a command say so before that silence instead of
 leaving a user to wonder.
@@ -23,7 +23,7 @@ KERNELS = (
 )
 
 FIRST_USE_NOTICE = (
-    "first use after installation: compiling robocal's numerical kernels (numba, about 40 s once; "
+    "first use after installation: compiling robocal's numerical kernels (numba, about 30 s once; "
     "later runs load them from numba's cache)"
 )
 
