@@ -127,3 +127,22 @@ def test_fused_kernels_pass_no_constants_to_the_shared_kernels():
     assert {c.func.id for c in calls} >= shared - {"_median"}
     constants = [(c.func.id, c.lineno) for c in calls for a in c.args if isinstance(a, ast.Constant)]
     assert not constants
+
+
+def test_preference_puts_the_device_frame_then_the_tool_then_the_rest_in_chain_order():
+    from robocal.identify.problem import measurement_chain
+    from robocal.identify.stages import preference_columns, preference_order
+    from robocal.model.chain import Role
+
+    chain = measurement_chain(rc.robot("ur10"), np.eye(4), np.eye(4), "position", True)
+    names = (*chain.free_names, "compliance_j2")  # an effect coefficient: no role, last
+    order = preference_order(names, chain.roles)
+    roles = [chain.roles.get(x) for x in order]
+    n_device = roles.count(Role.DEVICE)
+    n_tool = roles.count(Role.TOOL)
+    assert n_device >= 6 and n_tool == 3
+    assert set(roles[:n_device]) == {Role.DEVICE} and set(roles[n_device : n_device + n_tool]) == {Role.TOOL}
+    assert order[-1] == "compliance_j2"
+    rest = [x for x in names if chain.roles.get(x) not in (Role.DEVICE, Role.TOOL)]
+    assert order[n_device + n_tool :] == rest  # chain order kept
+    assert [names[i] for i in preference_columns(names, chain.roles)] == order

@@ -25,8 +25,7 @@ from robocal.identify.lm_numpy import lm_message
 from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.problem_setup import Run
 from robocal.identify.solve_result import SolveResult
-from robocal.identify.stages import chi2_bounds
-from robocal.model.chain import Role
+from robocal.identify.stages import chi2_bounds, preference_columns
 from robocal.model.rank import preference_subset
 
 __all__ = ["FirstPass", "applies", "fit", "rank_test"]
@@ -79,19 +78,12 @@ def rank_test(run: Run) -> FirstPass | None:
     free_steps = np.flatnonzero(chain.free_mask)
     data = _chain_data(run)
     T, r, J, norm, zero, ordered, At, finite = kernels.first_pass(
-        data, chain.values, free_steps, float(problem.length_scale), _preference(chain)
+        data, chain.values, free_steps, float(problem.length_scale), preference_columns(names, chain.roles)
     )
     if not finite or not len(ordered):
         return None
     selection = preference_subset(At.T, ordered.tolist(), norm, zero, names)
     return FirstPass((T, r, J), selection, data)
-
-
-def _preference(chain) -> NDArray[np.intp]:
-    """The free columns in :func:`~robocal.identify.stages.preference_order`: the device
-    frame's, then the tool's, then the others in chain order."""
-    rank = [0 if s.role is Role.DEVICE else 1 if s.role is Role.TOOL else 2 for s in chain.steps if s.free]
-    return np.argsort(np.array(rank), kind="stable")
 
 
 @functools.lru_cache(maxsize=64)

@@ -37,6 +37,7 @@ __all__ = [
     "median",
     "normal_inverse",
     "poorly_identifiable",
+    "preference_columns",
     "preference_order",
     "residual_variance",
     "robot_sizes",
@@ -46,7 +47,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
 
 
 # ---------------------------------------------------------------------- start values
@@ -142,14 +142,20 @@ def robot_sizes(T_flange: Array) -> Array:
 
 
 # ---------------------------------------------------------------------- identifiable set
+_PREFERENCE = {Role.DEVICE: 0, Role.TOOL: 1}  # the others: 2
+
+
+def preference_columns(names: Sequence[str], roles: Mapping[str, Role]) -> NDArray[np.intp]:
+    """The indices into ``names`` of the unknowns to keep first when some are redundant:
+    the device frame's, then the tool's, then the others in chain order (``roles``: the
+    chain's :attr:`Model.roles`; names it lacks, the joint-effect coefficients, come last)."""
+    rank = [_PREFERENCE.get(roles.get(x), 2) for x in names]  # type: ignore[arg-type]
+    return np.argsort(np.array(rank, dtype=np.intp), kind="stable")  # stable: chain order within a role
+
+
 def preference_order(names: Sequence[str], roles: Mapping[str, Role]) -> list[str]:
-    """Which unknowns to keep first when some are redundant: the device frame, then the
-    tool, then the others in chain order (``roles``: the chain's :attr:`Model.roles`;
-    names it lacks, the joint-effect coefficients, come last)."""
-    device = [x for x in names if roles.get(x) is Role.DEVICE]
-    order = device + [x for x in names if roles.get(x) is Role.TOOL]
-    first = set(order)
-    return order + [x for x in names if x not in first]
+    """``names`` in :func:`preference_columns` order."""
+    return [names[i] for i in preference_columns(names, roles).tolist()]
 
 
 def identifiable_set(
