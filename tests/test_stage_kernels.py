@@ -73,10 +73,20 @@ def _problem(seed, m=300, p=27, spread=1e3, noise=1e-3):
 @pytest.mark.parametrize("seed", range(5))
 def test_normal_inverse_matches_the_eigendecomposition(seed):
     _, J = _problem(seed)
-    J[:, 3] = 0.0  # a zero column keeps norm 1
-    J[:, 3] = J[:, 4] * 1e-3 + J[:, 5]
+    scale = 1e-3 * np.linalg.norm(J[:, 5]) / len(J) ** 0.5
+    noise = np.random.default_rng(seed).normal(scale=scale, size=len(J))
+    J[:, 3] = J[:, 4] * 1e-3 + J[:, 5] + noise  # nearly dependent: condition ~1e3
     for got, want in zip(stages.normal_inverse(J), normal_inverse_reference(J), strict=True):
-        np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-9)
+
+
+def test_normal_inverse_keeps_a_zero_column_at_norm_one():
+    _, J = _problem(0, p=6)
+    J[:, 3] = 0.0
+    Jn, norms, lam, _ = stages.normal_inverse(J)
+    assert norms[3] == 1.0 and not Jn[:, 3].any()
+    np.testing.assert_allclose(norms, normal_inverse_reference(J)[1], rtol=1e-14)
+    assert abs(lam[0]) <= 1e-14 * lam[-1]
 
 
 def test_normal_inverse_of_a_singular_matrix_falls_back_to_the_eigendecomposition():

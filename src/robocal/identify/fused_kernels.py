@@ -27,8 +27,8 @@ import math
 import numba
 import numpy as np
 
-from robocal.identify.lm_kernels import accept, propose, start
-from robocal.identify.stage_kernels import _median, covariance, screen
+from robocal.identify.lm_kernels import accept, propose
+from robocal.identify.stage_kernels import _median, normal_covariance, screen
 from robocal.model.kernels import segment_data
 from robocal.model.kernels_evaluate import evaluate
 
@@ -168,21 +168,29 @@ def _values(values0, free_steps, live, x):
 
 
 @_jit
-def _uncertainty(rw, Jw, chi2_low, chi2_high, known_noise):
-    """:func:`robocal.identify.stages.uncertainty` of position rows: σ̂², covariance,
-    standard deviations, correlations, condition number and whether the normal matrix is
-    regular enough (else the staged pipeline's SVD path).  ``chi2_low``/``chi2_high``
-    ``[p]``: the χ² test's bounds for ``p`` unknowns (:func:`residual_variance`)."""
-    m, p = Jw.shape
-    chi2 = 0.0
-    for i in range(m):
-        chi2 += rw[i] * rw[i]
+def _uncertainty(chi2, G, m, chi2_low, chi2_high, known_noise):
+    """:func:`robocal.identify.stages.uncertainty` of ``m`` position rows from their weighted
+    ``Σr²`` (``chi2``) and normal matrix ``G`` ``(p, p)``: σ̂², covariance, standard
+    deviations, correlations, condition number and whether the normal matrix is regular
+    enough (else the staged pipeline's SVD path).  ``chi2_low``/``chi2_high`` ``[p]``: the χ²
+    test's bounds for ``p`` unknowns (:func:`residual_variance`)."""
+    p = G.shape[0]
     s2 = chi2 / max(float(m - p), 1.0)
     if known_noise and chi2_low[p] <= chi2 <= chi2_high[p]:
         s2 = 1.0
-    cov, std, corr, lam, ok = covariance(Jw, np.full(m, s2), _flag(True))
+    cov, std, corr, lam, ok = normal_covariance(G, s2)
     cond = math.sqrt(lam[p - 1] / lam[0]) if ok else math.inf
     return s2, cov, std, corr, cond, ok
+
+
+@_jit
+def _normal_equations(r, J):
+    """``JᵀJ`` ``(p, p)``, ``Jᵀr`` ``(p,)`` and ``rᵀr`` of residuals ``r`` ``(m,)`` and
+    Jacobian ``J`` ``(m, p)``."""
+    rr = 0.0
+    for i in range(len(r)):
+        rr += r[i] * r[i]
+    return np.dot(J.T, J), np.dot(J.T, r), rr
 
 
 @_jit
@@ -194,9 +202,11 @@ def _without(a, k):
 
 
 @_inline
-def _fit_once(data, values0, free_steps, live, x0, first, settings, chi2_bounds):
+def _fit_once(data, values0, free_steps, live, x0, first, start, settings, chi2_bounds):
     """One fit from ``x0`` over ``live`` (``first``: the evaluation at the start values, all
-    free columns; ``settings``: ``(budget, tolerance, known_noise)``) and its covariance:
+    free columns; ``start``: the weighted normal equations there, ``(JᵀJ, Jᵀr, rᵀr, at)``,
+    over the columns ``at`` indexes (``at[c]``: the row of free column ``c``); ``settings``:
+    ``(budget, tolerance, known_noise)``) and its covariance from the last normal matrix:
     :func:`robocal.identify.solvers.levenberg_marquardt_batch` for one problem, the
     evaluations inside, then :func:`_uncertainty`.  Returns the solution, success,
     evaluations, the RMS history, the last accepted evaluation (frames, unweighted and
@@ -206,28 +216,29 @@ def _fit_once(data, values0, free_steps, live, x0, first, settings, chi2_bounds)
     kernel calls into it and optimises the whole again, so each level of functions above
     the chain evaluation costs 1-2 s of first-use compilation."""
     budget, tolerance, known_noise = settings
+    G0, g0, rr0, at = start
     weights = data[2]
-    p = len(live)
+    m, p = len(weights), len(live)
     max_evaluations = budget * (p + 1)
     columns = np.empty(p, dtype=np.intp)
     for a in range(p):
         columns[a] = free_steps[live[a]]
-    T, r, J = first[0], first[1], _columns_of(first[2], live)
-    rw, Jw = _weighted(r, J, weights)
     x = np.empty((1, p))
+    cost, G, Jr = np.full(1, rr0), np.empty((1, p, p)), np.empty((1, p))
     for a in range(p):
         x[0, a] = x0[a]
+        Jr[0, a] = g0[at[live[a]]]
+        for b in range(p):
+            G[0, a, b] = G0[at[live[a]], at[live[b]]]
     ids = np.zeros(1, dtype=np.intp)
-    cost, G, Jr = np.empty(1), np.empty((1, p, p)), np.empty((1, p))
-    no = _flag(False)
-    start(rw, Jw, no, cost, G, Jr)
     history = np.empty(max_evaluations + 1)
-    history[0] = math.sqrt(cost[0] / max(rw.shape[1], 1))
+    history[0] = math.sqrt(cost[0] / max(m, 1))
     h = 1
     D, mu, nu, x_new = np.zeros((1, p)), np.full(1, np.nan), np.full(1, 2.0), np.empty((1, p))
     evaluations, success = np.ones(1, dtype=np.intp), np.zeros(1, dtype=np.bool_)
     predicted, rms, accepted = np.empty(1), np.empty(1), np.empty((2, 1), dtype=np.intp)
-    last = (T, r, J, rw, Jw)
+    no = _flag(False)
+    last = (first[0], first[1], np.empty((m, 0)), np.empty((1, m)), np.empty((1, m, 0)))
     while True:
         n = propose(ids, _count(1), x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
                     x_new, predicted)  # fmt: skip
@@ -241,8 +252,12 @@ def _fit_once(data, values0, free_steps, live, x0, first, settings, chi2_bounds)
             history[h] = rms[0]
             h += 1
             last = (T2, r2, J2, rw2, Jw2)
+    if h == 1:  # no step taken: the evaluation at the start
+        J = _columns_of(first[2], live)
+        rw, Jw = _weighted(first[1], J, weights)
+        last = (first[0], first[1], J, rw, Jw)
     low, high = chi2_bounds
-    s2, cov, std, corr, cond, ok = _uncertainty(last[3][0], last[4][0], low, high, known_noise)
+    s2, cov, std, corr, cond, ok = _uncertainty(cost[0], G[0], m, low, high, known_noise)
     return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), last, (s2, cov, std, corr, cond),
             ok)  # fmt: skip
 
@@ -263,17 +278,21 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     all fits, its RMS history, the last evaluation (frames, unweighted residuals and
     Jacobian, weighted ones) and the covariance (σ̂², covariance, σ, correlations,
     condition number)."""
-    max_std, max_std_ratio, margin, known_noise = screening
+    max_std, max_std_ratio, _, known_noise = screening
     _, r0, J0 = first
     settings = (budget, tolerance, known_noise)
-    # screening at the start values
+    # the weighted normal equations at the start values over the rank test's columns: the
+    # screening's, and every fit's start (their blocks)
     J_live = _columns_of(J0, live)
     rw0, Jw0 = _weighted(r0, J_live, data[2])
+    G0, g0, rr0 = _normal_equations(rw0[0], Jw0[0])
+    at = np.full(J0.shape[1], -1, dtype=np.intp)
+    for a in range(len(live)):
+        at[live[a]] = a
+    start = (G0, g0, rr0, at)
     p = len(live)
     cols, sigmas = np.empty(p, dtype=np.intp), np.empty(p)
-    count = screen(rw0[0], Jw0[0], _displacement_scale(J_live), max_std, max_std_ratio, margin, known_noise,
-                   cols, sigmas)  # fmt: skip
-    count = count if count >= 0 else -1 - count
+    count = screen(G0, g0, rr0, len(r0), _displacement_scale(J_live), screening, cols, sigmas)
     keep = np.ones(p, dtype=np.bool_)
     screened = np.empty(count, dtype=np.intp)
     for c in range(count):
@@ -285,7 +304,7 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         x0[a] = values0[free_steps[live[a]]]
     # the fit, then pruning (after a converged fit)
     x, success, evaluations, history, last, cov, ok = _fit_once(data, values0, free_steps, live, x0, first,
-                                                                settings, chi2_bounds)  # fmt: skip
+                                                                start, settings, chi2_bounds)  # fmt: skip
     total = evaluations
     pruned, pruned_sigma = np.empty(len(live), dtype=np.intp), np.empty(len(live))
     n_pruned = 0
@@ -300,8 +319,8 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         pruned[n_pruned], pruned_sigma[n_pruned] = live[worst], move[worst]
         n_pruned += 1
         live, x0 = _without(live, worst), _without(x0, worst)
-        x, success, evaluations, history, last, cov, ok = _fit_once(data, values0, free_steps, live, x0,
-                                                                    first, settings, chi2_bounds)  # fmt: skip
+        fitted = _fit_once(data, values0, free_steps, live, x0, first, start, settings, chi2_bounds)
+        x, success, evaluations, history, last, cov, ok = fitted
         total += evaluations
     status = OK if ok else SINGULAR
     return (status, screened, sigmas[:count].copy(), pruned[:n_pruned].copy(), pruned_sigma[:n_pruned].copy(),

@@ -1,7 +1,10 @@
 """Compiled kernels (numba) of the linear algebra between the fits of a calibration:
 the normalised normal matrix and its inverse (:func:`normal_inverse`), the screening of
 hopeless unknowns before the first fit (:func:`screen`) and the covariance of a fit
-(:func:`covariance`), called by :mod:`robocal.identify.stages`.
+(:func:`covariance`, :func:`normal_covariance`), called by :mod:`robocal.identify.stages`
+and the fused kernels.  Screening and the covariance after Levenberg-Marquardt work from
+the normal equations ``JᵀJ`` the solver forms anyway: one product over the rows per
+evaluation.
 
 The matrices are small (for a 100-pose UR10, 300 x 27 Jacobians and 27 x 27 normal
 matrices): numpy spent about forty calls of fixed cost on each screening round and
@@ -25,7 +28,7 @@ import numpy as np
 
 from robocal.model.rank_kernels import cholesky
 
-__all__ = ["covariance", "normal_inverse", "screen"]
+__all__ = ["covariance", "normal_covariance", "normal_inverse", "normalised", "screen"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -57,6 +60,22 @@ def _spd_inverse(A, inverse):
             inverse[i, j] = t
             inverse[j, i] = t
     return True
+
+
+@_jit
+def normalised(G):
+    """The column norms of a normal matrix ``G = JᵀJ`` ``(p, p)`` (the square roots of its
+    diagonal; 1 for a zero column) and the normal matrix of the unit-norm columns,
+    ``A = G / (norms normsᵀ)``."""
+    p = G.shape[0]
+    norms = np.empty(p)
+    for a in range(p):
+        norms[a] = math.sqrt(G[a, a]) if G[a, a] > 0.0 else 1.0
+    A = np.empty((p, p))
+    for a in range(p):
+        for b in range(p):
+            A[a, b] = G[a, b] / (norms[a] * norms[b])
+    return norms, A
 
 
 @_jit
@@ -100,66 +119,65 @@ def _median(v):
 
 
 @_jit
-def _squares(e):
-    s = 0.0
-    for x in e:
-        s += x * x
-    return s
+def _norm1(A):
+    """The 1-norm (largest absolute column sum) of ``A`` ``(p, p)``."""
+    largest = 0.0
+    for b in range(A.shape[1]):
+        s = 0.0
+        for a in range(A.shape[0]):
+            s += abs(A[a, b])
+        largest = max(largest, s)
+    return largest
 
 
 @_jit
-def _one_step_residual(r, Jn, inverse):
-    """``r − Jn A⁻¹ Jnᵀ r``: the residual after one Gauss-Newton step (loops: numba's
-    matrix-vector products in several memory layouts cost seconds of compilation)."""
-    m, p = Jn.shape
-    g = np.zeros(p)
-    for i in range(m):
-        for a in range(p):
-            g[a] += Jn[i, a] * r[i]
-    step = np.zeros(p)
-    for a in range(p):
-        for b in range(p):
-            step[a] += inverse[a, b] * g[b]
-    e = r.copy()
-    for i in range(m):
-        for a in range(p):
-            e[i] -= Jn[i, a] * step[a]
-    return e
+def screen(G, g, rr, m, scale, screening, columns, sigmas):
+    """The screening of :func:`robocal.identify.stages.screen_unidentifiable` from the
+    normal equations of the weighted problem — ``G = JᵀJ`` ``(p, p)``, ``g = Jᵀr`` ``(p,)``,
+    ``rr = rᵀr`` over ``m`` rows — the tool displacement per unit ``scale`` ``(p,)`` and its
+    ``screening`` settings ``(max_std, max_std_ratio, margin, known_noise)``.
+    The dropped columns and their σ (m) go to ``columns[:count]`` and ``sigmas[:count]``,
+    worst first.  Returns ``count``.
 
-
-@_jit
-def screen(r, J, scale, max_std, max_std_ratio, margin, known_noise, columns, sigmas):
-    """The screening of :func:`robocal.identify.stages.screen_unidentifiable`: weighted
-    residuals ``r`` ``(m,)``, Jacobian ``J`` ``(m, p)``, tool displacement per unit
-    ``scale`` ``(p,)``.  The dropped columns and their σ (m) go to ``columns[:count]`` and
-    ``sigmas[:count]``, worst first.  Returns ``count``, or −1 − count when a normal
-    matrix passed the singularity test but its factorisation failed (the caller finishes
-    with numpy)."""
-    m, p = J.shape
+    Each round works on the block of the columns still in: no product over the rows
+    again.  The one-step residual's squares are ``rr − gₙᵀA⁻¹gₙ`` (``gₙ`` and ``A`` of the
+    unit-norm columns; at the start values the residuals are well above what one step
+    leaves, so the difference keeps its digits).  A numerically singular block — its
+    Cholesky factorisation fails, or the 1-norm condition number ``‖A‖₁‖A⁻¹‖₁`` (at most
+    ``p`` times the eigenvalue ratio's inverse) reaches ``1 / SINGULAR`` — is left to the
+    fit and its checks."""
+    max_std, max_std_ratio, margin, known_noise = screening
+    p = G.shape[0]
     keep = np.ones(p, dtype=np.bool_)
     count = 0
     while p - count > 1:
-        live = np.empty(p - count, dtype=np.intp)
-        k = 0
+        k = p - count
+        live = np.empty(k, dtype=np.intp)
+        n_live = 0
         for a in range(p):
             if keep[a]:
-                live[k] = a
-                k += 1
-        Jk = np.empty((m, len(live)))
-        for i in range(m):
-            for a in range(len(live)):
-                Jk[i, a] = J[i, live[a]]
-        Jn, norms, lam, inverse, ok = normal_inverse(Jk)
-        if lam[0] <= SINGULAR * lam[len(lam) - 1]:  # the fit and its checks decide
+                live[n_live] = a
+                n_live += 1
+        Gk = np.empty((k, k))
+        for a in range(k):
+            for b in range(k):
+                Gk[a, b] = G[live[a], live[b]]
+        norms, A = normalised(Gk)
+        inverse = np.empty((k, k))
+        if not _spd_inverse(A, inverse) or _norm1(A) * _norm1(inverse) >= 1.0 / SINGULAR:
             break
-        if not ok:
-            return -1 - count
-        e = _one_step_residual(r, Jn, inverse)
         # with a stated noise (weights 1/σ) the variance is 1: far from the solution the
         # one-step residual still holds nonlinear error (2° errors inflated σ 10-50x)
-        s2 = 1.0 if known_noise else _squares(e) / max(m - len(live), 1)
-        move = np.empty(len(live))
-        for a in range(len(live)):
+        s2 = 1.0
+        if not known_noise:
+            explained = 0.0
+            for a in range(k):
+                ga = g[live[a]] / norms[a]
+                for b in range(k):
+                    explained += ga * inverse[a, b] * (g[live[b]] / norms[b])
+            s2 = max(rr - explained, 0.0) / max(m - k, 1)
+        move = np.empty(k)
+        for a in range(k):
             move[a] = math.sqrt(s2 * inverse[a, a]) / norms[a] * scale[live[a]]
         worst = np.argmax(move)
         if move[worst] <= margin * max(max_std, max_std_ratio * _median(move)):
@@ -173,7 +191,8 @@ def screen(r, J, scale, max_std, max_std_ratio, margin, known_noise, columns, si
 
 @_jit
 def _sandwich(Jn, row_s2, inverse):
-    """``A⁻¹ Jnᵀ diag(σ̂²) Jn A⁻¹`` ``(p, p)`` (loops, as :func:`_one_step_residual`)."""
+    """``A⁻¹ Jnᵀ diag(σ̂²) Jn A⁻¹`` ``(p, p)`` (loops: numba's matrix products in several
+    memory layouts cost seconds of compilation)."""
     m, p = Jn.shape
     middle = np.zeros((p, p))
     for i in range(m):
@@ -198,21 +217,45 @@ def _sandwich(Jn, row_s2, inverse):
 def covariance(J, row_s2, uniform):
     """Covariance, standard deviations, correlations and the normal matrix's eigenvalues of
     a fit with weighted Jacobian ``J`` ``(m, p)`` and variance factors ``row_s2`` ``(m,)``
-    per row (``uniform``: all equal, σ̂²(JᵀJ)⁻¹; otherwise the sandwich
-    ``(JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹``).  The last value is False when the normal matrix's
-    eigenvalue ratio is ≤ 1e-12 or it is not positive definite (the caller uses the SVD)."""
+    per row (``uniform``: all equal, σ̂²(JᵀJ)⁻¹ by :func:`normal_covariance`; otherwise
+    the sandwich ``(JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹``).  The last value is False when the
+    normal matrix's eigenvalue ratio is ≤ 1e-12 or it is not positive definite (the caller
+    uses the SVD)."""
+    if uniform:
+        return normal_covariance(np.dot(J.T, J), row_s2[0])
     p = J.shape[1]
     Jn, norms, lam, inverse, ok = normal_inverse(J)
-    std = np.empty(p)
-    corr = np.zeros((p, p))
     if not ok or not lam[0] > 1e-12 * lam[p - 1]:
-        return np.empty((p, p)), std, corr, lam, False
-    cov = row_s2[0] * inverse if uniform else _sandwich(Jn, row_s2, inverse)
+        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), lam, False
+    return _in_units(_sandwich(Jn, row_s2, inverse), norms, lam)
+
+
+@_jit
+def normal_covariance(G, s2):
+    """:func:`covariance` with one variance ``s2`` for all rows, from the normal matrix
+    ``G = JᵀJ`` ``(p, p)`` of the weighted Jacobian (a solver's last one: no product over
+    the rows again)."""
+    p = G.shape[0]
+    norms, A = normalised(G)
+    lam = np.linalg.eigvalsh(A)
+    inverse = np.empty((p, p))
+    if not (p > 0 and lam[0] > 1e-12 * lam[p - 1] and _spd_inverse(A, inverse)):
+        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), lam, False
+    return _in_units(s2 * inverse, norms, lam)
+
+
+@_jit
+def _in_units(cov, norms, lam):
+    """The covariance ``cov`` of the unit-norm columns in the columns' own units, its
+    standard deviations and correlations (and ``lam``, passed through)."""
+    p = len(norms)
     for a in range(p):
         for b in range(p):
             cov[a, b] /= norms[a] * norms[b]
+    std = np.empty(p)
     for a in range(p):
         std[a] = math.sqrt(max(cov[a, a], 0.0))
+    corr = np.zeros((p, p))
     for a in range(p):
         for b in range(p):
             outer = std[a] * std[b]

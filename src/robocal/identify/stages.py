@@ -227,18 +227,17 @@ def screen_unidentifiable(
     of 3 on simulated DH UR10s).  Worst first, re-evaluated after each (correlated
     unknowns often become determined once their partner is fixed); borderline cases are
     left to the pruning after the fit.  A numerically singular problem is left to the
-    fit and its checks.  Compiled: :func:`robocal.identify.stage_kernels.screen`.
+    fit and its checks.  Compiled: :func:`robocal.identify.stage_kernels.screen` (from the
+    normal equations).
     """
     from robocal.identify import stage_kernels as sk
 
+    r, J = np.asarray(r, dtype=float), np.asarray(J, dtype=float)
     p = J.shape[1]
     columns, sigmas = np.empty(p, dtype=np.intp), np.empty(p)
-    r, J = np.ascontiguousarray(r, dtype=float), np.ascontiguousarray(J, dtype=float)
-    count = sk.screen(r, J, np.asarray(scale, dtype=float), float(max_std), float(max_std_ratio),
-                      float(margin), bool(known_noise), columns, sigmas)  # fmt: skip
-    # count < 0: a factorisation failed where the eigenvalues said it would not (round-off
-    # at the singularity threshold): stop there, as for a singular matrix
-    count = count if count >= 0 else -1 - count
+    G, g, rr = np.ascontiguousarray(J.T @ J), J.T @ r, float(r @ r)  # the normal equations
+    screening = (float(max_std), float(max_std_ratio), float(margin), bool(known_noise))
+    count = sk.screen(G, g, rr, len(r), np.asarray(scale, dtype=float), screening, columns, sigmas)
     return list(zip(columns[:count].tolist(), sigmas[:count].tolist(), strict=True))
 
 
