@@ -4,6 +4,7 @@ the code tests instead of name prefixes."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
 
@@ -34,6 +35,23 @@ def test_the_measurement_chain_marks_device_frame_tool_and_robot():
     position = measurement_chain(robot, T, np.eye(4), "position", fit_frame=False)
     assert position.names_with_role(Role.DEVICE) == tuple(f"frame0_{c}" for c in axes)
     assert position.names_with_role(Role.TOOL) == ("tcp_x", "tcp_y", "tcp_z")
+
+
+def test_measurement_chains_of_one_robot_share_its_structure_and_keep_their_own_values():
+    robot = rc.robot("ur10")
+    T_a, T_b = np.eye(4), np.eye(4)
+    T_a[:3, 3], T_b[:3, 3] = [1.0, 2.0, 0.5], [-0.3, 0.4, 0.1]
+    tool = np.eye(4)
+    tool[:3, 3] = [0.01, 0.02, 0.15]
+    a = measurement_chain(robot, T_a, tool, "position", fit_frame=True)
+    b = measurement_chain(robot, T_b, tool, "position", fit_frame=True)
+    assert a._plan is b._plan and a.free_names is b.free_names  # worked out once, for the robot
+    assert [a.values[a._index[f"frame0_{c}"]] for c in "xyz"] == [1.0, 2.0, 0.5]
+    assert [b.values[b._index[f"frame0_{c}"]] for c in "xyz"] == [-0.3, 0.4, 0.1]
+    assert [b.values[b._index[f"tcp_{c}"]] for c in "xyz"] == [0.01, 0.02, 0.15]
+    np.testing.assert_allclose(b.fk(np.zeros(6)), T_b @ robot.fk(np.zeros(6)) @ tool, atol=1e-12)
+    other = dataclasses.replace(robot, name="ur10b")  # another robot: its own chain
+    assert measurement_chain(other, T_a, tool, "position", fit_frame=True).name == "ur10b+measurement"
 
 
 def test_roles_are_stored_and_read_back(tmp_path):

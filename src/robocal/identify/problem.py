@@ -45,8 +45,12 @@ TOOL_PREFIX = "tcp_"
 
 def frame_steps(T: Array, prefix: str, free: bool, role: Role | None = None) -> list[Step]:
     """A rigid transform as six steps Tx Ty Tz Rz Ry Rx (intrinsic ZYX angles)."""
-    rz, ry, rx = spatial.zyx_angles(T[:3, :3])
-    return _valued(_frame_template(prefix, free, role), (*T[:3, 3].tolist(), rz, ry, rx))
+    return _valued(_frame_template(prefix, free, role), _frame_values(T))
+
+
+def _frame_values(T: Array) -> list[float]:
+    """The values of :func:`frame_steps` for ``T`` (4x4): x, y, z (m), rz, ry, rx (rad)."""
+    return [*T[:3, 3].tolist(), *spatial.zyx_angles(T[:3, :3])]
 
 
 @functools.lru_cache(maxsize=16)
@@ -70,18 +74,43 @@ def measurement_chain(
     robot: Model, T_device_base: Array, tool: Array, measure: str, fit_frame: bool
 ) -> Model:
     """The chain predicting observations in the device frame (see the module docstring)."""
+    fixed_frame = fit_frame or not np.allclose(T_device_base, np.eye(4))
+    pose_tool = tool is not None and measure == "pose"
+    template = _chain_template(robot, (fixed_frame, fit_frame, tool is not None, pose_tool))
+    steps = list(template.steps)
+    if fixed_frame:
+        steps[:6] = _valued(template.steps[:6], _frame_values(T_device_base))
+    if tool is not None:
+        T_tool = np.asarray(tool, dtype=float)
+        values = _frame_values(T_tool) if pose_tool else T_tool[:3, 3].tolist()
+        first = len(steps) - len(values)
+        steps[first:] = _valued(template.steps[first:], values)
+    return template._derived(tuple(steps), same_free=True)
+
+
+# measurement chains at zero frame and tool values, by (id(robot), layout): the robot is
+# kept with its chain so that its id stays its own; a few robots are calibrated in turn
+_TEMPLATES: dict[tuple, tuple[Model, Model]] = {}
+
+
+def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> Model:
+    """The measurement chain of ``robot`` with, by ``layout``, the device frame's fixed
+    steps, its free corrections, a tool and whether the tool is a frame (else a point),
+    all at zero: every calibration of that robot sets the values of a copy, which shares
+    the template's structure (plan, names, free flags) instead of working it out again."""
+    fixed_frame, fit_frame, has_tool, pose_tool = layout
+    key = (id(robot), *layout)
+    cached = _TEMPLATES.get(key)
+    if cached is not None:
+        return cached[1]
     before: list[Step] = []
-    if fit_frame or not np.allclose(T_device_base, np.eye(4)):
-        before += frame_steps(T_device_base, "frame0", free=False, role=Role.DEVICE)
+    if fixed_frame:
+        before += _frame_template("frame0", False, Role.DEVICE)
     if fit_frame:
         before += _frame_template("frame", True, Role.DEVICE)
     after: list[Step] = []
-    if tool is not None:
-        T_tool = np.asarray(tool, dtype=float)
-        if measure == "pose":
-            after += frame_steps(T_tool, "tcp", free=True, role=Role.TOOL)
-        else:
-            after += _valued(_tool_point_template(), T_tool[:3, 3].tolist())
+    if has_tool:
+        after += _frame_template("tcp", True, Role.TOOL) if pose_tool else _tool_point_template()
     clash = {s.name for s in before + after} & set(robot.names)
     if clash:
         raise ValueError(
@@ -92,8 +121,14 @@ def measurement_chain(
     steps = (*before, *robot.steps, *after)
     # the robot's steps are checked, the added ones come from checked templates and their
     # names were checked against the robot's above: the chain's invariants hold
-    return derived_copy(robot, steps, (), name=robot.name + "+measurement", bodies=(), joint_effects=(),
-                        residual=None)  # fmt: skip
+    template = derived_copy(robot, steps, (), name=robot.name + "+measurement", bodies=(), joint_effects=(),
+                            residual=None)  # fmt: skip
+    for name in ("names", "roles", "_index", "_plan", "free_mask", "free_names"):
+        getattr(template, name)  # worked out once, shared by every copy
+    if len(_TEMPLATES) >= 16:
+        _TEMPLATES.clear()
+    _TEMPLATES[key] = (robot, template)
+    return template
 
 
 @dataclass
