@@ -134,3 +134,23 @@ def test_calibration_is_the_same_with_the_numpy_path(monkeypatch):
     monkeypatch.setattr(chain, "_kernels", lambda compiled=None: None)
     ref = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])
     np.testing.assert_allclose(fast.model.values, ref.model.values, rtol=0, atol=1e-10)
+
+
+def test_leading_frame_is_the_product_of_the_first_steps():
+    from robocal import spatial
+    from robocal.identify.problem import measurement_chain
+    from robocal.model import kernels
+
+    rng = np.random.default_rng(3)
+    T = spatial.homogeneous(R=spatial.rotvec_to_matrix(rng.normal(size=3)), p=rng.normal(size=3))
+    chain = measurement_chain(rc.robot("ur10"), T, np.eye(4), "position", fit_frame=True)
+    values = chain.values + rng.normal(scale=0.1, size=len(chain.values))
+    plan = chain._plan
+
+    def leading(values, n):
+        return kernels.leading_frame(values, plan.step_axis, plan.step_rot, n)
+
+    for n in (0, 6, 12):  # the fixed start, then with the free corrections
+        want = spatial.chain_product([s.motion for s in chain.steps[:n]], values[:n])
+        np.testing.assert_allclose(leading(values, n), want, atol=1e-15)
+    np.testing.assert_allclose(leading(chain.values, 6), T, atol=1e-12)

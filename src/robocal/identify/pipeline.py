@@ -31,7 +31,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal import spatial
 from robocal.identify import fused
 from robocal.identify.bounds import bounded_method_bounds, parameters_at_bounds
 from robocal.identify.diagnose import diagnose, parameterisation_warnings
@@ -249,11 +248,13 @@ def _hold_effects(run: Run) -> None:
 def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     """The calibrated measurement chain, the calibrated robot (tool appended, the given
     model's free flags) and ``T_device_base`` (4x4)."""
+    from robocal.model import kernels  # numba: imported on first use
+
     chain, given = run.problem.chain, run.given_model
     calibrated_chain = chain.with_free_values(run.x[: len(run.x) - run.problem.n_effects])
     n_frame = len(chain.names_with_role(Role.DEVICE))  # the frame steps come first
-    frame_steps_ = calibrated_chain.steps[:n_frame]
-    T_device_base = spatial.chain_product([s.motion for s in frame_steps_], [s.value for s in frame_steps_])
+    plan = chain._plan
+    T_device_base = kernels.leading_frame(run.problem.values(run.x), plan.step_axis, plan.step_rot, n_frame)
     free_before = {s.name: s.free for s in given.steps}  # the tool's steps: free
     robot_steps = tuple(
         s if s.free == free_before.get(s.name, True) else s._with_free(not s.free)

@@ -85,7 +85,7 @@ def measurement_chain(
         values = _frame_values(T_tool) if pose_tool else T_tool[:3, 3].tolist()
         first = len(steps) - len(values)
         steps[first:] = _valued(template.steps[first:], values)
-    return template._derived(tuple(steps), same_free=True)
+    return template._derived(tuple(steps), "free")
 
 
 # measurement chains at zero frame and tool values, by (id(robot), layout): the robot is

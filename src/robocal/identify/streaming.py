@@ -64,7 +64,7 @@ class _PositionData:
         self.free = chain.free_mask
 
     def _values(self, x: Array) -> Array:
-        v = self.chain.values
+        v = self.chain.values.copy()
         v[self.free] = x
         return v
 

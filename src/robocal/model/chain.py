@@ -55,7 +55,7 @@ from robocal.model.chain_compiled import (
     kernel_forward,
     load_kernels,
 )
-from robocal.model.chain_plan import Plan, check_perturbations, check_q, elementaries, plan_of, segment_data
+from robocal.model.chain_plan import Plan, check_perturbations, check_q, plan_of, read_only, segment_data
 from robocal.model.steps import Body, Joint, JointEffects, JointType, Role, Step, check_chain
 
 __all__ = ["Body", "Joint", "JointEffects", "Model", "Role", "Step"]
@@ -63,9 +63,7 @@ __all__ = ["Body", "Joint", "JointEffects", "Model", "Role", "Step"]
 Array = NDArray[np.float64]
 #: cached properties of a model that depend only on its steps' names, motions, joints and roles
 _STRUCTURE = ("names", "roles", "_index", "_plan")
-# the old private names (robocal.model.dynamics imports them from here; tests patch _kernels)
-_elementaries = elementaries
-_kernels = load_kernels
+_kernels = load_kernels  # tests patch it (the numpy path throughout)
 
 
 @dataclass(frozen=True)
@@ -131,14 +129,14 @@ class Model:
         """Names of all parameters, in chain order."""
         return tuple(s.name for s in self.steps)
 
-    @property
+    @cached_property
     def values(self) -> Array:
-        """Values (SI) of all parameters, in chain order, shape ``(P,)``."""
-        return np.array([s.value for s in self.steps])
+        """Values (SI) of all parameters, in chain order, shape ``(P,)`` (read-only)."""
+        return read_only(np.array([s.value for s in self.steps]))
 
     @cached_property
     def free_mask(self) -> NDArray[np.bool_]:
-        return np.array([s.free for s in self.steps], dtype=bool)
+        return read_only(np.array([s.free for s in self.steps], dtype=bool))
 
     @cached_property
     def roles(self) -> dict[str, Role]:
@@ -175,8 +173,11 @@ class Model:
         x = np.asarray(x, dtype=float)
         if x.shape != (p := len(self.free_names),):
             raise ValueError(f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}")
-        values = iter(x.tolist())
-        return self._derived(tuple(s._with_value(next(values)) if s.free else s for s in self.steps), True)
+        if not np.isfinite(x).all():  # the checked copies name the first parameter that is not finite
+            self.with_values(dict(zip(self.free_names, x.tolist(), strict=True)))
+        v = iter(x.tolist())  # checked above: the copies need no checks of their own
+        steps = tuple(s._copy_with("value", next(v)) if s.free else s for s in self.steps)
+        return self._derived(steps, "free")
 
     def with_values(self, values: Mapping[str, float]) -> Model:
         """A new model with the named parameters set to new values (SI)."""
@@ -186,21 +187,22 @@ class Model:
             if i is None:
                 raise KeyError(f"model {self.name!r} has no parameter {name!r}")
             steps[i] = steps[i]._with_value(value)
-        return self._derived(tuple(steps), same_free=True)
+        return self._derived(tuple(steps), "free")
 
     def with_free(self, names: Iterable[str] | None = None, free: bool = True) -> Model:
         """A new model with the named parameters (all when ``names`` is None) freed or fixed."""
         selected = set(self.names if names is None else names)
-        unknown = selected - set(self.names)
-        if unknown:
+        if unknown := [n for n in selected if n not in self._index]:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
-        steps = tuple(s._with_free(free) if s.name in selected else s for s in self.steps)
-        return self._derived(steps, same_free=False)
+        steps = list(self.steps)
+        for i in map(self._index.get, selected):
+            steps[i] = steps[i]._with_free(free)
+        return self._derived(tuple(steps), "values")
 
-    def _derived(self, steps: tuple[Step, ...], same_free: bool) -> Model:
-        """This model with ``steps`` that differ only in values (and free flags unless
-        ``same_free``), each already checked: :func:`~robocal.model.chain_plan.derived_copy`."""
-        shared = _STRUCTURE + (("free_mask", "free_names") if same_free else ())
+    def _derived(self, steps: tuple[Step, ...], same: Literal["free", "values"]) -> Model:
+        """This model with checked ``steps`` whose free flags or values (``same``) are its own:
+        :func:`~robocal.model.chain_plan.derived_copy`, sharing what depends on them only."""
+        shared = _STRUCTURE + (("free_mask", "free_names") if same == "free" else ("values",))
         return chain_plan.derived_copy(self, steps, shared)
 
     def fixed(self, names: Iterable[str]) -> Model:
@@ -211,9 +213,6 @@ class Model:
     @cached_property
     def _plan(self) -> Plan:
         return plan_of(self.steps)
-
-    def _check_q(self, q: ArrayLike) -> tuple[Array, bool]:
-        return check_q(q, self.name, self.joint_names)
 
     def _check_perturbations(self, perturbations: ArrayLike | None, n: int) -> Array | None:
         return check_perturbations(perturbations, n, self.dof)
@@ -257,7 +256,7 @@ class Model:
             T = self._fk_one(q, compiled)  # one configuration: the interactive case, a few µs
             if T is not None:
                 return T
-        q, single = self._check_q(q)
+        q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(compiled)
         if kernels is not None and d is None:
@@ -277,7 +276,7 @@ class Model:
     ) -> Array:
         """Frames after each joint step, ``(n, dof, 4, 4)`` in the base frame (``compiled``: as
         for :meth:`fk`)."""
-        q, single = self._check_q(q)
+        q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(compiled)
         if kernels is not None:
@@ -374,7 +373,7 @@ class Model:
         """
         if rows not in ("position", "pose"):
             raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
-        q, single = self._check_q(q)
+        q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         free = np.flatnonzero(self.free_mask)
         kernels = _kernels(compiled)
@@ -417,7 +416,7 @@ class Model:
             ``T (n, 4, 4)``, ``J`` (``(3n, p)`` or ``(6n, p)``) or ``None``, the joint
             columns when asked, and the perturbation columns when asked.
         """
-        q, _ = self._check_q(q)
+        q, _ = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         v = None if values is None else np.asarray(values, dtype=float)
         if v is not None and v.shape != (len(self.steps),):
@@ -477,7 +476,7 @@ class Model:
         perpendicular axes (x, y for a joint about z) through its origin."""
         if rows not in ("position", "pose"):
             raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
-        q, single = self._check_q(q)
+        q, single = check_q(q, self)
         _, _, P = self.evaluate(
             q, rows=rows, jacobian=False, perturbations=perturbations, perturbation_columns=True
         )
@@ -487,7 +486,7 @@ class Model:
     def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
         """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
-        q, single = self._check_q(q)
+        q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(None)
         if kernels is not None:

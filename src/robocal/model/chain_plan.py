@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -17,7 +18,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal.model.steps import Step
 
-__all__ = ["EYE4", "Plan", "check_perturbations", "check_q", "elementaries", "plan_of", "segment_data"]
+__all__ = [
+    "EYE4", "Plan", "check_perturbations", "check_q", "elementaries", "plan_of", "read_only", "segment_data"
+]  # fmt: skip
 
 Array = NDArray[np.float64]
 EYE4 = np.eye(4)
@@ -148,10 +151,11 @@ def elementaries(axis: NDArray[np.intp], rotation: NDArray[np.bool_], values: Ar
     return E
 
 
-def check_q(q: ArrayLike, model_name: str, joint_names: Sequence[str]) -> tuple[Array, bool]:
+def check_q(q: ArrayLike, model: Any) -> tuple[Array, bool]:
     """Joint values ``(n, dof)`` as floats and whether one configuration ``(dof,)`` was given;
-    ValueError naming the shape or the first NaN/inf (pose, joint) when they do not fit."""
-    dof = len(joint_names)
+    ValueError naming the shape or the first NaN/inf (pose, joint) when they do not fit
+    ``model`` (:class:`~robocal.model.chain.Model`)."""
+    dof = model.dof
     q = np.asarray(q, dtype=float)
     single = q.ndim == 1
     if single:
@@ -159,11 +163,11 @@ def check_q(q: ArrayLike, model_name: str, joint_names: Sequence[str]) -> tuple[
     if q.ndim != 2 or q.shape[1] != dof:
         raise ValueError(
             f"joint values shaped {q.shape if not single else q.shape[1:]} do not fit model "
-            f"{model_name!r} with {dof} joints; expected (n, {dof})"
+            f"{model.name!r} with {dof} joints; expected (n, {dof})"
         )
-    if not np.all(np.isfinite(q)):
+    if not math.isfinite(float(q.sum())) and not np.isfinite(q).all():  # a finite sum: all finite
         bad = np.argwhere(~np.isfinite(q))[0]
-        raise ValueError(f"joint values contain NaN/inf (pose {bad[0]}, joint {joint_names[bad[1]]})")
+        raise ValueError(f"joint values contain NaN/inf (pose {bad[0]}, joint {model.joint_names[bad[1]]})")
     return q, single
 
 
@@ -177,6 +181,12 @@ def check_perturbations(perturbations: ArrayLike | None, n: int, dof: int) -> Ar
     if d.shape != (n, dof, 3):
         raise ValueError(f"joint perturbations shaped {d.shape}; expected ({n}, {dof}, 3)")
     return d
+
+
+def read_only(a: NDArray) -> NDArray:
+    """``a``, made read-only: an array a model caches and hands out (models are immutable)."""
+    a.flags.writeable = False
+    return a
 
 
 @functools.cache

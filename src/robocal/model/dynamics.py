@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.model.chain import Model
+from robocal.model.chain_plan import check_q, elementaries
 from robocal.spatial import elementary
 
 __all__ = ["TOOL_FRAME", "Payload", "gravity_torques", "joint_moments", "joint_wrenches", "to_pinocchio"]
@@ -115,7 +116,7 @@ def gravity_torques(model, q: np.ndarray, gravity: np.ndarray | None = None) -> 
     """
     if not model.bodies:
         raise ValueError(f"model {model.name!r} has no mass properties (bodies) to compute gravity torques")
-    q_arr, _ = model._check_q(np.atleast_2d(np.asarray(q, dtype=float)))
+    q_arr, _ = check_q(np.atleast_2d(np.asarray(q, dtype=float)), model)
     W = _static_wrenches(model, q_arr, gravity, None)
     plan = model._plan
     component = np.array(
@@ -205,7 +206,7 @@ def joint_wrenches(
         raise ValueError(f"model {model.name!r} has no mass properties (bodies) to compute joint wrenches")
     q_arr = np.asarray(q, dtype=float)
     single = q_arr.ndim == 1
-    q_arr, _ = model._check_q(q_arr)
+    q_arr, _ = check_q(q_arr, model)
     shape = q_arr.shape
     v = _joint_rates(qd, shape, "velocities")
     a = _joint_rates(qdd, shape, "accelerations")
@@ -248,14 +249,13 @@ def _mass_points(model: Model, payload: Payload | None) -> tuple[NDArray[np.intp
     Bodies before the first joint are left out, as in :func:`to_pinocchio`; a payload hangs
     from the last joint at the tool frame.
     """
-    from robocal.model.chain import _elementaries
 
     plan = model._plan
     seg_T, local = model._segments  # frames before each step in their joint's frame (cached)
     steps = np.array([model._index[b.frame] for b in model.bodies], dtype=np.intp)
     # the frame after each body's step in its joint's frame: local @ the step's own transform
     # (identity for a joint step: the joint frame itself)
-    after = local[steps] @ _elementaries(plan.step_axis[steps], plan.step_rot[steps], model.values[steps])
+    after = local[steps] @ elementaries(plan.step_axis[steps], plan.step_rot[steps], model.values[steps])
     after[plan.step_joint[steps]] = np.eye(4)
     joints = plan.anchor_of[steps] - 1 + plan.step_joint[steps]
     masses = [b.mass for b in model.bodies]

@@ -25,7 +25,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["fk_one", "forward", "forward_batch", "segment_data", "static_wrenches"]
+__all__ = ["fk_one", "forward", "forward_batch", "leading_frame", "segment_data", "static_wrenches"]
 
 _jit = numba.njit(cache=True, nogil=True)
 
@@ -120,6 +120,21 @@ def segment_data(values, step_axis, step_rot, step_joint, dof):
                 cur[r, 3] += cur[r, k] * values[i]
     _copy44(cur, seg[a])
     return seg, local
+
+
+@_jit
+def leading_frame(values, step_axis, step_rot, n):
+    """The product ``(4, 4)`` of the first ``n`` steps' transforms at ``values``, none of them
+    a joint (as :func:`robocal.spatial.chain_product`: a calibration's device frame)."""
+    cur = np.eye(4)
+    for i in range(n):
+        if step_rot[i]:
+            _rotate(cur, step_axis[i], math.cos(values[i]), math.sin(values[i]))
+        else:
+            k = step_axis[i]
+            for r in range(3):
+                cur[r, 3] += cur[r, k] * values[i]
+    return cur
 
 
 @_jit

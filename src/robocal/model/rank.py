@@ -290,16 +290,16 @@ def _absorbers(
     least-squares coefficient ``coef`` (on unit-norm columns) exceeds ``threshold``, largest
     first, converted back to the Jacobian's units; ``unexplained``: the norm of what the
     fit leaves of each (unit-norm) redundant column."""
-    size = np.abs(coef)
-    k, j = np.nonzero(size > threshold)  # the listed (kept, redundant) pairs: a few of them
-    order = np.lexsort((k, -size[k, j], j))  # by redundant column, largest first, ties in order
-    k, j = k[order], j[order]
-    units = (coef[k, j] * norm[np.asarray(red_cols)[j]] / norm[np.asarray(kept_cols)[k]]).tolist()
-    listed: list[list[tuple[str, float]]] = [[] for _ in red_cols]
-    for kk, jj, u in zip(k.tolist(), j.tolist(), units, strict=True):
-        listed[jj].append((names[kept_cols[kk]], u))
-    residuals = unexplained.tolist()
-    return {c: Dropped(names[c], "redundant", tuple(listed[i]), residuals[i]) for i, c in enumerate(red_cols)}
+    k, j = np.nonzero(np.abs(coef) > threshold)  # the listed (kept, redundant) pairs: a few of them
+    listed: list[list[tuple[float, int, int, float]]] = [[] for _ in red_cols]
+    for kk, jj, c in zip(k.tolist(), j.tolist(), coef[k, j].tolist(), strict=True):
+        listed[jj].append((-abs(c), kk, kept_cols[kk], c))  # sorted: largest first, ties in test order
+    scale, residuals = norm.tolist(), unexplained.tolist()
+    out = {}
+    for i, (c, pairs) in enumerate(zip(red_cols, listed, strict=True)):
+        absorbed = tuple((names[a], v * scale[c] / scale[a]) for _, _, a, v in sorted(pairs))
+        out[c] = Dropped(names[c], "redundant", absorbed, residuals[i])
+    return out
 
 
 def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array, Array]:
