@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.guards import CalibrationGuardError, check_solution, fit_to_noise
+from robocal.identify.guards import CalibrationGuardError, check_solution
+from robocal.identify.noise_check import FitToNoise
 from robocal.identify.problem import Problem
 from robocal.identify.result import CalibrationResult, CalibrationWarning
 from robocal.identify.stages import median
@@ -27,6 +28,7 @@ from robocal.model.chain import Model
 __all__ = ["diagnose", "outlier_poses", "parameterisation_warnings"]
 
 Array = NDArray[np.float64]
+_NO_SIGMA = np.zeros((0, 3))  # position_errors' "no stated noise"
 
 
 @functools.lru_cache(maxsize=64)
@@ -156,9 +158,13 @@ def diagnose(
     Raises:
         CalibrationGuardError: the solution guard's (with the orientation hint, if any).
     """
+    from robocal.identify import check_kernels  # numba: imported on first use
+
     out = list(warnings)
-    residuals = np.asarray(result.residuals)
-    errors = np.linalg.norm(residuals[:, :3], axis=1)  # (n,) m
+    r = np.ascontiguousarray(result.residuals)
+    sigma = _NO_SIGMA if data.sigma is None else np.ascontiguousarray(data.sigma, dtype=float)
+    # (n,) 3D position errors (m); Σr², Σ(r/σ)² and Σσ² over the position rows
+    errors, squares, chi2, noise = check_kernels.position_errors(r, sigma)
     outliers = outlier_poses(errors, data.sigma)
     changes: dict[str, Any] = {"outlier_poses": tuple(outliers)}
     if at_bounds is not None:
@@ -175,9 +181,10 @@ def diagnose(
     if known_noise:
         # does the model explain the data down to the noise? (position rows; for pose
         # measurements their share of the estimated parameters)
-        noise = fit_to_noise(residuals[:, :3], data.sigma, len(result.estimates) * 3 / problem.rows)
-        changes["fit_to_noise"] = noise
-        if (text := noise.warning()) is not None:
+        n_estimated = len(result.estimates) * 3 / problem.rows
+        fit = FitToNoise.from_sums(chi2, squares, noise, data.n, n_estimated)
+        changes["fit_to_noise"] = fit
+        if (text := fit.warning()) is not None:
             out.append(CalibrationWarning("fit-to-noise", text))
     result = result.with_diagnostics(**changes)
     try:

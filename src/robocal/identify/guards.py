@@ -10,7 +10,8 @@ Checks around :func:`robocal.calibrate`:
   measured poses with that of random poses over the joint ranges, with the same
   sequential rank test as the calibration (:func:`robocal.identify.observability.identifiable_subset`),
   and names the parameters lost and the joints that do not move.
-* :func:`fit_to_noise` after the fit, when the measurement noise is known — the model
+* :func:`fit_to_noise` (:mod:`robocal.identify.noise_check`) after the fit, when the
+  measurement noise is known — the model
   does not explain the data: residuals significantly larger than the noise (χ² test)
   mean errors the model does not represent, whose size it estimates.
 * :func:`check_solution` after the fit — the fit did not work: not converged,
@@ -27,12 +28,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal.identify.noise_check import FitToNoise, fit_to_noise  # re-exported: the guards
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model, Role
 
@@ -197,21 +198,21 @@ def check_data(model: Model, data: Measurements) -> list[str]:
         raise CalibrationGuardError(
             f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
         )
-    q, y = data.q, data.position
-    for what, a in (("joint values", q), ("positions", y)):
-        if math.isfinite(float(np.sum(a))) or np.isfinite(a).all():  # a finite sum: all finite
-            continue
-        bad = np.flatnonzero(~np.all(np.isfinite(a.reshape(len(a), -1)), axis=1))
-        raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
+    from robocal.identify import check_kernels  # numba: imported on first use
+
     if data.n == 0:
         raise CalibrationGuardError("no measured poses")
-    q_range = q.max(axis=0) - q.min(axis=0)  # (dof,) rad or m
+    q, y = np.ascontiguousarray(data.q, dtype=float), np.ascontiguousarray(data.position, dtype=float)
+    finite_q, finite_y, q_range, spread = check_kernels.data_ranges(q, y)  # q_range (dof,): rad or m
+    for what, a, finite in (("joint values", q, finite_q), ("positions", y, finite_y)):
+        if not finite:
+            bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+            raise CalibrationGuardError(f"{what} are NaN or inf in row(s) {_rows_text((bad + 1).tolist())}")
     if not q_range.any():
         raise CalibrationGuardError(
             f"all {data.n} poses have the same joint values ({', '.join(f'{v:.6g}' for v in q[0])}): "
             "a calibration needs poses that move the joints"
         )
-    spread = float(np.max(y.max(axis=0) - y.min(axis=0)))
     if spread < 1e-9:
         raise CalibrationGuardError(
             f"the measured positions do not change over {data.n} poses (spread {spread * 1e3:.3g} mm): "
@@ -391,109 +392,3 @@ def check_solution(
             "to another robot or model, or be in other units or joint order"
         )
     return warnings
-
-
-@dataclass(frozen=True)
-class FitToNoise:
-    """How the residuals of a calibration compare with the stated measurement noise.
-
-    Attributes:
-        ratio: RMS of the position residuals in units of their standard deviation,
-            corrected for the degrees of freedom the fit used (≈ 1 when the model
-            explains the data down to the noise).
-        p_value: probability of residuals at least this large if the model were right
-            and the noise as stated (χ² distribution with ``dof`` degrees of freedom).
-        dof: degrees of freedom of the position residuals.
-        noise_rms: the RMS 3D position residual that noise alone would leave (m).
-        unmodelled_rms: RMS 3D position error beyond the noise (m): the part of the
-            data the model does not represent; 0 unless the χ² test (at ``significance``
-            in :func:`fit_to_noise`) tells the residuals from noise.
-    """
-
-    ratio: float
-    p_value: float
-    dof: float
-    noise_rms: float
-    unmodelled_rms: float
-
-    def to_dict(self) -> dict[str, float]:
-        return {
-            "ratio": self.ratio,
-            "p_value": self.p_value,
-            "dof": self.dof,
-            "noise_rms_mm": self.noise_rms * 1e3,
-            "unmodelled_rms_mm": self.unmodelled_rms * 1e3,
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, float]) -> FitToNoise:
-        """The inverse of :meth:`to_dict`."""
-        return cls(d["ratio"], d["p_value"], d["dof"], d["noise_rms_mm"] / 1e3, d["unmodelled_rms_mm"] / 1e3)
-
-    @property
-    def p_text(self) -> str:
-        return "p < 1e-15" if self.p_value < 1e-15 else f"p = {self.p_value:.2g}"
-
-    def summary(self) -> str:
-        """One line: the residuals against the noise, and what is left unexplained."""
-        head = f"residuals {self.ratio:.2f}x the stated noise ({self.p_text})"
-        if self.warning() is None:
-            return f"{head}: the model explains the data down to the measurement noise"
-        if self.ratio > 1.0:
-            return f"{head}: about {self.unmodelled_rms * 1e3:.3g} mm RMS the model does not represent"
-        return f"{head}: the stated noise is probably too large"
-
-    def warning(self, significance: float = 1e-3) -> str | None:
-        """A sentence for the user when the residuals are significantly above the noise
-        (χ² test at ``significance``) or far below it (σ overstated), else None."""
-        if self.p_value < significance and self.ratio > 1.0:
-            return (
-                f"the residuals are {self.ratio:.2f}x the stated measurement noise (χ² test, "
-                f"{self.p_text}): about {self.unmodelled_rms * 1e3:.3g} mm RMS of error that the "
-                "model does not represent remains (joint effects, temperature, a moving device, or a "
-                "noise level stated too small); the uncertainties are scaled to the residuals, and "
-                "the held-out error will not fall below this"
-            )
-        if 1.0 - self.p_value < significance and self.ratio < 1.0:
-            return (
-                f"the residuals are only {self.ratio:.3g}x the stated measurement noise: the stated "
-                "noise (sigma) is probably too large"
-            )
-        return None
-
-
-def fit_to_noise(
-    residuals: ArrayLike, sigma: ArrayLike, n_estimated: float, significance: float = 1e-3
-) -> FitToNoise:
-    """Compare position residuals with their stated standard deviations.
-
-    Args:
-        residuals: ``(n, 3)`` position residuals after the fit (m).
-        sigma: ``(n, 3)`` their standard deviations (m).
-        n_estimated: the number of estimated parameters spent on these residuals (for
-            pose measurements, the position rows' share of them).
-
-    With the right model and Gaussian noise of the stated σ, ``Σ (r/σ)²`` follows a χ²
-    distribution with ``3n - p`` degrees of freedom.  The expected squared 3D residual
-    is then ``mean(Σ σ²) (3n - p) / 3n``; whatever the mean squared residual exceeds
-    that by is error the model does not represent.
-    """
-    import scipy.special
-
-    r = np.asarray(residuals, dtype=float).reshape(-1, 3)
-    s = np.asarray(sigma, dtype=float).reshape(-1, 3)
-    m = r.size
-    dof = max(m - float(n_estimated), 1.0)
-    chi2, n = float(np.vdot(z := r / np.maximum(s, 1e-300), z)), len(r)
-    noise_ms = float(np.vdot(s, s)) / n * dof / m  # mean over the poses of Σσ², (m - p) / m of it
-    ms = float(np.vdot(r, r)) / n
-    p_value = float(scipy.special.chdtrc(dof, chi2))  # the χ² survival function
-    return FitToNoise(
-        ratio=math.sqrt(chi2 / dof),
-        p_value=p_value,
-        dof=dof,
-        noise_rms=math.sqrt(noise_ms),
-        # only what the χ² test tells from noise (a model that explains the data leaves
-        # residuals a little above their expectation half of the time)
-        unmodelled_rms=math.sqrt(max(ms - noise_ms, 0.0)) if p_value < significance else 0.0,
-    )

@@ -20,6 +20,8 @@ KERNELS = (
     ("robocal.identify.start_kernels", "frames_and_tools"),
     ("robocal.identify.lm_kernels", "propose"),
     ("robocal.identify.stage_kernels", "screen"),
+    ("robocal.identify.fused_kernels", "fit"),
+    ("robocal.identify.check_kernels", "data_ranges"),
 )
 
 FIRST_USE_NOTICE = (
