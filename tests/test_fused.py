@@ -146,3 +146,23 @@ def test_preference_puts_the_device_frame_then_the_tool_then_the_rest_in_chain_o
     rest = [x for x in names if chain.roles.get(x) not in (Role.DEVICE, Role.TOOL)]
     assert order[n_device + n_tool :] == rest  # chain order kept
     assert [names[i] for i in preference_columns(names, chain.roles)] == order
+
+
+def test_first_pass_flags_a_jacobian_that_is_not_finite(monkeypatch):
+    # the fused rank test hands such a problem to the staged one (which, here, sees the real
+    # values: the NaN is only in the fused kernel's copy)
+    model, data = _data("ur10", 20, 7)
+    seen = []
+    original = fused_kernels.first_pass
+
+    def first_pass(data, values, *rest):
+        bad = values.copy()
+        bad[-1] = np.nan  # a tool coordinate: every row of the Jacobian is NaN
+        out = original(data, bad, *rest)
+        seen.append(out[-1])
+        return out
+
+    monkeypatch.setattr(fused_kernels, "first_pass", first_pass)
+    monkeypatch.setattr(fused, "preference_subset", lambda *a: pytest.fail("a NaN Jacobian was rank-tested"))
+    assert rc.calibrate(model, data).success
+    assert seen == [False]

@@ -112,16 +112,19 @@ def first_pass(data, values, free_steps, length_scale, preference):
     for a in range(p):
         free_scale[a] = length_scale if step_rot[free_steps[a]] else 1.0
     norm = np.zeros(p)
-    finite = True
     for i in range(m):
+        w = weights[i]
         for a in range(p):
-            v = J[i, a] * weights[i] * free_scale[a]
-            finite = finite and math.isfinite(v)
+            v = J[i, a] * w * free_scale[a]
             norm[a] += v * v
-    largest = 0.0
+    largest = total = 0.0
     for a in range(p):
+        total += norm[a]
         norm[a] = math.sqrt(norm[a])
         largest = max(largest, norm[a])
+    # a NaN or inf anywhere makes the sum of squares one (so would squares past 1e308: the
+    # staged rank test then looks at each value)
+    finite = math.isfinite(total)
     zero = norm <= 1e-12 * max(largest, 1e-300)
     k = 0
     ordered = np.empty(p, dtype=np.intp)
