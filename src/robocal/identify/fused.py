@@ -115,7 +115,7 @@ def fit(run: Run, first: FirstPass) -> bool:
     budget = int(run.solver["max_iterations"])
     t = time.perf_counter()
     (status, screened, screened_sigma, pruned, pruned_sigma, live, x0, x, success, evaluations, total,
-     history, last, covariance) = kernels.fit(first.data, problem.chain.values,
+     history, last, covariance, J0) = kernels.fit(first.data, problem.chain.values,
                                               np.flatnonzero(problem.chain.free_mask), live, first.evaluation,
                                               screening, bounds, budget, TOLERANCE)  # fmt: skip
     if status != kernels.OK:
@@ -126,9 +126,8 @@ def fit(run: Run, first: FirstPass) -> bool:
     run.dropped = list(first.selection.dropped) + poor
     run.problem = problem.fix([d.name for d in run.dropped])
     T, _, J, rw, Jw = last
-    T0, _, J0 = first.evaluation
     run.problem._cache[(x.tobytes(), True)] = (T, J)  # the evaluations the result and checks read
-    run.problem._cache[(x0.tobytes(), True)] = (T0, J0[:, live])
+    run.problem._cache[(x0.tobytes(), True)] = (first.evaluation[0], J0)
     run.x0, run.x = x0, x
     max_evaluations = budget * (len(live) + 1)
     run.fit = SolveResult(x, bool(success), lm_message(bool(success), int(evaluations), max_evaluations),

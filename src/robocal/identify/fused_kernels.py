@@ -279,8 +279,8 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     Returns the status, the screened and the pruned columns and their σ (m), the final
     unknowns, their start and fitted values, success, evaluations of the last fit and of
     all fits, its RMS history, the last evaluation (frames, unweighted residuals and
-    Jacobian, weighted ones) and the covariance (σ̂², covariance, σ, correlations,
-    condition number)."""
+    Jacobian, weighted ones), the covariance (σ̂², covariance, σ, correlations, condition
+    number) and the first Jacobian's columns of the final unknowns."""
     max_std, max_std_ratio, _, known_noise = screening
     _, r0, J0 = first
     settings = (budget, tolerance, known_noise)
@@ -327,4 +327,4 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         total += evaluations
     status = OK if ok else SINGULAR
     return (status, screened, sigmas[:count].copy(), pruned[:n_pruned].copy(), pruned_sigma[:n_pruned].copy(),
-            live, x0, x, success, evaluations, total, history, last, cov)  # fmt: skip
+            live, x0, x, success, evaluations, total, history, last, cov, _columns_of(J0, live))  # fmt: skip

@@ -254,7 +254,7 @@ def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     calibrated_chain = chain.with_free_values(run.x[: len(run.x) - run.problem.n_effects])
     n_frame = len(chain.names_with_role(Role.DEVICE))  # the frame steps come first
     plan = chain._plan
-    T_device_base = kernels.leading_frame(run.problem.values(run.x), plan.step_axis, plan.step_rot, n_frame)
+    T_device_base = kernels.leading_frame(calibrated_chain.values, plan.step_axis, plan.step_rot, n_frame)
     free_before = {s.name: s.free for s in given.steps}  # the tool's steps: free
     robot_steps = tuple(
         s if s.free == free_before.get(s.name, True) else s._with_free(not s.free)

@@ -209,17 +209,17 @@ def _subset(
     kept and the redundant ones, ``|R_kk|`` along ``cols``; ``absorbing``: the redundant
     columns' coefficients in the kept ones and what they leave (None: not explained) and
     the smallest listed coefficient."""
-    p = len(names)
     coef, unexplained, threshold = absorbing
-    dropped = {k: Dropped(names[k], "no effect") for k in range(p) if zero[k]}
+    zero_cols = np.flatnonzero(zero).tolist()
+    dropped = {k: Dropped(names[k], "no effect") for k in zero_cols}
     if red_cols:
         if coef is None:
             dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
         else:
             dropped.update(_absorbers(norm, names, kept_cols, red_cols, coef, unexplained, threshold))
     kept = tuple(names[k] for k in sorted(kept_cols))
-    pivots = tuple(names[k] for k in cols) + tuple(names[k] for k in range(p) if zero[k])
-    r_diag = np.concatenate([rel, np.zeros(int(zero.sum()))])
+    pivots = tuple(names[k] for k in (*cols, *zero_cols))
+    r_diag = np.concatenate([rel, np.zeros(len(zero_cols))]) if zero_cols else rel
     dropped_in_order = tuple(dropped[k] for k in sorted(dropped))
     return IdentifiableSubset(kept, dropped_in_order, len(kept_cols), pivots, r_diag)
 
