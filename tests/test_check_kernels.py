@@ -56,15 +56,16 @@ def test_check_data_names_the_rows_that_are_not_finite_and_data_that_does_not_mo
 def test_position_errors_match_numpy(rows):
     rng = np.random.default_rng(rows)
     r, sigma = rng.normal(scale=1e-4, size=(40, rows)), rng.uniform(1e-5, 3e-5, (40, 3))
-    errors, squares, chi2, noise = position_errors(r, sigma)
+    errors, median, squares, chi2, noise = position_errors(r, sigma)
     p = r[:, :3]
     np.testing.assert_allclose(errors, np.linalg.norm(p, axis=1), rtol=1e-15)
+    assert median == np.median(errors)
     assert squares == pytest.approx(float(np.sum(p * p)), rel=1e-14)
     assert chi2 == pytest.approx(float(np.sum((p / np.maximum(sigma, 1e-300)) ** 2)), rel=1e-14)
     assert noise == pytest.approx(float(np.sum(sigma * sigma)), rel=1e-14)
     no_sigma = position_errors(r, np.zeros((0, 3)))
     np.testing.assert_array_equal(no_sigma[0], errors)
-    assert no_sigma[1] == squares and no_sigma[2:] == (0.0, 0.0)
+    assert no_sigma[1:3] == (median, squares) and no_sigma[3:] == (0.0, 0.0)
 
 
 def test_fit_to_noise_from_sums_is_the_numpy_formula():
@@ -84,3 +85,16 @@ def test_fit_to_noise_from_sums_is_the_numpy_formula():
     assert fit.noise_rms == pytest.approx(np.sqrt(noise_ms), rel=1e-13)
     unmodelled = np.sqrt(max(float(np.sum(r**2)) / 60 - noise_ms, 0.0)) if fit.p_value < 1e-3 else 0.0
     assert fit.unmodelled_rms == pytest.approx(unmodelled, rel=1e-12, abs=1e-300)
+
+
+def test_the_outliers_from_the_kernel_sums_are_those_of_outlier_poses():
+    from robocal.identify.diagnose import _outliers, outlier_poses
+
+    rng = np.random.default_rng(11)
+    r = rng.normal(scale=2e-5, size=(50, 3))
+    r[[7, 31]] *= 40.0  # two glitches
+    for sigma in (None, np.full((50, 3), 2e-5), np.full((50, 3), 4e-4)):  # the last: noise hides them
+        errors, median, _, _, noise = position_errors(r, np.zeros((0, 3)) if sigma is None else sigma)
+        found = _outliers(errors, median, None if sigma is None else noise)
+        assert found == outlier_poses(errors, sigma)
+        assert found == ([] if sigma is not None and sigma[0, 0] > 1e-4 else [7, 31])

@@ -17,6 +17,8 @@ import math
 import numba
 import numpy as np
 
+from robocal.identify.stage_kernels import _median
+
 __all__ = ["data_ranges", "position_errors"]
 
 _jit = numba.njit(cache=True, nogil=True)
@@ -51,10 +53,10 @@ def data_ranges(q, y):
 
 @_jit
 def position_errors(r, sigma):
-    """Residuals ``r`` ``(n, rows)`` (m; position rows first) and their standard deviations
-    ``sigma`` ``(n, 3)`` (m; ``(0, 3)`` when not stated): each pose's 3D position error
-    ``(n,)``, ``Σr²``, ``Σ(r/σ)²`` and ``Σσ²`` over the position rows (the last two 0 without
-    ``sigma``; σ below 1e-300 counts as 1e-300)."""
+    """Residuals ``r`` ``(n, rows)`` (m; position rows first, n ≥ 1) and their standard
+    deviations ``sigma`` ``(n, 3)`` (m; ``(0, 3)`` when not stated): each pose's 3D position
+    error ``(n,)``, their median, ``Σr²``, ``Σ(r/σ)²`` and ``Σσ²`` over the position rows
+    (the last two 0 without ``sigma``; σ below 1e-300 counts as 1e-300)."""
     n = r.shape[0]
     stated = sigma.shape[0] > 0
     errors = np.empty(n)
@@ -71,4 +73,4 @@ def position_errors(r, sigma):
                 noise += s * s
         errors[i] = math.sqrt(e)
         squares += e
-    return errors, squares, chi2, noise
+    return errors, _median(errors), squares, chi2, noise

@@ -57,9 +57,16 @@ def outlier_poses(errors: Array, sigma: Array | None, factor: float = 5.0) -> li
     Gaussian), so these are measurement glitches or poses the model cannot reach."""
     if len(errors) < 10:
         return []
-    limit = factor * median(errors)
-    if sigma is not None:  # the 3D noise: √ of the mean of Σσ² over the poses
-        limit = max(limit, factor * math.sqrt(float(np.vdot(sigma, sigma)) / len(sigma)))
+    return _outliers(errors, median(errors), None if sigma is None else float(np.vdot(sigma, sigma)), factor)
+
+
+def _outliers(errors: Array, median_error: float, noise: float | None, factor: float = 5.0) -> list[int]:
+    """:func:`outlier_poses` from the errors' median (m) and ``Σσ²`` (m², None: not stated)."""
+    if len(errors) < 10:
+        return []
+    limit = factor * median_error
+    if noise is not None:  # the 3D noise: √ of the mean of Σσ² over the poses
+        limit = max(limit, factor * math.sqrt(noise / len(errors)))
     return np.flatnonzero(errors > limit).tolist()
 
 
@@ -163,9 +170,9 @@ def diagnose(
     out = list(warnings)
     r = np.ascontiguousarray(result.residuals)
     sigma = _NO_SIGMA if data.sigma is None else np.ascontiguousarray(data.sigma, dtype=float)
-    # (n,) 3D position errors (m); Σr², Σ(r/σ)² and Σσ² over the position rows
-    errors, squares, chi2, noise = check_kernels.position_errors(r, sigma)
-    outliers = outlier_poses(errors, data.sigma)
+    # (n,) 3D position errors (m), their median; Σr², Σ(r/σ)² and Σσ² over the position rows
+    errors, median_error, squares, chi2, noise = check_kernels.position_errors(r, sigma)
+    outliers = _outliers(errors, median_error, None if data.sigma is None else noise)
     changes: dict[str, Any] = {"outlier_poses": tuple(outliers)}
     if at_bounds is not None:
         changes |= {

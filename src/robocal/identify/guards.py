@@ -355,13 +355,14 @@ def check_solution(
         if require_convergence:
             raise CalibrationGuardError(text)
         warnings.append(text)
-    values = np.concatenate([np.atleast_1d(result.estimates), [result.rms_after, result.rms_before]])
-    if not math.isfinite(float(np.sum(values))) and not np.all(np.isfinite(values)):
+    estimates = np.asarray(result.estimates, dtype=float)  # a finite sum: all finite
+    finite = math.isfinite(float(estimates.sum())) or bool(np.isfinite(estimates).all())
+    if not (finite and math.isfinite(result.rms_after) and math.isfinite(result.rms_before)):
         bad = [n for n, v in zip(result.names, result.estimates, strict=True) if not math.isfinite(v)]
         raise CalibrationGuardError(
             "the fit produced non-finite values" + (f" for {', '.join(bad)}" if bad else "")
         )
-    if not math.isfinite(float(np.sum(result.std))) and not np.all(np.isfinite(result.std)):
+    if not math.isfinite(float(np.asarray(result.std).sum())) and not np.isfinite(result.std).all():
         bad = [n for n, v in zip(result.names, result.std, strict=True) if not math.isfinite(v)]
         raise CalibrationGuardError(f"the uncertainty of {', '.join(bad)} is not finite: the fit is singular")
     if (diverged := _diverged(result)) is not None:
@@ -369,7 +370,7 @@ def check_solution(
             f"the fit diverged: {diverged}; check units, joint order and the start values"
         )
     limit = min(max_length_change, max_angle_change)
-    if not np.any(np.abs(np.asarray(result.estimates) - result.nominal) > limit):
+    if not (np.abs(estimates - result.nominal) > limit).any():
         return warnings  # no change large enough to look at each
     rot = {}
     chain = result.measurement_chain or result.model

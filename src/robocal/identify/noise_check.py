@@ -122,5 +122,5 @@ def fit_to_noise(
 
     r = np.ascontiguousarray(residuals, dtype=float).reshape(-1, 3)
     s = np.ascontiguousarray(sigma, dtype=float).reshape(-1, 3)
-    _, squares, chi2, noise = check_kernels.position_errors(r, s)
+    _, _, squares, chi2, noise = check_kernels.position_errors(r, s)
     return FitToNoise.from_sums(chi2, squares, noise, len(r), n_estimated, significance)
