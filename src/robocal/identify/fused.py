@@ -43,6 +43,7 @@ class FirstPass:
     evaluation: tuple[Array, Array, Array]
     selection: IdentifiableSubset
     data: tuple
+    free_steps: NDArray[np.intp]  # the unknowns' step indices in the chain
 
 
 def applies(run: Run) -> bool:
@@ -83,7 +84,7 @@ def rank_test(run: Run) -> FirstPass | None:
     if not finite or not len(ordered):
         return None
     selection = preference_subset(At.T, ordered.tolist(), norm, zero, names)
-    return FirstPass((T, r, J), selection, data)
+    return FirstPass((T, r, J), selection, data, free_steps)
 
 
 @functools.lru_cache(maxsize=64)
@@ -115,9 +116,9 @@ def fit(run: Run, first: FirstPass) -> bool:
     budget = int(run.solver["max_iterations"])
     t = time.perf_counter()
     (status, screened, screened_sigma, pruned, pruned_sigma, live, x0, x, success, evaluations, total,
-     history, last, covariance, J0) = kernels.fit(first.data, problem.chain.values,
-                                              np.flatnonzero(problem.chain.free_mask), live, first.evaluation,
-                                              screening, bounds, budget, TOLERANCE)  # fmt: skip
+     history, last, covariance, J0) = kernels.fit(first.data, problem.chain.values, first.free_steps, live,
+                                                  first.evaluation, screening, bounds, budget,
+                                                  TOLERANCE)  # fmt: skip
     if status != kernels.OK:
         return False
     run.solve_seconds += time.perf_counter() - t

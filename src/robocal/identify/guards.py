@@ -224,7 +224,7 @@ def check_data(model: Model, data: Measurements) -> list[str]:
 
 def _still_joints(model: Model, q_range: Array) -> list[str]:
     """The joints whose range ``q_range`` ``(dof,)`` in the data is nil."""
-    return [model.joint_names[j] for j in np.flatnonzero(q_range < 1e-9).tolist()]
+    return [model.joint_names[j] for j, r in enumerate(q_range.tolist()) if r < 1e-9]
 
 
 def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes them

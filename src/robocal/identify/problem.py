@@ -207,7 +207,8 @@ class Problem:
 
     @property
     def free_names(self) -> tuple[str, ...]:
-        return self.chain.free_names + tuple(self.effect_names)
+        names = self.chain.free_names
+        return names + tuple(self.effect_names) if self.effect_names else names
 
     @functools.cached_property
     def free_scale(self) -> Array:

@@ -133,8 +133,10 @@ def _start_values(run: Run) -> tuple[Array, Array, Array, bool]:
 def _row_weights(run: Run, rows: int) -> Array:
     """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``."""
     data, weights = run.data, run.options.weights
-    w = np.ones((data.n, rows))
     run.known_noise = weights.by == "sigma" and data.sigma is not None
+    if rows == 3 and run.known_noise:
+        return 1.0 / np.maximum(data.sigma, 1e-12)
+    w = np.ones((data.n, rows))
     if run.known_noise:
         w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
     if rows == 6:

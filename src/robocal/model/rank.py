@@ -324,8 +324,8 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     # LAPACK's QR directly: numpy's and scipy's wrappers cost more than the factorisation
     # itself at 300 x 36
     qr = scipy.linalg.lapack.dgeqrf(A)[0] if A.size else np.zeros(A.shape)
-    diag, keep, coefs, left, ok = rank_kernels.sequential_test(qr, tolerance)
-    if ok and np.all(left <= tolerance):
+    diag, keep, coefs, left, explained = rank_kernels.sequential_test(qr, tolerance)
+    if explained:
         return keep, coefs, diag, left
     fit = _absorbing(A, keep, tolerance)
     if fit is None:

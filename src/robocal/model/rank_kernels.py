@@ -115,8 +115,9 @@ def sequential_test(qr, tolerance):
     unit-norm columns in test order: ``|R_kk|`` ``(p,)`` (0 past ``min(m, p)``), the mask
     of kept columns (``|R_kk| > tolerance``), the coefficients ``(kept, dropped)`` of the
     dropped columns in the kept ones, the norms ``(dropped,)`` of what they leave, and
-    False when the kept columns' normal matrix is not positive definite (or none is kept
-    while some is dropped): then the coefficients are not computed."""
+    whether the verdicts stand: False when some dropped column leaves more than
+    ``tolerance``, or the kept columns' normal matrix is not positive definite (or none is
+    kept while some is dropped; then the coefficients are not computed)."""
     m, p = qr.shape
     d = min(m, p)
     diag = np.zeros(p)
@@ -137,6 +138,7 @@ def sequential_test(qr, tolerance):
     if not cholesky(G, L):
         return diag, keep, coefs, left, False
     _cholesky_solve(L, B, coefs)
+    explained = True
     for j in range(len(dropped)):  # what the fit leaves: RD − RK coefs
         s = 0.0
         for i in range(d):
@@ -145,4 +147,5 @@ def sequential_test(qr, tolerance):
                 t -= RK[i, k] * coefs[k, j]
             s += t * t
         left[j] = math.sqrt(s)
-    return diag, keep, coefs, left, True
+        explained = explained and left[j] <= tolerance
+    return diag, keep, coefs, left, explained
