@@ -112,14 +112,21 @@ def segment_data(values, step_axis, step_rot, step_joint, dof):
             _copy44(cur, seg[a])
             a += 1
             cur = np.eye(4)
-        elif step_rot[i]:
-            _rotate(cur, step_axis[i], math.cos(values[i]), math.sin(values[i]))
         else:
-            k = step_axis[i]
-            for r in range(3):
-                cur[r, 3] += cur[r, k] * values[i]
+            _times_step(cur, step_axis[i], step_rot[i], values[i])
     _copy44(cur, seg[a])
     return seg, local
+
+
+@_jit
+def _times_step(F, axis, rotation, value):
+    """``F <- F @ step`` in place for a constant step (a rotation about or a translation
+    along local ``axis`` by ``value``)."""
+    if rotation:
+        _rotate(F, axis, math.cos(value), math.sin(value))
+    else:
+        for r in range(3):
+            F[r, 3] += F[r, axis] * value
 
 
 @_jit
@@ -128,12 +135,7 @@ def leading_frame(values, step_axis, step_rot, n):
     a joint (as :func:`robocal.spatial.chain_product`: a calibration's device frame)."""
     cur = np.eye(4)
     for i in range(n):
-        if step_rot[i]:
-            _rotate(cur, step_axis[i], math.cos(values[i]), math.sin(values[i]))
-        else:
-            k = step_axis[i]
-            for r in range(3):
-                cur[r, 3] += cur[r, k] * values[i]
+        _times_step(cur, step_axis[i], step_rot[i], values[i])
     return cur
 
 
