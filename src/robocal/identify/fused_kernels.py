@@ -27,7 +27,7 @@ import math
 import numba
 import numpy as np
 
-from robocal.identify.lm_kernels import accept, propose
+from robocal.identify.lm_kernels import accept, propose, start
 from robocal.identify.stage_kernels import _median, normal_covariance, screen
 from robocal.model.kernels import segment_data
 from robocal.model.kernels_evaluate import evaluate
@@ -187,16 +187,6 @@ def _uncertainty(chi2, G, m, chi2_low, chi2_high, known_noise):
 
 
 @_jit
-def _normal_equations(r, J):
-    """``JᵀJ`` ``(p, p)``, ``Jᵀr`` ``(p,)`` and ``rᵀr`` of residuals ``r`` ``(m,)`` and
-    Jacobian ``J`` ``(m, p)``."""
-    rr = 0.0
-    for i in range(len(r)):
-        rr += r[i] * r[i]
-    return np.dot(J.T, J), np.dot(J.T, r), rr
-
-
-@_jit
 def _without(a, k):
     out = np.empty(len(a) - 1, dtype=a.dtype)
     for i in range(len(a) - 1):
@@ -205,9 +195,9 @@ def _without(a, k):
 
 
 @_inline
-def _fit_once(data, values0, free_steps, live, x0, first, start, settings, chi2_bounds):
+def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2_bounds):
     """One fit from ``x0`` over ``live`` (``first``: the evaluation at the start values, all
-    free columns; ``start``: the weighted normal equations there, ``(JᵀJ, Jᵀr, rᵀr, at)``,
+    free columns; ``normal``: the weighted normal equations there, ``(JᵀJ, Jᵀr, rᵀr, at)``,
     over the columns ``at`` indexes (``at[c]``: the row of free column ``c``); ``settings``:
     ``(budget, tolerance, known_noise)``) and its covariance from the last normal matrix:
     :func:`robocal.identify.solvers.levenberg_marquardt_batch` for one problem, the
@@ -219,7 +209,7 @@ def _fit_once(data, values0, free_steps, live, x0, first, start, settings, chi2_
     kernel calls into it and optimises the whole again, so each level of functions above
     the chain evaluation costs 1-2 s of first-use compilation."""
     budget, tolerance, known_noise = settings
-    G0, g0, rr0, at = start
+    G0, g0, rr0, at = normal
     weights = data[2]
     m, p = len(weights), len(live)
     max_evaluations = budget * (p + 1)
@@ -288,14 +278,15 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     # screening's, and every fit's start (their blocks)
     J_live = _columns_of(J0, live)
     rw0, Jw0 = _weighted(r0, J_live, data[2])
-    G0, g0, rr0 = _normal_equations(rw0[0], Jw0[0])
-    at = np.full(J0.shape[1], -1, dtype=np.intp)
-    for a in range(len(live)):
-        at[live[a]] = a
-    start = (G0, g0, rr0, at)
     p = len(live)
+    rr0, G0, g0 = np.empty(1), np.empty((1, p, p)), np.empty((1, p))
+    start(rw0, Jw0, _flag(False), rr0, G0, g0)  # the solver's state at the start values
+    at = np.full(J0.shape[1], -1, dtype=np.intp)
+    for a in range(p):
+        at[live[a]] = a
+    normal = (G0[0], g0[0], rr0[0], at)
     cols, sigmas = np.empty(p, dtype=np.intp), np.empty(p)
-    count = screen(G0, g0, rr0, len(r0), _displacement_scale(J_live), screening, cols, sigmas)
+    count = screen(G0[0], g0[0], rr0[0], len(r0), _displacement_scale(J_live), screening, cols, sigmas)
     keep = np.ones(p, dtype=np.bool_)
     screened = np.empty(count, dtype=np.intp)
     for c in range(count):
@@ -307,7 +298,7 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         x0[a] = values0[free_steps[live[a]]]
     # the fit, then pruning (after a converged fit)
     x, success, evaluations, history, last, cov, ok = _fit_once(data, values0, free_steps, live, x0, first,
-                                                                start, settings, chi2_bounds)  # fmt: skip
+                                                                normal, settings, chi2_bounds)  # fmt: skip
     total = evaluations
     pruned, pruned_sigma = np.empty(len(live), dtype=np.intp), np.empty(len(live))
     n_pruned = 0
@@ -322,7 +313,7 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         pruned[n_pruned], pruned_sigma[n_pruned] = live[worst], move[worst]
         n_pruned += 1
         live, x0 = _without(live, worst), _without(x0, worst)
-        fitted = _fit_once(data, values0, free_steps, live, x0, first, start, settings, chi2_bounds)
+        fitted = _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2_bounds)
         x, success, evaluations, history, last, cov, ok = fitted
         total += evaluations
     status = OK if ok else SINGULAR

@@ -134,13 +134,12 @@ def _row_weights(run: Run, rows: int) -> Array:
     """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``."""
     data, weights = run.data, run.options.weights
     run.known_noise = weights.by == "sigma" and data.sigma is not None
-    if rows == 3 and run.known_noise:
-        return 1.0 / np.maximum(data.sigma, 1e-12)
-    w = np.ones((data.n, rows))
-    if run.known_noise:
-        w[:, :3] = 1.0 / np.maximum(data.sigma, 1e-12)
-    if rows == 6:
-        w[:, 3:] = weights.orientation * (w[:, :3].mean(axis=1, keepdims=True))
+    position = 1.0 / np.maximum(data.sigma, 1e-12) if run.known_noise else np.ones((data.n, 3))
+    if rows == 3:
+        return position
+    w = np.empty((data.n, 6))
+    w[:, :3] = position
+    w[:, 3:] = weights.orientation * position.mean(axis=1, keepdims=True)
     return w
 
 
