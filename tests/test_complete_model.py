@@ -68,6 +68,10 @@ def test_calibration_model_of_every_catalog_robot(name):
     assert np.abs(T1[:, :3, :3] - T0[:, :3, :3]).max() < 1e-9
     position = rc.calibration_model(name, "position")
     assert np.abs(position.fk(q)[:, :3, 3] - T0[:, :3, 3]).max() < 1e-9
+    # the flange where the robot has it for position models too: a tool, probe or
+    # orientation target in the flange frame means the same as on the controller
+    assert np.abs(position.fk(q)[:, :3, :3] - T0[:, :3, :3]).max() < 1e-9
+    assert not any(position.step(n).free for n in position.names if n.startswith("tool_r"))
     assert model.joint_effects == catalog.joint_effects
     assert len(model.bodies) == len(catalog.bodies)
     if catalog.bodies:

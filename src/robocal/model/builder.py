@@ -236,7 +236,10 @@ def _tool_link(
         equation, kind_label = (25, "T∥TCP") if par else (24, "T⊥TCP")
         names, values = [f"d{n}", "tool_y", "tool_x"], [c[2], c[1], c[0]]
     motions = SCHROER_SETS[equation]
-    if measure == "pose":
+    if measure == "pose" or tcp_rotation is not None:
+        # the flange's orientation is kept for position measurements too (fixed steps the
+        # position rank test never frees): a tool, probe or orientation target given in the
+        # flange frame then means the same here as on the controller
         seq = "ZYX" if par else "ZYZ"
         angles = spatial.matrix_to_euler(R_local, seq) if not np.allclose(R_local, np.eye(3)) else np.zeros(3)
         rot_names = ["tool_rz", "tool_ry", "tool_rx"] if par else ["tool_rz", "tool_ry", "tool_rz2"]
@@ -244,7 +247,8 @@ def _tool_link(
     else:
         motions = motions[: len(names)]
     for k, (motion, name, value) in enumerate(zip(motions, names, values, strict=True)):
-        b.steps.append(Step(motion, name, float(value), joint=joint if k == 0 else None))
+        free = measure == "pose" or not name.startswith("tool_r")
+        b.steps.append(Step(motion, name, float(value), free=free, joint=joint if k == 0 else None))
         b.frame = b.frame @ spatial.elementary(motion, value)
     b.links.append(LinkInfo(n, kind_label, equation, tuple(names)))
     b.deferred.append(f"{'theta' if kind == 'revolute' else 'd'}{n}")
@@ -390,7 +394,7 @@ def _check_reproduces(model: Model, geo, tcp: Tcp, measure: Measure) -> None:
     T = model.fk(np.zeros(model.dof))
     if np.linalg.norm(T[:3, 3] - points[-1] - np.asarray(tcp.position)) > 1e-9:
         raise AssertionError("builder bug: the TCP is not reproduced")
-    if measure == "pose" and tcp.rotation is not None and not np.allclose(T[:3, :3], tcp.rotation, atol=1e-9):
+    if tcp.rotation is not None and not np.allclose(T[:3, :3], tcp.rotation, atol=1e-9):
         raise AssertionError("builder bug: the TCP orientation is not reproduced")
 
 
