@@ -54,8 +54,10 @@ def _state(target: Path) -> str:
     """'old' or 'new...' when the folder holds exactly one complete result (asserted)."""
     names = sorted(os.listdir(target))
     tag = json.loads((target / "result.json").read_text())["tag"]
-    expected = ["a.yaml", "b.yaml", "notes.txt", "result.json"] + (["old_only.txt"] if tag == "old" else [])
-    assert names == sorted(expected), names
+    written = ["a.yaml", "b.yaml", "result.json"] + (["old_only.txt"] if tag == "old" else [])
+    assert names == sorted([*written, "notes.txt", outdir.MANIFEST]), names
+    # the manifest lists the files robocal wrote (with their run id), not the user's notes
+    assert outdir.robocal_names(target, names) == {*written, outdir.MANIFEST}
     check_consistent(target, ("a.yaml", "b.yaml"))
     assert read_run_id(target / "a.yaml") is not None
     for name in ("a.yaml", "b.yaml"):
@@ -183,7 +185,10 @@ def test_the_working_directory_is_written_in_place(tmp_path, monkeypatch):
         (st.path / "a.yaml").write_text(outdir.run_id_line(st.run_id))
         (st.path / "b.yaml").write_text(outdir.run_id_line(st.run_id))
         (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id, "tag": "x"}))
-    assert sorted(os.listdir(tmp_path)) == ["a.yaml", "b.yaml", "notes.txt", "result.json"]
+    # old_only.txt has an owned name but robocal did not write it: kept (never a user's file deleted)
+    assert sorted(os.listdir(tmp_path)) == [
+        outdir.MANIFEST, "a.yaml", "b.yaml", "notes.txt", "old_only.txt", "result.json"
+    ]
     check_consistent(tmp_path, ("a.yaml", "b.yaml"))
 
 
@@ -203,7 +208,7 @@ def test_a_folder_with_sub_folders_is_written_in_place_and_kept(tmp_path):
         (st.path / "a.yaml").write_text(outdir.run_id_line(st.run_id))
         (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id}))
     assert home.stat().st_ino == inode  # not renamed, nothing copied
-    assert sorted(os.listdir(home)) == ["a.yaml", "projects", "result.json"]
+    assert sorted(os.listdir(home)) == [outdir.MANIFEST, "a.yaml", "old_only.txt", "projects", "result.json"]
     assert (home / "projects" / "big.bin").stat().st_size == 1000
 
 

@@ -13,16 +13,24 @@ report and data files written with it) is one result: its files only make sense 
 * files in ``NAME`` that the writer does not own (a user's notes, another tool's files) are
   carried over (hard links, or copies across devices); files it owns are replaced or
   dropped, so no stale ``measurement_model.yaml`` of an earlier calibration survives;
+* robocal replaces or drops only the files robocal wrote: those listed in the folder's
+  manifest ``.robocal-files`` (the run id and the names a transaction wrote) or carrying a
+  run id.  A user's file under one of the result's names (their ``model.yaml`` given as
+  the input, their ``report.html``) is never replaced: the transaction is refused
+  (:class:`ForeignFileError`, whatever ``--force`` said), and one the result does not
+  write is kept;
 * a folder that cannot or should not be renamed (the working directory or a parent of
   it, a mount point, a folder with sub-folders or more than 50 other files: a home
   directory given as ``--out``) is written file by file, ``result.json`` last; the run
   ids then let readers detect a mix left by a crash in between.
 
 Writers of the same folder are serialised by a lock file ``.NAME.lock`` beside it
-(``flock``; removed on release): a second writer stops at once with a message naming the
-process that holds the lock.  A process killed at any point leaves either the earlier or
-the new result in ``NAME``; its leftover ``.NAME.*.staging`` / ``.NAME.*.old`` directories
-are removed by the next writer, and readers ignore them.
+(:mod:`robocal.folder_lock`: ``flock``, never through a link; removed on release): a
+second writer stops at once with a message naming the process that holds the lock.  A
+process killed at any point leaves either the earlier or the new result in ``NAME``; its
+leftover ``.NAME.<12 hex>.staging`` / ``.old`` directories (this user's real directories,
+not links) are removed by the next writer, and readers ignore them; a user's
+``.NAME.old`` or ``.NAME.v1.staging`` is not robocal's and is never touched.
 
 Every file of a result carries the same run id (``result.json``: ``"run_id"``; YAML and CSV
 files: a ``# robocal run: ID`` comment line; the HTML report: ``<meta name="robocal-run"
@@ -50,21 +58,31 @@ import ctypes
 import ctypes.util
 import errno
 import os
+import re
 import secrets
 import shutil
 import signal
+import stat
 import tempfile
-import time
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from robocal.folder_lock import FolderBusyError, check_not_busy
+from robocal.folder_lock import lock_beside as _lock
 from robocal.run_ids import (  # re-exported: the run ids of the files a transaction writes
+    MANIFEST,
     FolderMixedError,
+    ForeignFileError,
     check_consistent,
+    check_robocal_files,
+    is_mine,
+    is_own_regular_file,
     is_run_id,
+    manifest_text,
     new_run_id,
     read_run_id,
+    robocal_names,
     run_id_line,
     run_id_meta,
 )
@@ -73,16 +91,19 @@ __all__ = [
     "STEPS",
     "FolderBusyError",
     "FolderMixedError",
+    "ForeignFileError",
     "Stage",
     "atomic_write_bytes",
     "atomic_write_text",
     "check_consistent",
     "check_not_busy",
+    "check_robocal_files",
     "file_set",
     "is_run_id",
     "new_run_id",
     "read_run_id",
     "restore",
+    "robocal_names",
     "run_id_line",
     "run_id_meta",
     "transaction",
@@ -92,69 +113,10 @@ __all__ = [
 #: the write steps of a transaction, in order (see ``ROBOCAL_TEST_KILL_AT``)
 STEPS = ("locked", "staged", "carried", "parked", "swapped", "cleaned")
 
-class FolderBusyError(RuntimeError):
-    """Another process is writing the same result folder."""
-
 
 def _test_step(step: str) -> None:
     if os.environ.get("ROBOCAL_TEST_KILL_AT") == step:
         os.kill(os.getpid(), signal.SIGKILL)
-
-
-# ------------------------------------------------------------------ the lock
-@contextlib.contextmanager
-def _lock(target: Path, wait_s: float) -> Iterator[None]:
-    """Hold ``.NAME.lock`` beside ``target`` (flock), removed on release (no lock where the
-    system has no flock: Windows)."""
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not POSIX
-        yield
-        return
-
-    lock_path = target.parent / f".{target.name}.lock"
-    deadline = time.monotonic() + wait_s
-    while True:
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-            os.close(fd)
-            if time.monotonic() >= deadline:
-                raise FolderBusyError(
-                    f"{target} is being written by another robocal process"
-                    + (f" (pid {holder})" if holder.isdigit() else "")
-                    + "; wait for it to finish or write elsewhere"
-                ) from None
-            time.sleep(0.05)
-            continue
-        # the lock file may have been removed (and recreated) by its previous holder
-        # between our open and our lock: then start again on the current file
-        try:
-            same = os.fstat(fd).st_ino == os.stat(lock_path).st_ino
-        except FileNotFoundError:
-            same = False
-        if same:
-            break
-        os.close(fd)
-    try:
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
-        yield
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(lock_path)
-        os.close(fd)
-
-
-def check_not_busy(target: str | os.PathLike[str]) -> None:
-    """Raise :class:`FolderBusyError` at once when another process is writing ``target``
-    (for commands that would otherwise compute for minutes before finding out)."""
-    target = Path(os.path.abspath(target))
-    if (target.parent / f".{target.name}.lock").exists():
-        with _lock(target, 0.0):
-            pass
 
 
 # ------------------------------------------------------------------ swapping
@@ -191,16 +153,26 @@ def _exchange(a: Path, b: Path) -> bool:
 
 
 def _leftovers(target: Path) -> list[Path]:
-    prefix = f".{target.name}."
+    """The staging and parked directories robocal's writers of ``target`` left: named
+    ``.NAME.<12 hex digits>.staging`` / ``.old`` as :func:`transaction` names them, real
+    directories (not links) of this user; a user's ``.NAME.old`` or ``.NAME.v1.staging``
+    is none of them and is never touched."""
+    pattern = re.compile(re.escape(f".{target.name}.") + r"[0-9a-f]{12}\.(?:staging|old)")
     try:
         names = os.listdir(target.parent)
     except OSError:
         return []
-    return [
-        target.parent / n
-        for n in names
-        if n.startswith(prefix) and (n.endswith(".staging") or n.endswith(".old"))
-    ]
+    found = []
+    for name in names:
+        if not pattern.fullmatch(name):
+            continue
+        try:
+            info = os.lstat(target.parent / name)
+        except OSError:
+            continue
+        if stat.S_ISDIR(info.st_mode) and is_mine(info):
+            found.append(target.parent / name)
+    return found
 
 
 def recover(target: Path) -> None:
@@ -208,7 +180,7 @@ def recover(target: Path) -> None:
     when ``NAME`` is missing, and remove leftover staging and parked directories.  Call
     with the folder's lock held."""
     leftovers = _leftovers(target)
-    if not target.exists():
+    if not os.path.lexists(target):
         parked = sorted((p for p in leftovers if p.name.endswith(".old")), key=lambda p: p.stat().st_mtime)
         if parked:
             os.rename(parked[-1], target)
@@ -227,10 +199,11 @@ def restore(target: str | os.PathLike[str]) -> None:
         recover(target)
 
 
-def _carry_over(old: Path, stage: Path, owned: Collection[str]) -> None:
-    """Hard-link (or copy) into ``stage`` what ``old`` holds beyond the files the writer owns."""
+def _carry_over(old: Path, stage: Path, dropped: Collection[str]) -> None:
+    """Hard-link (or copy) into ``stage`` what ``old`` holds beyond the files of the earlier
+    result (``dropped``: robocal's, replaced or left out by the new one)."""
     for entry in os.scandir(old):  # files only (a folder with sub-folders is written in place)
-        if entry.name in owned or (stage / entry.name).exists():
+        if entry.name in dropped or entry.name == MANIFEST or (stage / entry.name).exists():
             continue
         src, dst = Path(entry.path), stage / entry.name
         if entry.is_symlink():
@@ -298,30 +271,59 @@ def transaction(
         FolderBusyError: another process holds the folder's lock (after ``wait_s`` seconds:
             a moment, so that a :func:`check_not_busy` probe never stops a writer).
     """
-    target = Path(os.path.abspath(target))
-    if target.exists() and target.is_dir():
-        target = target.resolve()
+    target = _target_folder(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     owned = frozenset(owned)
     with _lock(target, wait_s):
         _test_step("locked")
         recover(target)
-        stage = Path(os.path.join(target.parent, f".{target.name}.{secrets.token_hex(6)}.staging"))
-        os.mkdir(stage)
+        stage = Stage(
+            Path(target.parent, f".{target.name}.{secrets.token_hex(6)}.staging"), run_id or new_run_id()
+        )
+        os.mkdir(stage.path)
         try:
-            yield Stage(stage, run_id or new_run_id())
+            yield stage
             _test_step("staged")
+            earlier = _claim(stage, target, owned)
             if target.is_dir() and _in_place_only(target, owned):
-                _move_files_in(stage, target, owned)
+                _move_files_in(stage.path, target, earlier)
                 return
             if target.is_dir():
-                _carry_over(target, stage, owned)
+                _carry_over(target, stage.path, earlier)
             _test_step("carried")
-            _swap(stage, target)
+            _swap(stage.path, target)
             _test_step("swapped")
         finally:
-            shutil.rmtree(stage, ignore_errors=True)
+            shutil.rmtree(stage.path, ignore_errors=True)
         _test_step("cleaned")
+
+
+def _target_folder(target: str | os.PathLike[str]) -> Path:
+    """The absolute folder a transaction writes: an existing folder (or a link to one)
+    resolved; a link to anything else, or to nothing, is refused (never replaced)."""
+    target = Path(os.path.abspath(target))
+    if target.is_dir():
+        return target.resolve()
+    if os.path.islink(target):
+        raise ForeignFileError(
+            f"{target}: a symbolic link to no folder; robocal does not replace it: remove it or "
+            "choose another output folder"
+        )
+    return target
+
+
+def _claim(stage: Stage, target: Path, owned: Collection[str]) -> frozenset[str]:
+    """Refuse the result when one of its files would replace one in ``target`` that robocal
+    did not write (:class:`ForeignFileError`, whatever ``--force`` said); list the result's
+    files in its manifest; return the earlier result's files (robocal's among ``owned``),
+    which the new result replaces or drops."""
+    written = sorted(n for n in os.listdir(stage.path) if n != MANIFEST)
+    earlier: frozenset[str] = frozenset()
+    if target.is_dir():
+        check_robocal_files(target, written)
+        earlier = robocal_names(target, owned)
+    (stage.path / MANIFEST).write_text(manifest_text(stage.run_id, written), encoding="utf-8")
+    return earlier
 
 
 def _swap(stage: Path, target: Path) -> None:
@@ -347,21 +349,18 @@ def _swap(stage: Path, target: Path) -> None:
     os.rename(parked, stage)
 
 
-def _move_files_in(stage: Path, target: Path, owned: Collection[str]) -> None:
+def _move_files_in(stage: Path, target: Path, earlier: Collection[str]) -> None:
     """The working directory or a mount point is written file by file (it cannot be
-    renamed); the run ids let readers detect a mix should the process die in between."""
-    for name in owned:
-        if (target / name).exists() and not (stage / name).exists():
-            (target / name).unlink()
-    for entry in sorted(os.listdir(stage), key=lambda n: n == "result.json"):  # result.json last
+    renamed): the earlier result's files (``earlier``, robocal's) that the new one does not
+    have are removed, then the new files moved in, the manifest and ``result.json`` last;
+    the run ids let readers detect a mix should the process die in between."""
+    for name in earlier:
+        if not (stage / name).exists():
+            with contextlib.suppress(FileNotFoundError):
+                (target / name).unlink()
+    last = {MANIFEST: 1, "result.json": 2}
+    for entry in sorted(os.listdir(stage), key=lambda n: last.get(n, 0)):
         os.replace(stage / entry, target / entry)
-
-
-def write_files(stage: Stage, files: dict[str, str | bytes]) -> None:
-    """Write ``files`` (name -> text or bytes) into the staging directory."""
-    for name, content in files.items():
-        data = content.encode("utf-8") if isinstance(content, str) else content
-        (stage.path / name).write_bytes(data)
 
 
 # ------------------------------------------------------------------ the one atomic writer
@@ -389,7 +388,7 @@ def remove_stale_temporaries(path: Path) -> None:
         return
     for name in names:
         pid = name[len(prefix) :].split(".", 1)[0]
-        if not pid.isdigit() or int(pid) == os.getpid():
+        if not pid.isdigit() or int(pid) == os.getpid() or not is_own_regular_file(path.parent / name):
             continue
         try:
             os.kill(int(pid), 0)
@@ -497,4 +496,3 @@ def write_together(files: dict[Path, bytes], *, wait_s: float = 1.0) -> None:
     with file_set(paths, wait_s=wait_s) as temporaries:
         for path, tmp in zip(paths, temporaries, strict=True):
             atomic_write_bytes(tmp, files[path])
-

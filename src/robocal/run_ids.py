@@ -4,27 +4,44 @@ folder or a set of files that mixes two runs (:func:`check_consistent`).
 ``result.json`` keeps it as ``"run_id"``; YAML and CSV files as a ``# robocal run: ID``
 comment line among their first lines; the HTML report as ``<meta name="robocal-run"
 content="ID">``; a PNG in its ``tEXt`` ``Description`` (``robocal run: ID``).  Written by
-the transactions of :mod:`robocal.outdir`.
+the transactions of :mod:`robocal.outdir`, which also list the files they wrote in the
+folder's manifest (:data:`MANIFEST`, with the run id): those and the files carrying a run
+id are robocal's (:func:`robocal_names`); robocal replaces or deletes nothing else
+(:class:`ForeignFileError`).
 """
 
 from __future__ import annotations
 
+import os
 import re
 import secrets
+import stat
 from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "MANIFEST",
     "FolderMixedError",
+    "ForeignFileError",
     "check_consistent",
+    "check_robocal_files",
     "figure_png",
+    "is_mine",
+    "is_own_regular_file",
     "is_run_id",
+    "manifest_text",
     "new_run_id",
     "read_run_id",
+    "robocal_names",
     "run_id_line",
     "run_id_meta",
 ]
+
+#: the hidden file in which a transaction lists the files it wrote into a folder (after a
+#: ``# robocal run: ID`` line, one name a line)
+MANIFEST = ".robocal-files"
+_MANIFEST_MAX_BYTES = 1 << 20
 
 _RUN_LINE = re.compile(r"^# robocal run: ([0-9a-f]{8,64})\s*$")
 _RUN_META = re.compile(r'<meta name="robocal-run" content="([0-9a-f]{8,64})">')
@@ -33,6 +50,12 @@ _RUN_ID = re.compile(r"[0-9a-f]{8,64}")
 
 class FolderMixedError(ValueError):
     """The files of a result folder come from different runs (the message names them)."""
+
+
+class ForeignFileError(FolderMixedError):
+    """A file robocal did not write (no run id, not in the folder's manifest), a link, or
+    another user's file stands where robocal would write, replace or delete one: refused,
+    with or without ``--force`` (the message names it)."""
 
 
 def new_run_id() -> str:
@@ -154,3 +177,65 @@ def figure_png(fig: Any, *, dpi: float | None = None, run_id: str | None = None)
     finally:
         plt.close(fig)
     return buf.getvalue()
+
+
+def manifest_text(run_id: str, names: Collection[str]) -> str:
+    """The :data:`MANIFEST` of a folder: its run id line, then ``names`` one a line."""
+    return run_id_line(run_id) + "".join(f"{name}\n" for name in sorted(names))
+
+
+def is_own_regular_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file (not a symbolic link) of this user."""
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISREG(info.st_mode) and is_mine(info)
+
+
+def is_mine(info: os.stat_result) -> bool:
+    """Whether the file of ``info`` belongs to this process's user (always, without uids)."""
+    return not hasattr(os, "geteuid") or info.st_uid == os.geteuid()
+
+
+def _listed(directory: Path) -> frozenset[str]:
+    """The names in ``directory``'s manifest (none when it has none, or one not robocal's)."""
+    path = directory / MANIFEST
+    if not is_own_regular_file(path):
+        return frozenset()
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            lines = fh.read(_MANIFEST_MAX_BYTES).splitlines()
+    except OSError:
+        return frozenset()
+    if not lines or not _RUN_LINE.match(lines[0]):
+        return frozenset()
+    return frozenset(line for line in lines[1:] if line and "/" not in line)
+
+
+def robocal_names(directory: Path, names: Collection[str]) -> frozenset[str]:
+    """Those of ``names`` in ``directory`` that robocal wrote: regular files (not links) of
+    this user, listed in the folder's :data:`MANIFEST` or carrying a run id."""
+    directory = Path(directory)
+    listed = _listed(directory)
+    return frozenset(
+        name
+        for name in names
+        if is_own_regular_file(directory / name)
+        and (name in listed or read_run_id(directory / name) is not None)
+    )
+
+
+def check_robocal_files(directory: Path, names: Collection[str], doing: str = "replace") -> None:
+    """Raise :class:`ForeignFileError` naming the first of ``names`` present in
+    ``directory`` that robocal did not write (see :func:`robocal_names`)."""
+    directory = Path(directory)
+    present = [n for n in sorted(names) if os.path.lexists(directory / n)]
+    ours = robocal_names(directory, present)
+    for name in present:
+        if name not in ours:
+            raise ForeignFileError(
+                f"{directory / name}: not a file robocal wrote (no run id; or a link, or another "
+                f"user's file); robocal does not {doing} it, even with --force: move it away or "
+                "choose another output"
+            )

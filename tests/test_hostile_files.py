@@ -1,0 +1,185 @@
+"""Files robocal did not write are never written through, replaced or deleted (issue 38,
+items 2 and 4): a lock file planted as a link, a user's ``.NAME.old`` or ``.NAME.v1.staging``,
+a user's model or report in the output folder, fleet names that would leave the output
+folder, a study file that would open a network connection, and an empty HOME."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from robocal import outdir
+from robocal.outdir import FolderBusyError, ForeignFileError, transaction
+
+OWNED = ("model.yaml", "result.json", "report.html")
+
+
+def _write_result(target: Path, tag: str = "x") -> str:
+    """A result as a calibration writes one: every file stamped with the run id."""
+    with transaction(target, OWNED) as st:
+        (st.path / "model.yaml").write_text(outdir.run_id_line(st.run_id) + f"tag: {tag}\n")
+        (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id, "tag": tag}))
+    return st.run_id
+
+
+# ------------------------------------------------------------------ locks never follow links
+@pytest.mark.parametrize("kind", ["symlink", "hardlink"])
+def test_a_lock_file_planted_as_a_link_is_refused_and_its_target_untouched(tmp_path, kind):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    lock = tmp_path / ".cal.lock"
+    (os.symlink if kind == "symlink" else os.link)(victim, lock)
+    with pytest.raises(ForeignFileError, match=r"\.cal\.lock"):
+        _write_result(tmp_path / "cal")
+    assert victim.read_text() == "precious\n"
+    assert not (tmp_path / "cal").exists()
+    assert os.path.lexists(lock)  # refused, not removed: it is not robocal's
+
+
+def test_a_dangling_lock_link_creates_nothing_where_it_points(tmp_path):
+    lock = tmp_path / ".cal.lock"
+    os.symlink(tmp_path / "elsewhere.txt", lock)
+    with pytest.raises(ForeignFileError):
+        outdir.check_not_busy(tmp_path / "cal")
+    with pytest.raises(ForeignFileError):
+        _write_result(tmp_path / "cal")
+    assert not (tmp_path / "elsewhere.txt").exists()
+
+
+def test_a_lock_link_stops_every_locking_writer(tmp_path):
+    """A set of files (measurements and their truth) takes the same lock."""
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    os.symlink(victim, tmp_path / ".a.csv.lock")
+    with pytest.raises(ForeignFileError):
+        outdir.write_together({tmp_path / "a.csv": b"x\n", tmp_path / "b.csv": b"y\n"})
+    assert victim.read_text() == "precious\n"
+    assert not (tmp_path / "a.csv").exists() and not (tmp_path / "b.csv").exists()
+
+
+def test_the_calibrate_command_names_a_planted_lock_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    os.symlink(victim, tmp_path / ".cal.lock")
+    data = tmp_path / "m.csv"
+    data.write_text("q1,q2,q3,q4,q5,q6,x,y,z\n")
+    result = CliRunner().invoke(app, ["calibrate", "ur10", "--data", str(data), "--out", str(tmp_path / "cal")])
+    assert result.exit_code == 2
+    assert "Traceback" not in result.output and ".cal.lock" in result.stderr
+    assert victim.read_text() == "precious\n"
+
+
+def test_a_busy_folder_is_still_reported_as_busy(tmp_path):
+    with outdir._lock(tmp_path / "cal", 0.0), pytest.raises(FolderBusyError):
+        outdir.check_not_busy(tmp_path / "cal")
+
+
+# ------------------------------------------------------------------ leftovers: only robocal's
+def test_a_users_old_and_staging_folders_are_never_moved_or_deleted(tmp_path):
+    user_old = tmp_path / ".cal.old"
+    user_old.mkdir()
+    (user_old / "keep.txt").write_text("mine")
+    user_staging = tmp_path / ".cal.v1.staging"
+    user_staging.mkdir()
+    (user_staging / "keep.txt").write_text("mine too")
+    _write_result(tmp_path / "cal")
+    assert (user_old / "keep.txt").read_text() == "mine"
+    assert (user_staging / "keep.txt").read_text() == "mine too"
+    assert sorted(os.listdir(tmp_path / "cal")) == [outdir.MANIFEST, "model.yaml", "result.json"]
+
+
+def test_a_link_named_like_a_leftover_is_not_followed(tmp_path):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "keep.txt").write_text("mine")
+    os.symlink(elsewhere, tmp_path / ".cal.0123456789ab.staging")
+    os.symlink(elsewhere, tmp_path / ".cal.0123456789ab.old")
+    _write_result(tmp_path / "cal")
+    assert (elsewhere / "keep.txt").read_text() == "mine"
+    assert not (tmp_path / "cal" / "keep.txt").exists()
+
+
+def test_a_killed_writers_leftovers_are_still_cleaned(tmp_path):
+    leftover = tmp_path / ".cal.0123456789ab.staging"
+    leftover.mkdir()
+    (leftover / "model.yaml").write_text("half")
+    _write_result(tmp_path / "cal")
+    assert not leftover.exists()
+
+
+# ------------------------------------------------------------------ the user's files in the output folder
+def test_a_users_model_in_the_output_folder_is_never_replaced(tmp_path):
+    folder = tmp_path / "m"
+    folder.mkdir()
+    (folder / "model.yaml").write_text("robocal_model: 1\nname: mine\n")
+    (folder / "report.html").write_text("<p>my report</p>")
+    with pytest.raises(ForeignFileError, match="model.yaml"):
+        _write_result(folder)
+    assert (folder / "model.yaml").read_text() == "robocal_model: 1\nname: mine\n"
+    assert (folder / "report.html").read_text() == "<p>my report</p>"
+    assert sorted(os.listdir(tmp_path)) == ["m"]  # no staging folder left
+
+
+def test_a_users_file_under_an_owned_name_the_result_does_not_write_is_kept(tmp_path):
+    folder = tmp_path / "m"
+    folder.mkdir()
+    (folder / "report.html").write_text("<p>my report</p>")
+    _write_result(folder)
+    _write_result(folder, "again")  # the earlier result's files are replaced, the user's kept
+    assert (folder / "report.html").read_text() == "<p>my report</p>"
+    assert json.loads((folder / "result.json").read_text())["tag"] == "again"
+
+
+def test_files_robocal_wrote_without_a_run_id_are_replaced_by_the_manifest(tmp_path):
+    """Files a writer does not stamp (an experiment's plots) are robocal's by the manifest."""
+    target = tmp_path / "exp"
+    for tag in ("one", "two"):
+        with transaction(target, ("plot.txt",)) as st:
+            (st.path / "plot.txt").write_text(tag)
+    assert (target / "plot.txt").read_text() == "two"
+
+
+def test_an_output_link_to_no_folder_is_refused(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    os.symlink(victim, tmp_path / "cal")
+    with pytest.raises(ForeignFileError):
+        _write_result(tmp_path / "cal")
+    assert os.path.islink(tmp_path / "cal") and victim.read_text() == "precious\n"
+
+
+def test_the_calibrate_command_refuses_to_replace_its_input_model(tmp_path):
+    """``calibrate m/model.yaml --out m --report``: the input model and the user's report stay."""
+    import numpy as np
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+    from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
+    from robocal.measure.dataset import write_measurements
+    from robocal.measure.poses import random_poses
+    from robocal.model.catalog import robot
+    from robocal.model.files import save_model
+
+    ur10 = robot("ur10")
+    folder = tmp_path / "m"
+    folder.mkdir()
+    save_model(ur10, folder / "model.yaml")
+    (folder / "report.html").write_text("<p>my report</p>")
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    virtual = VirtualRobot(
+        ur10, draw_true_model(ur10, seed=1), LaserTracker(p_tool_target=np.array([0, 0, 0.1]))
+    )
+    write_measurements(simulate(virtual, random_poses(ur10, 30, seed=1), seed=1), tmp_path / "d.csv")
+    args = ["calibrate", str(folder / "model.yaml"), "--data", str(tmp_path / "d.csv")]
+    result = CliRunner().invoke(app, [*args, "--out", str(folder), "--report", "--residual", "none"])
+    assert result.exit_code == 2, result.output
+    assert "model.yaml" in result.stderr and "Traceback" not in result.output
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    assert sorted(os.listdir(tmp_path)) == ["d.csv", "m"]
