@@ -48,7 +48,7 @@ def test_calibrate_then_validate(measured, tmp_path):
         "--seed",
         "1",
         "--tool",
-        "0,0,109",
+        "0,0,109mm",
         "--out",
         str(out),
     ]
@@ -128,7 +128,7 @@ def test_noise_option_tests_the_fit_against_the_device_noise(measured, tmp_path)
     """The file has 10 µm noise per axis: stated as 0.01 mm the model explains it; stated
     as 0.001 mm the residuals are ten times the noise and the output says so."""
     path, _ = measured
-    base = ["calibrate", "ur10", "--data", str(path), "--length-unit", "mm", "--tool", "0,0,109"]
+    base = ["calibrate", "ur10", "--data", str(path), "--length-unit", "mm", "--tool", "0,0,109mm"]
     right = runner.invoke(app, [*base, "--noise", "0.01mm", "--out", str(tmp_path / "a")])
     assert right.exit_code == 0, right.output
     assert "explains the data down to the measurement noise" in " ".join(right.output.split())
@@ -150,7 +150,7 @@ def _write_mm(data, path):
 
 def test_validate_and_calibrate_corner_cases(measured, tmp_path):
     path, _ = measured
-    base = ["--length-unit", "mm", "--tool", "0,0,109"]
+    base = ["--length-unit", "mm", "--tool", "0,0,109mm"]
     out = tmp_path / "cal"
     result = runner.invoke(
         app, ["calibrate", "ur10", "--data", str(path), *base, "--out", str(out)]
@@ -235,7 +235,7 @@ def test_validate_uses_the_rows_marked_test(measured, tmp_path):
             "--length-unit",
             "mm",
             "--tool",
-            "0,0,109",
+            "0,0,109mm",
             "--out",
             str(out),
         ],
@@ -281,7 +281,7 @@ def test_space_separated_files_and_separator_names(measured, tmp_path):
             "--length-unit",
             "mm",
             "--tool",
-            "0,0,109",
+            "0,0,109mm",
             "--out",
             str(tmp_path / "o"),
         ],
@@ -327,14 +327,14 @@ def test_calibrate_explains_what_to_change(measured, tmp_path):
     assert code == 2 and "no measured positions" in text and "--columns" in text
     code, text = run("irb120", *base)
     assert code == 2 and "outside the limits" in text and "--limits warn" in text
-    code, text = run("UR10", *base, "--tool", "0,0,109")  # catalog names in any case
+    code, text = run("UR10", *base, "--tool", "0,0,109mm")  # catalog names in any case
     assert code == 0, text
 
 
 def test_bounds_option_is_explicit_and_printed(measured, tmp_path):
     path, _ = measured
     base = ["calibrate", "ur10", "--chain", "catalog", "--data", str(path), "--length-unit", "mm"]
-    base += ["--tool", "0,0,109", "--residual", "none", "--method", "bounded"]
+    base += ["--tool", "0,0,109mm", "--residual", "none", "--method", "bounded"]
     result = runner.invoke(app, [*base, "--bounds", "widened", "--out", str(tmp_path / "w")])
     assert result.exit_code == 0, result.output
     assert "bounds='widened'" in " ".join(result.output.split())

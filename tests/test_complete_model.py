@@ -218,7 +218,7 @@ def test_tilted_parallel_axes_through_the_cli(tmp_path):
     rms = {}
     for chain in ("complete", "catalog"):
         out = tmp_path / chain
-        args = ["calibrate", "ur10", "--data", str(tmp_path / "train.csv"), "--tool", "0,0,109"]
+        args = ["calibrate", "ur10", "--data", str(tmp_path / "train.csv"), "--tool", "0,0,109mm"]
         args += ["--residual", "none"]  # the physical model, whose covariance gives the bound
         args += ["--out", str(out)] + (["--chain", "catalog"] if chain == "catalog" else [])
         result = runner.invoke(app, args)
@@ -259,7 +259,7 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
         Measurements(q=q, position=position, orientation=orientation), tmp_path / "p.csv"
     )
     runner = CliRunner()
-    base = ["calibrate", "--data", str(data), "--tool", "0,0,109", "--residual", "none"]
+    base = ["calibrate", "--data", str(data), "--tool", "0,0,109mm", "--residual", "none"]
     result = runner.invoke(app, [*base, "ur10", "--out", str(tmp_path / "a")])
     assert result.exit_code == 0, result.output
     assert "model: ur10_complete, the complete model built from ur10's joint geometry for pose" in flat(
@@ -296,7 +296,7 @@ def test_fleet_calibrates_the_complete_model_by_default(tmp_path):
     for k in range(2):
         write_measurements(simulate(robot, poses(robot.nominal, 40, 10 + k), seed=k), folder / f"r{k}.csv")
     runner = CliRunner()
-    base = ["fleet", "ur10", str(folder), "--workers", "0", "--tool", "0,0,109", "--no-progress"]
+    base = ["fleet", "ur10", str(folder), "--workers", "0", "--tool", "0,0,109mm", "--no-progress"]
     base += ["--residual", "none"]
     result = runner.invoke(app, [*base, "--out", str(tmp_path / "complete")])
     assert result.exit_code == 0, result.output

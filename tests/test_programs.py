@@ -211,7 +211,7 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
             "-o",
             str(out),
             "--probe",
-            "0,0,0.1",
+            "0,0,0.1m",
         ],
     )
     assert res.exit_code == 0, res.output
@@ -408,7 +408,7 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     result.save(folder)
     path = tmp_path / "far.script"
     path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
-    args = ["filter", str(folder), str(path), "--probe", "0,0,0.1", "-o"]
+    args = ["filter", str(folder), str(path), "--probe", "0,0,0.1m", "-o"]
     res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
     assert res.exit_code == 0
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())
@@ -418,11 +418,16 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
 
 @pytest.mark.parametrize(
     ("option", "value", "hint"),
-    [("--probe", "0,0,109", "0,0,0.109"), ("--tool", "0,0,109,0,0,1.5", "0,0,0.109,0,0,1.5")],
+    [
+        ("--probe", "0,0,109m", "109 m from the flange"),
+        ("--tool", "0,0,109m,0,0,1.5rad", "109 m from the flange"),
+        ("--probe", "0,0,109", "add the unit"),
+        ("--tool", "0,0,109,0,0,1.5", "add the unit"),
+    ],
 )
 def test_filter_refuses_a_tool_given_in_millimetres(cell, tmp_path, option, value, hint):
-    """calibrate's --tool takes mm, filter's --probe and --tool take m: 109 "m" from the
-    flange is refused in one line with the value in metres, and nothing is written."""
+    """Every length option takes a unit (one spelling in every command): a bare 109 is
+    refused, and so is a tool 109 m from the flange, in one line; nothing is written."""
     _, _, result, _ = cell
     folder = tmp_path / "cal"
     result.save(folder)
@@ -431,7 +436,7 @@ def test_filter_refuses_a_tool_given_in_millimetres(cell, tmp_path, option, valu
     res = runner.invoke(app, args)
     text = " ".join(res.output.split())
     assert res.exit_code == 2 and not out.exists()
-    assert f"{option} '{value}': 109 m from the flange" in text and hint in text and "Traceback" not in text
+    assert f"{option} '{value}':" in text and hint in text and "Traceback" not in text
 
 
 @pytest.mark.parametrize("language", ["krl", "rapid"])

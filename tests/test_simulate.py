@@ -241,7 +241,7 @@ def _poses(tmp_path, ur10, n=40):
 def test_cli_simulate_writes_data_and_truth(tmp_path, ur10):
     poses, q = _poses(tmp_path, ur10)
     args = ["simulate", "ur10", "--poses", str(poses), "--device", "laser-tracker", "--noise", "0.02mm",
-            "--seed", "1", "--tool-offset", "0,0,109", "--tol", "theta2=0.2deg"]  # fmt: skip
+            "--seed", "1", "--tool-offset", "0,0,109mm", "--tol", "theta2=0.2deg"]  # fmt: skip
     result = runner.invoke(app, [*args, "-o", str(tmp_path / "meas.csv")])
     assert result.exit_code == 0, result.output
     assert "meas.csv" in result.output and "meas.truth.yaml" in result.output
@@ -264,7 +264,7 @@ def test_cli_simulate_pose_device_and_device_pose(tmp_path, ur10):
     out = tmp_path / "cmm.csv"
     result = runner.invoke(
         app, ["simulate", "ur10", "--poses", str(poses), "--device", "optical-cmm", "--seed", "3",
-              "--device-pose", "4000,0,500,0,0,180", "-o", str(out)],
+              "--device-pose", "4000,0,500mm,0,0,180deg", "-o", str(out)],
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     data = read_measurements(out)

@@ -463,7 +463,7 @@ def test_study_command_prints_the_throughput_last(tmp_path):
 def test_fleet_command(fleet_dir):
     result = CliRunner().invoke(
         app,
-        ["fleet", "ur10", str(fleet_dir), "--workers", "0", "--tool", "0,0,109", "--no-progress"],
+        ["fleet", "ur10", str(fleet_dir), "--workers", "0", "--tool", "0,0,109mm", "--no-progress"],
     )
     assert result.exit_code == 0, result.output
     assert LAST_LINE.match(result.output.strip().splitlines()[-1])

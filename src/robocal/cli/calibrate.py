@@ -24,9 +24,9 @@ from robocal.cli.options import (
     Robot,
     Sep,
     as_cli_text,
+    length_vector,
     measure_option,
     out_option,
-    parse_vector,
     robot_and_chain,
 )
 from robocal.cli.reading import read_data
@@ -51,7 +51,15 @@ NOISE_HELP = (
 )
 Chain = Annotated[str | None, typer.Option("--chain", metavar="complete|catalog", help=CHAIN_HELP)]
 Residual = Annotated[str, typer.Option("--residual", metavar="auto|joint_fourier|none", help=RESIDUAL_HELP)]
-Tool = Annotated[str | None, typer.Option("--tool", metavar='"x,y,z"', help="tool point start value, mm")]
+Tool = Annotated[
+    str | None,
+    typer.Option(
+        "--tool",
+        metavar='"x,y,z"',
+        help='the measured point (probe) on the flange as built, with a unit, e.g. "0,0,109mm": the '
+        "fit's start value, checked against what it identifies",
+    ),
+]
 Compliance = Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")]
 Data = Annotated[Path, typer.Option("--data", metavar="FILE", help="measurement CSV file")]
 
@@ -158,7 +166,7 @@ def calibrate_command(
     settings |= {"bounds": bounds} if bounds is not None else {}
     settings |= {"per_pose": True} if per_pose else {}
     if tool is not None:
-        settings["tool_guess"] = parse_vector(tool, 3, "--tool", "x,y,z in mm") * 1e-3
+        settings["tool_guess"] = length_vector(tool, 3, "--tool")
     result = _calibrate(model, train, data_path, settings)
     result = _record(result, data_path, reader, noise_sigma, train_n, seed, train)
     validation = None

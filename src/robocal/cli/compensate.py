@@ -26,10 +26,9 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.cli.options import Decimal, Force, Json, Sep, out_option, parse_vector, resolve_model
+from robocal.cli.options import Decimal, Force, Json, Sep, joint_values, out_option, resolve_model
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 from robocal.safe_output import strict_json
-from robocal.units import unit_factor
 
 __all__ = ["register"]
 
@@ -107,7 +106,9 @@ NominalOption = Annotated[
 Q0Option = Annotated[
     str | None,
     typer.Option(
-        "--q0", metavar='"q1,...,qn"', help='configuration choosing the branch, e.g. "0,-90,90,0,90,0"'
+        "--q0",
+        metavar='"q1,...,qn"',
+        help='configuration choosing the branch, e.g. "0,-90,90,0,90,0deg" (no unit: --angle-unit)',
     ),
 ]
 
@@ -152,12 +153,7 @@ def compensate_command(
             f"--frame measurement needs a calibration directory (its identified frame); {source} is a model"
         )
     nominal_model = None if nominal is None else resolve_model(nominal)
-    angle_f = unit_factor(angle_unit, "angle", "--angle-unit")
-    length_f = unit_factor(length_unit, "length", "--length-unit")
-    factor = np.array([angle_f if t == "revolute" else length_f for t in model.joint_types])
-    q_start = (
-        None if q0 is None else parse_vector(q0, model.dof, "--q0", f"{model.dof} joint values") * factor
-    )
+    q_start = None if q0 is None else joint_values(q0, model, "--q0", angle_unit, length_unit)
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, sep=sep, decimal=decimal)
     if targets is not None:
         result, source_file = _compensate_targets(

@@ -24,7 +24,7 @@ from typing import Annotated
 import typer
 
 from robocal.cli.compensate import CALIBRATION
-from robocal.cli.options import CONTEXT, Force, out_option, parse_vector, resolve_model
+from robocal.cli.options import CONTEXT, Force, frame_option, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe, warn
 
 __all__ = ["register"]
@@ -129,32 +129,28 @@ def ur_kinematics_command(
         err_console.print(f"[yellow]note:[/] {safe(m.note)}", highlight=False, markup=True)
 
 
-# a tool this far from the flange is a length given in mm where these options take m
-# (calibrate's --tool takes mm): refused rather than filtered with a tool metres long
+# a tool this far from the flange is a length in the wrong unit (e.g. 0,0,109m): refused
+# rather than filtered with a tool metres long
 _TOOL_REACH_M = 5.0
 
 
 def _frame_option(text: str | None, what: str):
-    """``"x,y,z,rx,ry,rz"`` (m, rotation vector in rad) -> a 4x4 transform."""
+    """``"x,y,z,rx,ry,rz"`` with units (``"0,0,109mm,0,0,90deg"``, rotation vector) -> 4x4."""
     if text is None:
         return None
-    from robocal import spatial
-
-    v = parse_vector(text, 6, what, "x,y,z,rx,ry,rz: m, rotation vector in rad")
+    T = frame_option(text, what)
     if what != "--base":
-        _check_reach(v, text, what)
-    return spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
+        _check_reach(T[:3, 3], text, what)
+    return T
 
 
 def _probe_option(text: str | None):
-    """``--probe``: ``"x,y,z"`` (m) on the flange, or a whole frame ``"x,y,z,rx,ry,rz"``."""
+    """``--probe``: ``"x,y,z"`` with a unit on the flange, or a whole frame ``"x,y,z,rx,ry,rz"``."""
     if text is None:
         return None
-    v = parse_vector(text, (3, 6), "--probe", "x,y,z in m, or x,y,z,rx,ry,rz")
-    if len(v) == 6:
-        return _frame_option(text, "--probe")
-    _check_reach(v, text, "--probe")
-    return list(v)
+    T = frame_option(text, "--probe", position_only=True)
+    _check_reach(T[:3, 3], text, "--probe")
+    return T if len(text.split(",")) == 6 else list(T[:3, 3])
 
 
 def _check_reach(v, text: str, what: str) -> None:
@@ -164,11 +160,7 @@ def _check_reach(v, text: str, what: str) -> None:
 
     distance = float(np.linalg.norm(v[:3]))
     if distance > _TOOL_REACH_M:
-        mm = ",".join([f"{x / 1000:g}" for x in v[:3]] + [f"{x:g}" for x in v[3:]])
-        raise fail(
-            f"{what} {text!r}: {distance:g} m from the flange; {what} takes metres "
-            f"(for millimetres: {mm})"
-        )
+        raise fail(f"{what} {text!r}: {distance:g} m from the flange; check the unit (e.g. 0,0,109mm)")
 
 
 ProgramOption = Annotated[
@@ -182,13 +174,15 @@ ToolOption = Annotated[
     typer.Option(
         "--tool",
         metavar='"x,y,z,rx,ry,rz"',
-        help="the program's tool on the flange: x,y,z,rx,ry,rz (m, rad)",
+        help='the program\'s tool on the flange with units, e.g. "0,0,109mm,0,0,90deg" (rotation vector)',
     ),
 ]
 BaseOption = Annotated[
     str | None,
     typer.Option(
-        "--base", metavar='"x,y,z,rx,ry,rz"', help="the targets' frame in the robot base: x,y,z,rx,ry,rz"
+        "--base",
+        metavar='"x,y,z,rx,ry,rz"',
+        help='the targets\' frame in the robot base with units, e.g. "500,0,0mm,0,0,90deg"',
     ),
 ]
 ProbeOption = Annotated[
@@ -196,14 +190,17 @@ ProbeOption = Annotated[
     typer.Option(
         "--probe",
         metavar='"x,y,z[,rx,ry,rz]"',
-        help="the calibration's measured tool as built: x,y,z (m) on the flange",
+        help='the measured tool (probe) as built, e.g. "0,0,109mm" (default: the one the calibration '
+        "identified; a different one is refused)",
     ),
 ]
 NominalOption = Annotated[
     str | None,
     typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
 ]
-LengthUnitOption = Annotated[str, typer.Option("--length-unit", metavar="m|mm", help="CSV programs: m | mm")]
+LengthUnitOption = Annotated[
+    str, typer.Option("--length-unit", metavar="m|mm|um", help="CSV programs: m | mm | um")
+]
 AngleUnitOption = Annotated[
     str, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
 ]

@@ -40,8 +40,8 @@ from robocal.cli.options import (
     Robot,
     Sep,
     as_cli_text,
+    length_vector,
     out_option,
-    parse_vector,
     resolve_model,
 )
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
@@ -234,12 +234,14 @@ DevicePoseOption = Annotated[
     typer.Option(
         "--device-pose",
         metavar='"x,y,z,roll,pitch,yaw"',
-        help="device pose in the robot base, mm and deg (Rz Ry Rx)",
+        help='device pose in the robot base with units, e.g. "2000,0,500mm,0,0,180deg" (Rz Ry Rx)',
     ),
 ]
 ToolOffsetOption = Annotated[
     str | None,
-    typer.Option("--tool-offset", metavar='"x,y,z"', help="observed point in the tool frame, mm"),
+    typer.Option(
+        "--tool-offset", metavar='"x,y,z"', help='observed point in the tool frame, e.g. "0,0,109mm"'
+    ),
 ]
 TrainOption = Annotated[
     float | None,
@@ -337,11 +339,13 @@ def _device(device: str, noise: str | None, device_pose: str | None, tool_offset
 
     kwargs = {}
     if device_pose is not None:
-        v = parse_vector(device_pose, 6, "--device-pose", "x,y,z,roll,pitch,yaw in mm and deg")
-        T_base_device = spatial.homogeneous(spatial.euler_to_matrix(np.radians(v[3:]), "xyz"), v[:3] / 1000)
+        from robocal.units import parse_quantities
+
+        v = np.array(parse_quantities(device_pose, ["length"] * 3 + ["angle"] * 3, "--device-pose"))
+        T_base_device = spatial.homogeneous(spatial.euler_to_matrix(v[3:], "xyz"), v[:3])
         kwargs["T_device_base"] = spatial.inverse(T_base_device)
     if tool_offset is not None:
-        kwargs["p_tool_target"] = parse_vector(tool_offset, 3, "--tool-offset", "x,y,z in mm") / 1000
+        kwargs["p_tool_target"] = length_vector(tool_offset, 3, "--tool-offset")
     dev = make_device(device, **kwargs)
     if noise is not None:
         sigma = parse_quantity_option(noise, "length", "--noise")

@@ -11,7 +11,11 @@
 
 The one model lookup (:func:`resolve_model`) and the one vector parser (:func:`parse_vector`)
 of the command line are here too: both call the library's (``robocal.model.catalog.find_model``,
-``robocal.spatial.parse_vector``) and turn its error into one line naming the option.
+``robocal.spatial.parse_vector``) and turn its error into one line naming the option.  Lengths
+and angles carry their units, one spelling in every command (:func:`length_vector`,
+:func:`frame_option`: ``"0,0,109mm"``, ``"0,0,0.1m,0,0,90deg"``; a bare non-zero length is
+refused), and joint values given in degrees without saying so are refused
+(:func:`joint_values`).
 
 Only typer is imported at the top (the command line starts fast).
 """
@@ -48,6 +52,9 @@ __all__ = [
     "Sep",
     "Workers",
     "as_cli_text",
+    "frame_option",
+    "joint_values",
+    "length_vector",
     "measure_option",
     "out_option",
     "parse_vector",
@@ -223,3 +230,72 @@ def tidy_help(command: Any) -> None:
     command.get_help_option = help_option
     for sub in getattr(command, "commands", {}).values():
         tidy_help(sub)
+
+
+def length_vector(text: str, count: int, option: str) -> np.ndarray:
+    """``count`` lengths (m) given to ``option`` with their unit (``"0,0,109mm"``,
+    ``"0,0,0.109m"``; :func:`robocal.units.parse_quantities`); exit 2 with one line for a
+    bare non-zero number, a bad unit or count."""
+    import numpy as np
+
+    from robocal.units import parse_quantities
+
+    try:
+        return np.array(parse_quantities(text, ["length"] * count, option))
+    except ValueError as err:
+        raise fail(str(err)) from None
+
+
+def frame_option(text: str | None, option: str, position_only: bool = False) -> np.ndarray | None:
+    """A frame given as ``"x,y,z,rx,ry,rz"`` with units (``"0,0,109mm,0,0,90deg"``; the
+    rotation a rotation vector) as a 4x4 transform (m), None for None.  ``position_only``:
+    ``"x,y,z"`` is accepted too (a point: the transform has no rotation)."""
+    if text is None:
+        return None
+    import numpy as np
+
+    from robocal import spatial
+    from robocal.units import parse_quantities
+
+    count = len(text.split(","))
+    kinds = ["length"] * 3 + ([] if position_only and count == 3 else ["angle"] * 3)
+    try:
+        v = np.array(parse_quantities(text, kinds, option))
+    except ValueError as err:
+        raise fail(str(err)) from None
+    rotation = spatial.rotvec_to_matrix(v[3:]) if len(v) == 6 else np.eye(3)
+    return spatial.homogeneous(rotation, v[:3])
+
+
+def joint_values(
+    text: str, model: Model, option: str, angle_unit: str = "rad", length_unit: str | None = None
+) -> np.ndarray:
+    """A joint configuration given to ``option`` (rad, m): values with or without units
+    (``"0,-90,90,0,90,0deg"``; unit-less revolute values in ``angle_unit``, prismatic ones
+    in ``length_unit``, or with a unit when that is None).  Exit 2 naming the joint when a
+    value in rad is beyond the joint's limits or beyond 4π, saying when it looks like
+    degrees (the measurement reader's check of joint columns)."""
+    import numpy as np
+
+    from robocal.measure.measurements import MAX_REVOLUTE_RAD
+    from robocal.units import parse_quantities
+
+    kinds = ["angle" if t == "revolute" else "length" for t in model.joint_types]
+    try:
+        bare = {"angle": angle_unit} | ({"length": length_unit} if length_unit else {})
+        q = np.array(parse_quantities(text, kinds, option, bare=bare))
+    except ValueError as err:
+        raise fail(f"{err} ({model.dof} joint values of {model.name})") from None
+    limits = model.joint_limits
+    as_rad = angle_unit == "rad" and "deg" not in text and "°" not in text
+    for j, (value, kind) in enumerate(zip(q, kinds, strict=True)):
+        inside = limits[j, 0] - 1e-9 <= value <= limits[j, 1] + 1e-9
+        if kind != "angle" or (inside and abs(value) <= MAX_REVOLUTE_RAD):
+            continue
+        degrees = as_rad and limits[j, 0] <= np.radians(value) <= limits[j, 1]
+        raise fail(
+            f"{option} {text!r}: {model.joint_names[j]} = {value:.6g} rad is beyond its limits "
+            f"[{limits[j, 0]:.4g}, {limits[j, 1]:.4g}] rad"
+            + (f"; looks like degrees: write {text.strip()}deg" if degrees else "")
+        )
+    return q

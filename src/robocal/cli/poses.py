@@ -25,7 +25,7 @@ import typer
 from rich.table import Table
 
 from robocal.cli import options
-from robocal.cli.options import Force, Robot, out_option, parse_vector, resolve_model
+from robocal.cli.options import Force, Robot, length_vector, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
 
 __all__ = ["MAX_POOL", "MAX_POSES", "register"]
@@ -46,8 +46,7 @@ class Method(StrEnum):
 def _region(text: str | None) -> np.ndarray | None:
     if text is None:
         return None
-    what = "six numbers in mm, 'xmin,ymin,zmin,xmax,ymax,zmax'"
-    box = parse_vector(text, 6, "--region", what).reshape(2, 3) * 1e-3
+    box = length_vector(text, 6, "--region").reshape(2, 3)
     if np.any(box[0] >= box[1]):
         raise fail(f"--region {text!r}: each minimum must be below its maximum")
     return box
@@ -83,7 +82,11 @@ KindOption = Annotated[
 ]
 RegionOption = Annotated[
     str | None,
-    typer.Option("--region", metavar='"xmin,ymin,zmin,xmax,ymax,zmax"', help="box the cube must lie in, mm"),
+    typer.Option(
+        "--region",
+        metavar='"xmin,ymin,zmin,xmax,ymax,zmax"',
+        help='box the cube must lie in, with a unit, e.g. "300,-400,200,900,400,800mm"',
+    ),
 ]
 
 

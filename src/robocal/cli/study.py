@@ -33,8 +33,8 @@ from robocal.cli.options import (
     Sep,
     Workers,
     as_cli_text,
+    length_vector,
     out_option,
-    parse_vector,
     robot_and_chain,
 )
 from robocal.console import console, err_console, fail, input_problem, safe
@@ -199,7 +199,7 @@ def fleet_command(
         raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
     calibrate_options: dict = {"method": method, "compliance": compliance, "residual": residual}
     if tool is not None:
-        calibrate_options["tool_guess"] = parse_vector(tool, 3, "--tool", "x,y,z in mm") * 1e-3
+        calibrate_options["tool_guess"] = length_vector(tool, 3, "--tool")
     read_options = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep)
     read_options |= dict(decimal=decimal, orientation=orientation, limits=limits, incomplete=incomplete)
     bar, update = _progress(not no_progress, "fleet")
