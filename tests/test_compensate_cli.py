@@ -70,6 +70,7 @@ def test_targets_in_the_cell_frame_land_on_target(cell, tmp_path):
         "predicted_error_after_mm",
         "expected_error_after_mm",
         "reachable",
+        "status",
     ]
     assert [r["name"] for r in rows] == [f"P{i}" for i in range(1, 9)]
     q = np.array([[float(r[f"q{j}"]) for j in range(1, 7)] for r in rows])

@@ -13,8 +13,13 @@ output (``-o``, CSV or ``.json``) holds ``name``, the corrected ``q1..qN``, the 
 ``nominal_q1..nominal_qN``, ``predicted_error_before_mm`` (the calibrated model's error
 at the nominal commands), ``predicted_error_after_mm`` (what the IK left against the
 calibrated model), ``expected_error_after_mm`` (the calibration's uncertainty and
-unexplained error at the corrected commands) and ``reachable``.  Exit status 1 when a
-target was not reached (the file is written all the same), 2 on bad input.
+unexplained error at the corrected commands), ``reachable`` and ``status``.  Every run
+prints a per-target table (predicted error before, correction, largest joint change,
+configuration, status and reason) and writes it beside the output as ``OUT.table.csv``.
+A target that cannot be corrected safely (:mod:`robocal.compensate.safety`: unreachable,
+a joint change beyond the calibration's bound, another configuration) is *refused*: its
+nominal command is written as is, it is named with its reason, and the exit status is 1
+unless ``--partial`` accepts partial output; 2 on bad input.
 """
 
 from __future__ import annotations
@@ -22,7 +27,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.table import Table
 
@@ -103,6 +107,13 @@ NominalOption = Annotated[
     str | None,
     typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
 ]
+PartialOption = Annotated[
+    bool,
+    typer.Option(
+        "--partial",
+        help="accept partial output: exit 0 although targets were refused (left as written)",
+    ),
+]
 Q0Option = Annotated[
     str | None,
     typer.Option(
@@ -128,10 +139,14 @@ def compensate_command(
     decimal: Decimal = ".",
     as_json: Json = False,
     force: Force = False,
+    partial: PartialOption = False,
 ) -> None:
     """Corrected joint commands that bring the calibrated robot onto an off-line program's targets."""
     if out is not None:
         refuse_overwrite(out, force, "output file")
+        from robocal.compensate.result import table_path
+
+        refuse_overwrite(table_path(out), force, "per-target table")
     from robocal.identify.calibrate import CalibrationResult
 
     if (targets is None) == (program is None):
@@ -162,22 +177,78 @@ def compensate_command(
     else:
         result, source_file = _filter_program(calibrated, model, program, nominal_model, kind, reader)
     if out is not None:
+        from robocal.compensate.result import table_path
+
         result.write(out, angle_unit=angle_unit, length_unit=length_unit)
+        result.write_table(table_path(out))
     if as_json:
         print(strict_json(result.to_dict(angle_unit, length_unit)))
     else:
         _print(result, model.name, source_file)
+        print_target_table(result.table())
         if out is not None:
-            console.print(f"wrote {out}", highlight=False)
-    if not result.reachable.all():
-        bad = [result.names[i] for i in np.flatnonzero(~result.reachable)]
+            console.print(f"wrote {out} and its per-target table {table_path(out).name}", highlight=False)
+    finish(result.table(), partial)
+
+
+def finish(rows: list[dict], partial: bool) -> None:
+    """Name every refused target with its reason; exit 1 when there is one, unless ``--partial``."""
+    refused = [r for r in rows if r["status"] == "refused"]
+    for r in rows:
+        if r["status"] == "damped":
+            console.print(f"damped: {safe(r['name'])}: {safe(r['reason'])}", highlight=False)
+    for r in refused:
         err_console.print(
-            f"[yellow]warning:[/] {len(bad)} target(s) not reached: {safe(', '.join(bad[:10]))}"
-            + (" ..." if len(bad) > 10 else ""),
+            f"[yellow]refused:[/] {safe(r['name'])}: {safe(r['reason'])} (left as written)",
             highlight=False,
             markup=True,
         )
+    unreached = [r["name"] for r in refused if "reach" in r["reason"]]
+    if unreached:
+        err_console.print(
+            f"[yellow]warning:[/] {len(unreached)} target(s) not reached: {safe(', '.join(unreached[:10]))}"
+            + (" ..." if len(unreached) > 10 else ""),
+            highlight=False,
+            markup=True,
+        )
+    if refused and not partial:
+        err_console.print(
+            f"error: {len(refused)} of {len(rows)} target(s) refused; the output holds them as written "
+            "(--partial accepts that)",
+            highlight=False,
+        )
         raise typer.Exit(code=1)
+
+
+#: rows of the per-target table printed in full; refused and damped rows always are
+_PRINTED_ROWS = 30
+
+
+def print_target_table(rows: list[dict]) -> None:
+    """The per-target table (:meth:`robocal.compensate.result.Compensation.table`)."""
+    flagged = [r for r in rows if r["status"] != "corrected"]
+    shown = flagged + [r for r in rows if r["status"] == "corrected"][: max(0, _PRINTED_ROWS - len(flagged))]
+    order = {id(r): k for k, r in enumerate(rows)}
+    shown.sort(key=lambda r: order[id(r)])
+    table = Table(title="per target", title_justify="left")
+    for col in ("target", "before mm", "correction mm", "largest joint change", "configuration", "status"):
+        table.add_column(col, justify="left" if col in ("target", "configuration", "status") else "right")
+
+    def num(v, digits: int = 4) -> str:
+        return "-" if v is None else f"{v:.{digits}f}"
+
+    for r in shown:
+        change = (
+            "-" if r["largest_joint_change"] is None else f"{r['largest_joint_change']:.4f} {r['joint_unit']}"
+        )
+        table.add_row(
+            safe(r["name"]), num(r["error_before_mm"]), num(r["correction_mm"]),
+            safe(f"{change} {r['joint']}"), safe(r["configuration"]), safe(r["status"]),
+        )  # fmt: skip
+    console.print(table)
+    if len(shown) < len(rows):
+        more = len(rows) - len(shown)
+        console.print(f"  ({more} more corrected targets in the table file)", highlight=False)
 
 
 def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: str, q_start, reader: dict):

@@ -61,9 +61,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
+from robocal.compensate import safety
 from robocal.compensate.result import Compensation
 from robocal.identify.calibrate import CalibrationResult
 from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
+from robocal.measure.ik_regularized import solve_regularized
 from robocal.model.chain import Model, Role
 
 __all__ = ["compensate_targets", "filter_program", "nominal_model"]
@@ -76,9 +78,10 @@ Frame = Literal["base", "measurement"]
 # ---------------------------------------------------------------------- models
 def nominal_model(result: CalibrationResult) -> Model:
     """The model the controller believed before calibration: ``result.model`` with every
-    estimated robot and tool parameter at its start value (``result.nominal``) and no
-    joint effects."""
-    names = set(result.model.names)
+    estimated robot parameter at its start value (``result.nominal``) and no joint
+    effects.  Its tool is the measured one the calibration identified (the controller's
+    TCP set to it): the error "before" is the robot's, not a change of tool."""
+    names = set(result.model.names) - {s.name for s in result.model.steps if s.role is Role.TOOL}
     start = {n: float(v) for n, v in zip(result.names, result.nominal, strict=True) if n in names}
     model = result.model.with_values(start)
     changes: dict[str, Any] = {"notes": (model.notes.replace("calibrated", "").strip() + " nominal").strip()}
@@ -212,7 +215,6 @@ def _default_kind(dof: int) -> TargetKind:
     return "pose" if dof >= 6 else ("axis" if dof == 5 else "position")
 
 
-
 # ---------------------------------------------------------------------- core
 def _names(names: Sequence[str] | None, n: int) -> tuple[str, ...]:
     if names is None:
@@ -238,42 +240,59 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     tool_axis: int,
     max_joint_change: float,
 ) -> Compensation:
-    """The calibrated-model IK from the nominal solution, and the bookkeeping."""
+    """The calibrated-model IK from the nominal solution (damped near singularities), the
+    invariants of :mod:`robocal.compensate.safety` (a refused target keeps its nominal
+    command), and the bookkeeping."""
+    opts = {"kind": kind, "tool_axis": tool_axis, "orientation_weight": orientation_weight}
     res = solve_ik(
-        setup.real,
-        T,
-        kind=kind,
-        q0=q_nominal,
-        restarts=0,
-        tol=tol,
-        tol_angle=tol_angle,
-        max_iter=max_iter,
-        tool_axis=tool_axis,
-        orientation_weight=orientation_weight,
-        joint_effects=setup.effects,
+        setup.real, T, q0=q_nominal, restarts=0, tol=tol, tol_angle=tol_angle, max_iter=max_iter,
+        joint_effects=setup.effects, **opts,
+    )  # fmt: skip
+    q, reached = res.q.copy(), res.reachable.copy()
+    sigma = safety.sigma_min(setup.real, q_nominal, setup.effects, kind, tool_axis)
+    near = sigma < safety.SINGULAR_SIGMA
+    bound = safety.joint_bound(setup.real, setup.nominal, setup.effects, kind, tool_axis)
+    if near.any():
+        damped = solve_regularized(
+            setup.real, T[near], q_nominal[near], damping=safety.DAMPING, joint_effects=setup.effects, **opts
+        )
+        revolute = np.array([t == "revolute" for t in setup.real.joint_types])
+        q[near] = q_nominal[near] + safety.limit_damped(damped.q - q_nominal[near], bound, revolute)
+    verdict = safety.judge(
+        setup.nominal, q, q_nominal, bound, near, reached, np.asarray(nominal_reachable, dtype=bool), sigma
     )
+    refused = np.array([st == "refused" for st in verdict.status], dtype=bool)
+    q[refused] = q_nominal[refused]  # left as written: the controller's own command
+    after, angle_after = _errors(_predict(setup, q), T, kind, tool_axis)
     before, angle_before = _errors(_predict(setup, q_nominal), T, kind, tool_axis)
     if not setup.has_nominal:
         before, angle_before = np.full(len(T), np.nan), np.full(len(T), np.nan)
-    change = np.abs(res.q - q_nominal).max(axis=1) if len(T) else np.zeros(0)
+    change = np.abs(q - q_nominal).max(axis=1) if len(T) else np.zeros(0)
+    moved = setup.nominal.fk(q)[:, :3, 3] - setup.nominal.fk(q_nominal)[:, :3, 3]
     return Compensation(
-        q=res.q,
+        q=q,
         q_nominal=q_nominal,
         targets=T,
         kind=kind,
         error_before=before,
-        error_after=res.position_error,
+        error_after=after,
         angle_before=angle_before,
-        angle_after=res.angle_error,
-        reachable=res.reachable,
+        angle_after=angle_after,
+        reachable=reached,
         nominal_reachable=np.asarray(nominal_reachable, dtype=bool),
         joint_change=change,
-        branch_kept=change <= max_joint_change,
+        branch_kept=verdict.config_kept & (change <= max_joint_change) & ~refused,
         names=names,
         joint_names=setup.real.joint_names,
         joint_types=setup.real.joint_types,
         iterations=res.iterations,
-        expected_error_after=setup.expected_error(res.q),
+        expected_error_after=setup.expected_error(q),
+        status=verdict.status,
+        reasons=verdict.reasons,
+        sigma_min=sigma,
+        configuration=verdict.configuration,
+        joint_bound=bound,
+        tool_correction=np.linalg.norm(moved, axis=1),
     )
 
 
@@ -310,7 +329,8 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
             ``(4, 4)`` ``T_frame_base``.
         q0: ``(dof,)`` or ``(n, dof)`` configuration(s) choosing the branch of the
             nominal IK (e.g. the robot's home or current configuration); default: the
-            IK's nearest-pool start.
+            first target's solution from the IK's nearest-pool start, for every target
+            (one configuration for all; restarts only for targets not reached from it).
         names: target names (default ``"1"``, ``"2"``, ...).
         joint_effects: override the joint effects ``q (m, dof) -> (m, dof, 3)`` (default:
             ``result.joint_perturbations`` for a result, none for a model).
@@ -321,7 +341,9 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
         orientation_weight: m per rad of orientation rows in the IK objective.
         tool_axis: tool axis (0, 1, 2) imposed by ``kind="axis"``.
         max_joint_change: a correction moving any joint by more than this (rad or m)
-            is reported as a change of configuration (``branch_kept`` false).
+            is reported as a change of configuration (``branch_kept`` false); the
+            calibration's own bound (:func:`robocal.compensate.safety.joint_bound`, at
+            most 5°) refuses such a correction.
 
     Returns:
         :class:`Compensation` with commands, nominal commands and predicted errors.
@@ -330,19 +352,13 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
     T, kind_ = _as_frames(targets, kind)
     T = _to_base(T, frame, setup)
     labels = _names(names, len(T))
-    nom = solve_ik(
-        setup.nominal,
-        T,
-        kind=kind_,
-        q0=q0,
-        restarts=restarts,
-        seed=seed,
-        tol=tol,
-        tol_angle=tol_angle,
-        max_iter=max_iter,
-        tool_axis=tool_axis,
-        orientation_weight=orientation_weight,
-    )
+    ik = {"kind": kind_, "seed": seed, "tol": tol, "tol_angle": tol_angle, "max_iter": max_iter}
+    ik |= {"tool_axis": tool_axis, "orientation_weight": orientation_weight}
+    if q0 is None and len(T) > 1:
+        # one configuration for the whole file: every target starts from the first one's
+        # solution (a wrist or elbow flip between neighbouring targets is never intended)
+        q0 = solve_ik(setup.nominal, T[:1], q0=None, restarts=restarts, **ik).q[0]
+    nom = solve_ik(setup.nominal, T, q0=q0, restarts=restarts, **ik)
     return _correct(
         setup,
         T,
@@ -422,5 +438,3 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
         tool_axis=tool_axis,
         max_joint_change=max_joint_change,
     )
-
-

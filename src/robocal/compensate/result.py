@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -20,7 +20,7 @@ from robocal.model.files import atomic_write_text
 from robocal.safe_output import csv_text, strict_json
 from robocal.units import joint_unit_factors
 
-__all__ = ["Compensation"]
+__all__ = ["TABLE_COLUMNS", "Compensation", "table_csv", "table_path"]
 
 Array = NDArray[np.float64]
 Calibrated = CalibrationResult | Model
@@ -57,6 +57,15 @@ class Compensation:
             unexplained (:meth:`CalibrationResult.expected_position_error`); NaN when only a
             bare model, with no uncertainty, was given.  ``error_after`` is only what the IK
             left against the calibrated model itself (below ``tol`` when reached).
+        status: ``(n,)`` ``"corrected"``, ``"damped"`` (near a singularity, a bounded
+            correction) or ``"refused"`` (``q`` is then ``q_nominal``: left as written);
+            see :mod:`robocal.compensate.safety`.
+        reasons: ``(n,)`` why a target was refused or damped (empty when corrected).
+        sigma_min: ``(n,)`` smallest singular value of the task Jacobian at ``q_nominal``.
+        configuration: ``(n,)`` the nominal command's configuration label.
+        joint_bound: ``(dof,)`` the largest joint change (rad, m) a correction may make.
+        tool_correction: ``(n,)`` how far (m) the corrected command moves the tool on the
+            controller's (nominal) model.
     """
 
     q: Array
@@ -76,15 +85,33 @@ class Compensation:
     joint_types: tuple[str, ...]
     iterations: NDArray[np.int64]
     expected_error_after: Array
+    status: tuple[str, ...] = ()
+    reasons: tuple[str, ...] = ()
+    sigma_min: Array = field(default_factory=lambda: np.zeros(0))
+    configuration: tuple[str, ...] = ()
+    joint_bound: Array = field(default_factory=lambda: np.zeros(0))
+    tool_correction: Array = field(default_factory=lambda: np.zeros(0))
 
     @property
     def n(self) -> int:
         return len(self.q)
 
     @property
+    def accepted(self) -> NDArray[np.bool_]:
+        """``(n,)`` the target's command is written corrected (or damped), not refused."""
+        if len(self.status) != self.n:
+            return self.reachable & self.branch_kept
+        return np.array([s != "refused" for s in self.status], dtype=bool)
+
+    @property
+    def refused(self) -> tuple[str, ...]:
+        """``"name: reason"`` of every refused target."""
+        return tuple(f"{self.names[i]}: {self.reasons[i]}" for i in np.flatnonzero(~self.accepted))
+
+    @property
     def success(self) -> bool:
-        """Every target reached in the nominal configuration branch."""
-        return bool(np.all(self.reachable & self.branch_kept))
+        """Every target corrected (or damped near a singularity) in the nominal configuration."""
+        return bool(np.all(self.accepted))
 
     @property
     def message(self) -> str:
@@ -142,6 +169,8 @@ class Compensation:
                 "expected_error_after_mm": _num(self.expected_error_after[i] * 1e3),
                 "reachable": bool(self.reachable[i]),
                 "branch_kept": bool(self.branch_kept[i]),
+                "status": _at(self.status, i, "corrected" if self.accepted[i] else "refused"),
+                "reason": _at(self.reasons, i, ""),
             }
             if self.kind != "position":
                 row["predicted_angle_error_before_deg"] = _num(math.degrees(self.angle_before[i]))
@@ -163,7 +192,7 @@ class Compensation:
         dof = self.q.shape[1]
         header = ["name", *(f"q{j + 1}" for j in range(dof)), *(f"nominal_q{j + 1}" for j in range(dof))]
         header += ["predicted_error_before_mm", "predicted_error_after_mm", "expected_error_after_mm"]
-        header.append("reachable")
+        header += ["reachable", "status"]
         pose = self.kind != "position"
         if pose:
             header += ["predicted_angle_error_before_deg", "predicted_angle_error_after_deg"]
@@ -179,6 +208,7 @@ class Compensation:
             row += [_fmt(self.error_before[i] * 1e3, 6), _fmt(self.error_after[i] * 1e3, 6)]
             row.append(_fmt(self.expected_error_after[i] * 1e3, 6))
             row.append("true" if self.reachable[i] else "false")
+            row.append(_at(self.status, i, "corrected" if self.accepted[i] else "refused"))
             if pose:
                 row += [
                     _fmt(math.degrees(self.angle_before[i]), 6),
@@ -186,6 +216,43 @@ class Compensation:
                 ]
             w.writerow(row)
         return buf.getvalue()
+
+    def table(self) -> list[dict[str, Any]]:
+        """The per-target table every run prints and writes beside its output: predicted
+        error before (mm, deg), the correction (tool mm on the controller's model), the
+        largest joint change (deg or mm, and which joint), the bound, sigma_min, the
+        configuration, the status and the reason."""
+        rows = []
+        for i, name in enumerate(self.names):
+            dq = np.abs(self.q[i] - self.q_nominal[i])
+            j = int(np.argmax(dq)) if dq.size else 0
+            revolute = not self.joint_types or self.joint_types[j] == "revolute"
+            f = 180 / math.pi if revolute else 1e3
+            rows.append(
+                {
+                    "name": name,
+                    "status": _at(self.status, i, "corrected" if self.accepted[i] else "refused"),
+                    "error_before_mm": _num(self.error_before[i] * 1e3),
+                    "angle_before_deg": _num(math.degrees(self.angle_before[i])),
+                    "correction_mm": _num(_at(self.tool_correction, i, math.nan) * 1e3),
+                    "largest_joint_change": _num(float(dq[j]) * f) if dq.size else None,
+                    "joint": self.joint_names[j] if self.joint_names else str(j + 1),
+                    "joint_unit": "deg" if revolute else "mm",
+                    "joint_bound": _num(_at(self.joint_bound, j, math.nan) * f),
+                    "sigma_min": _num(_at(self.sigma_min, i, math.nan)),
+                    "configuration": _at(self.configuration, i, "-"),
+                    "reason": _at(self.reasons, i, ""),
+                }
+            )
+        return rows
+
+    def table_csv(self) -> str:
+        """:meth:`table` as CSV text (strings escaped against spreadsheet formulas)."""
+        return table_csv(self.table())
+
+    def write_table(self, path: str | Path) -> Path:
+        """Write :meth:`table_csv` to ``path`` atomically."""
+        return atomic_write_text(Path(path), self.table_csv())
 
     def write(self, path: str | Path, angle_unit: str = "rad", length_unit: str = "mm") -> Path:
         """Write the corrected program to ``path`` atomically: JSON for a ``.json``
@@ -197,6 +264,51 @@ class Compensation:
         else:
             text = self.to_csv(angle_unit, length_unit)
         return atomic_write_text(path, text)
+
+
+TABLE_COLUMNS = (
+    "name",
+    "status",
+    "error_before_mm",
+    "angle_before_deg",
+    "correction_mm",
+    "largest_joint_change",
+    "joint",
+    "joint_unit",
+    "joint_bound",
+    "sigma_min",
+    "configuration",
+    "reason",
+)
+
+
+def table_csv(rows: list[dict[str, Any]]) -> str:
+    """Per-target table rows (:meth:`Compensation.table`) as CSV text; strings escaped."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(TABLE_COLUMNS)
+    for row in rows:
+        cells = []
+        for col in TABLE_COLUMNS:
+            v = row.get(col)
+            if v is None:
+                cells.append("")
+            elif isinstance(v, float):
+                cells.append(_fmt(v, 6))
+            else:
+                cells.append(csv_text(str(v)))
+        w.writerow(cells)
+    return buf.getvalue()
+
+
+def table_path(out: str | Path) -> Path:
+    """Where the per-target table of an output file goes: beside it, ``NAME.table.csv``."""
+    out = Path(out)
+    return out.with_name(out.name + ".table.csv")
+
+
+def _at(values: Any, i: int, default: Any) -> Any:
+    return values[i] if len(values) > i else default
 
 
 def _num(v: float) -> float | None:

@@ -1,0 +1,251 @@
+"""The invariants every command robocal writes must hold (issue 31), checked per target.
+
+A corrected command is written only when it is the nominal command moved a little, in the
+same arm configuration; otherwise the target is *refused* and left as written (the
+nominal command), named with its reason, and the CLI exits non-zero unless ``--partial``.
+
+* **Joint-change bound** (:func:`joint_bound`): the largest correction the calibration
+  implies over the workspace, times :data:`BOUND_FACTOR`.  Derived per calibration from
+  :data:`BOUND_SAMPLES` seeded random configurations within the joint limits, away from
+  singularities (``σ_min ≥`` :data:`SINGULAR_SIGMA`): their nominal tool frames are solved
+  on the calibrated model from the nominal joints; ``c`` is the largest ``|Δq|`` over
+  those samples and the revolute (prismatic) joints.  The bound is
+  ``clip(3 c, 0.25°, 5°)`` for revolute joints and ``clip(3 c, 0.5 mm, 5 mm)`` for
+  prismatic ones: a calibrated arm never has a joint moved by more than 5°, however the
+  corrections were sampled.  A correction beyond it is refused (a 2π winding change or a
+  jump to another IK branch is always far beyond it).
+* **Singularities** (:func:`sigma_min`): the smallest singular value of the task Jacobian
+  at the nominal command (position rows in m, orientation rows in rad, 1 m per rad — the
+  IK's weighting; ``"axis"`` targets with their two orientation rows across the tool
+  axis).  Below :data:`SINGULAR_SIGMA` the exact correction can be arbitrarily large
+  along the singular direction, so the correction is *damped*: the regularised IK
+  (:func:`robocal.measure.ik_regularized.solve_regularized`, ``λ =`` :data:`DAMPING`)
+  then scaled down, when needed, so that no joint moves more than the bound and no
+  revolute joint more than :data:`MAX_DAMPED` rad.
+* **Configuration** (:func:`configurations`): for arms with 6 or more joints, where the
+  wrist centre is against axis 1 (front/back), against the lower arm (elbow up/down) and
+  the sign of joint 5 (wrist) — the configuration KUKA's status and ABB's ``cfx`` encode.
+  A correction that changes one of them from one side of its boundary to the other, both
+  farther than :data:`BOUNDARY_M` / :data:`BOUNDARY_RAD` from it, is refused; near a
+  singularity the damped, bounded correction may cross it by a hair.  (Away from
+  singularities two configurations are far apart in joint space, so the joint-change bound
+  alone already keeps the branch; this check is the second, independent guard.)
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.measure.ik import PerturbationFunction, TargetKind, random_configurations, solve_ik
+from robocal.model.chain import Model
+
+__all__ = [
+    "BOUND_FACTOR",
+    "DAMPING",
+    "MAX_DAMPED",
+    "SINGULAR_SIGMA",
+    "Verdict",
+    "configurations",
+    "joint_bound",
+    "judge",
+    "sigma_min",
+]
+
+Array = NDArray[np.float64]
+
+#: σ_min (1 m per rad) below which a target counts as near a singularity (UR10: |q5| < ~1.8°)
+SINGULAR_SIGMA = 0.02
+#: λ of the damped correction near a singularity (same units as σ)
+DAMPING = 0.02
+#: rad: the largest revolute-joint move of a damped correction
+MAX_DAMPED = 0.1
+#: the joint-change bound is this many times the largest correction sampled over the workspace
+BOUND_FACTOR = 3.0
+#: configurations sampled to derive the bound
+BOUND_SAMPLES = 64
+_REVOLUTE_CLIP = (math.radians(0.25), math.radians(5.0))  # rad
+_PRISMATIC_CLIP = (0.5e-3, 5e-3)  # m
+#: m: the wrist centre this close to axis 1 or to the lower arm's line is on a boundary (a
+#: UR's wrist centre crosses axis 1 without any singularity: a hair is no configuration change)
+BOUNDARY_M = 5e-3
+#: rad: joint 5 this close to 0 is on the wrist boundary
+BOUNDARY_RAD = 1e-2
+
+
+def _task_jacobian(
+    model: Model, q: Array, effects: PerturbationFunction | None, kind: TargetKind, tool_axis: int
+) -> Array:
+    """``(n, rows, dof)`` Jacobian of the imposed rows: position (m) and orientation (rad)."""
+    d = None if effects is None else effects(q)
+    J = model.joint_jacobian(q, d)
+    if kind == "position":
+        return J[:, :3]
+    if kind == "pose":
+        return J
+    a = model.fk(q, d)[:, :3, tool_axis]  # the tool axis; orientation rows across it only
+    helper = np.where(np.abs(a[:, :1]) < 0.9, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+    u = np.cross(a, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(a, u)
+    basis = np.stack([u, v], axis=1)  # (n, 2, 3)
+    return np.concatenate([J[:, :3], basis @ J[:, 3:]], axis=1)
+
+
+def sigma_min(
+    model: Model, q: Array, effects: PerturbationFunction | None, kind: TargetKind, tool_axis: int = 2
+) -> Array:
+    """``(n,)`` smallest singular value of the task Jacobian at ``q`` (module docstring)."""
+    if not len(q):
+        return np.zeros(0)
+    J = _task_jacobian(model, np.asarray(q, dtype=float), effects, kind, tool_axis)
+    return np.linalg.svd(J, compute_uv=False)[:, -1]
+
+
+_BOUNDS: OrderedDict[tuple, Array] = OrderedDict()
+
+
+def joint_bound(
+    real: Model, nominal: Model, effects: PerturbationFunction | None, kind: TargetKind, tool_axis: int = 2
+) -> Array:
+    """``(dof,)`` the largest joint change (rad, m) a correction may make (module docstring);
+    cached per pair of models and target kind."""
+    key = (real, nominal, kind, tool_axis)
+    if key in _BOUNDS:
+        _BOUNDS.move_to_end(key)
+        return _BOUNDS[key]
+    q = random_configurations(nominal, BOUND_SAMPLES, np.random.default_rng(31))
+    q = q[sigma_min(nominal, q, None, kind, tool_axis) >= SINGULAR_SIGMA]
+    revolute = np.array([t == "revolute" for t in real.joint_types])
+    worst = np.zeros(2)  # revolute, prismatic
+    if len(q):
+        T = nominal.fk(q)
+        goal = T[:, :3, 3] if kind == "position" else T
+        res = solve_ik(real, goal, kind=kind, q0=q, restarts=0, tool_axis=tool_axis, joint_effects=effects)
+        dq = np.abs(res.q - q)[res.reachable]
+        if len(dq):
+            worst = np.array([dq[:, revolute].max(initial=0.0), dq[:, ~revolute].max(initial=0.0)])
+    bound = np.where(
+        revolute,
+        np.clip(BOUND_FACTOR * worst[0], *_REVOLUTE_CLIP),
+        np.clip(BOUND_FACTOR * worst[1], *_PRISMATIC_CLIP),
+    )
+    _BOUNDS[key] = bound
+    if len(_BOUNDS) > 16:
+        _BOUNDS.popitem(last=False)
+    return bound
+
+
+def _sides(model: Model, q: Array) -> Array:
+    """``(n, 3)`` signed configuration quantities (front m, elbow m, joint 5 rad); NaN for
+    arms with fewer than 6 joints."""
+    if model.dof < 6:
+        return np.full((len(q), 3), np.nan)
+    from robocal.compensate.program_config import _arm_sides  # the KUKA/ABB definitions
+
+    out = np.empty((len(q), 3))
+    for i, qi in enumerate(q):
+        out[i, :2] = _arm_sides(model, qi)
+        out[i, 2] = qi[4]
+    return out
+
+
+def _label(s: Array) -> str:
+    if np.isnan(s).any():
+        return "-"
+    bands = (BOUNDARY_M, BOUNDARY_M, BOUNDARY_RAD)
+    names = (("back", "front"), ("down", "up"), ("q5-", "q5+"))
+    parts = [
+        f"{pair[1] if v > 0 else pair[0]}{'~' if abs(v) < band else ''}"
+        for v, band, pair in zip(s, bands, names, strict=True)
+    ]
+    return "/".join(parts)
+
+
+def configurations(model: Model, q: Array) -> tuple[str, ...]:
+    """Configuration labels ``front|back/up|down/q5+|q5-`` of joints ``q`` (``~``: on the
+    boundary; ``-`` for arms with fewer than 6 joints)."""
+    return tuple(_label(s) for s in _sides(model, np.asarray(q, dtype=float).reshape(-1, model.dof)))
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Per target: ``status`` (``corrected``, ``damped`` or ``refused``), the reason (empty
+    when corrected), whether the configuration was kept, and the configuration labels."""
+
+    status: tuple[str, ...]
+    reasons: tuple[str, ...]
+    config_kept: NDArray[np.bool_]
+    configuration: tuple[str, ...]
+
+
+def _config_kept(nominal: Model, q: Array, q_nom: Array, near: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    a, b = _sides(nominal, q_nom), _sides(nominal, q)
+    bands = np.array([BOUNDARY_M, BOUNDARY_M, BOUNDARY_RAD])
+    same = (np.sign(a) == np.sign(b)) | (np.abs(a) < bands) | (np.abs(b) < bands) | np.isnan(a)
+    return same.all(axis=1) | near
+
+
+def judge(
+    nominal: Model,
+    q: Array,
+    q_nom: Array,
+    bound: Array,
+    near: NDArray[np.bool_],
+    reached: NDArray[np.bool_],
+    nominal_reached: NDArray[np.bool_],
+    sigma: Array,
+) -> Verdict:
+    """Every target's status and reason (module docstring)."""
+    kept = _config_kept(nominal, q, q_nom, near)
+    labels = configurations(nominal, q_nom)
+    status, reasons = [], []
+    for i in range(len(q)):
+        why = _refusal(nominal, q[i], q_nom[i], bound, bool(near[i]), bool(reached[i]), bool(kept[i]))
+        if not nominal_reached[i]:
+            why = "the controller's model does not reach it (no nominal command)"
+        if why:
+            status.append("refused")
+        elif near[i]:
+            status.append("damped")
+            why = f"near a singularity (sigma_min {sigma[i]:.2g} < {SINGULAR_SIGMA:g}): correction damped"
+        else:
+            status.append("corrected")
+        reasons.append(why)
+    return Verdict(tuple(status), tuple(reasons), kept, labels)
+
+
+def _refusal(
+    nominal: Model, q: Array, q_nom: Array, bound: Array, near: bool, reached: bool, kept: bool
+) -> str:
+    """Why one target's correction ``q`` is refused (empty: it is not)."""
+    dq = np.abs(q - q_nom)
+    j = int(np.argmax(dq / bound))
+    if not (reached or near):
+        return "not reachable by the calibrated robot"
+    if dq[j] > bound[j] * (1 + 1e-9):
+        return (
+            f"joint {j + 1} would move {_amount(dq[j], nominal, j)} (bound {_amount(bound[j], nominal, j)})"
+        )
+    if not kept:
+        now = configurations(nominal, q)[0]
+        return f"the correction changes the configuration ({configurations(nominal, q_nom)[0]} -> {now})"
+    return ""
+
+
+def _amount(v: float, model: Model, j: int) -> str:
+    if model.joint_types[j] == "revolute":
+        return f"{math.degrees(v):.3g} deg"
+    return f"{v * 1e3:.3g} mm"
+
+
+def limit_damped(dq: Array, bound: Array, revolute: NDArray[np.bool_]) -> Array:
+    """``(m, dof)`` damped corrections scaled down (direction kept) so that no joint exceeds
+    ``bound`` and no revolute joint :data:`MAX_DAMPED`."""
+    cap = np.where(revolute, np.minimum(bound, MAX_DAMPED), bound)
+    ratio = (np.abs(dq) / cap).max(axis=1, initial=0.0)
+    return dq / np.maximum(ratio, 1.0)[:, None]
