@@ -70,7 +70,8 @@ def test_the_calibrate_command_names_a_planted_lock_in_one_line(tmp_path):
     os.symlink(victim, tmp_path / ".cal.lock")
     data = tmp_path / "m.csv"
     data.write_text("q1,q2,q3,q4,q5,q6,x,y,z\n")
-    result = CliRunner().invoke(app, ["calibrate", "ur10", "--data", str(data), "--out", str(tmp_path / "cal")])
+    args = ["calibrate", "ur10", "--data", str(data), "--out", str(tmp_path / "cal")]
+    result = CliRunner().invoke(app, args)
     assert result.exit_code == 2
     assert "Traceback" not in result.output and ".cal.lock" in result.stderr
     assert victim.read_text() == "precious\n"
@@ -120,7 +121,7 @@ def test_a_users_model_in_the_output_folder_is_never_replaced(tmp_path):
     folder.mkdir()
     (folder / "model.yaml").write_text("robocal_model: 1\nname: mine\n")
     (folder / "report.html").write_text("<p>my report</p>")
-    with pytest.raises(ForeignFileError, match="model.yaml"):
+    with pytest.raises(ForeignFileError, match=r"model\.yaml"):
         _write_result(folder)
     assert (folder / "model.yaml").read_text() == "robocal_model: 1\nname: mine\n"
     assert (folder / "report.html").read_text() == "<p>my report</p>"
@@ -183,3 +184,70 @@ def test_the_calibrate_command_refuses_to_replace_its_input_model(tmp_path):
     assert "model.yaml" in result.stderr and "Traceback" not in result.output
     assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
     assert sorted(os.listdir(tmp_path)) == ["d.csv", "m"]
+
+
+# ------------------------------------------------------------------ Dask: consent and caps
+def _study_file(tmp_path: Path, **dask) -> Path:
+    import yaml
+
+    doc = {
+        "robocal_study": 1,
+        "name": "t",
+        "robot": "ur10",
+        "robots": 2,
+        "seed": 3,
+        "pose_sets": [{"name": "r30", "kind": "random", "n": 30}],
+        "devices": [{"name": "t20", "kind": "laser-tracker", "noise": "0.02mm"}],
+        "validation": {"n": 40},
+        "dask": dask,
+    }
+    path = tmp_path / "study.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_a_study_files_scheduler_opens_no_connection_without_the_command_line(tmp_path):
+    import socket
+
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(1)
+        listener.settimeout(0.5)
+        port = listener.getsockname()[1]
+        config = _study_file(tmp_path, scheduler=f"tcp://127.0.0.1:{port}")
+        args = ["study", str(config), "--out", str(tmp_path / "s"), "--no-progress"]
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 2
+        assert "--scheduler" in result.stderr and "Traceback" not in result.output
+        with pytest.raises(TimeoutError):  # nobody knocked
+            listener.accept()
+    assert not (tmp_path / "s").exists()  # refused before anything was written
+
+
+def test_local_workers_are_capped_before_anything_is_written(tmp_path):
+    from robocal.study import StudyError, run_study
+    from robocal.study.cluster import max_local_workers
+
+    config = _study_file(tmp_path)
+    with pytest.raises(StudyError, match=str(max_local_workers())):
+        run_study(config, tmp_path / "s", workers=100_000)
+    assert not (tmp_path / "s").exists()
+    with pytest.raises(StudyError, match="--workers"):
+        run_study(config, tmp_path / "s", workers=max_local_workers() + 1)
+
+
+def test_a_refused_scheduler_port_ends_with_one_clear_error(tmp_path):
+    import socket
+
+    from robocal.study import StudyError
+    from robocal.study.cluster import executor_for
+
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    with pytest.raises(StudyError, match=f"tcp://127.0.0.1:{port}"):
+        executor_for(None, f"tcp://127.0.0.1:{port}")

@@ -39,9 +39,10 @@ def _rows(path: Path) -> dict[str, dict[str, str]]:
 
 
 def test_the_study_file_points_the_study_at_a_scheduler(tmp_path):
-    """``dask: {scheduler: ADDRESS}`` in the study file: the study runs on that cluster's workers
-    (here an in-process cluster), with the rows of a run in this process; the address is not
-    part of the study's identity (the same study resumes wherever it runs)."""
+    """``dask: {scheduler: ADDRESS}`` in the study file, named by the call: the study runs on
+    that cluster's workers (here an in-process cluster), with the rows of a run in this
+    process; the address is not part of the study's identity (the same study resumes
+    wherever it runs)."""
     from distributed import LocalCluster
 
     reference = _rows(run_study(_config(), tmp_path / "ref", workers=0).out / "results.csv")
@@ -49,7 +50,8 @@ def test_the_study_file_points_the_study_at_a_scheduler(tmp_path):
         doc = _config(dask={"scheduler": c.scheduler_address}).model_dump(mode="json")
         path = tmp_path / "study.yaml"
         path.write_text(yaml.safe_dump(doc))
-        run = run_study(study.load_study_config(path), tmp_path / "dask")
+        # the command line names the file's scheduler (a study file alone never connects)
+        run = run_study(study.load_study_config(path), tmp_path / "dask", scheduler=c.scheduler_address)
         assert run.workers == 1 and run.computed == 3
     rows = _rows(tmp_path / "dask" / "results.csv")
     assert rows.keys() == reference.keys()

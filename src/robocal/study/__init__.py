@@ -17,8 +17,10 @@ resumable.
 
 Where the work runs (both): ``workers=0`` in this process; ``workers=None`` (default)
 a Dask ``LocalCluster`` with one single-threaded worker process per core; ``workers=N``
-N processes; ``scheduler="tcp://host:8786"`` an existing Dask cluster (whose workers
-need robocal installed and, for fleets, the files on a shared path).  Results are
+N processes (at most :data:`~robocal.study.cluster.MAX_WORKERS_PER_CORE` per core);
+``scheduler="tcp://host:8786"`` an existing Dask cluster (whose workers need robocal
+installed and, for fleets, the files on a shared path), given up after
+:data:`~robocal.study.cluster.CONNECT_TIMEOUT_S` seconds when it does not answer.  Results are
 gathered by the client as they complete and written there, by one writer.
 
 Two calibration engines compute the same thing:

@@ -9,6 +9,33 @@ from typing import Any
 
 from robocal.study.config import StudyError
 
+#: local worker processes per core at most: one per core is the default (each single-threaded
+#: worker keeps a core busy); more only contend, and each costs ~150 MB and a second to start
+MAX_WORKERS_PER_CORE = 4
+
+#: seconds to reach a Dask scheduler before giving up (Dask retries a refused port until
+#: then): an address that does not answer ends the command, not a 30 s wait
+CONNECT_TIMEOUT_S = 5
+
+
+def max_local_workers() -> int:
+    """The most worker processes of a local cluster on this machine
+    (:data:`MAX_WORKERS_PER_CORE` per core)."""
+    return MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)
+
+
+def check_workers(workers: int) -> int:
+    """``workers`` when a local cluster may have that many processes; else
+    :class:`StudyError` naming the limit."""
+    if workers < 0:
+        raise StudyError(f"--workers {workers}: give 1 or more (0 runs in this process)")
+    if workers > max_local_workers():
+        raise StudyError(
+            f"--workers {workers}: at most {max_local_workers()} local worker processes on this machine "
+            f"({MAX_WORKERS_PER_CORE} per core); for more, start a Dask cluster and give --scheduler"
+        )
+    return workers
+
 
 def _warm_up() -> bool:
     import contextlib
@@ -92,6 +119,24 @@ def local_cluster(workers: int | None = None):
                 os.environ[k] = v
 
 
+def _connect(scheduler: str):
+    """A client of the Dask scheduler at ``scheduler``, or :class:`StudyError` after
+    :data:`CONNECT_TIMEOUT_S` seconds (refused, unreachable, or not an address)."""
+    import dask
+    from distributed import Client
+
+    timeout = f"{CONNECT_TIMEOUT_S}s"
+    try:
+        with dask.config.set({"distributed.comm.timeouts.connect": timeout}):
+            return Client(scheduler, timeout=timeout)
+    except (OSError, ValueError, TimeoutError) as err:  # unreachable, or not an address Dask knows
+        why = " ".join(str(err).split()) or type(err).__name__
+        raise StudyError(
+            f"Dask scheduler {scheduler}: not reached within {CONNECT_TIMEOUT_S} s ({why}); "
+            "check the address and that the scheduler runs"
+        ) from None
+
+
 class _Executor:
     """In-process execution or a Dask client (local cluster or a scheduler address)."""
 
@@ -104,15 +149,10 @@ class _Executor:
         from distributed import Client
 
         if scheduler is not None:
-            try:
-                self.client = Client(scheduler, timeout="30s")
-            except (OSError, ValueError) as err:  # unreachable, or not an address Dask knows
-                raise StudyError(f"Dask scheduler {scheduler}: {' '.join(str(err).split())}") from None
+            self.client = _connect(scheduler)
             self.workers = len(self.client.scheduler_info().get("workers", {}))
         else:
-            n = workers if workers is not None else (os.cpu_count() or 1)
-            if n < 1:
-                raise StudyError(f"workers={n}: give 1 or more (0 runs in this process)")
+            n = check_workers(workers if workers is not None else (os.cpu_count() or 1))
             self.cluster = local_cluster(n)
             self.client = Client(self.cluster)
             self.workers = n

@@ -68,7 +68,9 @@ class _Validation(BaseModel):
 
 
 class _Dask(BaseModel):
-    """Where a study runs, unless the call (``--scheduler``/``--workers``) says otherwise."""
+    """Where a study runs, unless the call (``--scheduler``/``--workers``) says otherwise; a
+    ``scheduler`` here is only a note: the call must name it (``--scheduler``) before robocal
+    connects to it (a study file never opens a network connection by itself)."""
 
     model_config = _Config
     scheduler: str | None = Field(default=None, min_length=1)
@@ -109,8 +111,8 @@ class StudyConfig(BaseModel):
         engine: auto                # auto | batched | calibrate
         residual: none              # none | auto | joint_fourier (rc.calibrate's; not none: engine calibrate)
         chunk: 50                   # robots per task
-        dask: {scheduler: "tcp://host:8786"}   # an existing Dask cluster (or {workers: 2}:
-                                    # a local one); default a local cluster, one worker per core
+        dask: {workers: 2}          # a local cluster of 2 processes; default one per core
+                                    # ({scheduler: ADDRESS}: used only with --scheduler ADDRESS)
     """
 
     model_config = _Config

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from robocal.model.chain import Model
-from robocal.study.cluster import _Executor, executor_for
+from robocal.study.cluster import _Executor, check_workers, executor_for
 from robocal.study.config import StudyError
 from robocal.study.table import _Table
 from robocal.study.tasks import FIT_COLUMNS, _fill_fit, _stats
@@ -145,6 +145,8 @@ def run_fleet(  # noqa: PLR0913 - public keyword options, documented in README a
             orientations and ``calibrate_options`` do not say ``measure="position"``)
             instead of ``model`` as it is.
     """
+    if scheduler is None and client is None and workers:
+        check_workers(workers)  # before anything is written
     directory = Path(directory)
     files = _measurement_files(directory, pattern)
     out = Path(out) if out is not None else directory / "calibrated"

@@ -12,7 +12,7 @@ from typing import Any
 import yaml
 
 from robocal.model.files import atomic_write_text
-from robocal.study.cluster import _Executor, executor_for
+from robocal.study.cluster import _Executor, check_workers, executor_for
 from robocal.study.config import Case, StudyConfig, StudyError, load_study_config, study_cases
 from robocal.study.prepare import _prepare, _Prepared
 from robocal.study.summary import write_summary
@@ -96,8 +96,9 @@ def run_study(
             (one row per case, :data:`RESULT_COLUMNS`), ``summary.json``, ``summary.png``.
         workers: Dask worker processes of a local cluster (default: the study file's
             ``dask.workers``, else one per core); 0 runs in this process.
-        scheduler: address of a running Dask scheduler (instead of a local cluster;
-            default: the study file's ``dask.scheduler``).
+        scheduler: address of a running Dask scheduler (instead of a local cluster).  A
+            study file's ``dask.scheduler`` is used only when named here: a study file alone
+            never opens a network connection (:class:`StudyError` otherwise).
         force: start over when ``out`` holds a study with another configuration (its
             results are deleted); without it such a directory is refused.
         robots: run only the first N robots of the configuration (a smaller study with
@@ -112,6 +113,7 @@ def run_study(
         StudyError: bad configuration, or ``out`` holds another study (without ``force``).
     """
     config = _limited(config, robots)
+    scheduler, workers = _where(config, scheduler, workers, client)  # refused before anything is written
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _claim_directory(out, config, force)
@@ -121,8 +123,6 @@ def run_study(
     cases = study_cases(config)
     done = {c.key for c in cases if c.key in table.rows and table.rows[c.key]["status"] != "error"}
     t0 = time.perf_counter()
-    if scheduler is None and workers is None:  # the call decides, else the study file
-        scheduler, workers = config.dask.scheduler, config.dask.workers
     executor = executor_for(workers, scheduler, client)
     chunks = _chunks(prep, [c for c in cases if c.key not in done], config.chunk)
     _prime(executor, chunks)
@@ -152,6 +152,27 @@ def run_study(
         engine=prep.engine,
         summary=write_summary(out, config, mine, seconds, computed),
     )
+
+
+def _where(
+    config: StudyConfig, scheduler: str | None, workers: int | None, client: Any
+) -> tuple[str | None, int | None]:
+    """Where the study runs: the call's ``scheduler`` / ``workers`` / ``client``, else the
+    study file's ``dask.workers``.  A study file's ``dask.scheduler`` never opens a network
+    connection by itself (a Dask connection unpickles what the scheduler sends): the call
+    must name that scheduler (``--scheduler``)."""
+    local = scheduler is None and client is None
+    if local and workers is None:
+        if config.dask.scheduler is not None:
+            raise StudyError(
+                f"the study file names the Dask scheduler {config.dask.scheduler}; a study file does "
+                f"not connect to a network by itself: give --scheduler {config.dask.scheduler} to run "
+                "there, or --workers N for a local cluster (0: this process)"
+            )
+        workers = config.dask.workers
+    if local and workers:
+        check_workers(workers)
+    return scheduler, workers
 
 
 def _limited(config: StudyConfig | str | os.PathLike[str], robots: int | None) -> StudyConfig:
