@@ -197,11 +197,11 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
     folder = tmp_path / "cal"
     result.save(folder)
     out = tmp_path / "pick.script"
-    res = runner.invoke(
-        app, ["filter", str(folder), str(EXAMPLES / "pick.script"), "-o", str(out)]
+    res = runner.invoke(  # a probe far from the measured tool the calibration identified: refused
+        app, ["filter", str(folder), str(EXAMPLES / "pick.script"), "--probe", "0,0,130mm", "-o", str(out)]
     )
-    assert res.exit_code == 2 and "--probe" in res.output and not out.exists()  # position-only calibration
-    assert "pick.script: line" in " ".join(res.output.split())
+    assert res.exit_code == 2 and "--probe" in res.output and not out.exists()
+    assert "130.00" in res.output and "apart" in res.output  # both values named
     res = runner.invoke(
         app,
         [
@@ -210,9 +210,7 @@ def test_cli_filter_writes_the_corrected_program(cell, tmp_path):
             str(EXAMPLES / "pick.script"),
             "-o",
             str(out),
-            "--probe",
-            "0,0,0.1m",
-        ],
+        ],  # no --probe: the measured tool the calibration identified
     )
     assert res.exit_code == 0, res.output
     text = " ".join(res.output.split())
@@ -408,7 +406,7 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     result.save(folder)
     path = tmp_path / "far.script"
     path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
-    args = ["filter", str(folder), str(path), "--probe", "0,0,0.1m", "-o"]
+    args = ["filter", str(folder), str(path), "-o"]
     res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
     assert res.exit_code == 0
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())

@@ -249,6 +249,12 @@ def filter_command(
         raise fail(f"-o {out}: write a {language} program with the suffix of {program.name}")
     calibrated = _load(calibration)
     nominal_model = None if nominal is None else resolve_model(nominal)
+    from robocal.identify.measured_tool import probe_for
+
+    try:  # the calibration's measured tool unless --probe says otherwise; a disagreeing one refused
+        probe_value = probe_for(calibrated, _probe_option(probe), "--probe")
+    except ValueError as err:
+        raise fail(str(err)) from None
     try:
         result = filter_program_file(
             program,
@@ -257,7 +263,7 @@ def filter_command(
             nominal=nominal_model,
             tool=_frame_option(tool, "--tool"),
             base=_frame_option(base, "--base"),
-            probe=_probe_option(probe),
+            probe=probe_value,
             length_unit=length_unit,
             angle_unit=angle_unit,
             config_dat=config_dat,

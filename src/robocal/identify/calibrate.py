@@ -274,10 +274,29 @@ def calibrate(
     if model.residual is not None:  # a calibrated model calibrated again: its residual is refitted
         model = dataclasses.replace(model, residual=None)
     if residual == "none":
-        return calibrate_physics(model, data, method, physics)
+        return _with_tool_facts(calibrate_physics(model, data, method, physics), physics.setup)
     from robocal.identify.residual import calibrate_with_residual
 
-    return calibrate_with_residual(
+    result = calibrate_with_residual(
         calibrate_physics, model, data, method, physics.keywords(),
         kind=residual, harmonics=residual_harmonics, folds=cv_folds,
     )  # fmt: skip
+    return _with_tool_facts(result, physics.setup)
+
+
+def _with_tool_facts(result: CalibrationResult, setup: Setup) -> CalibrationResult:
+    """The result with its measured tool recorded (``records["measured_tool"]``, with the
+    stated start value) and warned about: a start value the fit moved far, and the
+    parameters and tool components these poses could not determine
+    (:mod:`robocal.identify.measured_tool`)."""
+    from robocal.identify.measured_tool import measured_tool, tool_start_warnings, undetermined_warnings
+
+    fitted = isinstance(setup.tool, str) and setup.tool == "fit"
+    tool = measured_tool(result, setup.tool_guess if fitted and setup.tool_guess is not None else None)
+    found = [
+        CalibrationWarning(c, m)
+        for c, m in (*tool_start_warnings(tool), *undetermined_warnings(result, tool))
+    ]
+    known = {w.message for w in result.warnings}
+    result = result.with_warnings(*[w for w in found if w.message not in known])
+    return result if tool is None else result.with_records(measured_tool=tool.to_dict())

@@ -1,0 +1,283 @@
+"""The measured tool (probe) a calibration identified, and what the poses left undetermined.
+
+A calibration identifies the measured point (position measurements) or frame (pose
+measurements) on the robot's flange: the ``tcp_*`` steps appended to ``result.model``.
+Its position on the flange, with its covariance, is :class:`MeasuredTool`
+(:func:`measured_tool`): stored in ``result.json`` (``measured_tool``), used by
+``robocal filter`` and ``robocal compensate`` unless told otherwise, and compared with a
+tool the user states (:func:`check_tool`): one that differs from the identified tool by
+more than :data:`AGREE_SIGMAS` σ *and* :data:`AGREE_FLOOR_M` is refused, naming both.
+
+The flange is the controller's: the complete model keeps the flange's offset along the
+last axis (``tool_z``, UR's d6) at its nominal value, since position measurements cannot
+tell it from the tool's length (it is reported as absorbed by ``tcp_z``), so the
+identified tool is the flange-to-TCP vector as the controller understands it.
+
+:func:`tool_start_warnings` reports a stated start value the fit moved by more than
+:data:`START_REPORT_M` or 3σ; :func:`undetermined_warnings` the parameters the pose
+set could not determine (kept at their start value, or a tool component whose σ exceeds
+:data:`UNDETERMINED_STD_M`, e.g. the tool length from poses with one tool orientation).
+Units: SI (m) unless a name says mm.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal import spatial
+from robocal.model.chain import Model, Role
+
+__all__ = [
+    "AGREE_FLOOR_M",
+    "AGREE_SIGMAS",
+    "START_REPORT_M",
+    "UNDETERMINED_STD_M",
+    "MeasuredTool",
+    "check_tool",
+    "measured_tool",
+    "probe_for",
+    "tool_start_warnings",
+    "undetermined_warnings",
+]
+
+Array = NDArray[np.float64]
+
+#: a stated tool this many σ from the identified one disagrees with it ...
+AGREE_SIGMAS = 3.0
+#: ... if it is also farther than this (m): below, a difference is the probe's build tolerance
+AGREE_FLOOR_M = 0.5e-3
+#: a start value the fit moved farther than this (m) is reported (also beyond 3σ and the floor)
+START_REPORT_M = 5e-3
+#: a tool component with a larger σ (m) is not determined by the calibration's poses
+UNDETERMINED_STD_M = 0.5e-3
+
+
+def _mm(v: Sequence[float]) -> str:
+    return ", ".join(f"{x * 1e3:.2f}" for x in v)
+
+
+@dataclass(frozen=True)
+class MeasuredTool:
+    """The measured point a calibration identified on the (controller's) flange.
+
+    Attributes:
+        position_m: ``(3,)`` the point in the flange frame (m).
+        covariance_m2: ``(3, 3)`` its covariance (m²) from the estimated ``tcp_*``
+            parameters (zero for components that were not estimated).
+        estimated: whether each of ``tcp_x``, ``tcp_y``, ``tcp_z`` (when present) was
+            estimated (False: kept at its start value).
+        given_m: the tool the user stated as the start value (m), None when none was.
+    """
+
+    position_m: tuple[float, float, float]
+    covariance_m2: tuple[tuple[float, float, float], ...]
+    estimated: tuple[bool, ...] = ()
+    given_m: tuple[float, float, float] | None = None
+
+    @property
+    def std_m(self) -> Array:
+        """``(3,)`` the 1σ of each component (m)."""
+        return np.sqrt(np.clip(np.diag(np.asarray(self.covariance_m2)), 0.0, None))
+
+    def text(self) -> str:
+        """``"x, y, z mm ± sx, sy, sz"``."""
+        return f"({_mm(self.position_m)}) mm ± ({_mm(self.std_m)})"
+
+    def separation(self, point_m: ArrayLike) -> tuple[float, float]:
+        """Distance (m) of ``point_m`` (flange frame) from the identified point, and that
+        distance in σ of the identified point along the line between them (inf when the
+        identified point has no uncertainty in that direction)."""
+        d = np.asarray(point_m, dtype=float)[:3] - np.asarray(self.position_m)
+        distance = float(np.linalg.norm(d))
+        if distance == 0.0:
+            return 0.0, 0.0
+        u = d / distance
+        sigma = math.sqrt(max(float(u @ np.asarray(self.covariance_m2) @ u), 0.0))
+        return distance, (distance / sigma if sigma > 0 else math.inf)
+
+    def disagrees(self, point_m: ArrayLike) -> bool:
+        """``point_m`` is more than :data:`AGREE_SIGMAS` σ and :data:`AGREE_FLOOR_M` away."""
+        distance, sigmas = self.separation(point_m)
+        return distance > AGREE_FLOOR_M and sigmas > AGREE_SIGMAS
+
+    def to_dict(self) -> dict[str, Any]:
+        """``result.json``'s ``measured_tool`` (mm)."""
+        out: dict[str, Any] = {
+            "frame": "flange",
+            "position_mm": [x * 1e3 for x in self.position_m],
+            "std_mm": [float(x) * 1e3 for x in self.std_m],
+            "covariance_mm2": [[x * 1e6 for x in row] for row in self.covariance_m2],
+            "estimated": list(self.estimated),
+        }
+        if self.given_m is not None:
+            out["given_mm"] = [x * 1e3 for x in self.given_m]
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> MeasuredTool:
+        """The inverse of :meth:`to_dict`."""
+        given = data.get("given_mm")
+        return cls(
+            position_m=_triple(x * 1e-3 for x in data["position_mm"]),
+            covariance_m2=tuple(_triple(x * 1e-6 for x in row) for row in data["covariance_mm2"]),
+            estimated=tuple(bool(x) for x in data.get("estimated", ())),
+            given_m=None if given is None else _triple(x * 1e-3 for x in given),
+        )
+
+
+def _triple(values: Any) -> tuple[float, float, float]:
+    a, b, c = (float(x) for x in values)
+    return a, b, c
+
+
+def _tool_steps(model: Model) -> list:
+    """The measured tool's steps (``tcp_*``) at the end of ``model``."""
+    steps: list = []
+    for s in reversed(model.steps):
+        if s.role is not Role.TOOL or s.joint is not None:
+            break
+        steps.insert(0, s)
+    return steps
+
+
+def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool | None:
+    """The measured tool of a :class:`~robocal.identify.result.CalibrationResult` (None
+    when the calibration measured the model's end without a tool).  ``given_m``: the
+    stated tool (position (3,) or 4x4; default: the one recorded with the result)."""
+    steps = _tool_steps(result.model)
+    if not steps:
+        return None
+    values = np.array([s.value for s in steps])
+    motions = [s.motion for s in steps]
+
+    def point(v: Array) -> Array:
+        return spatial.chain_product(motions, list(v))[:3, 3]
+
+    p = point(values)
+    index = {n: i for i, n in enumerate(result.names)}
+    cols = [index.get(s.name) for s in steps]
+    J = np.zeros((3, len(steps)))
+    for k in range(len(steps)):  # the point's derivative by each tool parameter (exact for Tx..)
+        h = np.zeros(len(steps))
+        h[k] = 1e-7
+        J[:, k] = (point(values + h) - point(values - h)) / 2e-7
+    Sigma = np.zeros((len(steps), len(steps)))
+    cov = np.asarray(result.covariance)
+    for a, ia in enumerate(cols):
+        for b, ib in enumerate(cols):
+            if ia is not None and ib is not None:
+                Sigma[a, b] = cov[ia, ib]
+    C = J @ Sigma @ J.T
+    if given_m is None:
+        recorded = (getattr(result, "records", None) or {}).get("measured_tool") or {}
+        given_m = None if recorded.get("given_mm") is None else np.asarray(recorded["given_mm"]) * 1e-3
+    given = None if given_m is None else _given_point(given_m)
+    return MeasuredTool(
+        position_m=_triple(p),
+        covariance_m2=tuple(_triple(row) for row in C),
+        estimated=tuple(c is not None for c in cols),
+        given_m=None if given is None else _triple(given),
+    )
+
+
+def _given_point(value: ArrayLike) -> Array:
+    g = np.asarray(value, dtype=float)
+    return g[:3, 3] if g.shape == (4, 4) else g.reshape(3)
+
+
+def check_tool(tool: MeasuredTool, given: ArrayLike, what: str) -> None:
+    """Refuse a stated tool (``given``: (3,) or 4x4, m, flange frame) that disagrees with
+    the identified one (:meth:`MeasuredTool.disagrees`).
+
+    Raises:
+        ValueError: one line naming ``what`` (e.g. ``"--probe"``) and both values.
+    """
+    point = _given_point(given)
+    if not tool.disagrees(point):
+        return
+    distance, sigmas = tool.separation(point)
+    raise ValueError(
+        f"{what} ({_mm(point)}) mm disagrees with the measured tool the calibration identified, "
+        f"{tool.text()}: {distance * 1e3:.2f} mm ({sigmas:.0f}σ) apart; leave {what} out to use the "
+        "identified tool, or recalibrate with the tool as built"
+    )
+
+
+def tool_start_warnings(tool: MeasuredTool | None) -> list[tuple[str, str]]:
+    """``("tool-start", message)`` when the stated tool (``tool.given_m``) and the fit
+    differ by more than :data:`START_REPORT_M`, or by more than 3σ and :data:`AGREE_FLOOR_M`."""
+    if tool is None or tool.given_m is None:
+        return []
+    distance, sigmas = tool.separation(tool.given_m)
+    if distance <= START_REPORT_M and not tool.disagrees(tool.given_m):
+        return []
+    return [
+        (
+            "tool-start",
+            f"the tool given as start value, ({_mm(tool.given_m)}) mm, is {distance * 1e3:.2f} mm "
+            f"({sigmas:.0f}σ) from the measured tool the calibration identified on the controller's "
+            f"flange, {tool.text()}; the identified one is stored with the calibration and used by "
+            "filter and compensate: set it as the controller's TCP, or check the probe's mounting "
+            "and the value given",
+        )
+    ]
+
+
+def undetermined_warnings(result: Any, tool: MeasuredTool | None) -> list[tuple[str, str]]:
+    """``("undetermined", message)``: the parameters the pose set left at their start value
+    (poorly identifiable, not structurally redundant) and the tool components whose σ
+    exceeds :data:`UNDETERMINED_STD_M`: predictions that depend on them (another tool
+    orientation than the calibration poses had) carry that error."""
+    out: list[tuple[str, str]] = []
+    poor = [d for d in result.dropped if d.reason == "poorly identifiable"]
+    if poor:
+        listed = ", ".join(
+            d.name + (f" (σ {d.sigma * 1e3:.3g} mm)" if d.sigma is not None else "") for d in poor
+        )
+        out.append(
+            (
+                "undetermined",
+                f"not determined by these poses, kept at their start values: {listed}; poses with "
+                "more varied joint values and tool orientations would identify them",
+            )
+        )
+    if tool is not None:
+        loose = [f"tcp_{a} (σ {s * 1e3:.3g} mm)" for a, s in zip("xyz", tool.std_m, strict=True)]
+        loose = [t for t, s in zip(loose, tool.std_m, strict=True) if s > UNDETERMINED_STD_M]
+        if loose:
+            out.append(
+                (
+                    "undetermined",
+                    f"the measured tool is poorly determined by these poses: {', '.join(loose)} "
+                    "(e.g. poses with one tool orientation do not separate the tool's length from "
+                    "the device frame); targets with other tool orientations may be off by that much",
+                )
+            )
+    return out
+
+
+def probe_for(calibrated: Any, given: ArrayLike | None, what: str = "--probe") -> Any:
+    """The measured tool as built that a program filter assumes: ``given`` (position (3,)
+    or 4x4, m) checked against the identified tool (:func:`check_tool`), or the identified
+    tool itself (its 4x4 on the flange) when none is given; ``given`` unchanged for a bare
+    model or a calibration without a tool.
+
+    Raises:
+        ValueError: ``given`` disagrees with the identified tool (names ``what``).
+    """
+    if not hasattr(calibrated, "covariance"):  # a model file: nothing identified to compare with
+        return given
+    tool = measured_tool(calibrated)
+    if tool is None:
+        return given
+    if given is not None:
+        check_tool(tool, given, what)
+        return given
+    steps = _tool_steps(calibrated.model)
+    return spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
