@@ -9,11 +9,19 @@ as ``\\x1b``-style escapes and Rich markup in it is escaped, so a name such as `
 ``[red]`` prints as written.  The consoles below also refuse to let any string crash or
 reach the terminal raw: every string they render has its control characters made visible,
 and a string whose markup does not parse is printed as plain text.
+
+Any terminal encoding: :func:`tolerate_terminal_encoding` (called by the ``robocal`` entry
+point) makes stdout and stderr write what their encoding cannot hold as ASCII instead of
+raising: ``—`` as ``-``, ``σ`` as ``sigma``, ``²`` as ``2``, ``é`` as ``e``, an undecodable
+byte of a file name as ``\\xNN``, anything else as ``?``.
 """
 
 from __future__ import annotations
 
+import codecs
 import re
+import sys
+import unicodedata
 
 import typer
 from rich.console import Console
@@ -29,6 +37,7 @@ __all__ = [
     "plain",
     "refuse_overwrite",
     "safe",
+    "tolerate_terminal_encoding",
     "warn",
 ]
 
@@ -50,6 +59,50 @@ def safe(text: object) -> str:
     """``text`` ready to be put into a line with Rich markup: control characters made
     visible and markup escaped (``[/x]`` prints as ``[/x]``)."""
     return escape(plain(text))
+
+
+#: ASCII for the characters robocal's own messages use that have no ASCII decomposition
+_ASCII = {
+    "—": "-", "–": "-", "−": "-", "‐": "-", "…": "...", "·": ".", "×": "x", "±": "+/-",
+    "≤": "<=", "≥": ">=", "≈": "~", "≠": "!=", "→": "->", "←": "<-", "°": " deg", "µ": "u", "μ": "u",
+    "∞": "inf", "√": "sqrt", "‖": "|", "∘": "o", "Σ": "sum", "“": '"', "”": '"', "‘": "'", "’": "'",
+    "─": "-", "│": "|", "━": "-", "┃": "|", "•": "*", "✓": "ok", "✗": "x",
+}  # fmt: skip
+
+
+def _ascii(char: str) -> str:
+    """One character as ASCII: the table above, a Greek letter's name (σ -> sigma), the
+    character's compatibility decomposition without accents (é -> e, ² -> 2), a lone
+    surrogate (an undecodable byte of a file name) as ``\\xNN``, else ``?``."""
+    if char in _ASCII:
+        return _ASCII[char]
+    if "\udc80" <= char <= "\udcff":
+        return f"\\x{ord(char) - 0xDC00:02x}"
+    name = unicodedata.name(char, "")
+    if name.startswith("GREEK") and " LETTER " in name:
+        letter = name.rsplit(" ", 1)[-1].lower()
+        return letter.capitalize() if " CAPITAL " in name else letter
+    plain_ = unicodedata.normalize("NFKD", char).encode("ascii", "ignore").decode("ascii")
+    return plain_ or "?"
+
+
+def _transliterate(err: UnicodeError) -> tuple[str, int]:
+    if not isinstance(err, UnicodeEncodeError):
+        raise err
+    return "".join(_ascii(c) for c in err.object[err.start : err.end]), err.end
+
+
+codecs.register_error("robocal-ascii", _transliterate)
+
+
+def tolerate_terminal_encoding() -> None:
+    """Make stdout and stderr print on any encoding: what the encoding cannot hold is
+    written as ASCII (:func:`_ascii`) instead of raising ``UnicodeEncodeError``
+    (``PYTHONIOENCODING=ascii``, a latin-1 locale, a file name with undecodable bytes)."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None:
+            reconfigure(errors="robocal-ascii")
 
 
 class _SafeConsole(Console):

@@ -14,6 +14,7 @@ import typer
 
 from robocal.cli.errors import RobocalGroup
 from robocal.cli.options import CONTEXT
+from robocal.console import tolerate_terminal_encoding
 
 __all__ = ["app", "main"]
 
@@ -45,6 +46,7 @@ def _top(
     ] = False,
 ) -> None:
     """robocal: calibration of serial robot arms."""
+    tolerate_terminal_encoding()  # also when the app is called in-process, not through main()
 
 
 from robocal.cli import (  # noqa: E402  (the modules register their commands on `app`)
@@ -70,6 +72,7 @@ for _module in (iso9283, study, gui):
 
 
 def main() -> None:  # pragma: no cover - console entry point
+    tolerate_terminal_encoding()  # --help and usage errors print before any callback runs
     app()
 
 

@@ -17,11 +17,11 @@ __all__ = ["register"]
 
 def _is_ur_kinematics(path: Path) -> bool:
     """Whether a YAML file is a UR kinematics file (a top-level ``kinematics:`` mapping)."""
-    import yaml
+    from robocal.model.files import ModelFileError, read_yaml
 
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, RecursionError, yaml.YAMLError):
+    try:  # read_yaml: the size and entry limits are checked before the file is parsed
+        data = read_yaml(path, "model")
+    except (OSError, ModelFileError):  # too large, not YAML ...: said when it is read as geometry
         return False
     return isinstance(data, dict) and isinstance(data.get("kinematics"), dict)
 

@@ -22,6 +22,7 @@ from robocal.evaluate.iso9283_eval_pose import (
     _missing,
     _mm,
     _no_rows,
+    _spread,
     _visits,
     _worst,
 )
@@ -87,7 +88,7 @@ def _path(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
     return Characteristic(
         *args,
         True,
-        f"AT {at:.3f} mm ({ap}), RT {rt:.3f} mm ({rp}); worst of {len(details)} paths",
+        f"AT {at:.3f} mm ({ap}), {_spread('RT', rt, rp)}; worst of {len(details)} paths",
         _cycles([d["n"] for d in details], 10),
         details,
     )
@@ -104,8 +105,10 @@ def _reorientation(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
         return _missing(*args, "no reorientation run has five or more distinct commanded points")
     d = details[0]
     at = ", ".join(f"{x:.3f}" for x in d["AT_abc_deg"])
-    rt = ", ".join(f"{x:.3f}" for x in (d["RT_abc_deg"] or [math.nan] * 3))
-    summary = f"AT_abc {at} deg, RT_abc {rt} deg; AT {d['AT_mm']:.3f} mm ({d['path']})"
+    rt_abc = d["RT_abc_deg"]
+    single = rt_abc is None or not all(map(math.isfinite, rt_abc))  # NaN: a single cycle
+    rt = "not measured (a single cycle)" if single else ", ".join(f"{x:.3f}" for x in rt_abc) + " deg"
+    summary = f"AT_abc {at} deg, RT_abc {rt}; AT {d['AT_mm']:.3f} mm ({d['path']})"
     return Characteristic(*args, True, summary, _cycles([x["n"] for x in details], 10), details)
 
 

@@ -148,6 +148,14 @@ def _worst(details: list[dict[str, Any]], key: str, label: str) -> tuple[float, 
     return max(vals, key=lambda x: abs(x[0]))
 
 
+def _spread(symbol: str, value: float, where: str) -> str:
+    """``"RP 0.012 mm (P1)"``; a repeatability no pose or path supports (every one visited
+    once: no spread to measure) says so instead of printing NaN."""
+    if math.isfinite(value):
+        return f"{symbol} {value:.3f} mm ({where})"
+    return f"{symbol} not measured (a single cycle: a repeatability needs >= 2)"
+
+
 def _cycles(counts: list[int], iso_cycles: int) -> str:
     return f"{min(counts) if counts else 0} (ISO {iso_cycles})"
 
@@ -184,7 +192,7 @@ def _pose(log: Iso9283Log, visits: list[_Visit]) -> Characteristic:
         details.append(row)
     ap, ap_pose = _worst(details, "AP_mm", "pose")
     rp, rp_pose = _worst(details, "RP_mm", "pose")
-    summary = f"AP {ap:.3f} mm ({ap_pose}), RP {rp:.3f} mm ({rp_pose}); worst of {len(details)} poses"
+    summary = f"AP {ap:.3f} mm ({ap_pose}), {_spread('RP', rp, rp_pose)}; worst of {len(details)} poses"
     return Characteristic(*args, True, summary, _cycles([d["n"] for d in details], 30), details)
 
 

@@ -289,6 +289,43 @@ def _check_rows(
             )
 
 
+#: the largest magnitude a cell of a column may hold, by unit (the name's suffix): beyond it a
+#: value is a typo or a corrupted file, and squares and sums of it overflow to inf or NaN
+_RANGE = {"_mm": 1e9, "_deg": 1e6, "_N": 1e9, "time_s": 1e10, "cycle": 1e9}
+
+
+def _limit(column: str) -> float:
+    return next(v for k, v in _RANGE.items() if column.endswith(k))
+
+
+def _check_ranges(name: str, values: dict[str, Array], line: NDArray[np.int_]) -> None:
+    """Every number within :data:`_RANGE` (1e9 mm, 1e6 deg, 1e9 N, 1e10 s, cycle 1e9)."""
+    for c, v in values.items():
+        big = np.abs(v) > _limit(c)
+        if big.any():
+            i = int(np.argmax(big))
+            raise _fail(
+                name, int(line[i]), c, f"{v[i]:g} is out of range: |{c}| must be at most {_limit(c):g}"
+            )
+
+
+def _check_time_records(name: str, values: dict[str, Array], texts: dict[str, NDArray], line) -> None:
+    """Within a run (consecutive rows of one test, cycle, target and group) the time must
+    increase: a record whose samples share a time has no speed or settling to measure."""
+    t, cyc = values["time_s"], values["cycle"]
+    same_run = (cyc[1:] == cyc[:-1]) & np.all([texts[c][1:] == texts[c][:-1] for c in _TEXT], axis=0)
+    repeated = np.flatnonzero(same_run & (t[1:] == t[:-1])) + 1
+    if len(repeated):
+        i = int(repeated[0])
+        raise _fail(
+            name,
+            int(line[i]),
+            "time_s",
+            f"{t[i]:g} s repeats the previous sample's time within one run (test {texts['test'][i]}, "
+            f"cycle {cyc[i]:g}, target {_short(texts['target'][i])}): a run's samples need increasing times",
+        )
+
+
 def read_iso9283_log(path: str | Path) -> Iso9283Log:
     """Read an ISO 9283 log (see the module docstring).
 
@@ -306,7 +343,9 @@ def read_iso9283_log(path: str | Path) -> Iso9283Log:
     values, texts, line = _read_body(head)
     if len(line) == 0:
         raise _fail(name, None, None, "no data rows")
+    _check_ranges(name, values, line)
     _check_rows(name, values, texts, line)
+    _check_time_records(name, values, texts, line)
     t, cyc = values["time_s"], values["cycle"]
     mm = 1e-3
     pos = np.column_stack([values[c] for c in ("x_mm", "y_mm", "z_mm")]) * mm
@@ -424,7 +463,11 @@ def load_log_truth(path: str | Path) -> dict:
             f"{truth_file}: the truth is of simulation run {want or 'none'} but {log_file} is run "
             f"{got or 'none'}: these files come from different simulations; simulate again"
         )
+    from robocal.model.yaml_files import MAX_FILE_BYTES
+
     try:
+        if truth_file.stat().st_size > MAX_FILE_BYTES:  # checked before parsing: YAML takes seconds per MB
+            raise Iso9283LogError(f"{truth_file}: larger than {MAX_FILE_BYTES} bytes: not a truth file")
         doc = yaml.safe_load(truth_file.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise Iso9283LogError(f"{truth_file}: cannot read the truth ({err.__class__.__name__})") from None

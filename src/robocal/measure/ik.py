@@ -61,6 +61,9 @@ __all__ = ["IKResult", "PerturbationFunction", "TargetKind", "random_configurati
 Array = NDArray[np.float64]
 #: ``joint_effects(q (m, dof)) -> (m, dof, 3)`` joint perturbations, or None for none
 PerturbationFunction = Callable[[NDArray[np.float64]], NDArray[np.float64] | None]
+#: m: a target coordinate beyond this is refused, not searched for (no arm reaches 1000 km, and
+#: errors of 1e200 m overflow the solver's squares); a wrong length unit is the usual cause
+FARTHEST_TARGET = 1e6
 
 
 @dataclass(frozen=True)
@@ -134,6 +137,14 @@ def _targets(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Ar
     if not np.all(np.isfinite(T)):
         bad = int(np.flatnonzero(~np.isfinite(T).reshape(len(T), -1).all(axis=1))[0])
         raise ValueError(f"IK target {bad} contains NaN or inf")
+    # |x|, |y| or |z| (m); the largest coordinate, not the norm, which overflows at 1e200
+    reach = np.max(np.abs(T[:, :3, 3]), axis=1)
+    if np.any(reach > FARTHEST_TARGET):
+        far = int(np.flatnonzero(reach > FARTHEST_TARGET)[0])
+        raise ValueError(
+            f"IK target {far} lies {reach[far]:.3g} m from the base: beyond any robot's reach "
+            f"(targets are refused beyond {FARTHEST_TARGET:g} m; check the length unit)"
+        )
     return T, kind
 
 

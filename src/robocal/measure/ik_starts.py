@@ -18,6 +18,10 @@ TargetKind = Literal["position", "pose", "axis"]
 
 
 _POOL_SEED = 20240917  # the seed pool is fixed: results depend on `seed` only through random restarts
+#: feature magnitude (m) beyond which a target's features are pulled in along their direction:
+#: the pool's tool frames lie within a few metres, and a target at 1e200 m would give an
+#: infinite squared distance, for which the k-d tree reports no neighbour at all
+_FAR_FEATURE = 1e6
 
 
 def _sampling_box(model: Model) -> Array:
@@ -80,10 +84,18 @@ class _Targets(Protocol):
     k: int  # the tool axis of kind "axis"
 
 
+def _within_reach(features: Array) -> Array:
+    """``(n, m)`` features with every row whose largest entry exceeds :data:`_FAR_FEATURE`
+    scaled down to it (same direction), so that squared distances stay finite."""
+    largest = np.max(np.abs(features), axis=1, keepdims=True)
+    return features * np.where(largest > _FAR_FEATURE, _FAR_FEATURE / np.maximum(largest, _FAR_FEATURE), 1.0)
+
+
 def _nearest_pool(problem: _Targets, size: int, idx: NDArray[np.intp], rank: int) -> Array:
     """For targets ``idx``: the pool configuration whose tool frame is the ``rank``-th
     nearest (0 = nearest) to the target's, ``(len(idx), dof)``."""
     tree = _seed_tree(problem.model, size, problem.kind, problem.w, problem.k)
-    _, nn = tree.query(_features(problem.T[idx], problem.kind, problem.w, problem.k), k=rank + 1)
+    features = _within_reach(_features(problem.T[idx], problem.kind, problem.w, problem.k))
+    _, nn = tree.query(features, k=rank + 1)
     nn = np.asarray(nn).reshape(len(idx), rank + 1)
     return _seed_pool(problem.model, size)[0][nn[:, rank]]

@@ -193,17 +193,13 @@ def build_from_ur_kinematics(
     Raises:
         URKinematicsError: the file is not such a YAML (file and key named).
     """
-    import yaml
+    from robocal.model.yaml_files import read_yaml
 
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    try:  # its size, entries and nesting are checked before the file is parsed
+        data = read_yaml(path, "UR kinematics", URKinematicsError)
     except OSError as err:
         raise URKinematicsError(f"{path}: cannot read: {err.strerror or err}") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise URKinematicsError(f"{path}: not YAML{where}: {getattr(err, 'problem', err)}") from None
     kin = data.get("kinematics") if isinstance(data, dict) else None
     if not isinstance(kin, dict):
         raise URKinematicsError(f"{path}: no 'kinematics:' mapping (a UR default_kinematics.yaml)")

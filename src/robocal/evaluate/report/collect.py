@@ -74,6 +74,29 @@ def _check_dof(facts: ResultFacts, data: Measurements | None, test_data: Measure
             )
 
 
+#: m: a device frame farther from the base than this is a corrupted or hand-edited result
+_FARTHEST_DEVICE = 1e6
+
+
+def _check_result(result: CalibrationResult) -> None:
+    """Refuse (ValueError naming the entry of result.json) a result whose device frame is no
+    rigid transform or whose estimates are not finite: every number of the report would be
+    NaN, inf or an overflow."""
+    T = np.asarray(result.T_device_base, dtype=float)
+    where = "result.json frame.T_device_base"
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{where}: the device frame must be a 4x4 matrix of finite numbers")
+    R, t = T[:3, :3], T[:3, 3]
+    rigid = np.max(np.abs(R)) <= 1 + 1e-6 and np.allclose(R.T @ R, np.eye(3), atol=1e-6)  # no overflow
+    if not rigid or not np.allclose(T[3], [0, 0, 0, 1]):
+        raise ValueError(f"{where}: the device frame is not a rigid transform (rotation and last row)")
+    if np.max(np.abs(t)) > _FARTHEST_DEVICE:
+        raise ValueError(f"{where}: the device lies {np.max(np.abs(t)):.3g} m from the base (at most 1e6 m)")
+    bad = np.flatnonzero(~np.isfinite(np.asarray(result.estimates, dtype=float)))
+    if bad.size:
+        raise ValueError(f"result.json parameters: the estimate of {result.names[int(bad[0])]!r} is not finite")
+
+
 def _pose_set(facts: ResultFacts, name: str, data: Measurements, colour: str) -> PoseSet:
     model = facts.model
     revolute = np.array(model.joint_types) == "revolute"
@@ -335,6 +358,7 @@ def collect_report(
     )
 
     options = options or ReportOptions()
+    _check_result(result)
     facts = report_data_from_result(result)
     _check_dof(facts, data, test_data)
     ev = dict(evaluation or {})
