@@ -268,6 +268,7 @@ def filter_command(
             angle_unit=angle_unit,
             config_dat=config_dat,
             require_probe=True,
+            overwrite=force,
         )
     except ProgramError as err:
         raise fail(str(err)) from None
@@ -284,8 +285,12 @@ def _print_filtered(result, program: Path, out: Path, language: str, no_frames_g
 
     n = len(result.targets)
     ok = np.isfinite(result.error_after_mm) & result.reachable
+    left = ~result.changed & ~(result.reachable & result.branch_kept)
     console.print(
-        f"{program.name}: {n} targets ({language}), {int(result.changed.sum())} corrected; "
+        f"{program.name}: {n} targets ({language}), {int(result.changed.sum())} corrected, "
+        f"{n - int(result.changed.sum()) - int(left.sum())} already within the written resolution, "
+        f"{int(left.sum())} left as written (see the warnings); "
+        f"{len(result.unsupported)} statements untouched (listed); "
         + (
             f"predicted error {np.nanmax(result.error_before_mm[ok]):.3f} mm (max) before; "
             f"corrected onto the calibrated model within {np.nanmax(result.error_after_mm[ok]):.1e} mm, "

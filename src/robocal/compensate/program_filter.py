@@ -4,6 +4,7 @@ numbers that moved (see :func:`robocal.compensate.programs.filter_program_text`)
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -23,6 +24,9 @@ from robocal.compensate.program_syntax import (
     ProgramTarget,
     Unsupported,
     _decimals,
+    _line_of,
+    _line_text,
+    code_only,
 )
 from robocal.compensate.program_urscript import _parse_urscript
 from robocal.compensate.program_values import _UNITS, _format, _Units, _write_values
@@ -40,6 +44,7 @@ class _Parsed:
     found_tool: Array | None = None
     events: list[tuple[int, int, str]] = field(default_factory=list)  # (file, position, name) of motions
     rapid_data: dict[str, dict] = field(default_factory=dict)
+    code: dict[str, str] = field(default_factory=dict)  # per file: the text with comments, strings blanked
 
 
 @dataclass
@@ -71,19 +76,23 @@ FramesOf = Callable[[int], tuple[Model, Model, Array]]
 
 
 def parse_program(texts: dict[str, str], language: Language, dof: int) -> _Parsed:
-    """Parse every file of a program; KRL motions to names declared elsewhere are unsupported."""
+    """Parse the code of every file of a program (comments and strings masked, see
+    :func:`code_only`: ``parsed.code``); motions to names the program does not declare
+    with a value are listed as unsupported."""
     parsed = _Parsed()
-    krl_used: list[tuple[str, str, int, str]] = []
+    used: list[tuple[str, str, int, str]] = []  # (file, name, line, statement) of named motions
     for f, (label, text) in enumerate(texts.items()):
+        code = parsed.code[label] = code_only(text, language)
         uses: list[tuple[int, str]] = []
         parsed.rapid_data[label] = {"tools": {}, "wobjs": {}, "moves": []}
         if language == "urscript":
-            t, u, parsed.found_tool = _parse_urscript(text, dof, label, uses)
+            t, u, parsed.found_tool = _parse_urscript(code, dof, label, uses)
         elif language == "krl":
-            t, u, used = _parse_krl(text, dof, label, uses)
-            krl_used += [(label, *x) for x in used]
+            t, u, krl_used = _parse_krl(code, dof, label, uses)
+            used += [(label, *x) for x in krl_used]
         elif language == "rapid":
-            t, u, parsed.found_tool = _parse_rapid(text, dof, label, uses, parsed.rapid_data[label])
+            t, u, parsed.found_tool = _parse_rapid(code, dof, label, uses, parsed.rapid_data[label])
+            used += [(label, name, _line_of(code, pos), _line_text(code, pos)) for pos, name in uses]
         elif language == "csv":
             t, u = _parse_csv(text, dof, label), []
         else:
@@ -92,12 +101,41 @@ def parse_program(texts: dict[str, str], language: Language, dof: int) -> _Parse
         parsed.unsupported += u
         parsed.events += [(f, pos, name) for pos, name in uses]
     declared = {t.name.upper() for t in parsed.targets}
-    for label, name, line, statement in krl_used:
+    _list_assignments(parsed, language, declared)
+    for label, name, line, statement in used:
         if name.upper() not in declared:
             parsed.unsupported.append(
-                Unsupported(label, line, statement, f"{name} is declared outside the program")
+                Unsupported(
+                    label,
+                    line,
+                    statement,
+                    f"{name} has no value in this program (another module, run time): not corrected",
+                )
             )
     return parsed
+
+
+# statements that change a declared target at run time (not declarations): KRL ``XP1 = ...``,
+# ``XP1.X = ...``; RAPID ``p1 := ...``, ``p1.trans.z := ...``
+_ASSIGNMENTS = {
+    "krl": re.compile(r"^[ \t]*(?!DECL\b)([A-Za-z_]\w*)(?:\.\w+)*\s*=(?!=)", re.M | re.I),
+    "rapid": re.compile(r"^[ \t]*([A-Za-z_]\w*)(?:\.\w+)*\s*:=", re.M),
+}
+
+
+def _list_assignments(parsed: _Parsed, language: Language, declared: set[str]) -> None:
+    """List the run-time assignments to declared targets: motions after them go to values
+    the filter did not correct."""
+    pattern = _ASSIGNMENTS.get(language)
+    if pattern is None:
+        return
+    for label, code in parsed.code.items():
+        for m in pattern.finditer(code):
+            if m.group(1).upper() in declared:
+                reason = f"{m.group(1)} is changed here: later motions to it are not corrected"
+                parsed.unsupported.append(
+                    Unsupported(label, _line_of(code, m.start()), _line_text(code, m.start()), reason)
+                )
 
 
 def check_probe(
@@ -140,10 +178,13 @@ def frames_of_targets(
     frame_at = _program_frames(texts, language, parsed.rapid_data, config_dat, problems)
     label_of = list(texts)
     cache: dict[bytes, tuple[Model, Model]] = {}
+    runs_of: dict[str, list[tuple[str, int]]] = {}  # the motions to each name, in file order
+    for f, pos, name in parsed.events:
+        runs_of.setdefault(name.upper(), []).append((label_of[f], pos))
 
     def frames_of(i: int) -> tuple[Model, Model, Array]:
         t = parsed.targets[i]
-        runs = [(label_of[f], pos) for f, pos, name in parsed.events if name.upper() == t.name.upper()]
+        runs = runs_of.get(t.name.upper(), [])
         T_i, B_i = frame_at(*(runs[0] if runs else (t.file, t.tokens[0].start)))
         if tool is None or base is None:
             _report_other_frames(t, runs, (T_i, B_i), frame_at, texts, problems)
@@ -271,9 +312,11 @@ def rewrite_texts(
             changed[i] = True
     out = {}
     for label, text in texts.items():
-        for s, e, new in sorted(edits[label], reverse=True):
-            text = text[:s] + new + text[e:]
-        out[label] = text
+        pieces, last = [], 0
+        for s, e, new in sorted(edits[label]):  # spliced once, in order: linear in the text
+            pieces += [text[last:s], new]
+            last = e
+        out[label] = "".join([*pieces, text[last:]])
     return out, changed
 
 

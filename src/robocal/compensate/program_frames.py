@@ -4,6 +4,7 @@ frames in force at each motion."""
 from __future__ import annotations
 
 import dataclasses
+from bisect import bisect_right
 from collections.abc import Callable
 
 import numpy as np
@@ -19,6 +20,7 @@ from robocal.compensate.program_syntax import (
     ProgramError,
     ProgramTarget,
     _line_of,
+    code_only,
 )
 from robocal.identify.calibrate import CalibrationResult
 from robocal.identify.problem import frame_steps
@@ -78,8 +80,11 @@ def _program_frames(
         wobjs.setdefault("WOBJ0", np.eye(4))
         seen: set[str] = set()
 
+        starts = {label: [move[0] for move in d["moves"]] for label, d in rapid_data.items()}
+
         def rapid_at(label: str, pos: int) -> tuple[Array | None, Array | None]:
-            for start, end, line, tool, wobj in rapid_data[label]["moves"]:
+            k = bisect_right(starts[label], pos) - 1  # the Move statement holding pos (in file order)
+            for start, end, line, tool, wobj in rapid_data[label]["moves"][max(k, 0) : k + 1]:
                 if start <= pos < end:
                     for name, table, what in ((tool, tools, "tooldata"), (wobj, wobjs, "wobjdata")):
                         if name is not None and name.upper() not in table and name.upper() not in seen:
@@ -95,7 +100,7 @@ def _program_frames(
     if language != "krl" or config_dat is None:
         return lambda label, pos: (None, None)
     cfg_label, cfg_text = config_dat
-    data = _krl_config_frames(cfg_text, cfg_label)
+    data = _krl_config_frames(code_only(cfg_text, "krl"), cfg_label)  # commented-out frames are not read
     settings = _krl_settings(texts)
 
     def krl_at(label: str, pos: int) -> tuple[Array | None, Array | None]:
@@ -138,3 +143,40 @@ def _report_other_frames(
     )
     if lines and message not in problems:
         problems.append(message)
+
+
+#: a ``nominal`` model whose flange is farther than this (m) from the calibration's start
+#: model's, at some joint values, is another robot: its targets would move by that much
+NOMINAL_AGREEMENT_M = 0.05
+
+
+def check_nominal(calibrated: CalibrationResult | Model, nominal: Model) -> None:
+    """Refuse (:class:`ProgramError`) a controller model that is not the calibrated robot:
+    other joints (count, names, types) or a flange more than :data:`NOMINAL_AGREEMENT_M`
+    from the calibration's start model (a result) or the calibrated model (a model) at 64
+    joint configurations within the limits; tools are left out of the comparison."""
+    from robocal.compensate.compensation import nominal_model
+
+    ref = nominal_model(calibrated) if isinstance(calibrated, CalibrationResult) else calibrated
+    what = f"the nominal model {nominal.name!r} is not the calibration's robot {ref.name!r}"
+    for label, a, b in (
+        ("joints", ref.dof, nominal.dof),
+        ("joint names", ", ".join(ref.joint_names), ", ".join(nominal.joint_names)),
+        ("joint types", ", ".join(ref.joint_types), ", ".join(nominal.joint_types)),
+    ):
+        if a != b:
+            raise ProgramError(f"{what}: {label} {b} (the calibration's: {a})")
+    lim = ref.joint_limits
+    lo, hi = np.maximum(lim[:, 0], -np.pi), np.minimum(lim[:, 1], np.pi)
+    q = np.random.default_rng(0).uniform(lo, hi, (64, ref.dof))
+
+    def flange(m: Model) -> Array:
+        bare = dataclasses.replace(m, steps=tuple(s for s in m.steps if s.role is not Role.TOOL))
+        return bare.fk(q)[:, :3, 3]
+
+    gap = float(np.max(np.linalg.norm(flange(ref) - flange(nominal), axis=1)))
+    if not gap <= NOMINAL_AGREEMENT_M:  # NaN too
+        raise ProgramError(
+            f"{what}: its flange is {gap * 1e3:.0f} mm from the calibration's at the same joint values "
+            f"(at most {NOMINAL_AGREEMENT_M * 1e3:g} mm)"
+        )

@@ -19,6 +19,7 @@ from robocal.compensate.program_syntax import (
     _line_of,
     _matching,
     _Token,
+    code_only,
 )
 
 # ---------------------------------------------------------------------- KRL
@@ -179,18 +180,81 @@ def krl_run_id(text: str) -> str | None:
 def stamp_krl(text: str, run_id: str) -> str:
     """``text`` with one ``;robocal run: ID`` comment line (an earlier one removed),
     after the leading ``&ACCESS``/``&REL`` lines, which must stay first."""
+    bom = "\ufeff" if text.startswith("\ufeff") else ""  # a byte-order mark stays the first character
+    text = text[len(bom) :]
     newline = "\r\n" if "\r\n" in text else "\n"
     lines = [ln for ln in text.splitlines(keepends=True) if not _KRL_RUN.match(ln.rstrip("\n"))]
     k = 0
     while k < len(lines) and lines[k].lstrip().startswith("&"):
         k += 1
     lines.insert(k, f";robocal run: {run_id}{newline}")
-    return "".join(lines)
+    return bom + "".join(lines)
+
+
+_KRL_MODULE = re.compile(
+    r"^[ \t]*(?:GLOBAL[ \t]+)?(DEF|DEFFCT|DEFDAT)[ \t]+(?:\w+[ \t]+)??(\w+)", re.M | re.I
+)
+
+
+def krl_module_name(text: str) -> str | None:
+    """The module a KRL file defines: the name of its first ``DEF``/``DEFFCT`` (``.src``) or
+    its ``DEFDAT`` (``.dat``); None when it has none."""
+    match = _KRL_MODULE.search(code_only(text, "krl"))
+    return match.group(2) if match else None
+
+
+def _sibling(path: Path, suffix: str) -> Path:
+    """``path`` with ``suffix`` (``.src``/``.dat``), in the case of ``path``'s suffix when a
+    file of that case exists or ``path``'s suffix is upper case (``PICK.SRC`` / ``PICK.DAT``)."""
+    for candidate in (path.with_suffix(suffix.upper()), path.with_suffix(suffix)):
+        if candidate.is_file():
+            return candidate
+    return path.with_suffix(suffix.upper() if path.suffix.isupper() else suffix)
+
+
+def _krl_inputs(path: Path, out: str | Path | None) -> Path | None:
+    """The ``.dat`` read with a ``.src`` (None: none, or ``path`` is a ``.dat``); refuses a
+    ``.dat`` that has its ``.src`` beside it and an output of another kind than the program."""
+    kind = path.suffix.lower()
+    if kind == ".dat":
+        src = _sibling(path, ".src")
+        if src.is_file():
+            raise ProgramError(
+                f"{path} is the data list of {src}: give {src.name}, its .dat is filtered with it"
+            )
+    if out is not None and Path(out).suffix.lower() != kind:
+        raise ProgramError(f"-o {out}: a KRL {kind} is written as a {kind} (a .src with its .dat beside it)")
+    if kind != ".src":
+        return None
+    dat = _sibling(path, ".dat")
+    return dat if dat.is_file() else None
+
+
+def _krl_outputs(path: Path, out: Path, labels: list[str], overwrite: bool) -> dict[str, Path]:
+    """``{file label: output path}`` of a KRL program: the ``.src`` at ``out``, its ``.dat``
+    beside it; an existing ``.dat`` there that the program has none for is refused unless
+    ``overwrite`` (it would be read with the new ``.src``)."""
+    targets = {str(path): out}
+    dat = _sibling(out, ".dat")
+    for label in labels[1:]:
+        targets[label] = dat
+    if len(labels) == 1 and out.suffix.lower() == ".src" and dat.exists() and not overwrite:
+        raise ProgramError(
+            f"{dat} exists and would be read as the data list of {out.name}, but {path.name} has no .dat: "
+            "remove it, or use --force"
+        )
+    return targets
 
 
 def _check_krl_pair(src: Path, src_text: str, dat: Path, dat_text: str) -> None:
     """Refuse a KRL .src and .dat of different runs (a write killed between the two
     renames, or files copied together by hand): their targets would not match."""
+    names = krl_module_name(src_text), krl_module_name(dat_text)
+    if None not in names and names[0].upper() != names[1].upper():
+        raise ProgramError(
+            f"{src} (DEF {names[0]}) and {dat} (DEFDAT {names[1]}) are not one module: "
+            "a .src and its .dat must name the same module"
+        )
     a, b = krl_run_id(src_text), krl_run_id(dat_text)
     if a != b:
         raise ProgramError(

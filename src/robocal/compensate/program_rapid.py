@@ -24,6 +24,13 @@ _RAPID_DECL = re.compile(
     r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+(\w+)\s*:=\s*\[", re.I
 )
 _RAPID_MOVE = re.compile(r"^[ \t]*(MoveJ|MoveL|MoveC|MoveAbsJ)\b([^;]*);", re.M | re.I)
+# declarations whose values are not corrected: arrays (``path{3}``), no value (set at run time)
+_RAPID_OTHER_DECL = re.compile(
+    r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget)\s+(\w+)\s*(\{[^}]*\}|;)", re.I
+)
+# motion instructions with targets outside the supported grammar (MoveLDO, SearchL, TriggL ...)
+_RAPID_OTHER_MOTION = re.compile(r"^[ \t]*((?:Move|Search|Trigg|Arc|Cap)\w*|SMove\w*)\b[^;]*;", re.M | re.I)
+_SUPPORTED = {"movej", "movel", "movec", "moveabsj"}
 
 
 def _rapid_groups(text: str, b: int, path: str) -> tuple[list[tuple[int, int]], int]:
@@ -102,8 +109,24 @@ def _parse_rapid(
     targets, tool = _rapid_declarations(text, dof, path, data)
     unsupported: list[Unsupported] = []
     _rapid_moves(text, dof, path, uses, data, targets, unsupported)
+    _rapid_others(text, path, unsupported)
     targets.sort(key=lambda t: t.tokens[0].start)
     return targets, unsupported, tool
+
+
+def _rapid_others(text: str, path: str, unsupported: list[Unsupported]) -> None:
+    """Target declarations and motion instructions the filter does not correct, listed."""
+    for m in _RAPID_OTHER_DECL.finditer(text):
+        what = "an array: its elements are" if m.group(3).startswith("{") else "declared without a value:"
+        unsupported.append(
+            Unsupported(
+                path, _line_of(text, m.start()), m.group(0).strip(), f"{m.group(2)} is {what} not corrected"
+            )
+        )
+    for m in _RAPID_OTHER_MOTION.finditer(text):
+        if m.group(1).lower() not in _SUPPORTED:
+            reason = f"{m.group(1)} is not supported: its targets are not corrected"
+            unsupported.append(Unsupported(path, _line_of(text, m.start()), m.group(0).strip(), reason))
 
 
 def _rapid_declarations(
@@ -141,6 +164,21 @@ def _rapid_declarations(
     return targets, tool
 
 
+def _rapid_not_a_name(arg_text: str, first: re.Match | None) -> str | None:
+    """Why a Move's target argument is not corrected (None: a plain name)."""
+    head = arg_text.split(",")[0].strip()
+    if first is None or first.group().startswith("\\"):
+        return "target is not a name or literal"
+    rest = arg_text[first.end() :].lstrip()
+    if rest.startswith("{"):
+        return f"target {head} is an array element: not corrected"
+    if rest.startswith("("):
+        return f"target {first.group()}(...) is computed (an offset or relative target): not corrected"
+    if rest and not rest.startswith(","):
+        return f"target {head} is an expression: not corrected"
+    return None
+
+
 def _rapid_moves(
     text: str,
     dof: int,
@@ -171,10 +209,9 @@ def _rapid_moves(
                 k = end - offset
             else:
                 first = re.match(r"[\\\w]+", arg_text)
-                if first is None or first.group().startswith("\\") or "(" in arg_text.split(",")[0]:
-                    unsupported.append(
-                        Unsupported(path, line, m.group(0).strip(), "target is not a name or literal")
-                    )
+                reason = _rapid_not_a_name(arg_text, first)
+                if reason is not None:
+                    unsupported.append(Unsupported(path, line, m.group(0).strip(), reason))
                     break
                 k = len(args) - len(arg_text) + first.end()
                 if uses is not None:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import re
+from bisect import bisect_right
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Literal
 
 import numpy as np
@@ -104,9 +106,43 @@ class FilteredProgram:
         return bool(np.all(self.reachable & self.branch_kept))
 
 
-# ---------------------------------------------------------------------- helpers
+# ---------------------------------------------------------------------- code and text
+#: a program file above this size (bytes) is refused before it is read: the filter keeps a few
+#: copies of the text and its tokens, and no robot program comes near it
+MAX_PROGRAM_BYTES = 20_000_000
+
+# what is not code, per language: comments to the end of the line and strings (a string
+# ends at its closing quote or, unclosed, at the end of the line; RAPID's "" inside a string
+# reads as two strings, both masked).  KRL's 'B0101' / 'H1F' literals are code (status, turn).
+_NOT_CODE = {
+    "urscript": re.compile(r"#[^\n]*|\"[^\"\n]*\"?|'[^'\n]*'?"),
+    "krl": re.compile(r";[^\n]*|\"[^\"\n]*\"?"),
+    "rapid": re.compile(r"![^\n]*|\"[^\"\n]*\"?"),
+}
+
+
+def code_only(text: str, language: str) -> str:
+    """``text`` with its comments and strings (and a leading byte-order mark) blanked out:
+    the same length and the same line breaks, so offsets and lines are the text's, and only
+    code is scanned for targets (a ``movej([...])`` in a comment or a ``textmsg`` string is
+    not a target).  Languages without a mask (CSV) are returned as they are."""
+    pattern = _NOT_CODE.get(language)
+    if pattern is None:
+        return text
+    code = pattern.sub(lambda m: " " * (m.end() - m.start()), text)
+    return " " + code[1:] if code.startswith("\ufeff") else code
+
+
+@lru_cache(maxsize=4)
+def _line_starts(text: str) -> list[int]:
+    """Offsets at which the lines of ``text`` start (computed once per text: line numbers
+    are looked up by bisection, so a long program is read in linear time)."""
+    return [0] + [m.end() for m in re.finditer("\n", text)]
+
+
 def _line_of(text: str, pos: int) -> int:
-    return text.count("\n", 0, pos) + 1
+    """1-based line of offset ``pos`` in ``text``."""
+    return bisect_right(_line_starts(text), pos)
 
 
 def _tokens(text: str, start: int, end: int) -> list[_Token]:

@@ -21,8 +21,9 @@ from robocal.compensate.program_syntax import (
 )
 
 # ---------------------------------------------------------------------- URScript
-_UR_MOVE = re.compile(r"\b(movej|movel|movep|movec|servoj)\s*\(")
+_UR_MOVE = re.compile(r"\b(movej|movel|movep|movec|servoj|servoc)\s*\(")
 _UR_ASSIGN = re.compile(r"^[ \t]*(?:(?:global|local)\s+)?([A-Za-z_]\w*)\s*=\s*(p?)\[", re.M)
+_UR_ANY_ASSIGN = re.compile(r"^[ \t]*(?:(?:global|local)\s+)?([A-Za-z_]\w*)\s*=(?!=)", re.M)
 _UR_TCP = re.compile(r"\bset_tcp\s*\(\s*p\[")
 
 
@@ -53,12 +54,14 @@ def _parse_urscript(
     targets: list[ProgramTarget] = []
     unsupported: list[Unsupported] = []
     names: set[str] = set()
+    literal_at: set[int] = set()
     for m in _UR_ASSIGN.finditer(text):
         i = m.end() - 1 - len(m.group(2))
         lit = _ur_literal(text, i, dof, f"the assignment to {m.group(1)}", path)
         if lit is not None:
             kind, toks, _ = lit
             names.add(m.group(1))
+            literal_at.add(m.start())
             targets.append(ProgramTarget(m.group(1), _line_of(text, i), kind, path, tuple(toks), "urscript"))
     for m in _UR_MOVE.finditer(text):
         call_end = _matching(text, m.end() - 1, "(", ")")
@@ -91,6 +94,7 @@ def _parse_urscript(
             else:
                 reason = f"target {stripped!r} is not a literal nor a variable assigned a literal"
                 unsupported.append(Unsupported(path, line, _line_text(text, m.start()), reason))
+    _reassigned(text, path, names, literal_at, unsupported)
     tool = None
     m = _UR_TCP.search(text)
     if m:
@@ -102,3 +106,15 @@ def _parse_urscript(
             tool = spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
     targets.sort(key=lambda t: t.tokens[0].start)
     return targets, unsupported, tool
+
+
+def _reassigned(text: str, path: str, names: set[str], literal_at: set[int], unsupported: list) -> None:
+    """List the assignments of anything but a literal to a target's name (``p = pose_trans(p,
+    ...)``; ``literal_at``: where the literal assignments start): motions to the name after
+    them go to a value the filter did not correct."""
+    for m in _UR_ANY_ASSIGN.finditer(text):
+        if m.group(1) in names and m.start() not in literal_at:
+            reason = f"{m.group(1)} is assigned an expression here: later motions to it are not corrected"
+            unsupported.append(
+                Unsupported(path, _line_of(text, m.start()), _line_text(text, m.start()), reason)
+            )

@@ -66,15 +66,19 @@ from robocal.compensate import program_filter as steps
 # the names marked F401 below (parsers, units, configuration rules) are re-exported for the tests
 from robocal.compensate.program_config import _cfx, _cfx_bits, _config_ok, _status, _status_bits  # noqa: F401
 from robocal.compensate.program_csv import _parse_csv  # noqa: F401
-from robocal.compensate.program_frames import _robot_models
+from robocal.compensate.program_frames import _robot_models, check_nominal
 from robocal.compensate.program_krl import (
     _check_krl_pair,
+    _krl_inputs,
+    _krl_outputs,
     _parse_krl,  # noqa: F401
+    krl_module_name,
     krl_run_id,
     stamp_krl,
 )
 from robocal.compensate.program_rapid import _parse_rapid  # noqa: F401
 from robocal.compensate.program_syntax import (
+    MAX_PROGRAM_BYTES,
     FilteredProgram,
     Language,
     ProgramError,
@@ -90,12 +94,14 @@ from robocal.identify.calibrate import CalibrationResult
 from robocal.model.chain import Model
 
 __all__ = [
+    "MAX_PROGRAM_BYTES",
     "FilteredProgram",
     "ProgramError",
     "ProgramTarget",
     "Unsupported",
     "filter_program_file",
     "filter_program_text",
+    "krl_module_name",
     "krl_run_id",
     "language_of",
     "stamp_krl",
@@ -164,6 +170,8 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
         tol: IK tolerance (m, rad); corrections smaller than it leave the text as is.
     """
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
+    if nominal is not None:
+        check_nominal(calibrated, nominal)
     parsed = steps.parse_program(texts, language, model.dof)
     targets = parsed.targets
     if require_probe:
@@ -172,7 +180,7 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
     effects = _robot_models(calibrated, nominal, None, probe)[2]
     problems: list[str] = []
     frames_of = steps.frames_of_targets(
-        texts, language, parsed, calibrated, nominal, tool, base, probe, config_dat, problems
+        parsed.code, language, parsed, calibrated, nominal, tool, base, probe, config_dat, problems
     )
     values = [_read_value(t, units, model.joint_types, False) for t in targets]
     c = steps._Corrections.start(values, problems)
@@ -199,8 +207,14 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
 
 
 def _read(path: Path) -> tuple[str, str]:
-    """The text and its encoding (UTF-8, else Latin-1 as KRL and RAPID files often are)."""
+    """The text and its encoding (UTF-8, else Latin-1 as KRL and RAPID files often are);
+    a file above :data:`MAX_PROGRAM_BYTES` is refused before it is read."""
     try:
+        size = path.stat().st_size
+        if size > MAX_PROGRAM_BYTES:
+            raise ProgramError(
+                f"{path}: {size / 1e6:.1f} MB; robot programs are read up to {MAX_PROGRAM_BYTES / 1e6:g} MB"
+            )
         data = path.read_bytes()
     except OSError as err:
         raise ProgramError(f"{path}: cannot read: {err.strerror or err}") from None
@@ -217,43 +231,59 @@ def filter_program_file(
     *,
     language: Language | None = None,
     config_dat: str | Path | None = None,
+    overwrite: bool = True,
     **options,
 ) -> FilteredProgram:
     """Filter a program file (see :func:`filter_program_text`); written to ``out``
     atomically when given (KRL: ``out`` and the ``.dat`` next to it, both or neither).  Nothing is
     written when the program cannot be read.
 
-    KRL: ``config_dat`` is the ``$config.dat`` holding ``TOOL_DATA``/``BASE_DATA``
-    (default: the one in the program's folder, when there is one)."""
+    KRL: a ``.src`` is read and written with its ``.dat`` (same name; ``DEF`` and ``DEFDAT``
+    must name the same module) as a pair stamped with one run id; ``out`` must be a ``.src``
+    too, and an existing ``.dat`` beside ``out`` that the program has none for is refused
+    (it would be read with the new ``.src``).  A ``.dat`` is filtered alone only when no
+    ``.src`` of its name is beside it.  ``overwrite=False`` refuses any existing output file.
+    ``config_dat`` is the ``$config.dat`` holding ``TOOL_DATA``/``BASE_DATA`` (default: the
+    one in the program's folder, when there is one)."""
     path = Path(path)
     if not path.is_file():
         raise ProgramError(f"{path}: no such program file")
     language = language or language_of(path)
     texts, encodings = {}, {}
     texts[str(path)], encodings[str(path)] = _read(path)
-    dat = path.with_suffix(".dat")
-    if language == "krl" and path.suffix.lower() == ".src" and dat.is_file():
-        texts[str(dat)], encodings[str(dat)] = _read(dat)
-        _check_krl_pair(path, texts[str(path)], dat, texts[str(dat)])
     if language == "krl":
+        dat = _krl_inputs(path, out)
+        if dat is not None:
+            texts[str(dat)], encodings[str(dat)] = _read(dat)
+            _check_krl_pair(path, texts[str(path)], dat, texts[str(dat)])
         cfg = Path(config_dat) if config_dat is not None else path.parent / "$config.dat"
         if config_dat is not None and not cfg.is_file():
             raise ProgramError(f"{cfg}: no such $config.dat")
         if cfg.is_file():
             options["config_dat"] = (str(cfg), _read(cfg)[0])
+    targets = None if out is None else _output_files(path, Path(out), list(texts), language, overwrite)
     result = filter_program_text(texts, language, calibrated, **options)
-    if out is not None:
+    if targets is not None:
         from robocal.outdir import new_run_id, write_together
 
-        out = Path(out)
         files = {}
         run_id = new_run_id()
         for label, text in result.texts.items():
-            target = out if label == str(path) else out.with_suffix(Path(label).suffix)
             if language == "krl":  # the pair carries one run id: a mix is refused when read
                 text = stamp_krl(text, run_id)
-            files[target] = text.encode(encodings[label])
+            files[targets[label]] = text.encode(encodings[label])
         # KRL: the .src and its .dat both or neither; the .dat renamed first, so that a
         # process killed in between leaves no new .src without its .dat
         write_together(dict(sorted(files.items(), key=lambda item: item[0].suffix.lower() != ".dat")))
     return result
+
+
+def _output_files(
+    path: Path, out: Path, labels: list[str], language: Language, overwrite: bool
+) -> dict[str, Path]:
+    """``{file label: output path}``; with ``overwrite=False`` an existing one is refused."""
+    targets = _krl_outputs(path, out, labels, overwrite) if language == "krl" else {str(path): out}
+    existing = [p for p in targets.values() if p.exists()]
+    if existing and not overwrite:
+        raise ProgramError(f"{existing[0]} already exists; use --force to overwrite it")
+    return targets
