@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -251,3 +252,121 @@ def test_a_refused_scheduler_port_ends_with_one_clear_error(tmp_path):
         port = probe.getsockname()[1]
     with pytest.raises(StudyError, match=f"tcp://127.0.0.1:{port}"):
         executor_for(None, f"tcp://127.0.0.1:{port}")
+
+
+# ------------------------------------------------------------------ fleets: names inside --out, tables
+@pytest.fixture
+def one_file_fleet(tmp_path):
+    """A folder with one good measurement file (robot0.csv) of a UR10 with a 100 mm tool."""
+    import numpy as np
+
+    from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
+    from robocal.measure.dataset import write_measurements
+    from robocal.measure.poses import random_poses
+    from robocal.model.catalog import robot
+
+    ur10 = robot("ur10")
+    folder = tmp_path / "in"
+    folder.mkdir()
+    virtual = VirtualRobot(
+        ur10, draw_true_model(ur10, seed=1), LaserTracker(p_tool_target=np.array([0, 0, 0.1]))
+    )
+    write_measurements(simulate(virtual, random_poses(ur10, 30, seed=1), seed=1), folder / "robot0.csv")
+    return folder
+
+
+@pytest.mark.parametrize("name", ["...csv", "..csv", ".hidden.csv"])
+def test_a_fleet_file_whose_result_folder_would_leave_the_output_is_refused(tmp_path, one_file_fleet, name):
+    from robocal.model.catalog import robot
+    from robocal.study import StudyError, run_fleet
+
+    (one_file_fleet / name).write_bytes((one_file_fleet / "robot0.csv").read_bytes())
+    before = sorted(os.listdir(tmp_path))
+    with pytest.raises(StudyError, match=re.escape(name[: -len(".csv")])):
+        run_fleet(one_file_fleet, robot("ur10"), tmp_path / "out", pattern="*csv", workers=0)
+    assert not (tmp_path / "model.yaml").exists() and not (tmp_path / "result.json").exists()
+    assert sorted(os.listdir(tmp_path)) == sorted([*before, "out"])
+    assert os.listdir(tmp_path / "out") == []  # nothing written, not even the table
+
+
+def test_a_fleet_result_folder_that_is_a_link_is_refused(tmp_path, one_file_fleet):
+    from robocal.model.catalog import robot
+    from robocal.study import StudyError, run_fleet
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (tmp_path / "out").mkdir()
+    os.symlink(elsewhere, tmp_path / "out" / "robot0")
+    with pytest.raises(StudyError, match="symbolic link"):
+        run_fleet(one_file_fleet, robot("ur10"), tmp_path / "out", workers=0)
+    assert os.listdir(elsewhere) == []
+
+
+def test_fleet_force_never_deletes_a_users_table(tmp_path, one_file_fleet):
+    from robocal.model.catalog import robot
+    from robocal.study import StudyError, run_fleet
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "fleet.csv").write_text("my,own,table\n1,2,3\n")
+    with pytest.raises(StudyError, match=r"fleet\.csv"):
+        run_fleet(one_file_fleet, robot("ur10"), out, workers=0, force=True)
+    assert (out / "fleet.csv").read_text() == "my,own,table\n1,2,3\n"
+
+
+def test_a_fleet_result_folder_holding_a_users_model_gets_an_error_row(tmp_path, one_file_fleet):
+    """The file's result is not saved over the user's model; the fleet goes on and says why."""
+    from robocal.model.catalog import robot
+    from robocal.study import run_fleet
+
+    out = tmp_path / "out"
+    (out / "robot0").mkdir(parents=True)
+    (out / "robot0" / "model.yaml").write_text("mine\n")
+    run = run_fleet(one_file_fleet, robot("ur10"), out, workers=0)
+    assert (run.calibrated, run.errors) == (0, 1)
+    assert run.rows[0]["status"] == "error" and "model.yaml" in run.rows[0]["message"]
+    assert (out / "robot0" / "model.yaml").read_text() == "mine\n"
+    assert sorted(os.listdir(out / "robot0")) == ["model.yaml"]
+
+
+# ------------------------------------------------------------------ studies: the user's files in --out
+def test_a_study_never_replaces_a_users_study_yaml_or_summary(tmp_path):
+    from robocal.study import StudyError, run_study
+
+    config = _study_file(tmp_path)
+    for name, text in (("study.yaml", "robots: 2\nmine: true\n"), ("summary.json", '{"mine": 1}')):
+        out = tmp_path / f"out_{name}"
+        out.mkdir()
+        (out / name).write_text(text)
+        for force in (False, True):
+            with pytest.raises(StudyError, match=re.escape(name)):
+                run_study(config, out, workers=0, force=force)
+        assert sorted(os.listdir(out)) == [name] and (out / name).read_text() == text
+
+
+def test_study_force_never_deletes_a_users_results_table(tmp_path):
+    from robocal.study import StudyError, run_study
+
+    config = _study_file(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "results.csv").write_text("my,own,table\n")
+    with pytest.raises(StudyError, match=r"results\.csv"):
+        run_study(config, out, workers=0, force=True)
+    assert (out / "results.csv").read_text() == "my,own,table\n"
+
+
+def test_a_study_resumes_and_restarts_in_its_own_folder(tmp_path):
+    """What robocal wrote stays robocal's: the same study resumes; --force starts another over."""
+    import yaml
+
+    from robocal.study import run_study
+
+    config = _study_file(tmp_path)
+    first = run_study(config, tmp_path / "out", workers=0)
+    again = run_study(config, tmp_path / "out", workers=0)
+    assert (first.computed, again.resumed, again.computed) == (2, 2, 0)
+    other = yaml.safe_load(config.read_text()) | {"seed": 4}
+    config.write_text(yaml.safe_dump(other))
+    forced = run_study(config, tmp_path / "out", workers=0, force=True)
+    assert (forced.computed, forced.resumed) == (2, 0)

@@ -13,7 +13,7 @@ from typing import Any
 from robocal.model.chain import Model
 from robocal.study.cluster import _Executor, check_workers, executor_for
 from robocal.study.config import StudyError
-from robocal.study.table import _Table
+from robocal.study.table import _Table, remove_table
 from robocal.study.tasks import FIT_COLUMNS, _fill_fit, _stats
 
 #: Columns of ``fleet.csv``.
@@ -155,11 +155,11 @@ def run_fleet(  # noqa: PLR0913 - public keyword options, documented in README a
     files = [p for p in files if p.resolve() != table_path.resolve()]  # --out DIR: not its own table
     if not files:
         raise StudyError(f"{directory}: no measurement files match {pattern!r}")
+    _check_names(directory, files, out, table_path)
     if force:
-        table_path.unlink(missing_ok=True)
+        remove_table(table_path, FLEET_COLUMNS)
     table = _Table(table_path, FLEET_COLUMNS, "file")
     names = {p: str(p.relative_to(directory)) for p in files}
-    _check_names(directory, files, table_path)
     todo, skipped, resumed = _fleet_todo(files, names, table)
     items = [
         _FleetItem(p, names[p], model, dict(read_options or {}), dict(calibrate_options or {}), complete)
@@ -201,10 +201,22 @@ def _measurement_files(directory: Path, pattern: str) -> list[Path]:
     return files
 
 
-def _check_names(directory: Path, files: Sequence[Path], table_path: Path) -> None:
+def _check_names(directory: Path, files: Sequence[Path], out: Path, table_path: Path) -> None:
     """Refuse files whose result folders (``OUT/<file stem>``) would clash with each other or
-    with the fleet table."""
+    with the fleet table, or would not be a plain folder of ``OUT`` (``...csv``: ``OUT/..``;
+    a hidden name; a link to elsewhere)."""
     stems = [p.stem for p in files]
+    for path, stem in zip(files, stems, strict=True):
+        if stem in ("", ".", "..") or stem.startswith(".") or os.sep in stem:
+            raise StudyError(
+                f"{path}: its result folder would be {stem!r}, not a plain folder inside {out}; "
+                "rename the file (or leave it out with --pattern)"
+            )
+        if os.path.islink(out / stem):
+            raise StudyError(
+                f"{out / stem}: a symbolic link where {path.name}'s result folder goes; robocal does "
+                "not write through it: remove it or choose another --out"
+            )
     twice = sorted({s for s in stems if stems.count(s) > 1})
     if twice:
         raise StudyError(
@@ -239,6 +251,20 @@ def _failed_file(item: _FleetItem, err: BaseException) -> tuple[dict[str, Any], 
     return row, None
 
 
+def _save(result: Any, target: Path, row: dict[str, Any]) -> tuple[dict[str, Any], Any]:
+    """Save ``result`` in ``target``: ``(row, result)``, or an ``error`` row and None when
+    the folder holds files robocal did not write or is being written (the other files go on)."""
+    from robocal.outdir import FolderBusyError, FolderMixedError
+
+    try:
+        result.save(target)
+    except (FolderBusyError, FolderMixedError) as err:
+        row.update(status="error", message=" ".join(str(err).split()))
+        return row, None
+    row["result_dir"] = str(target)
+    return row, result
+
+
 def _calibrate_files(
     executor: _Executor,
     items: Sequence[_FleetItem],
@@ -251,9 +277,8 @@ def _calibrate_files(
     calibrated = errors = 0
     for item, (row, result) in executor.map(_fleet_task, items, _failed_file):
         if result is not None:
-            target = out / item.path.stem
-            result.save(target)
-            row["result_dir"] = str(target)
+            row, result = _save(result, out / item.path.stem, row)
+        if result is not None:
             calibrated += 1
         else:
             errors += 1

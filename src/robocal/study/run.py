@@ -12,11 +12,12 @@ from typing import Any
 import yaml
 
 from robocal.model.files import atomic_write_text
+from robocal.run_ids import ForeignFileError, check_robocal_files, new_run_id, run_id_line
 from robocal.study.cluster import _Executor, check_workers, executor_for
 from robocal.study.config import Case, StudyConfig, StudyError, load_study_config, study_cases
 from robocal.study.prepare import _prepare, _Prepared
 from robocal.study.summary import write_summary
-from robocal.study.table import _Table, table_cells
+from robocal.study.table import _Table, remove_table, table_cells
 from robocal.study.tasks import RESULT_COLUMNS, _Chunk, _empty_row, _run_chunk
 
 
@@ -53,7 +54,11 @@ class StudyRun:
 
 
 def _config_text(config: StudyConfig) -> str:
-    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=True, default_flow_style=None, width=100)
+    """The study's ``study.yaml``: a run id line (it marks the file as robocal's), then the
+    configuration."""
+    return run_id_line(new_run_id()) + yaml.safe_dump(
+        config.model_dump(mode="json"), sort_keys=True, default_flow_style=None, width=100
+    )
 
 
 def _identity(dumped: Mapping[str, Any]) -> dict[str, Any]:
@@ -188,9 +193,15 @@ def _limited(config: StudyConfig | str | os.PathLike[str], robots: int | None) -
 
 def _claim_directory(out: Path, config: StudyConfig, force: bool) -> None:
     """Refuse ``out`` when it holds another study (or results without their ``study.yaml``)
-    unless ``force``, which deletes those results; the same study's results stay (resume)."""
+    unless ``force``, which deletes those results; the same study's results stay (resume).
+    Files robocal did not write (a ``study.yaml`` without its run id line, a table with
+    another header, a user's ``summary.json``) are refused, with or without ``force``."""
     cfg_path = out / "study.yaml"
     results_path = out / "results.csv"
+    try:
+        check_robocal_files(out, ("study.yaml", "summary.json", "summary.png"))
+    except ForeignFileError as err:
+        raise StudyError(str(err)) from None
     if cfg_path.exists():
         try:
             old = yaml.safe_load(cfg_path.read_text(encoding="utf-8"))
@@ -203,11 +214,11 @@ def _claim_directory(out: Path, config: StudyConfig, force: bool) -> None:
                     f"{out} holds a study with another configuration ({cfg_path}); use --force to "
                     "start over (its results are deleted) or choose another --out"
                 )
-            results_path.unlink(missing_ok=True)
+            remove_table(results_path, RESULT_COLUMNS)
     elif results_path.exists():
         if not force:
             raise StudyError(f"{results_path} exists without its study.yaml; use --force to start over")
-        results_path.unlink()
+        remove_table(results_path, RESULT_COLUMNS)
 
 
 def _prime(executor: _Executor, chunks: Sequence[_Chunk]) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 
 from robocal import csvfile
 from robocal.model.files import atomic_write_text
+from robocal.run_ids import is_own_regular_file
 from robocal.safe_output import csv_text, csv_untext
 from robocal.study.config import StudyError
 
@@ -69,6 +70,23 @@ class _Table:
         for row_cells in cells:
             row = dict(zip(self.columns, row_cells, strict=True))
             self.rows[csv_untext(row[self.key])] = row
+
+
+def remove_table(path: Path, columns: Sequence[str]) -> None:
+    """Delete the results table at ``path`` (``--force``) when robocal wrote it: this user's
+    plain file whose header is ``columns``; anything else is refused, never deleted."""
+    if not os.path.lexists(path):
+        return
+    header = None
+    if is_own_regular_file(path):
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            header = fh.readline(64 * 1024).strip()
+    if header != ",".join(columns):
+        raise StudyError(
+            f"{path}: not a results table robocal wrote (another header, a link, or another user's "
+            "file); robocal does not delete it, even with --force: move it away or choose another output"
+        )
+    path.unlink()
 
 
 def table_cells(rows: Iterable[Mapping[str, Any]], columns: Sequence[str]) -> list[list[str]]:
