@@ -370,3 +370,28 @@ def test_a_study_resumes_and_restarts_in_its_own_folder(tmp_path):
     config.write_text(yaml.safe_dump(other))
     forced = run_study(config, tmp_path / "out", workers=0, force=True)
     assert (forced.computed, forced.resumed) == (2, 0)
+
+
+# ------------------------------------------------------------------ the demo's default folder
+@pytest.mark.parametrize("home", ["", "/", "relative/home", "/no/such/home"])
+def test_the_demo_never_writes_to_the_root_without_a_usable_home(tmp_path, monkeypatch, home):
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+    from robocal.demo.folder import default_folder
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("HOME", home)
+    with pytest.raises(ValueError, match="--out"):
+        default_folder()
+    existed = Path("/robocal-demo").exists()
+    result = CliRunner().invoke(app, ["demo", "--quick"])
+    assert result.exit_code == 2 and "--out" in result.stderr
+    assert Path("/robocal-demo").exists() == existed and os.listdir(tmp_path) == []
+
+
+def test_the_demo_folder_is_in_a_usable_home(tmp_path, monkeypatch):
+    from robocal.demo.folder import default_folder
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert default_folder() == tmp_path / "robocal-demo"

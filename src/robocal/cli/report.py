@@ -169,7 +169,12 @@ def demo_command(
     if n < 10:
         raise fail(f"--n {n}: a calibration needs at least 10 poses")
     if out is None:
-        out = Path.home() / "robocal-demo"
+        from robocal.demo.folder import default_folder
+
+        try:  # HOME/robocal-demo; an empty HOME is not the root
+            out = default_folder()
+        except ValueError as err:
+            raise fail(str(err)) from None
     refuse_overwrite(out, force, "demo folder")
     try:
         numbers = run_demo(robot, out, seed=seed, n_calibration=n, quick=quick, verbose=not as_json)
