@@ -64,7 +64,7 @@ from robocal import spatial
 from robocal.compensate import safety
 from robocal.compensate.result import Compensation
 from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.ik import PerturbationFunction, TargetKind, solve_ik
+from robocal.measure.ik import IKResult, PerturbationFunction, TargetKind, solve_ik
 from robocal.measure.ik_regularized import solve_regularized
 from robocal.model.chain import Model, Role
 
@@ -296,6 +296,22 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     )
 
 
+def _chained(model: Model, T: Array, nom: IKResult, restarts: int, ik: dict[str, Any]) -> IKResult:
+    """Targets not reached from the common start: each from the solution of the previous
+    target reached (in file order, the configuration the robot comes from), then restarts."""
+    q, ok = nom.q.copy(), nom.reachable.copy()
+    for i in np.flatnonzero(~ok):
+        before = np.flatnonzero(ok[:i])
+        if len(before):
+            one = solve_ik(model, T[i : i + 1], q0=q[before[-1]], restarts=0, **ik)
+            q[i], ok[i] = one.q[0], one.reachable[0]
+    todo = np.flatnonzero(~ok)
+    if len(todo) and restarts:
+        more = solve_ik(model, T[todo], q0=q[todo], restarts=restarts, **ik)
+        q[todo], ok[todo] = more.q, more.reachable
+    return dataclasses.replace(nom, q=q, reachable=ok)
+
+
 def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in README and docs
     calibrated: Calibrated,
     targets: ArrayLike,
@@ -358,7 +374,8 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
         # one configuration for the whole file: every target starts from the first one's
         # solution (a wrist or elbow flip between neighbouring targets is never intended)
         q0 = solve_ik(setup.nominal, T[:1], q0=None, restarts=restarts, **ik).q[0]
-    nom = solve_ik(setup.nominal, T, q0=q0, restarts=restarts, **ik)
+    nom = solve_ik(setup.nominal, T, q0=q0, restarts=0, **ik)
+    nom = _chained(setup.nominal, T, nom, restarts, ik)
     return _correct(
         setup,
         T,
