@@ -1,7 +1,7 @@
 """``robocal export``: the calibrated robot in the formats the robot's software reads.
 
-    robocal export urdf DIR [--urdf ORIGINAL.urdf] [--tip LINK] [--device-link NAME]
-                            [--tool-link NAME] -o OUT.urdf
+    robocal export urdf DIR [--urdf ORIGINAL.urdf] [--joint-map a=b,...] [--tip LINK]
+                            [--device-link NAME] [--tool-link NAME] -o OUT.urdf
     robocal export ur-kinematics DIR [--base-rz-pi] -o calibration.yaml
     robocal filter DIR PROGRAM [--tool x,y,z,rx,ry,rz] [--probe x,y,z]
                            [--config-dat PATH] [--strict] -o OUT
@@ -11,8 +11,11 @@
 from) and keeps everything else; without ``--urdf`` it writes a kinematic URDF of its
 own.  What the file cannot carry (joint effects, a learned residual) is printed with its
 size and stated in an XML comment.  ``export ur-kinematics`` writes the UR ROS
-description's ``default_kinematics.yaml`` format.  Exit status 2 on bad input (nothing
-written).
+description's ``default_kinematics.yaml`` format.  Both carry a calibration without a
+learned residual; for a hybrid one (``--residual auto`` chose the residual) the best
+physics-only calibration stored with it, both CV errors stated.  A ``model.yaml`` edited
+after the calibration, a non-finite or implausible value or device frame, or a name that
+is not a safe URDF name is refused.  Exit status 2 on bad input (nothing written).
 """
 
 from __future__ import annotations
@@ -59,21 +62,31 @@ def urdf_command(
         str | None,
         typer.Option("--tool-link", metavar="NAME", help="add the measured tool as a link of this name"),
     ] = None,
+    joint_map: Annotated[
+        str | None,
+        typer.Option(
+            "--joint-map",
+            metavar="a=b,...",
+            help="model joint = URDF joint, for a URDF whose joint names differ (default: by chain order)",
+        ),
+    ] = None,
     force: Force = False,
 ) -> None:
     """A URDF whose forward kinematics are the calibrated model's (joint offsets folded into origins)."""
     refuse_overwrite(out, force, "URDF")
-    from robocal.cli.compensate import _load
     from robocal.compensate.export import export_urdf
     from robocal.identify.calibrate import CalibrationResult
     from robocal.model.files import atomic_write_text
     from robocal.model.urdf import URDFError
 
-    calibrated = _load(source)
+    calibrated = _load_checked(source)
     if device_link is not None and not isinstance(calibrated, CalibrationResult):
         raise fail(f"--device-link needs a calibration directory (its device frame); {source} is a model")
+    mapping = _joint_map(joint_map)
     try:
-        ex, _ = export_urdf(calibrated, urdf, tip=tip, device_link=device_link, tool_link=tool_link)
+        ex, _ = export_urdf(
+            calibrated, urdf, tip=tip, device_link=device_link, tool_link=tool_link, joint_map=mapping
+        )
     except FileNotFoundError as err:
         raise fail(str(err)) from None
     except (URDFError, ValueError) as err:
@@ -102,13 +115,13 @@ def ur_kinematics_command(
     """The calibrated kinematics as a UR description default_kinematics.yaml."""
     refuse_overwrite(out, force, "kinematics file")
     from robocal import spatial
-    from robocal.cli.compensate import _load
-    from robocal.compensate.export import export_ur_kinematics, left_out
+    from robocal.compensate.export import export_ur_kinematics, kinematic_part, left_out
 
-    calibrated = _load(source)
+    calibrated = _load_checked(source)
     base = spatial.homogeneous(spatial.rotz(math.pi)) if base_rz_pi else None
     try:
-        kin = export_ur_kinematics(calibrated, None, T_base_urbase=base)
+        part = kinematic_part(calibrated)
+        kin = export_ur_kinematics(part.calibrated, None, T_base_urbase=base)
     except ValueError as err:
         raise fail(f"{source}: {err}") from None
     from robocal.model.files import atomic_write_text
@@ -125,8 +138,38 @@ def ur_kinematics_command(
             highlight=False,
             markup=True,
         )
-    for m in left_out(calibrated):
-        err_console.print(f"[yellow]note:[/] {safe(m.note)}", highlight=False, markup=True)
+    for note in (*part.notes, *(m.note for m in left_out(part.calibrated))):
+        err_console.print(f"[yellow]note:[/] {safe(note)}", highlight=False, markup=True)
+
+
+def _load_checked(source: Path):
+    """The calibration (or model) to export, refused when its files disagree (a hand-edited
+    ``model.yaml``) or its numbers cannot be a robot's (a 1e308 device frame)."""
+    from robocal.cli.compensate import _load
+    from robocal.compensate.export import check_exportable, check_result_files
+    from robocal.identify.calibrate import CalibrationResult
+
+    calibrated = _load(source)
+    try:
+        if isinstance(calibrated, CalibrationResult):
+            check_result_files(source, calibrated)
+        check_exportable(calibrated, f"{source}: ")
+    except ValueError as err:
+        raise fail(str(err)) from None
+    return calibrated
+
+
+def _joint_map(text: str | None) -> dict[str, str] | None:
+    """``--joint-map "a=b,c=d"`` (model joint = URDF joint) -> a dict."""
+    if text is None:
+        return None
+    pairs = [p.split("=") for p in text.split(",") if p.strip()]
+    if not pairs or any(len(p) != 2 or not p[0].strip() or not p[1].strip() for p in pairs):
+        raise fail(f"--joint-map {text!r}: give model_joint=urdf_joint pairs separated by commas")
+    mapping = {a.strip(): b.strip() for a, b in pairs}
+    if len(mapping) != len(pairs) or len(set(mapping.values())) != len(mapping):
+        raise fail(f"--joint-map {text!r}: a joint named twice")
+    return mapping
 
 
 # a tool this far from the flange is a length in the wrong unit (e.g. 0,0,109m): refused

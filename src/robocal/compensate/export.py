@@ -31,9 +31,156 @@ from robocal.model.files import atomic_write_text
 from robocal.model.ur_kinematics import URKinematics, ur_kinematics
 from robocal.model.urdf_export import URDFExport, calibrated_urdf
 
-__all__ = ["LeftOut", "export_ur_kinematics", "export_urdf", "left_out"]
+__all__ = [
+    "KinematicPart",
+    "LeftOut",
+    "check_exportable",
+    "check_result_files",
+    "export_ur_kinematics",
+    "export_urdf",
+    "kinematic_part",
+    "left_out",
+]
 
 Array = NDArray[np.float64]
+#: A device frame or model length beyond this (m) is not a robot cell's: a hand-edited
+#: or corrupted file, refused before anything is written.
+MAX_LENGTH_M = 1e3
+
+
+@dataclass(frozen=True)
+class KinematicPart:
+    """What a kinematic export (URDF, UR kinematics) carries of a calibration.
+
+    Attributes:
+        calibrated: a result or model without a learned residual: the calibration itself,
+            or — for a hybrid calibration (physics + learned residual) — the best
+            physics-only calibration of the same poses stored with it.
+        notes: what was chosen and why, with both CV errors (mm).
+    """
+
+    calibrated: CalibrationResult | Model
+    notes: tuple[str, ...] = ()
+
+
+def kinematic_part(calibrated: CalibrationResult | Model) -> KinematicPart:
+    """The part of ``calibrated`` a URDF or a UR kinematics file can hold.
+
+    A learned residual cannot be written into either; the hybrid's physical part alone is
+    not a calibration (it was fitted with the residual beside it, and predicts worse than a
+    physics-only fit), so a hybrid result gives the physics-only calibration stored in its
+    ``result.json`` (``physics_only``) with both cross-validated errors stated.
+
+    Raises:
+        ValueError: a model or result with a learned residual and no physics-only calibration.
+    """
+    model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
+    if model.residual is None:
+        return KinematicPart(calibrated)
+    record = calibrated.records.get("physics_only") if isinstance(calibrated, CalibrationResult) else None
+    if not isinstance(record, dict):
+        raise ValueError(
+            f"model {model.name!r} has a learned residual, which a URDF or UR kinematics file cannot hold, "
+            "and no physics-only calibration stored with it (its physical part alone was fitted beside "
+            "the residual): calibrate again (robocal stores one) or with --residual none"
+        )
+    assert isinstance(calibrated, CalibrationResult)
+    return KinematicPart(_physics_only(calibrated, record), (_physics_only_note(calibrated, record),))
+
+
+def _physics_only(result: CalibrationResult, record: dict) -> CalibrationResult:
+    """The stored physics-only calibration as a result (model, device frame, compliance)."""
+    from robocal.model.files import ModelFileError, model_from_dict
+
+    where = "result.json: physics_only"
+    try:
+        model = model_from_dict(record.get("model"), origin=f"{where}.model")
+        frame = np.array(record["T_device_base"], dtype=float).reshape(4, 4)
+        compliance = {str(k): float(v) for k, v in dict(record.get("compliance") or {}).items()}
+    except (KeyError, TypeError, ValueError, ModelFileError) as err:
+        raise ValueError(f"{where}: not a physics-only calibration written by robocal ({err})") from None
+    if model.joint_names != result.model.joint_names or model.residual is not None:
+        raise ValueError(f"{where}: its model is not the calibration's robot without a residual")
+    _check_frame(frame, f"{where}.T_device_base")
+    _check_values(model, f"{where}.model")
+    return result.replace(
+        model=model, T_device_base=frame, compliance=compliance, residual_cross_covariance=None
+    )
+
+
+def _physics_only_note(result: CalibrationResult, record: dict) -> str:
+    def mm(key: str) -> str:
+        v = record.get(key)
+        return f"{float(v):.4f} mm" if isinstance(v, int | float) else "not cross-validated"
+
+    held_out = ""
+    if result.validation is not None and "mean_mm" in result.validation:
+        v = result.validation
+        held_out = f", {float(v['mean_mm']):.4f} mm mean on {v.get('n')} held-out poses"
+    return (
+        f"kinematics of the best physics-only calibration of the same poses ({record.get('candidate')}: "
+        f"CV mean error {mm('cv_mean_mm')}); the calibration's hybrid ({record.get('hybrid')}: CV mean "
+        f"error {mm('hybrid_cv_mean_mm')}{held_out}) has a learned residual this file cannot hold: "
+        "compensate and filter use the hybrid"
+    )
+
+
+def check_exportable(calibrated: CalibrationResult | Model, where: str = "") -> None:
+    """Refuse (ValueError naming ``where``) a calibration whose numbers cannot be a robot:
+    non-finite or implausibly large model values (beyond :data:`MAX_LENGTH_M`), or a device
+    frame that is not a finite rigid transform within that distance."""
+    model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
+    _check_values(model, f"{where}model {model.name!r}")
+    if isinstance(calibrated, CalibrationResult):
+        _check_frame(np.asarray(calibrated.T_device_base, dtype=float), f"{where}result.json: T_device_base")
+
+
+def check_result_files(directory: str | Path, result: CalibrationResult) -> None:
+    """Refuse (ValueError naming the file) a calibration folder whose ``model.yaml`` is not
+    the one the calibration wrote: its SHA-256 differs from ``result.json``'s
+    ``model_sha256``, or — in a folder written before the digest — a parameter of
+    ``result.json`` has another value in the model (relative 1e-9)."""
+    from robocal.identify.result_io import file_hash
+
+    path = Path(directory) / "model.yaml"
+    digest = result.records.get("model_sha256")
+    if isinstance(digest, str):
+        if file_hash(path) != digest:
+            raise ValueError(
+                f"{path}: changed since the calibration wrote it (its SHA-256 is not result.json's "
+                "model_sha256): calibrate again, or export a model file of your own"
+            )
+        return
+    values = dict(zip(result.model.names, result.model.values, strict=True))
+    for name, estimate in zip(result.names, result.estimates, strict=True):
+        v = values.get(name)
+        if v is not None and not abs(v - estimate) <= 1e-9 * max(1.0, abs(estimate)):
+            raise ValueError(
+                f"{path}: parameter {name} is {v!r}, result.json says {float(estimate)!r}: the model "
+                "does not belong to this result; calibrate again"
+            )
+
+
+def _check_values(model: Model, where: str) -> None:
+    for s in model.steps:
+        limit = math.inf if s.is_rotation else MAX_LENGTH_M
+        if not math.isfinite(s.value) or abs(s.value) > limit:
+            raise ValueError(f"{where}: parameter {s.name} = {s.value!r} is not a plausible value")
+
+
+def _check_frame(T: Array, where: str) -> None:
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{where}: not a finite 4x4 transform")
+    R = T[:3, :3]
+    rigid = np.abs(R.T @ R - np.eye(3)).max() < 1e-6 and np.abs(T[3] - (0, 0, 0, 1)).max() == 0
+    if not rigid or np.linalg.det(R) < 0:
+        raise ValueError(f"{where}: not a rigid transform (rotation not orthonormal)")
+    distance = float(np.abs(T[:3, 3]).max())  # not the norm: 1e308 would overflow it
+    if distance > MAX_LENGTH_M:
+        raise ValueError(
+            f"{where}: the device is {distance:.4g} m from the robot base along an axis (more than "
+            f"{MAX_LENGTH_M:g} m): not a plausible device frame"
+        )
 
 
 @dataclass(frozen=True)
@@ -129,6 +276,7 @@ def export_urdf(
     device_link: str | None = None,
     tool_link: str | None = None,
     samples: int = 200,
+    joint_map: dict[str, str] | None = None,
 ) -> tuple[URDFExport, tuple[LeftOut, ...]]:
     """A calibrated URDF (see :func:`robocal.model.urdf_export.calibrated_urdf`) and what
     it leaves out.
@@ -140,9 +288,16 @@ def export_urdf(
         device_link, tool_link: names of the optional new links at the device frame
             (the new root) and at the measured tool.
         samples: configurations for sizing what is left out.
+        joint_map: model joint -> source URDF joint, where the names differ (default: by
+            name, else by chain order; checked and stated).
+
+    A hybrid calibration exports its best physics-only calibration (:func:`kinematic_part`).
     """
     from robocal.compensate.compensation import nominal_model
 
+    part = kinematic_part(calibrated)
+    calibrated = part.calibrated
+    check_exportable(calibrated)
     if isinstance(calibrated, CalibrationResult):
         model = calibrated.model
         frame: Array | None = np.asarray(calibrated.frame, dtype=float)
@@ -152,7 +307,7 @@ def export_urdf(
         if device_link is not None:
             raise ValueError("a device link needs a calibration result (its device frame)")
     missing = left_out(calibrated, samples)
-    notes = [m.note for m in missing]
+    notes = [*part.notes, *(m.note for m in missing)]
     if device_link is None and frame is not None:
         notes.append("the measuring device's frame is not in this file (device link not requested)")
     ex = calibrated_urdf(
@@ -164,6 +319,7 @@ def export_urdf(
         device_link=device_link,
         tool_link=tool_link,
         notes=notes,
+        joint_map=joint_map,
     )
     return ex, missing
 
@@ -175,7 +331,10 @@ def export_ur_kinematics(
     T_base_urbase: ArrayLike | None = None,
     hash: str = "robocal_calibration",
 ) -> URKinematics:
-    """The calibrated UR kinematics; written atomically to ``path`` when given."""
+    """The calibrated UR kinematics (of :func:`kinematic_part`: a hybrid calibration's
+    best physics-only calibration); written atomically to ``path`` when given."""
+    calibrated = kinematic_part(calibrated).calibrated
+    check_exportable(calibrated)
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     kin = ur_kinematics(model, T_base_urbase, hash)
     if path is not None:

@@ -174,8 +174,34 @@ def calibrate_with_residual(
             ).with_diagnostics(cv=table.to_dict())
         e = data.position - result.predict(data.q)[:, :3, 3]
         rms_mm = float(np.sqrt(np.mean(np.sum(e**2, axis=1)))) * 1e3
-        result = result.with_diagnostics(residual_rms_after_mm=rms_mm)
+        result = result.with_diagnostics(residual_rms_after_mm=rms_mm).with_records(
+            physics_only=_physics_only_record(table, full, chosen)
+        )
     return result.with_diagnostics(cv=table.to_dict()).replace(seconds=time.perf_counter() - t0)
+
+
+def _physics_only_record(table: CVTable, full: dict[str, PhysicalFit], chosen: CVCandidate) -> dict[str, Any]:
+    """The best physics-only calibration of the same poses (the physics-only CV candidate with
+    the lowest mean CV error, else the variant the hybrid's physics is), for the exports that
+    cannot hold a learned residual (URDF, UR kinematics): its model, device frame and CV errors
+    (mm) next to the hybrid's.  Stored in ``result.json`` as ``physics_only``."""
+    from robocal.model.files import model_to_dict
+
+    rows = [c for c in table.candidates if c.harmonics is None and c.physics in full]
+    best = min(rows, key=lambda c: c.cv_mean) if rows else None
+    fit = full[best.physics if best is not None else chosen.physics].result
+    return {
+        "candidate": best.name if best is not None else chosen.physics,
+        "cv_mean_mm": None if best is None else best.cv_mean * 1e3,
+        "cv_rms_mm": None if best is None else best.cv_rms * 1e3,
+        "hybrid": chosen.name,
+        "hybrid_cv_mean_mm": chosen.cv_mean * 1e3,
+        "hybrid_cv_rms_mm": chosen.cv_rms * 1e3,
+        "rms_after_mm": fit.rms_after * 1e3,
+        "T_device_base": np.asarray(fit.T_device_base, dtype=float).tolist(),
+        "compliance": {str(k): float(v) for k, v in fit.compliance.items()},
+        "model": model_to_dict(dataclasses.replace(fit.model, residual=None)),
+    }
 
 
 def _harmonics_grid(harmonics: int | Sequence[int] | None, folds: int) -> tuple[int, ...]:

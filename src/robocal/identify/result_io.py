@@ -180,7 +180,9 @@ def save_result(result: Any, directory: str | Path, also: Callable[[Path], objec
         save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)
         if result.measurement_chain is not None:
             save_model(result.measurement_chain, stage.path / "measurement_model.yaml", run_id=stage.run_id)
-        text = strict_json(result_dict(result) | {"run_id": stage.run_id}, indent=2) + "\n"
+        # the model file's digest: an export refuses a model.yaml edited after the calibration
+        digest = {"model_sha256": file_hash(stage.path / "model.yaml")}
+        text = strict_json(result_dict(result) | {"run_id": stage.run_id} | digest, indent=2) + "\n"
         atomic_write_text(stage.path / "result.json", text)
         if also is not None:
             also(stage.path)

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.model.chain import Model, Role
 from robocal.model.urdf import URDFError, _read_checked
+from robocal.model.urdf_map import base_note, map_joints, root_from_base
 from robocal.model.urdf_source import (
     _axis_of,
     _chain_to,
@@ -64,6 +65,10 @@ from robocal.model.urdf_source import (
     _set_attrs,
     urdf_origin,
 )
+from robocal.model.urdf_xml import attr, check_name, comment, own_limits, rpy_from_matrix
+from robocal.model.urdf_xml import fixed_pair as _fixed_pair
+from robocal.model.urdf_xml import num as _num
+from robocal.model.urdf_xml import triple as _triple
 
 __all__ = ["TOOL_PREFIX", "URDFExport", "calibrated_urdf", "rpy_from_matrix", "urdf_origin"]
 
@@ -98,32 +103,6 @@ class URDFExport:
 
 
 # ---------------------------------------------------------------------- numbers
-def rpy_from_matrix(R: Array) -> tuple[float, float, float]:
-    """URDF roll, pitch, yaw (rad) of a rotation ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
-
-    Accurate to rounding even at pitch = ±90° (the UR URDFs' ``rpy="0 1.5707... 0"``):
-    roll from ``R[2, 1:]``, then pitch and yaw from ``R Rx(roll)ᵀ = Rz(yaw) Ry(pitch)``,
-    whose entries used are of order one.
-    """
-    R = np.asarray(R, dtype=float)
-    roll = math.atan2(R[2, 1], R[2, 2])
-    M = R @ spatial.rotx(roll).T
-    pitch = math.atan2(-M[2, 0], M[2, 2])
-    yaw = math.atan2(-M[0, 1], M[1, 1])
-    return roll, pitch, yaw
-
-
-def _num(v: float) -> str:
-    if abs(v) < 1e-15:
-        return "0"
-    text = repr(float(v))
-    return text[:-2] if text.endswith(".0") else text
-
-
-def _triple(values: Sequence[float]) -> str:
-    return " ".join(_num(v) for v in values)
-
-
 # ---------------------------------------------------------------------- the chain
 @dataclass(frozen=True)
 class _Chain:
@@ -167,9 +146,8 @@ def _minimal_rotation(b: Array, a: Array) -> Array:
 
 
 def _comment(notes: Sequence[str]) -> str:
-    lines = ["robocal: calibrated kinematics (joint origins rewritten; joint offsets folded in)."]
-    lines += [n.replace("--", "-") for n in notes]
-    return "<!-- " + "\n     ".join(lines) + " -->"
+    title = "robocal: calibrated kinematics (joint origins rewritten; joint offsets folded in)."
+    return comment([title, *notes])
 
 
 def _export_source(
@@ -181,17 +159,19 @@ def _export_source(
     device_link: str | None,
     tool_link: str | None,
     notes: Sequence[str],
+    joint_map: Mapping[str, str] | None = None,
 ) -> URDFExport:
     _read_checked(path)
     data = path.read_bytes()
     joints, links, robot = _scan(path, data)
-    chain, tip_link = _source_chain(path, model.joint_names, joints, links, tip)
+    mapped = map_joints(path, nominal, joints, links, tip, joint_map)
+    chain, tip_link = _source_chain(path, mapped.names, joints, links, tip)
     root = chain[0].parent
-    # nominal link frames of the URDF at zero, and the calibrated ones
-    nom, cal = _split(nominal), _split(model)
+    # nominal link frames of the URDF at zero, and the calibrated ones, in the URDF's root frame
+    nom, cal, B, notes = _in_root(chain, _split(nominal), _split(model), mapped, notes)
     new_origin, new_axis, W_urdf, W_last = _calibrated_joints(path, chain, nom, cal)
     # the flange: the first fixed joint after the last movable joint carries the correction
-    after = chain[[j.name for j in chain].index(model.joint_names[-1]) + 1 :]
+    after = chain[[j.name for j in chain].index(mapped.names[-1]) + 1 :]
     # the URDF's tip in the nominal model's flange frame: a rotation when the model does not
     # hold the flange orientation (position measurement); it rides on the calibrated flange
     G = spatial.inverse(nom.T_base_flange0) @ W_urdf
@@ -228,9 +208,7 @@ def _export_source(
     additions: list[str] = [] if flange_pair is None else [flange_pair]
     new_root = root
     if device_link is not None:
-        if T_device_base is None:
-            raise ValueError("a device link needs T_device_base (the calibration's device frame)")
-        additions.append(_fixed_pair(device_link, root, np.asarray(T_device_base, dtype=float), links))
+        additions.append(_device_pair(device_link, root, T_device_base, B, links))
         new_root = device_link
     if tool_link is not None:
         T_tip_tool = spatial.inverse(G) @ cal.T_flange_tool
@@ -250,6 +228,28 @@ def _export_source(
         changed=tuple(sorted(set(new_origin) | set(new_axis), key=list(joints).index)),
         notes=tuple(notes),
     )
+
+
+def _in_root(
+    chain: list[_JointInfo], nom: _Chain, cal: _Chain, mapped, notes: Sequence[str]
+) -> tuple[_Chain, _Chain, Array, list[str]]:
+    """The nominal and calibrated chains in the URDF's root frame, that frame's transform
+    ``B`` from the model's base, and the notes (with the mapping stated)."""
+    if not mapped.note:  # the URDF the model was built from: its root is the model's base
+        return nom, cal, np.eye(4), list(notes)
+    # another description of the robot: its root may sit elsewhere on the base
+    B = root_from_base(chain, nom.T_base_flange0)
+    return _rebased(nom, B), _rebased(cal, B), B, [*notes, mapped.note + base_note(B, chain[0].parent)]
+
+
+def _device_pair(name: str, root: str, T_device_base: Array | None, B: Array, links: Sequence[str]) -> str:
+    if T_device_base is None:
+        raise ValueError("a device link needs T_device_base (the calibration's device frame)")
+    return _fixed_pair(name, root, np.asarray(T_device_base, dtype=float) @ spatial.inverse(B), links)
+
+
+def _rebased(c: _Chain, B: Array) -> _Chain:
+    return dataclasses.replace(c, F0=B @ c.F0, T_base_flange0=B @ c.T_base_flange0)
 
 
 def _source_chain(
@@ -368,20 +368,6 @@ def _apply_edits(path: Path, data: bytes, edits: list[tuple[int, int, bytes]]) -
         raise URDFError(f"{path}: line {line}: not UTF-8 text") from None
 
 
-def _fixed_pair(new: str, existing: str, T: Array, links: Sequence[str], parent_is_new: bool = True) -> str:
-    """A new link and the fixed joint attaching it (``new`` is the parent when
-    ``parent_is_new``, i.e. a new root)."""
-    if new in links:
-        raise ValueError(f"link {new!r} exists already in the URDF; choose another name")
-    parent, child = (new, existing) if parent_is_new else (existing, new)
-    rpy = rpy_from_matrix(T[:3, :3])
-    return (
-        f'<link name="{new}"/>\n  <joint name="{new}_joint" type="fixed">\n'
-        f'    <parent link="{parent}"/>\n    <child link="{child}"/>\n'
-        f'    <origin xyz="{_triple(T[:3, 3])}" rpy="{_triple(rpy)}"/>\n  </joint>'
-    )
-
-
 def _export_own(
     model: Model,
     T_device_base: Array | None,
@@ -391,13 +377,18 @@ def _export_own(
 ) -> URDFExport:
     cal = _split(model)
     joints = [s for s in model.steps if s.joint is not None]
+    check_name(model.name, "model name")
+    for s in joints:
+        assert s.joint is not None
+        check_name(s.joint.name, f"model {model.name!r}: joint name")
     names = ["base_link", *(f"{s.joint.name}_link" for s in joints if s.joint), "flange"]
+    limits, limits_note = own_limits(model.title, len(joints))
     lines = [
         '<?xml version="1.0"?>',
-        f'<robot name="{model.name}">',
-        "  " + _comment(notes).replace("\n", "\n  "),
+        f"<robot name={attr(model.name)}>",
+        "  " + _comment([*notes, limits_note]).replace("\n", "\n  "),
     ]
-    lines += [f'  <link name="{n}"/>' for n in names]
+    lines += [f"  <link name={attr(n)}/>" for n in names]
     previous = np.eye(4)
     for k, s in enumerate(joints):
         assert s.joint is not None
@@ -407,19 +398,23 @@ def _export_own(
         lim = s.joint.limits
         if kind == "revolute" and lim is None:
             kind = "continuous"
-        lines.append(f'  <joint name="{s.joint.name}" type="{kind}">')
-        lines.append(f'    <parent link="{names[k]}"/>\n    <child link="{names[k + 1]}"/>')
+        lines.append(f'  <joint name={attr(s.joint.name)} type="{kind}">')
+        lines.append(f"    <parent link={attr(names[k])}/>\n    <child link={attr(names[k + 1])}/>")
         lines.append(
             f'    <origin xyz="{_triple(T_o[:3, 3])}" rpy="{_triple(rpy_from_matrix(T_o[:3, :3]))}"/>'
         )
         lines.append(f'    <axis xyz="{_triple(np.eye(3)[cal.axes[k]])}"/>')
         if lim is not None or kind == "prismatic":
             lo, hi = lim if lim is not None else (-1.0, 1.0)
-            lines.append(f'    <limit lower="{_num(lo)}" upper="{_num(hi)}" effort="0" velocity="0"/>')
+            effort, velocity = limits[k]
+            lines.append(
+                f'    <limit lower="{_num(lo)}" upper="{_num(hi)}" effort="{_num(effort)}" '
+                f'velocity="{_num(velocity)}"/>'
+            )
         lines.append("  </joint>")
     T_o = spatial.inverse(previous) @ cal.T_base_flange0
     lines.append('  <joint name="flange_joint" type="fixed">')
-    lines.append(f'    <parent link="{names[-2]}"/>\n    <child link="flange"/>')
+    lines.append(f'    <parent link={attr(names[-2])}/>\n    <child link="flange"/>')
     lines.append(f'    <origin xyz="{_triple(T_o[:3, 3])}" rpy="{_triple(rpy_from_matrix(T_o[:3, :3]))}"/>')
     lines.append("  </joint>")
     root = "base_link"
@@ -437,7 +432,7 @@ def _export_own(
         tip="flange",
         tool_link=tool_link,
         changed=tuple(s.joint.name for s in joints if s.joint),
-        notes=tuple(notes),
+        notes=(*notes, limits_note),
     )
 
 
@@ -451,6 +446,7 @@ def calibrated_urdf(
     device_link: str | None = None,
     tool_link: str | None = None,
     notes: Sequence[str] = (),
+    joint_map: Mapping[str, str] | None = None,
 ) -> URDFExport:
     """A URDF whose forward kinematics are ``model``'s (to rounding, ~1e-15 m).
 
@@ -468,14 +464,24 @@ def calibrated_urdf(
         tool_link: name of a new link at the measured tool (fixed joint from the tip),
             or ``None``.
         notes: lines for the XML comment (what the URDF cannot carry, with sizes).
+        joint_map: model joint name -> source URDF joint name, for a URDF whose joint names
+            differ (default: by name, else by chain order, checked and stated in the notes).
 
     Raises:
         URDFError: the source URDF is malformed (file and line named) or is not the one
             the model was built from.
+        ValueError: a name that is not a safe URDF name (:mod:`robocal.model.urdf_xml`).
     """
+    for name, what in ((device_link, "--device-link"), (tool_link, "--tool-link"), (tip, "--tip")):
+        if name is not None:
+            check_name(name, what)
+    for a, b in (joint_map or {}).items():
+        check_name(a, "--joint-map"), check_name(b, "--joint-map")
     if source is None:
         return _export_own(model, T_device_base, device_link, tool_link, notes)
     nominal = model if nominal is None else nominal
     if nominal.joint_names != model.joint_names:
         raise ValueError("the nominal and calibrated models have different joints")
-    return _export_source(model, nominal, Path(source), tip, T_device_base, device_link, tool_link, notes)
+    return _export_source(
+        model, nominal, Path(source), tip, T_device_base, device_link, tool_link, notes, joint_map
+    )
