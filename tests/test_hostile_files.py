@@ -285,8 +285,7 @@ def test_a_fleet_file_whose_result_folder_would_leave_the_output_is_refused(tmp_
     with pytest.raises(StudyError, match=re.escape(name[: -len(".csv")])):
         run_fleet(one_file_fleet, robot("ur10"), tmp_path / "out", pattern="*csv", workers=0)
     assert not (tmp_path / "model.yaml").exists() and not (tmp_path / "result.json").exists()
-    assert sorted(os.listdir(tmp_path)) == sorted([*before, "out"])
-    assert os.listdir(tmp_path / "out") == []  # nothing written, not even the table
+    assert sorted(os.listdir(tmp_path)) == before  # nothing written, not even the table
 
 
 def test_a_fleet_result_folder_that_is_a_link_is_refused(tmp_path, one_file_fleet):
@@ -395,3 +394,23 @@ def test_the_demo_folder_is_in_a_usable_home(tmp_path, monkeypatch):
 
     monkeypatch.setenv("HOME", str(tmp_path))
     assert default_folder() == tmp_path / "robocal-demo"
+
+
+# ------------------------------------------------------------------ a run's own input in its output folder
+def test_an_input_inside_the_output_folder_is_never_dropped_or_replaced(tmp_path):
+    """``--data cal/train.csv --out cal --force``: train.csv (robocal's, of an earlier run)
+    is this run's input: kept, and a result that would write its own input is refused."""
+    owned = ("result.json", "train.csv")
+    target = tmp_path / "cal"
+    with transaction(target, owned) as st:  # an earlier run wrote train.csv
+        (st.path / "train.csv").write_text(outdir.run_id_line(st.run_id) + "q1\n0\n")
+        (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id}))
+    data = (target / "train.csv").read_text()
+    with transaction(target, owned) as st:  # this run read it and writes a result without it
+        result = {"run_id": st.run_id, "data_file": str(target / "train.csv")}
+        (st.path / "result.json").write_text(json.dumps(result))
+    assert (target / "train.csv").read_text() == data
+    with pytest.raises(ForeignFileError, match="input"), transaction(target, owned) as st:
+        (st.path / "train.csv").write_text("replaced\n")
+        (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id, "provenance": result}))
+    assert (target / "train.csv").read_text() == data

@@ -76,6 +76,7 @@ from robocal.run_ids import (  # re-exported: the run ids of the files a transac
     ForeignFileError,
     check_consistent,
     check_robocal_files,
+    input_names,
     is_mine,
     is_own_regular_file,
     is_run_id,
@@ -314,14 +315,15 @@ def _target_folder(target: str | os.PathLike[str]) -> Path:
 
 def _claim(stage: Stage, target: Path, owned: Collection[str]) -> frozenset[str]:
     """Refuse the result when one of its files would replace one in ``target`` that robocal
-    did not write (:class:`ForeignFileError`, whatever ``--force`` said); list the result's
-    files in its manifest; return the earlier result's files (robocal's among ``owned``),
-    which the new result replaces or drops."""
+    did not write or an input its ``result.json`` names (:class:`ForeignFileError`, whatever
+    ``--force`` said); list its files in its manifest; return the earlier result's files
+    (robocal's among ``owned``, not inputs), which the new result replaces or drops."""
     written = sorted(n for n in os.listdir(stage.path) if n != MANIFEST)
     earlier: frozenset[str] = frozenset()
     if target.is_dir():
+        inputs = input_names(target, written, stage.path / "result.json")  # refused if replaced
         check_robocal_files(target, written)
-        earlier = robocal_names(target, owned)
+        earlier = robocal_names(target, owned) - inputs  # an input is kept
     (stage.path / MANIFEST).write_text(manifest_text(stage.run_id, written), encoding="utf-8")
     return earlier
 

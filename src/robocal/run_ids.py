@@ -27,10 +27,12 @@ __all__ = [
     "check_consistent",
     "check_robocal_files",
     "figure_png",
+    "input_names",
     "is_mine",
     "is_own_regular_file",
     "is_run_id",
     "manifest_text",
+    "named_inputs",
     "new_run_id",
     "read_run_id",
     "robocal_names",
@@ -239,3 +241,32 @@ def check_robocal_files(directory: Path, names: Collection[str], doing: str = "r
                 f"user's file); robocal does not {doing} it, even with --force: move it away or "
                 "choose another output"
             )
+
+
+def named_inputs(result_json: Path) -> frozenset[Path]:
+    """The input files a ``result.json`` names (``data_file``, ``provenance.data_file``), as
+    absolute paths: a transaction never replaces or drops them (``--data cal/train.csv --out
+    cal`` keeps ``train.csv``); none when the file is missing or not a result."""
+    import json
+
+    try:
+        data = json.loads(Path(result_json).read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return frozenset()
+    if not isinstance(data, dict):
+        return frozenset()
+    provenance = data.get("provenance")
+    names = [data.get("data_file"), provenance.get("data_file") if isinstance(provenance, dict) else None]
+    return frozenset(Path(os.path.abspath(n)) for n in names if isinstance(n, str) and n)
+
+
+def input_names(directory: Path, written: Collection[str], result_json: Path) -> frozenset[str]:
+    """The names of the inputs ``result_json`` names (:func:`named_inputs`) that lie in
+    ``directory``; :class:`ForeignFileError` when ``written`` would replace one of them."""
+    directory = Path(directory).resolve()
+    names = frozenset(p.name for p in named_inputs(result_json) if p.parent.resolve() == directory)
+    for name in sorted(names.intersection(written)):
+        raise ForeignFileError(
+            f"{directory / name}: an input of this run; robocal does not replace it: write elsewhere"
+        )
+    return names

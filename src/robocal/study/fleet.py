@@ -150,15 +150,12 @@ def run_fleet(  # noqa: PLR0913 - public keyword options, documented in README a
     directory = Path(directory)
     files = _measurement_files(directory, pattern)
     out = Path(out) if out is not None else directory / "calibrated"
-    out.mkdir(parents=True, exist_ok=True)
     table_path = out / "fleet.csv"
     files = [p for p in files if p.resolve() != table_path.resolve()]  # --out DIR: not its own table
     if not files:
         raise StudyError(f"{directory}: no measurement files match {pattern!r}")
-    _check_names(directory, files, out, table_path)
-    if force:
-        remove_table(table_path, FLEET_COLUMNS)
-    table = _Table(table_path, FLEET_COLUMNS, "file")
+    _check_names(directory, files, out, table_path)  # before anything is written
+    table = _open_table(table_path, force)
     names = {p: str(p.relative_to(directory)) for p in files}
     todo, skipped, resumed = _fleet_todo(files, names, table)
     items = [
@@ -189,6 +186,15 @@ def run_fleet(  # noqa: PLR0913 - public keyword options, documented in README a
         workers=executor.workers,
         rows=[table.rows[names[p]] for p in files if names[p] in table.rows],
     )
+
+
+def _open_table(path: Path, force: bool) -> _Table:
+    """The fleet table (its folder made); ``force`` starts it over when robocal wrote it
+    (a user's file of that name is refused, never deleted)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if force:
+        remove_table(path, FLEET_COLUMNS)
+    return _Table(path, FLEET_COLUMNS, "file")
 
 
 def _measurement_files(directory: Path, pattern: str) -> list[Path]:
