@@ -217,3 +217,105 @@ def test_iso9283_single_cycle_gives_no_nan(tmp_path):
     pose = data["characteristics"][0]
     assert pose["measured"] and "RP not measured" in pose["summary"]
     assert all(d["RP_mm"] is None and d["AP_mm"] > 0 for d in pose["details"])
+
+
+# ------------------------------------------------------------------ GUI requests
+@pytest.fixture(scope="module")
+def gui(tmp_path_factory):
+    pytest.importorskip("dash")
+    from robocal.apps.gui.app import create_app
+
+    app = create_app(tmp_path_factory.mktemp("gui"))
+    return app, app.server.test_client()
+
+
+def _callback(app, client, output: str, values: dict, trigger: str):
+    """POST one Dash callback request: the callback whose output key holds ``output``, its
+    inputs and states valued from ``values`` ((id, property) or id -> value, else None)."""
+    key = next(k for k in app.callback_map if output in k)
+    spec = app.callback_map[key]
+
+    def item(d):
+        return {"id": d["id"], "property": d["property"], "value": values.get((d["id"], d["property"]))}
+
+    outputs = [
+        {"id": o.split(".")[0], "property": o.split(".")[1].split("@")[0]}
+        for o in key.strip(".").split("...")
+    ]
+    body = {
+        "output": key,
+        "outputs": outputs if len(outputs) > 1 else outputs[0],
+        "inputs": [item(d) for d in spec["inputs"]],
+        "state": [item(d) for d in spec["state"]],
+        "changedPropIds": [trigger],
+    }
+    return client.post("/_dash-update-component", json=body)
+
+
+def _no_traceback(caplog) -> None:
+    assert not [r for r in caplog.records if r.exc_info], [r.getMessage() for r in caplog.records]
+    assert "Traceback" not in caplog.text
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        b"{not json",
+        b"[1, 2, 3]",
+        b"{}",
+        b'{"output": "nope.children", "inputs": [], "changedPropIds": []}',
+        b"null",
+    ],
+)
+def test_gui_answers_malformed_callback_requests_with_400(gui, caplog, body):
+    _, client = gui
+    response = client.post("/_dash-update-component", data=body, content_type="application/json")
+    assert response.status_code == 400
+    assert response.get_json()["error"]
+    _no_traceback(caplog)
+
+
+def test_gui_answers_a_robot_outside_the_catalog_with_400(gui, caplog, tmp_path):
+    import base64
+
+    app, client = gui
+    csv = b"q1,q2,q3,q4,q5,q6,x,y,z\n" + b"0,0,0,0,0,0,0.1,0.2,0.3\n" * 12
+    uploaded = _callback(
+        app,
+        client,
+        "csv-file.data",
+        {
+            ("upload-csv", "contents"): "data:text/csv;base64," + base64.b64encode(csv).decode(),
+            ("upload-csv", "filename"): "m.csv",
+        },
+        "upload-csv.contents",
+    )
+    assert uploaded.status_code == 200, uploaded.data
+    token = uploaded.get_json()["response"]["csv-file"]["data"]
+    options = {("opt-length", "value"): "m", ("opt-angle", "value"): "rad", ("opt-decimal", "value"): "."}
+    options |= {("opt-orientation", "value"): "auto", ("opt-incomplete", "value"): "error"}
+    options |= {("opt-limits", "value"): "error", ("csv-file", "data"): token}
+    for robot_name in ("no-such-robot", "../ur10"):
+        response = _callback(
+            app, client, "csv-preview", options | {("cal-model", "value"): robot_name}, "cal-model.value"
+        )
+        assert response.status_code == 400, response.data
+        assert "unknown robot" in response.get_json()["error"]
+    good = _callback(
+        app, client, "csv-preview", options | {("cal-model", "value"): "ur10"}, "cal-model.value"
+    )
+    assert good.status_code == 200, good.data
+    _no_traceback(caplog)
+
+
+def test_gui_refuses_an_upload_beyond_its_limit_before_reading_it(gui, caplog):
+    from robocal.apps.gui.app import MAX_REQUEST_BYTES, MAX_UPLOAD_BYTES
+
+    _, client = gui
+    assert MAX_REQUEST_BYTES >= MAX_UPLOAD_BYTES * 4 // 3  # a file at the limit fits, in base64
+    response = client.post(
+        "/_dash-update-component", data=b" " * (MAX_REQUEST_BYTES + 1), content_type="application/json"
+    )
+    assert response.status_code == 413
+    assert "limit" in response.get_json()["error"]
+    _no_traceback(caplog)

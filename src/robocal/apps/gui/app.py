@@ -16,7 +16,13 @@ import threading
 import webbrowser
 from pathlib import Path
 
-__all__ = ["create_app", "serve"]
+__all__ = ["MAX_UPLOAD_BYTES", "create_app", "serve"]
+
+#: the largest file the GUI accepts as an upload (bytes); a request that carries a larger one
+#: (base64 adds a third) is answered HTTP 413 before it is read: no upload can exhaust memory
+MAX_UPLOAD_BYTES = 32 * 1024 * 1024
+#: the largest request body (bytes): one upload in base64 and the page's other values
+MAX_REQUEST_BYTES = MAX_UPLOAD_BYTES * 4 // 3 + 1024 * 1024
 
 CSS = """
 body { font-family: system-ui, sans-serif; margin: 0; color: #222; font-size: 14px; }
@@ -108,6 +114,7 @@ def create_app(workdir: Path):
     )
     builder_page.register(app)
     calibrate_page.register(app, workdir)
+    _bound_requests(app.server)
     runs = workdir / "runs"
 
     @app.server.route("/runs/<run_id>/<name>")
@@ -118,6 +125,32 @@ def create_app(workdir: Path):
         return send_from_directory(runs / run_id, name)
 
     return app
+
+
+def _bound_requests(server) -> None:
+    """Cap request bodies (HTTP 413) and answer a request the app cannot handle (not JSON, no
+    callback of that name, values no control can hold, such as a robot outside the catalog)
+    with HTTP 400 and one line, logged in one line without a traceback."""
+    from flask import jsonify, request
+    from werkzeug.exceptions import HTTPException, RequestEntityTooLarge
+
+    server.config["MAX_CONTENT_LENGTH"] = MAX_REQUEST_BYTES
+
+    @server.errorhandler(RequestEntityTooLarge)
+    def too_large(_err):
+        mb = MAX_UPLOAD_BYTES / 2**20
+        return jsonify(
+            error=f"the upload is larger than the GUI's limit of {mb:g} MB; use the command line"
+        ), 413
+
+    @server.errorhandler(Exception)
+    def refused(err: Exception):
+        if isinstance(err, HTTPException):  # 404, 405, a body that is not JSON ...: as Flask words it
+            return jsonify(error=err.description or err.name), err.code or 400
+        text = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)  # no quotes
+        message = f"{type(err).__name__}: {text.splitlines()[0] if text else ''}"[:300]
+        server.logger.warning("robocal gui: refused %s %s (%s)", request.method, request.path, message)
+        return jsonify(error=f"the request could not be handled: {message}"), 400
 
 
 def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") -> None:
