@@ -408,10 +408,11 @@ def test_unreachable_target_reported_with_line_and_strict_exit(cell, tmp_path):
     path.write_text("def far():\n  movel(p[5.0, 0.0, 0.3, 0.0, 3.14159, 0.0], a=0.5, v=0.1)\nend\n")
     args = ["filter", str(folder), str(path), "-o"]
     res = runner.invoke(app, [*args, str(tmp_path / "a.script")])
-    assert res.exit_code == 0
+    assert res.exit_code == 1  # refused (issue 31): non-zero unless --partial
     assert "far.script: line 2: target line 2: not reachable" in " ".join(res.output.split())
     assert (tmp_path / "a.script").read_text() == path.read_text()  # left as written
-    assert runner.invoke(app, [*args, str(tmp_path / "b.script"), "--strict"]).exit_code == 1
+    assert runner.invoke(app, [*args, str(tmp_path / "b.script"), "--partial"]).exit_code == 0
+    assert runner.invoke(app, [*args, str(tmp_path / "c.script"), "--partial", "--strict"]).exit_code == 1
 
 
 @pytest.mark.parametrize(
@@ -608,9 +609,11 @@ def test_cli_config_dat_and_strict_configuration_change(tmp_path):
     res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "none.dat")])
     assert res.exit_code == 2 and "none.dat: no such $config.dat" in " ".join(res.output.split())
     res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat")])
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 1, res.output  # refused (issue 31): non-zero unless --partial
     assert "prog.dat: line 5: target XP0: reachable only in another configuration (S bit 0" in " ".join(
         res.output.split()
     )
+    res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat"), "--partial", "--force"])
+    assert res.exit_code == 0, res.output
     res = runner.invoke(app, [*args, "--config-dat", str(tmp_path / "cfg.dat"), "--strict", "--force"])
     assert res.exit_code == 1

@@ -191,13 +191,30 @@ def compensate_command(
     finish(result.table(), partial)
 
 
-def finish(rows: list[dict], partial: bool) -> None:
-    """Name every refused target with its reason; exit 1 when there is one, unless ``--partial``."""
+def finish_filtered(result, out: Path, partial: bool, strict: bool) -> None:
+    """``filter``'s end, compensate's rule: the per-target table printed and written beside
+    ``out``; refused targets (already named with file, line and reason) exit 1 unless
+    ``--partial``; ``--strict``: any other warning exits 1 too."""
+    from robocal.compensate.result import table_csv, table_path
+    from robocal.model.files import atomic_write_text
+
+    rows = list(result.table)
+    print_target_table(rows)
+    atomic_write_text(table_path(out), table_csv(rows))
+    console.print(f"wrote the per-target table {table_path(out).name}", highlight=False)
+    finish(rows, partial, listed=True)
+    if strict and result.problems:
+        raise typer.Exit(code=1)
+
+
+def finish(rows: list[dict], partial: bool, listed: bool = False) -> None:
+    """Name every refused target with its reason (``listed``: already named); exit 1 when
+    there is one, unless ``--partial``."""
     refused = [r for r in rows if r["status"] == "refused"]
     for r in rows:
         if r["status"] == "damped":
             console.print(f"damped: {safe(r['name'])}: {safe(r['reason'])}", highlight=False)
-    for r in refused:
+    for r in refused if not listed else ():
         err_console.print(
             f"[yellow]refused:[/] {safe(r['name'])}: {safe(r['reason'])} (left as written)",
             highlight=False,

@@ -4,7 +4,7 @@
                             [--device-link NAME] [--tool-link NAME] -o OUT.urdf
     robocal export ur-kinematics DIR [--base-rz-pi] -o calibration.yaml
     robocal filter DIR PROGRAM [--tool x,y,z,rx,ry,rz] [--probe x,y,z]
-                           [--config-dat PATH] [--strict] -o OUT
+                           [--config-dat PATH] [--partial] [--strict] -o OUT
 
 ``DIR`` is a calibration directory (``model.yaml`` + ``result.json``) or a model file.
 ``export urdf`` rewrites the joint origins of ``--urdf`` (the URDF the model was built
@@ -26,7 +26,7 @@ from typing import Annotated
 
 import typer
 
-from robocal.cli.compensate import CALIBRATION
+from robocal.cli.compensate import CALIBRATION, PartialOption
 from robocal.cli.options import CONTEXT, Force, frame_option, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe, warn
 
@@ -248,7 +248,7 @@ AngleUnitOption = Annotated[
     str, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
 ]
 StrictOption = Annotated[
-    bool, typer.Option("--strict", help="exit 1 when a target is unreachable or changes configuration")
+    bool, typer.Option("--strict", help="exit 1 on any warning too (statements untouched, other frames)")
 ]
 ConfigDatOption = Annotated[
     Path | None,
@@ -273,9 +273,17 @@ def filter_command(
     strict: StrictOption = False,
     force: Force = False,
     config_dat: ConfigDatOption = None,
+    partial: PartialOption = False,
 ) -> None:
-    """Correct every target of a robot program through a calibration; everything else stays byte-identical."""
+    """Correct every target of a robot program through a calibration; everything else stays byte-identical.
+
+    Every target is corrected, damped near a singularity or refused (left as written, named
+    with its reason; exit 1 unless --partial), as in compensate; the per-target table is
+    printed and written beside the output (OUT.table.csv)."""
+    from robocal.compensate.result import table_path
+
     refuse_overwrite(out, force, "program")
+    refuse_overwrite(table_path(out), force, "per-target table")
 
     from robocal.cli.compensate import _load
     from robocal.compensate.programs import ProgramError, filter_program_file, language_of
@@ -318,8 +326,9 @@ def filter_command(
     except ValueError as err:
         raise fail(f"{program}: {err}") from None
     _print_filtered(result, program, out, language, tool is None and config_dat is None)
-    if strict and result.problems:
-        raise typer.Exit(code=1)
+    from robocal.cli.compensate import finish_filtered
+
+    finish_filtered(result, out, partial, strict)
 
 
 def _print_filtered(result, program: Path, out: Path, language: str, no_frames_given: bool) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -30,6 +31,7 @@ from robocal.compensate.program_syntax import (
 )
 from robocal.compensate.program_urscript import _parse_urscript
 from robocal.compensate.program_values import _UNITS, _format, _Units, _write_values
+from robocal.compensate.result import TABLE_COLUMNS, Compensation
 from robocal.identify.calibrate import CalibrationResult
 from robocal.model.chain import Model
 from robocal.units import unit_factor
@@ -57,7 +59,11 @@ class _Corrections:
     reach: NDArray[np.bool_]
     kept: NDArray[np.bool_]
     problems: list[str]
-    reported: set[int] = field(default_factory=set)  # targets whose configuration change is reported
+    # per target, the safety outcome of :mod:`robocal.compensate.safety` (as compensate's):
+    # "corrected", "damped" or "refused", its reason, and its per-target table row
+    status: list[str] = field(default_factory=list)
+    reasons: list[str] = field(default_factory=list)
+    rows: list[dict | None] = field(default_factory=list)
 
     @classmethod
     def start(cls, values: list[Array], problems: list[str]) -> _Corrections:
@@ -69,7 +75,27 @@ class _Corrections:
             reach=np.ones(n, dtype=bool),
             kept=np.ones(n, dtype=bool),
             problems=problems,
+            status=["corrected"] * n,
+            reasons=[""] * n,
+            rows=[None] * n,
         )
+
+    def take(self, i: int, res: Compensation, k: int) -> None:
+        """Target ``i``'s outcome from row ``k`` of a compensation: a refused target keeps
+        its written value (``res.q`` is then the nominal command)."""
+        self.before[i], self.after[i] = res.error_before[k] * 1e3, res.error_after[k] * 1e3
+        self.status[i], self.reasons[i] = res.status[k], res.reasons[k]
+        # reach: a command to write exists (IK reached, or damped near a singularity)
+        self.reach[i] = bool(res.reachable[k]) or res.status[k] == "damped"
+        self.kept[i] = res.status[k] != "refused"
+        self.rows[i] = res.table()[k]
+
+    def refuse(self, i: int, reason: str) -> None:
+        """Target ``i`` refused by the filter itself (e.g. its written configuration)."""
+        self.status[i], self.reasons[i], self.kept[i] = "refused", reason, False
+        row = self.rows[i]
+        if row is not None:  # nothing of the correction is written
+            row.update(status="refused", reason=reason, correction_mm=0.0, largest_joint_change=0.0)
 
 
 FramesOf = Callable[[int], tuple[Model, Model, Array]]
@@ -212,9 +238,8 @@ def correct_joint_targets(
         q = np.array([values[i] for i in idx])
         res = filter_program(real_g, q, nom_g, joint_effects=effects, tol=tol, tol_angle=tol)
         for k, i in enumerate(idx):
-            c.new_values[i] = res.q[k]
-        c.before[idx], c.after[idx] = res.error_before * 1e3, res.error_after * 1e3
-        c.reach[idx], c.kept[idx] = res.reachable, res.branch_kept
+            c.new_values[i] = res.q[k]  # refused: the programmed joints (q_nominal)
+            c.take(i, res, k)
 
 
 def execution_order(texts: dict[str, str], parsed: _Parsed) -> list[int]:
@@ -281,18 +306,12 @@ def correct_pose_targets(
         res, changes = _solve_pose(
             t, real, nom, goal, "position" if position_only else "pose", q_prev, rng, opts
         )
-        config_kept = changes is None
-        if not config_kept:
-            c.problems.append(
-                f"{t.file}: line {t.line}: target {t.name}: reachable only in another "
-                f"configuration ({changes}); left as written"
-            )
-            c.reported.add(i)
+        c.take(i, res, 0)
+        if changes is not None:
+            c.refuse(i, f"reachable only in another configuration ({changes})")
         q_prev = res.q_nominal[0] if res.nominal_reachable[0] else q_prev
         corrected = spatial.inverse(B_i) @ nom.fk(res.q)[0]
-        c.new_values[i] = corrected if res.reachable[0] and config_kept else values[i]
-        c.before[i], c.after[i] = res.error_before[0] * 1e3, res.error_after[0] * 1e3
-        c.reach[i], c.kept[i] = bool(res.reachable[0]), bool(res.branch_kept[0]) and config_kept
+        c.new_values[i] = corrected if c.status[i] != "refused" else values[i]
 
 
 def rewrite_texts(
@@ -303,7 +322,7 @@ def rewrite_texts(
     changed = np.zeros(len(targets), dtype=bool)
     edits: dict[str, list[tuple[int, int, str]]] = {label: [] for label in texts}
     for i, t in enumerate(targets):
-        if not c.reach[i]:
+        if c.status[i] == "refused":  # left as written
             continue
         for tok, (v, d) in zip(t.tokens, _write_values(t, units, c.new_values[i], types), strict=True):
             if abs(v - tok.value) <= 0.5 * 10.0 ** (-max(_decimals(tok.text), d)):
@@ -320,14 +339,20 @@ def rewrite_texts(
     return out, changed
 
 
-def report_unreached(targets: list[ProgramTarget], c: _Corrections) -> None:
-    """A problem per target the calibrated robot cannot reach or reaches in another branch."""
+def report_refused(targets: list[ProgramTarget], c: _Corrections) -> None:
+    """A problem per refused target, with its reason (as compensate gives it)."""
     for i, t in enumerate(targets):
-        if not c.reach[i]:
-            c.problems.append(
-                f"{t.file}: line {t.line}: target {t.name}: not reachable by the calibrated robot"
-            )
-        elif not c.kept[i] and i not in c.reported:
-            c.problems.append(
-                f"{t.file}: line {t.line}: target {t.name}: the correction changes the configuration"
-            )
+        if c.status[i] == "refused":
+            c.problems.append(f"{t.file}: line {t.line}: target {t.name}: {c.reasons[i]}; left as written")
+
+
+def target_table(targets: list[ProgramTarget], c: _Corrections) -> tuple[dict, ...]:
+    """The per-target table (:meth:`robocal.compensate.result.Compensation.table` rows, as
+    compensate writes them), named ``FILE:LINE NAME``, in file order."""
+    out = []
+    for i, t in enumerate(targets):
+        row = dict(c.rows[i] or dict.fromkeys(TABLE_COLUMNS) | {"joint": "-", "configuration": "-"})
+        row |= {"status": c.status[i], "reason": c.reasons[i]}
+        row["name"] = f"{Path(t.file).name}:{t.line} {t.name}"
+        out.append(row)
+    return tuple(out)

@@ -84,10 +84,17 @@ class FilteredProgram:
             robot will move to.
         error_before_mm, error_after_mm: ``(n,)`` predicted position error of the real
             robot (mm) unfiltered and filtered.
-        reachable, branch_kept: ``(n,)`` per target.
+        reachable: ``(n,)`` a command to write exists (the calibrated IK reached the target,
+            or damped it near a singularity).
+        branch_kept: ``(n,)`` the target is not refused (written corrected or damped).
         changed: ``(n,)`` whether the target's text was rewritten.
         unsupported: motion statements left untouched.
         language: the language.
+        problems: one line per refused target (file, line, name, reason) and per frame issue.
+        status, reasons: ``(n,)`` ``"corrected"``, ``"damped"`` or ``"refused"`` and why, the
+            invariants of :mod:`robocal.compensate.safety` (a refused target is left as written).
+        table: the per-target table (:meth:`robocal.compensate.result.Compensation.table`
+            rows, named ``FILE:LINE NAME``).
     """
 
     texts: dict[str, str]
@@ -100,10 +107,18 @@ class FilteredProgram:
     unsupported: tuple[Unsupported, ...] = ()
     language: str = ""
     problems: tuple[str, ...] = field(default=())
+    status: tuple[str, ...] = ()
+    reasons: tuple[str, ...] = ()
+    table: tuple[dict, ...] = ()
 
     @property
     def ok(self) -> bool:
         return bool(np.all(self.reachable & self.branch_kept))
+
+    @property
+    def refused(self) -> tuple[str, ...]:
+        """``"FILE:LINE NAME: reason"`` of every refused target (left as written)."""
+        return tuple(f"{r['name']}: {r['reason']}" for r in self.table if r["status"] == "refused")
 
 
 # ---------------------------------------------------------------------- code and text

@@ -191,7 +191,7 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
         sequence = steps.execution_order(texts, parsed)
         steps.correct_pose_targets(sequence, targets, values, q_start, frames_of, effects, tol, c)
     out, changed = steps.rewrite_texts(texts, targets, units, model.joint_types, c)
-    steps.report_unreached(targets, c)
+    steps.report_refused(targets, c)
     return FilteredProgram(
         texts=out,
         targets=tuple(targets),
@@ -203,6 +203,9 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
         unsupported=tuple(parsed.unsupported),
         language=language,
         problems=tuple(c.problems),
+        status=tuple(c.status),
+        reasons=tuple(c.reasons),
+        table=steps.target_table(targets, c),
     )
 
 

@@ -207,7 +207,7 @@ def judge(
     for i in range(len(q)):
         why = _refusal(nominal, q[i], q_nom[i], bound, bool(near[i]), bool(reached[i]), bool(kept[i]))
         if not nominal_reached[i]:
-            why = "the controller's model does not reach it (no nominal command)"
+            why = "not reachable by the controller's model (no nominal command)"
         if why:
             status.append("refused")
         elif near[i]:
