@@ -150,6 +150,7 @@ def calibrate_command(
     model, from_catalog = robot_and_chain(robot, chain)
     _check_out(out, force)
     _check_choices(measure, residual, loss, method, bounds, per_pose)
+    tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     reader |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     data = read_data(data_path, model, **reader)
@@ -165,8 +166,7 @@ def calibrate_command(
     settings |= dict(residual=residual, effects=_effects(effects))
     settings |= {"bounds": bounds} if bounds is not None else {}
     settings |= {"per_pose": True} if per_pose else {}
-    if tool is not None:
-        settings["tool_guess"] = length_vector(tool, 3, "--tool")
+    settings |= {"tool_guess": tool_guess} if tool_guess is not None else {}
     result = _calibrate(model, train, data_path, settings)
     result = _record(result, data_path, reader, noise_sigma, train_n, seed, train)
     validation = None

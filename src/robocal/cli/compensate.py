@@ -188,6 +188,10 @@ def compensate_command(
         print_target_table(result.table())
         if out is not None:
             console.print(f"wrote {out} and its per-target table {table_path(out).name}", highlight=False)
+    from robocal.identify.measured_tool import orientation_warnings
+
+    for line in orientation_warnings(calibrated, result.q, result.names):  # what the poses left open
+        err_console.print(f"[yellow]warning:[/] {safe(line)}", highlight=False, markup=True)
     finish(result.table(), partial)
 
 

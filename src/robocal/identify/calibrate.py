@@ -274,22 +274,27 @@ def calibrate(
     if model.residual is not None:  # a calibrated model calibrated again: its residual is refitted
         model = dataclasses.replace(model, residual=None)
     if residual == "none":
-        return _with_tool_facts(calibrate_physics(model, data, method, physics), physics.setup)
+        return _with_tool_facts(calibrate_physics(model, data, method, physics), physics.setup, data)
     from robocal.identify.residual import calibrate_with_residual
 
     result = calibrate_with_residual(
         calibrate_physics, model, data, method, physics.keywords(),
         kind=residual, harmonics=residual_harmonics, folds=cv_folds,
     )  # fmt: skip
-    return _with_tool_facts(result, physics.setup)
+    return _with_tool_facts(result, physics.setup, data)
 
 
-def _with_tool_facts(result: CalibrationResult, setup: Setup) -> CalibrationResult:
+def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements) -> CalibrationResult:
     """The result with its measured tool recorded (``records["measured_tool"]``, with the
     stated start value) and warned about: a start value the fit moved far, and the
     parameters and tool components these poses could not determine
     (:mod:`robocal.identify.measured_tool`)."""
-    from robocal.identify.measured_tool import measured_tool, tool_start_warnings, undetermined_warnings
+    from robocal.identify.measured_tool import (
+        measured_tool,
+        tool_axis_coverage,
+        tool_start_warnings,
+        undetermined_warnings,
+    )
 
     fitted = isinstance(setup.tool, str) and setup.tool == "fit"
     tool = measured_tool(result, setup.tool_guess if fitted and setup.tool_guess is not None else None)
@@ -299,4 +304,6 @@ def _with_tool_facts(result: CalibrationResult, setup: Setup) -> CalibrationResu
     ]
     known = {w.message for w in result.warnings}
     result = result.with_warnings(*[w for w in found if w.message not in known])
-    return result if tool is None else result.with_records(measured_tool=tool.to_dict())
+    if tool is None:
+        return result
+    return result.with_records(measured_tool=tool.to_dict() | tool_axis_coverage(result.model, data.q))

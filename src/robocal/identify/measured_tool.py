@@ -36,12 +36,15 @@ from robocal.model.chain import Model, Role
 __all__ = [
     "AGREE_FLOOR_M",
     "AGREE_SIGMAS",
+    "ORIENTATION_MARGIN_DEG",
     "START_REPORT_M",
     "UNDETERMINED_STD_M",
     "MeasuredTool",
     "check_tool",
     "measured_tool",
+    "orientation_warnings",
     "probe_for",
+    "tool_axis_coverage",
     "tool_start_warnings",
     "undetermined_warnings",
 ]
@@ -224,7 +227,8 @@ def tool_start_warnings(tool: MeasuredTool | None) -> list[tuple[str, str]]:
             f"({sigmas:.0f}σ) from the measured tool the calibration identified on the controller's "
             f"flange, {tool.text()}; the identified one is stored with the calibration and used by "
             "filter and compensate: set it as the controller's TCP, or check the probe's mounting "
-            "and the value given",
+            "and the value given (position measurements cannot tell the tool's length from the "
+            "flange's offset along the last axis, which is kept at its nominal value)",
         )
     ]
 
@@ -281,3 +285,44 @@ def probe_for(calibrated: Any, given: ArrayLike | None, what: str = "--probe") -
         return given
     steps = _tool_steps(calibrated.model)
     return spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
+
+
+#: a target's tool axis this much (deg) beyond the calibration poses' spread is "another
+#: tool orientation" for a calibration that left parameters undetermined
+ORIENTATION_MARGIN_DEG = 5.0
+
+
+def tool_axis_coverage(model: Model, q: ArrayLike) -> dict[str, Any]:
+    """The tool orientations the calibration poses covered: the mean direction of the
+    flange's z axis in the robot base and the largest angle (deg) of a pose's axis from it."""
+    axes = model.fk(np.asarray(q, dtype=float))[:, :3, 2]
+    mean = axes.mean(axis=0)
+    mean = mean / max(float(np.linalg.norm(mean)), 1e-12)
+    spread = np.degrees(np.arccos(np.clip(axes @ mean, -1.0, 1.0)))
+    return {"tool_axis_base": [float(x) for x in mean], "tool_axis_spread_deg": float(spread.max())}
+
+
+def orientation_warnings(calibrated: Any, q: ArrayLike, names: Sequence[str]) -> list[str]:
+    """For a calibration that left parameters undetermined (its ``undetermined`` warnings):
+    one line naming the commands ``q`` ``(n, dof)`` whose tool axis lies more than
+    :data:`ORIENTATION_MARGIN_DEG` beyond the calibration poses' spread: there the
+    undetermined parameters (e.g. the tool's length) move the tool, and the error after
+    compensation may be that large.  Empty otherwise (or for a bare model)."""
+    record = (getattr(calibrated, "records", None) or {}).get("measured_tool") or {}
+    codes = {w.code for w in getattr(calibrated, "warnings", ())}
+    if "undetermined" not in codes or "tool_axis_base" not in record:
+        return []
+    q = np.asarray(q, dtype=float).reshape(-1, calibrated.model.dof)
+    ok = np.all(np.isfinite(q), axis=1)
+    axes = calibrated.model.fk(q[ok])[:, :3, 2]
+    angle = np.degrees(np.arccos(np.clip(axes @ np.asarray(record["tool_axis_base"]), -1.0, 1.0)))
+    limit = float(record["tool_axis_spread_deg"]) + ORIENTATION_MARGIN_DEG
+    far = [str(n) for n, a in zip(np.asarray(names, dtype=object)[ok], angle, strict=True) if a > limit]
+    if not far:
+        return []
+    shown = ", ".join(far[:10]) + (" ..." if len(far) > 10 else "")
+    return [
+        f"{len(far)} target(s) with a tool orientation the calibration poses did not cover (more than "
+        f"{limit:.3g}° from their mean tool axis): {shown}; the calibration left parameters undetermined "
+        "(see its warnings), which may put these targets off by more than the expected error"
+    ]
