@@ -239,3 +239,12 @@ def test_a_later_command_warns_for_another_tool_orientation(one_orientation, tmp
     varied = rc.calibrate(rc.calibration_model("ur10", "position"), data, tool_guess=TOOL)
     side = np.array([[0.0, -1.2, 1.5, 0.0, 0.3, 0.0]])
     assert orientation_warnings(varied, side, ["side"]) == []
+
+
+def test_fk_refuses_degrees_read_as_radians():
+    res = runner.invoke(app, ["fk", "ur10", "--q", "0,-90,90,0,90,0"])
+    assert res.exit_code == 2 and "looks like degrees" in _text(res) and "--deg" in _text(res)
+    res = runner.invoke(app, ["fk", "ur10", "--q", "0,-90,90,0,90,0", "--deg", "--json"])
+    assert res.exit_code == 0
+    T = rc.robot("ur10").fk(np.radians([0, -90, 90, 0, 90, 0]))
+    np.testing.assert_allclose(json.loads(res.output)["T"], T, atol=1e-12)

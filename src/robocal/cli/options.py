@@ -58,6 +58,7 @@ __all__ = [
     "measure_option",
     "out_option",
     "parse_vector",
+    "refuse_degrees_as_radians",
     "resolve_model",
     "robot_and_chain",
     "seed",
@@ -277,7 +278,6 @@ def joint_values(
     degrees (the measurement reader's check of joint columns)."""
     import numpy as np
 
-    from robocal.measure.measurements import MAX_REVOLUTE_RAD
     from robocal.units import parse_quantities
 
     kinds = ["angle" if t == "revolute" else "length" for t in model.joint_types]
@@ -286,16 +286,31 @@ def joint_values(
         q = np.array(parse_quantities(text, kinds, option, bare=bare))
     except ValueError as err:
         raise fail(f"{err} ({model.dof} joint values of {model.name})") from None
+    if angle_unit == "rad" and "deg" not in text and "°" not in text:
+        refuse_degrees_as_radians(q, model, option, text, f"{text.strip()}deg")
     limits = model.joint_limits
-    as_rad = angle_unit == "rad" and "deg" not in text and "°" not in text
     for j, (value, kind) in enumerate(zip(q, kinds, strict=True)):
-        inside = limits[j, 0] - 1e-9 <= value <= limits[j, 1] + 1e-9
-        if kind != "angle" or (inside and abs(value) <= MAX_REVOLUTE_RAD):
-            continue
-        degrees = as_rad and limits[j, 0] <= np.radians(value) <= limits[j, 1]
-        raise fail(
-            f"{option} {text!r}: {model.joint_names[j]} = {value:.6g} rad is beyond its limits "
-            f"[{limits[j, 0]:.4g}, {limits[j, 1]:.4g}] rad"
-            + (f"; looks like degrees: write {text.strip()}deg" if degrees else "")
-        )
+        if kind == "angle" and not limits[j, 0] - 1e-9 <= value <= limits[j, 1] + 1e-9:
+            raise fail(
+                f"{option} {text!r}: {model.joint_names[j]} = {value:.6g} rad is beyond its limits "
+                f"[{limits[j, 0]:.4g}, {limits[j, 1]:.4g}] rad"
+            )
     return q
+
+
+def refuse_degrees_as_radians(q: np.ndarray, model: Model, option: str, text: str, fix: str) -> None:
+    """Exit 2 when joint values read in rad look like degrees: a revolute joint beyond its
+    limits (or 4π, the measurement reader's bound) whose value in degrees is within them.
+    ``fix``: how to say degrees (``"0,-90,90deg"``, ``"--deg"``)."""
+    import numpy as np
+
+    from robocal.measure.measurements import MAX_REVOLUTE_RAD
+
+    limits = model.joint_limits
+    for j, (value, kind) in enumerate(zip(q, model.joint_types, strict=True)):
+        beyond = abs(value) > MAX_REVOLUTE_RAD or not limits[j, 0] - 1e-9 <= value <= limits[j, 1] + 1e-9
+        if kind == "revolute" and beyond and limits[j, 0] <= np.radians(value) <= limits[j, 1]:
+            raise fail(
+                f"{option} {text!r}: {model.joint_names[j]} = {value:.6g} rad is beyond its limits "
+                f"[{limits[j, 0]:.4g}, {limits[j, 1]:.4g}] rad; looks like degrees: give {fix}"
+            )

@@ -92,6 +92,10 @@ def _parse_q(text: str, m: Model, deg: bool) -> np.ndarray:
     import numpy as np
 
     q = parse_vector(text, m.dof, "--q", f"{m.dof} joint values of {m.name}: {', '.join(m.joint_names)}")
+    if not deg:  # "0,-90,90,0,90,0" read as radians: refused (beyond the limits, within them in degrees)
+        from robocal.cli.options import refuse_degrees_as_radians
+
+        refuse_degrees_as_radians(q, m, "--q", text, "--deg")
     if deg:
         q = np.where(np.array(m.joint_types) == "revolute", np.radians(q), q / 1000.0)
     return q
