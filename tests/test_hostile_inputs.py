@@ -197,13 +197,27 @@ def test_iso9283_refuses_overflowing_values_by_row_and_column(tmp_path, row, col
     _one_error(result, str(log), f"row {row}", f"column {column}")
 
 
-def test_iso9283_refuses_a_time_record_without_increasing_times(tmp_path):
-    """All-zero times in runs of several samples: no speed or settling can be measured."""
+@pytest.mark.parametrize("step", [0.0, 1e-300, 1e-9])
+def test_iso9283_refuses_a_time_record_without_increasing_times(tmp_path, step):
+    """All-zero (or sub-microsecond) time steps in runs of several samples: no speed or
+    settling can be measured, and the fits of a time record degenerate (LAPACK errors)."""
+    text = _pose_log(3, samples=5)
+    lines = text.splitlines()
+    for k in range(1, len(lines)):
+        lines[k] = f"{k * step!r}," + lines[k].split(",", 1)[1]
     log = tmp_path / "log.csv"
-    log.write_text(_pose_log(3, samples=5, times=0.0), encoding="utf-8")
-    result = runner.invoke(app, ["iso9283", str(log)])
+    log.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    result = runner.invoke(app, ["iso9283", str(log), "--json"])
     _one_error(result, str(log), "row 3", "column time_s")
-    assert "DLASCL" not in result.output
+    assert "DLASCL" not in result.output and result.stdout == ""
+
+
+def test_iso9283_time_records_10_ms_apart_are_read(tmp_path):
+    log = tmp_path / "log.csv"
+    log.write_text(_pose_log(3, samples=5), encoding="utf-8")
+    result = runner.invoke(app, ["iso9283", str(log), "--json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["characteristics"][0]["measured"]
 
 
 def test_iso9283_single_cycle_gives_no_nan(tmp_path):

@@ -8,7 +8,8 @@ See ``docs/iso9283.md`` for the full description and an example.
 
 Columns (required ones first):
 
-``time_s``          sample time (s); must not decrease within a test.
+``time_s``          sample time (s); must not decrease within a test, and must increase by
+                    at least :data:`MIN_TIME_STEP` (1 µs) between the samples of a run.
 ``test``            which ISO 9283 test the sample belongs to, one of :data:`TESTS`.
 ``cycle``           cycle number (integer >= 1).
 ``target``          the commanded pose the robot is moving to or standing at (``P1``..),
@@ -26,6 +27,10 @@ Columns (required ones first):
 A *run* is a maximal stretch of consecutive rows of one test with the same cycle,
 target and group: one approach to (and stay at) a pose, or one traversal of a path.
 A run may hold a single sample (a static measurement) or a time record.
+
+Every number must lie within the range of its unit (|mm| <= 1e9, |deg| <= 1e6, |N| <= 1e9,
+|time_s| <= 1e10, cycle <= 1e9): beyond it a cell is a typo or a corrupted file, whose squares
+overflow into NaN characteristics.
 """
 
 from __future__ import annotations
@@ -309,20 +314,27 @@ def _check_ranges(name: str, values: dict[str, Array], line: NDArray[np.int_]) -
             )
 
 
+#: s: the shortest time between two samples of a run (trackers sample at up to some kHz); a
+#: shorter one makes speeds overflow and the fits of a time record degenerate
+MIN_TIME_STEP = 1e-6
+
+
 def _check_time_records(name: str, values: dict[str, Array], texts: dict[str, NDArray], line) -> None:
     """Within a run (consecutive rows of one test, cycle, target and group) the time must
-    increase: a record whose samples share a time has no speed or settling to measure."""
+    increase by at least :data:`MIN_TIME_STEP`: a record whose samples share a time has no
+    speed or settling to measure."""
     t, cyc = values["time_s"], values["cycle"]
     same_run = (cyc[1:] == cyc[:-1]) & np.all([texts[c][1:] == texts[c][:-1] for c in _TEXT], axis=0)
-    repeated = np.flatnonzero(same_run & (t[1:] == t[:-1])) + 1
-    if len(repeated):
-        i = int(repeated[0])
+    short = np.flatnonzero(same_run & (np.diff(t) < MIN_TIME_STEP)) + 1
+    if len(short):
+        i = int(short[0])
         raise _fail(
             name,
             int(line[i]),
             "time_s",
-            f"{t[i]:g} s repeats the previous sample's time within one run (test {texts['test'][i]}, "
-            f"cycle {cyc[i]:g}, target {_short(texts['target'][i])}): a run's samples need increasing times",
+            f"{t[i]:g} s follows the previous sample of its run (test {texts['test'][i]}, cycle {cyc[i]:g}, "
+            f"target {_short(texts['target'][i])}) after {t[i] - t[i - 1]:g} s: the samples of a run need "
+            f"increasing times, at least {MIN_TIME_STEP:g} s apart",
         )
 
 
