@@ -277,9 +277,11 @@ def filter_command(
 ) -> None:
     """Correct every target of a robot program through a calibration; everything else stays byte-identical.
 
-    Every target is corrected, damped near a singularity or refused (left as written, named
-    with its reason; exit 1 unless --partial), as in compensate; the per-target table is
-    printed and written beside the output (OUT.table.csv)."""
+    Each target is corrected, damped near a singularity or refused (left as written, exit 1 unless --partial).
+
+    The same bound as compensate: a joint moves at most 1.5 |e| / sigma_min, 0.05 to 5 deg.
+
+    The per-target table is printed and written beside the output (OUT.table.csv)."""
     from robocal.compensate.result import table_path
 
     refuse_overwrite(out, force, "program")

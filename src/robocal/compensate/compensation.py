@@ -249,22 +249,24 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
         joint_effects=setup.effects, **opts,
     )  # fmt: skip
     q, reached = res.q.copy(), res.reachable.copy()
+    before, angle_before = _errors(_predict(setup, q_nominal), T, kind, tool_axis)
     sigma = safety.sigma_min(setup.real, q_nominal, setup.effects, kind, tool_axis)
     near = sigma < safety.SINGULAR_SIGMA
-    bound = safety.joint_bound(setup.real, setup.nominal, setup.effects, kind, tool_axis)
+    # |e| weighted as sigma_min's Jacobian (1 m per rad)
+    size = np.hypot(before, angle_before)
+    bound = safety.joint_bound(size, sigma, near, setup.real.joint_types)
     if near.any():
         damped = solve_regularized(
             setup.real, T[near], q_nominal[near], damping=safety.DAMPING, joint_effects=setup.effects, **opts
         )
         revolute = np.array([t == "revolute" for t in setup.real.joint_types])
-        q[near] = q_nominal[near] + safety.limit_damped(damped.q - q_nominal[near], bound, revolute)
+        q[near] = q_nominal[near] + safety.limit_damped(damped.q - q_nominal[near], bound[near], revolute)
     verdict = safety.judge(
         setup.nominal, q, q_nominal, bound, near, reached, np.asarray(nominal_reachable, dtype=bool), sigma
     )
     refused = np.array([st == "refused" for st in verdict.status], dtype=bool)
     q[refused] = q_nominal[refused]  # left as written: the controller's own command
     after, angle_after = _errors(_predict(setup, q), T, kind, tool_axis)
-    before, angle_before = _errors(_predict(setup, q_nominal), T, kind, tool_axis)
     if not setup.has_nominal:
         before, angle_before = np.full(len(T), np.nan), np.full(len(T), np.nan)
     change = np.abs(q - q_nominal).max(axis=1) if len(T) else np.zeros(0)
@@ -358,8 +360,8 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
         tool_axis: tool axis (0, 1, 2) imposed by ``kind="axis"``.
         max_joint_change: a correction moving any joint by more than this (rad or m)
             is reported as a change of configuration (``branch_kept`` false); the
-            calibration's own bound (:func:`robocal.compensate.safety.joint_bound`, at
-            most 5°) refuses such a correction.
+            calibration's own per-target bound (:func:`robocal.compensate.safety.joint_bound`:
+            1.5 |e| / σ_min, at most 5°) refuses such a correction.
 
     Returns:
         :class:`Compensation` with commands, nominal commands and predicted errors.

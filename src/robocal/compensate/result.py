@@ -63,7 +63,8 @@ class Compensation:
         reasons: ``(n,)`` why a target was refused or damped (empty when corrected).
         sigma_min: ``(n,)`` smallest singular value of the task Jacobian at ``q_nominal``.
         configuration: ``(n,)`` the nominal command's configuration label.
-        joint_bound: ``(dof,)`` the largest joint change (rad, m) a correction may make.
+        joint_bound: ``(n, dof)`` the largest joint change (rad, m) each target's correction
+            may make (:func:`robocal.compensate.safety.joint_bound`).
         tool_correction: ``(n,)`` how far (m) the corrected command moves the tool on the
             controller's (nominal) model.
     """
@@ -238,13 +239,18 @@ class Compensation:
                     "largest_joint_change": _num(float(dq[j]) * f) if dq.size else None,
                     "joint": self.joint_names[j] if self.joint_names else str(j + 1),
                     "joint_unit": "deg" if revolute else "mm",
-                    "joint_bound": _num(_at(self.joint_bound, j, math.nan) * f),
+                    "joint_bound": _num(self._bound(i, j) * f),
                     "sigma_min": _num(_at(self.sigma_min, i, math.nan)),
                     "configuration": _at(self.configuration, i, "-"),
                     "reason": _at(self.reasons, i, ""),
                 }
             )
         return rows
+
+    def _bound(self, i: int, j: int) -> float:
+        """Target ``i``'s bound on joint ``j`` (NaN when none was derived)."""
+        b = np.asarray(self.joint_bound)
+        return float(b[i, j]) if b.ndim == 2 and i < len(b) and j < b.shape[1] else math.nan
 
     def table_csv(self) -> str:
         """:meth:`table` as CSV text (strings escaped against spreadsheet formulas)."""
