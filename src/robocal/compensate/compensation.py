@@ -239,12 +239,14 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     orientation_weight: float,
     tool_axis: int,
     max_joint_change: float,
+    solved: IKResult | None = None,
 ) -> Compensation:
     """The calibrated-model IK from the nominal solution (damped near singularities), the
     invariants of :mod:`robocal.compensate.safety` (a refused target keeps its nominal
-    command), and the bookkeeping."""
+    command), and the bookkeeping.  ``solved``: commands found otherwise (seed 003 eq. 5.22
+    for paths), put through the same invariants instead of the IK."""
     opts = {"kind": kind, "tool_axis": tool_axis, "orientation_weight": orientation_weight}
-    res = solve_ik(
+    res = solved or solve_ik(
         setup.real, T, q0=q_nominal, restarts=0, tol=tol, tol_angle=tol_angle, max_iter=max_iter,
         joint_effects=setup.effects, **opts,
     )  # fmt: skip

@@ -26,7 +26,7 @@ from robocal.compensate.compensation import (
 )
 from robocal.compensate.result import Compensation
 from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.ik import PerturbationFunction, TargetKind
+from robocal.measure.ik import IKResult, PerturbationFunction, TargetKind
 from robocal.measure.paths import joint_path
 from robocal.model.chain import Model
 
@@ -120,43 +120,16 @@ def _path_targets(
     return _to_base(T, frame, setup), kind_
 
 
-def _jacobian_result(
-    setup: _Setup,
-    q: Array,
-    q_nom: Array,
-    T: Array,
-    kind: TargetKind,
-    labels: tuple[str, ...],
-    iterations: int,
-    limits: tuple[float, float, int, float],
-) -> Compensation:
-    """The :class:`Compensation` of eq. 5.22's commands ``q``; ``limits``: ``tol`` (m),
-    ``tol_angle`` (rad), ``tool_axis`` and ``max_joint_change`` as for
-    :func:`compensate_targets`."""
-    tol, tol_angle, tool_axis, max_joint_change = limits
-    after, angle_after = _errors(_predict(setup, q), T, kind, tool_axis)
-    before, angle_before = _errors(_predict(setup, q_nom), T, kind, tool_axis)
-    if not setup.has_nominal:
-        before, angle_before = np.full(len(T), np.nan), np.full(len(T), np.nan)
-    change = np.abs(q - q_nom).max(axis=1)
-    return Compensation(
-        q=q,
-        q_nominal=q_nom,
-        targets=T,
-        kind=kind,
-        error_before=before,
-        error_after=after,
-        angle_before=angle_before,
-        angle_after=angle_after,
-        reachable=(after < tol) & (angle_after < tol_angle),
-        nominal_reachable=np.ones(len(q), dtype=bool),
-        joint_change=change,
-        branch_kept=change <= max_joint_change,
-        names=labels,
-        joint_names=setup.real.joint_names,
-        joint_types=setup.real.joint_types,
-        iterations=np.full(len(q), iterations, dtype=np.int64),
-        expected_error_after=setup.expected_error(q),
+def _jacobian_solved(setup: _Setup, q: Array, q_nom: Array, T: Array, kind: TargetKind, iterations: int):
+    """Eq. 5.22's commands ``q`` as an :class:`IKResult` for the invariants of
+    :mod:`robocal.compensate.safety`: a sample counts as solved when the step did not make
+    its error worse (one step leaves a second-order residual by design)."""
+    after, angle_after = _errors(_predict(setup, q), T, kind, 2)
+    before, angle_before = _errors(_predict(setup, q_nom), T, kind, 2)
+    ok = np.isfinite(after) & (np.hypot(after, angle_after) <= np.hypot(before, angle_before) + 1e-12)
+    n = len(q)
+    return IKResult(
+        q, after, angle_after, ok, np.full(n, iterations, dtype=np.int64), np.ones(n, np.int64), kind
     )
 
 
@@ -216,8 +189,14 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
         if iterations < 1:
             raise ValueError(f"iterations must be >= 1, got {iterations}")
         q = _eq522(setup, q_nom, T, kind_, int(iterations), float(damping))
-        base = _jacobian_result(setup, q, q_nom, T, kind_, labels, int(iterations),
-                                (tol, tol_angle, tool_axis, max_joint_change))  # fmt: skip
+        solved = _jacobian_solved(setup, q, q_nom, T, kind_, int(iterations))
+        base = _correct(
+            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, tol=tol, tol_angle=tol_angle,
+            max_iter=max_iter, orientation_weight=orientation_weight, tool_axis=tool_axis,
+            max_joint_change=max_joint_change, solved=solved,
+        )  # fmt: skip
+        after, angle_after = base.error_after, base.angle_after  # reachable: within tol, as for "ik"
+        base = dataclasses.replace(base, reachable=(after < tol) & (angle_after < tol_angle))
     else:
         raise ValueError(f"method must be 'ik' or 'jacobian', got {method!r}")
     correction = base.q - q_nom
@@ -273,5 +252,3 @@ def compensate_cartesian_path(
         frame="base",
         **options,
     )
-
-
