@@ -29,6 +29,10 @@ class _Table:
     def __init__(self, path: Path, columns: Sequence[str], key: str) -> None:
         self.path, self.columns, self.key = path, tuple(columns), key
         self.rows: dict[str, dict[str, str]] = {}
+        if os.path.lexists(path) and not is_own_regular_file(path):  # appended to: never through a link
+            raise StudyError(
+                f"{path}: a link or another user's file, not a table robocal wrote; move it away"
+            )
         if path.exists():
             self._load()
         else:
