@@ -187,7 +187,12 @@ def test_the_working_directory_is_written_in_place(tmp_path, monkeypatch):
         (st.path / "result.json").write_text(json.dumps({"run_id": st.run_id, "tag": "x"}))
     # old_only.txt has an owned name but robocal did not write it: kept (never a user's file deleted)
     assert sorted(os.listdir(tmp_path)) == [
-        outdir.MANIFEST, "a.yaml", "b.yaml", "notes.txt", "old_only.txt", "result.json"
+        outdir.MANIFEST,
+        "a.yaml",
+        "b.yaml",
+        "notes.txt",
+        "old_only.txt",
+        "result.json",
     ]
     check_consistent(tmp_path, ("a.yaml", "b.yaml"))
 
