@@ -70,7 +70,7 @@ def local_cluster(workers: int | None = None):
     import dask
     from distributed import LocalCluster
 
-    n = workers if workers is not None else (os.cpu_count() or 1)
+    n = check_workers(workers) if workers is not None else (os.cpu_count() or 1)
     # Dask starts workers with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's
     # mmap threshold at 128 KiB: every Jacobian-sized array is then mmapped and
     # page-faulted afresh, and freed heap is given back at once, ~1.5x slower here
