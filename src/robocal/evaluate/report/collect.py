@@ -94,7 +94,8 @@ def _check_result(result: CalibrationResult) -> None:
         raise ValueError(f"{where}: the device lies {np.max(np.abs(t)):.3g} m from the base (at most 1e6 m)")
     bad = np.flatnonzero(~np.isfinite(np.asarray(result.estimates, dtype=float)))
     if bad.size:
-        raise ValueError(f"result.json parameters: the estimate of {result.names[int(bad[0])]!r} is not finite")
+        name = result.names[int(bad[0])]
+        raise ValueError(f"result.json parameters: the estimate of {name!r} is not finite")
 
 
 def _pose_set(facts: ResultFacts, name: str, data: Measurements, colour: str) -> PoseSet:
