@@ -333,3 +333,25 @@ def test_gui_refuses_an_upload_beyond_its_limit_before_reading_it(gui, caplog):
     assert response.status_code == 413
     assert "limit" in response.get_json()["error"]
     _no_traceback(caplog)
+
+
+# ------------------------------------------------------------------ sizes checked before parsing
+def test_model_build_refuses_an_oversized_yaml_before_parsing_it(tmp_path, monkeypatch):
+    """A YAML beyond the 5 MB limit is refused by its size: no YAML parser ever sees it."""
+    import yaml
+
+    from robocal.model.yaml_files import MAX_FILE_BYTES
+
+    big = tmp_path / "big.yaml"
+    row = "  - {name: j, type: revolute}\n"
+    big.write_text("joints:\n" + row * (MAX_FILE_BYTES // len(row) + 10), encoding="utf-8")
+
+    def parsed(*_args, **_kwargs):
+        raise AssertionError("an oversized YAML reached the parser")
+
+    for name in ("safe_load", "load", "parse", "compose"):
+        monkeypatch.setattr(yaml, name, parsed)
+    out = tmp_path / "model.yaml"
+    result = runner.invoke(app, ["model", "build", str(big), "-o", str(out)])
+    _one_error(result, "big.yaml", "too large")
+    assert not out.exists()
