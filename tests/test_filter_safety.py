@@ -86,15 +86,11 @@ def _read_back(out, language: str, dof: int, joint_types) -> list:
     return [(t.name, t.kind, pg._read_value(t, units, joint_types, False)) for t in parsed.targets]
 
 
-# Measured: every target, joint ones included, lands 0.47-0.49 mm off on the true robot (UR10,
-# KR 16, IRB 2400), the same offset everywhere: the filter's default probe is the tool the
-# calibration identified, so the geometry that tool absorbed (the complete model's d6 etc.,
-# 0.5-0.7 mm here) is dropped when the program's as-built tool is attached; and --probe with
-# the as-built tool is refused beyond 0.5 mm / 3σ (issue 31 item 1, another engineer's part).
-PROBE_DEFAULT_BUG = "filter's default probe drops the tool-absorbed geometry (~0.48 mm), see above"
+# The calibration was given the probe as built (tool_guess = 100 mm); its identified tool also
+# carries the flange's own errors (0.5-0.7 mm here), which the filter must keep with the robot
+# when the program's tool is attached: before that, every target landed 0.47-0.49 mm off.
 
 
-@pytest.mark.xfail(strict=True, reason=PROBE_DEFAULT_BUG)
 @pytest.mark.parametrize(("language", "name"), [("urscript", "ur10"), ("krl", "kr16"), ("rapid", "irb2400")])
 def test_cli_filter_closed_loop_every_language(tmp_path, calibrations, language, name):
     robot, result, folder = calibrations(name)

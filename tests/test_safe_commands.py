@@ -164,8 +164,8 @@ def test_nominal_model_gives_one_configuration_on_every_catalog_robot(robot):
 
 # ---------------------------------------------------------------- KR 16 filter (repro)
 def test_kr16_default_model_filter_keeps_axes_and_predicts_millimetres(tmp_path):
-    """`robocal filter CAL examples/programs/pick.src` (the repro's --probe 0,0,0.1 is now the
-    identified tool's default) on a default KR 16 calibration: every axis changes by at most
+    """`robocal filter CAL examples/programs/pick.src` (with the repro's --probe 0,0,0.1m or
+    the probe stated at calibration by default) on a default KR 16 calibration: every axis changes by at most
     1°, the predicted error is at most 10 mm, nothing refused (exit 0)."""
     poses, data, cal = tmp_path / "p.csv", tmp_path / "d.csv", tmp_path / "cal"
     assert runner.invoke(app, ["poses", "kr16", "-o", str(poses), "--n", "60", "--seed", "2"]).exit_code == 0
@@ -177,20 +177,22 @@ def test_kr16_default_model_filter_keeps_axes_and_predicts_millimetres(tmp_path)
         app, ["calibrate", "kr16", "--data", str(data), "-o", str(cal), "--tool", "0,0,100mm"]
     )
     assert res.exit_code == 0, res.output
-    out = tmp_path / "out" / "pick.src"
-    res = runner.invoke(
-        app, ["filter", str(cal), str(EXAMPLES / "pick.src"), "-o", str(out)]
-    )  # the probe: the measured tool stored with the calibration (issue 31 item 1)
-    assert res.exit_code == 0, res.output
-    text = " ".join(res.output.split())
-    before = float(text.split("predicted error ")[1].split(" mm")[0])
-    assert 0 < before <= 10.0
     old = (EXAMPLES / "pick.src").read_text()
-    new = out.read_text()
-    axes_old = _axes(old)
-    axes_new = _axes(new)
-    assert len(axes_old) == len(axes_new) > 0
-    assert np.abs(np.array(axes_new) - np.array(axes_old)).max() <= 1.0
+    # the probe: by default the tool stated at the calibration (issue 31 item 1); then the
+    # repro's own --probe (with its unit) and the repro's wrong sign, which is refused
+    for k, probe in enumerate(([], ["--probe", "0,0,0.1m"], ["--probe", "0,0,-0.1m"])):
+        out = tmp_path / f"out{k}" / "pick.src"
+        res = runner.invoke(app, ["filter", str(cal), str(EXAMPLES / "pick.src"), "-o", str(out), *probe])
+        if k == 2:
+            assert res.exit_code == 2 and not out.exists(), res.output
+            continue
+        assert res.exit_code == 0, res.output
+        text = " ".join(res.output.split())
+        before = float(text.split("predicted error ")[1].split(" mm")[0])
+        assert 0 < before <= 10.0
+        axes_old, axes_new = _axes(old), _axes(out.read_text())
+        assert len(axes_old) == len(axes_new) > 0
+        assert np.abs(np.array(axes_new) - np.array(axes_old)).max() <= 1.0
 
 
 def _axes(text: str) -> list[list[float]]:

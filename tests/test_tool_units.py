@@ -6,6 +6,7 @@ the calibration and again where a later command depends on it."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -158,8 +159,23 @@ def test_a_disagreeing_tool_is_refused_naming_both(cal):
         check_tool(tool, [0.0, 0.0, 0.12], "--probe")
     assert "120.00" in str(err.value) and f"{tool.position_m[2] * 1e3:.2f}" in str(err.value)
     check_tool(tool, np.asarray(tool.position_m) + [0, 0, 3e-4], "--probe")  # within the floor
-    T = probe_for(result, None)  # default: the identified tool itself
+    T = probe_for(result, None)  # the stated 120 mm is refused: default, the identified tool
     assert np.allclose(np.asarray(T)[:3, 3], tool.position_m)
+
+
+def test_a_stated_tool_within_the_flange_tolerance_is_the_default_probe(cal):
+    """Within 2 mm the stated tool is the tool as built and the difference is the flange's
+    (position measurements cannot separate them): the filter's default probe is the stated one."""
+    result, _ = cal
+    tool = measured_tool(result)
+    near = np.asarray(tool.position_m) + [0.0, 0.0, 1.2e-3]
+    stated = dataclasses.replace(tool, given_m=tuple(near))
+    records = {**result.records, "measured_tool": stated.to_dict()}
+    T = probe_for(dataclasses.replace(result, records=records), None)
+    assert np.allclose(np.asarray(T)[:3, 3], near)
+    check_tool(tool, near, "--probe")  # accepted: within the flange's tolerance
+    with pytest.raises(ValueError, match="disagrees"):
+        check_tool(tool, np.asarray(tool.position_m) + [0.0, 0.0, 2.5e-3], "--probe")
 
 
 def test_filter_uses_the_identified_tool_and_refuses_another(cal, tmp_path):

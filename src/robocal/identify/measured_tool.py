@@ -6,7 +6,14 @@ Its position on the flange, with its covariance, is :class:`MeasuredTool`
 (:func:`measured_tool`): stored in ``result.json`` (``measured_tool``), used by
 ``robocal filter`` and ``robocal compensate`` unless told otherwise, and compared with a
 tool the user states (:func:`check_tool`): one that differs from the identified tool by
-more than :data:`AGREE_SIGMAS` σ *and* :data:`AGREE_FLOOR_M` is refused, naming both.
+more than :data:`AGREE_SIGMAS` σ *and* :data:`FLANGE_TOLERANCE_M` is refused, naming both.
+
+Within that tolerance the difference is the robot's, not the tool's: position measurements
+cannot tell the probe's offset from the flange's own (the last link's length, its offset
+along the last axis), so the identified tool carries both.  A program filter attaches the
+program's own tool to the flange, so it keeps the difference with the robot (the flange
+correction ``identified ∘ as_built⁻¹``); the tool as built is the one stated at the
+calibration (``calibrate --tool``) unless ``--probe`` says otherwise (:func:`probe_for`).
 
 The flange is the controller's: the complete model keeps the flange's offset along the
 last axis (``tool_z``, UR's d6) at its nominal value, since position measurements cannot
@@ -34,9 +41,10 @@ from robocal import spatial
 from robocal.model.chain import Model, Role
 
 __all__ = [
-    "AGREE_FLOOR_M",
     "AGREE_SIGMAS",
+    "FLANGE_TOLERANCE_M",
     "ORIENTATION_MARGIN_DEG",
+    "START_FLOOR_M",
     "START_REPORT_M",
     "UNDETERMINED_STD_M",
     "MeasuredTool",
@@ -53,8 +61,12 @@ Array = NDArray[np.float64]
 
 #: a stated tool this many σ from the identified one disagrees with it ...
 AGREE_SIGMAS = 3.0
-#: ... if it is also farther than this (m): below, a difference is the probe's build tolerance
-AGREE_FLOOR_M = 0.5e-3
+#: ... if it is also farther than this (m): up to it, a difference is the flange's own geometry
+#: (a few tenths of a millimetre on a new arm, ±0.5 mm per parameter in simulated ones; a
+#: wrong or mis-typed tool is millimetres to centimetres off: the real UR10's 109 mm vs 93 mm)
+FLANGE_TOLERANCE_M = 2e-3
+#: a stated start value this far (m) and 3σ from the fit is reported (not refused)
+START_FLOOR_M = 0.5e-3
 #: a start value the fit moved farther than this (m) is reported (also beyond 3σ and the floor)
 START_REPORT_M = 5e-3
 #: a tool component with a larger σ (m) is not determined by the calibration's poses
@@ -104,10 +116,10 @@ class MeasuredTool:
         sigma = math.sqrt(max(float(u @ np.asarray(self.covariance_m2) @ u), 0.0))
         return distance, (distance / sigma if sigma > 0 else math.inf)
 
-    def disagrees(self, point_m: ArrayLike) -> bool:
-        """``point_m`` is more than :data:`AGREE_SIGMAS` σ and :data:`AGREE_FLOOR_M` away."""
+    def disagrees(self, point_m: ArrayLike, floor_m: float = FLANGE_TOLERANCE_M) -> bool:
+        """``point_m`` is more than :data:`AGREE_SIGMAS` σ and ``floor_m`` away."""
         distance, sigmas = self.separation(point_m)
-        return distance > AGREE_FLOOR_M and sigmas > AGREE_SIGMAS
+        return distance > floor_m and sigmas > AGREE_SIGMAS
 
     def to_dict(self) -> dict[str, Any]:
         """``result.json``'s ``measured_tool`` (mm)."""
@@ -214,21 +226,29 @@ def check_tool(tool: MeasuredTool, given: ArrayLike, what: str) -> None:
 
 def tool_start_warnings(tool: MeasuredTool | None) -> list[tuple[str, str]]:
     """``("tool-start", message)`` when the stated tool (``tool.given_m``) and the fit
-    differ by more than :data:`START_REPORT_M`, or by more than 3σ and :data:`AGREE_FLOOR_M`."""
+    differ by more than :data:`START_REPORT_M`, or by more than 3σ and :data:`START_FLOOR_M`."""
     if tool is None or tool.given_m is None:
         return []
     distance, sigmas = tool.separation(tool.given_m)
-    if distance <= START_REPORT_M and not tool.disagrees(tool.given_m):
+    if distance <= START_REPORT_M and not tool.disagrees(tool.given_m, START_FLOOR_M):
         return []
+    if not tool.disagrees(tool.given_m):
+        use = (
+            "filter takes the stated tool as built and keeps the difference with the robot's flange "
+            "(position measurements cannot tell the two apart)"
+        )
+    else:
+        use = (
+            f"beyond the flange's tolerance ({FLANGE_TOLERANCE_M * 1e3:.0f} mm), so filter and compensate "
+            "use the identified tool and refuse the stated one: set the identified tool as the "
+            "controller's TCP, or check the probe's mounting and the value given"
+        )
     return [
         (
             "tool-start",
             f"the tool given as start value, ({_mm(tool.given_m)}) mm, is {distance * 1e3:.2f} mm "
             f"({sigmas:.0f}σ) from the measured tool the calibration identified on the controller's "
-            f"flange, {tool.text()}; the identified one is stored with the calibration and used by "
-            "filter and compensate: set it as the controller's TCP, or check the probe's mounting "
-            "and the value given (position measurements cannot tell the tool's length from the "
-            "flange's offset along the last axis, which is kept at its nominal value)",
+            f"flange, {tool.text()}; {use}",
         )
     ]
 
@@ -267,10 +287,13 @@ def undetermined_warnings(result: Any, tool: MeasuredTool | None) -> list[tuple[
 
 
 def probe_for(calibrated: Any, given: ArrayLike | None, what: str = "--probe") -> Any:
-    """The measured tool as built that a program filter assumes: ``given`` (position (3,)
-    or 4x4, m) checked against the identified tool (:func:`check_tool`), or the identified
-    tool itself (its 4x4 on the flange) when none is given; ``given`` unchanged for a bare
-    model or a calibration without a tool.
+    """The measured tool as built that a program filter assumes (4x4 on the flange, m):
+    ``given`` (position (3,) or 4x4) checked against the identified tool
+    (:func:`check_tool`); when none is given, the tool stated at the calibration
+    (``calibrate --tool``) if it agrees with the identified one, else the identified tool
+    itself.  ``given`` unchanged for a bare model or a calibration without a tool.  What
+    separates the tool as built from the identified one is kept with the robot's flange
+    (:mod:`robocal.compensate.program_frames`).
 
     Raises:
         ValueError: ``given`` disagrees with the identified tool (names ``what``).
@@ -284,7 +307,12 @@ def probe_for(calibrated: Any, given: ArrayLike | None, what: str = "--probe") -
         check_tool(tool, given, what)
         return given
     steps = _tool_steps(calibrated.model)
-    return spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
+    identified = spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
+    if tool.given_m is not None and not tool.disagrees(tool.given_m):
+        as_built = identified.copy()  # the identified orientation (pose tools), the stated point
+        as_built[:3, 3] = tool.given_m
+        return as_built
+    return identified
 
 
 #: a target's tool axis this much (deg) beyond the calibration poses' spread is "another
