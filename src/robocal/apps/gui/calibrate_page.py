@@ -470,12 +470,16 @@ def _compensate_or_export(page: _Page, targets, _urdf, _ur, filename, unit, fram
         if trigger == "export-urdf":
             from robocal.compensate.export import export_urdf
 
-            ex, missing = export_urdf(result)
-            notes = "; ".join(m.note for m in missing) or "everything calibrated is carried"
+            ex, _ = export_urdf(result)  # its notes: the physics-only fit used, what it leaves out
+            notes = "; ".join(ex.notes) or "everything calibrated is carried"
             return {"content": ex.text, "filename": f"{result.model.name}_calibrated.urdf"}, notes
-        from robocal.compensate.export import export_ur_kinematics
+        from robocal.compensate.export import export_ur_kinematics, kinematic_part, left_out
 
-        kin = export_ur_kinematics(result)
-        return {"content": kin.to_yaml(), "filename": "default_kinematics.yaml"}, "UR kinematics written"
+        part = kinematic_part(result)
+        kin = export_ur_kinematics(part.calibrated)
+        notes = "; ".join((*part.notes, *(m.note for m in left_out(part.calibrated))))
+        return {"content": kin.to_yaml(), "filename": "default_kinematics.yaml"}, (
+            f"UR kinematics written; {notes}" if notes else "UR kinematics written"
+        )
     except ValueError as err:
         return no_update, html.Span(str(err), className="error")
