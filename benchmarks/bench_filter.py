@@ -12,7 +12,8 @@ Two cases from issue 38 (bounded work):
   the size cap (``MAX_PROGRAM_BYTES``), else filtered; the peak memory allocated while filtering
   (tracemalloc) is reported: a small multiple of the file size.
 
-Run: ``python benchmarks/bench_filter.py [--targets 40000] [--comment-mb 150]``.
+Run: ``python benchmarks/bench_filter.py [--targets 40000] [--poses 10000] [--comment-mb 150]``
+(``--poses``: a program of named Cartesian targets, each one its own IK solve).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np
 
 
 def _program(n: int, seed: int = 0) -> str:
+    """``n`` joint targets, one ``movej([...])`` each."""
     rng = np.random.default_rng(seed)
     q = rng.uniform(-2.5, 2.5, (n, 6))
     lines = ["def big():", "  # a long program: one movej per target"]
@@ -37,7 +39,21 @@ def _program(n: int, seed: int = 0) -> str:
     return "\n".join(lines) + "\nend\n"
 
 
-def bench_long(n: int) -> None:
+def _pose_program(n: int) -> str:
+    """``n`` named Cartesian targets ``t_k = p[...]``, each moved to by ``movel(t_k)``."""
+    import robocal as rc
+    from robocal import spatial
+
+    T = rc.robot("ur10").fk(np.array([[0.3, -1.2, 1.4, -1.7, -1.5, 0.2]]))[0]
+    rv = spatial.matrix_to_rotvec(T[:3, :3])
+    lines = ["def poses():"]
+    for k in range(n):
+        v = [*(T[:3, 3] + [0.0, 0.0, 1e-5 * k]), *rv]
+        lines += [f"  t{k} = p[{', '.join(f'{x:.6f}' for x in v)}]", f"  movel(t{k}, a=0.5, v=0.1)"]
+    return "\n".join(lines) + "\nend\n"
+
+
+def bench_long(text: str, what: str) -> None:
     import robocal as rc
     from robocal.compensate import program_filter as steps
     from robocal.compensate.programs import filter_program_text
@@ -45,7 +61,6 @@ def bench_long(n: int) -> None:
 
     nominal = rc.robot("ur10")
     real = draw_true_model(nominal, length=2e-3, angle=np.radians(0.2), seed=3)
-    text = _program(n)
     label = "big.script"
     filter_program_text({label: _program(3)}, "urscript", real, nominal)  # compile kernels
     t0 = time.perf_counter()
@@ -55,7 +70,7 @@ def bench_long(n: int) -> None:
     result = filter_program_text({label: text}, "urscript", real, nominal)
     t_all = time.perf_counter() - t0
     print(
-        f"URScript, {n} joint targets ({len(text) / 1e6:.1f} MB): parse {t_parse:.2f} s, "
+        f"URScript, {what} ({len(text) / 1e6:.1f} MB): parse {t_parse:.2f} s, "
         f"filter end to end {t_all:.2f} s; {len(parsed.targets)} targets, "
         f"{int(result.changed.sum())} corrected"
     )
@@ -96,9 +111,13 @@ def bench_memory(mb: float) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--targets", type=int, default=40_000)
+    parser.add_argument("--poses", type=int, default=10_000)
     parser.add_argument("--comment-mb", type=int, default=150)
     args = parser.parse_args()
-    bench_long(args.targets)
+    if args.targets:
+        bench_long(_program(args.targets), f"{args.targets} joint targets")
+    if args.poses:
+        bench_long(_pose_program(args.poses), f"{args.poses} named Cartesian targets")
     bench_memory(19.5)  # just under the cap: memory a small multiple of the file
     bench_memory(args.comment_mb)
 

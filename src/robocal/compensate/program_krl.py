@@ -24,7 +24,10 @@ from robocal.compensate.program_syntax import (
 
 # ---------------------------------------------------------------------- KRL
 _KRL_AGG = re.compile(r"\{([^{}]*)\}")
-_KRL_DECL = re.compile(r"^[ \t]*DECL\s+(E6POS|POS|E6AXIS|AXIS|FRAME)\s+(\w+)\s*=\s*\{", re.M | re.I)
+# DECL may be left out for the standard types; GLOBAL makes a .dat's target public
+_KRL_DECL = re.compile(
+    r"^[ \t]*(?:DECL\s+)?(?:GLOBAL\s+)?(E6POS|POS|E6AXIS|AXIS|FRAME)\s+(\w+)\s*=\s*\{", re.M | re.I
+)
 _KRL_MOTION = re.compile(r"^[ \t]*(PTP|LIN|CIRC|PTP_REL|LIN_REL|SPTP|SLIN|SCIRC)\b(.*)$", re.M | re.I)
 _KRL_POSE_KEYS = ("X", "Y", "Z", "A", "B", "C")
 

@@ -51,6 +51,21 @@ listed in :attr:`FilteredProgram.unsupported`):
 * **robocal target CSV** (``.csv``): ``name,x,y,z[,qw,qx,qy,qz]`` (Cartesian, in
   ``length_unit``) or ``[name,]q1..qN`` (joint, in ``angle_unit``); ``#`` lines kept.
 
+Only code is read: comments and strings are masked first (:func:`code_only`; URScript
+``#``, KRL ``;``, RAPID ``!`` and double-quoted strings), so a ``movej([...])`` in a
+comment or a ``textmsg``/``TPWrite`` string is kept byte for byte.  Every motion is either
+corrected or listed in :attr:`FilteredProgram.unsupported` with its reason: arrays
+(``path{1}``, ``XP[1]``), names the program gives no value (another module, set at run
+time), offsets and computed targets (``Offs``, ``RelTool``, ``pose_trans``), relative and
+other motion instructions (``LIN_REL``, ``MoveLDO``), and run-time changes of a target
+(``p1.trans.z := ...``, ``p1 = pose_add(...)``).
+
+A ``nominal`` model that is not the calibrated robot (other joint count, names or types,
+or a flange more than :data:`~robocal.compensate.program_frames.NOMINAL_AGREEMENT_M` from
+the calibration's start model) is refused.  KRL pairs are read and written as pairs (see
+:func:`filter_program_file`).  Files above :data:`MAX_PROGRAM_BYTES` (20 MB) are refused
+before they are read; parsing and rewriting are linear in the size of the program.
+
 Units: SI inside; each language's units in its file.
 """
 
@@ -84,6 +99,7 @@ from robocal.compensate.program_syntax import (
     ProgramError,
     ProgramTarget,
     Unsupported,
+    code_only,
 )
 from robocal.compensate.program_urscript import _parse_urscript  # noqa: F401
 from robocal.compensate.program_values import (
@@ -99,6 +115,7 @@ __all__ = [
     "ProgramError",
     "ProgramTarget",
     "Unsupported",
+    "code_only",
     "filter_program_file",
     "filter_program_text",
     "krl_module_name",
