@@ -80,15 +80,16 @@ class _Corrections:
             rows=[None] * n,
         )
 
-    def take(self, i: int, res: Compensation, k: int) -> None:
-        """Target ``i``'s outcome from row ``k`` of a compensation: a refused target keeps
-        its written value (``res.q`` is then the nominal command)."""
+    def take(self, i: int, res: Compensation, k: int, table: list[dict] | None = None) -> None:
+        """Target ``i``'s outcome from row ``k`` of a compensation (``table``: its
+        ``res.table()``, built once per compensation); a refused target keeps its written
+        value (``res.q`` is then the nominal command)."""
         self.before[i], self.after[i] = res.error_before[k] * 1e3, res.error_after[k] * 1e3
         self.status[i], self.reasons[i] = res.status[k], res.reasons[k]
         # reach: a command to write exists (IK reached, or damped near a singularity)
         self.reach[i] = bool(res.reachable[k]) or res.status[k] == "damped"
         self.kept[i] = res.status[k] != "refused"
-        self.rows[i] = res.table()[k]
+        self.rows[i] = (res.table() if table is None else table)[k]
 
     def refuse(self, i: int, reason: str) -> None:
         """Target ``i`` refused by the filter itself (e.g. its written configuration)."""
@@ -237,9 +238,10 @@ def correct_joint_targets(
         real_g, nom_g, _ = frames_of(idx[0])
         q = np.array([values[i] for i in idx])
         res = filter_program(real_g, q, nom_g, joint_effects=effects, tol=tol, tol_angle=tol)
+        table = res.table()
         for k, i in enumerate(idx):
             c.new_values[i] = res.q[k]  # refused: the programmed joints (q_nominal)
-            c.take(i, res, k)
+            c.take(i, res, k, table)
 
 
 def execution_order(texts: dict[str, str], parsed: _Parsed) -> list[int]:

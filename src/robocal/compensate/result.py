@@ -224,6 +224,7 @@ class Compensation:
         largest joint change (deg or mm, and which joint), the bound, sigma_min, the
         configuration, the status and the reason."""
         rows = []
+        accepted = self.accepted  # once: O(n) to build
         for i, name in enumerate(self.names):
             dq = np.abs(self.q[i] - self.q_nominal[i])
             j = int(np.argmax(dq)) if dq.size else 0
@@ -232,7 +233,7 @@ class Compensation:
             rows.append(
                 {
                     "name": name,
-                    "status": _at(self.status, i, "corrected" if self.accepted[i] else "refused"),
+                    "status": _at(self.status, i, "corrected" if accepted[i] else "refused"),
                     "error_before_mm": _num(self.error_before[i] * 1e3),
                     "angle_before_deg": _num(math.degrees(self.angle_before[i])),
                     "correction_mm": _num(_at(self.tool_correction, i, math.nan) * 1e3),
