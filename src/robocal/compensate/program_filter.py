@@ -26,6 +26,7 @@ from robocal.compensate.program_syntax import (
     Unsupported,
     _decimals,
     _line_of,
+    _line_starts,
     _line_text,
     code_only,
 )
@@ -338,6 +339,7 @@ def rewrite_texts(
             pieces += [text[last:s], new]
             last = e
         out[label] = "".join([*pieces, text[last:]])
+    _line_starts.cache_clear()  # the line index holds the texts: not kept past the filter
     return out, changed
 
 

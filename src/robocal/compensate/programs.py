@@ -99,7 +99,6 @@ from robocal.compensate.program_syntax import (
     ProgramError,
     ProgramTarget,
     Unsupported,
-    _line_starts,
     code_only,
 )
 from robocal.compensate.program_urscript import _parse_urscript  # noqa: F401
@@ -210,7 +209,6 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
         steps.correct_pose_targets(sequence, targets, values, q_start, frames_of, effects, tol, c)
     out, changed = steps.rewrite_texts(texts, targets, units, model.joint_types, c)
     steps.report_refused(targets, c)
-    _line_starts.cache_clear()  # the line index holds the texts: not kept past the filter
     return FilteredProgram(
         texts=out,
         targets=tuple(targets),
