@@ -18,6 +18,7 @@ from robocal.compensate import (
     read_program,
     read_targets,
 )
+from robocal.compensate.safety import sigma_min
 from robocal.measure import (
     LaserTracker,
     VirtualRobot,
@@ -26,7 +27,6 @@ from robocal.measure import (
     random_poses,
     simulate,
 )
-from robocal.compensate.safety import sigma_min
 from robocal.model.dynamics import gravity_torques
 
 TOOL = np.array([0.0, 0.0, 0.1])

