@@ -14,6 +14,7 @@ from robocal.compensate.program_syntax import (
     ProgramTarget,
     Unsupported,
     _line_of,
+    _line_text,
     _matching,
     _split_args,
     _tokens,
@@ -23,13 +24,18 @@ from robocal.compensate.program_syntax import (
 _RAPID_DECL = re.compile(
     r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget|tooldata|wobjdata)\s+(\w+)\s*:=\s*\[", re.I
 )
-_RAPID_MOVE = re.compile(r"^[ \t]*(MoveJ|MoveL|MoveC|MoveAbsJ)\b([^;]*);", re.M | re.I)
+# a statement runs to its ';' within 4000 characters (bounded: a file of unterminated
+# statements is not rescanned to its end for each one)
+_RAPID_MOVE = re.compile(r"^[ \t]*(MoveJ|MoveL|MoveC|MoveAbsJ)\b([^;]{0,4000});", re.M | re.I)
 # declarations whose values are not corrected: arrays (``path{3}``), no value (set at run time)
 _RAPID_OTHER_DECL = re.compile(
-    r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget)\s+(\w+)\s*(\{[^}]*\}|;)", re.I
+    r"\b(?:CONST|PERS|VAR)\s+(robtarget|jointtarget)\s+(\w+)\s*(\{[^}]{0,200}\}|;)", re.I
 )
 # motion instructions with targets outside the supported grammar (MoveLDO, SearchL, TriggL ...)
-_RAPID_OTHER_MOTION = re.compile(r"^[ \t]*((?:Move|Search|Trigg|Arc|Cap)\w*|SMove\w*)\b[^;]*;", re.M | re.I)
+_RAPID_OTHER_MOTION = re.compile(
+    r"^[ \t]*((?:Move|Search|Trigg|Arc|Cap)\w*|SMove\w*)\b[^;]{0,4000};", re.M | re.I
+)
+_RAPID_MOTION_START = re.compile(r"^[ \t]*(?:(?:Move|Search|Trigg|Arc|Cap)\w*|SMove\w*)\b", re.M | re.I)
 _SUPPORTED = {"movej", "movel", "movec", "moveabsj"}
 
 
@@ -123,10 +129,17 @@ def _rapid_others(text: str, path: str, unsupported: list[Unsupported]) -> None:
                 path, _line_of(text, m.start()), m.group(0).strip(), f"{m.group(2)} is {what} not corrected"
             )
         )
+    ended = set()
     for m in _RAPID_OTHER_MOTION.finditer(text):
+        ended.add(m.start())
         if m.group(1).lower() not in _SUPPORTED:
             reason = f"{m.group(1)} is not supported: its targets are not corrected"
             unsupported.append(Unsupported(path, _line_of(text, m.start()), m.group(0).strip(), reason))
+    for m in _RAPID_MOTION_START.finditer(text):
+        if m.start() not in ended:
+            line = _line_of(text, m.start())
+            reason = "no ';' ends the statement: its targets are not corrected"
+            unsupported.append(Unsupported(path, line, _line_text(text, m.start()), reason))
 
 
 def _rapid_declarations(

@@ -164,17 +164,24 @@ def _tokens(text: str, start: int, end: int) -> list[_Token]:
     return [_Token(start + m.start(), start + m.end(), m.group()) for m in _NUM_RE.finditer(text[start:end])]
 
 
+@lru_cache(maxsize=8)
+def _bracket_pairs(text: str, open_: str, close: str) -> dict[int, int]:
+    """``{offset of an opening bracket: offset after its closing one}`` for the whole text,
+    in one pass (a bracket never closed has no entry)."""
+    pairs: dict[int, int] = {}
+    stack: list[int] = []
+    for m in re.finditer(re.escape(open_) + "|" + re.escape(close), text):
+        if m.group() == open_:
+            stack.append(m.start())
+        elif stack:
+            pairs[stack.pop()] = m.end()
+    return pairs
+
+
 def _matching(text: str, i: int, open_: str, close: str) -> int:
-    """Index after the bracket closing the one at ``i``."""
-    depth = 0
-    for k in range(i, len(text)):
-        if text[k] == open_:
-            depth += 1
-        elif text[k] == close:
-            depth -= 1
-            if depth == 0:
-                return k + 1
-    return -1
+    """Index after the bracket closing the one at ``i`` (-1: never closed); looked up, so
+    many unclosed brackets cost no rescans."""
+    return _bracket_pairs(text, open_, close).get(i, -1)
 
 
 def _decimals(token: str) -> int:

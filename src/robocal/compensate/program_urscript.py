@@ -21,6 +21,9 @@ from robocal.compensate.program_syntax import (
 )
 
 # ---------------------------------------------------------------------- URScript
+# characters a target literal or a motion call spans at most (longer ones are not targets:
+# bounded, so nested brackets to the end of a file are not rescanned for each one)
+_LITERAL_CHARS = 4000
 _UR_MOVE = re.compile(r"\b(movej|movel|movep|movec|servoj|servoc)\s*\(")
 _UR_ASSIGN = re.compile(r"^[ \t]*(?:(?:global|local)\s+)?([A-Za-z_]\w*)\s*=\s*(p?)\[", re.M)
 _UR_ANY_ASSIGN = re.compile(r"^[ \t]*(?:(?:global|local)\s+)?([A-Za-z_]\w*)\s*=(?!=)", re.M)
@@ -34,6 +37,8 @@ def _ur_literal(text: str, i: int, dof: int, what: str, path: str) -> tuple[str,
     end = _matching(text, b, "[", "]")
     if end < 0:
         raise ProgramError(f"{path}: line {_line_of(text, i)}: unclosed '[' in {what}")
+    if end - b > _LITERAL_CHARS:  # no target is this long: not read (nor copied, for each one)
+        return None
     inner = text[b + 1 : end - 1]
     parts = [s.strip() for s in inner.split(",")]
     if not all(re.fullmatch(_NUM, s) for s in parts):
@@ -68,6 +73,10 @@ def _parse_urscript(
         line = _line_of(text, m.start())
         if call_end < 0:
             raise ProgramError(f"{path}: line {line}: unclosed '(' in {m.group(1)}")
+        if call_end - m.end() > _LITERAL_CHARS:
+            reason = "the call is too long to be a motion to a target"
+            unsupported.append(Unsupported(path, line, _line_text(text, m.start())[:200], reason))
+            continue
         args = _split_args(text, m.end(), call_end - 1)
         n_targets = 2 if m.group(1) == "movec" else 1
         for a_start, a_end in args[:n_targets]:
