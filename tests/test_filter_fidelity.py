@@ -377,3 +377,17 @@ def test_long_program_lines_and_splices_are_exact():
     np.testing.assert_allclose(got[ok], expected[ok], atol=1e-5)  # corrections are ~1e-3 rad
     np.testing.assert_allclose(got[~ok], q[~ok], atol=6e-7)
     assert np.abs(got - q).max() > 1e-4
+
+
+def test_unterminated_and_overlong_statements_are_listed_not_rescanned():
+    """A RAPID Move without its ';', and URScript motions whose brackets close only at the
+    end of the file, are listed (not corrected, not silently skipped); the file's real
+    targets are still read."""
+    rapid = "MODULE A\n" + "    MoveL p1, v100, fine, tool0\n" * 50 + "ENDMODULE\n"
+    result = filter_program_text({"a.mod": rapid}, "rapid", rc.robot("irb120"))
+    assert sorted(u.line for u in result.unsupported) == list(range(2, 52))
+    nested = "  movej(p[\n" * 600 + "])" * 600
+    text = f"def a():\n  movej([0.1, -1.2, 1.3, -1.4, -1.5, 0.6])\n{nested}\nend\n"
+    result = filter_program_text({"a.script": text}, "urscript", rc.robot("ur10"))
+    assert [t.line for t in result.targets] == [2]
+    assert {u.line for u in result.unsupported} >= set(range(3, 3 + 500))
