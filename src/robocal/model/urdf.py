@@ -9,6 +9,7 @@ is used.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ import numpy as np
 from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
 from robocal.model.chain import Model
 
-__all__ = ["URDFError", "build_from_urdf", "geometry_from_urdf", "model_from_urdf"]
+__all__ = ["URDFError", "build_from_urdf", "default_tip", "geometry_from_urdf", "model_from_urdf"]
 
 MAX_URDF_BYTES = 20_000_000
 #: Movable joints a URDF may have: Pinocchio's work arrays grow faster than the square of
@@ -35,6 +36,17 @@ class URDFError(ValueError):
 
 
 def _read_checked(path: Path) -> str:
+    """The URDF's text, once the file and its tree are checked (:func:`_load`) and the numbers
+    of every joint (:func:`_check_numbers`: a URDF edited in place is edited through them)."""
+    text, tree = _load(path)
+    for j in tree.joints:
+        _check_numbers(path, j)
+    return text
+
+
+def _load(path: Path) -> tuple[str, _Tree]:
+    """The URDF's text and its tree, checked: a regular file within the size limit, no
+    DOCTYPE/ENTITY, well-formed XML, and a tree of named joints between existing links."""
     if path.exists() and not path.is_file():  # a FIFO or a device would never end
         raise URDFError(f"{path}: not a regular file")
     if not path.is_file():
@@ -50,11 +62,22 @@ def _read_checked(path: Path) -> str:
         raise URDFError(f"{path}: DOCTYPE/ENTITY declarations are not allowed in a URDF")
     if "<robot" not in text:
         raise URDFError(f"{path}: not a URDF (no <robot> element)")
-    _check_xml(path)
-    return text
+    return text, _check_xml(path)
 
 
 _JOINT_TYPES = {"revolute", "continuous", "prismatic", "fixed", "floating", "planar"}
+#: what robocal reads of a chain joint's elements (the rest: dynamics, safety ... is not geometry)
+_KEPT = {"origin": ("xyz", "rpy"), "axis": ("xyz",), "limit": ("lower", "upper", "effort", "velocity")}
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """A URDF's robot name, links (file order) and joints (file order, each a dict: name,
+    type, line, parent and child as (link, line), and its elements as tag -> (attrs, line))."""
+
+    name: str
+    links: list[str]
+    joints: list[dict]
 
 
 def _numbers(text: str | None, count: int, what: str, line: int) -> tuple[float, ...] | None:
@@ -69,28 +92,29 @@ def _numbers(text: str | None, count: int, what: str, line: int) -> tuple[float,
     return values
 
 
-def _check_xml(path: Path) -> None:
-    """Parse the URDF with expat, entities never declared nor resolved, and check what
-    urdfdom would reject with a message that does not say where: syntax (line,
-    column), joints without parent or child link, links that do not exist, numbers
-    that are not numbers, a zero axis, inverted limits, a revolute or prismatic joint
-    without limits."""
-    links, joints = _scan_xml(path)
-    _check_joints(path, links, joints)
-    _check_tree(path, joints)
+def _check_xml(path: Path) -> _Tree:
+    """Parse the URDF with expat, entities never declared nor resolved, and check the tree
+    (what urdfdom would reject with a message that does not say where): syntax (line,
+    column), joints without a name, parent or child link, links that do not exist, a link
+    with two parents, loops.  The joints' numbers are checked on the chain only
+    (:func:`_check_chain`): what is off the chain is not used."""
+    tree = _scan_xml(path)
+    _check_joints(path, set(tree.links), tree.joints)
+    _check_tree(path, tree.joints)
+    return tree
 
 
-def _scan_xml(path: Path) -> tuple[set[str], list[dict]]:
-    """The robot's link names and its joints (name, type, line, parent, child, limit), checking
-    the syntax and each joint element's numbers on the way."""
+def _scan_xml(path: Path) -> _Tree:
+    """The robot's name, link names and joints, checking the syntax on the way."""
     from xml.parsers import expat
 
     parser = expat.ParserCreate()
     parser.SetParamEntityParsing(expat.XML_PARAM_ENTITY_PARSING_NEVER)
-    links: set[str] = set()
+    links: dict[str, None] = {}  # ordered, and the check stays linear in the link count
     joints: list[dict] = []
-    joint_names: set[str | None] = set()  # a set: the check stays linear in the joint count
+    joint_names: set[str | None] = set()
     stack: list[str] = []
+    robot: list[str] = []
 
     def refuse(*_):
         raise URDFError(
@@ -101,18 +125,23 @@ def _scan_xml(path: Path) -> tuple[set[str], list[dict]]:
         line = parser.CurrentLineNumber
         parent = stack[-1] if stack else None
         stack.append(tag)
-        if tag == "link" and parent == "robot":
+        if tag == "robot" and parent is None:
+            robot.append(attrs.get("name", ""))
+        elif tag == "link" and parent == "robot":
             name = attrs.get("name", "")
             if name in links:
                 raise URDFError(f"line {line}: link {name!r} is defined twice")
-            links.add(name)
+            links[name] = None
         elif tag == "joint" and parent == "robot":
             if attrs.get("name") in joint_names:
                 raise URDFError(f"line {line}: joint {attrs.get('name')!r} is defined twice")
             joint_names.add(attrs.get("name"))
-            joints.append({"name": attrs.get("name"), "type": attrs.get("type"), "line": line})
-        elif parent == "joint" and joints:
-            _joint_element(joints[-1], tag, attrs, line)
+            joints.append({"name": attrs.get("name"), "type": attrs.get("type"), "line": line, "el": {}})
+        elif parent == "joint" and len(stack) == 3 and joints:
+            if tag in ("parent", "child"):
+                joints[-1][tag] = (attrs.get("link"), line)
+            else:
+                joints[-1]["el"].setdefault(tag, (dict(attrs), line))
 
     parser.StartDoctypeDeclHandler = refuse
     parser.EntityDeclHandler = refuse
@@ -128,32 +157,49 @@ def _scan_xml(path: Path) -> tuple[set[str], list[dict]]:
         ) from None
     except URDFError as err:
         raise URDFError(f"{path}: {err}") from None
-    return links, joints
+    return _Tree(robot[0] if robot else "", list(links), joints)
 
 
-def _joint_element(j: dict, tag: str, attrs: dict[str, str], line: int) -> None:
-    """Record or check one element inside ``<joint>`` ``j``."""
-    if tag in ("parent", "child"):
-        j[tag] = (attrs.get("link"), line)
-    elif tag == "origin":
-        _numbers(attrs.get("xyz"), 3, "origin xyz", line)
-        _numbers(attrs.get("rpy"), 3, "origin rpy", line)
-    elif tag == "axis":
-        axis = _numbers(attrs.get("xyz"), 3, "axis xyz", line)
-        if axis is not None and not any(axis):
-            raise URDFError(f"line {line}: joint {j['name']!r}: the axis is zero")
-    elif tag == "mimic":
+def _check_chain_joint(path: Path, j: dict) -> None:
+    """Check one joint of the chain to the tip: its numbers, a non-zero axis and limits when it
+    moves, no coupling."""
+    _check_numbers(path, j)
+    where = f"{path}: line {j['line']}: joint {j['name']!r}"
+    el = j["el"]
+    if "mimic" in el:
         raise URDFError(
-            f"line {line}: joint {j['name']!r} mimics joint {attrs.get('joint')!r}: coupled (mimic) "
-            "joints are not supported (robocal would calibrate it as an independent joint); make it "
-            "fixed or remove the <mimic> element if the joint really moves on its own"
+            f"{where}: mimics joint {el['mimic'][0].get('joint')!r} and is on the chain to the tip: coupled "
+            "(mimic) joints are not supported (robocal would calibrate it as an independent joint); "
+            "end the chain before it (--tip), or make it fixed if it does not move"
         )
-    elif tag == "limit":
-        lo = _numbers(attrs.get("lower", "0"), 1, "limit lower", line)
-        hi = _numbers(attrs.get("upper", "0"), 1, "limit upper", line)
-        if lo[0] > hi[0]:
-            raise URDFError(f"line {line}: joint {j['name']!r}: limit lower {lo[0]:g} > upper {hi[0]:g}")
-        j["limit"] = True
+    if j["type"] in ("revolute", "prismatic") and "limit" not in el:
+        raise URDFError(f"{where}: a {j['type']} joint needs <limit lower upper effort velocity>")
+
+
+def _check_numbers(path: Path, j: dict) -> None:
+    """Check joint ``j``'s origin, and its axis (not zero) and limits when it moves; a fixed
+    joint's axis is not read (it has none to speak of)."""
+    el = j["el"]
+    try:
+        if "origin" in el:
+            attrs, line = el["origin"]
+            _numbers(attrs.get("xyz"), 3, "origin xyz", line)
+            _numbers(attrs.get("rpy"), 3, "origin rpy", line)
+        if j["type"] == "fixed":
+            return
+        if "axis" in el:
+            attrs, line = el["axis"]
+            axis = _numbers(attrs.get("xyz"), 3, "axis xyz", line)
+            if axis is not None and not any(axis):
+                raise URDFError(f"line {line}: joint {j['name']!r}: the axis is zero")
+        if "limit" in el:
+            attrs, line = el["limit"]
+            lo = _numbers(attrs.get("lower", "0"), 1, "limit lower", line)
+            hi = _numbers(attrs.get("upper", "0"), 1, "limit upper", line)
+            if lo[0] > hi[0]:
+                raise URDFError(f"line {line}: joint {j['name']!r}: limit lower {lo[0]:g} > upper {hi[0]:g}")
+    except URDFError as err:
+        raise URDFError(f"{path}: {err}") from None
 
 
 def _check_joints(path: Path, links: set[str], joints: list[dict]) -> None:
@@ -169,9 +215,7 @@ def _check_joints(path: Path, links: set[str], joints: list[dict]) -> None:
                 raise URDFError(f"{where}: no <{end} link=...>")
             if link not in links:
                 raise URDFError(f"{where}: {end} link {link!r} is not a <link> of the robot")
-        if j["type"] in ("revolute", "prismatic") and not j.get("limit"):
-            raise URDFError(f"{where}: a {j['type']} joint needs <limit lower upper effort velocity>")
-    if len(joints) > MAX_URDF_ALL_JOINTS:  # urdfdom recurses per link: deep chains crash it
+    if len(joints) > MAX_URDF_ALL_JOINTS:  # the chain walks are per link: keep them bounded
         raise URDFError(
             f"{path}: {len(joints)} joints; robocal reads URDFs of up to {MAX_URDF_ALL_JOINTS} "
             "(fixed ones included)"
@@ -239,48 +283,111 @@ def _unaligned_axis(joint_model, kind: str) -> np.ndarray:
     return S[3:] if kind == "revolute" else S[:3]
 
 
+def _chain(tree: _Tree, tip: str) -> list[dict]:
+    """The joints from the root to link ``tip``, root first."""
+    by_child = {j["child"][0]: j for j in tree.joints}
+    chain, link = [], tip
+    while link in by_child:  # the tree is checked: no loop
+        chain.append(by_child[link])
+        link = by_child[link]["parent"][0]
+    return chain[::-1]
+
+
+def _movable(chain: list[dict]) -> tuple[str, ...]:
+    return tuple(j["name"] for j in chain if j["type"] != "fixed")
+
+
+def default_tip(path: Path, tree: _Tree) -> str:
+    """The link the chain ends at by default: the deepest link of the single longest chain.
+
+    Every leaf link ends a chain; the longest chains move the most joints.  When they all move
+    the same joints (they differ in fixed frames only: ``flange`` -> ``tool0``), the deepest
+    leaf is the tip.  Chains of the same length that move different joints (two gripper
+    fingers, two arms) or equally deep fixed branches are ambiguous: refused, naming the
+    candidates, for ``--tip``."""
+    parents = {j["parent"][0] for j in tree.joints}
+    leaves = [link for link in tree.links if link not in parents]
+    chains = {leaf: _chain(tree, leaf) for leaf in leaves}
+    longest = max((len(_movable(c)) for c in chains.values()), default=0)
+    if longest == 0:
+        raise URDFError(f"{path}: the robot has no movable joint")
+    best = [leaf for leaf, c in chains.items() if len(_movable(c)) == longest]
+    deepest = max(len(chains[leaf]) for leaf in best)
+    tips = [leaf for leaf in best if len(chains[leaf]) == deepest]
+    if len({_movable(chains[leaf]) for leaf in best}) == 1 and len(tips) == 1:
+        return tips[0]
+    ranked = sorted(leaves, key=lambda leaf: -len(_movable(chains[leaf])))
+    listed = ", ".join(f"{leaf!r} ({len(_movable(chains[leaf]))} joints)" for leaf in ranked[:12])
+    more = f" and {len(ranked) - 12} more" if len(ranked) > 12 else ""
+    raise URDFError(
+        f"{path}: the robot branches into {len(best)} chains of {longest} joints ending at different "
+        f"links; choose the tip with --tip LINK (chain ends: {listed}{more})"
+    )
+
+
+def _tip_link(path: Path, tree: _Tree, tip: str | None) -> str:
+    """``tip`` as a link name (a joint's name stands for its child link), or the default."""
+    if tip is None:
+        return default_tip(path, tree)
+    if tip in tree.links:
+        return tip
+    child = {j["name"]: j["child"][0] for j in tree.joints}
+    if tip in child:
+        return child[tip]
+    shown = ", ".join(repr(n) for n in tree.links[:40]) + (" ..." if len(tree.links) > 40 else "")
+    raise URDFError(f"{path}: no link {tip!r}; links are {shown}")
+
+
+def _chain_urdf(tree: _Tree, chain: list[dict]) -> str:
+    """A URDF of the chain alone (bare links; each joint's origin, axis and limit): what is
+    off the chain (fingers, mimic joints, sensors, meshes) never reaches the URDF reader."""
+    from xml.etree import ElementTree as ET
+
+    robot = ET.Element("robot", name=tree.name or "robot")
+    for link in [chain[0]["parent"][0], *(j["child"][0] for j in chain)]:
+        ET.SubElement(robot, "link", name=link)
+    for j in chain:
+        joint = ET.SubElement(robot, "joint", name=j["name"], type=j["type"])
+        ET.SubElement(joint, "parent", link=j["parent"][0])
+        ET.SubElement(joint, "child", link=j["child"][0])
+        for tag, keys in _KEPT.items():
+            if tag in j["el"] and not (tag == "axis" and j["type"] == "fixed"):
+                attrs = j["el"][tag][0]
+                ET.SubElement(joint, tag, {k: attrs[k] for k in keys if k in attrs})
+    return ET.tostring(robot, encoding="unicode")
+
+
 def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, list[JointGeometry], Tcp]:
     """Joint geometry (name, joints, TCP) of the serial chain from the root to ``tip``.
 
+    Only the chain is read: joints and links off it (gripper fingers with ``<mimic>``,
+    sensor frames, meshes) are ignored, and so is a fixed joint's axis.
+
     Args:
         path: the URDF file.
-        tip: name of the frame (link) to end at; default: the frame of the deepest joint
-            that comes last in the file (e.g. ``tool0`` when present).
+        tip: name of the link to end at (a joint's name stands for its child link); default:
+            the deepest link of the single longest chain (:func:`default_tip`).
     """
     import pinocchio as pin
 
     path = Path(path)
-    _read_checked(path)
+    _, tree = _load(path)
+    tip_link = _tip_link(path, tree, tip)
+    chain = _chain(tree, tip_link)
+    if not _movable(chain):
+        raise URDFError(f"{path}: link {tip_link!r} is not moved by any joint")
+    for j in chain:
+        _check_chain_joint(path, j)
     try:
-        pm = pin.buildModelFromUrdf(str(path))
+        pm = pin.buildModelFromXML(_chain_urdf(tree, chain))
     except (RuntimeError, ValueError) as err:
         raise URDFError(f"{path}: {err}") from None
     data = pm.createData()
-    q0 = pin.neutral(pm)
-    pin.framesForwardKinematics(pm, data, q0)
-    if pm.njoints < 2:
-        raise URDFError(f"{path}: the robot has no movable joint")
-    if tip is None:
-        # the last body frame attached to the deepest joint
-        deepest = max(range(1, pm.njoints), key=lambda j: (_depth(pm, j), j))
-        candidates = [f for f in range(pm.nframes) if pm.frames[f].parentJoint == deepest]
-        frame_id = candidates[-1]
-    else:
-        if not pm.existFrame(tip):
-            names = sorted({f.name for f in pm.frames})
-            raise URDFError(f"{path}: no frame {tip!r}; frames are {', '.join(names)}")
-        frame_id = pm.getFrameId(tip)
-    chain = []
-    j = pm.frames[frame_id].parentJoint
-    while j > 0:
-        chain.append(j)
-        j = pm.parents[j]
-    chain.reverse()
-    if not chain:
-        raise URDFError(f"{path}: frame {pm.frames[frame_id].name!r} is not moved by any joint")
+    pin.framesForwardKinematics(pm, data, pin.neutral(pm))
+    frame_id = pm.getFrameId(tip_link, pin.FrameType.BODY)
     joints: list[JointGeometry] = []
     previous = np.zeros(3)
-    for j in chain:
+    for j in range(1, pm.njoints):  # the chain alone: joint j's parent is j - 1
         try:
             kind, local_axis = _joint_axis(pm.joints[j])
         except URDFError as err:
@@ -299,15 +406,7 @@ def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, l
     tcp = Tcp(
         tuple(np.array(tip_frame.translation) - previous), tuple(map(tuple, np.array(tip_frame.rotation)))
     )
-    return pm.name or path.stem, joints, tcp
-
-
-def _depth(pm, j: int) -> int:
-    d = 0
-    while j > 0:
-        j = pm.parents[j]
-        d += 1
-    return d
+    return tree.name or path.stem, joints, tcp
 
 
 def build_from_urdf(
