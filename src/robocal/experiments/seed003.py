@@ -61,6 +61,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.experiments.seed003_inclinometer import inclinometer_experiment, print_inclinometer
 from robocal.experiments.seed003_report import _mean_sd, _notes, _print, _write, table_3_4_notes
 from robocal.experiments.seed003_setup import ABOVE_TABLE as ABOVE_TABLE
 from robocal.experiments.seed003_setup import (
@@ -329,6 +330,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     static = {f"{k}_static": first["results"][k] for k in ("simultaneous", "simultaneous_measured")}
     trajectory = trajectory_experiment(setup, static, n_samples=n_samples)
     chapter_3 = influence_experiment(setup, noise_seeds(draws))
+    inclinometer = inclinometer_experiment(setup)
     numbers: dict[str, Any] = {
         **{k: round(held[k]["mean"], 4) for k in ("before", "conventional", "tilt_aware", "simultaneous")},
         "units": "mm and deg; held-out = poses not used for calibration",
@@ -340,6 +342,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         "robustness_joint_parameters_25pct": {k: v["average"][3] for k, v in robust["held_out"].items()},
         "trajectory": {k: v for k, v in trajectory.items() if not k.startswith("_")},
         "table_3_4": chapter_3,
+        "inclinometer": inclinometer,
         "setup": {
             "poses": len(setup.train_q),
             "held_out_poses": len(setup.test_q),
@@ -357,6 +360,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     numbers["seconds"] = round(time.perf_counter() - t0, 2)
     if verbose:
         _print(numbers, first)
+        print_inclinometer(inclinometer)
     if out is not None:
         _write(Path(out), numbers, trajectory)
     return numbers
