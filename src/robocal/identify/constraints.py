@@ -1,0 +1,424 @@
+"""Constraint measurements: calibrate from fixed points, planes and distances (no tracker).
+
+Each measurement states where the tool point ``p_i = FK(q_i)`` (device frame; the robot's
+base frame when no device measures) is, not what it reads:
+
+* **fixed point** ``k``: ``p_i - c_k = 0`` (3 rows; a ball seated in socket ``k``, a sphere
+  probed from many orientations), the point ``c_k`` (m) an unknown estimated with the
+  robot; a known distance ``L`` between points ``a`` and ``b`` adds ``|c_a - c_b| - L = 0``;
+* **plane** ``k``: ``n_k · p_i - d_k = 0`` (1 row), the unit normal and offset (m) unknown
+  (``n = (n0 + a t1 + b t2) / |…|`` around a start normal ``n0`` with tangents ``t1, t2``:
+  no singular direction near the start) or known;
+* **distance**: ``|p_i - p_j| - L = 0`` (1 row) for a pair of poses whose tool points are a
+  known length apart (ball-bar, a table of known points);
+* **tracker point**: ``p_i - y_i = 0`` (3 rows), mixed with the others; the device frame
+  is then estimated too.
+
+Residuals are weighted by 1/σ (the tool point's noise σ, isotropic; σ√2 for a distance
+between two tool points; ``distance_sigma`` for a stated distance between fixed points).
+The Jacobian is analytic: the chain's position Jacobian ``∂p_i/∂θ`` (m per unit) times the
+constraint's gradient.  The unknowns are the chain's free parameters followed by the
+points' coordinates and the planes' parameters; :func:`robocal.identify.constraint_fit`
+fits them with the engine's stages.
+
+What a kind cannot see is a null space of this Jacobian: rigid motions of the whole scene
+for fixed points (the base frame), motion within the plane for a plane, every absolute
+position for distances; a scale needs a known length (a distance).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.model.chain import Model, Role
+
+__all__ = ["KINDS", "ConstraintProblem", "ConstraintSet", "plane_normal"]
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+KINDS = ("point", "plane", "distance")
+
+
+def _ints(v, shape) -> IntArray:
+    return np.asarray(v, dtype=np.intp).reshape(shape)
+
+
+@dataclass(frozen=True)
+class ConstraintSet:
+    """Joint values and what each pose's tool point satisfies.
+
+    Attributes:
+        q: ``(n, dof)`` joint values (rad or m).
+        point: ``(n,)`` the fixed point pose ``i``'s tool point sits in, ``-1`` none.
+        plane: ``(n,)`` the plane pose ``i``'s tool point touches, ``-1`` none.
+        position: ``(n, 3)`` tracker positions (m, device frame), NaN rows none; or None.
+        pairs: ``(m, 2)`` poses whose tool points are ``pair_length`` apart.
+        pair_length: ``(m,)`` (m).
+        point_pairs: ``(k, 2)`` fixed points ``point_length`` apart.
+        point_length: ``(k,)`` (m).
+        known_planes: ``(P, 4)`` unit normal and offset (m) of each plane, NaN rows unknown;
+            or None (all unknown).
+        sigma: the tool point's noise (m, isotropic).
+        distance_sigma: the uncertainty of a stated distance between fixed points (m).
+    """
+
+    q: Array
+    point: IntArray
+    plane: IntArray
+    position: Array | None = None
+    pairs: IntArray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.intp))
+    pair_length: Array = field(default_factory=lambda: np.zeros(0))
+    point_pairs: IntArray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.intp))
+    point_length: Array = field(default_factory=lambda: np.zeros(0))
+    known_planes: Array | None = None
+    sigma: float = 1e-5
+    distance_sigma: float = 1e-6
+
+    def __post_init__(self) -> None:
+        q = np.asarray(self.q, dtype=float)
+        n = len(q)
+        object.__setattr__(self, "q", q)
+        object.__setattr__(self, "point", _ints(self.point, (n,)))
+        object.__setattr__(self, "plane", _ints(self.plane, (n,)))
+        object.__setattr__(self, "pairs", _ints(self.pairs, (-1, 2)))
+        object.__setattr__(self, "pair_length", np.asarray(self.pair_length, dtype=float).reshape(-1))
+        object.__setattr__(self, "point_pairs", _ints(self.point_pairs, (-1, 2)))
+        object.__setattr__(self, "point_length", np.asarray(self.point_length, dtype=float).reshape(-1))
+        if len(self.pairs) != len(self.pair_length) or len(self.point_pairs) != len(self.point_length):
+            raise ValueError("every pair needs one length")
+        if len(self.pairs) and (self.pairs.min() < 0 or self.pairs.max() >= n):
+            raise ValueError(f"a distance pair names a pose outside 0..{n - 1}")
+        if len(self.point_pairs) and (self.point_pairs.min() < 0 or self.point_pairs.max() >= self.n_points):
+            raise ValueError(f"a known distance names a point outside 0..{self.n_points - 1}")
+        if self.position is not None and np.shape(self.position) != (n, 3):
+            raise ValueError(f"tracker positions shaped {np.shape(self.position)}; expected ({n}, 3)")
+        if not self.sigma > 0 or not self.distance_sigma > 0:
+            raise ValueError("sigma and distance_sigma must be > 0 (m)")
+
+    @property
+    def n(self) -> int:
+        return len(self.q)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.point.max()) + 1 if self.n else 0
+
+    @property
+    def n_planes(self) -> int:
+        return int(self.plane.max()) + 1 if self.n else 0
+
+    @property
+    def tracked(self) -> NDArray[np.bool_]:
+        """``(n,)`` whether a tracker measured pose ``i``."""
+        if self.position is None:
+            return np.zeros(self.n, dtype=bool)
+        return np.all(np.isfinite(self.position), axis=1)
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The kinds present: ``point``, ``plane``, ``distance``, ``tracker``."""
+        found = [
+            ("point", self.n_points > 0),
+            ("plane", self.n_planes > 0),
+            ("distance", len(self.pairs) > 0),
+            ("tracker", bool(self.tracked.any())),
+        ]
+        return tuple(k for k, present in found if present)
+
+    def unknown_plane(self, k: int) -> bool:
+        return (
+            self.known_planes is None
+            or k >= len(self.known_planes)
+            or not np.isfinite(self.known_planes[k]).all()
+        )
+
+
+def plane_normal(n0: Array, tangents: Array, ab: Array) -> tuple[Array, Array]:
+    """The unit normal ``n = (n0 + a t1 + b t2)/|…|`` and its derivatives ``(3, 2)``
+    with respect to ``(a, b)``; ``tangents`` ``(2, 3)``."""
+    v = n0 + ab[0] * tangents[0] + ab[1] * tangents[1]
+    norm = float(np.linalg.norm(v))
+    n = v / norm
+    projector = (np.eye(3) - np.outer(n, n)) / norm
+    return n, projector @ tangents.T
+
+
+def _tangents(n0: Array) -> Array:
+    """Two unit vectors orthogonal to ``n0`` and to each other ``(2, 3)``."""
+    helper = np.eye(3)[int(np.argmin(np.abs(n0)))]
+    t1 = np.cross(n0, helper)
+    t1 /= np.linalg.norm(t1)
+    return np.stack([t1, np.cross(n0, t1)])
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where the scene's unknowns sit in ``x`` after the chain's free parameters."""
+
+    n_chain: int
+    n_points: int
+    planes: tuple[int, ...]  # the unknown planes' indices
+
+    @property
+    def size(self) -> int:
+        return self.n_chain + 3 * self.n_points + 3 * len(self.planes)
+
+    def point(self, k: int) -> int:
+        return self.n_chain + 3 * k
+
+    def plane(self, k: int) -> int:
+        return self.n_chain + 3 * self.n_points + 3 * self.planes.index(k)
+
+
+class ConstraintProblem:
+    """Weighted residuals and their analytic Jacobian for a :class:`ConstraintSet`.
+
+    ``x`` holds the unknowns that are not fixed (:meth:`fix`): the chain's free
+    parameters, then each point's ``x, y, z`` (m), then each unknown plane's ``a, b``
+    (tilts of the normal, rad-like) and ``d`` (offset, m).  The interface is the one the
+    engine's stages and solvers use (``residual``, ``jacobian``, ``x0``, ``free_names``,
+    ``fix``, ``effect_scale``)."""
+
+    rows = 3  # one group of rows for the residual variance (stages.uncertainty)
+    n_effects = 0
+
+    def __init__(self, chain: Model, data: ConstraintSet, full0: Array, planes0: Array, length_scale: float):
+        self.chain, self.data, self.length_scale = chain, data, float(length_scale)
+        planes = tuple(k for k in range(data.n_planes) if data.unknown_plane(k))
+        self.layout = _Layout(len(chain.free_names), data.n_points, planes)
+        self.full0 = np.asarray(full0, dtype=float)
+        self.planes0 = np.asarray(planes0, dtype=float)  # (P, 4): start / known normal, offset
+        self.tangents = (
+            np.stack([_tangents(p[:3]) for p in self.planes0]) if len(self.planes0) else np.zeros((0, 2, 3))
+        )
+        self.keep = np.ones(self.layout.size, dtype=bool)
+        self._cache: dict = {}
+
+    # ------------------------------------------------------------------ names and values
+    @functools.cached_property
+    def all_names(self) -> tuple[str, ...]:
+        names = list(self.chain.free_names)
+        names += [f"point{k}_{c}" for k in range(self.data.n_points) for c in "xyz"]
+        names += [f"plane{k}_{c}" for k in self.layout.planes for c in ("a", "b", "d")]
+        return tuple(names)
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        return tuple(n for n, k in zip(self.all_names, self.keep, strict=True) if k)
+
+    @property
+    def scene_names(self) -> tuple[str, ...]:
+        return self.all_names[self.layout.n_chain :]
+
+    @property
+    def roles(self) -> dict[str, Role]:
+        """The chain's roles, the scene's unknowns as the device's (kept first by the rank test)."""
+        return {**self.chain.roles, **{n: Role.DEVICE for n in self.scene_names}}
+
+    @property
+    def x0(self) -> Array:
+        return self.full0[self.keep]
+
+    def full(self, x: Array) -> Array:
+        v = self.full0.copy()
+        v[self.keep] = x
+        return v
+
+    def fix(self, names) -> ConstraintProblem:
+        """The same problem with ``names`` held at their start values."""
+        fixed = object.__new__(ConstraintProblem)
+        fixed.__dict__.update(self.__dict__)
+        fixed.keep = self.keep & ~np.isin(np.array(self.all_names), list(names))
+        fixed._cache = {}
+        return fixed
+
+    @functools.cached_property
+    def _full_scale(self) -> Array:
+        rot = [s.is_rotation for s in self.chain.steps if s.free]
+        scene = [
+            self.length_scale if n[-1] in "ab" and n.startswith("plane") else 1.0 for n in self.scene_names
+        ]
+        return np.concatenate([np.where(rot, self.length_scale, 1.0), scene])
+
+    @property
+    def free_scale(self) -> Array:
+        """Displacement (m) per unit of each unknown: 1 for lengths, the robot's size for angles."""
+        return self._full_scale[self.keep]
+
+    def effect_scale(self, x: Array) -> Array:
+        """``(p,)`` displacement (m) per unit of each unknown (pruning judges σ by it): the
+        largest tool displacement over the poses for the chain's, else :attr:`free_scale`."""
+        from robocal.identify.stages import tool_displacement_scale
+
+        Jp = self._chain(x)[1].reshape(self.data.n, 3, -1)
+        scale = self._full_scale.copy()
+        scale[: self.layout.n_chain] = tool_displacement_scale(Jp)
+        return scale[self.keep]
+
+    def scaled_jacobian(self, x: Array) -> Array:
+        return self.jacobian(x) * self.free_scale
+
+    # ------------------------------------------------------------------ evaluation
+    def _chain(self, x: Array) -> tuple[Array, Array]:
+        """Tool points ``(n, 3)`` and their Jacobian ``(3n, p_chain)`` over the chain's free parameters."""
+        full = self.full(np.asarray(x, dtype=float))
+        key = full.tobytes()
+        if key not in self._cache:
+            self._cache.clear()
+            values = self.chain.values.copy()
+            values[self.chain.free_mask] = full[: self.layout.n_chain]
+            T, J = self.chain.evaluate(self.data.q, values, rows="position", jacobian=True)[:2]
+            self._cache[key] = (T[:, :3, 3], J)
+        return self._cache[key]
+
+    def consistent_jacobian(self, x: Array) -> Array:
+        """The weighted Jacobian ``(m, p)`` at consistent data: each pose's joint values
+        moved (IK of the chain at ``x``, a few µm to mm) so that its tool point lies on what
+        it touches (its point, its plane, its tracker position, its pair's length).  There a
+        rigid motion of the whole scene, and without a known length its scale, are exact
+        null vectors whatever the residuals were; at the measured joint values a residual of
+        17 mm on a 0.8 m arm made the base frame's rotations look identifiable (the rank
+        test tells columns apart to 1e-7).  For the rank test only."""
+        from robocal.measure.ik import solve_ik
+
+        full = self.full(np.asarray(x, dtype=float))
+        chain = self.chain.with_free_values(full[: self.layout.n_chain])
+        p = self._chain(x)[0]
+        ik = solve_ik(chain, self._touched(x, p), kind="position", q0=self.data.q, restarts=0, tol=1e-12,
+                      seed_pool=0)  # fmt: skip
+        moved = object.__new__(ConstraintProblem)
+        moved.__dict__.update(self.__dict__)
+        moved.data = dataclasses.replace(self.data, q=ik.q)
+        moved._cache = {}
+        return moved.jacobian(x)
+
+    def _touched(self, x: Array, p: Array) -> Array:
+        """``(n, 3)`` the point each pose's tool point touches (itself for distances only)."""
+        d = self.data
+        out = p.copy()
+        on_plane = d.plane >= 0
+        if on_plane.any():
+            planes = self.plane_values(x)[d.plane[on_plane]]
+            dist = np.einsum("ij,ij->i", p[on_plane], planes[:, :3]) - planes[:, 3]
+            out[on_plane] = p[on_plane] - dist[:, None] * planes[:, :3]
+        on_point = d.point >= 0
+        if on_point.any():
+            out[on_point] = self.points(x)[d.point[on_point]]
+        if len(d.pairs):
+            a, b = d.pairs[:, 0], d.pairs[:, 1]
+            delta = out[b] - out[a]
+            out[b] = out[a] + delta * (d.pair_length / np.linalg.norm(delta, axis=1))[:, None]
+        if d.position is not None:
+            tracked = d.tracked
+            out[tracked] = d.position[tracked]
+        return out
+
+    def plane_values(self, x: Array) -> Array:
+        """``(P, 4)`` every plane's unit normal and offset (m) at ``x``."""
+        full = self.full(np.asarray(x, dtype=float))
+        out = self.planes0.copy()
+        for k in self.layout.planes:
+            at = self.layout.plane(k)
+            out[k, :3] = plane_normal(self.planes0[k, :3], self.tangents[k], full[at : at + 2])[0]
+            out[k, 3] = full[at + 2]
+        return out
+
+    def points(self, x: Array) -> Array:
+        """``(K, 3)`` the fixed points at ``x`` (m)."""
+        full = self.full(np.asarray(x, dtype=float))
+        return full[self.layout.point(0) : self.layout.point(0) + 3 * self.data.n_points].reshape(-1, 3)
+
+    def _blocks(self, x: Array) -> tuple[Array, Array]:
+        """Weighted residuals ``(m,)`` and Jacobian ``(m, size)`` over every unknown."""
+        full = self.full(np.asarray(x, dtype=float))
+        p, Jc = self._chain(x)
+        d, lay = self.data, self.layout
+        Jp = np.zeros((d.n, 3, lay.size))
+        Jp[:, :, : lay.n_chain] = Jc.reshape(d.n, 3, -1)
+        r_parts, J_parts = [], []
+        tracked = d.tracked
+        if tracked.any():
+            r_parts.append((p[tracked] - d.position[tracked]).reshape(-1))
+            J_parts.append(Jp[tracked].reshape(-1, lay.size))
+        on_point = np.flatnonzero(d.point >= 0)
+        if len(on_point):
+            r, J = self._point_rows(full, p, Jp, on_point)
+            r_parts.append(r)
+            J_parts.append(J)
+        on_plane = np.flatnonzero(d.plane >= 0)
+        if len(on_plane):
+            r, J = self._plane_rows(full, p, Jp, on_plane)
+            r_parts.append(r)
+            J_parts.append(J)
+        if r_parts:
+            r_parts, J_parts = [np.concatenate(r_parts) / d.sigma], [np.concatenate(J_parts) / d.sigma]
+        if len(d.pairs):
+            r, J = self._pair_rows(p, Jp)
+            r_parts.append(r / (d.sigma * np.sqrt(2)))
+            J_parts.append(J / (d.sigma * np.sqrt(2)))
+        if len(d.point_pairs):
+            r, J = self._point_distance_rows(full)
+            r_parts.append(r / d.distance_sigma)
+            J_parts.append(J / d.distance_sigma)
+        return np.concatenate(r_parts), np.concatenate(J_parts)
+
+    def _point_rows(self, full: Array, p: Array, Jp: Array, rows: IntArray) -> tuple[Array, Array]:
+        k = self.data.point[rows]
+        at = self.layout.n_chain + 3 * k
+        c = full[at[:, None] + np.arange(3)]
+        J = Jp[rows].copy()
+        J[np.arange(len(rows))[:, None], np.arange(3)[None, :], at[:, None] + np.arange(3)] -= 1.0
+        return (p[rows] - c).reshape(-1), J.reshape(-1, self.layout.size)
+
+    def _plane_rows(self, full: Array, p: Array, Jp: Array, rows: IntArray) -> tuple[Array, Array]:
+        r = np.empty(len(rows))
+        J = np.zeros((len(rows), self.layout.size))
+        for row, i in enumerate(rows):
+            k = int(self.data.plane[i])
+            if k in self.layout.planes:
+                at = self.layout.plane(k)
+                n, dn = plane_normal(self.planes0[k, :3], self.tangents[k], full[at : at + 2])
+                offset = full[at + 2]
+                J[row, at : at + 2] = p[i] @ dn
+                J[row, at + 2] = -1.0
+            else:
+                n, offset = self.planes0[k, :3], self.planes0[k, 3]
+            r[row] = n @ p[i] - offset
+            J[row] += n @ Jp[i]
+        return r, J
+
+    def _pair_rows(self, p: Array, Jp: Array) -> tuple[Array, Array]:
+        a, b = self.data.pairs[:, 0], self.data.pairs[:, 1]
+        delta = p[a] - p[b]
+        length = np.linalg.norm(delta, axis=1)
+        u = delta / np.maximum(length, 1e-300)[:, None]
+        J = np.einsum("mr,mrp->mp", u, Jp[a] - Jp[b])
+        return length - self.data.pair_length, J
+
+    def _point_distance_rows(self, full: Array) -> tuple[Array, Array]:
+        d, lay = self.data, self.layout
+        c = full[lay.point(0) : lay.point(0) + 3 * d.n_points].reshape(-1, 3)
+        a, b = d.point_pairs[:, 0], d.point_pairs[:, 1]
+        delta = c[a] - c[b]
+        length = np.linalg.norm(delta, axis=1)
+        u = delta / np.maximum(length, 1e-300)[:, None]
+        J = np.zeros((len(a), lay.size))
+        for row in range(len(a)):
+            J[row, lay.point(int(a[row])) : lay.point(int(a[row])) + 3] += u[row]
+            J[row, lay.point(int(b[row])) : lay.point(int(b[row])) + 3] -= u[row]
+        return length - d.point_length, J
+
+    def residual(self, x: Array, weighted: bool = True) -> Array:
+        """Weighted residuals ``(m,)`` (``weighted=False``: m)."""
+        r = self._blocks(x)[0]
+        return r if weighted else r * self.data.sigma
+
+    def jacobian(self, x: Array, weighted: bool = True) -> Array:
+        """d residual / d x ``(m, p)`` over the unknowns not fixed."""
+        J = self._blocks(x)[1][:, self.keep]
+        return J if weighted else J * self.data.sigma
