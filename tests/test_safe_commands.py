@@ -14,7 +14,13 @@ import robocal as rc
 from robocal.cli import app
 from robocal.compensate.compensation import compensate_targets, filter_program
 from robocal.compensate.result import table_path
-from robocal.compensate.safety import MAX_DAMPED, SINGULAR_SIGMA, configurations, sigma_min
+from robocal.compensate.safety import (
+    MAX_DAMPED,
+    SINGULAR_SIGMA,
+    configurations,
+    same_configuration,
+    sigma_min,
+)
 from robocal.measure import draw_true_model, random_poses
 
 EXAMPLES = Path(__file__).parents[1] / "examples" / "programs"
@@ -142,6 +148,37 @@ def test_nominal_ur10_keeps_the_pick_target_in_the_approach_configuration(ur10, 
     assert table["pick"]["configuration"] == table["approach"]["configuration"]
     for r in rows.values():
         assert float(r["predicted_angle_error_after_deg"]) < 1e-3
+
+
+def test_q0_in_degrees_chooses_the_configuration_of_every_target(ur10, tmp_path):
+    """The help's own --q0 (with its unit): every target is solved in q0's configuration,
+    wrist side included whatever the winding; the repro's --nominal of another robot is refused."""
+    out = tmp_path / "o.csv"
+    args = [
+        "compensate",
+        str(ur10 / "cal"),
+        "--targets",
+        str(EXAMPLES / "targets.csv"),
+        "--length-unit",
+        "mm",
+    ]
+    res = runner.invoke(app, [*args, "--nominal", "ur10", "--q0", "0,-90,90,0,90,0deg", "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    nominal = rc.robot("ur10")
+    q = np.array([[float(r[f"nominal_q{j}"]) for j in range(1, 7)] for r in _rows(out)])
+    q0 = np.radians([0, -90, 90, 0, 90, 0])
+    assert same_configuration(nominal, q, q0).all(), configurations(nominal, q)
+    assert np.all(np.sin(q[:, 4]) > 0.5)  # the wrist on q0's side (q5 = 90 deg)
+    res = runner.invoke(app, [*args, "--nominal", "kr16", "-o", str(tmp_path / "k.csv")])
+    assert res.exit_code == 2 and not (tmp_path / "k.csv").exists(), res.output
+
+
+def test_same_configuration_reads_the_wrist_side_through_the_winding():
+    nominal = rc.robot("ur10")
+    q = np.array([0.3, -1.0, 1.2, 0.2, 1.5, 0.1])
+    wound, flipped = q + [0, 0, 0, 0, 2 * np.pi, 0], q * [1, 1, 1, 1, -1, 1]
+    assert same_configuration(nominal, np.array([wound]), q).all()
+    assert not same_configuration(nominal, np.array([flipped, flipped + [0, 0, 0, 0, 2 * np.pi, 0]]), q).any()
 
 
 @pytest.mark.parametrize("robot", [n for n in rc.robots() if rc.robot(n).dof >= 6])

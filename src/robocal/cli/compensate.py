@@ -177,7 +177,7 @@ def compensate_command(
         raise fail(
             f"--frame measurement needs a calibration directory (its identified frame); {source} is a model"
         )
-    nominal_model = None if nominal is None else resolve_model(nominal)
+    nominal_model = _checked_nominal(calibrated, nominal)
     q_start = None if q0 is None else joint_values(q0, model, "--q0", angle_unit, length_unit)
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, sep=sep, decimal=decimal)
     if targets is not None:
@@ -280,6 +280,22 @@ def print_target_table(rows: list[dict]) -> None:
     if len(shown) < len(rows):
         more = len(rows) - len(shown)
         console.print(f"  ({more} more corrected targets in the table file)", highlight=False)
+
+
+def _checked_nominal(calibrated, nominal: str | None):
+    """``--nominal`` as a model, refused when it is not the calibration's robot (another
+    robot's model would turn every target into nonsense)."""
+    if nominal is None:
+        return None
+    from robocal.compensate.program_frames import check_nominal
+    from robocal.compensate.program_syntax import ProgramError
+
+    model = resolve_model(nominal)
+    try:
+        check_nominal(calibrated, model)
+    except ProgramError as err:
+        raise fail(f"--nominal {nominal}: {err}") from None
+    return model
 
 
 def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: str, q_start, reader: dict):

@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.compensate import safety
+from robocal.compensate.nominal_ik import nominal_solutions
 from robocal.compensate.result import Compensation
 from robocal.identify.calibrate import CalibrationResult
 from robocal.measure.ik import IKResult, PerturbationFunction, TargetKind, solve_ik
@@ -240,6 +241,7 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     tool_axis: int,
     max_joint_change: float,
     solved: IKResult | None = None,
+    nominal_reasons: tuple[str, ...] = (),
 ) -> Compensation:
     """The calibrated-model IK from the nominal solution (damped near singularities), the
     invariants of :mod:`robocal.compensate.safety` (a refused target keeps its nominal
@@ -264,8 +266,9 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
         revolute = np.array([t == "revolute" for t in setup.real.joint_types])
         q[near] = q_nominal[near] + safety.limit_damped(damped.q - q_nominal[near], bound[near], revolute)
     verdict = safety.judge(
-        setup.nominal, q, q_nominal, bound, near, reached, np.asarray(nominal_reachable, dtype=bool), sigma
-    )
+        setup.nominal, q, q_nominal, bound, near, reached, np.asarray(nominal_reachable, dtype=bool), sigma,
+        nominal_reasons,
+    )  # fmt: skip
     refused = np.array([st == "refused" for st in verdict.status], dtype=bool)
     q[refused] = q_nominal[refused]  # left as written: the controller's own command
     after, angle_after = _errors(_predict(setup, q), T, kind, tool_axis)
@@ -298,22 +301,6 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
         joint_bound=bound,
         tool_correction=np.linalg.norm(moved, axis=1),
     )
-
-
-def _chained(model: Model, T: Array, nom: IKResult, restarts: int, ik: dict[str, Any]) -> IKResult:
-    """Targets not reached from the common start: each from the solution of the previous
-    target reached (in file order, the configuration the robot comes from), then restarts."""
-    q, ok = nom.q.copy(), nom.reachable.copy()
-    for i in np.flatnonzero(~ok):
-        before = np.flatnonzero(ok[:i])
-        if len(before):
-            one = solve_ik(model, T[i : i + 1], q0=q[before[-1]], restarts=0, **ik)
-            q[i], ok[i] = one.q[0], one.reachable[0]
-    todo = np.flatnonzero(~ok)
-    if len(todo) and restarts:
-        more = solve_ik(model, T[todo], q0=q[todo], restarts=restarts, **ik)
-        q[todo], ok[todo] = more.q, more.reachable
-    return dataclasses.replace(nom, q=q, reachable=ok)
 
 
 def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in README and docs
@@ -374,12 +361,7 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
     labels = _names(names, len(T))
     ik = {"kind": kind_, "seed": seed, "tol": tol, "tol_angle": tol_angle, "max_iter": max_iter}
     ik |= {"tool_axis": tool_axis, "orientation_weight": orientation_weight}
-    if q0 is None and len(T) > 1:
-        # one configuration for the whole file: every target starts from the first one's
-        # solution (a wrist or elbow flip between neighbouring targets is never intended)
-        q0 = solve_ik(setup.nominal, T[:1], q0=None, restarts=restarts, **ik).q[0]
-    nom = solve_ik(setup.nominal, T, q0=q0, restarts=0, **ik)
-    nom = _chained(setup.nominal, T, nom, restarts, ik)
+    nom, held = nominal_solutions(setup.nominal, T, q0, restarts, ik)
     return _correct(
         setup,
         T,
@@ -393,6 +375,7 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
         orientation_weight=orientation_weight,
         tool_axis=tool_axis,
         max_joint_change=max_joint_change,
+        nominal_reasons=held,
     )
 
 

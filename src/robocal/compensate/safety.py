@@ -57,6 +57,7 @@ __all__ = [
     "configurations",
     "joint_bound",
     "judge",
+    "same_configuration",
     "sigma_min",
 ]
 
@@ -127,7 +128,7 @@ def joint_bound(error: Array, sigma: Array, damped: NDArray[np.bool_], joint_typ
 
 
 def _sides(model: Model, q: Array) -> Array:
-    """``(n, 3)`` signed configuration quantities (front m, elbow m, joint 5 rad); NaN for
+    """``(n, 3)`` signed configuration quantities (front m, elbow m, sin q5 ≈ rad); NaN for
     arms with fewer than 6 joints."""
     if model.dof < 6:
         return np.full((len(q), 3), np.nan)
@@ -136,7 +137,8 @@ def _sides(model: Model, q: Array) -> Array:
     out = np.empty((len(q), 3))
     for i, qi in enumerate(q):
         out[i, :2] = _arm_sides(model, qi)
-        out[i, 2] = qi[4]
+        # the wrist's side, whatever the winding: sin q5 (0 at both wrist singularities, 0 and π)
+        out[i, 2] = math.sin(qi[4])
     return out
 
 
@@ -156,6 +158,16 @@ def configurations(model: Model, q: Array) -> tuple[str, ...]:
     """Configuration labels ``front|back/up|down/q5+|q5-`` of joints ``q`` (``~``: on the
     boundary; ``-`` for arms with fewer than 6 joints)."""
     return tuple(_label(s) for s in _sides(model, np.asarray(q, dtype=float).reshape(-1, model.dof)))
+
+
+def same_configuration(model: Model, q: Array, q_ref: Array) -> NDArray[np.bool_]:
+    """``(n,)`` whether each of ``q`` ``(n, dof)`` has the configuration of ``q_ref`` ``(dof,)``
+    (front/back, elbow, sign of joint 5; a side on its boundary band matches either)."""
+    a = _sides(model, np.asarray(q_ref, dtype=float).reshape(1, -1))
+    b = _sides(model, np.asarray(q, dtype=float).reshape(-1, model.dof))
+    bands = np.array([BOUNDARY_M, BOUNDARY_M, BOUNDARY_RAD])
+    same = (np.sign(a) == np.sign(b)) | (np.abs(a) < bands) | (np.abs(b) < bands) | np.isnan(a) | np.isnan(b)
+    return same.all(axis=1)
 
 
 @dataclass(frozen=True)
@@ -185,8 +197,10 @@ def judge(
     reached: NDArray[np.bool_],
     nominal_reached: NDArray[np.bool_],
     sigma: Array,
+    nominal_reasons: tuple[str, ...] = (),
 ) -> Verdict:
-    """Every target's status and reason (module docstring); ``bound`` ``(n, dof)``."""
+    """Every target's status and reason (module docstring); ``bound`` ``(n, dof)``;
+    ``nominal_reasons``: why a target's nominal command is refused (empty: it is not)."""
     kept = _config_kept(nominal, q, q_nom, near)
     labels = configurations(nominal, q_nom)
     status, reasons = [], []
@@ -194,6 +208,8 @@ def judge(
         why = _refusal(nominal, q[i], q_nom[i], bound[i], bool(near[i]), bool(reached[i]), bool(kept[i]))
         if not nominal_reached[i]:
             why = "not reachable by the controller's model (no nominal command)"
+        elif nominal_reasons and nominal_reasons[i]:
+            why = nominal_reasons[i]
         if why:
             status.append("refused")
         elif near[i]:

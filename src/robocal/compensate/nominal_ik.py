@@ -1,0 +1,92 @@
+"""The controller's own solutions for a file of Cartesian targets, in one configuration.
+
+A file of targets is one program: the robot goes from one to the next, and a wrist or elbow
+flip between neighbours is never intended.  :func:`nominal_solutions` solves the nominal
+model's IK for every target from one reference configuration — ``q0`` (``--q0``) or the
+first target's solution — chains a target not reached from it on the previous target's
+solution, and then holds every solution in the reference's configuration
+(:func:`robocal.compensate.safety.same_configuration`: front/back, elbow, wrist side),
+solving again from starts in it.  A target reachable only in another configuration is
+refused when the user chose the configuration (``q0``) and keeps it otherwise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from robocal.compensate import safety
+from robocal.measure.ik import IKResult, solve_ik
+from robocal.model.chain import Model
+
+__all__ = ["hold_configuration", "nominal_solutions"]
+
+Array = NDArray[np.float64]
+
+
+def nominal_solutions(
+    model: Model, T: Array, q0: ArrayLike | None, restarts: int, ik: dict[str, Any]
+) -> tuple[IKResult, tuple[str, ...]]:
+    """The nominal IK of targets ``T`` ``(n, 4, 4)`` in one configuration, and per target
+    why its nominal command is refused (empty: it is not); ``q0``: ``(dof,)`` the chosen
+    configuration, ``(n, dof)`` one start per target, or None; ``ik``: solve_ik options."""
+    asked = q0 is not None and np.asarray(q0).ndim == 1  # the user chose the configuration
+    if q0 is None and len(T) > 1:
+        q0 = solve_ik(model, T[:1], q0=None, restarts=restarts, **ik).q[0]
+    nom = solve_ik(model, T, q0=q0, restarts=0, **ik)
+    nom = _chained(model, T, nom, restarts, ik)
+    if q0 is None or np.asarray(q0).ndim != 1:
+        return nom, ()
+    nom, held = hold_configuration(model, T, nom, np.asarray(q0, dtype=float), ik)
+    return nom, (held if asked else ())
+
+
+def _chained(model: Model, T: Array, nom: IKResult, restarts: int, ik: dict[str, Any]) -> IKResult:
+    """Targets not reached from the common start: each from the solution of the previous
+    target reached (in file order, the configuration the robot comes from), then restarts."""
+    q, ok = nom.q.copy(), nom.reachable.copy()
+    for i in np.flatnonzero(~ok):
+        before = np.flatnonzero(ok[:i])
+        if len(before):
+            one = solve_ik(model, T[i : i + 1], q0=q[before[-1]], restarts=0, **ik)
+            q[i], ok[i] = one.q[0], one.reachable[0]
+    todo = np.flatnonzero(~ok)
+    if len(todo) and restarts:
+        more = solve_ik(model, T[todo], q0=q[todo], restarts=restarts, **ik)
+        q[todo], ok[todo] = more.q, more.reachable
+    return dataclasses.replace(nom, q=q, reachable=ok)
+
+
+def hold_configuration(
+    model: Model, T: Array, nom: IKResult, q_ref: Array, ik: dict[str, Any]
+) -> tuple[IKResult, tuple[str, ...]]:
+    """Every nominal solution in ``q_ref``'s configuration (``--q0`` or the first target's):
+    a target the local IK solved in another one is solved again from the previous target in
+    the configuration, from ``q_ref`` and from starts scattered about it; one that stays in
+    another configuration gets its reason (refused: the file asked for one configuration)."""
+    q, reached = nom.q.copy(), nom.reachable
+    ok = reached & safety.same_configuration(model, q, q_ref)
+    rng = np.random.default_rng(0)
+    for i in np.flatnonzero(reached & ~ok):
+        previous = [q[j] for j in np.flatnonzero(ok[:i])[-1:]]
+        starts = (*previous, q_ref, *(q_ref + rng.normal(0.0, 0.3, (6, model.dof))))
+        tries: list[tuple[Array | None, int, int]] = [(s, 0, 0) for s in starts]
+        # then the IK's own starts (the pool's nearest tool frames, random ones) under other seeds
+        tries += [(None, 4, k) for k in range(8)]
+        for start, restarts, seed in tries:
+            one = solve_ik(model, T[i : i + 1], q0=start, restarts=restarts, **(ik | {"seed": seed}))
+            if one.reachable[0] and safety.same_configuration(model, one.q, q_ref)[0]:
+                q[i], ok[i] = one.q[0], True
+                break
+    wanted, found = safety.configurations(model, q_ref[None])[0], safety.configurations(model, q)
+    reasons = tuple(
+        "" if ok[i] or not reached[i] else (
+            f"reachable by the controller's model only in configuration {found[i]}, "
+            f"not the file's {wanted} (--q0 or the first target)"
+        )
+        for i in range(len(T))
+    )  # fmt: skip
+    return dataclasses.replace(nom, q=q), reasons
