@@ -154,3 +154,71 @@ def test_leading_frame_is_the_product_of_the_first_steps():
         want = spatial.chain_product([s.motion for s in chain.steps[:n]], values[:n])
         np.testing.assert_allclose(leading(values, n), want, atol=1e-15)
     np.testing.assert_allclose(leading(chain.values, 6), T, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_direct_entry_points_equal_the_numpy_reference(name):
+    """The one-configuration kernels (every joint turned into a z joint at packing) give
+    the numpy path's frames and joint Jacobian, one configuration and many."""
+    from robocal.model.chain_compiled import direct
+
+    model = MODELS[name]()
+    d = direct(model)
+    q = np.random.default_rng(11).uniform(-2.5, 2.5, (7, model.dof))
+    T_ref = model.fk(q, compiled=False)
+    J_ref = model.joint_jacobian(q)
+    for k in range(len(q)):
+        assert d.fk(q[k], d.data)
+        close(d.T, T_ref[k])
+        d.T[:] = np.nan
+        assert d.fk_jacobian(q[k], d.data)
+        close(d.T, T_ref[k])
+        np.testing.assert_allclose(d.J, J_ref[k], rtol=0, atol=1e-12)
+        T1 = np.empty((4, 4))
+        assert model.fk(q[k]) is not None and rc.model.kernels.fk_one(q[k], model._fk_one_data, T1)
+        close(T1, T_ref[k])
+    Ts, Js = np.empty((len(q), 4, 4)), np.empty((len(q), 6, model.dof))
+    assert d.fk_many(q, d.data, Ts, Js, True)
+    close(Ts, T_ref)
+    np.testing.assert_allclose(Js, J_ref, rtol=0, atol=1e-12)
+
+
+def test_direct_joint_jacobian_is_the_derivative_of_fk():
+    """Central differences of the direct FK (prismatic joints and joints about x, y, z)."""
+    from robocal.model.chain_compiled import direct
+
+    model = mixed_chain()
+    d = direct(model)
+    q = np.random.default_rng(5).uniform(-2.0, 2.0, model.dof)
+    assert d.fk_jacobian(q, d.data)
+    J = d.J.copy()
+    h = 1e-6
+    for j in range(model.dof):
+        dq = np.zeros(model.dof)
+        dq[j] = h
+        d.fk(q + dq, d.data)
+        Tp = d.T.copy()
+        d.fk(q - dq, d.data)
+        Tm = d.T.copy()
+        S = (Tp[:3, :3] - Tm[:3, :3]) @ (Tp[:3, :3] + Tm[:3, :3]).T / (4 * h)  # skew(ω)
+        np.testing.assert_allclose(J[:3, j], (Tp[:3, 3] - Tm[:3, 3]) / (2 * h), atol=1e-8)
+        np.testing.assert_allclose(J[3:, j], [S[2, 1], S[0, 2], S[1, 0]], atol=1e-8)
+
+
+def test_direct_entry_points_refuse_what_does_not_fit():
+    """Wrong length, NaN/inf or a wrong output shape: False and the outputs left as they were."""
+    from robocal.model.chain_compiled import direct
+
+    model = rc.robot("ur10")
+    d = direct(model)
+    d.T[:] = 7.0
+    for bad in (np.zeros(5), np.zeros(7), np.array([0, 0, np.nan, 0, 0, 0.0]), np.full(6, np.inf)):
+        assert not d.fk(bad, d.data)
+        assert not d.fk_jacobian(bad, d.data)
+        assert not rc.model.kernels.fk_one(bad, model._fk_one_data, np.empty((4, 4)))
+    assert np.all(d.T == 7.0)
+    q = np.zeros((3, 6))
+    assert not d.fk_many(q, d.data, np.empty((2, 4, 4)), np.empty((3, 6, 6)), True)
+    assert not d.fk_many(q, d.data, np.empty((3, 4, 4)), np.empty((3, 6, 5)), True)
+    assert not rc.model.kernels.fk_jacobian_one(q[0], d.data, np.empty((4, 4)), np.empty((6, 5)))
+    assert not d.fk(q[0], d.data[:-1])  # no room for the outputs

@@ -7,12 +7,23 @@ and units: m, rad).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal.model.chain_plan import Plan
 
-__all__ = ["evaluate_compiled", "kernel_data", "kernel_evaluate", "kernel_forward", "load_kernels"]
+__all__ = [
+    "Direct",
+    "direct",
+    "evaluate_compiled",
+    "kernel_data",
+    "kernel_evaluate",
+    "kernel_forward",
+    "load_kernels",
+]
 
 Array = NDArray[np.float64]
 FLOAT64 = np.dtype(np.float64)
@@ -132,3 +143,55 @@ def evaluate_compiled(
     if perturbation_columns:
         out += (P,)
     return out
+
+
+@dataclass(frozen=True)
+class Direct:
+    """The compiled one-configuration entry points of a model, with its data and outputs in
+    one preallocated array (as Pinocchio's ``model`` / ``data`` pair): no Python between the
+    caller and the kernel, and two arguments (numba's dispatch costs per argument).
+
+    ``fk(q, data)`` writes the tool frame ``T_base_tool`` of ``q`` ``(dof,)`` (float64; rad for
+    revolute joints, m for prismatic) into ``T`` ``(4, 4)`` (m), a view into ``data``;
+    ``fk_jacobian(q, data)`` also writes the geometric Jacobian of the tool frame's origin into
+    ``J`` ``(6, dof)`` (rows ``[v; ω]`` in the base frame per unit joint rate, as
+    ``Model.joint_jacobian``).  ``fk_many(Q, data, Ts, Js, jacobian)`` does it for each row of
+    ``Q`` ``(n, dof)`` into the caller's ``Ts`` ``(n, 4, 4)`` and (with ``jacobian``) ``Js``
+    ``(n, 6, dof)``.  Each returns True, or False with the outputs unset when ``q`` is not
+    ``(dof,)`` or holds NaN/inf or an output has another shape (only those checks: the
+    general ``Model.fk`` says what is wrong).  ``T`` and ``J`` are overwritten by the next
+    call: copy what is kept.
+
+    >>> d = direct(rc.robot("ur10"))
+    >>> fk, data, T = d.fk, d.data, d.T       # bind once, outside the loop
+    >>> fk(q, data)                            # T now holds the tool frame of q
+    True
+
+    The model's values are copied when this is made: a model with other values needs its
+    own :func:`direct`; two threads need two.
+    """
+
+    fk: Any  # numba dispatcher: (q, data) -> bool
+    fk_jacobian: Any  # (q, data) -> bool
+    fk_many: Any  # (Q, data, Ts, Js, jacobian) -> bool
+    data: Array  # the model (robocal.model.kernels.pack_one), then T and J
+    T: Array  # (4, 4) view into data: the output of fk / fk_jacobian
+    J: Array  # (6, dof) view into data: the output of fk_jacobian
+
+
+def direct(model: Any) -> Direct:
+    """:class:`Direct` entry points of ``model`` (a :class:`robocal.model.chain.Model`; numba
+    required: imports the kernels)."""
+    kernels = load_kernels(True)
+    plan = model._plan
+    seg, _, offsets = model._kernel_segments
+    data = kernels.pack_one(seg, offsets, plan.joint_axis_array, plan.joint_rot_array, outputs=True)
+    out = int(data[1])
+    return Direct(
+        fk=kernels.fk_into,
+        fk_jacobian=kernels.fk_jacobian_into,
+        fk_many=kernels.fk_jacobian_many,
+        data=data,
+        T=data[out : out + 16].reshape(4, 4),
+        J=data[out + 16 : out + 16 + 6 * model.dof].reshape(6, model.dof),
+    )

@@ -25,53 +25,26 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["fk_one", "forward", "forward_batch", "leading_frame", "segment_data", "static_wrenches"]
+from robocal.model.kernels_math import _sincos
+
+__all__ = [
+    "fk_into",
+    "fk_jacobian_into",
+    "fk_jacobian_many",
+    "fk_jacobian_one",
+    "fk_one",
+    "forward",
+    "forward_batch",
+    "leading_frame",
+    "pack_one",
+    "segment_data",
+    "static_wrenches",
+]
 
 _jit = numba.njit(cache=True, nogil=True)
 
 
-# sin and cos on |r| <= π/4 after a two-part Cody-Waite reduction by π/2: fdlibm's minimax
-# coefficients (k_sin.c, k_cos.c, e_rem_pio2.c; Sun Microsystems, freely distributable).
-# libm's scalar sin and cos cost 25-30 ns a pair here; this branch-free form is vectorised
-# over the poses by LLVM (AVX2/AVX-512) and agrees with numpy to a few 1e-16 for the joint
-# angles of a robot (|x| < 1e5 rad).
-_S = (
-    -1.66666666666666324348e-01,
-    8.33333333332248946124e-03,
-    -1.98412698298579493134e-04,
-    2.75573137070700676789e-06,
-    -2.50507602534068634195e-08,
-    1.58969099521155010221e-10,
-)
-_C = (
-    4.16666666666666019037e-02,
-    -1.38888888887411972484e-03,
-    2.48015872894767294178e-05,
-    -2.75573143513906633035e-07,
-    2.08757232129817482790e-09,
-    -1.13596475577881948265e-11,
-)
-_PIO2_1, _PIO2_1T, _INVPIO2 = (
-    1.57079632673412561417e00,
-    6.07710050650619224932e-11,
-    6.36619772367581382433e-01,
-)
-
-
-@_jit
-def _sincos(x):
-    n = math.floor(x * _INVPIO2 + 0.5)
-    r = (x - n * _PIO2_1) - n * _PIO2_1T
-    z = r * r
-    s = r + r * z * (_S[0] + z * (_S[1] + z * (_S[2] + z * (_S[3] + z * (_S[4] + z * _S[5])))))
-    c = 1.0 - 0.5 * z + z * z * (_C[0] + z * (_C[1] + z * (_C[2] + z * (_C[3] + z * (_C[4] + z * _C[5])))))
-    k = np.int64(n) & 3
-    swap = (k & 1) == 1
-    sin = c if swap else s
-    cos = s if swap else c
-    sign_sin = 1.0 - (k & 2)
-    sign_cos = 1.0 - ((k + 1) & 2)
-    return sin * sign_sin, cos * sign_cos
+# _sincos: fdlibm's sin and cos, vectorisable over the poses (robocal.model.kernels_math)
 
 
 @_jit
@@ -227,52 +200,6 @@ def forward_batch(qt, seg, offsets, joint_axis, joint_rot):
 
 
 @_jit
-def fk_one(q, packed, T):
-    """One configuration ``q`` ``(dof,)`` into ``T`` ``(4, 4)``.
-
-    ``packed`` holds the model (:func:`pack_one`, few arguments: numba's dispatch costs about
-    0.2 µs per argument).  Returns False, leaving ``T`` unset, when ``q`` does not fit the
-    model or holds NaN/inf (the caller's general path then reports it).
-    """
-    dof = np.int64(packed[0])
-    if q.shape[0] != dof:
-        return False
-    for j in range(dof):
-        if not math.isfinite(q[j]):
-            return False
-    seg = packed[1 : 1 + 16 * (dof + 1)].reshape((dof + 1, 4, 4))
-    base = 1 + 16 * (dof + 1)
-    F = np.empty((3, 4))
-    for r in range(3):
-        for c in range(4):
-            F[r, c] = seg[0, r, c]
-    for j in range(dof):
-        k = np.int64(packed[base + dof + j])
-        theta = q[j] + packed[base + j]
-        if packed[base + 2 * dof + j] != 0.0:
-            sin, cos = _sincos(theta)
-            _rotate(F, k, cos, sin)
-        else:
-            for r in range(3):
-                F[r, 3] += F[r, k] * theta
-        _times_segment(F, seg[j + 1])
-    for r in range(3):
-        for c in range(4):
-            T[r, c] = F[r, c]
-        T[3, r] = 0.0
-    T[3, 3] = 1.0
-    return True
-
-
-def pack_one(seg, offsets, joint_axis, joint_rot):
-    """The model data of :func:`fk_one` in one array: dof, the segments, offsets, axes, kinds."""
-    dof = len(offsets)
-    return np.concatenate(
-        [[float(dof)], seg.ravel(), offsets, joint_axis.astype(float), joint_rot.astype(float)]
-    )
-
-
-@_jit
 def _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, keep):
     """Poses ``start .. start + b``: the tool frames into ``F`` ``(3, 4, block)`` and ``T``; with
     ``keep`` the anchors (the base, then the frame after each joint) into ``A``
@@ -363,3 +290,14 @@ def static_wrenches(q, seg, offsets, joint_axis, joint_rot, joints, masses, cent
                 out[p, j, c] = A[0, c] * f0 + A[1, c] * f1 + A[2, c] * f2
                 out[p, j, 3 + c] = A[0, c] * n0 + A[1, c] * n1 + A[2, c] * n2
     return out
+
+
+# the one-configuration kernels (their own module for its size)
+from robocal.model.kernels_one import (  # noqa: E402
+    fk_into,
+    fk_jacobian_into,
+    fk_jacobian_many,
+    fk_jacobian_one,
+    fk_one,
+    pack_one,
+)
