@@ -80,7 +80,12 @@ def parse_distance(text: str) -> tuple[int, int, float]:
     parts = pair.split(",")
     if not sep or len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
         raise ValueError(f"--distance {text!r}: expected A,B=LENGTH with point numbers, e.g. 0,1=50mm")
-    value = parse_quantity(length.strip(), "length")
+    try:
+        float(length)
+    except ValueError:
+        value = parse_quantity(length.strip(), "length")
+    else:  # a bare number: metres or millimetres? say it
+        raise ValueError(f"--distance {text!r}: give the length with its unit, e.g. {pair}=50mm")
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"--distance {text!r}: the length must be > 0")
     a, b = int(parts[0]), int(parts[1])
