@@ -43,7 +43,15 @@ MeasureOption = Annotated[
     str | None, measure_option("the measured quantities (default: the file's, else pose)")
 ]
 TipOption = Annotated[
-    str | None, typer.Option("--tip", metavar="LINK", help="URDF: frame to end the chain at")
+    str | None,
+    typer.Option(
+        "--tip",
+        metavar="LINK",
+        help="URDF: link to end the chain at (a joint's name stands for its child link); only the chain "
+        "from the root to it is read (off it: grippers, <mimic> joints, sensor frames are ignored). "
+        "Default: the deepest link of the single longest chain; refused, naming the chain ends, when "
+        "the robot branches (two gripper fingers, camera frames)",
+    ),
 ]
 
 

@@ -3,8 +3,13 @@
 Pinocchio parses the URDF (its urdfdom reader) and places every joint at the zero
 configuration; robocal then reads each joint's axis and origin in the base frame and
 builds a complete, minimal, singularity-free calibration model from them
-(:mod:`robocal.model.builder`).  Only the serial chain from the root to the tip frame
-is used.
+(:mod:`robocal.model.builder`).  Only the serial chain from the root to the tip link is
+read: robocal checks it and hands Pinocchio a URDF of the chain alone, so what hangs off it
+as real descriptions come (gripper fingers coupled by ``<mimic>``, camera and sensor frames,
+meshes that are not there) is ignored, and so is a fixed joint's ``<axis>`` (Kinova and KUKA
+descriptions write ``xyz="0 0 0"``).  The default tip is the deepest link of the single
+longest chain (:func:`default_tip`); a robot that branches into several is refused with the
+candidates named.
 """
 
 from __future__ import annotations

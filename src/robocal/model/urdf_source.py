@@ -147,16 +147,19 @@ def _chain_to(joints: dict[str, _JointInfo], tip: str) -> list[_JointInfo]:
 
 
 def _default_tip(joints: dict[str, _JointInfo], last_movable: _JointInfo) -> str:
-    """The link where the chain ends: the last link (in file order) reached from the last
-    movable joint's child through fixed joints only (``tool0`` in the ROS descriptions)."""
-    reach = {last_movable.child}
+    """The link where the chain ends: the deepest link reached from the last movable joint's
+    child through fixed joints only (``tool0`` in the ROS descriptions; of equally deep ones,
+    the last found), as :func:`robocal.model.urdf.default_tip` ends the chain."""
+    depth = {last_movable.child: 0}
     tip = last_movable.child
     changed = True
     while changed:
         changed = False
         for j in joints.values():
-            if j.type == "fixed" and j.parent in reach and j.child not in reach:
-                reach.add(j.child)
-                tip = j.child
+            if j.type == "fixed" and j.parent in depth and j.child not in depth:
+                depth[j.child] = depth[j.parent] + 1
                 changed = True
+    for link, d in depth.items():
+        if d >= depth[tip]:
+            tip = link
     return tip
