@@ -117,9 +117,13 @@ def _physics_only_note(result: CalibrationResult, record: dict) -> str:
     if result.validation is not None and "mean_mm" in result.validation:
         v = result.validation
         held_out = f", {float(v['mean_mm']):.4f} mm mean on {v.get('n')} held-out poses"
+    physics = f"CV mean error {mm('cv_mean_mm')}"
+    if isinstance(record.get("held_out_mean_mm"), int | float):
+        n = record.get("held_out_n")
+        physics += f", {float(record['held_out_mean_mm']):.4f} mm mean on {n} held-out poses"
     return (
         f"kinematics of the best physics-only calibration of the same poses ({record.get('candidate')}: "
-        f"CV mean error {mm('cv_mean_mm')}); the calibration's hybrid ({record.get('hybrid')}: CV mean "
+        f"{physics}); the calibration's hybrid ({record.get('hybrid')}: CV mean "
         f"error {mm('hybrid_cv_mean_mm')}{held_out}) has a learned residual this file cannot hold: "
         "compensate and filter use the hybrid"
     )
