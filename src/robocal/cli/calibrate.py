@@ -113,19 +113,8 @@ Loss = Annotated[
 ]
 Noise = Annotated[str | None, typer.Option("--noise", metavar="LENGTH", help=NOISE_HELP)]
 OutDir = Annotated[Path, out_option("directory for model.yaml and result.json", "DIR")]
-Measure = Annotated[
-    str | None,
-    measure_option("the measured quantities (default: the file's): position|pose|point|plane|distance"),
-]
+Measure = Annotated[str | None, measure_option("the measured quantities (default: the file's)")]
 Report = Annotated[bool, typer.Option("--report", help="also write DIR/report.html")]
-Distance = Annotated[
-    list[str] | None,
-    typer.Option(
-        "--distance",
-        metavar="A,B=LENGTH",
-        help="fixed points A and B of a constraint file are LENGTH apart, e.g. 0,1=50mm (repeatable)",
-    ),
-]
 
 
 def calibrate_command(
@@ -156,19 +145,10 @@ def calibrate_command(
     residual: Residual = "auto",
     force: Force = False,
     report: Report = False,
-    distance: Distance = None,
 ) -> None:
-    """Identify the robot's parameters from measurements; write the calibrated model.
-
-    A file with a point, plane or pair/distance_mm column (or --measure point|plane|distance)
-    holds constraint measurements: fixed points (ball in socket), planes, distances."""
+    """Identify the robot's parameters from measurements; write the calibrated model."""
     model, from_catalog = robot_and_chain(robot, chain)
     _check_out(out, force)
-    from robocal.cli.constraints import calibrate_constraint_command, is_constraint_file
-
-    if is_constraint_file(data_path, measure):
-        return calibrate_constraint_command(model, from_catalog, chain, data_path, out, angle_unit=angle_unit,
-                                            distances=distance, level=level, noise=noise)  # fmt: skip
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
