@@ -113,8 +113,19 @@ Loss = Annotated[
 ]
 Noise = Annotated[str | None, typer.Option("--noise", metavar="LENGTH", help=NOISE_HELP)]
 OutDir = Annotated[Path, out_option("directory for model.yaml and result.json", "DIR")]
-Measure = Annotated[str | None, measure_option("the measured quantities (default: the file's)")]
+Measure = Annotated[
+    str | None,
+    measure_option("the measured quantities (default: the file's): position|pose|point|plane|distance"),
+]
 Report = Annotated[bool, typer.Option("--report", help="also write DIR/report.html")]
+Distance = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--distance",
+        metavar="A,B=LENGTH",
+        help="fixed points A and B of a constraint file are LENGTH apart, e.g. 0,1=50mm (repeatable)",
+    ),
+]
 
 
 def calibrate_command(
@@ -145,10 +156,19 @@ def calibrate_command(
     residual: Residual = "auto",
     force: Force = False,
     report: Report = False,
+    distance: Distance = None,
 ) -> None:
-    """Identify the robot's parameters from measurements; write the calibrated model."""
+    """Identify the robot's parameters from measurements; write the calibrated model.
+
+    A file with a point, plane or pair/distance_mm column (or --measure point|plane|distance)
+    holds constraint measurements: fixed points (ball in socket), planes, distances."""
     model, from_catalog = robot_and_chain(robot, chain)
     _check_out(out, force)
+    from robocal.cli.constraints import calibrate_constraint_command, is_constraint_file
+
+    if is_constraint_file(data_path, measure):
+        return calibrate_constraint_command(model, from_catalog, chain, data_path, out, angle_unit=angle_unit,
+                                            distances=distance, level=level, noise=noise)  # fmt: skip
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
@@ -174,7 +194,7 @@ def calibrate_command(
         import robocal as rc
 
         validation = rc.validate(result, test)
-        result = _physics_only_held_out(result.with_validation(validation.to_dict()), test)
+        result = result.with_validation(validation.to_dict())
     _save(result, out, report, train, test)
     _print_result(result)
     if validation is not None:
@@ -262,20 +282,6 @@ def _effects(effects: str | None):
     if effects is None or effects in ("none", "predict", "identify"):
         return effects
     return [k.strip() for k in effects.split(",") if k.strip()]
-
-
-def _physics_only_held_out(result, test):
-    """A hybrid's stored physics-only fit (what a URDF or UR kinematics export carries)
-    scored on the same held-out poses, so the export can state both errors."""
-    record = result.records.get("physics_only")
-    if not isinstance(record, dict) or result.model.residual is None:
-        return result
-    import robocal as rc
-    from robocal.compensate.export import kinematic_part
-
-    physics = rc.validate(kinematic_part(result).calibrated, test)
-    held_out = {"held_out_mean_mm": physics.mean * 1e3, "held_out_n": physics.n}
-    return result.with_records(physics_only={**record, **held_out})
 
 
 def _calibrate(model, train, data_path: Path, settings: dict):

@@ -250,6 +250,22 @@ TrainOption = Annotated[
 LogOption = Annotated[
     bool, typer.Option("--log", help="instead: write a simulated ISO 9283 log (docs/iso9283.md) to -o")
 ]
+KindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--kind",
+        metavar="point|plane|distance",
+        help="instead: constraint measurements (no tracker: ball in socket, plane touches, ball-bar "
+        "pairs) at N configurations of the true robot, to -o; the truth beside them",
+    ),
+]
+CountOption = Annotated[
+    int, typer.Option("--count", min=1, metavar="K", help="--kind: fixed points or planes")
+]
+PoseCountOption = Annotated[int, typer.Option("--n", min=4, metavar="N", help="--kind: configurations")]
+LengthOption = Annotated[
+    str, typer.Option("--length", metavar="LENGTH", help="--kind distance: the pairs' length")
+]
 
 
 def simulate_command(
@@ -268,8 +284,22 @@ def simulate_command(
     train: TrainOption = None,
     force: Force = False,
     log: LogOption = False,
+    kind: KindOption = None,
+    n: PoseCountOption = 60,
+    count: CountOption = 2,
+    length: LengthOption = "300mm",
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
+    if kind is not None:  # fixed points, planes, distances (robocal.cli.constraints)
+        if out is None or poses is not None:
+            raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
+        from robocal.cli.constraints import simulate_constraint_file
+        from robocal.model.complete import calibration_model
+
+        refuse_overwrite(out, force, "measurement file")
+        model = calibration_model(_model(robot), "position")
+        return simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise,
+                                        seed=seed, length_tol=length_tol, angle_tol=angle_tol)  # fmt: skip
     if log:
         if poses is not None or out is None:
             raise fail("--log writes an ISO 9283 log of its own test poses to -o FILE: drop --poses")

@@ -135,8 +135,14 @@ def validate_command(
         bool, typer.Option("--all-rows", help="validate every row, also those marked train in a set column")
     ] = False,
 ) -> None:
-    """Error statistics of a calibrated model on (held-out) measurements."""
+    """Error statistics of a calibrated model on (held-out) measurements; for a constraint
+    file (point, plane, pair/distance_mm columns) its own figures: the spread around each
+    point, the distance errors, the plane residual."""
     import robocal as rc
+    from robocal.cli.constraints import is_constraint_file, validate_constraint_file
+
+    if data_path is not None and is_constraint_file(data_path, None):
+        return validate_constraint_file(directory, data_path, angle_unit, distances=None)
 
     result = load_result(directory)
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)

@@ -306,7 +306,8 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
         identifiable=tuple(kept), points=problem.points(x), planes=problem.plane_values(x),
         rms_before=sigma * math.sqrt(float(r0 @ r0) / len(r0)),
         rms_after=sigma * math.sqrt(float(r @ r) / len(r)),
-        residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success), message=str(fit.message),
+        residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success),
+        message=str(fit.message),
         kinds=problem.data.kinds, figures=figures,
     )  # fmt: skip
 

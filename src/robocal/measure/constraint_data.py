@@ -99,11 +99,11 @@ def _cell(value: str, where: str, integer: bool = False) -> float:
     try:
         number = float(text)
     except ValueError:
-        raise ConstraintFileError(f"{where}: {short(text)!r} is not a number") from None
+        raise ConstraintFileError(f"{where}: {short(text)} is not a number") from None
     if not math.isfinite(number):
-        raise ConstraintFileError(f"{where}: {short(text)!r} is not a finite number")
+        raise ConstraintFileError(f"{where}: {short(text)} is not a finite number")
     if integer and (number != int(number) or not 0 <= number <= MAX_INDEX):
-        raise ConstraintFileError(f"{where}: {short(text)!r} is not an index 0..{MAX_INDEX}")
+        raise ConstraintFileError(f"{where}: {short(text)} is not an index 0..{MAX_INDEX}")
     return number
 
 

@@ -1,0 +1,223 @@
+"""The constraint kinds on the command line (fixed points, planes, distances: no tracker).
+
+``robocal calibrate ROBOT --data FILE`` calibrates from them when the file has a ``point``,
+``plane`` or ``pair``/``distance_mm`` column (or ``--measure point|plane|distance``;
+:mod:`robocal.measure.constraint_data` documents the file); ``robocal simulate ROBOT --kind
+KIND`` makes such a file with known truth; ``robocal validate DIR --data FILE`` reports a
+constraint file's own figures (spread around each point, distance errors, plane residual).
+A result folder holds ``model.yaml`` (the calibrated robot) and ``constraints.json``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from robocal.console import console, fail, safe
+
+__all__ = [
+    "CONSTRAINT_MEASURES",
+    "RESULT_FILE",
+    "calibrate_constraint_command",
+    "calibrate_constraint_file",
+    "is_constraint_file",
+    "simulate_constraint_file",
+    "validate_constraint_file",
+]
+
+CONSTRAINT_MEASURES = ("point", "plane", "distance")
+RESULT_FILE = "constraints.json"
+
+
+def is_constraint_file(path: Path, measure: str | None) -> bool:
+    """Whether ``path`` holds constraint measurements (its columns, or ``--measure``)."""
+    from robocal.measure.constraint_data import constraint_kind
+
+    if measure in CONSTRAINT_MEASURES:
+        return True
+    return measure is None and path.is_file() and constraint_kind(path) is not None
+
+
+def _distances(items: list[str] | None) -> list[tuple[int, int, float]]:
+    from robocal.measure.constraint_data import parse_distance
+
+    try:
+        return [parse_distance(item) for item in items or []]
+    except ValueError as err:
+        raise fail(str(err)) from None
+
+
+def _read(path: Path, dof: int, angle_unit: str, distances, sigma: float):
+    from robocal.measure.constraint_data import ConstraintFileError, read_constraints
+
+    if angle_unit not in ("rad", "deg"):
+        raise fail(f"--angle-unit {angle_unit!r}: rad or deg")
+    try:
+        return read_constraints(path, dof, angle_unit=angle_unit, distances=distances, sigma=sigma)
+    except ConstraintFileError as err:
+        raise fail(str(err)) from None
+
+
+def _sigma(noise: str | None) -> float:
+    from robocal.measure.true_model import parse_quantity_option
+
+    return 1e-4 if noise is None else parse_quantity_option(noise, "length", "--noise")
+
+
+def calibrate_constraint_command(
+    model, from_catalog: bool, chain: str | None, data_path: Path, out: Path, *, angle_unit: str,
+    distances: list[str] | None, level: str | None, noise: str | None,
+) -> None:  # fmt: skip
+    """``robocal calibrate`` of a constraint file: a catalog robot's complete position model
+    (``--chain catalog``: its published chain), a model file's chain as it is."""
+    from robocal.model.complete import calibration_model
+
+    if chain == "complete" or (chain is None and from_catalog):
+        try:
+            model = calibration_model(model, "position")
+        except ValueError as err:
+            raise fail(f"no complete model of {model.name}: {err}") from None
+    levels = {None: None, "1": 1, "offsets": 1, "2": 2, "kinematic": 2}
+    if level not in levels:
+        raise fail(
+            f"--level {level}: constraint measurements identify level 1 (joint offsets) or 2 (kinematic)"
+        )
+    calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
+                              level=levels[level], noise=noise)  # fmt: skip
+
+
+def calibrate_constraint_file(
+    model, data_path: Path, out: Path, *, angle_unit: str, distances: list[str] | None, level: int | None,
+    noise: str | None,
+) -> None:  # fmt: skip
+    """Calibrate ``model`` (the complete position model of a catalog robot, or a model
+    file's chain) from a constraint file; write ``out``/model.yaml and constraints.json."""
+    from robocal.identify.constraint_fit import calibrate_constraints
+    from robocal.identify.options import Pruning
+
+    stated = _distances(distances)
+    data = _read(data_path, model.dof, angle_unit, stated, _sigma(noise))
+    try:
+        result = calibrate_constraints(model, data, level=level or 2, pruning=Pruning(), known_noise=False)
+    except ValueError as err:
+        raise fail(f"{data_path}: {err}") from None
+    _save(result, out, data_path, stated)
+    for line in result.summary_lines():
+        console.print(safe(line), highlight=False, soft_wrap=True)
+    console.print(f"wrote {out / 'model.yaml'} and {out / RESULT_FILE}", highlight=False)
+
+
+def _result_doc(result, data_path: Path, stated) -> dict:
+    from robocal.identify.calibrate import file_hash
+
+    return {
+        "kind": "constraints",
+        "measurements": list(result.kinds),
+        "data": str(data_path),
+        "data_sha256": file_hash(data_path),
+        "distances_m": [[a, b, d] for a, b, d in stated],
+        "success": result.success,
+        "names": list(result.names),
+        "estimates": result.estimates.tolist(),
+        "std": result.std.tolist(),
+        "not_identifiable": [{"name": d.name, "reason": d.reason} for d in result.dropped],
+        "points_m": result.points.tolist(),
+        "planes": result.planes.tolist(),
+        "T_device_base": result.T_device_base.tolist(),
+        "rms_before_m": result.rms_before,
+        "rms_after_m": result.rms_after,
+        "summary": result.summary_lines(),
+    }
+
+
+def _save(result, out: Path, data_path: Path, stated) -> None:
+    """model.yaml and constraints.json, all or nothing."""
+    from robocal.model.files import save_model
+    from robocal.outdir import FolderBusyError, transaction
+
+    if out.exists() and not out.is_dir():
+        raise fail(f"--out {out} is a file; give a directory")
+    doc = _result_doc(result, data_path, stated)
+    try:
+        with transaction(out, ("model.yaml", RESULT_FILE)) as stage:
+            save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)
+            (stage.path / RESULT_FILE).write_text(json.dumps(doc | {"run_id": stage.run_id}, indent=1) + "\n")
+    except FolderBusyError as err:
+        raise fail(str(err)) from None
+
+
+def validate_constraint_file(
+    directory: Path, data_path: Path, angle_unit: str, distances: list[str] | None
+) -> None:
+    """The calibrated model of ``directory`` (and the model it started from, when it is a
+    constraint calibration) on a constraint file: each kind's own figures."""
+    from robocal.identify.constraint_fit import constraint_figures
+    from robocal.model.files import load_model
+
+    if not (directory / "model.yaml").is_file():
+        raise fail(f"{directory} holds no calibrated model (model.yaml)")
+    try:
+        model = load_model(directory / "model.yaml")
+    except (OSError, ValueError) as err:
+        raise fail(f"{directory / 'model.yaml'}: {err}") from None
+    stated = _distances(distances)
+    if not stated and (directory / RESULT_FILE).is_file():  # the calibration's stated distances
+        try:
+            recorded = json.loads((directory / RESULT_FILE).read_text()).get("distances_m", [])
+            stated = [(int(a), int(b), float(d)) for a, b, d in recorded]
+        except (OSError, ValueError, TypeError) as err:
+            raise fail(f"{directory / RESULT_FILE}: {err}") from None
+    data = _read(data_path, model.dof, angle_unit, [s for s in stated if max(s[:2]) < 10**6], 1e-4)
+    figures = constraint_figures(model, data)
+    console.print(f"{safe(model.name)} on {safe(data_path.name)} ({data.n} poses, {', '.join(data.kinds)}):",
+                  highlight=False)  # fmt: skip
+    for line in figures.lines():
+        console.print("  " + line, highlight=False)
+
+
+def simulate_constraint_file(
+    model, kind: str, out: Path, *, n: int, count: int, length: str, noise: str | None, seed: int | None,
+    length_tol: str, angle_tol: str,
+) -> None:  # fmt: skip
+    """Simulate ``kind`` on a true robot drawn around ``model``; write ``out`` and
+    ``out``.truth.json (the true parameters and scene)."""
+    from robocal.measure.constraint_data import write_constraints
+    from robocal.measure.constraint_sim import simulate_constraints
+    from robocal.measure.true_model import draw_true_model, parse_quantity_option
+
+    if kind not in CONSTRAINT_MEASURES:
+        raise fail(f"--kind {kind!r}: one of {', '.join(CONSTRAINT_MEASURES)}")
+    if n < 4 or count < 1:
+        raise fail("--n must be >= 4 and --count >= 1")
+    length_m = parse_quantity_option(length, "length", "--length")
+    sigma = 1e-5 if noise is None else parse_quantity_option(noise, "length", "--noise")
+    try:
+        true = draw_true_model(model, length=length_tol, angle=angle_tol, seed=seed)
+        data, scene = simulate_constraints(
+            true, kind, n, sigma=sigma, count=count, length=length_m, seed=seed
+        )
+    except ValueError as err:
+        raise fail(str(err)) from None
+    truth = {
+        "kind": kind,
+        "sigma_m": sigma,
+        "true_parameters": dict(zip(true.names, true.values.tolist(), strict=True)),
+        "points_m": scene.points.tolist(),
+        "planes": scene.planes.tolist(),
+        "length_m": scene.length,
+        "point_distances_m": [
+            [a, b, float(np.linalg.norm(scene.points[a] - scene.points[b]))]
+            for a in range(len(scene.points))
+            for b in range(a + 1, len(scene.points))
+        ],
+    }
+    from robocal.outdir import write_together
+
+    truth_path = out.with_name(out.name + ".truth.json")
+    write_together(
+        {out: write_constraints(data).encode(), truth_path: (json.dumps(truth, indent=1) + "\n").encode()}
+    )
+    console.print(f"wrote {safe(str(out))} ({data.n} rows, {kind}) and the truth {safe(str(truth_path))}",
+                  highlight=False, soft_wrap=True)  # fmt: skip
