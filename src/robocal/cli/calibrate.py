@@ -194,7 +194,7 @@ def calibrate_command(
         import robocal as rc
 
         validation = rc.validate(result, test)
-        result = result.with_validation(validation.to_dict())
+        result = _physics_only_held_out(result.with_validation(validation.to_dict()), test)
     _save(result, out, report, train, test)
     _print_result(result)
     if validation is not None:
@@ -282,6 +282,20 @@ def _effects(effects: str | None):
     if effects is None or effects in ("none", "predict", "identify"):
         return effects
     return [k.strip() for k in effects.split(",") if k.strip()]
+
+
+def _physics_only_held_out(result, test):
+    """A hybrid's stored physics-only fit (what a URDF or UR kinematics export carries)
+    scored on the same held-out poses, so the export can state both errors."""
+    record = result.records.get("physics_only")
+    if not isinstance(record, dict) or result.model.residual is None:
+        return result
+    import robocal as rc
+    from robocal.compensate.export import kinematic_part
+
+    physics = rc.validate(kinematic_part(result).calibrated, test)
+    held_out = {"held_out_mean_mm": physics.mean * 1e3, "held_out_n": physics.n}
+    return result.with_records(physics_only={**record, **held_out})
 
 
 def _calibrate(model, train, data_path: Path, settings: dict):
