@@ -324,3 +324,46 @@ def test_cli_refuses_bad_constraint_input_in_one_line(tmp_path):
         app, ["calibrate", "ur10", "--data", str(good), "-o", str(tmp_path / "o3"), "--distance", "0,1=5mm"]
     )
     assert run.exit_code == 2 and "point" in run.output  # the file has point 0 only
+
+
+@pytest.mark.parametrize("kind", ["point", "plane", "distance"])
+def test_pose_planning_on_each_kinds_jacobian(ur10, kind):
+    from robocal.identify.constraint_poses import select_constraint_poses
+
+    pool, _ = simulate_constraints(
+        ur10, kind, 240 if kind == "distance" else 120, sigma=1e-9, count=3, seed=2
+    )
+    n = 30
+    chosen = select_constraint_poses(ur10, pool, n, index="O1")
+    assert chosen.indices["O1"] > chosen.baseline["O1"] > 0  # better than as many taken at random
+    assert not BASE & set(chosen.params)  # over what this kind can see
+    assert chosen.data.kinds == (kind,)
+    # the plan's configurations satisfy the constraint on the nominal robot, so recording them works
+    figures = constraint_figures(ur10, chosen.data)
+    assert max([*figures.point_spread, *figures.plane_rms, *np.abs(figures.pair_error)]) < 1e-6
+
+
+def test_cli_poses_writes_a_constraint_plan(tmp_path):
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    out = tmp_path / "plan.csv"
+    args = [
+        "poses",
+        "ur10",
+        "--method",
+        "optimal",
+        "--rows",
+        "plane",
+        "--n",
+        "30",
+        "--pool",
+        "90",
+        "-o",
+        str(out),
+    ]
+    run = CliRunner().invoke(app, args)
+    assert run.exit_code == 0, run.output
+    assert constraint_kind(out) == "plane"
+    assert read_constraints(out, 6).n == 30

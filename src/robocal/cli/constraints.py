@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from rich.table import Table
 
 from robocal.console import console, fail, safe
 
@@ -23,6 +24,7 @@ __all__ = [
     "calibrate_constraint_command",
     "calibrate_constraint_file",
     "is_constraint_file",
+    "plan_constraint_poses",
     "simulate_constraint_file",
     "validate_constraint_file",
 ]
@@ -221,3 +223,34 @@ def simulate_constraint_file(
     )
     console.print(f"wrote {safe(str(out))} ({data.n} rows, {kind}) and the truth {safe(str(truth_path))}",
                   highlight=False, soft_wrap=True)  # fmt: skip
+
+
+def plan_constraint_poses(model, kind: str, out: Path, *, n: int, pool: int, index: str, seed: int) -> None:
+    """``robocal poses --rows point|plane|distance``: ``n`` configurations (pairs for
+    distances) of a seeded pool satisfying the constraint on the nominal robot (two sockets
+    0.5 m apart, three planes, 300 mm pairs) maximising ``index`` on the kind's Jacobian;
+    written as a constraint file (joint columns and labels) to record."""
+    from robocal.identify.constraint_poses import select_constraint_poses
+    from robocal.measure.constraint_data import write_constraints
+    from robocal.measure.constraint_sim import simulate_constraints
+    from robocal.model.complete import calibration_model
+
+    if index not in ("O1", "O2", "O3", "O4", "O5"):
+        raise fail(f"--index {index!r}: expected one of O1, O2, O3, O4, O5")
+    complete = calibration_model(model, "position")
+    size = 2 * pool if kind == "distance" else pool
+    candidates, _ = simulate_constraints(complete, kind, size, sigma=1e-9, count=3 if kind == "plane" else 2,
+                                         seed=seed)  # fmt: skip
+    try:
+        chosen = select_constraint_poses(complete, candidates, n, index=index)
+    except ValueError as err:
+        raise fail(str(err)) from None
+    table = Table(title=f"observability of {n} {kind} candidates ({len(chosen.params)} unknowns)")
+    for col in ("index", "chosen", f"first {n} of the pool"):
+        table.add_column(col, justify="right")
+    for name in ("O1", "O2", "O3", "O4", "O5"):
+        table.add_row(name, f"{chosen.indices[name]:.4g}", f"{chosen.baseline[name]:.4g}")
+    console.print(table)
+    write_constraints(chosen.data, out)
+    what = f"{chosen.data.n} configurations of {safe(complete.name)} ({kind})"
+    console.print(f"wrote {what} to {safe(str(out))}", highlight=False)

@@ -74,7 +74,13 @@ PoolOption = Annotated[
     typer.Option("--pool", min=1, max=MAX_POOL, metavar="N", help="candidate pool size for --method optimal"),
 ]
 RowsOption = Annotated[
-    str, typer.Option("--rows", metavar="position|pose", help="the quantities that will be measured")
+    str,
+    typer.Option(
+        "--rows",
+        metavar="position|pose|point|plane|distance",
+        help="the quantities that will be measured (point, plane, distance: configurations at a socket, "
+        "on a plate, ball-bar pairs; with the constraint labels)",
+    ),
 ]
 KindOption = Annotated[
     str | None,
@@ -108,6 +114,10 @@ def poses_command(
 
     refuse_overwrite(out, force, "poses file")
     m = resolve_model(robot)
+    if rows in ("point", "plane", "distance"):  # a socket, a plate, a ball-bar (robocal.cli.constraints)
+        from robocal.cli.constraints import plan_constraint_poses
+
+        return plan_constraint_poses(m, rows, out, n=n or 30, pool=pool, index=index.upper(), seed=seed)
     index = index.upper()
     if index not in ("O1", "O2", "O3", "O4", "O5"):
         raise fail(f"--index {index!r}: expected one of O1, O2, O3, O4, O5")
