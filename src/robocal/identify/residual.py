@@ -63,6 +63,7 @@ from robocal.identify.residual_fit import (
     _CHUNK,
     Hyper,
     _layout,
+    _one_blas_thread,
     _prior,
     fit_joint_fourier,
 )
@@ -130,6 +131,22 @@ def calibrate_with_residual(
     ``data`` (see the module docstring); returns a
     :class:`~robocal.identify.calibrate.CalibrationResult` whose ``model.residual`` is the
     residual (None when CV chose the physics alone) and whose ``diagnostics.cv`` is the table."""
+    with _one_blas_thread():  # the whole stage: BLAS threads idling between small products cost CPU
+        return _calibrate_with_residual(
+            calibrate_physics, model, data, method, options, kind, harmonics, folds
+        )
+
+
+def _calibrate_with_residual(
+    calibrate_physics: Callable[..., Any],
+    model: Any,
+    data: Any,
+    method: str,
+    options: dict[str, Any],
+    kind: str,
+    harmonics: int | Sequence[int] | None,
+    folds: int,
+) -> Any:
     t0 = time.perf_counter()
     grid = _harmonics_grid(harmonics, folds)
     base = calibrate_physics(model, data, method, **options)

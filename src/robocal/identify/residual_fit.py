@@ -54,15 +54,28 @@ def _gram(
         return _gram_blocks(q, r, P, template, J)
 
 
+_BLAS_LIMITED = [0]  # depth of nested _one_blas_thread contexts
+
+
+@contextlib.contextmanager
 def _one_blas_thread():
     """A context in which BLAS/LAPACK run on one thread (threadpoolctl): the evidence's
     factorisations of ``(m, m)`` matrices ran 4x slower with OpenBLAS's threads on a shared
-    2-core machine; without threadpoolctl, nothing changes."""
+    2-core machine, and its idle threads spinning doubled the default calibration's CPU time;
+    without threadpoolctl, nothing changes.  Nested contexts cost nothing (setting the limit
+    costs 0.4 ms: the model choice enters hundreds)."""
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        return contextlib.nullcontext()
-    return threadpool_limits(1, user_api="blas")
+        yield
+        return
+    limit = threadpool_limits(1, user_api="blas") if _BLAS_LIMITED[0] == 0 else contextlib.nullcontext()
+    _BLAS_LIMITED[0] += 1
+    try:
+        with limit:
+            yield
+    finally:
+        _BLAS_LIMITED[0] -= 1
 
 
 @dataclass(frozen=True)
@@ -312,43 +325,60 @@ def fit_joint_fourier(
 def _fit(
     template: JointAngleResidual, normal: _Normal, hyper: Hyper | None, start: Hyper | None
 ) -> tuple[JointAngleResidual, Hyper]:
-    """:func:`fit_joint_fourier` from its normal equations (without ``angle_rms``); the
-    evidence in its dual form when that is cheaper."""
-    G, b, rr, N = normal.G, normal.b, normal.rr, normal.N
-    joint_names, joint_index, harmonics = template.joints, template.joint_index, template.harmonics
-    groups, freq = _layout(template)
-    k = len(joint_names)
+    """:func:`fit_joint_fourier` from its normal equations (without ``angle_rms``)."""
     if hyper is None:
-        noise0 = max(float(np.sqrt(rr / N)), 1e-7)
-        theta0 = np.r_[np.full(k, np.log(2e-4)), np.log(0.02), np.log(noise0)]
-        if start is not None:
-            theta0 = np.r_[np.log(start.amplitudes), np.log(start.length_scale), np.log(start.noise)]
-        # a joint's angle error is physically small: transmission errors of robot gears are
-        # arcminutes (0.3 mrad); 2 mrad bounds the prior well above that and keeps the evidence
-        # out of the degenerate optimum where huge coefficients cancel (seen at H = 12)
-        bounds = [(np.log(1e-9), np.log(MAX_AMPLITUDE))] * k + [
-            (np.log(1e-4), np.log(2.0)),
-            (np.log(1e-7), np.log(1e-2)),
-        ]
-        fun, data = _nll_and_grad, (G, b)
-        if normal.A is not None and _dual_is_cheaper(*normal.A.shape):
-            fun, data = _nll_and_grad_dual, (normal.A, normal.r)
-        opt = minimize(
-            fun, theta0, args=(*data, rr, N, groups, freq), jac=True, method="L-BFGS-B",
-            bounds=bounds, options={"maxiter": 200, "ftol": 1e-8},
-        )  # fmt: skip
-        theta = opt.x
-        hyper = Hyper(
-            tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1]))
-        )
-    theta = np.r_[np.log(hyper.amplitudes), np.log(hyper.length_scale), np.log(hyper.noise)]
-    log_s = _prior(theta, groups, freq)
-    L, mu, _ = _posterior(G, b, log_s, hyper.noise**2)
+        hyper = _evidence(template, normal, start)
+    groups, freq = _layout(template)
+    log_s = _prior(_theta(hyper), groups, freq)
+    L, mu, _ = _posterior(normal.G, normal.b, log_s, hyper.noise**2)
     d = np.exp(0.5 * log_s)
     Linv = _inverse_lower(L)
     cov = (d[:, None] * (Linv.T @ Linv)) * d[None, :]
     model = JointAngleResidual(
-        tuple(joint_names), tuple(joint_index), harmonics, mu, 0.5 * (cov + cov.T), hyper.noise,
+        template.joints, template.joint_index, template.harmonics, mu, 0.5 * (cov + cov.T), hyper.noise,
         hyper.amplitudes, hyper.length_scale, template.coverage,
     )  # fmt: skip
     return model, hyper
+
+
+def _theta(hyper: Hyper) -> Array:
+    """``[log a_j..., log ℓ, log σ]`` of ``hyper``."""
+    return np.r_[np.log(hyper.amplitudes), np.log(hyper.length_scale), np.log(hyper.noise)]
+
+
+def _evidence(
+    template: JointAngleResidual, normal: _Normal, start: Hyper | None, maxiter: int = 200, ftol: float = 1e-8
+) -> Hyper:
+    """The hyperparameters that maximise the evidence (L-BFGS-B from ``start``, else a
+    neutral start), in its dual form when that is cheaper."""
+    G, b, rr, N = normal.G, normal.b, normal.rr, normal.N
+    groups, freq = _layout(template)
+    k = len(template.joints)
+    theta0 = np.r_[np.full(k, np.log(2e-4)), np.log(0.02), np.log(max(float(np.sqrt(rr / N)), 1e-7))]
+    if start is not None:
+        theta0 = _theta(start)
+    # a joint's angle error is physically small: transmission errors of robot gears are
+    # arcminutes (0.3 mrad); 2 mrad bounds the prior well above that and keeps the evidence
+    # out of the degenerate optimum where huge coefficients cancel (seen at H = 12)
+    bounds = [(np.log(1e-9), np.log(MAX_AMPLITUDE))] * k + [
+        (np.log(1e-4), np.log(2.0)),
+        (np.log(1e-7), np.log(1e-2)),
+    ]
+    fun, data = _nll_and_grad, (G, b)
+    if normal.A is not None and _dual_is_cheaper(*normal.A.shape):
+        fun, data = _nll_and_grad_dual, (normal.A, normal.r)
+    opt = minimize(
+        fun, theta0, args=(*data, rr, N, groups, freq), jac=True,
+        method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter, "ftol": ftol},
+    )  # fmt: skip
+    theta = opt.x
+    return Hyper(
+        tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1]))
+    )
+
+
+def posterior_mean(template: JointAngleResidual, normal: _Normal, hyper: Hyper) -> Array:
+    """``(m,)`` the coefficients' posterior mean (rad) for ``hyper`` (no covariance: what a
+    cross-validation fold needs)."""
+    groups, freq = _layout(template)
+    return _posterior(normal.G, normal.b, _prior(_theta(hyper), groups, freq), hyper.noise**2)[1]

@@ -197,13 +197,14 @@ class JointAngleResidual:
         coefficients' posterior, and where the residual fades out (outside the covered
         angles) the angle errors it no longer predicts, at their size on the calibration
         poses (``angle_rms``) (the noise ``noise_std`` is not included)."""
-        B = self.basis(q)  # (n, k, 2H)
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        B = fourier_basis(q[:, list(self.joint_index)], self.harmonics)  # (n, k, 2H)
+        fade = None if self.coverage is None else self.fade(q)  # (n, k), once for both uses
+        if fade is not None:
+            B *= fade[:, :, None]
         cols = P[:, :3, list(self.joint_index), 2]  # (n, 3, k): position per rad of each joint
         cov = cols @ self._basis_covariance(B) @ np.swapaxes(cols, 1, 2)
-        if self.coverage is not None:
-            q = np.atleast_2d(np.asarray(q, dtype=float))
-            fade = self.fade(q)  # (n, k)
-            cols = P[:, :3, list(self.joint_index), 2]  # (n, 3, k): position per rad of each joint
+        if fade is not None:
             rms = np.asarray(self.amplitudes if self.angle_rms is None else self.angle_rms)
             missing = (1.0 - fade**2) * rms**2  # (n, k) rad²
             cov = cov + np.einsum("nrk,nk,nsk->nrs", cols, missing, cols)
@@ -220,10 +221,11 @@ class JointAngleResidual:
         C = self.covariance.reshape(k, h2, k * h2)
         M = np.empty((n, k, k))
         for start in range(0, n, chunk):
-            Bc = B[start : start + chunk]
-            for a in range(k):
-                X = (Bc[:, a, :] @ C[a]).reshape(len(Bc), k, h2)  # (B̃ C) rows of joint a
-                M[start : start + chunk, a, :] = np.einsum("nbh,nbh->nb", X, Bc)
+            Bc, Mc = B[start : start + chunk], M[start : start + chunk]
+            for a in range(k):  # M is symmetric: the blocks b >= a, mirrored (7/12 of the work for 6 joints)
+                X = (Bc[:, a, :] @ C[a, :, a * h2 :]).reshape(len(Bc), k - a, h2)  # (B̃ C) rows of joint a
+                Mc[:, a, a:] = np.einsum("nbh,nbh->nb", X, Bc[:, a:, :])
+                Mc[:, a + 1 :, a] = Mc[:, a, a + 1 :]
         return M
 
     def coefficient_map(self, q: ArrayLike, P: Array, X: Array) -> Array:

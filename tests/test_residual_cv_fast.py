@@ -1,0 +1,92 @@
+"""The learned residual's fast model choice against its slow reference.
+
+The default cross-validation calibrates the physics on all poses only and takes each fold's
+physical fit as its linear response (``refit_folds=False``); the reference calibrates the
+physics again on every fold.  On small virtual UR10s with and without errors the physics
+lacks, both choose the same candidate and their CV errors agree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import robocal as rc
+from robocal.identify import residual as stage
+from robocal.identify.pipeline import calibrate_physics
+from robocal.identify.residual_cv import cross_validate_residual
+from robocal.identify.residual_fit import (
+    Hyper,
+    _grams,
+    _one_blas_thread,
+    _template,
+    fit_joint_fourier,
+    posterior_mean,
+)
+from tests.test_complete_model import poses, simulate, tilted_ur10
+from tests.test_residual import PROBE, _case, _ur10
+
+
+def _choices(model: rc.Model, data: rc.Measurements, refit_folds: bool):
+    """The CV table of ``calibrate_with_residual``'s candidates (grid 8, 24)."""
+    options = {"tool_guess": PROBE}
+    base = calibrate_physics(model, data, "lm", **options)
+    joints = list(range(model.dof))
+    variants = stage._physics_variants(model, options, "auto")
+    fits = stage._PhysicsFits(calibrate_physics, model, data, "lm", variants, "geometry", base)
+    usable, _ = fits.usable()
+    names = [model.joint_names[j] for j in joints]
+    table, _ = cross_validate_residual(
+        data.q, data.position, usable, names, joints, (8, 24), 5, refit_folds=refit_folds
+    )
+    return table
+
+
+def _twin_without_errors() -> tuple[rc.Model, rc.Measurements]:
+    robot = tilted_ur10(0)  # the 60-pose twin whose choice fixed fold hyperparameters got wrong
+    return rc.calibration_model("ur10", "position"), simulate(robot, poses(robot.nominal, 60, 100), seed=200)
+
+
+@pytest.mark.parametrize("case", ["with errors", "without errors"])
+def test_linearised_folds_choose_as_the_refitted_folds(case):
+    if case == "with errors":
+        model, (data, _) = _ur10(), _case(errors=True, n_train=80, seed=6)
+    else:
+        model, data = _twin_without_errors()
+    fast, slow = _choices(model, data, False), _choices(model, data, True)
+    assert fast.chosen == slow.chosen
+    if case == "with errors":
+        assert "angle errors" in fast.chosen  # the case exercises a residual choice
+    else:
+        assert "angle errors" not in fast.chosen
+    for a, b in zip(fast.candidates, slow.candidates, strict=True):
+        assert a.name == b.name
+        assert a.cv_mean == pytest.approx(b.cv_mean, rel=0.02)
+        assert a.cv_rms == pytest.approx(b.cv_rms, rel=0.02)
+
+
+def test_posterior_mean_is_the_fitted_coefficients():
+    """What a fold computes (the mean only) is the full fit's mean for the same hyperparameters."""
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-np.pi, np.pi, (50, 6))
+    P = rng.normal(size=(50, 3, 6, 3))
+    r = rng.normal(scale=1e-4, size=(50, 3))
+    hyper = Hyper((3e-4, 1e-4), 0.05, 2e-5)
+    learned, _ = fit_joint_fourier(q, r, P, ["a", "b"], [1, 2], 4, hyper=hyper)
+    template = _template(["a", "b"], [1, 2], 4, q)
+    normal = _grams(q, r, P, template, [4], None)[4]
+    np.testing.assert_allclose(posterior_mean(template, normal, hyper), learned.coefficients, rtol=1e-10)
+
+
+def test_nested_blas_limits_hold_and_restore():
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+
+    def blas_threads() -> list[int]:
+        return [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas_threads()
+    with _one_blas_thread():
+        with _one_blas_thread():
+            assert all(n == 1 for n in blas_threads())
+        assert all(n == 1 for n in blas_threads())  # the inner exit does not lift the outer limit
+    assert blas_threads() == before
