@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from robocal.identify.constraint_fit import calibrate_constraints, constraint_figures
-from robocal.identify.constraints import ConstraintSet
 from robocal.identify.options import Pruning
+from robocal.measure.constraint_set import ConstraintSet
 from robocal.model.urdf import URDFError, model_from_urdf
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "ball_in_socket"

@@ -18,7 +18,6 @@ from robocal.identify.constraint_fit import (
     constraint_figures,
     kind_identifiable,
 )
-from robocal.identify.constraints import ConstraintSet
 from robocal.identify.options import Pruning
 from robocal.measure.constraint_data import (
     ConstraintFileError,
@@ -27,6 +26,7 @@ from robocal.measure.constraint_data import (
     read_constraints,
     write_constraints,
 )
+from robocal.measure.constraint_set import ConstraintSet
 from robocal.measure.constraint_sim import simulate_constraints
 from robocal.measure.ik import random_configurations
 from robocal.measure.true_model import draw_true_model

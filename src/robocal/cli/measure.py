@@ -291,15 +291,8 @@ def simulate_command(
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
     if kind is not None:  # fixed points, planes, distances (robocal.cli.constraints)
-        if out is None or poses is not None:
-            raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
-        from robocal.cli.constraints import simulate_constraint_file
-        from robocal.model.complete import calibration_model
-
-        refuse_overwrite(out, force, "measurement file")
-        model = calibration_model(_model(robot), "position")
-        return simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise,
-                                        seed=seed, length_tol=length_tol, angle_tol=angle_tol)  # fmt: skip
+        options = (n, count, length, noise, seed, length_tol, angle_tol)
+        return _simulate_constraints(robot, kind, poses, out, force, options)
     if log:
         if poses is not None or out is None:
             raise fail("--log writes an ISO 9283 log of its own test poses to -o FILE: drop --poses")
@@ -349,6 +342,22 @@ def simulate_command(
         highlight=False,
         soft_wrap=True,
     )
+
+
+def _simulate_constraints(robot, kind: str, poses, out, force: bool, options: tuple) -> None:
+    """``simulate --kind``: constraint measurements (:mod:`robocal.cli.constraints`);
+    ``options``: ``--n``, ``--count``, ``--length``, ``--noise``, ``--seed``, ``--length-tol``,
+    ``--angle-tol``."""
+    n, count, length, noise, seed, length_tol, angle_tol = options
+    if out is None or poses is not None:
+        raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
+    from robocal.cli.constraints import simulate_constraint_file
+    from robocal.model.complete import calibration_model
+
+    refuse_overwrite(out, force, "measurement file")
+    model = calibration_model(_model(robot), "position")
+    simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise, seed=seed,
+                             length_tol=length_tol, angle_tol=angle_tol)  # fmt: skip
 
 
 def _tolerances(items: list[str]) -> dict[str, str]:

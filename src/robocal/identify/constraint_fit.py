@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.constraints import ConstraintProblem, ConstraintSet
+from robocal.identify.constraints import ConstraintProblem
 from robocal.identify.options import Pruning
 from robocal.identify.problem import measurement_chain
 from robocal.identify.solvers import solve
@@ -35,6 +35,7 @@ from robocal.identify.stages import (
     screen_unidentifiable,
     uncertainty,
 )
+from robocal.measure.constraint_set import ConstraintSet
 from robocal.model.chain import Model, Role
 from robocal.model.rank import Dropped
 

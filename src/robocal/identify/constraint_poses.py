@@ -19,13 +19,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.constraint_fit import build_constraint_problem, identifiable
-from robocal.identify.constraints import ConstraintSet
 from robocal.identify.observability_indices import (
     INDICES,
     ObservabilityIndices,
     observability_indices,
     singular_values,
 )
+from robocal.measure.constraint_set import ConstraintSet
 from robocal.model.chain import Model
 
 __all__ = ["ConstraintPoseSelection", "select_constraint_poses"]

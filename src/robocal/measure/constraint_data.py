@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.csvfile import short
-from robocal.identify.constraints import KINDS, ConstraintSet
+from robocal.measure.constraint_set import KINDS, ConstraintSet
 
 __all__ = [
     "KIND_COLUMNS",

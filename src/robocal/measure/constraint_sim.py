@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.constraints import KINDS, ConstraintSet
+from robocal.measure.constraint_set import KINDS, ConstraintSet
 from robocal.measure.ik import random_configurations, solve_ik
 from robocal.model.chain import Model
 
