@@ -297,6 +297,8 @@ def test_cli_simulate_calibrate_validate_each_kind(tmp_path):
         unseen = {d["name"] for d in doc["not_identifiable"] if d["reason"] in ("redundant", "no effect")}
         assert unseen >= BASE or (kind == "plane" and len(unseen) == 7)
         assert doc["rms_after_m"] < 3e-5 < doc["rms_before_m"]
+        again = runner.invoke(app, ["calibrate", "ur10", "--data", str(data), "-o", str(out), *extra])
+        assert again.exit_code == 2 and "--force" in again.output  # a result is not replaced silently
         check = runner.invoke(app, ["validate", str(out), "--data", str(data)])
         assert check.exit_code == 0, check.output
         numbers = [float(x) for x in re.findall(r"(-?\d+\.\d+) mm", check.output)]

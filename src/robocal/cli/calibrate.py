@@ -168,7 +168,8 @@ def calibrate_command(
 
     if is_constraint_file(data_path, measure):
         return calibrate_constraint_command(model, from_catalog, chain, data_path, out, angle_unit=angle_unit,
-                                            distances=distance, level=level, noise=noise)  # fmt: skip
+                                            distances=distance, level=level, noise=noise,
+                                            force=force)  # fmt: skip
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)

@@ -70,10 +70,12 @@ def _sigma(noise: str | None) -> float:
 
 def calibrate_constraint_command(
     model, from_catalog: bool, chain: str | None, data_path: Path, out: Path, *, angle_unit: str,
-    distances: list[str] | None, level: str | None, noise: str | None,
+    distances: list[str] | None, level: str | None, noise: str | None, force: bool = False,
 ) -> None:  # fmt: skip
     """``robocal calibrate`` of a constraint file: a catalog robot's complete position model
     (``--chain catalog``: its published chain), a model file's chain as it is."""
+    if (out / RESULT_FILE).exists() and not force:
+        raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     from robocal.model.complete import calibration_model
 
     if chain == "complete" or (chain is None and from_catalog):
