@@ -198,9 +198,13 @@ def compensate_command(
         print_target_table(result.table())
         if out is not None:
             console.print(f"wrote {out} and its per-target table {table_path(out).name}", highlight=False)
+    from robocal.identify.coverage import coverage_warnings
     from robocal.identify.measured_tool import orientation_warnings
 
-    for line in orientation_warnings(calibrated, result.q, result.names):  # what the poses left open
+    for line in (  # what the poses left open, and where they never went
+        *orientation_warnings(calibrated, result.q, result.names),
+        *coverage_warnings(calibrated, result.q, result.names),
+    ):
         err_console.print(f"[yellow]warning:[/] {safe(line)}", highlight=False, markup=True)
     finish(result.table(), partial)
 

@@ -80,8 +80,6 @@ class FilteredProgram:
     Attributes:
         texts: ``{file label: corrected text}`` (one entry; two for KRL ``.src`` + ``.dat``).
         targets: every target found, in file order.
-        q: ``(n,)`` list of corrected joint values per target (rad, m) — the joints the
-            robot will move to.
         error_before_mm, error_after_mm: ``(n,)`` predicted position error of the real
             robot (mm) unfiltered and filtered.
         reachable: ``(n,)`` a command to write exists (the calibrated IK reached the target,

@@ -304,6 +304,9 @@ def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements
     ]
     known = {w.message for w in result.warnings}
     result = result.with_warnings(*[w for w in found if w.message not in known])
+    from robocal.identify.coverage import joint_coverage
+
+    result = result.with_records(coverage=joint_coverage(result.model, data.q).to_dict())
     if tool is None:
         return result
     return result.with_records(measured_tool=tool.to_dict() | tool_axis_coverage(result.model, data.q))
