@@ -222,3 +222,39 @@ def test_direct_entry_points_refuse_what_does_not_fit():
     assert not d.fk_many(q, d.data, np.empty((3, 4, 4)), np.empty((3, 6, 5)), True)
     assert not rc.model.kernels.fk_jacobian_one(q[0], d.data, np.empty((4, 4)), np.empty((6, 5)))
     assert not d.fk(q[0], d.data[:-1])  # no room for the outputs
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_model_fk_of_one_configuration_takes_every_layout(name):
+    """``Model.fk(q)`` of one configuration (the kernel's wrapper called without numba's
+    dispatch) equals the numpy path for float64 vectors of any strides, alignment or
+    writeability, and for the inputs the wrapper must not see (other dtypes, byte order,
+    subclasses, lists) through the general path; a new array per call."""
+    model = MODELS[name]()
+    rng = np.random.default_rng(17)
+    q = rng.uniform(-2.5, 2.5, model.dof)
+    want = model.fk(q, compiled=False)
+    wide = np.repeat(q, 3)[::3]  # strided
+    raw = np.zeros(8 * model.dof + 1, dtype=np.uint8)
+    unaligned = np.frombuffer(raw[1:].data, dtype=np.float64)
+    unaligned[:] = q
+    readonly = q.copy()
+    readonly.flags.writeable = False
+    inputs = [q, wide, unaligned, readonly, q.astype(">f8"), q.astype(np.float32).astype(float), list(q)]
+    inputs += [np.asarray(q).view(np.recarray).view(np.ndarray), q.astype(np.longdouble)]
+    for x in inputs:
+        close(model.fk(x), model.fk(np.asarray(x, dtype=float), compiled=False))
+    close(model.fk(q), want)
+    assert model.fk(q) is not model.fk(q)
+    assert not np.shares_memory(model.fk(q), model._fk_one_data)
+    if model.dof == 6:
+        qi = np.arange(6)  # int64: same item size as float64, so must not reach the wrapper
+        close(model.fk(qi), model.fk(qi.astype(float), compiled=False))
+
+
+def test_model_fk_of_one_configuration_refuses_what_does_not_fit():
+    """A wrong length or NaN/inf: the general path's ValueError, not a frame."""
+    model = rc.robot("ur10")
+    for bad in (np.zeros(5), np.zeros(7), np.array([0, 0, np.nan, 0, 0, 0.0]), np.zeros((1, 1, 6))):
+        with pytest.raises(ValueError):
+            model.fk(bad)

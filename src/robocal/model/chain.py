@@ -47,9 +47,10 @@ from numpy.typing import ArrayLike, NDArray
 from robocal.model import chain_batch, chain_plan
 from robocal.model.chain_batch import perturbation_layout, to_homogeneous
 from robocal.model.chain_compiled import (
+    FK_ONE,
     FLOAT64,
-    KERNELS,
     evaluate_compiled,
+    fk_one_entry,
     kernel_data,
     kernel_evaluate,
     kernel_forward,
@@ -252,10 +253,12 @@ class Model:
         ``compiled``: use the compiled kernels (:mod:`robocal.model.kernels`; default: when
         numba is installed) or, with False, the numpy code (no numba import).
         """
-        if perturbations is None and compiled is not False and type(q) is np.ndarray and q.ndim == 1:
-            T = self._fk_one(q, compiled)  # one configuration: the interactive case, a few µs
-            if T is not None:
-                return T
+        if type(q) is np.ndarray and q.ndim == 1 and q.dtype is FLOAT64 and perturbations is None:
+            # one configuration (the interactive case): ~0.6 µs, kernel called without dispatch
+            one = FK_ONE[0] if FK_ONE else fk_one_entry(compiled)
+            T = np.empty((4, 4))
+            if compiled is not False and one is not None and one(q, self._fk_one_data, T):
+                return T  # else the general path says what is wrong
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(compiled)
@@ -289,18 +292,12 @@ class Model:
         return T[0] if single else T
 
     # ------------------------------------------------------- compiled kernels (numba)
-    def _fk_one(self, q: Array, compiled: bool | None) -> Array | None:
-        """:meth:`fk` of one configuration by :func:`robocal.model.kernels.fk_one`, or None
-        when it does not apply (no numba, another shape or type: the general path decides)."""
-        kernels = KERNELS[0] if KERNELS else _kernels(compiled)
-        if kernels is None or q.dtype is not FLOAT64 or q.strides != (8,):
-            return None
-        T = np.empty((4, 4))
-        return T if kernels.fk_one(q, self._fk_one_data, T) else None
-
     @cached_property
     def _fk_one_data(self) -> Array:
-        """:func:`robocal.model.kernels.pack_one` of this model."""
+        """:func:`robocal.model.kernels.pack_one` of this model: like :attr:`_plan` and
+        :attr:`_kernel_segments`, a constant of the model's values (never written by the
+        kernels), not a work array; the outputs are the caller's (a new array per
+        :meth:`fk` call, or :func:`robocal.model.chain_compiled.direct`'s ``data``)."""
         from robocal.model import kernels
 
         plan = self._plan

@@ -16,9 +16,11 @@ from numpy.typing import NDArray
 from robocal.model.chain_plan import Plan
 
 __all__ = [
+    "FK_ONE",
     "Direct",
     "direct",
     "evaluate_compiled",
+    "fk_one_entry",
     "kernel_data",
     "kernel_evaluate",
     "kernel_forward",
@@ -28,6 +30,10 @@ __all__ = [
 Array = NDArray[np.float64]
 FLOAT64 = np.dtype(np.float64)
 KERNELS: list = []  # the kernels module once imported (a list: no `global` statement needed)
+#: :func:`fk_one_entry` once looked up (None: no numba).  One entry point for every model,
+#: each model's data being its ``_fk_one_data`` (a constant of its values, as its ``_plan``):
+#: a cache keyed by the model would hash it in Python (~0.1 µs) on every call.
+FK_ONE: list = []
 
 
 def load_kernels(compiled: bool | None):
@@ -48,6 +54,36 @@ def load_kernels(compiled: bool | None):
         return None
     KERNELS.append(kernels)
     return kernels
+
+
+def fk_one_entry(compiled: bool | None):
+    """:func:`robocal.model.kernels.fk_one` ``(q, packed, T) -> bool`` for a float64 ``q`` of
+    one dimension (any strides or alignment), a packed model and a C-ordered ``(4, 4)``
+    ``T``, called without numba's dispatch (kept in :data:`FK_ONE`); None without the
+    kernels (``compiled``: as for :func:`load_kernels`).
+
+    Why: numba's dispatcher types every argument on every call (about 0.07 µs of the 0.4 µs
+    of a one-configuration FK); the compiled wrapper of one explicit signature skips that.
+    It checks no more than each array's item size (a float64 of another dtype, another
+    number of dimensions or a subclass would be misread), so the caller lets through only
+    ``type(q) is np.ndarray``, ``q.ndim == 1`` and ``q.dtype is FLOAT64``.
+    """
+    kernels = load_kernels(compiled)
+    if kernels is None:
+        if compiled is None:  # no numba (compiled=False: not looked up, nothing learnt)
+            FK_ONE.append(None)
+        return None
+    from numba import types
+
+    f64 = types.float64
+    signature = (types.Array(f64, 1, "A", aligned=False), types.Array(f64, 1, "C"), types.Array(f64, 2, "C"))
+    kernels.fk_one.compile(signature)  # from numba's cache after the first time
+    try:
+        entry = kernels.fk_one.overloads[signature].entry_point
+    except (AttributeError, KeyError):  # another numba's internals: its dispatcher then
+        entry = kernels.fk_one
+    FK_ONE.append(entry)
+    return entry
 
 
 def kernel_data(kernels, plan: Plan, dof: int, values: Array) -> tuple[Array, Array, Array]:
