@@ -1,12 +1,14 @@
-"""Start-up of the ``robocal`` command: importing the CLI, ``--help`` and ``fk`` load none of the
-heavy libraries (each command imports what it uses). Run in a fresh interpreter, since this
-test session has long imported them all."""
+"""Start-up of the ``robocal`` command: importing the CLI, ``--help``, ``robots`` and ``fk`` load
+none of the heavy libraries (each command imports what it uses; ``--help`` not even numpy or a
+command's module). Run in a fresh interpreter, since this test session has long imported them
+all. Timings stay out of the tests: benchmarks/bench_startup.py measures them."""
 
 import json
 import subprocess
 import sys
 
 import pytest
+import typer
 
 HEAVY = (
     "scipy.stats",
@@ -25,20 +27,79 @@ import contextlib, io, json, sys
 from robocal.cli import app
 with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):
     app(sys.argv[1:], standalone_mode=True)
-print(json.dumps(sorted(m for m in {heavy} if m in sys.modules)))
+print(json.dumps(sorted(m for m in sys.modules if m in {heavy} or m.startswith("robocal.cli."))))
 """
+
+#: the modules of robocal.cli every command loads: the app, its group and the shared options
+CLI_CORE = {"robocal.cli.app", "robocal.cli.errors", "robocal.cli.options"}
+
+
+def _loaded(argv: list[str]) -> set[str]:
+    """The heavy libraries and robocal.cli modules loaded by ``robocal argv`` in a fresh process."""
+    probe = _PROBE.format(heavy=repr(HEAVY))
+    out = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return set(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
 @pytest.mark.parametrize(
-    "argv",
-    [["--help"], ["fk", "ur10", "--q", "0,-90,90,0,90,0", "--deg"], ["simulate", "--help"]],
-    ids=["help", "fk", "simulate-help"],
+    ("argv", "command_modules"),
+    [
+        (["--help"], set()),
+        (["robots"], {"robocal.cli.robots"}),
+        (["fk", "ur10", "--q", "0,-90,90,0,90,0", "--deg"], {"robocal.cli.robots"}),
+        (["simulate", "--help"], {"robocal.cli.measure"}),
+        (["validate", "--help"], {"robocal.cli.validate", "robocal.cli.reading"}),
+    ],
+    ids=["help", "robots", "fk", "simulate-help", "validate-help"],
 )
-def test_the_command_line_starts_without_heavy_libraries(argv):
-    probe = _PROBE.format(heavy=repr(HEAVY))
-    out = subprocess.run([sys.executable, "-c", probe, *argv], capture_output=True, text=True, timeout=60)
+def test_the_command_line_starts_without_heavy_libraries(argv, command_modules):
+    loaded = _loaded(argv)
+    assert loaded & set(HEAVY) == set()
+    assert loaded - CLI_CORE == command_modules  # only the module of the command that runs
+
+
+def test_help_lists_the_commands_without_numpy():
+    probe = (
+        "import contextlib, io, sys\n"
+        "from robocal.cli import app\n"
+        "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+        "    app(['--help'])\n"
+        "print(sorted(m for m in ('numpy', 'yaml', 'pydantic') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+    assert out.stdout.split() == ["[]"]
+
+
+def test_the_help_summaries_are_the_commands_own():
+    """``robocal --help`` lists COMMANDS' summaries without importing the commands: every
+    command the modules register is listed, by its module, and its summary is the start of its
+    own help (up to the summary's final full stop)."""
+    from robocal.cli.app import COMMANDS, module_commands
+
+    registered = {}
+    for module in {module for module, _ in COMMANDS.values()}:
+        for name, command in module_commands(module).items():
+            registered[name] = (module, " ".join((command.help or "").split()))
+    assert registered.keys() == COMMANDS.keys()
+    for name, (module, summary) in COMMANDS.items():
+        assert registered[name][0] == module
+        assert registered[name][1].startswith(summary.rstrip(".")), name
+
+
+def test_the_lazy_group_resolves_every_command_and_refuses_others():
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+    from robocal.cli.app import COMMANDS
+
+    group = typer.main.get_command(app)
+    assert list(group.commands) == list(COMMANDS)  # the names, without importing a module
+    assert all(group.commands[name].name == name for name in COMMANDS)
+    result = CliRunner().invoke(app, ["calibrat"])
+    assert result.exit_code == 2
+    assert "calibrate" in result.output  # the close match suggested
 
 
 def test_lazy_exports_keep_the_functions_named_like_modules():

@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from robocal import spatial
 from robocal._lazy import lazy_package
-from robocal._version import __version__
 
-# Loaded on first use (robocal._lazy): the command line starts without numpy's heavier
-# neighbours (scipy.stats, Pinocchio, plotly, Dask).
+# Loaded on first use (robocal._lazy): the command line starts without numpy (robocal.spatial),
+# importlib.metadata (the version) or numpy's heavier neighbours (scipy.stats, Pinocchio,
+# plotly, Dask); tests/test_startup.py checks it.
 lazy_package(
     __name__,
     {
+        "robocal._version": ("__version__",),
         "robocal.compensate.compensation": ("compensate_targets",),
         "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
         "robocal.identify.validate": ("cross_validate", "validate"),
@@ -29,11 +29,14 @@ lazy_package(
         "robocal.model.catalog": ("robot", "robots"),
         "robocal.model.builder": ("build_model",),
     },
+    submodules=("spatial",),
 )
 
 if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_typing.py keeps them equal)
     from pathlib import Path
 
+    from robocal import spatial
+    from robocal._version import __version__
     from robocal.compensate.compensation import compensate_targets
     from robocal.identify.calibrate import CalibrationResult, calibrate
     from robocal.identify.validate import cross_validate, validate

@@ -23,6 +23,7 @@ __all__ = ["lazy_package"]
 
 class _LazyPackage(types.ModuleType):
     _lazy_exports: dict[str, str]
+    _lazy_submodules: tuple[str, ...]
 
     def __getattr__(self, name: str) -> Any:
         module = self.__dict__.get("_lazy_exports", {}).get(name)
@@ -56,16 +57,20 @@ class _LazyPackage(types.ModuleType):
         self.__dict__.pop(name, None)
 
     def __dir__(self) -> list[str]:
-        return sorted(set(super().__dir__()) | set(self.__dict__.get("_lazy_exports", {})))
+        lazy = set(self.__dict__.get("_lazy_exports", {})) | set(self.__dict__.get("_lazy_submodules", ()))
+        return sorted(set(super().__dir__()) | lazy)
 
 
-def lazy_package(name: str, exports: dict[str, tuple[str, ...]]) -> None:
+def lazy_package(name: str, exports: dict[str, tuple[str, ...]], submodules: tuple[str, ...] = ()) -> None:
     """Make package ``name`` load its exports on first use.
 
     Args:
         name: the package's ``__name__``.
         exports: module name -> the public names it provides.
+        submodules: public submodules (``robocal.spatial``) loaded on first attribute access
+            rather than with the package; listed by ``dir()`` like the exports.
     """
     package = sys.modules[name]
     package.__class__ = _LazyPackage
+    package.__dict__["_lazy_submodules"] = tuple(submodules)
     package.__dict__["_lazy_exports"] = {attr: module for module, attrs in exports.items() for attr in attrs}
