@@ -179,3 +179,41 @@ def test_the_reproduction_document_section_is_current(experiment):
     generated = render_markdown("seed003", "x", [section]).split(f"## {section.title}\n", 1)[1].strip()
     doc = (Path(__file__).resolve().parents[1] / "docs" / "reproductions" / "seed003.md").read_text("utf-8")
     assert f"## {section.title}\n\n{generated}\n" in doc, "regenerate with robocal reproduce all --md ..."
+
+
+def test_simulate_and_identify_from_the_command_line(tmp_path, katana):
+    """robocal simulate --device inclinometer writes readings and the truth; robocal data
+    tilt identifies the joint effects from them within 4σ of that truth (the drawn
+    geometry fitted); bad input is one line."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    model, _, q = katana
+    poses = tmp_path / "poses.csv"
+    np.savetxt(poses, q, delimiter=",", header=",".join(model.joint_names), comments="")
+    out = tmp_path / "tilt.csv"
+    run = CliRunner().invoke
+    args = ["simulate", "katana450", "--device", "inclinometer", "--poses", str(poses), "-o", str(out)]
+    result = run(app, [*args, "--seed", "4", "--angle-tol", "0.1deg"])
+    assert result.exit_code == 0, result.output
+    truth = json.loads((tmp_path / "tilt.truth.json").read_text())
+    assert read_tilt_readings(out, model).n == len(q) * 10
+    result = run(app, ["data", "tilt", str(out), "katana450", "--json", str(tmp_path / "fit.json")])
+    assert result.exit_code == 0, result.output
+    fit = json.loads((tmp_path / "fit.json").read_text())
+    assert fit["rms_residual"] < 1.5 and "backlash_q1" in fit["not_identified"]
+    for effect in truth["joint_effects"]:
+        for kind, key in (("clearance", "clearance_tilt_deg"), ("backlash", "backlash_deg")):
+            got = fit["parameters"].get(f"{kind}_{effect['joint']}")
+            if got is not None:
+                assert abs(math.degrees(got["value"]) - effect[key]) < 4 * math.degrees(got["sigma"]), effect
+    nominal = run(app, ["data", "tilt", str(out), "katana450", "--nominal-geometry"])
+    assert nominal.exit_code == 0 and "residual" in nominal.output
+    bad = run(app, [*args, "--force", "--noise", "5deg"])
+    assert bad.exit_code == 2 and "--noise" in bad.output and "Traceback" not in bad.output
+    out.write_text(out.read_text().replace(",q3,x,", ",q9,x,", 1))
+    bad = run(app, ["data", "tilt", str(out), "katana450"])
+    assert bad.exit_code == 2 and "column 'link'" in bad.output

@@ -210,7 +210,7 @@ PosesOption = Annotated[
 ]
 OutOption = Annotated[Path | None, out_option("measurements CSV to write (with --log: the ISO 9283 log)")]
 DeviceOption = Annotated[
-    str, typer.Option("--device", metavar="DEVICE", help=f"one of: {', '.join(DEVICES)}")
+    str, typer.Option("--device", metavar="DEVICE", help=f"one of: {', '.join(DEVICES)}, inclinometer")
 ]
 SeedOption = Annotated[
     int | None, typer.Option("--seed", min=0, metavar="N", help="seed of the drawn errors and the noise")
@@ -305,6 +305,11 @@ def simulate_command(
 
     refuse_overwrite(out, force, "measurement file")
     model = _model(robot)
+    if device == "inclinometer":  # tilt readings of the links, not tool positions
+        from robocal.cli.inclinometer import simulate_inclinometer
+
+        drawn = (tol, length_tol, angle_tol, distribution)
+        return simulate_inclinometer(model, poses, out, noise, seed, drawn)
     if device not in DEVICES:
         raise fail(f"--device: unknown device {device!r}; known: {', '.join(DEVICES)}")
     if distribution not in ("uniform", "normal"):
@@ -467,5 +472,8 @@ def _noise_text(dev) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add ``data check`` and ``simulate`` to the ``robocal`` app."""
+    from robocal.cli.inclinometer import tilt_command
+
+    data_app.command("tilt")(tilt_command)
     app.add_typer(data_app, name="data")
     app.command("simulate")(simulate_command)

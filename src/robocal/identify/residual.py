@@ -65,6 +65,7 @@ from robocal.identify.residual_fit import (
     _layout,
     _one_blas_thread,
     _prior,
+    _raw_blocks,
     fit_joint_fourier,
 )
 from robocal.identify.residual_fit import (
@@ -329,12 +330,16 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
     ]
     d = np.exp(0.5 * _prior(theta, groups, freq))
     p, m = len(result.names), learned.size
-    F = np.zeros((p + m, p + m))
+    raw = None
     for s in range(0, len(q), _CHUNK):  # the Fisher matrix over chunks of poses: O((p + m)²) memory
         qs = q[s : s + _CHUNK]
         P = chain.perturbation_jacobian(qs, "position", result.joint_perturbations(qs))
-        B = np.hstack([result.position_columns(qs).reshape(-1, p), learned.design(qs, P).reshape(-1, m) * d])
-        F += B.T @ B
+        # by joint blocks (:func:`~robocal.identify.residual_fit._raw_blocks`): 5x fewer
+        # operations than the products of the whole design
+        part = _raw_blocks(qs, np.zeros((len(qs), 3)), P, learned, result.position_columns(qs))
+        raw = part if raw is None else raw + part
+    assert raw is not None
+    F = np.block([[raw.JJ, raw.JA * d], [(raw.JA * d).T, d[:, None] * raw.AA * d]])
     F[p:, p:] += learned.noise_std**2 * np.eye(m)
     scale = np.sqrt(np.maximum(np.diag(F), 1e-300))  # columns scaled: J's units differ widely
     try:

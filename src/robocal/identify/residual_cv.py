@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import operator
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -20,8 +21,11 @@ from robocal.identify.residual_fit import (
     _apply,
     _evidence,
     _grams,
+    _keep,
+    _Raw,
+    _raw_blocks,
+    _Solver,
     _template,
-    fit_joint_fourier,
     posterior_mean,
 )
 
@@ -158,9 +162,16 @@ def cross_validate_residual(
     per_pose: dict[str, Array] = {}
     for pname, physics_fit in physics.items():
         full = physics_fit(np.arange(n))
-        specs, fit_time = _fit_candidates(problem, pname, full, include_none, hypers)
-        fold_fit = physics_fit if refit_folds else functools.partial(_linearised, full)
-        errors = _fold_errors(problem, fold_fit, parts, specs, hypers)
+        t1 = time.perf_counter()
+        raws = None if refit_folds else _fold_raws(problem, full, parts)
+        specs, fit_time = _fit_candidates(
+            problem, pname, full, include_none, hypers, raws, time.perf_counter() - t1
+        )
+        if raws is not None:
+            errors = _fold_errors_of_raws(problem, full, parts, raws, specs, hypers)
+        else:
+            fold_fit = physics_fit if refit_folds else functools.partial(_linearised, full)
+            errors = _fold_errors(problem, fold_fit, parts, specs, hypers)
         for name, H in specs:
             e = errors[name]
             if not np.all(np.isfinite(e)):
@@ -190,24 +201,88 @@ _Spec = tuple[str, int | None]  # a candidate: its name and harmonics (None: phy
 
 
 def _fit_candidates(
-    problem: _Problem, pname: str, full: PhysicalFit, include_none: bool, hypers: dict[str, Hyper]
+    problem: _Problem,
+    pname: str,
+    full: PhysicalFit,
+    include_none: bool,
+    hypers: dict[str, Hyper],
+    raws: list[_Raw] | None = None,
+    raw_seconds: float = 0.0,
 ) -> tuple[list[_Spec], dict[str, float]]:
     """The candidates of one physical variant and the time of their fit on all poses (s); the
-    residual's hyperparameters found on all poses go into ``hypers`` (the folds' start)."""
+    residual's hyperparameters found on all poses go into ``hypers`` (the folds' start).
+    ``raws``: the folds' unprojected normal equations (:func:`_fold_raws`, their sum is all
+    poses'), taking ``raw_seconds``."""
     q, names, index, harmonics = problem.q, problem.joint_names, problem.joint_index, problem.harmonics
     specs: list[_Spec] = [(pname, None)] if include_none else []
     fit_time: dict[str, float] = {pname: full.result.seconds}
     t1 = time.perf_counter()
-    grams = _grams(q, full.residuals, full.P, _template(names, index, 1, q), harmonics, full.J)
-    gram_time = (time.perf_counter() - t1) / len(harmonics)  # shared: each candidate's share
+    if raws is None:
+        grams = _grams(q, full.residuals, full.P, _template(names, index, 1, q), harmonics, full.J)
+    else:
+        total, top = functools.reduce(operator.add, raws), max(harmonics)
+        grams = {H: total.projected(_keep(_template(names, index, 1), top, H))[0] for H in harmonics}
+    gram_time = (time.perf_counter() - t1 + raw_seconds) / len(harmonics)  # shared: each one's share
     for H in harmonics:
         t1 = time.perf_counter() - gram_time
-        _, hyper = fit_joint_fourier(q, full.residuals, full.P, names, index, H, J=full.J, gram=grams[H])
         name = f"{pname} + angle errors H={H}"
+        hyper = _evidence(_template(names, index, H), grams[H], None)
         hypers[name] = hyper
         fit_time[name] = full.result.seconds + time.perf_counter() - t1
         specs.append((name, H))
     return specs, fit_time
+
+
+def _fold_raws(problem: _Problem, full: PhysicalFit, parts: Sequence[Array]) -> list[_Raw] | None:
+    """Each fold's unprojected normal equations at the largest number of harmonics, from the
+    rows of the fit on all poses (one pass over the poses: a fold's training poses are the sum
+    of the other folds'); None when a fold's training poses give fewer equations than
+    coefficients (the evidence's dual form needs the design: :func:`_fold_errors`)."""
+    names, index, top = problem.joint_names, problem.joint_index, max(problem.harmonics)
+    template = _template(names, index, top, problem.q)  # covers every pose: no row faded
+    if 3 * (len(problem.q) - max(len(held) for held in parts)) < template.size:
+        return None
+    return [
+        _raw_blocks(problem.q[held], full.residuals[held], full.P[held], template, full.J[held])
+        for held in parts
+    ]
+
+
+def _fold_errors_of_raws(
+    problem: _Problem,
+    full: PhysicalFit,
+    parts: Sequence[Array],
+    raws: list[_Raw],
+    specs: Sequence[_Spec],
+    hypers: dict[str, Hyper],
+) -> dict[str, Array]:
+    """:func:`_fold_errors` of the linearised folds (:func:`_linearised`) from the folds'
+    normal equations (:func:`_fold_raws`): a fold's are all poses' minus its own; the
+    physical parameters' step is solved from them too, so only the held-out poses are
+    evaluated.  All ``inf`` when a fold's physical columns are rank deficient."""
+    q, names, index, top = problem.q, problem.joint_names, problem.joint_index, max(problem.harmonics)
+    total = functools.reduce(operator.add, raws)
+    errors = {name: np.empty(len(q)) for name, _ in specs}
+    for held, raw in zip(parts, raws, strict=True):
+        train = total - raw
+        r_held, P_held, J_held = full.residuals[held], full.P[held], full.J[held]
+        try:
+            base = r_held - J_held @ _Solver.of(train).step()
+        except np.linalg.LinAlgError:  # the physics is not determined by this fold: not a candidate
+            return {name: np.full(len(q), np.inf) for name, _ in specs}
+        train_q = q[np.setdiff1d(np.arange(len(q)), held)]
+        for name, H in specs:
+            e = base
+            if H is not None:
+                keep = _keep(_template(names, index, 1), top, H)
+                normal, solver = train.projected(keep)
+                template = _template(names, index, H, train_q)  # fades beyond the fold's angles
+                hyper = _evidence(template, normal, hypers[name], ftol=FOLD_FTOL)
+                c = posterior_mean(template, normal, hyper)
+                learned = dataclasses.replace(template, coefficients=c)
+                e = r_held - J_held @ solver.step(keep, c) - _apply(learned, q[held], P_held)
+            errors[name][held] = np.linalg.norm(e, axis=1)
+    return errors
 
 
 def _fold_errors(

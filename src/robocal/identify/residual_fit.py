@@ -110,7 +110,7 @@ def _grams(
         (G, b, rr, N), A, y = _gram(q, r, P, big, J), None, None
     out = {}
     for H in harmonics:
-        keep = (np.arange(len(template.joints))[:, None] * 2 * top + np.arange(2 * H)).reshape(-1)
+        keep = _keep(template, top, H)
         out[H] = _Normal(G[np.ix_(keep, keep)], b[keep], rr, N, None if A is None else A[:, keep], y)
     return out
 
@@ -134,36 +134,104 @@ def _complement_design(
 def _gram_blocks(
     q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None
 ) -> tuple[Array, Array, float, int]:
-    k, h2 = len(template.joints), 2 * template.harmonics
-    m = template.size
-    G, b, rr = np.zeros((m, m)), np.zeros(m), 0.0
     Q = None if J is None else np.linalg.qr(J.reshape(-1, J.shape[-1]))[0]
-    p = 0 if Q is None else Q.shape[1]
-    QA, Qr = np.zeros((p, m)), (np.zeros(0) if Q is None else Q.T @ r.reshape(-1))
+    raw = _raw_blocks(q, r, P, template, None if Q is None else Q.reshape(len(q), 3, -1))
+    G, b, rr, N = raw.AA, raw.Ar, raw.rr, raw.N
+    if Q is not None:  # the complement of J's columns: QᵀQ = I
+        G, b = G - raw.JA.T @ raw.JA, b - raw.JA.T @ raw.Jr
+        rr, N = rr - float(raw.Jr @ raw.Jr), N - Q.shape[1]
+    return G, b, rr, N
+
+
+@dataclass(frozen=True)
+class _Raw:
+    """The residual's normal equations before the physical columns ``J`` are projected out:
+    ``AᵀA`` ``(m, m)``, ``JᵀA`` ``(p, m)``, ``Aᵀr``, ``JᵀJ``, ``Jᵀr``, ``rᵀr`` and the number of
+    equations.  Sums over poses: a fold's training poses are all poses minus the fold's."""
+
+    AA: Array
+    JA: Array
+    Ar: Array
+    JJ: Array
+    Jr: Array
+    rr: float
+    N: int
+
+    def __sub__(self, other: _Raw) -> _Raw:
+        return _Raw(*(getattr(self, f.name) - getattr(other, f.name) for f in dataclasses.fields(self)))
+
+    def __add__(self, other: _Raw) -> _Raw:
+        return _Raw(*(getattr(self, f.name) + getattr(other, f.name) for f in dataclasses.fields(self)))
+
+    def projected(self, keep: Array) -> tuple[_Normal, _Solver]:
+        """The normal equations of the coefficients ``keep`` in the complement of ``J``'s
+        columns (the physical parameters' least squares eliminated: ``G = AᵀA − AᵀJ (JᵀJ)⁻¹
+        JᵀA``), and the solver of the physical parameters' step."""
+        solver = _Solver.of(self)
+        W = solver.whiten(self.JA[:, keep])  # (p, m)
+        w = solver.whiten(self.Jr)
+        G = self.AA[np.ix_(keep, keep)] - W.T @ W
+        normal = _Normal(0.5 * (G + G.T), self.Ar[keep] - W.T @ w, self.rr - float(w @ w), self.N - len(w))
+        return normal, solver
+
+
+@dataclass(frozen=True)
+class _Solver:
+    """``JᵀJ``'s Cholesky factor with its columns scaled to unit diagonal (their units differ
+    widely), and the pieces of :class:`_Raw` it solves with."""
+
+    L: Array
+    scale: Array
+    raw: _Raw
+
+    @classmethod
+    def of(cls, raw: _Raw) -> _Solver:
+        scale = np.sqrt(np.maximum(np.diag(raw.JJ), 1e-300))
+        return cls(cholesky(raw.JJ / np.outer(scale, scale), lower=True, check_finite=False), scale, raw)
+
+    def whiten(self, X: Array) -> Array:
+        """``L⁻¹ S⁻¹ X``: ``(JᵀJ)⁻¹ = S⁻¹ L⁻ᵀ L⁻¹ S⁻¹``."""
+        scaled = X / (self.scale[:, None] if X.ndim == 2 else self.scale)
+        return solve_triangular(self.L, scaled, lower=True, check_finite=False)
+
+    def step(self, keep: Array | None = None, c: Array | None = None) -> Array:
+        """``(p,)`` the physical parameters' least squares ``(JᵀJ)⁻¹ Jᵀ(r − A c)`` (``c`` the
+        coefficients ``keep``; None: ``(JᵀJ)⁻¹ Jᵀ r``)."""
+        rhs = self.raw.Jr if c is None else self.raw.Jr - self.raw.JA[:, keep] @ c
+        return cho_solve((self.L, True), rhs / self.scale, check_finite=False) / self.scale
+
+
+def _raw_blocks(q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None) -> _Raw:
+    """:class:`_Raw` over chunks of poses; ``J`` ``(n, 3, p)`` (None: no physical columns)."""
+    k, h2 = len(template.joints), 2 * template.harmonics
+    m, p = template.size, 0 if J is None else J.shape[-1]
+    AA, Ar, rr = np.zeros((m, m)), np.zeros(m), 0.0
+    JA, JJ, Jr = np.zeros((p, m)), np.zeros((p, p)), np.zeros(p)
     index = list(template.joint_index)
     for s in range(0, len(q), _CHUNK):
         B = template.basis(q[s : s + _CHUNK])  # (c, k, 2H)
         cols = np.ascontiguousarray(P[s : s + _CHUNK, :, index, 2])  # (c, 3, k)
         y = r[s : s + _CHUNK]  # (c, 3)
         W = np.einsum("crj,crl->cjl", cols, cols)  # (c, k, k): P_j · P_l per pose
-        for j in range(k):  # block row j, blocks j' >= j (G is symmetric)
+        for j in range(k):  # block row j, blocks j' >= j (AᵀA is symmetric)
             right = (W[:, j, j:, None] * B[:, j:, :]).reshape(len(B), -1)  # (c, (k - j) 2H)
-            G[j * h2 : (j + 1) * h2, j * h2 :] += B[:, j, :].T @ right
-        b += np.einsum("cj,cjh->jh", np.einsum("crj,cr->cj", cols, y), B).reshape(-1)
+            AA[j * h2 : (j + 1) * h2, j * h2 :] += B[:, j, :].T @ right
+        Ar += np.einsum("cj,cjh->jh", np.einsum("crj,cr->cj", cols, y), B).reshape(-1)
         rr += float(np.sum(y * y))
-        if Q is not None:
-            Qs = Q[3 * s : 3 * (s + len(y))].reshape(len(y), 3, p)
-            V = np.einsum("cri,crj->jic", Qs, cols)  # (k, p, c)
+        if J is not None:
+            Js = J[s : s + _CHUNK]  # (c, 3, p)
+            V = np.einsum("cri,crj->jic", Js, cols)  # (k, p, c)
             for j in range(k):
-                QA[:, j * h2 : (j + 1) * h2] += V[j] @ B[:, j, :]
-    G = np.triu(G) + np.triu(G, 1).T
-    N = r.size
-    if Q is not None:
-        G -= QA.T @ QA
-        b -= QA.T @ Qr
-        rr -= float(Qr @ Qr)
-        N -= p
-    return G, b, rr, N
+                JA[:, j * h2 : (j + 1) * h2] += V[j] @ B[:, j, :]
+            J2 = Js.reshape(-1, p)
+            JJ += J2.T @ J2
+            Jr += J2.T @ y.reshape(-1)
+    return _Raw(np.triu(AA) + np.triu(AA, 1).T, JA, Ar, JJ, Jr, rr, r.size)
+
+
+def _keep(template: JointAngleResidual, top: int, H: int) -> Array:
+    """The coefficients of H harmonics among those of ``top`` (joint by joint)."""
+    return (np.arange(len(template.joints))[:, None] * 2 * top + np.arange(2 * H)).reshape(-1)
 
 
 def _spectrum(log_ell: float, freq: Array) -> tuple[Array, Array]:

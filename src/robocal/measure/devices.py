@@ -50,7 +50,9 @@ Noise figures and where they come from
   (A4) are assumptions.
 
 The interface lives in :mod:`robocal.measure.device_base`, the plate and the pen in
-:mod:`robocal.measure.plates`; this module re-exports them.
+:mod:`robocal.measure.plates`; this module re-exports them, and the
+:class:`~robocal.measure.inclinometer.Inclinometer` (seed 003: a link's tilt angles, not a
+tool position, so not among :data:`DEVICES`; ``robocal simulate --device inclinometer``).
 """
 
 from __future__ import annotations
@@ -74,6 +76,7 @@ from robocal.measure.device_base import (
     _vector,
     look_at,
 )
+from robocal.measure.inclinometer import Inclinometer
 from robocal.measure.plates import CalibrationPlate, PenOnPaper, plate_points
 
 __all__ = [
@@ -81,6 +84,7 @@ __all__ = [
     "CalibrationPlate",
     "Camera",
     "Device",
+    "Inclinometer",
     "LaserTracker",
     "Observations",
     "OpticalCMM",

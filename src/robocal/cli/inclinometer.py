@@ -1,0 +1,182 @@
+"""Inclinometer readings on the command line (seed 003's joint tilting set-up).
+
+``robocal simulate ROBOT --device inclinometer --poses POSES.csv -o READINGS.csv`` reads a
+dual-axis inclinometer on the link after every joint (level at the home configuration) at
+the configurations of ``POSES.csv``, on a true robot with drawn geometric errors and the
+model's joint effects (clearance, backlash, stiffness), and writes the readings CSV
+(docs/inclinometer.md) with the truth beside it (``READINGS.truth.json``).
+
+``robocal data tilt READINGS.csv ROBOT`` identifies the joint effects, the channels' zeros
+and the angles of the geometry that turn the sensed links from such a file, and prints
+them with their 1σ and what the readings cannot see.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from robocal.console import console, fail, refuse_overwrite, safe
+
+__all__ = ["simulate_inclinometer", "tilt_command"]
+
+OFFSET_RANGE_DEG = 0.05  # the channels' zeros drawn within ±this (docs/inclinometer.md)
+
+
+def _sensors(model, links: tuple[str, ...] | None = None) -> tuple[Any, ...]:
+    from robocal.measure.inclinometer import Inclinometer
+
+    return tuple(Inclinometer.level_at(model, j) for j in (links or model.joint_names))
+
+
+def simulate_inclinometer(
+    model, poses: Path, out: Path, noise: str | None, seed: int | None, drawn: tuple[Any, ...]
+) -> None:
+    """Readings of a true robot (geometry drawn as ``simulate`` draws it, ``drawn``: its
+    ``--tol``, ``--length-tol``, ``--angle-tol``, ``--distribution``; the model's joint
+    effects) at the poses of ``poses``, written to ``out`` with the truth beside it; bad
+    input exits with one line."""
+    from robocal.cli.measure import _tolerances, _true_model
+    from robocal.measure.dataset import MeasurementFileError
+
+    tol, length_tol, angle_tol, distribution = drawn
+    try:
+        true = _true_model(model, _tolerances(tol or []), length_tol, angle_tol, distribution, seed)[0]
+        _simulate(model, true, poses, out, noise, seed)
+    except MeasurementFileError as err:
+        raise fail(str(err)) from None
+    except (ValueError, KeyError) as err:
+        raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
+
+
+def _simulate(model, true, poses: Path, out: Path, noise: str | None, seed: int | None) -> None:
+    from robocal.measure.dataset import read_measurements
+    from robocal.measure.inclinometer import simulate_readings
+    from robocal.measure.simulate import parse_quantity_option
+    from robocal.measure.tilt_csv import write_tilt_readings
+    from robocal.outdir import atomic_write_text
+
+    kwargs = {}
+    if noise is not None:
+        sigma = parse_quantity_option(noise, "angle", "--noise")
+        if not 0 <= sigma <= math.radians(1.0):
+            raise ValueError(f"--noise {noise}: an inclinometer's 1σ between 0 and 1 deg, e.g. 0.001deg")
+        kwargs["sigma"] = sigma
+    q = read_measurements(poses, model=model).q
+    sensors = tuple(
+        type(s)(link=s.link, mount=s.mount, **kwargs) for s in _sensors(model)
+    )  # mounted level on the nominal robot: the set-up's, not the truth's
+    rng = np.random.default_rng(None if seed is None else [seed, 2])
+    span = math.radians(OFFSET_RANGE_DEG)
+    offsets = {(s.link, a): float(rng.uniform(-span, span)) for s in sensors for a in s.axes}
+    data = simulate_readings(true, q, sensors, rng, offsets)
+    write_tilt_readings(out, data, model.joint_names)
+    truth = {
+        "command": "robocal simulate --device inclinometer",
+        "poses": str(poses),
+        "geometry_change": {
+            n: b - a for n, a, b in zip(model.names, model.values, true.values, strict=True) if a != b
+        },
+        "joint_effects": [
+            {
+                "joint": e.joint,
+                "clearance_tilt_deg": math.degrees(e.clearance_tilt),
+                "backlash_deg": math.degrees(e.backlash),
+                "compliance_rad_per_Nm": e.compliance,
+            }
+            for e in true.joint_effects
+        ],
+        "channel_zero_deg": {f"{k[0]}_{k[1]}": math.degrees(v) for k, v in offsets.items()},
+        "sigma_deg": math.degrees(sensors[0].sigma),
+        "seed": seed,
+    }
+    truth_path = out.with_name(out.stem + ".truth.json")
+    atomic_write_text(truth_path, json.dumps(truth, indent=2) + "\n")
+    console.print(
+        f"wrote {safe(out)} ({data.n} readings: {len(q)} configurations x {len(data.channels())} channels) "
+        f"and the truth {safe(truth_path)}",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
+def _rows(fit) -> list[tuple[str, str, str]]:
+    """``(parameter, estimate ± 1σ, unit)`` in the thesis' units (deg, kgf·m/deg)."""
+    from robocal.model.files import STIFFNESS_SCALE
+
+    kgfm = STIFFNESS_SCALE["kgf*m/deg"]
+    rows = []
+    for name, v, s in zip(fit.names, fit.values, fit.sigma, strict=True):
+        if name.startswith("compliance_"):
+            k = f"{1 / v / kgfm:.1f} ± {s / v**2 / kgfm:.1f}" if v > 2 * s else "not above zero"
+            rows.append((f"stiffness_{name[len('compliance_') :]}", k, "kgf·m/deg"))
+        else:
+            rows.append((name, f"{math.degrees(v):.4f} ± {math.degrees(s):.4f}", "deg"))
+    return rows
+
+
+def tilt_command(
+    file: Annotated[Path, typer.Argument(metavar="READINGS", help="inclinometer readings CSV")],
+    robot: Annotated[str, typer.Argument(metavar="ROBOT", help="catalog name or model file (.yaml)")],
+    nominal_geometry: Annotated[
+        bool,
+        typer.Option("--nominal-geometry", help="take the geometry as exact (fit no angle of it)"),
+    ] = False,
+    json_out: Annotated[
+        Path | None, typer.Option("--json", metavar="FILE", help="write the estimates (SI) as JSON")
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="replace an existing --json file")] = False,
+) -> None:
+    """Identify clearance, backlash and stiffness from inclinometer readings (seed 003)."""
+    from rich.table import Table
+
+    from robocal.cli.options import resolve_model
+    from robocal.identify.tilt_identification import identify_tilt
+    from robocal.measure.tilt_csv import read_tilt_readings
+
+    model = resolve_model(robot)
+    if json_out is not None:
+        refuse_overwrite(json_out, force, "JSON file")
+    try:
+        data = read_tilt_readings(file, model)
+        sensors = _sensors(model, tuple(dict.fromkeys(data.link)))
+        fit = identify_tilt(model, data, sensors, geometry=not nominal_geometry)
+    except (ValueError, np.linalg.LinAlgError) as err:
+        raise fail(str(err)) from None
+    console.print(
+        f"{safe(file)}: {fit.readings} readings, weighted RMS residual {fit.rms_residual:.2f}",
+        highlight=False,
+    )
+    table = Table()
+    for column in ("parameter", "estimate ± 1σ", "unit"):
+        table.add_column(column)
+    for row in _rows(fit):
+        table.add_row(*row)
+    console.print(table)
+    for name, why in fit.not_identified.items():
+        console.print(f"not identified: {name}: {why}", highlight=False, soft_wrap=True)
+    if fit.rms_residual > 3:
+        console.print(
+            "note: the residual is far above 1: the readings' sigma is too small or the model misses an "
+            "effect (sensors not level at home, a different robot)",
+            highlight=False,
+        )
+    if json_out is not None:
+        from robocal.outdir import atomic_write_text
+
+        result = {
+            "parameters": {
+                n: {"value": float(v), "sigma": float(s)}
+                for n, v, s in zip(fit.names, fit.values, fit.sigma, strict=True)
+            },
+            "not_identified": fit.not_identified,
+            "rms_residual": fit.rms_residual,
+            "readings": fit.readings,
+            "units": "rad, rad/(N·m)",
+        }
+        atomic_write_text(json_out, json.dumps(result, indent=2) + "\n")
