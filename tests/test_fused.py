@@ -34,6 +34,7 @@ def _staged(monkeypatch, model, data, **options):
 def _assert_same(fused_result, staged):
     a, b = fused_result, staged
     assert a.names == b.names
+
     def dropped(r):
         return [(d.name, d.reason, d.absorbed_by) for d in r.dropped], [d.sigma or 0.0 for d in r.dropped]
 
@@ -113,7 +114,6 @@ def test_chi2_bounds_give_the_tail_probabilities_test():
             assert residual_variance(chi2, dof, True) == (chi2 / dof if rejected else 1.0)
 
 
-
 def test_fused_kernels_pass_no_constants_to_the_shared_kernels():
     # numba compiles a kernel called with a constant (False, 3) a second time for that
     # literal: seconds of first-use compilation the staged path's Python calls would not
@@ -121,8 +121,16 @@ def test_fused_kernels_pass_no_constants_to_the_shared_kernels():
     import ast
     import inspect
 
-    shared = {"evaluate", "segment_data", "start", "propose", "accept", "screen", "normal_covariance",
-              "_median"}
+    shared = {
+        "evaluate",
+        "segment_data",
+        "start",
+        "propose",
+        "accept",
+        "screen",
+        "normal_covariance",
+        "_median",
+    }
     tree = ast.parse(inspect.getsource(fused_kernels))
     calls = [c for c in ast.walk(tree) if isinstance(c, ast.Call) and getattr(c.func, "id", None) in shared]
     assert {c.func.id for c in calls} >= shared - {"_median"}
@@ -167,3 +175,32 @@ def test_first_pass_flags_a_jacobian_that_is_not_finite(monkeypatch):
     monkeypatch.setattr(fused, "preference_subset", lambda *a: pytest.fail("a NaN Jacobian was rank-tested"))
     assert rc.calibrate(model, data).success
     assert seen == [False]
+
+
+def _merged_reference(values, half):
+    """The union of [v - half, v + half], one value at a time (the loop coverage replaced)."""
+    out: list[list[float]] = []
+    for v in np.sort(values[np.isfinite(values)]):
+        if out and v - half <= out[-1][1]:
+            out[-1][1] = float(v + half)
+        else:
+            out.append([float(v - half), float(v + half)])
+    return tuple((lo, hi) for lo, hi in out)
+
+
+def test_joint_coverage_is_the_union_of_the_poses_neighbourhoods():
+    """The coverage every calibration records (numpy, not a loop over the poses): the same
+    intervals as the one-value-at-a-time union, with ties, NaN, wrapped angles, no poses."""
+    from robocal.identify.coverage import COVER_RAD, joint_coverage
+
+    model = rc.robot("ur10")
+    rng = np.random.default_rng(5)
+    for k in range(200):
+        q = rng.uniform(-7.0, 7.0, (int(rng.integers(0, 40)), model.dof))
+        if k % 3 == 0:
+            q = np.round(q * 5) / 5  # ties and touching neighbourhoods (0.2 apart = 2 x 0.1)
+        if k % 4 == 0 and len(q):
+            q[rng.integers(0, len(q)), rng.integers(0, model.dof)] = np.nan
+        got = joint_coverage(model, q)
+        wrapped = np.remainder(q + np.pi, 2 * np.pi) - np.pi
+        assert got.intervals == tuple(_merged_reference(wrapped[:, j], COVER_RAD) for j in range(model.dof))

@@ -99,26 +99,30 @@ class JointCoverage:
         )
 
 
-def _merged(values: np.ndarray, half: float) -> tuple[tuple[float, float], ...]:
-    """The union of ``[v - half, v + half]`` over ``values``, as sorted disjoint intervals."""
-    out: list[list[float]] = []
-    for v in np.sort(values[np.isfinite(values)]):
-        if out and v - half <= out[-1][1]:
-            out[-1][1] = float(v + half)
-        else:
-            out.append([float(v - half), float(v + half)])
-    return tuple((lo, hi) for lo, hi in out)
+def _merged(v: np.ndarray, half: float) -> tuple[tuple[float, float], ...]:
+    """The union of ``[v - half, v + half]`` over the sorted finite ``v``, as sorted disjoint
+    intervals (one ends where the next value's ``v - half`` passes its ``v + half``)."""
+    if not len(v):
+        return ()
+    lo, hi = v - half, v + half
+    gaps = np.flatnonzero(lo[1:] > hi[:-1])  # numpy, not a loop: every calibration records it
+    starts, ends = [lo[0], *lo[1:][gaps].tolist()], [*hi[:-1][gaps].tolist(), hi[-1]]
+    return tuple(zip(map(float, starts), map(float, ends), strict=True))
 
 
 def joint_coverage(model: Model, q: ArrayLike) -> JointCoverage:
     """The joint coverage of the calibration poses ``q`` ``(n, dof)`` (see the module docstring)."""
     q = np.asarray(q, dtype=float).reshape(-1, model.dof)
     revolute = tuple(t == "revolute" for t in model.joint_types)
-    intervals = []
-    for j, turns in enumerate(revolute):
-        values = np.remainder(q[:, j] + math.pi, _TWO_PI) - math.pi if turns else q[:, j]
-        intervals.append(_merged(values, COVER_RAD if turns else COVER_M))
-    return JointCoverage(tuple(model.joint_names), revolute, tuple(intervals))
+    turns = np.array(revolute, dtype=bool)
+    values = q.copy()
+    values[:, turns] = np.remainder(q[:, turns] + math.pi, _TWO_PI) - math.pi
+    finite = np.isfinite(values).sum(axis=0).tolist()
+    values = np.sort(values, axis=0)  # NaN last in each column
+    intervals = tuple(
+        _merged(values[: finite[j], j], COVER_RAD if r else COVER_M) for j, r in enumerate(revolute)
+    )
+    return JointCoverage(tuple(model.joint_names), revolute, intervals)
 
 
 def coverage_warnings(calibrated: Any, q: ArrayLike, names: Sequence[str]) -> list[str]:
