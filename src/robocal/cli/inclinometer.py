@@ -6,24 +6,24 @@ the configurations of ``POSES.csv``, on a true robot with drawn geometric errors
 model's joint effects (clearance, backlash, stiffness), and writes the readings CSV
 (docs/inclinometer.md) with the truth beside it (``READINGS.truth.json``).
 
-``robocal data tilt READINGS.csv ROBOT`` identifies the joint effects, the channels' zeros
-and the angles of the geometry that turn the sensed links from such a file, and prints
-them with their 1σ and what the readings cannot see.
+``robocal data tilt READINGS.csv ROBOT`` (:func:`identify_tilt_file`) identifies the joint
+effects, the channels' zeros and the angles of the geometry that turn the sensed links
+from such a file, and prints them with their 1σ and what the readings cannot see.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
-import typer
 
 from robocal.console import console, fail, refuse_overwrite, safe
 
-__all__ = ["simulate_inclinometer", "tilt_command"]
+__all__ = ["identify_tilt_file", "simulate_inclinometer"]
 
 OFFSET_RANGE_DEG = 0.05  # the channels' zeros drawn within ±this (docs/inclinometer.md)
 
@@ -35,19 +35,15 @@ def _sensors(model, links: tuple[str, ...] | None = None) -> tuple[Any, ...]:
 
 
 def simulate_inclinometer(
-    model, poses: Path, out: Path, noise: str | None, seed: int | None, drawn: tuple[Any, ...]
+    model, draw: Callable[[], Any], poses: Path, out: Path, noise: str | None, seed: int | None
 ) -> None:
-    """Readings of a true robot (geometry drawn as ``simulate`` draws it, ``drawn``: its
-    ``--tol``, ``--length-tol``, ``--angle-tol``, ``--distribution``; the model's joint
-    effects) at the poses of ``poses``, written to ``out`` with the truth beside it; bad
-    input exits with one line."""
-    from robocal.cli.measure import _tolerances, _true_model
+    """Readings of the true robot ``draw()`` (geometry drawn as ``simulate`` draws it, the
+    model's joint effects) at the poses of ``poses``, written to ``out`` with the truth
+    beside it; bad input exits with one line."""
     from robocal.measure.dataset import MeasurementFileError
 
-    tol, length_tol, angle_tol, distribution = drawn
     try:
-        true = _true_model(model, _tolerances(tol or []), length_tol, angle_tol, distribution, seed)[0]
-        _simulate(model, true, poses, out, noise, seed)
+        _simulate(model, draw(), poses, out, noise, seed)
     except MeasurementFileError as err:
         raise fail(str(err)) from None
     except (ValueError, KeyError) as err:
@@ -120,17 +116,8 @@ def _rows(fit) -> list[tuple[str, str, str]]:
     return rows
 
 
-def tilt_command(
-    file: Annotated[Path, typer.Argument(metavar="READINGS", help="inclinometer readings CSV")],
-    robot: Annotated[str, typer.Argument(metavar="ROBOT", help="catalog name or model file (.yaml)")],
-    nominal_geometry: Annotated[
-        bool,
-        typer.Option("--nominal-geometry", help="take the geometry as exact (fit no angle of it)"),
-    ] = False,
-    json_out: Annotated[
-        Path | None, typer.Option("--json", metavar="FILE", help="write the estimates (SI) as JSON")
-    ] = None,
-    force: Annotated[bool, typer.Option("--force", help="replace an existing --json file")] = False,
+def identify_tilt_file(
+    file: Path, robot: str, nominal_geometry: bool, json_out: Path | None, force: bool
 ) -> None:
     """Identify clearance, backlash and stiffness from inclinometer readings (seed 003)."""
     from rich.table import Table

@@ -197,6 +197,20 @@ def data_check(
         console.print(fact, highlight=False)
 
 
+@data_app.command("tilt")
+def data_tilt(
+    file: Annotated[Path, typer.Argument(metavar="READINGS", help="inclinometer readings CSV")],
+    robot: Annotated[str, typer.Argument(metavar="ROBOT", help="catalog name or model file (.yaml)")],
+    nominal: Annotated[bool, typer.Option("--nominal-geometry", help="fit no angle of the geometry")] = False,
+    json_out: Annotated[Path | None, typer.Option("--json", metavar="FILE", help="estimates (SI)")] = None,
+    force: Force = False,
+) -> None:
+    """Identify clearance, backlash and stiffness from inclinometer readings (docs/inclinometer.md)."""
+    from robocal.cli.inclinometer import identify_tilt_file
+
+    identify_tilt_file(file, robot, nominal, json_out, force)
+
+
 # -------------------------------------------------------------------- simulate
 NOISE_HELP = (
     "the device's main noise, 1σ with a unit, e.g. 0.02mm: laser-tracker per axis (no distance term), "
@@ -306,10 +320,8 @@ def simulate_command(
     refuse_overwrite(out, force, "measurement file")
     model = _model(robot)
     if device == "inclinometer":  # tilt readings of the links, not tool positions
-        from robocal.cli.inclinometer import simulate_inclinometer
-
         drawn = (tol, length_tol, angle_tol, distribution)
-        return simulate_inclinometer(model, poses, out, noise, seed, drawn)
+        return _simulate_inclinometer(model, poses, out, noise, seed, drawn)
     if device not in DEVICES:
         raise fail(f"--device: unknown device {device!r}; known: {', '.join(DEVICES)}")
     if distribution not in ("uniform", "normal"):
@@ -347,6 +359,14 @@ def simulate_command(
         highlight=False,
         soft_wrap=True,
     )
+
+
+def _simulate_inclinometer(model, poses, out, noise, seed, drawn: tuple) -> None:
+    """``simulate --device inclinometer``; ``drawn``: --tol, --length-tol, --angle-tol, --distribution."""
+    from robocal.cli.inclinometer import simulate_inclinometer
+
+    draw = lambda: _true_model(model, _tolerances(drawn[0] or []), *drawn[1:], seed)[0]  # noqa: E731
+    simulate_inclinometer(model, draw, poses, out, noise, seed)
 
 
 def _simulate_constraints(robot, kind: str, poses, out, force: bool, options: tuple) -> None:
@@ -472,8 +492,5 @@ def _noise_text(dev) -> str:
 
 def register(app: typer.Typer) -> None:
     """Add ``data check`` and ``simulate`` to the ``robocal`` app."""
-    from robocal.cli.inclinometer import tilt_command
-
-    data_app.command("tilt")(tilt_command)
     app.add_typer(data_app, name="data")
     app.command("simulate")(simulate_command)
