@@ -204,3 +204,28 @@ def test_joint_coverage_is_the_union_of_the_poses_neighbourhoods():
         got = joint_coverage(model, q)
         wrapped = np.remainder(q + np.pi, 2 * np.pi) - np.pi
         assert got.intervals == tuple(_merged_reference(wrapped[:, j], COVER_RAD) for j in range(model.dof))
+
+
+def test_measured_tool_derivative_is_exact():
+    """The measured tool's point derivative (analytic, not finite differences): central
+    differences of the chain product for rotations and translations; for a tool of
+    translations its covariance is the fit's covariance block of those parameters."""
+    from robocal import spatial
+    from robocal.identify.measured_tool import _point_and_derivative, measured_tool
+
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        motions = [str(m) for m in rng.choice(spatial.MOTIONS, int(rng.integers(1, 6)))]
+        v = rng.normal(size=len(motions))
+        p, J = _point_and_derivative(motions, v.tolist())
+        np.testing.assert_allclose(p, spatial.chain_product(motions, v)[:3, 3], rtol=0, atol=1e-14)
+        for k in range(len(v)):
+            h = np.zeros(len(v))
+            h[k] = 1e-6
+            fd = (spatial.chain_product(motions, v + h) - spatial.chain_product(motions, v - h))[:3, 3] / 2e-6
+            np.testing.assert_allclose(J[:, k], fd, rtol=0, atol=1e-8)
+    model, data = _data("ur10", 40, 3)
+    result = rc.calibrate(model, data, tool_guess=TOOL)
+    tool = measured_tool(result)
+    cols = [result.names.index(f"tcp_{a}") for a in "xyz"]
+    np.testing.assert_array_equal(tool.covariance_m2, np.asarray(result.covariance)[np.ix_(cols, cols)])

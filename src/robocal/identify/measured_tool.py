@@ -161,6 +161,29 @@ def _tool_steps(model: Model) -> list:
     return steps
 
 
+def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Array, Array]:
+    """The point ``(3,)`` at the end of the elementary ``motions`` with ``values`` (m, rad;
+    as :func:`robocal.spatial.chain_product`) and its derivative ``(3, k)`` by each value:
+    a translation moves it along the step's axis, a rotation turns it about that axis
+    through the step's origin (both in the chain's first frame)."""
+    R = np.eye(3)
+    t = np.zeros(3)
+    axes, origins = [], []
+    for motion, value in zip(motions, values, strict=True):
+        a = R[:, "xyz".index(motion[1])].copy()
+        axes.append(a)
+        origins.append(t.copy())
+        if motion[0] == "T":
+            t = t + a * value
+        else:
+            R = R @ spatial.rot(motion[1], value)
+    J = np.zeros((3, len(motions)))
+    for k, motion in enumerate(motions):
+        a = axes[k]
+        J[:, k] = a if motion[0] == "T" else np.cross(a, t - origins[k])
+    return t, J
+
+
 def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool | None:
     """The measured tool of a :class:`~robocal.identify.result.CalibrationResult` (None
     when the calibration measured the model's end without a tool).  ``given_m``: the
@@ -168,20 +191,9 @@ def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool
     steps = _tool_steps(result.model)
     if not steps:
         return None
-    values = np.array([s.value for s in steps])
-    motions = [s.motion for s in steps]
-
-    def point(v: Array) -> Array:
-        return spatial.chain_product(motions, list(v))[:3, 3]
-
-    p = point(values)
+    p, J = _point_and_derivative([s.motion for s in steps], [s.value for s in steps])
     index = {n: i for i, n in enumerate(result.names)}
     cols = [index.get(s.name) for s in steps]
-    J = np.zeros((3, len(steps)))
-    for k in range(len(steps)):  # the point's derivative by each tool parameter (exact for Tx..)
-        h = np.zeros(len(steps))
-        h[k] = 1e-7
-        J[:, k] = (point(values + h) - point(values - h)) / 2e-7
     Sigma = np.zeros((len(steps), len(steps)))
     cov = np.asarray(result.covariance)
     for a, ia in enumerate(cols):
