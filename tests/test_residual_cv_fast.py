@@ -8,11 +8,14 @@ lacks, both choose the same candidate and their CV errors agree.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
 import robocal as rc
 from robocal.identify import residual as stage
+from robocal.identify import residual_cv as cv
 from robocal.identify.pipeline import calibrate_physics
 from robocal.identify.residual_cv import cross_validate_residual
 from robocal.identify.residual_fit import (
@@ -27,8 +30,13 @@ from tests.test_complete_model import poses, simulate, tilted_ur10
 from tests.test_residual import PROBE, _case, _ur10
 
 
-def _choices(model: rc.Model, data: rc.Measurements, refit_folds: bool):
-    """The CV table of ``calibrate_with_residual``'s candidates (grid 8, 24)."""
+def _choices(model: rc.Model, data: rc.Measurements, refit_folds: bool, harmonics: tuple[int, ...]):
+    """The CV table of ``calibrate_with_residual``'s candidates (on one BLAS thread, as there)."""
+    with _one_blas_thread():
+        return _table(model, data, refit_folds, harmonics)
+
+
+def _table(model: rc.Model, data: rc.Measurements, refit_folds: bool, harmonics: tuple[int, ...]):
     options = {"tool_guess": PROBE}
     base = calibrate_physics(model, data, "lm", **options)
     joints = list(range(model.dof))
@@ -37,7 +45,7 @@ def _choices(model: rc.Model, data: rc.Measurements, refit_folds: bool):
     usable, _ = fits.usable()
     names = [model.joint_names[j] for j in joints]
     table, _ = cross_validate_residual(
-        data.q, data.position, usable, names, joints, (8, 24), 5, refit_folds=refit_folds
+        data.q, data.position, usable, names, joints, harmonics, 5, refit_folds=refit_folds
     )
     return table
 
@@ -49,11 +57,11 @@ def _twin_without_errors() -> tuple[rc.Model, rc.Measurements]:
 
 @pytest.mark.parametrize("case", ["with errors", "without errors"])
 def test_linearised_folds_choose_as_the_refitted_folds(case):
-    if case == "with errors":
-        model, (data, _) = _ur10(), _case(errors=True, n_train=80, seed=6)
-    else:
-        model, data = _twin_without_errors()
-    fast, slow = _choices(model, data, False), _choices(model, data, True)
+    if case == "with errors":  # 64 training poses, m = 96: the folds' normal equations
+        model, (data, _), grid = _ur10(), _case(errors=True, n_train=80, seed=6), (4, 8)
+    else:  # 48 training poses, m = 288: the evidence's dual form from each fold's design
+        (model, data), grid = _twin_without_errors(), (8, 24)
+    fast, slow = _choices(model, data, False, grid), _choices(model, data, True, grid)
     assert fast.chosen == slow.chosen
     if case == "with errors":
         assert "angle errors" in fast.chosen  # the case exercises a residual choice
@@ -63,6 +71,29 @@ def test_linearised_folds_choose_as_the_refitted_folds(case):
         assert a.name == b.name
         assert a.cv_mean == pytest.approx(b.cv_mean, rel=0.02)
         assert a.cv_rms == pytest.approx(b.cv_rms, rel=0.02)
+
+
+def test_fold_normal_equations_give_the_folds_least_squares():
+    """All poses' normal equations minus a fold's (one pass over the poses) give the same
+    held-out errors as each fold's own least squares of the linearised physics and the
+    residual (the design of its training poses)."""
+    model, (data, _) = _ur10(), _case(errors=True, n_train=80, seed=6)
+    base = calibrate_physics(model, data, "lm", tool_guess=PROBE)
+    variants = {"geometry": {"tool_guess": PROBE}}
+    fits = stage._PhysicsFits(calibrate_physics, model, data, "lm", variants, "geometry", base)
+    full = fits.usable()[1]["geometry"]
+    names = tuple(model.joint_names)
+    problem = cv._Problem(data.q, data.position, names, tuple(range(6)), (4, 8))  # m = 96 <= 3 x 64
+    parts = np.array_split(np.random.default_rng(0).permutation(data.n), 5)
+    hypers: dict = {}
+    specs, _ = cv._fit_candidates(problem, "geometry", full, True, hypers)
+    raws = cv._fold_raws(problem, full, parts)
+    assert raws is not None
+    fast = cv._fold_errors_of_raws(problem, full, parts, raws, specs, hypers)
+    slow = cv._fold_errors(problem, functools.partial(cv._linearised, full), parts, specs, hypers)
+    assert set(fast) == {"geometry", "geometry + angle errors H=4", "geometry + angle errors H=8"}
+    for name in fast:
+        np.testing.assert_allclose(fast[name], slow[name], rtol=1e-3, atol=1e-9)
 
 
 def test_posterior_mean_is_the_fitted_coefficients():
