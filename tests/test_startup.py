@@ -30,9 +30,6 @@ with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):
 print(json.dumps(sorted(m for m in sys.modules if m in {heavy} or m.startswith("robocal.cli."))))
 """
 
-#: the modules of robocal.cli every command loads: the app, its group and the shared options
-CLI_CORE = {"robocal.cli.app", "robocal.cli.errors", "robocal.cli.options"}
-
 
 def _loaded(argv: list[str]) -> set[str]:
     """The heavy libraries and robocal.cli modules loaded by ``robocal argv`` in a fresh process."""
@@ -49,14 +46,17 @@ def _loaded(argv: list[str]) -> set[str]:
         (["robots"], {"robocal.cli.robots"}),
         (["fk", "ur10", "--q", "0,-90,90,0,90,0", "--deg"], {"robocal.cli.robots"}),
         (["simulate", "--help"], {"robocal.cli.measure"}),
-        (["validate", "--help"], {"robocal.cli.validate", "robocal.cli.reading"}),
+        (["validate", "--help"], {"robocal.cli.validate"}),
     ],
     ids=["help", "robots", "fk", "simulate-help", "validate-help"],
 )
 def test_the_command_line_starts_without_heavy_libraries(argv, command_modules):
+    from robocal.cli.app import COMMANDS
+
     loaded = _loaded(argv)
     assert loaded & set(HEAVY) == set()
-    assert loaded - CLI_CORE == command_modules  # only the module of the command that runs
+    registering = {f"robocal.cli.{module}" for module, _ in COMMANDS.values()}
+    assert loaded & registering == command_modules  # only the module of the command that runs
 
 
 def test_help_lists_the_commands_without_numpy():
@@ -117,3 +117,29 @@ def test_lazy_exports_keep_the_functions_named_like_modules():
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["True", "True", "[]"]  # rc.compensate: the subpackage, not a function
+
+
+def test_the_calibration_clock_stops_while_numba_compiles():
+    """A calibration's ``seconds`` (result.json, the report's calibration time) come from
+    work_clock: a compilation between two readings is not counted, and first_use reports it
+    apart."""
+    import io
+    import time
+
+    import numba
+    from rich.console import Console
+
+    from robocal.identify import pipeline
+    from robocal.identify.kernel_cache import compile_seconds, first_use, work_clock
+
+    assert pipeline.work_clock is work_clock  # the clock the calibration times itself with
+    out = io.StringIO()
+    compiled_before, work_start, wall_start = compile_seconds(), work_clock(), time.perf_counter()
+    with first_use(Console(file=out, width=200), min_seconds=0.0):
+        square = numba.njit(lambda x: x * x + 1.0)  # a new function: compiled here, not cached
+        assert square(3.0) == 10.0
+    work, wall = work_clock() - work_start, time.perf_counter() - wall_start
+    compiling = compile_seconds() - compiled_before
+    assert compiling > 0.0
+    assert work == pytest.approx(wall - compiling, abs=1e-3)
+    assert "compiling robocal's kernels took" in out.getvalue()

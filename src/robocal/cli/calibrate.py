@@ -302,15 +302,13 @@ def _physics_only_held_out(result, test):
 def _calibrate(model, train, data_path: Path, settings: dict):
     """rc.calibrate with a spinner; the data's problem as one line naming the file."""
     import robocal as rc
-    from robocal.identify.kernel_cache import FIRST_USE_NOTICE, kernels_to_compile
+    from robocal.identify.kernel_cache import first_use
 
     what = settings["method"] + (
         ", choosing the model by cross-validation" if settings["residual"] != "none" else ""
     )
-    if kernels_to_compile():
-        console.print(FIRST_USE_NOTICE, style="dim", highlight=False)
     try:
-        with console.status(f"calibrating {model.name} on {train.n} poses ({what}) ..."):
+        with first_use(console), console.status(f"calibrating {model.name} on {train.n} poses ({what}) ..."):
             return rc.calibrate(model, train, **settings)
     except ValueError as err:
         message = as_cli_text(str(err))  # the data's problem: name the file unless the message does

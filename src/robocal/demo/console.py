@@ -118,19 +118,20 @@ class Steps:
         from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
         from robocal.console import console
-        from robocal.identify.kernel_cache import FIRST_USE_NOTICE, kernels_to_compile
+        from robocal.identify.kernel_cache import first_use
 
-        if kernels_to_compile():
-            console.print(FIRST_USE_NOTICE, style="dim", highlight=False)
-        with Progress(
-            SpinnerColumn(),
-            TextColumn("[progress.description]{task.description}"),
-            BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
-            TimeElapsedColumn(),
-            console=console,
-            transient=False,
-        ) as progress:
+        with (
+            first_use(console),
+            Progress(
+                SpinnerColumn(),
+                TextColumn("[progress.description]{task.description}"),
+                BarColumn(),
+                TextColumn("{task.completed}/{task.total}"),
+                TimeElapsedColumn(),
+                console=console,
+                transient=False,
+            ) as progress,
+        ):
             self._progress = progress
             self._task = progress.add_task("robocal demo", total=len(self.names))
             yield self
