@@ -281,6 +281,8 @@ def sections_seed003(numbers: dict[str, Any]) -> list[Section]:
         sections += _sections_chapter_3(t34, numbers.get("table_3_4_notes", ()))
     if "inclinometer" in numbers:
         sections.append(_section_inclinometer(numbers["inclinometer"]))
+    if "pen" in numbers:
+        sections.append(_section_pen(numbers["pen"]))
     if "calibration_average_dP" not in numbers:
         return sections
     return [*sections, _section_chapter_4(numbers), _section_chapter_5(numbers)]
@@ -475,6 +477,14 @@ def _section_inclinometer(inc: dict[str, Any]) -> Section:
     return Section(
         "Ch. 4-5: joint parameters from inclinometer readings (Tables 4.3, 4.4, 5.2)", tuple(rows), notes
     )
+
+
+def _section_pen(pen: dict[str, Any]) -> Section:
+    """§5.5.2's pen and potentiometer check of the circle and the line (seed003_pen)."""
+    from robocal.experiments.seed003_pen import pen_table
+
+    title, rows, notes = pen_table(pen)
+    return Section(title, tuple(Row(*r) for r in rows), notes)
 
 
 #: experiment -> (title, sections function)

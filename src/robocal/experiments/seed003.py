@@ -331,6 +331,9 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     trajectory = trajectory_experiment(setup, static, n_samples=n_samples)
     chapter_3 = influence_experiment(setup, noise_seeds(draws))
     inclinometer = inclinometer_experiment(setup)
+    from robocal.experiments.seed003_pen import pen_experiment, public
+
+    pen = public(pen_experiment(setup, n_samples=n_samples))
     numbers: dict[str, Any] = {
         **{k: round(held[k]["mean"], 4) for k in ("before", "conventional", "tilt_aware", "simultaneous")},
         "units": "mm and deg; held-out = poses not used for calibration",
@@ -343,6 +346,7 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         "trajectory": {k: v for k, v in trajectory.items() if not k.startswith("_")},
         "table_3_4": chapter_3,
         "inclinometer": inclinometer,
+        "pen": pen,
         "setup": {
             "poses": len(setup.train_q),
             "held_out_poses": len(setup.test_q),

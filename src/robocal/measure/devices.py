@@ -47,7 +47,8 @@ Noise figures and where they come from
   resolution; the defaults, 0.1 mm in the paper plane and 0.01 mm out of it, are the
   grid and height-sensor resolutions of Ha (2008), the set-up the seed cites for it
   (seed 003 §2.2, literature review).  The spring travel (±10 mm) and the paper size
-  (A4) are assumptions.
+  (A4) are assumptions.  The thesis' procedure (the trace and the potentiometer along a
+  path, pen lift, what it cannot give) is :mod:`robocal.measure.pen_trace`.
 
 The interface lives in :mod:`robocal.measure.device_base`, the plate and the pen in
 :mod:`robocal.measure.plates`; this module re-exports them, and the
