@@ -5,9 +5,10 @@ random configurations within the joint limits:
 
 * one configuration per call: robocal's direct entry points
   (:func:`robocal.model.chain_compiled.direct`: ``fk(q, data)``, ``fk_jacobian(q, data)``,
-  the outputs preallocated) and ``Model.fk(q)`` (a new array per call), against Pinocchio's
-  ``forwardKinematics`` + ``updateFramePlacement`` and ``computeFrameJacobian``
-  (LOCAL_WORLD_ALIGNED: the same ``[v; ω]`` in the base frame; it places the frame too);
+  the outputs preallocated), ``Model.fk(q)`` and ``Model.joint_jacobian(q)`` (a new array
+  per call), against Pinocchio's ``forwardKinematics`` + ``updateFramePlacement`` and
+  ``computeFrameJacobian`` (LOCAL_WORLD_ALIGNED: the same ``[v; ω]`` in the base frame; it
+  places the frame too);
 * many configurations: ``Model.fk(Q)``, ``Model.joint_jacobian(Q)`` and the direct
   ``fk_many``, against Pinocchio called once per configuration (it has no batched call).
 
@@ -100,6 +101,7 @@ def cases(name: str):
     assert fk(q, data) and np.abs(d.T - T_pin[0]).max() < 1e-12
     assert fkj(q, data) and np.abs(d.J - J_pin[0]).max() < 1e-11
     assert np.abs(model.fk(q) - T_pin[0]).max() < 1e-12
+    assert np.abs(model.joint_jacobian(q) - J_pin[0]).max() < 1e-11
     assert fk_many(Q, data, Ts, Js, True)
     assert np.abs(Ts - T_pin).max() < 1e-12 and np.abs(Js - J_pin).max() < 1e-11
     assert np.abs(model.fk(Q) - T_pin).max() < 1e-12
@@ -110,6 +112,8 @@ def cases(name: str):
         (f"{label} FK, one configuration, `Model.fk(q)` (new array)", 1, lambda: model.fk(q), pin_fk),
         (f"{label} FK + joint Jacobian, one configuration, direct `fk_jacobian(q, data)`", 1,
          lambda: fkj(q, data), pin_jacobian),
+        (f"{label} joint Jacobian, one configuration, `Model.joint_jacobian(q)` (new array)", 1,
+         lambda: model.joint_jacobian(q), pin_jacobian),
         (f"{label} FK, {N_MANY:,} configurations, `Model.fk(Q)`", N_MANY, lambda: model.fk(Q), pin_fk_many),
         (f"{label} FK, {N_MANY:,} configurations, direct `fk_many`", N_MANY,
          lambda: fk_many(Q, data, Ts, Js, False), pin_fk_many),

@@ -226,10 +226,11 @@ def test_direct_entry_points_refuse_what_does_not_fit():
 
 @pytest.mark.parametrize("name", sorted(MODELS))
 def test_model_fk_of_one_configuration_takes_every_layout(name):
-    """``Model.fk(q)`` of one configuration (the kernel's wrapper called without numba's
-    dispatch) equals the numpy path for float64 vectors of any strides, alignment or
-    writeability, and for the inputs the wrapper must not see (other dtypes, byte order,
-    subclasses, lists) through the general path; a new array per call."""
+    """``Model.fk(q)`` and ``Model.joint_jacobian(q)`` of one configuration (the kernels'
+    wrappers called without numba's dispatch) equal the general paths for float64 vectors
+    of any strides, alignment or writeability, and for the inputs the wrapper must not see
+    (other dtypes, byte order, subclasses, lists) through the general path; a new array
+    per call."""
     model = MODELS[name]()
     rng = np.random.default_rng(17)
     q = rng.uniform(-2.5, 2.5, model.dof)
@@ -243,9 +244,13 @@ def test_model_fk_of_one_configuration_takes_every_layout(name):
     inputs = [q, wide, unaligned, readonly, q.astype(">f8"), q.astype(np.float32).astype(float), list(q)]
     inputs += [np.asarray(q).view(np.recarray).view(np.ndarray), q.astype(np.longdouble)]
     for x in inputs:
-        close(model.fk(x), model.fk(np.asarray(x, dtype=float), compiled=False))
+        as_float = np.asarray(x, dtype=float)
+        close(model.fk(x), model.fk(as_float, compiled=False))
+        J_want = model.joint_jacobian(as_float[None])[0]  # the general (batched) path
+        np.testing.assert_allclose(model.joint_jacobian(x), J_want, rtol=0, atol=TOL)
     close(model.fk(q), want)
     assert model.fk(q) is not model.fk(q)
+    assert model.joint_jacobian(q) is not model.joint_jacobian(q)
     assert not np.shares_memory(model.fk(q), model._fk_one_data)
     if model.dof == 6:
         qi = np.arange(6)  # int64: same item size as float64, so must not reach the wrapper
@@ -253,8 +258,10 @@ def test_model_fk_of_one_configuration_takes_every_layout(name):
 
 
 def test_model_fk_of_one_configuration_refuses_what_does_not_fit():
-    """A wrong length or NaN/inf: the general path's ValueError, not a frame."""
+    """A wrong length or NaN/inf: the general path's ValueError, not a frame or Jacobian."""
     model = rc.robot("ur10")
     for bad in (np.zeros(5), np.zeros(7), np.array([0, 0, np.nan, 0, 0, 0.0]), np.zeros((1, 1, 6))):
         with pytest.raises(ValueError):
             model.fk(bad)
+        with pytest.raises(ValueError):
+            model.joint_jacobian(bad)

@@ -51,6 +51,7 @@ from robocal.model.chain_compiled import (
     FLOAT64,
     evaluate_compiled,
     fk_one_entry,
+    joint_jacobian_one,
     kernel_data,
     kernel_evaluate,
     kernel_forward,
@@ -257,7 +258,7 @@ class Model:
             # one configuration (the interactive case): ~0.6 µs, kernel called without dispatch
             one = FK_ONE[0] if FK_ONE else fk_one_entry(compiled)
             T = np.empty((4, 4))
-            if compiled is not False and one is not None and one(q, self._fk_one_data, T):
+            if compiled is not False and one is not None and one[0](q, self._fk_one_data, T):
                 return T  # else the general path says what is wrong
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
@@ -294,10 +295,8 @@ class Model:
     # ------------------------------------------------------- compiled kernels (numba)
     @cached_property
     def _fk_one_data(self) -> Array:
-        """:func:`robocal.model.kernels.pack_one` of this model: like :attr:`_plan` and
-        :attr:`_kernel_segments`, a constant of the model's values (never written by the
-        kernels), not a work array; the outputs are the caller's (a new array per
-        :meth:`fk` call, or :func:`robocal.model.chain_compiled.direct`'s ``data``)."""
+        """:func:`robocal.model.kernels.pack_one` of this model: a constant of its values (as
+        :attr:`_plan`), not a work array: the outputs are the caller's."""
         from robocal.model import kernels
 
         plan = self._plan
@@ -483,6 +482,9 @@ class Model:
     def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
         """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
+        one = type(q) is np.ndarray and q.ndim == 1 and q.dtype is FLOAT64 and perturbations is None
+        if one and (J := joint_jacobian_one(self, q)) is not None:  # one configuration: ~0.7 µs
+            return J
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(None)

@@ -21,6 +21,7 @@ __all__ = [
     "direct",
     "evaluate_compiled",
     "fk_one_entry",
+    "joint_jacobian_one",
     "kernel_data",
     "kernel_evaluate",
     "kernel_forward",
@@ -56,11 +57,12 @@ def load_kernels(compiled: bool | None):
     return kernels
 
 
-def fk_one_entry(compiled: bool | None):
-    """:func:`robocal.model.kernels.fk_one` ``(q, packed, T) -> bool`` for a float64 ``q`` of
-    one dimension (any strides or alignment), a packed model and a C-ordered ``(4, 4)``
-    ``T``, called without numba's dispatch (kept in :data:`FK_ONE`); None without the
-    kernels (``compiled``: as for :func:`load_kernels`).
+def fk_one_entry(compiled: bool | None) -> tuple[Any, Any] | None:
+    """:func:`robocal.model.kernels.fk_one` ``(q, packed, T) -> bool`` and
+    :func:`~robocal.model.kernels.fk_jacobian_one` ``(q, packed, T, J) -> bool`` for a float64
+    ``q`` of one dimension (any strides or alignment), a packed model and C-ordered ``T``
+    ``(4, 4)`` and ``J`` ``(6, dof)``, called without numba's dispatch (kept in
+    :data:`FK_ONE`); None without the kernels (``compiled``: as for :func:`load_kernels`).
 
     Why: numba's dispatcher types every argument on every call (about 0.07 µs of the 0.4 µs
     of a one-configuration FK); the compiled wrapper of one explicit signature skips that.
@@ -76,14 +78,34 @@ def fk_one_entry(compiled: bool | None):
     from numba import types
 
     f64 = types.float64
-    signature = (types.Array(f64, 1, "A", aligned=False), types.Array(f64, 1, "C"), types.Array(f64, 2, "C"))
-    kernels.fk_one.compile(signature)  # from numba's cache after the first time
-    try:
-        entry = kernels.fk_one.overloads[signature].entry_point
-    except (AttributeError, KeyError):  # another numba's internals: its dispatcher then
-        entry = kernels.fk_one
-    FK_ONE.append(entry)
-    return entry
+    q, packed, out = (
+        types.Array(f64, 1, "A", aligned=False),
+        types.Array(f64, 1, "C"),
+        types.Array(f64, 2, "C"),
+    )
+    entries = []
+    for kernel, signature in (
+        (kernels.fk_one, (q, packed, out)),
+        (kernels.fk_jacobian_one, (q, packed, out, out)),
+    ):
+        kernel.compile(signature)  # from numba's cache after the first time
+        try:
+            entries.append(kernel.overloads[signature].entry_point)
+        except (AttributeError, KeyError):  # another numba's internals: its dispatcher then
+            entries.append(kernel)
+    FK_ONE.append((entries[0], entries[1]))
+    return FK_ONE[-1]
+
+
+def joint_jacobian_one(model: Any, q: Array) -> Array | None:
+    """``Model.joint_jacobian`` ``(6, dof)`` of one configuration ``q`` (let through as for
+    :func:`fk_one_entry`) by the compiled kernel; None without numba or when ``q`` does not
+    fit (the general path then says why)."""
+    one = FK_ONE[0] if FK_ONE else fk_one_entry(None)
+    J = np.empty((6, model.dof))
+    if one is not None and one[1](q, model._fk_one_data, np.empty((4, 4)), J):
+        return J
+    return None
 
 
 def kernel_data(kernels, plan: Plan, dof: int, values: Array) -> tuple[Array, Array, Array]:
