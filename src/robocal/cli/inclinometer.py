@@ -104,13 +104,15 @@ def _simulate(model, true, poses: Path, out: Path, noise: str | None, seed: int 
 def _rows(fit) -> list[tuple[str, str, str]]:
     """``(parameter, estimate ± 1σ, unit)`` in the thesis' units (deg, kgf·m/deg)."""
     from robocal.model.files import STIFFNESS_SCALE
+    from robocal.model.joints import effect_of
 
     kgfm = STIFFNESS_SCALE["kgf*m/deg"]
     rows = []
     for name, v, s in zip(fit.names, fit.values, fit.sigma, strict=True):
-        if name.startswith("compliance_"):
+        effect = effect_of(name)
+        if effect is not None and effect[0] == "compliance":
             k = f"{1 / v / kgfm:.1f} ± {s / v**2 / kgfm:.1f}" if v > 2 * s else "not above zero"
-            rows.append((f"stiffness_{name[len('compliance_') :]}", k, "kgf·m/deg"))
+            rows.append((f"stiffness_{effect[1]}", k, "kgf·m/deg"))
         else:
             rows.append((name, f"{math.degrees(v):.4f} ± {math.degrees(s):.4f}", "deg"))
     return rows

@@ -45,7 +45,14 @@ from scipy.linalg import qr
 from scipy.spatial.transform import Rotation
 
 from robocal.measure.inclinometer import GRAVITY, Inclinometer, TiltReadings, readings, up_vector
-from robocal.model.joints import DEADBAND, EFFECT_PREFIXES, contact_angle, effects_from_values, load_moments
+from robocal.model.joints import (
+    DEADBAND,
+    EFFECT_PREFIXES,
+    contact_angle,
+    effect_of,
+    effects_from_values,
+    load_moments,
+)
 
 __all__ = [
     "TiltFit",
@@ -144,8 +151,10 @@ def _split(names: Sequence[str]) -> tuple[list[tuple[str, str, int]], list[int]]
             continue
         if name.startswith(GEOM):
             continue
-        kind = next(k for k in KINDS if name.startswith(EFFECT_PREFIXES[k][0]))
-        effects.append((kind, name[len(EFFECT_PREFIXES[kind][0]) :], i))
+        kind, joint = effect_of(name) or ("", "")
+        if kind not in KINDS:
+            raise ValueError(f"{name!r} is no joint-effect coefficient of {', '.join(KINDS)}")
+        effects.append((kind, joint, i))
     return effects, offsets
 
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from robocal.csvfile import short
 from robocal.measure.constraint_set import KINDS, ConstraintSet
+from robocal.units import unit_factor
 
 __all__ = [
     "KIND_COLUMNS",
@@ -157,7 +158,7 @@ def read_constraints(
     if not any(set(cols) <= set(header) for cols in KIND_COLUMNS.values()):
         raise ConstraintFileError(f"{path}: no constraint column (point, plane, or pair and distance_mm)")
     col = {name: header.index(name) for name in header}
-    scale = math.pi / 180 if angle_unit == "deg" else 1.0
+    scale = unit_factor(angle_unit, "angle", "angle_unit")
     q, point, plane, xyz, pair, length = [], [], [], [], [], []
     for number, cells in rows:
         if len(cells) != len(header):
