@@ -17,7 +17,7 @@ import robocal as rc
 from robocal.identify import residual as stage
 from robocal.identify import residual_cv as cv
 from robocal.identify.pipeline import calibrate_physics
-from robocal.identify.residual_cv import cross_validate_residual
+from robocal.identify.residual_cv import cross_validate_residual, cross_validate_residual_refitted
 from robocal.identify.residual_fit import (
     Hyper,
     _grams,
@@ -44,9 +44,8 @@ def _table(model: rc.Model, data: rc.Measurements, refit_folds: bool, harmonics:
     fits = stage._PhysicsFits(calibrate_physics, model, data, "lm", variants, "geometry", base)
     usable, _ = fits.usable()
     names = [model.joint_names[j] for j in joints]
-    table, _ = cross_validate_residual(
-        data.q, data.position, usable, names, joints, harmonics, 5, refit_folds=refit_folds
-    )
+    cv_of = cross_validate_residual_refitted if refit_folds else cross_validate_residual
+    table, _ = cv_of(data.q, data.position, usable, names, joints, harmonics, 5)
     return table
 
 

@@ -29,7 +29,14 @@ from robocal.identify.residual_fit import (
     posterior_mean,
 )
 
-__all__ = ["DEFAULT_HARMONICS", "CVCandidate", "CVTable", "PhysicalFit", "cross_validate_residual"]
+__all__ = [
+    "DEFAULT_HARMONICS",
+    "CVCandidate",
+    "CVTable",
+    "PhysicalFit",
+    "cross_validate_residual",
+    "cross_validate_residual_refitted",
+]
 
 Array = NDArray[np.float64]
 
@@ -141,21 +148,52 @@ def cross_validate_residual(
     folds: int = 5,
     seed: int = 0,
     include_none: bool = True,
-    refit_folds: bool = False,
+    normals: dict[str, Any] | None = None,
 ) -> tuple[CVTable, dict[str, Hyper]]:
     """k-fold CV over physical variants × (no residual, Fourier residual with H harmonics).
 
     ``physics[name](train_indices)`` calibrates that physical variant on those training
-    poses.  By default it is called on all poses only: each fold's physical fit is the
-    Gauss-Newton step from the fit on all poses to the fold's training poses
-    (:func:`_linearised`, the fit's linear response, which is also what the folds add for
-    the residual); ``refit_folds=True`` calibrates the physics again on every fold (the
-    reference: 5 folds x 2 variants of nonlinear fits with their own screening and pruning,
-    most of the model choice's time before).  Returns the table and the hyperparameters
-    found for each residual candidate on all poses.
+    poses; it is called on all poses only: each fold's physical fit is the Gauss-Newton step
+    from the fit on all poses to the fold's training poses (:func:`_linearised`, the fit's
+    linear response, which is also what the folds add for the residual), solved from the
+    normal equations of all poses minus the fold's (:func:`_fold_raws`).  The reference
+    that calibrates the physics again on every fold is
+    :func:`cross_validate_residual_refitted`.  Returns the table and the hyperparameters
+    found for each residual candidate on all poses; ``normals``, when given, receives each
+    residual candidate's normal equations on all poses by name (the final fit's).
     """
     problem = _Problem(q, position, tuple(joint_names), tuple(joint_index), tuple(harmonics))
-    n = len(q)
+    return _cross_validate(problem, physics, folds, seed, include_none, False, normals)
+
+
+def cross_validate_residual_refitted(
+    q: Array,
+    position: Array,
+    physics: dict[str, Callable[[Array], PhysicalFit]],
+    joint_names: Sequence[str],
+    joint_index: Sequence[int],
+    harmonics: Sequence[int] = DEFAULT_HARMONICS,
+    folds: int = 5,
+    seed: int = 0,
+    include_none: bool = True,
+) -> tuple[CVTable, dict[str, Hyper]]:
+    """:func:`cross_validate_residual` with the physics calibrated again on every fold (the
+    reference: 5 folds x 2 variants of nonlinear fits with their own screening and pruning,
+    most of the model choice's time before the linearised folds)."""
+    problem = _Problem(q, position, tuple(joint_names), tuple(joint_index), tuple(harmonics))
+    return _cross_validate(problem, physics, folds, seed, include_none, True, None)
+
+
+def _cross_validate(
+    problem: _Problem,
+    physics: dict[str, Callable[[Array], PhysicalFit]],
+    folds: int,
+    seed: int,
+    include_none: bool,
+    refit_folds: bool,
+    normals: dict[str, Any] | None,
+) -> tuple[CVTable, dict[str, Hyper]]:
+    n = len(problem.q)
     parts = np.array_split(np.random.default_rng(seed).permutation(n), folds)
     rows: list[CVCandidate] = []
     hypers: dict[str, Hyper] = {}
@@ -165,7 +203,7 @@ def cross_validate_residual(
         t1 = time.perf_counter()
         raws = None if refit_folds else _fold_raws(problem, full, parts)
         specs, fit_time = _fit_candidates(
-            problem, pname, full, include_none, hypers, raws, time.perf_counter() - t1
+            problem, pname, full, include_none, hypers, raws, time.perf_counter() - t1, normals
         )
         if raws is not None:
             errors = _fold_errors_of_raws(problem, full, parts, raws, specs, hypers)
@@ -208,11 +246,12 @@ def _fit_candidates(
     hypers: dict[str, Hyper],
     raws: list[_Raw] | None = None,
     raw_seconds: float = 0.0,
+    normals: dict[str, Any] | None = None,
 ) -> tuple[list[_Spec], dict[str, float]]:
     """The candidates of one physical variant and the time of their fit on all poses (s); the
     residual's hyperparameters found on all poses go into ``hypers`` (the folds' start).
     ``raws``: the folds' unprojected normal equations (:func:`_fold_raws`, their sum is all
-    poses'), taking ``raw_seconds``."""
+    poses'), taking ``raw_seconds``; ``normals``: as :func:`cross_validate_residual`."""
     q, names, index, harmonics = problem.q, problem.joint_names, problem.joint_index, problem.harmonics
     specs: list[_Spec] = [(pname, None)] if include_none else []
     fit_time: dict[str, float] = {pname: full.result.seconds}
@@ -228,6 +267,8 @@ def _fit_candidates(
         name = f"{pname} + angle errors H={H}"
         hyper = _evidence(_template(names, index, H), grams[H], None)
         hypers[name] = hyper
+        if normals is not None:
+            normals[name] = grams[H]
         fit_time[name] = full.result.seconds + time.perf_counter() - t1
         specs.append((name, H))
     return specs, fit_time
