@@ -143,3 +143,19 @@ def test_the_calibration_clock_stops_while_numba_compiles():
     assert compiling > 0.0
     assert work == pytest.approx(wall - compiling, abs=1e-3)
     assert "compiling robocal's kernels took" in out.getvalue()
+
+
+def test_validate_and_report_of_a_folder_load_no_fitting_or_statistics_library(tmp_path):
+    """Reading a calibration folder fits nothing: ``validate`` loads neither scipy.optimize (the
+    solvers) nor scipy.stats (Student's t comes from scipy.special); ``report`` no scipy.stats
+    (the learned residual's module still imports scipy.optimize at its top)."""
+    from robocal.demo import run_demo
+
+    folder = tmp_path / "calibration"
+    run_demo(out=folder, quick=True, verbose=False)
+    unused = {"scipy.optimize", "scipy.stats", "pinocchio", "dask", "distributed", "sklearn"}
+    validate = _loaded(["validate", str(folder)])
+    report = _loaded(["report", str(folder), "--out", str(tmp_path / "report.html")])
+    assert validate & unused == set()
+    assert report & (unused - {"scipy.optimize"}) == set()
+    assert (tmp_path / "report.html").stat().st_size > 0  # the probe ran the command through

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
-import scipy.optimize
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.identify.observability_indices import (
@@ -141,6 +140,8 @@ def _largest_variance(
     """The largest ``variance`` over ``points`` ``(k, dof)`` and over the local maxima found by
     L-BFGS-B (within the joint limits, central-difference gradient) from the ``polish`` best
     points: the value and its configuration ``(dof,)``."""
+    import scipy.optimize  # here: reading a calibration (robocal validate, report) needs none of it
+
     d = variance(points)
     k = int(np.argmax(d))
     best, q_best = float(d[k]), points[k].copy()

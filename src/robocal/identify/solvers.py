@@ -34,7 +34,6 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from robocal.identify.lm_numpy import BatchSolveResult
 from robocal.identify.solve_result import SolveResult
@@ -61,6 +60,8 @@ def _lm(
     tolerance: float = 1e-10,
 ) -> SolveResult:
     if loss != "linear":  # robust losses: scipy's trust-region reflective, which supports them
+        from scipy.optimize import least_squares  # on use: reading a calibration needs none of it
+
         res = least_squares(
             problem.residual,
             x0,
@@ -250,6 +251,8 @@ def _bounded(
         return np.linalg.norm(problem.residual(x).reshape(-1, width), axis=1)
 
     def weighted_fit(x, w):
+        from scipy.optimize import least_squares
+
         def fun(z):
             return (problem.residual(z).reshape(-1, width) * w[:, None]).reshape(-1)
 
