@@ -7,9 +7,11 @@ Modules: :mod:`~robocal.cli.app` (the app, ``--version``, the registration of th
 ``experiments`` (reproduce), ``compensate``, ``export``, ``report``, ``iso9283``, ``study``
 (study, fleet), ``gui``.
 
-Start-up: these modules import only typer and rich at the top; each command imports what it
-uses (tests/test_startup.py checks that ``robocal --help`` loads none of scipy.stats,
-Pinocchio, plotly, Dask, scikit-learn).
+Start-up: ``robocal --help`` lists the commands from :data:`robocal.cli.app.COMMANDS` without
+importing a command module; a command's module is imported when the command runs, and it
+imports at the top only typer, rich and the modules of :mod:`robocal.cli`, each command the
+rest when it runs (tests/test_startup.py checks the modules ``--help``, ``robots``, ``fk``,
+``validate`` and ``report`` load).
 """
 
 from robocal.cli.app import app, main
