@@ -28,6 +28,8 @@ def finite_or_none(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: finite_or_none(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
+        if all(type(v) is float for v in value):  # numbers only (a covariance: 166k): 4x faster
+            return [v if math.isfinite(v) else None for v in value]
         return [finite_or_none(v) for v in value]
     return value
 

@@ -6,7 +6,6 @@ likelihood (:func:`fit_joint_fourier`; the method, memory and time:
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -17,7 +16,7 @@ from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.linalg.lapack import dtrtri
 from scipy.optimize import minimize
 
-from robocal.model.residual import FADE, JointAngleResidual, covered_intervals
+from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, one_blas_thread
 
 __all__ = ["Hyper", "fit_joint_fourier"]
 
@@ -54,28 +53,7 @@ def _gram(
         return _gram_blocks(q, r, P, template, J)
 
 
-_BLAS_LIMITED = [0]  # depth of nested _one_blas_thread contexts
-
-
-@contextlib.contextmanager
-def _one_blas_thread():
-    """A context in which BLAS/LAPACK run on one thread (threadpoolctl): the evidence's
-    factorisations of ``(m, m)`` matrices ran 4x slower with OpenBLAS's threads on a shared
-    2-core machine, and its idle threads spinning doubled the default calibration's CPU time;
-    without threadpoolctl, nothing changes.  Nested contexts cost nothing (setting the limit
-    costs 0.4 ms: the model choice enters hundreds)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        yield
-        return
-    limit = threadpool_limits(1, user_api="blas") if _BLAS_LIMITED[0] == 0 else contextlib.nullcontext()
-    _BLAS_LIMITED[0] += 1
-    try:
-        with limit:
-            yield
-    finally:
-        _BLAS_LIMITED[0] -= 1
+_one_blas_thread = one_blas_thread  # the stage's BLAS limit (defined with the residual model)
 
 
 @dataclass(frozen=True)
