@@ -69,7 +69,8 @@ PerPose = Annotated[
     bool,
     typer.Option(
         "--per-pose",
-        help="with --method pinv: seed 003's per-pose pseudo-inverse Jᵀ(JJᵀ)⁻¹ at each pose, then the "
+        help="with --method pinv: the Katana thesis' (seed 003) per-pose "
+        "pseudo-inverse Jᵀ(JJᵀ)⁻¹ at each pose, then the "
         "mean of the per-pose sets (instead of (JᵀJ)⁻¹Jᵀ over all poses)",
     ),
 ]
@@ -78,7 +79,8 @@ Bounds = Annotated[
     typer.Option(
         "--bounds",
         metavar="default|widened",
-        help="with --method bounded: default (seed 001: every robot parameter within ±5 mm, ±2° of its "
+        help="with --method bounded: default (Li et al. 2016, seed 001: every robot "
+        "parameter within ±5 mm, ±2° of its "
         "nominal) | widened (wider for parameters that absorb redundant ones; warned)",
     ),
 ]
@@ -99,7 +101,8 @@ Effects = Annotated[
     typer.Option(
         "--effects",
         metavar="none|predict|identify|KINDS",
-        help="joint effects: none | predict (from the model's joint_effects, seed 003's two-stage "
+        help="joint effects: none | predict (from the model's joint_effects, the Katana thesis' "
+        "(seed 003) two-stage "
         'method) | identify (default of --level 3) | kinds, e.g. "compliance,backlash"',
     ),
 ]

@@ -119,9 +119,9 @@ def _rows(fit) -> list[tuple[str, str, str]]:
 
 
 def identify_tilt_file(
-    file: Path, robot: str, nominal_geometry: bool, json_out: Path | None, force: bool
+    file: Path, robot: str, exact_geometry: bool, json_out: Path | None, force: bool
 ) -> None:
-    """Identify clearance, backlash and stiffness from inclinometer readings (seed 003)."""
+    """Identify clearance, backlash and stiffness from inclinometer readings (Katana thesis, seed 003)."""
     from rich.table import Table
 
     from robocal.cli.options import resolve_model
@@ -134,7 +134,7 @@ def identify_tilt_file(
     try:
         data = read_tilt_readings(file, model)
         sensors = _sensors(model, tuple(dict.fromkeys(data.link)))
-        fit = identify_tilt(model, data, sensors, geometry=not nominal_geometry)
+        fit = identify_tilt(model, data, sensors, geometry=not exact_geometry)
     except (ValueError, np.linalg.LinAlgError) as err:
         raise fail(str(err)) from None
     console.print(

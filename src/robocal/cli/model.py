@@ -63,7 +63,7 @@ def build_command(
     tip: TipOption = None,
     force: Force = False,
 ) -> None:
-    """Build a complete, minimal, singularity-free model from joint geometry (seed 000)."""
+    """Build a complete, minimal, singularity-free model from joint geometry (Motta et al., seed 000)."""
     refuse_overwrite(out, force, "model file")
     from robocal.model.builder import GeometryError, load_geometry
     from robocal.model.files import save_model

@@ -162,7 +162,8 @@ def _print(numbers: dict[str, Any]) -> None:
 
     pub = PUBLISHED
     console.print(
-        f"[bold]seed 001[/] — calibration table, bounded L1 calibration, compensated commands "
+        f"[bold]Li et al. 2016 (seed 001)[/] — calibration table, bounded L1 calibration, "
+        f"compensated commands "
         f"({pub['source']})",
         highlight=False,
         markup=True,
@@ -234,7 +235,8 @@ def _report(numbers: dict[str, Any]) -> str:
         "# Seed 001 reproduced: calibration table, bounded L1 calibration, compensation",
         "",
         f"Table arm: seed {numbers['arm_seed']}; initial mean error at points 1-6 "
-        f"{numbers['initial_error_mm']:.3f} mm (seed 001: {PUBLISHED['initial_mean_error_mm']:.3f} mm).",
+        f"{numbers['initial_error_mm']:.3f} mm "
+        f"(Li et al. 2016: {PUBLISHED['initial_mean_error_mm']:.3f} mm).",
         "",
     ]
     for key, title in (("points", "Table 4: verification points 1-6"), ("trajectory", "Table 6: spline")):
