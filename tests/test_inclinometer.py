@@ -210,7 +210,7 @@ def test_simulate_and_identify_from_the_command_line(tmp_path, katana):
             got = fit["parameters"].get(f"{kind}_{effect['joint']}")
             if got is not None:
                 assert abs(math.degrees(got["value"]) - effect[key]) < 4 * math.degrees(got["sigma"]), effect
-    nominal = run(app, ["data", "tilt", str(out), "katana450", "--nominal-geometry"])
+    nominal = run(app, ["data", "tilt", str(out), "katana450", "--exact-geometry"])
     assert nominal.exit_code == 0 and "residual" in nominal.output
     bad = run(app, [*args, "--force", "--noise", "5deg"])
     assert bad.exit_code == 2 and "--noise" in bad.output and "Traceback" not in bad.output

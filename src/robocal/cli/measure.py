@@ -201,14 +201,16 @@ def data_check(
 def data_tilt(
     file: Annotated[Path, typer.Argument(metavar="READINGS", help="inclinometer readings CSV")],
     robot: Annotated[str, typer.Argument(metavar="ROBOT", help="catalog name or model file (.yaml)")],
-    nominal: Annotated[bool, typer.Option("--nominal-geometry", help="fit no angle of the geometry")] = False,
+    exact_geometry: Annotated[
+        bool, typer.Option("--exact-geometry", help="take the geometry as exact: fit no angle of it")
+    ] = False,
     json_out: Annotated[Path | None, typer.Option("--json", metavar="FILE", help="estimates (SI)")] = None,
     force: Force = False,
 ) -> None:
     """Identify clearance, backlash and stiffness from inclinometer readings (docs/inclinometer.md)."""
     from robocal.cli.inclinometer import identify_tilt_file
 
-    identify_tilt_file(file, robot, nominal, json_out, force)
+    identify_tilt_file(file, robot, exact_geometry, json_out, force)
 
 
 # -------------------------------------------------------------------- simulate
