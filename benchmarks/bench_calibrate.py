@@ -18,10 +18,10 @@ measuring a probe at an unknown tool offset with 20 µm noise, 100 random poses.
 
 FIGAROH, which pins its own dependencies, runs in its own environment on its own shipped
 TIAGo data in ``benchmarks/bench_peers.py`` (robocal 4 ms against FIGAROH's 82 ms for
-the same joint-offset calibration, README "Peers").
+the same joint-offset calibration, docs/performance.md "Peers").
 
-Run: ``python benchmarks/bench_calibrate.py [--repeats 7] [--poses 100] [--md README.md]`` (``--md``
-writes the README's ``<!-- bench:calibrate -->`` block, with each stage's CPU time).
+Run: ``python benchmarks/bench_calibrate.py [--repeats 7] [--poses 100] [--md docs/performance.md]`` (``--md``
+writes the performance page's ``<!-- bench:calibrate -->`` block, with each stage's CPU time).
 """
 
 from __future__ import annotations
@@ -224,7 +224,7 @@ def main(argv=None) -> int:
     parser.add_argument("--poses", type=int, default=100)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--md", metavar="README", help="write the README's bench:calibrate block")
+    parser.add_argument("--md", metavar="PAGE", help="write the performance page's bench:calibrate block")
     args = parser.parse_args(argv)
     if args.md and (why := readme_table.check(args.md, "calibrate")):
         parser.error(why)
@@ -269,7 +269,8 @@ def main(argv=None) -> int:
     _where_the_limit_is(runs, theirs, fd, result, data, t_ours)
     if args.md:
         body = [
-            f"`python benchmarks/bench_calibrate.py --repeats {args.repeats} --md README.md` — a UR10 "
+            f"`python benchmarks/bench_calibrate.py --repeats {args.repeats} --md docs/performance.md` "
+            "— a UR10 "
             f"(complete model built from its joint geometry, probe off the flange axis), {data.n} poses, "
             f"{len(result.names)} unknowns (robot, tracker frame, probe point), 20 µm noise; CPU time, "
             "medians of interleaved rounds:",

@@ -18,8 +18,8 @@ are CPU time of this thread (``time.thread_time``: on a shared machine wall time
 waiting too), the minimum over ``--rounds`` of the mean of a batch of calls, the methods
 interleaved round by round; ratio = robocal / Pinocchio (below 1: faster).
 
-Run: ``python benchmarks/bench_fk.py [--rounds 9] [--robots ur10 puma560] [--md README.md]``
-(``--md`` writes the README's ``<!-- bench:fk -->`` block).
+Run: ``python benchmarks/bench_fk.py [--rounds 9] [--robots ur10 puma560] [--md docs/performance.md]``
+(``--md`` writes the performance page's ``<!-- bench:fk -->`` block).
 """
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--robots", nargs="+", default=["ur10"], choices=rc.robots())
-    parser.add_argument("--md", metavar="README", help="write the table into this file's bench:fk block")
+    parser.add_argument("--md", metavar="PAGE", help="write the table into this file's bench:fk block")
     args = parser.parse_args()
     if args.md and (why := readme_table.check(args.md, "fk")):
         parser.error(why)
@@ -148,7 +148,7 @@ def main() -> None:
         if args.robots != ["ur10"]:
             cmd += " --robots " + " ".join(args.robots)
         body = [
-            f"`{cmd} --md README.md` — robocal against Pinocchio {pin.__version__} in the same run "
+            f"`{cmd} --md docs/performance.md` — robocal against Pinocchio {pin.__version__} in the same run "
             f"(CPU time of the thread, minimum over {args.rounds} interleaved rounds; ratio below 1: "
             "faster than Pinocchio; Pinocchio has no batched call, its many-configuration figures "
             "are one call per configuration):",

@@ -9,9 +9,9 @@ time the process waited for a core — it is printed too); the targets of issue 
 checked against the CPU time.  Every compiled result is checked against the numpy one to
 1e-12 before timing.
 
-Run: ``python benchmarks/bench_kernels.py [--rounds 7] [--cold] [--md README.md]``
+Run: ``python benchmarks/bench_kernels.py [--rounds 7] [--cold] [--md docs/performance.md]``
 (``--cold`` also times a compilation from scratch in a temporary cache directory: tens of
-seconds; ``--md`` writes the table into the README's ``<!-- bench:kernels -->`` block).
+seconds; ``--md`` writes the table into the performance page's ``<!-- bench:kernels -->`` block).
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--cold", action="store_true", help="also time compiling from scratch")
-    parser.add_argument("--md", metavar="README", help="write the table into this file's bench:kernels block")
+    parser.add_argument("--md", metavar="PAGE", help="write the table into this file's bench:kernels block")
     args = parser.parse_args()
     rounds = args.rounds
     if args.md and (why := readme_table.check(args.md, "kernels")):
@@ -209,7 +209,8 @@ def main() -> None:
         header = ["UR10, µs per configuration, CPU (wall)", "compiled", "numpy", "speed-up", "Pinocchio",
                   "target (issue 20)"]  # fmt: skip
         body = [
-            f"`python benchmarks/bench_kernels.py --rounds {rounds}{' --cold' * args.cold} --md README.md` "
+            f"`python benchmarks/bench_kernels.py --rounds {rounds}{' --cold' * args.cold} "
+            "--md docs/performance.md` "
             f"(minimum over "
             f"{rounds} rounds; CPU time of the thread, wall time in brackets):",
             "",

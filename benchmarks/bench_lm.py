@@ -16,7 +16,7 @@ Minimum over rounds of the mean of a batch of calls, as CPU time of this thread
 (``time.thread_time``, one BLAS thread); numpy and compiled rounds interleaved.  The two
 iterations are checked to give the same solution, iterations and evaluations first.
 
-Run: ``python benchmarks/bench_lm.py [--rounds 7] [--md README.md]`` (``--md`` writes the README's
+Run: ``python benchmarks/bench_lm.py [--rounds 7] [--md docs/performance.md]`` (``--md`` writes the page's
 ``<!-- bench:lm -->`` block).
 """
 
@@ -202,7 +202,7 @@ def check_same(prob, x0, method, options) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=7)
-    parser.add_argument("--md", metavar="README", help="write the README's bench:lm block")
+    parser.add_argument("--md", metavar="PAGE", help="write the performance page's bench:lm block")
     args = parser.parse_args()
     if args.md and (why := readme_table.check(args.md, "lm")):
         parser.error(why)
@@ -271,7 +271,7 @@ def main() -> None:
     print(first_line)
     if args.md:
         body = [
-            f"`python benchmarks/bench_lm.py --rounds {args.rounds} --md README.md` — {title}:", "",
+            f"`python benchmarks/bench_lm.py --rounds {args.rounds} --md docs/performance.md` — {title}:", "",
             *readme_table.markdown_table(["", "numpy", "compiled", "ratio"], table), "",
             first_line, "", readme_table.machine(load_start),
         ]  # fmt: skip

@@ -16,8 +16,8 @@
 The 10,000-pose fits (issue 20's target: the hybrid ≤ 30 s) report wall and CPU time of
 the fit in the child (on a shared machine the wall time also counts waiting for a core).
 
-Run: ``python benchmarks/bench_residual.py [--repeats 3] [--md README.md]`` (``--md``
-writes the table into the README's ``<!-- bench:residual -->`` block).
+Run: ``python benchmarks/bench_residual.py [--repeats 3] [--md docs/tutorials/ur10-real.md]`` (``--md``
+writes the table into the UR10 tutorial's ``<!-- bench:residual -->`` block).
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def _median_time(fn, repeats: int) -> tuple[float, float, object]:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--md", metavar="README", help="write the bench:residual block")
+    parser.add_argument("--md", metavar="PAGE", help="write the bench:residual block")
     args = parser.parse_args(argv)
     if args.md and (why := readme_table.check(args.md, "residual")):
         parser.error(why)
@@ -117,7 +117,8 @@ def main(argv: list[str] | None = None) -> None:
         header = ["real UR10 (series A)", "physics (complete + compliance)", "hybrid (`residual=\"auto\"`)",
                   "ratio", "target (issue 20)"]  # fmt: skip
         body = [
-            f"`python benchmarks/bench_residual.py --repeats {args.repeats} --md README.md`; chosen by "
+            f"`python benchmarks/bench_residual.py --repeats {args.repeats} "
+            "--md docs/tutorials/ur10-real.md`; chosen by "
             f"cross-validation: {chosen} (1,000 poses), {chosen_big} (10,000 poses), m = {size} "
             "coefficients at 1,000 poses:",
             "",

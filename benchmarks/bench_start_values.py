@@ -11,8 +11,8 @@
 Per-call times: the minimum over rounds of timeit batches (CPU time of this thread, one BLAS
 thread).  Both implementations' results are checked to agree to 1e-12 before timing.
 
-Run: ``python benchmarks/bench_start_values.py [--rounds 15] [--cold] [--md README.md]`` (``--md``
-writes the README's ``<!-- bench:start_values -->`` block).
+Run: ``python benchmarks/bench_start_values.py [--rounds 15] [--cold] [--md docs/performance.md]`` (``--md``
+writes the performance page's ``<!-- bench:start_values -->`` block).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=15)
     parser.add_argument("--cold", action="store_true", help="also time a compilation from scratch")
-    parser.add_argument("--md", metavar="README", help="write the README's bench:start_values block")
+    parser.add_argument("--md", metavar="PAGE", help="write the performance page's bench:start_values block")
     args = parser.parse_args()
     if args.md and (why := readme_table.check(args.md, "start_values")):
         parser.error(why)
@@ -135,7 +135,7 @@ def main() -> None:
     print(*lines, sep="\n")
     if args.md:
         command = f"python benchmarks/bench_start_values.py --rounds {args.rounds}"
-        command += " --cold --md README.md" if args.cold else " --md README.md"
+        command += " --cold --md docs/performance.md" if args.cold else " --md docs/performance.md"
         body = [
             f"`{command}` — {title}:",
             "", *readme_table.markdown_table(["case", "numpy", "kernel", "speed-up"], table), "",

@@ -41,7 +41,7 @@ the main process's by a third, 1.76x -> 1.85x for 800 robots.  Shrinking the las
 (guided scheduling) was tried and cost more than the idle tail it saved.
 
 Run: ``python benchmarks/bench_throughput.py [--robots 400] [--rounds 3] [--model built|dh|both]
-[--md README.md]`` (about two minutes for both models; ``--md`` writes the README's
+[--md docs/performance.md]`` (about two minutes for both models; ``--md`` writes the page's
 ``<!-- bench:throughput -->`` block).
 """
 
@@ -140,7 +140,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds; the best is reported")
     parser.add_argument("--model", choices=["built", "dh", "both"], default="both")
     parser.add_argument("--malloc", action="store_true", help="also Dask with its default malloc settings")
-    parser.add_argument("--md", metavar="README", help="write the README's bench:throughput block")
+    parser.add_argument("--md", metavar="PAGE", help="write the performance page's bench:throughput block")
     args = parser.parse_args()
     if args.md and (why := readme_table.check(args.md, "throughput")):
         parser.error(why)
@@ -207,7 +207,7 @@ def main() -> None:
 
 
 def _write_md(args, table, scaling, cost, load_start: str) -> None:
-    """The README's throughput block: calibrations per second per row and model."""
+    """The performance page's throughput block: calibrations per second per row and model."""
     import dask
     import distributed
 
@@ -226,7 +226,7 @@ def _write_md(args, table, scaling, cost, load_start: str) -> None:
     rows.append(["scaling, 2 workers / 1 worker (target ≥ 1.8×)", *(f"{scaling[m]:.2f}×" for m in models)])
     body = [
         f"`python benchmarks/bench_throughput.py --robots {args.robots} --rounds {args.rounds} --model "
-        f"{args.model} --md README.md` (50 poses, 200 validation poses; a complete calibration = "
+        f"{args.model} --md docs/performance.md` (50 poses, 200 validation poses; a complete calibration = "
         f"simulate + calibrate + validate; best of {args.rounds} interleaved rounds; Dask rows "
         f"{2 * args.robots} robots from the first task submitted to the last row written, the "
         "cluster's start-up and warm-up apart; *worker CPU*: the workers' CPU time per robot, *busy*: "

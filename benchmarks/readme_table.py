@@ -1,6 +1,7 @@
-"""The README's performance tables, written by the benchmarks that measure them.
+"""The documentation's performance tables, written by the benchmarks that measure them.
 
-A benchmark run with ``--md README.md`` replaces the block between
+A benchmark run with ``--md PAGE`` (``docs/performance.md``; ``docs/tutorials/ur10-real.md``
+for ``bench_residual.py``) replaces the block between
 ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->`` in that file with its table and a
 line naming the machine, the versions and the load average during the run (as the
 reproductions do with ``<!-- reproduce:NAME -->``).  The file is replaced whole

@@ -30,10 +30,21 @@ COLUMNS = (
 )
 
 
-def read(path: Path):
-    return rc.read_measurements(
-        path, length_unit="mm", decimal=",", sep=";", columns=COLUMNS, orientation="none"
-    )
+def read_or_exit(parser: argparse.ArgumentParser, path: Path):
+    """The series read with its options, or one line naming what is missing (exit 2)."""
+    if not path.is_file():
+        parser.exit(
+            2,
+            f"error: {path}: no such file; this example needs the real UR10 series "
+            "(ur10_laser_tracker/measurements_grid.csv of ../shared/data beside the clone): "
+            "pass --data PATH\n",
+        )
+    try:
+        return rc.read_measurements(
+            path, length_unit="mm", decimal=",", sep=";", columns=COLUMNS, orientation="none"
+        )
+    except (ValueError, OSError) as err:  # the reader's MeasurementFileError is a ValueError
+        parser.exit(2, f"error: {err}\n".splitlines()[0] + "\n")
 
 
 def complete_ur10() -> rc.Model:
@@ -48,7 +59,7 @@ def main(argv=None) -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--train-n", type=int, default=100)
     args = parser.parse_args(argv)
-    data = read(args.data)
+    data = read_or_exit(parser, args.data)
     dh = rc.robot("ur10")
     complete = complete_ur10()
     variants = {

@@ -26,6 +26,23 @@ COLUMNS = (
 )
 
 
+def read_or_exit(parser: argparse.ArgumentParser, path: Path):
+    """The series read with its options, or one line naming what is missing (exit 2)."""
+    if not path.is_file():
+        parser.exit(
+            2,
+            f"error: {path}: no such file; this example needs the real UR10 series "
+            "(ur10_laser_tracker/measurements_grid.csv of ../shared/data beside the clone): "
+            "pass --data PATH\n",
+        )
+    try:
+        return rc.read_measurements(
+            path, length_unit="mm", decimal=",", sep=";", columns=COLUMNS, orientation="none"
+        )
+    except (ValueError, OSError) as err:  # the reader's MeasurementFileError is a ValueError
+        parser.exit(2, f"error: {err}\n".splitlines()[0] + "\n")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=DATA)
@@ -34,9 +51,7 @@ def main(argv=None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     t = time.perf_counter()
-    data = rc.read_measurements(
-        args.data, length_unit="mm", decimal=",", sep=";", columns=COLUMNS, orientation="none"
-    )
+    data = read_or_exit(parser, args.data)
     split = data.with_split(args.train_n, seed=args.seed)
     train, test = split.split_rows("train"), split.split_rows("test")
     model = complete_model("ur10", "position")

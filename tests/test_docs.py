@@ -9,8 +9,8 @@
   like a checkout (``examples/`` and a ``../shared`` beside it), so the pages' commands run
   as printed.  A page whose blocks need ``../shared/data`` is skipped
   when it is absent (a clone without the data), saying so.
-* The example scripts in examples/ run with their defaults or end with one line naming what
-  they need.
+* The README's marked blocks run the same way (README.md counts as a page), and its demo
+  transcript is what ``robocal demo`` prints.  The example scripts: tests/test_examples.py.
 """
 
 from __future__ import annotations
@@ -38,13 +38,20 @@ def runnable_blocks(page: Path) -> list[tuple[str, str, bool]]:
 
 
 def pages_with_examples() -> list[Path]:
-    return sorted(p for p in DOCS.rglob("*.md") if runnable_blocks(p))
+    """The site's pages with runnable blocks, then the README."""
+    pages = sorted(p for p in DOCS.rglob("*.md") if runnable_blocks(p))
+    return pages + [ROOT / "README.md"]
+
+
+def _page_id(page: Path) -> str:
+    return page.relative_to(ROOT if page.parent == ROOT else DOCS).as_posix()
 
 
 def test_runnable_convention_is_found() -> None:
     """The collector sees the tutorials' blocks (a renamed marker would silently run nothing)."""
-    names = {p.relative_to(DOCS).as_posix() for p in pages_with_examples()}
-    assert {"getting-started.md", "tutorials/own-robot.md"} <= names
+    names = {_page_id(p) for p in pages_with_examples()}
+    assert {"getting-started.md", "tutorials/own-robot.md", "README.md"} <= names
+    assert runnable_blocks(ROOT / "README.md")
 
 
 def test_site_builds_offline_with_no_warning(tmp_path: Path) -> None:
@@ -107,7 +114,7 @@ def _page_params() -> list:
     for page in pages_with_examples():
         slow = any(slow for _, _, slow in runnable_blocks(page))  # one slow block makes the page slow
         marks = [pytest.mark.slow] if slow else []
-        params.append(pytest.param(page, id=page.relative_to(DOCS).as_posix(), marks=marks))
+        params.append(pytest.param(page, id=_page_id(page), marks=marks))
     return params
 
 
@@ -121,3 +128,30 @@ def test_page_examples_run_as_printed(page: Path, tmp_path: Path) -> None:
         done = _run_block(language, code, work)
         output = done.stdout[-3000:] + done.stderr[-3000:]
         assert done.returncode == 0, f"{page.name} block {number}:\n{code}\n{output}"
+
+
+def _demo_rows(text: str) -> dict[str, tuple[str, ...]]:
+    """The held-out table's rows (mean, RMS, p95, max mm) and the improvement line's numbers."""
+    rows = {
+        m.group(1): m.groups()[1:]
+        for m in re.finditer(r"^│ ([a-z +()]+?)\s*│\s+(\S+) │\s+(\S+) │\s+(\S+) │\s+(\S+) │$", text, re.M)
+    }
+    if m := re.search(
+        r"mean held-out error (\S+) mm → (\S+) mm: (\S+) % smaller \(95 % CI (\S+) to (\S+) %\)", text
+    ):
+        rows["improvement"] = m.groups()
+    return rows
+
+
+def test_readme_demo_transcript_is_what_the_demo_prints(tmp_path: Path) -> None:
+    """The README's first command's numbers are the demo's (default robot, seed and poses)."""
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    shown = _demo_rows(readme[readme.index("robocal demo — ur10: held-out poses") :])
+    assert len(shown) == 4, shown  # three models and the improvement
+    result = CliRunner().invoke(app, ["demo", "--out", str(tmp_path / "demo")], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert _demo_rows(result.output) == shown

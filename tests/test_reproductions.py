@@ -1,6 +1,6 @@
-"""The reproduction documents (docs/reproductions/*.md) and the README's quoted numbers
-are what the code produces: ``robocal reproduce all --md docs/reproductions --readme
-README.md --force`` regenerates them.  The default run recomputes the cheap sections
+"""The reproduction documents (docs/reproductions/*.md) and the numbers docs/sources.md quotes
+(the README's once) are what the code produces: ``robocal reproduce all --md docs/reproductions
+--readme docs/sources.md --force`` regenerates them.  The default run recomputes the cheap sections
 (seed 000 whole, seed 001's table arm, seed 003's chapter 3); ``-m slow`` all of them."""
 
 import re
@@ -20,7 +20,8 @@ from robocal.experiments.reproductions import (
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "reproductions"
-REGENERATE = "robocal reproduce all --md docs/reproductions --readme README.md --force"
+QUOTES = ROOT / "docs" / "sources.md"  # the page whose <!-- reproduce:NAME --> blocks quote them
+REGENERATE = "robocal reproduce all --md docs/reproductions --readme docs/sources.md --force"
 
 
 def _section(text: str, title: str) -> str:
@@ -32,13 +33,13 @@ def _section(text: str, title: str) -> str:
 
 def _check_sections(name, sections, quoted_only=False):
     doc = (DOCS / f"{name}.md").read_text(encoding="utf-8")
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    readme = QUOTES.read_text(encoding="utf-8")
     for section in sections:
         generated = render_markdown(name, "x", [section]).split(f"## {section.title}\n", 1)[1].strip()
         assert _section(doc, section.title) == generated, f"{name}.md is stale: regenerate with {REGENERATE}"
         for line in render_rows([r for r in section.rows if r.quote], why=False)[2:]:
             assert line in readme, (
-                f"README quotes a stale {name} number ({line}): regenerate with {REGENERATE}"
+                f"docs/sources.md quotes a stale {name} number ({line}): regenerate with {REGENERATE}"
             )
 
 
@@ -49,7 +50,7 @@ def test_seed000_document_and_quotes_are_current():
     title, sections_of = SECTIONS["seed000"]
     sections = sections_of(numbers)
     assert (DOCS / "seed000.md").read_text(encoding="utf-8") == render_markdown("seed000", title, sections)
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    readme = QUOTES.read_text(encoding="utf-8")
     assert readme_block("seed000", sections) in readme, f"regenerate with {REGENERATE}"
 
 
@@ -81,10 +82,10 @@ def test_reproduce_md_writes_the_document_and_the_readme_block(tmp_path):
     committed = (DOCS / "seed001.md").read_text(encoding="utf-8")
     first = re.findall(r"^## (.*)$", written, re.M)[0]  # the table arm: the same in quick and full runs
     assert _section(committed, first) == _section(written, first), f"seed001.md is stale: {REGENERATE}"
-    readme_now = (ROOT / "README.md").read_text(encoding="utf-8")
+    readme_now = QUOTES.read_text(encoding="utf-8")
     for line in text.splitlines()[4:]:  # the quoted rows of the quick run (the table arm's)
         if line.startswith("| "):
-            assert line in readme_now, f"README quotes a stale seed001 number ({line}): {REGENERATE}"
+            assert line in readme_now, f"docs/sources.md quotes a stale seed001 number ({line}): {REGENERATE}"
 
 
 @pytest.mark.parametrize(
@@ -126,7 +127,7 @@ def test_replace_readme_block_keeps_the_rest():
 def test_every_document_and_quote_is_current(tmp_path):
     """The whole regeneration, into a copy of the README (a few minutes)."""
     readme = tmp_path / "README.md"
-    readme.write_text((ROOT / "README.md").read_text(encoding="utf-8"), encoding="utf-8")
+    readme.write_text(QUOTES.read_text(encoding="utf-8"), encoding="utf-8")
     args = ["reproduce", "all", "--md", str(tmp_path / "md"), "--readme", str(readme), "--json"]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
@@ -134,4 +135,4 @@ def test_every_document_and_quote_is_current(tmp_path):
         assert (tmp_path / "md" / f"{name}.md").read_text(encoding="utf-8") == (
             DOCS / f"{name}.md"
         ).read_text(encoding="utf-8"), f"{name}.md is stale: regenerate with {REGENERATE}"
-    assert readme.read_text(encoding="utf-8") == (ROOT / "README.md").read_text(encoding="utf-8")
+    assert readme.read_text(encoding="utf-8") == QUOTES.read_text(encoding="utf-8")

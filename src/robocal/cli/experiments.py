@@ -58,15 +58,15 @@ def reproduce_command(
         typer.Option(
             "--readme",
             metavar="FILE",
-            help="rewrite this README's '<!-- reproduce:NAME -->' blocks (with --md)",
+            help="rewrite this page's '<!-- reproduce:NAME -->' blocks (docs/sources.md; with --md)",
         ),
     ] = None,
     force: Force = False,
 ) -> None:
     """Reproduce a seed's experiment and print its published numbers next to robocal's.
 
-    ``robocal reproduce all --md docs/reproductions --readme README.md --force`` regenerates
-    the reproduction documents and the README's quoted numbers."""
+    ``robocal reproduce all --md docs/reproductions --readme docs/sources.md --force``
+    regenerates the reproduction documents and the numbers docs/sources.md quotes."""
     from robocal.experiments import EXPERIMENTS, get
     from robocal.identify.guards import CalibrationGuardError
 
@@ -78,7 +78,7 @@ def reproduce_command(
         except (KeyError, NotImplementedError) as err:
             raise fail(str(err.args[0]).replace("choose one of ", "choose all or one of ")) from None
     if readme is not None and md is None:
-        raise fail("--readme needs --md (the README quotes the documents --md writes)")
+        raise fail("--readme needs --md (the page quotes the documents --md writes)")
     readme_text = _check_readme(readme, names) if readme is not None else None
     if out is not None:
         refuse_overwrite(out, force, "folder")

@@ -1,9 +1,9 @@
 """The seeds' reproductions as documents that cannot go stale.
 
-``robocal reproduce all --md docs/reproductions --readme README.md --force`` runs every
+``robocal reproduce all --md docs/reproductions --readme docs/sources.md --force`` runs every
 seed's experiment (seeded: the same numbers on every run) and writes, per seed, a
 markdown file whose tables put each quantity's published number beside robocal's, with
-what differs and why; the README's quoted numbers are the rows marked ``quote``,
+what differs and why; the numbers docs/sources.md quotes are the rows marked ``quote``,
 rewritten between the markers ``<!-- reproduce:NAME -->`` and ``<!-- /reproduce:NAME -->``.
 ``tests/test_reproductions.py`` recomputes them and fails when a file differs.
 
@@ -32,7 +32,7 @@ __all__ = [
     "sections_seed003",
 ]
 
-COMMAND = "robocal reproduce all --md docs/reproductions --readme README.md --force"
+COMMAND = "robocal reproduce all --md docs/reproductions --readme docs/sources.md --force"
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ class Row:
     seed: str
     robocal: str
     why: str = ""
-    quote: bool = False  # quoted in the README
+    quote: bool = False  # quoted in docs/sources.md (the README once)
 
 
 @dataclass(frozen=True)
@@ -90,11 +90,12 @@ def render_markdown(name: str, title: str, sections: list[Section], quick: bool 
 
 
 def readme_block(name: str, sections: list[Section]) -> str:
-    """The README's quote of seed ``name``: its rows marked ``quote``, linked to the file."""
+    """The quote of seed ``name`` (docs/sources.md): its rows marked ``quote``, linked to the file."""
     rows = [r for s in sections for r in s.rows if r.quote]
     lines = [f"<!-- reproduce:{name} -->", *render_rows(rows, why=False), ""]
-    link = f"docs/reproductions/{name}.md"
-    lines += [f"All numbers, and what differs and why: [{link}]({link})."]
+    # the quote lives in docs/sources.md, beside docs/reproductions/: the link is relative to it
+    text, target = f"docs/reproductions/{name}.md", f"reproductions/{name}.md"
+    lines += [f"All numbers, and what differs and why: [{text}]({target})."]
     lines += [f"<!-- /reproduce:{name} -->"]
     return "\n".join(lines)
 
