@@ -16,11 +16,10 @@ import threading
 import webbrowser
 from pathlib import Path
 
+from robocal.apps.gui.jobs import MAX_UPLOAD_BYTES
+
 __all__ = ["MAX_UPLOAD_BYTES", "create_app", "serve"]
 
-#: the largest file the GUI accepts as an upload (bytes); a request that carries a larger one
-#: (base64 adds a third) is answered HTTP 413 before it is read: no upload can exhaust memory
-MAX_UPLOAD_BYTES = 32 * 1024 * 1024
 #: the largest request body (bytes): one upload in base64 and the page's other values
 MAX_REQUEST_BYTES = MAX_UPLOAD_BYTES * 4 // 3 + 1024 * 1024
 
@@ -93,6 +92,7 @@ def create_app(workdir: Path):
         assets_folder=str(workdir / "assets"),  # none: the style is in the page
         suppress_callback_exceptions=True,
         update_title=None,
+        compress=True,  # flask-compress: the 6 MB of JavaScript travel gzipped
     )
     app.index_string = INDEX
     catalog = rc.robots()
@@ -101,7 +101,7 @@ def create_app(workdir: Path):
             html.Header(
                 [html.B("robocal"), html.Span(f"calibration of serial robot arms · {rc.__version__}")]
             ),
-            dcc.Store(id="built-model"),
+            dcc.Store(id="built-model", storage_type="session"),  # survives a reload
             dcc.Tabs(
                 id="tabs",
                 value="builder",
@@ -115,6 +115,7 @@ def create_app(workdir: Path):
     builder_page.register(app)
     calibrate_page.register(app, workdir)
     _bound_requests(app.server)
+    _guard(app)
     runs = workdir / "runs"
 
     @app.server.route("/runs/<run_id>/<name>")
@@ -153,6 +154,62 @@ def _bound_requests(server) -> None:
         return jsonify(error=f"the request could not be handled: {message}"), 400
 
 
+#: the names this server answers to: a page of another site that resolves its own name to
+#: 127.0.0.1 (DNS rebinding) or posts across sites is refused before any work starts
+LOCAL_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
+#: the app's pages: scripts from the server only (the renderer's inline ones by hash; plotly
+#: compiles some code, hence unsafe-eval), no frames of it anywhere, no other host reached
+_CSP = (
+    "default-src 'self'; script-src 'self' 'unsafe-eval' {hashes}; style-src 'self' 'unsafe-inline'; "
+    "img-src 'self' data: blob:; font-src 'self' data:; connect-src 'self'; worker-src 'self' blob:; "
+    "object-src 'none'; base-uri 'self'; form-action 'self'; frame-ancestors 'none'"
+)
+#: the saved report (one self-contained HTML file with plotly inline): nothing from anywhere
+_REPORT_CSP = (
+    "default-src 'none'; script-src 'unsafe-inline' 'unsafe-eval'; style-src 'unsafe-inline'; "
+    "img-src data: blob:; font-src data:; frame-ancestors 'none'; form-action 'none'"
+)
+
+
+def _local(value: str | None) -> bool:
+    """Whether a Host header or an Origin's host names this machine's loopback."""
+    from urllib.parse import urlsplit
+
+    if not value:
+        return False
+    try:
+        host = urlsplit(value if "//" in value else f"//{value}").hostname
+    except ValueError:
+        return False
+    return host in LOCAL_HOSTS
+
+
+def _guard(app) -> None:
+    """Refuse (HTTP 403) a request whose Host or Origin is not localhost; give every answer the
+    security headers (CSP, frame-ancestors and X-Frame-Options, nosniff, no referrer)."""
+    from flask import jsonify, request
+
+    server = app.server
+    policy = _CSP.format(hashes=" ".join(app.csp_hashes()))  # quoted already
+
+    @server.before_request
+    def check_origin():
+        origin = request.headers.get("Origin")
+        if not _local(request.host) or (origin is not None and not _local(origin)):
+            return jsonify(error="refused: robocal gui answers pages of localhost only"), 403
+        return None
+
+    @server.after_request
+    def headers(response):
+        report = request.path.startswith("/runs/")
+        response.headers["Content-Security-Policy"] = _REPORT_CSP if report else policy
+        response.headers["X-Frame-Options"] = "DENY"
+        response.headers["X-Content-Type-Options"] = "nosniff"
+        response.headers["Referrer-Policy"] = "no-referrer"
+        response.headers["Cross-Origin-Opener-Policy"] = "same-origin"
+        return response
+
+
 def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") -> None:
     """Run the app on ``host:port`` until Ctrl-C; open the browser unless told not to."""
     import signal
@@ -160,6 +217,9 @@ def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") 
     # Ctrl-C (SIGINT) stops the server even when it was started with SIGINT ignored (a
     # background job of a script inherits that): interrupting it is how it ends
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    # SIGTERM (kill, systemd, a closing terminal's job control) ends it the same way: the
+    # runs are stopped and the uploaded data removed in the finally below
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     workdir = Path(tempfile.mkdtemp(prefix="robocal-gui-"))
     atexit.register(shutil.rmtree, workdir, ignore_errors=True)
     app = create_app(workdir)
@@ -170,5 +230,5 @@ def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") 
     try:
         app.run(host=host, port=port, debug=False)
     finally:
-        app.robocal_runner.cancel()
+        app.robocal_runner.cancel_all()
         shutil.rmtree(workdir, ignore_errors=True)

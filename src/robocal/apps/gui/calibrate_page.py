@@ -18,6 +18,7 @@ from typing import Any
 
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
+from robocal.apps.gui import runs_page
 from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.calibrate_views import (
     _compensate,
@@ -26,14 +27,15 @@ from robocal.apps.gui.calibrate_views import (
     _problems,
     _raw_head,
     _read,
-    _report_links,
     preview_table,
-    results_view,
 )
-from robocal.apps.gui.jobs import CalibrationJob, JobRunner, read_options
+from robocal.apps.gui.jobs import MAX_UPLOAD_BYTES, CalibrationJob, JobRunner, public_text, read_options
 from robocal.outdir import atomic_write_bytes, atomic_write_text
 
-__all__ = ["layout", "register"]
+__all__ = ["RUN_STATES", "layout", "register"]
+
+#: the controls keep their values over a reload of the tab (its session storage)
+KEEP = {"persistence": True, "persistence_type": "session"}
 
 
 def _radio(
@@ -45,6 +47,7 @@ def _radio(
         options=[{"label": lab, "value": v} for v, lab in zip(options, labels, strict=True)],
         value=value,
         inline=True,
+        **KEEP,
     )
 
 
@@ -61,10 +64,15 @@ def layout(catalog: Sequence[str]) -> html.Div:
         [
             html.Div([reader, html.Div(id="csv-preview")], className="left"),
             html.Div([model, html.Div(id="cal-results"), after], className="right"),
-            dcc.Interval(id="cal-poll", interval=400, disabled=True),
-            dcc.Store(id="cal-run-id"),
-            dcc.Store(id="cal-shown"),
-            dcc.Store(id="csv-file"),
+            # fires once per arming (max_intervals = n_intervals + 1): polls never overlap
+            dcc.Interval(id="cal-poll", interval=400, max_intervals=0),
+            dcc.Interval(id="runs-refresh", interval=3000),
+            dcc.Store(id="session", storage_type="session"),
+            dcc.Store(id="cal-run-id", storage_type="session"),
+            dcc.Store(id="cal-phase"),
+            dcc.Store(id="cal-finished"),
+            dcc.Store(id="csv-upload"),
+            dcc.Store(id="csv-file", storage_type="session"),
             dcc.Download(id="cal-download"),
         ],
         className="page",
@@ -72,7 +80,8 @@ def layout(catalog: Sequence[str]) -> html.Div:
 
 
 def _reader_fieldset() -> html.Fieldset:
-    reread = {"type": "text", "debounce": 0.5}  # the reader's text options: re-read once the typing pauses
+    # the reader's text options: re-read once the typing pauses
+    reread = {"type": "text", "debounce": 0.5, **KEEP}
     return html.Fieldset(
         [
             html.Legend("measurement file and reader options"),
@@ -99,7 +108,7 @@ def _reader_fieldset() -> html.Fieldset:
 
 
 def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
-    text = {"type": "text", "debounce": False}
+    text = {"type": "text", "debounce": False, **KEEP}
     return html.Fieldset(
         [
             html.Legend("model and method"),
@@ -111,6 +120,7 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
                     + [{"label": n, "value": n} for n in catalog],
                     value=None,
                     inline=True,
+                    **KEEP,
                 ),
                 "catalog robots: their complete model (rc.calibration_model)",
             ),
@@ -138,7 +148,7 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
                 "1σ per axis, for the fit-to-noise test (empty: not tested)",
             ),
             dcc.Checklist(
-                id="cal-compliance", options=[{"label": "identify joint compliance", "value": "yes"}]
+                id="cal-compliance", options=[{"label": "identify joint compliance", "value": "yes"}], **KEEP
             ),
             html.Div(
                 [
@@ -150,6 +160,8 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
             html.Div(html.Div(id="cal-bar", className="bar"), className="progress"),
             html.Div(id="cal-status", className="message"),
             html.Div(id="cal-report", className="toolbar"),
+            html.H4("runs"),
+            html.Div(id="run-list"),
         ]
     )
 
@@ -180,12 +192,12 @@ def _after_fieldset() -> html.Fieldset:
 
 # ----------------------------------------------------------------------- callbacks
 def register(app: Dash, workdir: Path) -> None:
-    """The calibration page's callbacks; files live in ``workdir`` (a temporary directory)."""
-    runner = JobRunner()
+    """The calibration page's callbacks; files live in ``workdir`` (uploads, runs)."""
+    runner = JobRunner(workdir / "runs")
     app.robocal_runner = runner  # for shutting down
     page = _Page(workdir, runner)
     _register_data(app, page)
-    _register_run(app, page)
+    runs_page.register(app, runner, workdir, RUN_STATES, lambda session, *a: _start_run(page, session, *a))
     _register_export(app, page)
 
 
@@ -200,19 +212,60 @@ _READER_INPUTS = (
     ("opt-limits", "value"),
 )
 
+#: the page's values a run starts from (after the session id)
+RUN_STATES = (
+    *[State(*i) for i in _READER_INPUTS],
+    State("cal-model", "value"),
+    State("built-model", "data"),
+    State("cal-measure", "value"),
+    State("cal-method", "value"),
+    State("cal-residual", "value"),
+    State("cal-train-n", "value"),
+    State("cal-seed", "value"),
+    State("cal-tool", "value"),
+    State("cal-noise", "value"),
+    State("cal-compliance", "value"),
+    State("csv-file", "data"),
+)
+
+# the upload's size is checked in the browser: a file over the limit never reaches the server
+# (which would answer HTTP 413 where the page cannot show it) and the page says why
+_CHECK_UPLOAD = """
+function(contents, filename) {
+    if (!contents) { return window.dash_clientside.no_update; }
+    if (contents.length > %d) {
+        return {"error": (filename || "the file") + ": larger than the GUI's limit of %g MB; "
+                + "use the command line (robocal calibrate)"};
+    }
+    return {"contents": contents, "filename": filename};
+}
+"""
+
 
 def _register_data(app: Dash, page: _Page) -> None:
     """Upload of the measurement file and its preview with the reader options."""
-
-    @app.callback(
-        Output("csv-name", "children"),
-        Output("csv-file", "data"),
+    encoded = (MAX_UPLOAD_BYTES + 2) // 3 * 4 + 200  # base64 and its data: header
+    app.clientside_callback(
+        _CHECK_UPLOAD % (encoded, MAX_UPLOAD_BYTES / 2**20),
+        Output("csv-upload", "data"),
         Input("upload-csv", "contents"),
         State("upload-csv", "filename"),
         prevent_initial_call=True,
     )
-    def upload(contents, filename):
-        return _upload(page, contents, filename)
+
+    @app.callback(Output("csv-file", "data"), Input("csv-upload", "data"), prevent_initial_call=True)
+    def upload(checked):
+        if not checked or "error" in checked:
+            return {"error": (checked or {}).get("error", "the upload could not be read")}
+        return _upload(page, checked["contents"], checked["filename"])
+
+    @app.callback(Output("csv-name", "children"), Input("csv-file", "data"))
+    def file_name(file):
+        if not file:
+            return ""
+        if "error" in file:
+            return html.Span(file["error"], className="error", id="upload-error")
+        return file["label"]
 
     @app.callback(
         Output("csv-preview", "children"),
@@ -221,59 +274,8 @@ def _register_data(app: Dash, page: _Page) -> None:
         Input("cal-model", "value"),
         State("built-model", "data"),
     )
-    def preview(token, *args):
-        return _preview(page, token, *args)
-
-
-def _register_run(app: Dash, page: _Page) -> None:
-    """Calibrate, poll the running job, cancel it."""
-
-    @app.callback(
-        Output("cal-run-id", "data"),
-        Output("cal-poll", "disabled"),
-        Output("cal-status", "children", allow_duplicate=True),
-        Output("cal-results", "children", allow_duplicate=True),
-        Output("cal-report", "children", allow_duplicate=True),
-        Input("cal-run", "n_clicks"),
-        *[State(*i) for i in _READER_INPUTS],
-        State("cal-model", "value"),
-        State("built-model", "data"),
-        State("cal-measure", "value"),
-        State("cal-method", "value"),
-        State("cal-residual", "value"),
-        State("cal-train-n", "value"),
-        State("cal-seed", "value"),
-        State("cal-tool", "value"),
-        State("cal-noise", "value"),
-        State("cal-compliance", "value"),
-        State("csv-file", "data"),
-        prevent_initial_call=True,
-    )
-    def run(_n, *args):
-        return _start_run(page, *args)
-
-    @app.callback(
-        Output("cal-bar", "style"),
-        Output("cal-status", "children"),
-        Output("cal-results", "children"),
-        Output("cal-shown", "data"),
-        Output("cal-report", "children"),
-        Output("cal-poll", "disabled", allow_duplicate=True),
-        Input("cal-poll", "n_intervals"),
-        State("cal-run-id", "data"),
-        State("cal-shown", "data"),
-        prevent_initial_call=True,
-    )
-    def poll(_n, run_id, shown):
-        return _poll(page, run_id, shown)
-
-    @app.callback(
-        Output("cal-status", "children", allow_duplicate=True),
-        Input("cal-cancel", "n_clicks"),
-        prevent_initial_call=True,
-    )
-    def cancel(_n):
-        return "cancelling ..." if page.runner.cancel() else "nothing is running"
+    def preview(file, *args):
+        return _preview(page, (file or {}).get("token"), *args)
 
 
 def _register_export(app: Dash, page: _Page) -> None:
@@ -309,9 +311,12 @@ class _Page:
         if choice == "@built":
             if not built:
                 raise ValueError("no model built yet: build one on the builder page (build → model file)")
-            path = self.workdir / "built_model.yaml"
+            path = self.workdir / f"built-{uuid.uuid4().hex[:12]}.yaml"  # one per request: tabs
             atomic_write_text(path, built["text"])
-            return rc.load_model(path)
+            try:
+                return rc.load_model(path)
+            finally:
+                path.unlink(missing_ok=True)
         return rc.calibration_model(choice, measure)
 
     def data_file(self, token: str | None) -> Path | None:
@@ -326,13 +331,13 @@ def _upload(page: _Page, contents, filename):
     try:
         data = _decode_bytes(contents)
     except ValueError as err:
-        return html.Span(str(err), className="error"), None
+        return {"error": str(err)}
     name = Path(filename or "measurements.csv").name or "measurements.csv"
     token = f"{uuid.uuid4().hex[:12]}/{name}"
     target = page.workdir / "data" / token
     target.parent.mkdir(parents=True)
     atomic_write_bytes(target, data)
-    return f"{name} ({len(data):,} bytes)", token
+    return {"token": token, "label": f"{name} ({len(data):,} bytes)"}
 
 
 def _preview(page: _Page, token, *args):
@@ -363,10 +368,12 @@ def _preview(page: _Page, token, *args):
     ]
 
 
-def _start_run(page: _Page, *args: Any) -> tuple:
+def _start_run(page: _Page, session: str, *args: Any) -> tuple:
+    """Check the page's values and queue the run: ``(run_id, status)``, or ``(no_update, the
+    error)`` when a value is wrong."""
     options = read_options(*args[:8])
-    choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, token = args[8:]
-    path = page.data_file(token)
+    choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, file = args[8:]
+    path = page.data_file((file or {}).get("token"))
     try:
         if path is None:
             raise ValueError("open a measurement CSV first")
@@ -393,16 +400,12 @@ def _start_run(page: _Page, *args: Any) -> tuple:
         if noise_mm is not None and not noise_mm > 0:
             raise ValueError("device noise: a positive standard deviation in mm")
     except ValueError as err:
-        return (
-            no_update,
-            True,
-            html.Span(str(err), className="error", id="cal-error"),
-            no_update,
-            no_update,
-        )
+        message = public_text(str(err), page.workdir)
+        return no_update, html.Span(message, className="error", id="cal-error")
     from robocal.model.files import save_model
 
     run_id = uuid.uuid4().hex[:12]
+    (page.workdir / "runs").mkdir(exist_ok=True)
     model_file = save_model(model, page.workdir / "runs" / f"{run_id}.model.yaml")
     job = CalibrationJob(
         data=path,
@@ -418,41 +421,8 @@ def _start_run(page: _Page, *args: Any) -> tuple:
         compliance=bool(compliance),
         measure=None if measure == "auto" else measure,
     )
-    page.runner.start(job)
-    return run_id, False, f"calibrating {model.name} on {path.name} ...", "", ""
-
-
-def _poll(page: _Page, run_id, shown):
-    state = page.runner.poll()
-    if state is None or run_id is None:
-        return no_update, no_update, no_update, no_update, no_update, True
-    bar = {"width": f"{100 * state.fraction:.0f}%"}
-    warns = [html.Div(f"warning: {w}", className="warning") for w in state.warnings[-5:]]
-    results, report = no_update, no_update
-    if state.saved and shown != run_id:
-        try:
-            results = results_view(page.workdir / "runs" / run_id)
-        except (OSError, ValueError, KeyError) as err:
-            results = html.Span(f"cannot show the result: {err}", className="error")
-        report = _report_links(run_id, state.status == "done")
-    elif state.status == "done":
-        report = _report_links(run_id, True)
-    if state.status == "running":
-        text = f"{state.text} ({state.seconds:.0f} s)"
-        return (
-            bar | {"animation": "pulse 1s infinite"},
-            [text, *warns],
-            results,
-            run_id if state.saved else shown,
-            report,
-            False,
-        )
-    if state.status == "done":
-        return bar, [f"done in {state.seconds:.1f} s", *warns], results, run_id, report, True
-    if state.status == "cancelled":
-        return {"width": "0%"}, "cancelled", no_update, shown, "", True
-    error = html.Span(state.error or "failed", className="error", id="cal-error")
-    return {"width": "0%"}, [error, *warns], "", shown, "", True
+    page.runner.start(job, run_id, session, model.name)
+    return run_id, f"calibrating {model.name} on {path.name} ..."
 
 
 def _compensate_or_export(page: _Page, targets, _urdf, _ur, filename, unit, frame, run_id):

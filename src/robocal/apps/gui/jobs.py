@@ -24,7 +24,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["STAGES", "CalibrationJob", "JobRunner", "JobState", "read_options"]
+__all__ = [
+    "MAX_UPLOAD_BYTES",
+    "STAGES",
+    "CalibrationJob",
+    "JobRunner",
+    "JobState",
+    "RunInfo",
+    "public_text",
+    "read_options",
+]
+
+#: the largest file the GUI accepts as an upload (bytes); a request that carries a larger one
+#: (base64 adds a third) is answered HTTP 413 before it is read: no upload can exhaust memory;
+#: the page checks the size before sending (calibrate_page) and says why
+MAX_UPLOAD_BYTES = 32 * 1024 * 1024
 
 #: The stages of a run and the share of the bar each one completes.
 STAGES = (
@@ -192,95 +206,229 @@ def _write_errors(path: Path, result, train, validation) -> None:
 class JobState:
     """What the page shows of a run: stage, share done, messages, outcome."""
 
-    stage: str = "start"
-    text: str = "starting"
+    stage: str = "queued"
+    text: str = "queued behind another run"
     fraction: float = 0.0
-    status: str = "running"  # running | done | error | cancelled
+    status: str = "queued"  # queued | running | done | error | cancelled | interrupted
     saved: bool = False  # the result is saved (the report may still be being written)
     error: str | None = None
     warnings: list[str] = field(default_factory=list)
     started: float = field(default_factory=time.monotonic)
     seconds: float = 0.0
 
+    @property
+    def active(self) -> bool:
+        """Queued or running: the page keeps polling."""
+        return self.status in ("queued", "running")
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """A run as the run list shows it (``created``: seconds since the epoch)."""
+
+    run_id: str
+    session: str
+    data_name: str
+    robot: str
+    created: float
+    status: str
+    seconds: float
+
+
+@dataclass
+class _Run:
+    job: CalibrationJob
+    info: RunInfo
+    state: JobState
+    process: mp.process.BaseProcess | None = None
+    queue: Any = None
+
 
 class JobRunner:
-    """One calibration at a time in a child process; :meth:`poll` collects its reports."""
+    """Calibrations of every browser session, one at a time (the machine's cores are shared),
+    the others queued in order: no run stops another.  A monitor thread collects the running
+    child's reports and starts the next queued run, so a run finishes with no page polling it.
+    Each run's record (``<run_id>.run.json`` beside its folder in ``runs``) is read back
+    when the server starts again: the run list outlives the process."""
 
-    def __init__(self) -> None:
+    def __init__(self, runs: Path) -> None:
+        self.runs = runs
         self._lock = threading.Lock()
-        self._process: mp.process.BaseProcess | None = None
-        self._queue = None
-        self._job: CalibrationJob | None = None
-        self.state: JobState | None = None
+        self._runs: dict[str, _Run | RunInfo] = {info.run_id: info for info in _read_records(runs)}
+        self._order: list[str] = []  # queued run ids, oldest first
+        self._monitor: threading.Thread | None = None
+        self._stop = threading.Event()
 
-    @property
-    def running(self) -> bool:
-        return self.state is not None and self.state.status == "running"
-
-    def start(self, job: CalibrationJob) -> None:
-        """Start ``job`` (a running one is cancelled first)."""
-        self.cancel()
+    def start(self, job: CalibrationJob, run_id: str, session: str, robot: str) -> None:
+        """Queue ``job`` as ``run_id`` of ``session``; it starts when no other run is running."""
+        info = RunInfo(run_id, session, job.data.name, robot, time.time(), "queued", 0.0)
         with self._lock:
             if job.out.exists():
                 shutil.rmtree(job.out)
-            job.out.mkdir(parents=True)
-            ctx = mp.get_context("spawn")  # a clean interpreter: no web-server threads forked
-            self._queue = ctx.Queue()
-            self._process = ctx.Process(target=_run, args=(job, self._queue), daemon=True)
-            self._job = job
-            self.state = JobState()
-            self._process.start()
+            self._runs[run_id] = _Run(job, info, JobState())
+            self._order.append(run_id)
+            _write_record(self.runs, info)
+            if self._monitor is None:
+                self._monitor = threading.Thread(target=self._watch, daemon=True, name="robocal-runs")
+                self._monitor.start()
+            self._advance()
 
-    def poll(self) -> JobState | None:
-        """Read the child's reports; detect a child that died without one."""
+    def state(self, run_id: str | None) -> JobState | None:
+        """The run's state (cheap: the monitor thread keeps it current)."""
         with self._lock:
-            state = self.state
-            if state is None or state.status != "running" or self._queue is None:
-                return state
-            fractions = {key: f for key, _, f in STAGES}
-            order = [key for key, _, _ in STAGES]
-            while True:
-                try:
-                    kind, *payload = self._queue.get_nowait()
-                except Exception:  # queue.Empty (the spawn context's queue raises the stdlib's)
-                    break
-                if kind == "stage":
-                    key, text = payload
-                    state.stage, state.text = key, text
-                    i = order.index(key)
-                    state.fraction = fractions[order[i - 1]] if i else 0.0
-                elif kind == "saved":
-                    state.saved = True
-                elif kind == "warning":
-                    state.warnings.append(payload[0])
-                elif kind == "done":
-                    state.status, state.fraction, state.text = "done", 1.0, "done"
-                elif kind == "error":
-                    state.status, state.error, state.text = "error", payload[0], "failed"
-            state.seconds = time.monotonic() - state.started
-            alive = self._process is not None and self._process.is_alive()
-            if state.status == "running" and not alive and self._queue.empty():
-                state.status, state.text = "error", "failed"
-                code = None if self._process is None else self._process.exitcode
-                state.error = f"the calibration process ended unexpectedly (exit code {code})"
-            if state.status != "running" and self._process is not None:
-                self._process.join(timeout=5)
-                self._process = None
-            return state
+            run = self._runs.get(run_id or "")
+            if isinstance(run, RunInfo):  # a run of an earlier server: done, or interrupted
+                return JobState(
+                    stage=run.status, text=run.status, status=run.status, saved=run.status == "done",
+                    fraction=1.0 if run.status == "done" else 0.0, seconds=run.seconds,
+                )  # fmt: skip
+            if run is None:
+                return None
+            if run.state.active:
+                run.state.seconds = time.monotonic() - run.state.started
+            return dataclasses.replace(run.state, warnings=list(run.state.warnings))
 
-    def cancel(self) -> bool:
-        """Stop a running calibration and discard what it wrote; whether one was running."""
+    def runs_list(self) -> list[RunInfo]:
+        """Every run, newest first."""
         with self._lock:
-            process, job = self._process, self._job
-            if process is None or self.state is None or self.state.status != "running":
+            infos = [r if isinstance(r, RunInfo) else r.info for r in self._runs.values()]
+        return sorted(infos, key=lambda i: i.created, reverse=True)
+
+    def cancel(self, run_id: str | None) -> bool:
+        """Stop that run (queued or running) and discard what it wrote; whether it was active."""
+        with self._lock:
+            run = self._runs.get(run_id or "")
+            if not isinstance(run, _Run) or not run.state.active:
                 return False
-            process.terminate()
-            process.join(timeout=10)
-            if process.is_alive():
-                process.kill()
-                process.join(timeout=5)
-            self._process = None
-            self.state.status, self.state.text = "cancelled", "cancelled"
-            if job is not None and job.out.exists():
-                shutil.rmtree(job.out, ignore_errors=True)
+            _stop_process(run)
+            if run_id in self._order:
+                self._order.remove(run_id)
+            run.state.status, run.state.text = "cancelled", "cancelled"
+            shutil.rmtree(run.job.out, ignore_errors=True)
+            self._finish(run)
+            self._advance()
             return True
+
+    def cancel_all(self) -> None:
+        """Stop every run (the server is stopping)."""
+        self._stop.set()
+        for info in self.runs_list():
+            if info.status in ("queued", "running"):
+                self.cancel(info.run_id)
+
+    # ------------------------------------------------------------------ inside the lock
+    def _advance(self) -> None:
+        """Start the oldest queued run when none is running."""
+        if any(isinstance(r, _Run) and r.state.status == "running" for r in self._runs.values()):
+            return
+        if not self._order:
+            return
+        run = self._runs[self._order.pop(0)]
+        assert isinstance(run, _Run)
+        run.job.out.mkdir(parents=True)
+        ctx = mp.get_context("spawn")  # a clean interpreter: no web-server threads forked
+        run.queue = ctx.Queue()
+        run.process = ctx.Process(target=_run, args=(run.job, run.queue), daemon=True)
+        run.state = JobState(stage="start", text="starting", status="running")
+        run.info = dataclasses.replace(run.info, status="running")
+        run.process.start()
+
+    def _finish(self, run: _Run) -> None:
+        state = run.state
+        state.seconds = time.monotonic() - state.started
+        run.info = dataclasses.replace(run.info, status=state.status, seconds=round(state.seconds, 1))
+        _write_record(self.runs, run.info)
+
+    def _collect(self, run: _Run) -> None:
+        """Read the child's reports; detect a child that died without one."""
+        state = run.state
+        while True:
+            try:
+                kind, *payload = run.queue.get_nowait()
+            except Exception:  # queue.Empty (the spawn context's queue raises the stdlib's)
+                break
+            _apply(state, kind, payload)
+        alive = run.process is not None and run.process.is_alive()
+        if state.status == "running" and not alive and run.queue.empty():
+            state.status, state.text = "error", "failed"
+            code = None if run.process is None else run.process.exitcode
+            state.error = f"the calibration process ended unexpectedly (exit code {code})"
+        if state.status != "running":
+            if run.process is not None:
+                run.process.join(timeout=5)
+                run.process = None
+            self._finish(run)
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.2):
+            with self._lock:
+                for run in self._runs.values():
+                    if isinstance(run, _Run) and run.state.status == "running":
+                        self._collect(run)
+                self._advance()
+
+
+def _apply(state: JobState, kind: str, payload: list[Any]) -> None:
+    """One report of the child on the run's state."""
+    if kind == "stage":
+        key, text = payload
+        order = [k for k, _, _ in STAGES]
+        state.stage, state.text = key, text
+        i = order.index(key)
+        state.fraction = STAGES[i - 1][2] if i else 0.0
+    elif kind == "saved":
+        state.saved = True
+    elif kind == "warning":
+        state.warnings.append(payload[0])
+    elif kind == "done":
+        state.status, state.fraction, state.text = "done", 1.0, "done"
+    elif kind == "error":
+        state.status, state.error, state.text = "error", payload[0], "failed"
+
+
+def _stop_process(run: _Run) -> None:
+    process = run.process
+    if process is None:
+        return
+    process.terminate()
+    process.join(timeout=10)
+    if process.is_alive():
+        process.kill()
+        process.join(timeout=5)
+    run.process = None
+
+
+def _write_record(runs: Path, info: RunInfo) -> None:
+    import json
+
+    from robocal.outdir import atomic_write_text
+
+    runs.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(runs / f"{info.run_id}.run.json", json.dumps(dataclasses.asdict(info)))
+
+
+def _read_records(runs: Path) -> list[RunInfo]:
+    """The records of an earlier server's runs; one that was active then is interrupted now."""
+    import json
+
+    infos = []
+    for path in sorted(runs.glob("*.run.json")) if runs.is_dir() else []:
+        try:
+            info = RunInfo(**json.loads(path.read_text(encoding="utf-8")))
+        except (OSError, ValueError, TypeError):
+            continue  # a record this version cannot read is left out of the list
+        if info.status in ("queued", "running"):
+            info = dataclasses.replace(info, status="interrupted")
+        elif info.status == "done" and not (runs / info.run_id / "result.json").is_file():
+            continue
+        infos.append(info)
+    return infos
+
+
+def public_text(text: str, root: Path) -> str:
+    """``text`` with every path under the server's work dir ``root`` cut to its file name: a
+    message on the page never shows where the server keeps its files."""
+    import re
+
+    pattern = re.escape(str(root)) + r"[^\s'\"]*"
+    return re.sub(pattern, lambda m: Path(m.group(0)).name, text)
