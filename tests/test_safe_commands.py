@@ -197,6 +197,10 @@ def test_nominal_model_gives_one_configuration_on_every_catalog_robot(robot):
     assert len(set(comp.configuration)) == 1, comp.configuration
     assert set(configurations(nominal, comp.q)) == set(comp.configuration)
     assert np.abs(comp.q - q_true).max() < 0.05
+    # without q0: still one configuration for the file (the PUMA's joint limits once split
+    # these six targets over four configurations)
+    free = compensate_targets(real, real.fk(q_true), nominal)
+    assert free.success and len(set(free.configuration)) == 1, free.configuration
 
 
 # ---------------------------------------------------------------- KR 16 filter (repro)

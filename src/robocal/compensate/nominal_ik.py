@@ -35,13 +35,46 @@ def nominal_solutions(
     configuration, ``(n, dof)`` one start per target, or None; ``ik``: solve_ik options."""
     asked = q0 is not None and np.asarray(q0).ndim == 1  # the user chose the configuration
     if q0 is None and len(T) > 1:
-        q0 = solve_ik(model, T[:1], q0=None, restarts=restarts, **ik).q[0]
+        q0 = _reference(model, T, restarts, ik)
     nom = solve_ik(model, T, q0=q0, restarts=0, **ik)
     nom = _chained(model, T, nom, restarts, ik)
     if q0 is None or np.asarray(q0).ndim != 1:
         return nom, ()
     nom, held = hold_configuration(model, T, nom, np.asarray(q0, dtype=float), ik)
     return nom, (held if asked else ())
+
+
+#: random starts for the first target's other solutions, tried as the file's configuration
+#: when ``q0`` is not given
+REFERENCE_TRIES = 8
+
+
+def _reference(model: Model, T: Array, restarts: int, ik: dict[str, Any]) -> Array:
+    """The file's configuration when the user gave none: among the first target's solutions
+    in different configurations (the IK's own, and from :data:`REFERENCE_TRIES` random
+    starts), the one from which the most targets are solved in that configuration (joint
+    limits can keep the others out of the first solution found, e.g. a PUMA 560's); for
+    tool frames only."""
+    first = solve_ik(model, T[:1], q0=None, restarts=restarts, **ik)
+
+    def held(c: Array) -> int:
+        res = solve_ik(model, T, q0=c, restarts=0, **ik)
+        return int(np.sum(res.reachable & safety.same_configuration(model, res.q, c)))
+
+    if ik.get("kind") != "pose" or not first.reachable[0] or held(first.q[0]) == len(T):
+        # the IK's own choice: it holds them all, or the targets leave the orientation free
+        # (position or axis targets: a correction may then drift along the free rotations)
+        return first.q[0]
+    lim = np.clip(model.joint_limits, -np.pi, np.pi)
+    starts = np.random.default_rng(0).uniform(lim[:, 0], lim[:, 1], (REFERENCE_TRIES, model.dof))
+    others = solve_ik(model, np.repeat(T[:1], REFERENCE_TRIES, axis=0), q0=starts, restarts=0, **ik)
+    candidates: list[Array] = []
+    for q, ok in zip((first.q[0], *others.q), (first.reachable[0], *others.reachable), strict=True):
+        if ok and not any(safety.same_configuration(model, q[None], c)[0] for c in candidates):
+            candidates.append(q)
+    if len(candidates) < 2:
+        return candidates[0] if candidates else first.q[0]
+    return max(candidates, key=held)  # the first of equals: the IK's own first choice
 
 
 def _chained(model: Model, T: Array, nom: IKResult, restarts: int, ik: dict[str, Any]) -> IKResult:
