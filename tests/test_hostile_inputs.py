@@ -298,11 +298,13 @@ def test_gui_answers_a_robot_outside_the_catalog_with_400(gui, caplog, tmp_path)
         app,
         client,
         "csv-file.data",
-        {
-            ("upload-csv", "contents"): "data:text/csv;base64," + base64.b64encode(csv).decode(),
-            ("upload-csv", "filename"): "m.csv",
+        {  # the browser checks the size, then hands the file over in the csv-upload store
+            ("csv-upload", "data"): {
+                "contents": "data:text/csv;base64," + base64.b64encode(csv).decode(),
+                "filename": "m.csv",
+            },
         },
-        "upload-csv.contents",
+        "csv-upload.data",
     )
     assert uploaded.status_code == 200, uploaded.data
     token = uploaded.get_json()["response"]["csv-file"]["data"]
