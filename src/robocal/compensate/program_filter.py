@@ -65,6 +65,7 @@ class _Corrections:
     status: list[str] = field(default_factory=list)
     reasons: list[str] = field(default_factory=list)
     rows: list[dict | None] = field(default_factory=list)
+    joints: list[Array | None] = field(default_factory=list)  # the command written (rad, m)
 
     @classmethod
     def start(cls, values: list[Array], problems: list[str]) -> _Corrections:
@@ -79,6 +80,7 @@ class _Corrections:
             status=["corrected"] * n,
             reasons=[""] * n,
             rows=[None] * n,
+            joints=[None] * n,
         )
 
     def take(self, i: int, res: Compensation, k: int, table: list[dict] | None = None) -> None:
@@ -91,6 +93,7 @@ class _Corrections:
         self.reach[i] = bool(res.reachable[k]) or res.status[k] == "damped"
         self.kept[i] = res.status[k] != "refused"
         self.rows[i] = (res.table() if table is None else table)[k]
+        self.joints[i] = np.asarray(res.q[k], dtype=float)
 
     def refuse(self, i: int, reason: str) -> None:
         """Target ``i`` refused by the filter itself (e.g. its written configuration)."""

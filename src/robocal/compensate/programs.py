@@ -208,7 +208,7 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
         sequence = steps.execution_order(texts, parsed)
         steps.correct_pose_targets(sequence, targets, values, q_start, frames_of, effects, tol, c)
     out, changed = steps.rewrite_texts(texts, targets, units, model.joint_types, c)
-    steps.report_refused(targets, c)
+    _report(calibrated, targets, c)
     return FilteredProgram(
         texts=out,
         targets=tuple(targets),
@@ -224,6 +224,18 @@ def filter_program_text(  # noqa: PLR0913 - public API: the filter's keyword opt
         reasons=tuple(c.reasons),
         table=steps.target_table(targets, c),
     )
+
+
+def _report(calibrated, targets: list, c) -> None:
+    """The refused targets, and those whose commands need joint values no calibration pose
+    came near (:func:`robocal.identify.coverage.coverage_warnings`), as problems."""
+    from robocal.identify.coverage import coverage_warnings
+
+    steps.report_refused(targets, c)
+    done = [i for i, q in enumerate(c.joints) if q is not None]
+    names = [f"{targets[i].file}: line {targets[i].line} {targets[i].name}" for i in done]
+    if done:
+        c.problems.extend(coverage_warnings(calibrated, np.array([c.joints[i] for i in done]), names))
 
 
 def _read(path: Path) -> tuple[str, str]:

@@ -26,8 +26,10 @@ from robocal.model.chain import Model
 
 __all__ = ["COVER_M", "COVER_RAD", "JointCoverage", "coverage_warnings", "joint_coverage"]
 
-#: a revolute joint value within this (rad) of a calibration pose's is covered
-COVER_RAD = 0.1
+#: a revolute joint value within this (rad) of a calibration pose's is covered: 100 random
+#: poses leave gaps of ~0.3 rad between neighbouring values of a joint (2π ln n / n), and a
+#: real UR10's held-out pose got 1.56 mm worse 0.22 rad from every training angle
+COVER_RAD = 0.2
 #: a prismatic joint value within this (m) of a calibration pose's is covered
 COVER_M = 0.02
 _TWO_PI = 2.0 * math.pi
