@@ -129,20 +129,22 @@ def test_joint_change_beyond_the_bound_is_refused():
 
 
 # ---------------------------------------------------------------- --nominal, one configuration
+def _compensate_pick_targets(ur10, out, *options):
+    """``robocal compensate`` of the example's targets (mm) with ``options``, into ``out``."""
+    targets = ["--targets", str(EXAMPLES / "targets.csv"), "--length-unit", "mm"]
+    return runner.invoke(app, ["compensate", str(ur10 / "cal"), *targets, *options, "-o", str(out)])
+
+
+def _nominal_q(row: dict) -> np.ndarray:
+    return np.array([float(row[f"nominal_q{j}"]) for j in range(1, 7)])
+
+
 def test_nominal_ur10_keeps_the_pick_target_in_the_approach_configuration(ur10, tmp_path):
     out = tmp_path / "o.csv"
-    args = [
-        "compensate",
-        str(ur10 / "cal"),
-        "--targets",
-        str(EXAMPLES / "targets.csv"),
-        "--length-unit",
-        "mm",
-    ]
-    res = runner.invoke(app, [*args, "--nominal", "ur10", "-o", str(out)])
+    res = _compensate_pick_targets(ur10, out, "--nominal", "ur10")
     assert res.exit_code == 0, res.output
     rows = {r["name"]: r for r in _rows(out)}
-    q = {k: np.array([float(r[f"nominal_q{j}"]) for j in range(1, 7)]) for k, r in rows.items()}
+    q = {k: _nominal_q(r) for k, r in rows.items()}
     assert np.abs(q["pick"][3:] - q["approach"][3:]).max() < 0.05  # the wrist does not flip
     table = {r["name"]: r for r in _rows(table_path(out))}
     assert table["pick"]["configuration"] == table["approach"]["configuration"]
@@ -154,22 +156,14 @@ def test_q0_in_degrees_chooses_the_configuration_of_every_target(ur10, tmp_path)
     """The help's own --q0 (with its unit): every target is solved in q0's configuration,
     wrist side included whatever the winding; the repro's --nominal of another robot is refused."""
     out = tmp_path / "o.csv"
-    args = [
-        "compensate",
-        str(ur10 / "cal"),
-        "--targets",
-        str(EXAMPLES / "targets.csv"),
-        "--length-unit",
-        "mm",
-    ]
-    res = runner.invoke(app, [*args, "--nominal", "ur10", "--q0", "0,-90,90,0,90,0deg", "-o", str(out)])
+    res = _compensate_pick_targets(ur10, out, "--nominal", "ur10", "--q0", "0,-90,90,0,90,0deg")
     assert res.exit_code == 0, res.output
     nominal = rc.robot("ur10")
-    q = np.array([[float(r[f"nominal_q{j}"]) for j in range(1, 7)] for r in _rows(out)])
+    q = np.array([_nominal_q(r) for r in _rows(out)])
     q0 = np.radians([0, -90, 90, 0, 90, 0])
     assert same_configuration(nominal, q, q0).all(), configurations(nominal, q)
     assert np.all(np.sin(q[:, 4]) > 0.5)  # the wrist on q0's side (q5 = 90 deg)
-    res = runner.invoke(app, [*args, "--nominal", "kr16", "-o", str(tmp_path / "k.csv")])
+    res = _compensate_pick_targets(ur10, tmp_path / "k.csv", "--nominal", "kr16")
     assert res.exit_code == 2 and not (tmp_path / "k.csv").exists(), res.output
 
 

@@ -35,8 +35,9 @@ def nominal_solutions(
     configuration, ``(n, dof)`` one start per target, or None; ``ik``: solve_ik options."""
     asked = q0 is not None and np.asarray(q0).ndim == 1  # the user chose the configuration
     if q0 is None and len(T) > 1:
-        q0 = _reference(model, T, restarts, ik)
-    nom = solve_ik(model, T, q0=q0, restarts=0, **ik)
+        q0, nom = _reference(model, T, restarts, ik)
+    else:
+        nom = solve_ik(model, T, q0=q0, restarts=0, **ik)
     nom = _chained(model, T, nom, restarts, ik)
     if q0 is None or np.asarray(q0).ndim != 1:
         return nom, ()
@@ -49,32 +50,32 @@ def nominal_solutions(
 REFERENCE_TRIES = 8
 
 
-def _reference(model: Model, T: Array, restarts: int, ik: dict[str, Any]) -> Array:
-    """The file's configuration when the user gave none: among the first target's solutions
-    in different configurations (the IK's own, and from :data:`REFERENCE_TRIES` random
-    starts), the one from which the most targets are solved in that configuration (joint
-    limits can keep the others out of the first solution found, e.g. a PUMA 560's); for
-    tool frames only."""
+def _reference(model: Model, T: Array, restarts: int, ik: dict[str, Any]) -> tuple[Array, IKResult]:
+    """The file's configuration when the user gave none, and every target solved from it:
+    among the first target's solutions in different configurations (the IK's own, and from
+    :data:`REFERENCE_TRIES` random starts), the one from which the most targets are solved
+    in that configuration (joint limits can keep the others out of the first solution
+    found, e.g. a PUMA 560's); for tool frames only."""
     first = solve_ik(model, T[:1], q0=None, restarts=restarts, **ik)
 
-    def held(c: Array) -> int:
+    def solved(c: Array) -> tuple[Array, IKResult, int]:
         res = solve_ik(model, T, q0=c, restarts=0, **ik)
-        return int(np.sum(res.reachable & safety.same_configuration(model, res.q, c)))
+        return c, res, int(np.sum(res.reachable & safety.same_configuration(model, res.q, c)))
 
-    if ik.get("kind") != "pose" or not first.reachable[0] or held(first.q[0]) == len(T):
+    own = solved(first.q[0])
+    if ik.get("kind") != "pose" or not first.reachable[0] or own[2] == len(T):
         # the IK's own choice: it holds them all, or the targets leave the orientation free
         # (position or axis targets: a correction may then drift along the free rotations)
-        return first.q[0]
+        return own[0], own[1]
     lim = np.clip(model.joint_limits, -np.pi, np.pi)
     starts = np.random.default_rng(0).uniform(lim[:, 0], lim[:, 1], (REFERENCE_TRIES, model.dof))
     others = solve_ik(model, np.repeat(T[:1], REFERENCE_TRIES, axis=0), q0=starts, restarts=0, **ik)
-    candidates: list[Array] = []
-    for q, ok in zip((first.q[0], *others.q), (first.reachable[0], *others.reachable), strict=True):
-        if ok and not any(safety.same_configuration(model, q[None], c)[0] for c in candidates):
-            candidates.append(q)
-    if len(candidates) < 2:
-        return candidates[0] if candidates else first.q[0]
-    return max(candidates, key=held)  # the first of equals: the IK's own first choice
+    candidates = [own]
+    for q, ok in zip(others.q, others.reachable, strict=True):
+        if ok and not any(safety.same_configuration(model, q[None], c[0])[0] for c in candidates):
+            candidates.append(solved(q))
+    best = max(candidates, key=lambda c: c[2])  # the first of equals: the IK's own first choice
+    return best[0], best[1]
 
 
 def _chained(model: Model, T: Array, nom: IKResult, restarts: int, ik: dict[str, Any]) -> IKResult:

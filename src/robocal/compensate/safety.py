@@ -161,9 +161,10 @@ def configurations(model: Model, q: Array) -> tuple[str, ...]:
 
 
 def same_configuration(model: Model, q: Array, q_ref: Array) -> NDArray[np.bool_]:
-    """``(n,)`` whether each of ``q`` ``(n, dof)`` has the configuration of ``q_ref`` ``(dof,)``
-    (front/back, elbow, sign of joint 5; a side on its boundary band matches either)."""
-    a = _sides(model, np.asarray(q_ref, dtype=float).reshape(1, -1))
+    """``(n,)`` whether each of ``q`` ``(n, dof)`` has the configuration of ``q_ref``
+    (``(dof,)`` for all, or ``(n, dof)`` row by row): front/back, elbow, wrist side; a side
+    on its boundary band matches either."""
+    a = _sides(model, np.asarray(q_ref, dtype=float).reshape(-1, model.dof))
     b = _sides(model, np.asarray(q, dtype=float).reshape(-1, model.dof))
     bands = np.array([BOUNDARY_M, BOUNDARY_M, BOUNDARY_RAD])
     same = (np.sign(a) == np.sign(b)) | (np.abs(a) < bands) | (np.abs(b) < bands) | np.isnan(a) | np.isnan(b)
@@ -182,10 +183,7 @@ class Verdict:
 
 
 def _config_kept(nominal: Model, q: Array, q_nom: Array, near: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    a, b = _sides(nominal, q_nom), _sides(nominal, q)
-    bands = np.array([BOUNDARY_M, BOUNDARY_M, BOUNDARY_RAD])
-    same = (np.sign(a) == np.sign(b)) | (np.abs(a) < bands) | (np.abs(b) < bands) | np.isnan(a)
-    return same.all(axis=1) | near
+    return same_configuration(nominal, q, q_nom) | near
 
 
 def judge(
