@@ -65,19 +65,11 @@ def _robot_flange(model, q):
 
 
 def _pin_fk(path, frame, q):
-    pin = pytest.importorskip("pinocchio")
-    pm = pin.buildModelFromUrdf(str(path))
-    data = pm.createData()
-    fid = pm.getFrameId(frame)
-    out = []
-    for qk in q:
-        qp = []
-        for j in range(1, pm.njoints):
-            v = qk[pm.joints[j].idx_v]
-            qp += [np.cos(v), np.sin(v)] if pm.joints[j].nq == 2 else [v]
-        pin.framesForwardKinematics(pm, data, np.array(qp))
-        out.append(data.oMf[fid].homogeneous)
-    return np.array(out)
+    """test_export's Pinocchio frames, skipped (this test alone) without Pinocchio."""
+    pytest.importorskip("pinocchio")
+    from tests.test_export import _pin_fk as frames
+
+    return frames(path, frame, q)
 
 
 def _angle_deg(Ra, Rb):

@@ -18,6 +18,9 @@ from robocal.cli.app import app
 from robocal.model.urdf import URDFError, build_from_urdf, default_tip, geometry_from_urdf
 
 pin = pytest.importorskip("pinocchio")
+
+from tests.test_urdf import _pin_tip_pose as _pin_pose  # noqa: E402  (after the skip)
+
 DATA = Path(__file__).parent / "data" / "urdf"
 runner = CliRunner()
 
@@ -31,19 +34,6 @@ CASES = [
     ("m10ia.urdf", None, 6, 30),
     ("kr16_2.urdf", None, 6, 30),
 ]
-
-
-def _pin_pose(path: Path, tip: str, names: list[str], q: np.ndarray) -> np.ndarray:
-    """Pinocchio's 4x4 pose of link ``tip`` of the whole URDF, joints ``names`` at ``q`` (rad,
-    m) and every other joint at its neutral value."""
-    pm = pin.buildModelFromUrdf(str(path))
-    data = pm.createData()
-    qp = pin.neutral(pm)
-    for name, value in zip(names, q, strict=True):
-        jm = pm.joints[pm.getJointId(name)]
-        qp[jm.idx_q : jm.idx_q + jm.nq] = [np.cos(value), np.sin(value)] if jm.nq == 2 else [value]
-    pin.framesForwardKinematics(pm, data, qp)
-    return data.oMf[pm.getFrameId(tip, pin.FrameType.BODY)].homogeneous
 
 
 @pytest.mark.parametrize(("name", "tip", "dof", "free"), CASES)
