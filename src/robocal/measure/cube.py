@@ -223,8 +223,8 @@ def _bisect_sides(
             return lo, seeds
         mid = 0.5 * (lo[todo] + hi[todo])
         pts = (centers[todo, None, :] + mid[:, None, None] * offsets[None]).reshape(-1, 3)
-        ok, q = _solve(model, con, pts, seeds[todo].reshape(-1, dof), restarts=1, seed=seed)
-        ok = ok.reshape(len(todo), P).all(axis=1)
+        reached, q = _solve(model, con, pts, seeds[todo].reshape(-1, dof), restarts=1, seed=seed)
+        ok = np.all(reached.reshape(len(todo), P), axis=1)  # every check point reached
         q = q.reshape(len(todo), P, dof)
         good, bad = todo[ok], todo[~ok]
         lo[good] = mid[ok]

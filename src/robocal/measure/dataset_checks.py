@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robocal.measure.dataset_columns import _short
+from robocal.measure.dataset_columns import _ReaderState, _short
 from robocal.measure.measurements import (
     MAX_MEDIAN_DISTANCE,
     MAX_POSITION,
@@ -14,7 +14,7 @@ from robocal.measure.measurements import (
 )
 
 
-class _RowChecks:
+class _RowChecks(_ReaderState):
     """Checks across a file's rows, mixed into :class:`robocal.measure.dataset_reader._Reader`."""
 
     def _rows_text(self) -> str:

@@ -6,9 +6,11 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from robocal import csvfile
 from robocal.measure.measurements import (
@@ -17,8 +19,17 @@ from robocal.measure.measurements import (
     _POSITION,
     _QUATERNION,
     _SIGMA,
+    Array,
+    LimitsMode,
+    Problem,
+    Severity,
 )
 from robocal.units import unit_factor
+
+if TYPE_CHECKING:
+    from robocal.model.chain import Model
+
+_Item = TypeVar("_Item", bound=np.generic)
 
 
 @dataclass(frozen=True)
@@ -91,7 +102,82 @@ SEPARATOR_NAMES = {"tab": "\t", "\\t": "\t", "space": " ", "whitespace": " ", "s
 _JOINT_LIKE = re.compile(r"q(\d+)$")
 
 
-class _ColumnResolver:
+class _ReaderState:
+    """What :class:`robocal.measure.dataset_reader._Reader` knows of a file (its options, set
+    by its ``__init__``; the header and the rows' arrays, set while reading) and its problem
+    list; the base of the reader's parts (:class:`_ColumnResolver`, ``_RowChecks``)."""
+
+    # the options (SI factors ``L`` per length unit, ``A`` per angle unit)
+    path: Path
+    L: float
+    A: float
+    length_unit: str
+    angle_unit: str
+    rename: dict[str, str]
+    sep: str | None
+    decimal: str
+    dof: int | None
+    model: Model | None
+    limits: LimitsMode
+    orientation: _Orientation
+    extra_names: list[str]
+    incomplete: IncompleteMode
+    problems: list[Problem]
+    # the header: its cells, line number (1-based) and each name's column index
+    head: csvfile.Head
+    header_line: int
+    header: list[str]
+    where: dict[str, int]
+    # the rows, shape (n,): line numbers, byte offsets, split into cells, with a missing/bad value
+    line_no: NDArray[np.int64]
+    offsets: NDArray[np.int64]
+    good: NDArray[np.bool_]
+    incomplete_rows: NDArray[np.bool_]
+    # per column index: its numbers (NaN where bad), problems (code, message, line), counts, uses left
+    columns: dict[int, Array]
+    labels: NDArray[np.str_]
+    found: dict[int, list[tuple[str, str, int]]]
+    counts: dict[int, int]
+    uses: dict[int, int]
+
+    def error(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
+        if self.incomplete == "drop" and code in INCOMPLETE_CODES and row is not None:
+            self.warn(code, f"{message}; row left out (incomplete='drop')", row, column)
+            return
+        if code in INCOMPLETE_CODES and row is not None:
+            message += " (incomplete='drop' leaves such rows out)"
+        self.problems.append(Problem("error", code, message, str(self.path), row, column))
+
+    def warn(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
+        self.problems.append(Problem("warning", code, message, str(self.path), row, column))
+
+    @property
+    def ok(self) -> bool:
+        return not any(p.severity == "error" for p in self.problems)
+
+    def _listed(
+        self, items: NDArray[_Item], code: str, column: str | None, severity: Severity = "error"
+    ) -> NDArray[_Item]:
+        """The first :data:`MAX_LISTED` of ``items`` (problems of one kind); one line counts
+        the rest, so that a file with a million bad cells costs no more memory."""
+        self._summary(code, len(items) - MAX_LISTED, column, severity)
+        return items[:MAX_LISTED]
+
+    def _summary(self, code: str, more: int, column: str | None, severity: Severity) -> None:
+        if more > 0:
+            message = f"and {more} more row(s) with such problems (only the first {MAX_LISTED} are listed)"
+            if severity == "warning":
+                message += "; left out (incomplete='drop')"
+            self.problems.append(Problem(severity, code, message, str(self.path), None, column))
+
+    def _cell(self, i: int, name: str) -> str:
+        """Row ``i``'s cell of column ``name`` as written (read again from the file)."""
+        cells = csvfile.row_at(self.head, int(self.offsets[i]))
+        k = self.where[name]
+        return cells[k].strip() if k < len(cells) else ""
+
+
+class _ColumnResolver(_ReaderState):
     """The reader's column resolution: which header columns hold the joints, the position,
     sigma, orientation, temperature, set and extra values (``columns=`` renames applied).
     Mixed into :class:`robocal.measure.dataset_reader._Reader`, whose header and problem
@@ -110,7 +196,7 @@ class _ColumnResolver:
     def _resolve_columns(self) -> dict | None:
         self._check_renames()
         if self.model is not None:
-            joints, dof = self._model_joints(), self.model.dof
+            joints, dof = self._model_joints(self.model), self.model.dof
         else:
             joints, dof = self._counted_joints()
         self._check_extra_joints(dof)
@@ -167,9 +253,8 @@ class _ColumnResolver:
                     target,
                 )
 
-    def _model_joints(self) -> list[str]:
+    def _model_joints(self, model: Model) -> list[str]:
         """The model's joint columns (``q<j>`` or the joint's name, renames first)."""
-        model = self.model
         joints: list[str] = []
         missing = []
         for j, jname in enumerate(model.joint_names):

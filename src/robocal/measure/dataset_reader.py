@@ -29,7 +29,6 @@ from robocal.measure.measurements import (
     LimitsMode,
     Measurements,
     Problem,
-    Severity,
 )
 from robocal.model.chain import Model
 from robocal.units import unit_factor
@@ -80,24 +79,6 @@ class _Reader(_ColumnResolver, _RowChecks):
         self.incomplete = incomplete
         self.problems: list[Problem] = []
 
-    # -- problem helpers
-    def error(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
-        if self.incomplete == "drop" and code in INCOMPLETE_CODES and row is not None:
-            self.warn(code, f"{message}; row left out (incomplete='drop')", row, column)
-            return
-        if code in INCOMPLETE_CODES and row is not None:
-            message += " (incomplete='drop' leaves such rows out)"
-        self.problems.append(Problem("error", code, message, str(self.path), row, column))
-
-    def warn(self, code: str, message: str, row: int | None = None, column: str | None = None) -> None:
-        self.problems.append(Problem("warning", code, message, str(self.path), row, column))
-
-    @property
-    def ok(self) -> bool:
-        return not any(p.severity == "error" for p in self.problems)
-
-    # -- the pass
-
     # -- the pass
     def read(self) -> Measurements | None:
         head = self._open()
@@ -125,7 +106,7 @@ class _Reader(_ColumnResolver, _RowChecks):
             return None
         return self._measurements(values, cols, metadata)
 
-    def _open(self) -> csvfile.CsvHead | None:
+    def _open(self) -> csvfile.Head | None:
         """The file's head (metadata, header), or None with the problem recorded."""
         path = self.path
         if path.exists() and not path.is_file():  # a directory, FIFO or device (which never ends)
@@ -147,7 +128,7 @@ class _Reader(_ColumnResolver, _RowChecks):
             self.error(err.code, err.message, err.line)
             return None
 
-    def _index_header(self, head) -> None:
+    def _index_header(self, head: csvfile.Head) -> None:
         """``self.where``: each header name's column; a name given twice is an error."""
         self.head = head
         self.header_line = head.header_line
@@ -240,19 +221,6 @@ class _Reader(_ColumnResolver, _RowChecks):
             metadata["read_orientation"] = cols["orientation_kind"]
         return Measurements(joint_names=joint_names, metadata=metadata, **values)
 
-    def _listed(self, items, code: str, column: str | None, severity: Severity = "error"):
-        """The first :data:`MAX_LISTED` of ``items`` (problems of one kind); one line counts
-        the rest, so that a file with a million bad cells costs no more memory."""
-        self._summary(code, len(items) - MAX_LISTED, column, severity)
-        return items[:MAX_LISTED]
-
-    def _summary(self, code: str, more: int, column: str | None, severity: Severity) -> None:
-        if more > 0:
-            message = f"and {more} more row(s) with such problems (only the first {MAX_LISTED} are listed)"
-            if severity == "warning":
-                message += "; left out (incomplete='drop')"
-            self.problems.append(Problem(severity, code, message, str(self.path), None, column))
-
     def _stream(self, cols: dict) -> bool:
         """Read the rows chunk by chunk (:mod:`robocal.csvfile`), keeping for each column
         in use its numbers (NaN where a cell is bad), its problems (the first
@@ -291,7 +259,7 @@ class _Reader(_ColumnResolver, _RowChecks):
             if set_k is not None:
                 cells = [r[set_k].strip().lower() if len(r) > set_k else "" for r in chunk.rows]
                 valid = np.array([c in ("train", "test") for c in cells], dtype=bool)
-                for i in np.flatnonzero(ok & ~valid):
+                for i in map(int, np.flatnonzero(ok & ~valid)):
                     raw = chunk.rows[i][set_k].strip()
                     message = f"{_short(raw)} is not a train/test label (expected 'train' or 'test')"
                     note(-2, "split", message, int(chunk.line[i]))
@@ -325,12 +293,6 @@ class _Reader(_ColumnResolver, _RowChecks):
         self._summary(code, self.counts.get(k, 0) - MAX_LISTED, column, "warning" if drop else "error")
 
     # -- cells
-    def _cell(self, i: int, name: str) -> str:
-        """Row ``i``'s cell of column ``name`` as written (read again from the file)."""
-        cells = csvfile.row_at(self.head, int(self.offsets[i]))
-        k = self.where[name]
-        return cells[k].strip() if k < len(cells) else ""
-
     def _numbers(self, names: Sequence[str]) -> Array:
         """``(n, len(names))`` floats; bad cells (reported) are NaN.  Each column's array
         is handed over at its last use, so that no column is held twice."""

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -56,9 +56,30 @@ from robocal import spatial
 from robocal.measure.ik_starts import TargetKind, _nearest_pool, random_configurations
 from robocal.model.chain import Model
 
-__all__ = ["IKResult", "PerturbationFunction", "TargetKind", "random_configurations", "solve_ik"]
+__all__ = [
+    "IKResult",
+    "IKSettings",
+    "PerturbationFunction",
+    "TargetKind",
+    "random_configurations",
+    "solve_ik",
+]
 
 Array = NDArray[np.float64]
+
+
+class IKSettings(TypedDict, total=False):
+    """The convergence settings of :func:`solve_ik`, for functions that pass them on
+    (``**ik_options``); each absent one takes :func:`solve_ik`'s default."""
+
+    tol: float
+    tol_angle: float
+    max_iter: int
+    orientation_weight: float
+    damping: float
+    seed_pool: int
+
+
 #: ``joint_effects(q (m, dof)) -> (m, dof, 3)`` joint perturbations, or None for none
 PerturbationFunction = Callable[[NDArray[np.float64]], NDArray[np.float64] | None]
 #: m: a target coordinate beyond this is refused, not searched for (no arm reaches 1000 km, and

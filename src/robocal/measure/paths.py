@@ -22,11 +22,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Unpack
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.measure.ik import TargetKind, solve_ik
+from robocal.measure.ik import IKSettings, TargetKind, solve_ik
 from robocal.model.chain import Model
 
 __all__ = [
@@ -309,7 +310,7 @@ def joint_path(
     block: int = 16,
     tool_axis: int = 2,
     seed: int = 0,
-    **ik_options: float,
+    **ik_options: Unpack[IKSettings],
 ) -> JointPath:
     """Joint values along a sampled path: positions ``(n, 3)`` or frames ``(n, 4, 4)`` (m).
 
@@ -355,7 +356,7 @@ def joint_path(
             seed=seed,
             tool_axis=tool_axis,
             **ik_options,
-        )  # type: ignore[arg-type]
+        )
         q[sl], dist[sl], angle[sl], reach[sl] = r.q, r.position_error, r.angle_error, r.reachable
 
     if q0 is None:

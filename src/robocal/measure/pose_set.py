@@ -57,7 +57,7 @@ def position_sigma_min(model: Model, q: ArrayLike, rows: Literal["position", "po
         J = J[:, :3]
     elif rows != "pose":
         raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
-    return np.linalg.svd(J, compute_uv=False)[:, -1]
+    return np.linalg.svd(J, compute_uv=False)[:, -1].astype(np.float64, copy=False)
 
 
 # ------------------------------------------------------------------------ ordering

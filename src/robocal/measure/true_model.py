@@ -58,7 +58,7 @@ def parse_quantity(value: str | float, kind: Literal["length", "angle"]) -> floa
                 f"{value!r} is not a {kind} such as {'0.02mm' if kind == 'length' else '0.05deg'} "
                 f"(units: {', '.join(units)})"
             )
-        out = float(m.group(1)) * units.get(unit, 1.0)
+        out = float(m.group(1)) * (units[unit] if unit else 1.0)
     if not math.isfinite(out):
         raise ValueError(f"{kind} {value!r} is not finite")
     return out
