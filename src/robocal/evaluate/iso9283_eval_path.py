@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal import spatial
 from robocal.evaluate import iso9283 as iso
 from robocal.evaluate.iso9283_eval_pose import (
     _NAMES,
@@ -48,8 +49,21 @@ def _paths(log: Iso9283Log, test: str) -> dict[str, list[Run]]:
     return dict(out)
 
 
+def _path_samples(
+    log: Iso9283Log, keep: NDArray[np.int_], runs: list[Run], with_angles: bool
+) -> tuple[Array, list[Array]]:
+    """The commanded samples ``keep`` and each run's attained ones: ``(k, 4, 4)`` frames (m)
+    ``with_angles`` when the log holds measured and commanded orientations, else ``(k, 3)``
+    positions (m), so that a log without commanded orientations still gives AT and RT."""
+    R, R_c = log.rotation, log.commanded_rotation
+    if with_angles and R is not None and R_c is not None:
+        attained = [spatial.homogeneous(R[r.index], log.position[r.index]) for r in runs]
+        return spatial.homogeneous(R_c[keep], log.commanded[keep]), attained
+    return log.commanded[keep], [log.position[r.index] for r in runs]
+
+
 def _path_rows(log: Iso9283Log, test: str, opts: EvaluationOptions) -> list[dict[str, Any]]:
-    details = []
+    details: list[dict[str, Any]] = []
     for name, runs in _paths(log, test).items():
         first = runs[0].index
         keep = first[_dedupe(log.commanded[first])]
@@ -59,9 +73,7 @@ def _path_rows(log: Iso9283Log, test: str, opts: EvaluationOptions) -> list[dict
             np.unique(np.linspace(0, len(keep) - 1, min(opts.path_points, len(keep))).round().astype(int))
         ]
         keep = keep[1:-1]  # the end points: an attained path that stops short never crosses their planes
-        with_angles = test == "reorientation" and log.rotation is not None
-        commanded = log.frames(keep, commanded=True) if with_angles else log.commanded[keep]
-        attained = [log.frames(r.index) if with_angles else log.position[r.index] for r in runs]
+        commanded, attained = _path_samples(log, keep, runs, test == "reorientation")
         pa = path_accuracy(commanded, attained)
         details.append(
             {
@@ -98,7 +110,7 @@ def _reorientation(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
     args = _NAMES[9]
     if not log.runs("reorientation"):
         return _missing(*args, _no_rows("reorientation"))
-    if log.rotation is None:
+    if log.rotation is None or log.commanded_rotation is None:  # both: the deviations need them
         return _missing(*args, "the log has no orientation columns (a_deg ... cmd_c_deg)")
     details = _path_rows(log, "reorientation", opts)
     if not details:
@@ -149,7 +161,8 @@ def _cornering(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
     paths = _paths(log, "cornering")
     if not paths:
         return _missing(*args, _no_rows("cornering"))
-    details, counts = [], []
+    details: list[dict[str, Any]] = []
+    counts: list[int] = []
     for name, runs in paths.items():
         first = runs[0].index
         pts = log.commanded[first[_dedupe(log.commanded[first])]]
@@ -188,7 +201,7 @@ def _velocity(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
     paths = _paths(log, "velocity")
     if not paths:
         return _missing(*args, _no_rows("velocity"))
-    details = []
+    details: list[dict[str, Any]] = []
     for name, runs in paths.items():
         speeds, v_cmd = [], []
         for r in runs:
@@ -242,7 +255,7 @@ def _positioning(log: Iso9283Log, opts: EvaluationOptions, band: float) -> Chara
             by_distance[round(_mm(np.linalg.norm(cmd[-1] - cmd[0])), 1)].append(tp)
     if not by_distance:
         return _missing(*args, "no positioning run holds a time record of a move that settles")
-    details = [
+    details: list[dict[str, Any]] = [
         {"distance_mm": d, "n": len(ts), "time_s": float(np.mean(ts))}
         for d, ts in sorted(by_distance.items())
     ]
@@ -276,7 +289,7 @@ def _compliance(log: Iso9283Log) -> Characteristic:
         sc = iso.static_compliance(np.vstack(F), np.vstack(disp))
     except ValueError as err:
         return _missing(*args, str(err))
-    details = [
+    details: list[dict[str, Any]] = [
         {"direction": d, "compliance_mm_per_N": _mm(c), "max_load_N": float(loads.max())}
         for d, c, loads in zip(sc.directions, sc.compliance, sc.loads, strict=True)
     ]
@@ -293,7 +306,7 @@ def _weaving(log: Iso9283Log) -> Characteristic:
     paths = _paths(log, "weaving")
     if not paths:
         return _missing(*args, _no_rows("weaving"))
-    details = []
+    details: list[dict[str, Any]] = []
     for name, runs in paths.items():
         ws = []
         for r in runs:

@@ -133,7 +133,7 @@ def _by(visits: list[_Visit], key: Callable[[_Visit], str]) -> dict[str, list[_V
     return dict(out)
 
 
-def _mm(v: float) -> float:
+def _mm(v: float | np.floating) -> float:
     return float(v) * 1e3
 
 
@@ -173,7 +173,7 @@ def _pose(log: Iso9283Log, visits: list[_Visit]) -> Characteristic:
     args = _NAMES[1]
     if not visits:
         return _missing(*args, _no_rows("pose"))
-    details = []
+    details: list[dict[str, Any]] = []
     for target, vs in _by(visits, lambda v: v.run.target).items():
         att = np.array([v.frame() for v in vs])
         acc = pose_accuracy(att, vs[0].frame(commanded=True))
@@ -202,7 +202,8 @@ def _multidirectional(log: Iso9283Log, opts: EvaluationOptions) -> Characteristi
     visits = _visits(log, "multidirectional", opts)
     if not visits:
         return _missing(*args, _no_rows("multidirectional"))
-    details, counts = [], []
+    details: list[dict[str, Any]] = []
+    counts: list[int] = []
     for target, vs in _by(visits, lambda v: v.run.target).items():
         groups = _by(vs, lambda v: v.run.group)
         if len(groups) < 2:
@@ -248,7 +249,7 @@ def _distance(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
         v1[0].frame(commanded=True),
         v2[0].frame(commanded=True),
     )
-    details = [
+    details: list[dict[str, Any]] = [
         {
             "poses": targets,
             "n": d.n,
@@ -275,7 +276,7 @@ def _stabilisation_rows(
     a5 = _NAMES[5]
     if not visits:
         return _missing(*a4, _no_rows("pose")), _missing(*a5, _no_rows("pose"))
-    details = []
+    details: list[dict[str, Any]] = []
     for target, vs in _by(visits, lambda v: v.run.target).items():
         times, overs, unsettled = [], [], 0
         for v in vs:
@@ -335,7 +336,7 @@ def _drift(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic:
     visits = _visits(log, "drift", opts)
     if not visits:
         return _missing(*args, _no_rows("drift"))
-    details = []
+    details: list[dict[str, Any]] = []
     for target, vs in _by(visits, lambda v: v.run.target).items():
         blocks = _by(vs, lambda v: v.run.group)
         order = sorted(blocks, key=lambda g: log.time[blocks[g][0].run.index[0]])
@@ -375,7 +376,8 @@ def _exchangeability(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic
     visits = _visits(log, "exchangeability", opts)
     if not visits:
         return _missing(*args, _no_rows("exchangeability"))
-    details, counts = [], []
+    details: list[dict[str, Any]] = []
+    counts: list[int] = []
     for target, vs in _by(visits, lambda v: v.run.target).items():
         robots = _by(vs, lambda v: v.run.group)
         if len(robots) < 2:
@@ -388,7 +390,7 @@ def _exchangeability(log: Iso9283Log, opts: EvaluationOptions) -> Characteristic
         )
     if not details:
         return _missing(*args, "exchangeability needs >= 2 robots (the group column) at a pose")
-    e, pose = _worst(details, "E_mm", "pose")
+    worst, pose = _worst(details, "E_mm", "pose")
     return Characteristic(
-        *args, True, f"E {e:.3f} mm ({pose}); worst of {len(details)} poses", _cycles(counts, 30), details
+        *args, True, f"E {worst:.3f} mm ({pose}); worst of {len(details)} poses", _cycles(counts, 30), details
     )

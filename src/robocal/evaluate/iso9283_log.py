@@ -395,10 +395,10 @@ def log_text(log: Iso9283Log, decimals: int = 6, run_id: str | None = None) -> s
     if run_id is not None:
         out.write(run_id_line(run_id))
     out.write("# robocal ISO 9283 measurement log (docs/iso9283.md)\n")
-    for k, v in log.conditions.items():
-        if k == "robocal run":
+    for key, value in log.conditions.items():
+        if key == "robocal run":
             continue
-        out.write(f"# {k}: {v}\n".replace("\r", " "))
+        out.write(f"# {key}: {value}\n".replace("\r", " "))
     cols: dict[str, object] = {
         "time_s": np.round(log.time, 6),
         "test": log.test,

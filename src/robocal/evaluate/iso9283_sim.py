@@ -379,7 +379,8 @@ def simulate_log(
     if unknown:
         raise ValueError(f"unknown test(s) {', '.join(unknown)}; known: {', '.join(TESTS)}")
     rng = np.random.default_rng(seed)
-    true = draw_true_model(model, length=errors.length_tol, angle=errors.angle_tol, seed=[seed, 1])
+    true_rng = np.random.default_rng([seed, 1])
+    true = draw_true_model(model, length=errors.length_tol, angle=errors.angle_tol, seed=true_rng)
     robot, cube = _robot_geometry(model, true, seed, cube)
     sim = _Sim(robot, errors, plan, rng)
     cyc = plan.cycles

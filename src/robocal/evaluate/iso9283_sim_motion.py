@@ -46,8 +46,8 @@ def _trapezoid(L: float, v: float, a: float) -> tuple[float, Any]:
     ta = v / a
     T = L / v + ta
 
-    def s(t: ArrayLike) -> Array:
-        t = np.clip(np.asarray(t, dtype=float), 0.0, T)
+    def s(time: ArrayLike) -> Array:
+        t = np.clip(np.asarray(time, dtype=float), 0.0, T)
         return np.where(
             t < ta,
             0.5 * a * t**2,

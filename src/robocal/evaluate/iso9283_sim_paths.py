@@ -4,7 +4,7 @@ cornering (8.5), path velocity (8.6), positioning time (9), compliance (10) and 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +25,35 @@ class _PathTests:
     b: _Builder
     truth: dict[str, Any]
     labels: tuple[str, ...]
+
+    if TYPE_CHECKING:  # defined by _Sim (declared here for the type checker only)
+
+        def move(
+            self,
+            test: str,
+            cycle: int,
+            target: str,
+            group: str,
+            start: Array,
+            end: Array,
+            off_start: Array,
+            off_end: Array,
+            abc: Array,
+        ) -> None: ...
+
+        def static(
+            self,
+            test: str,
+            cycle: int,
+            target: str,
+            group: str,
+            cmd: Array,
+            att: Array,
+            abc: Array,
+            force: Array | None = None,
+        ) -> None: ...
+
+        def _random(self, sigma: float | None = None) -> Array: ...
 
     # ---- paths
     def _path_run(  # noqa: PLR0913 - a run is its log columns and the path callables

@@ -326,7 +326,7 @@ def _crossing_angles(R: Array, seg: Array, u: Array, R_c: Array, seq: str) -> Ar
 
 def path_accuracy(
     commanded: ArrayLike,
-    attained: ArrayLike | Sequence[ArrayLike],
+    attained: NDArray[np.floating] | Sequence[ArrayLike],
     window: float = 0.1,
     angles: str = ISO_ANGLES,
 ) -> PathAccuracy:
@@ -357,7 +357,7 @@ def path_accuracy(
     for j, (p, _) in enumerate(split):
         if p.ndim != 2 or len(p) < 2:
             raise ValueError(f"attained path {j} must be (k >= 2, 3) points (m), got shape {p.shape}")
-    with_angles = R_c is not None and all(R is not None for _, R in split)
+    attained_R = [R for _, R in split if R is not None]  # all or none of them: frames or points
     t = _tangents(c)
     found = [_crossings(c, t, p, window) for p, _ in split]  # a loop over cycles, not points
     X = np.array([f[0] for f in found])  # (n, m, 3)
@@ -376,9 +376,9 @@ def path_accuracy(
         raise ValueError("no attained path crosses the normal plane of any commanded point")
     RT = float(np.nanmax(rt)) if np.any(np.isfinite(rt)) else float("nan")
     AT_abc = RT_abc = None
-    if with_angles:
+    if R_c is not None and len(attained_R) == n:
         A = np.array(
-            [_crossing_angles(R, f[1], f[2], R_c, angles) for (_, R), f in zip(split, found, strict=True)]
+            [_crossing_angles(R, f[1], f[2], R_c, angles) for R, f in zip(attained_R, found, strict=True)]
         )
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns: no crossing there

@@ -12,7 +12,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -159,7 +159,7 @@ def _observability(facts: ResultFacts, data: Measurements | None) -> tuple[dict[
     chain = facts.measurement_chain
     if data is None or chain is None or not chain.free_names or data.dof != facts.model.dof:
         return None
-    rows = "pose" if facts.measure == "pose" else "position"
+    rows: Literal["position", "pose"] = "pose" if facts.measure == "pose" else "position"
     idx = observability(chain, data.q, rows=rows, scale="tolerance").as_dict()
     Js, _, _ = scaled_jacobian(chain, data.q, rows=rows, scale="norm")
     return idx, singular_values(Js)
@@ -321,7 +321,7 @@ def _effects(
     )
     displacement = None
     pert = result.joint_perturbations(q) if q is not None else None
-    if pert is not None:
+    if q is not None and pert is not None:
         model = facts.model
         displacement = np.linalg.norm(model.fk(q, pert)[:, :3, 3] - model.fk(q)[:, :3, 3], axis=1)
     return EffectsData(compliance=compliance, other=other, held=held, displacement_m=displacement)

@@ -25,7 +25,11 @@ from robocal.model.chain import Model
 __all__ = ["before_validation", "report_data_from_result", "start_chain"]
 
 #: result.records keys shown under provenance as the calibration's input, with their labels
-INPUT_KEYS = (("data_file", "data file"), ("data_sha256", "data SHA-256"), ("train_n", "train n"))
+INPUT_KEYS: tuple[tuple[str, str], ...] = (
+    ("data_file", "data file"),
+    ("data_sha256", "data SHA-256"),
+    ("train_n", "train n"),
+)
 INPUT_KEYS += (("seed", "seed"), ("source", "source"))
 
 

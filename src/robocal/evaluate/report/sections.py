@@ -79,7 +79,7 @@ def _status(r: ReportData) -> str:
 
 def summary(r: ReportData, figs: m.Figures) -> Section:
     facts = r.facts
-    n_effects = sum(effect_of(n) is not None and effect_of(n)[0] == "compliance" for n in facts.names)
+    n_effects = sum((e := effect_of(n)) is not None and e[0] == "compliance" for n in facts.names)
     cards = _held_out_card(r)
     cards += _card(
         "RMS error on calibration poses",
@@ -112,7 +112,7 @@ def robot_model(r: ReportData, figs: m.Figures) -> Section:
     body = figs.html(
         model_figure(model, title=f"{model.name} at zero joint values (calibrated)"), "model", 560
     )
-    info = [
+    info: list[list[str | int]] = [
         ["robot", model.title or model.name],
         ["joints", f"{model.dof} ({''.join('R' if t == 'revolute' else 'P' for t in model.joint_types)})"],
         ["steps (elementary transforms)", len(model.steps)],

@@ -53,16 +53,17 @@ def seed_table_html(table: ErrorTable, caption: str) -> str:
             row += [table.display(i, arr[i, j]) for j in range(len(table.cases))]
             for c in cases:
                 imp = table.improvements[c].get(q)
-                shown = stat == "average" and imp is not None
                 row.append(
-                    f"{imp.percent:.1f} ({imp.percent_low:.1f} to {imp.percent_high:.1f})" if shown else ""
+                    f"{imp.percent:.1f} ({imp.percent_low:.1f} to {imp.percent_high:.1f})"
+                    if stat == "average" and imp is not None
+                    else ""
                 )
             rows.append(row)
     return m.table(header, rows, "seed", caption)
 
 
 def _expected_note(after: ValidationStats) -> str:
-    if after.expected_rms is None:
+    if after.expected_rms is None or after.parameter_rms is None:  # set together
         return ""
     verdict = (
         "more than 1.5× the expectation: the robot or device changed, or the model misses errors the "
