@@ -57,6 +57,14 @@ def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str]
         "refit": "the device frame was refitted to this data (--refit-frame)",
     }
     notes = [frames.get(stats.frame, "")] if frame_note else []
+    if frame_note and stats.scoring is not None and stats.scoring != "in-sample":
+        notes[0] += f": each row scored with the frame fitted on the other rows ({stats.scoring})"
+    if stats.in_sample is not None:
+        s = stats.in_sample
+        notes.append(
+            f"in-sample (the frame fitted and scored on the same {s.n} rows, looks better than it is): "
+            f"mean {s.mean * 1e3:.4f} mm, RMS {s.rms * 1e3:.4f} mm"
+        )
     if stats.expected_rms is not None:
         notes.append(
             f"the calibration expected an RMS error of {stats.expected_rms * 1e3:.4g} mm here "
@@ -67,6 +75,8 @@ def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str]
                 "sigma": "the data's stated noise",
                 "sigma+unmodelled": "the data's stated noise and the error its residuals showed beyond noise",
                 "residual model": "the noise and error the learned residual left unexplained",
+                "registration": "the refitted frame's own uncertainty from these poses and the error "
+                "the calibration does not explain",
             }.get(stats.scatter or "", "the scatter of its own residuals")
             + f"); measured {stats.rms * 1e3:.4g} mm"
         )

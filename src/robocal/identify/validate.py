@@ -6,9 +6,14 @@ position error, per axis, and the orientation error where measured.
 
 Which device frame: data from the calibration's own set-up uses the frame identified
 by the calibration as it is (pass the :class:`CalibrationResult`, or ``frame=``); data
-from another placement of the device may refit the frame only (``refit_frame=True``):
-a rigid Kabsch/Horn fit, the exact least-squares frame for positions.  A bare model
-without a frame is validated with a refitted frame.  The result says which was done.
+from another placement of the device may refit the frame only (``refit_frame=True``).
+A frame fitted to the rows it is then scored on looks better than it is (it spent six
+degrees of freedom on them), so a calibration's refitted frame is scored honestly: each row
+with the frame fitted on the other rows (K-fold, K = min(5, n),
+:mod:`robocal.identify.register`), its expected error including that frame's own
+uncertainty; the in-sample fit comes with it (``in_sample``), labelled so.  A bare model
+without a frame is validated with a rigid Kabsch/Horn fit on all rows (in-sample).  The
+result says which was done (``frame``, ``scoring``).
 """
 
 from __future__ import annotations
@@ -53,8 +58,13 @@ class ValidationStats:
     expected_rms: float | None = None
     # where the rest came from: "sigma" (the data's noise), "sigma+unmodelled" (and the error
     # the calibration's residuals showed beyond its noise), "residuals" (their scatter) or
-    # "residual model" (what the learned residual's evidence left unexplained)
+    # "residual model" (what the learned residual's evidence left unexplained), "registration"
+    # (the calibration's predicted error and the refitted frame's uncertainty)
     scatter: str | None = None
+    # how a refitted frame was scored: "5-fold" (each row by a frame fitted without it) or
+    # "in-sample" (fitted and scored on the same rows); None for a frame used as it is
+    scoring: str | None = None
+    in_sample: ValidationStats | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -70,9 +80,13 @@ class ValidationStats:
         if self.orientation_mean is not None:
             out["orientation_mean_deg"] = float(np.degrees(self.orientation_mean))
             out["orientation_max_deg"] = float(np.degrees(self.orientation_max))
-        if self.expected_rms is not None:
+        if self.expected_rms is not None and self.parameter_rms is not None:
             out["expected_rms_mm"] = self.expected_rms * 1e3
             out["parameter_rms_mm"] = self.parameter_rms * 1e3
+        if self.scoring is not None:
+            out["scoring"] = self.scoring
+        if self.in_sample is not None:
+            out["in_sample"] = self.in_sample.to_dict()
         return out
 
     @property
@@ -126,15 +140,40 @@ def validate(
 
         perturbations = joint_perturbations(model, data.q)  # a bare model's own joint effects
     T = model.fk(data.q, perturbations)
+    if refit_frame and result is not None:
+        return _refit_scored(result, data)
     if refit_frame or frame is None:
         T_frame = spatial.fit_rigid_transform(T[:, :3, 3], data.position)
-        label = "refit"
-    else:
-        T_frame = np.asarray(frame, dtype=float)
-    stats = validation_statistics(T_frame @ T, data, label)
-    if result is not None and label in ("calibrated", "refit") and result.measurement_chain is not None:
+        stats = validation_statistics(T_frame @ T, data, "refit")
+        return dataclasses.replace(stats, scoring="in-sample")
+    stats = validation_statistics(np.asarray(frame, dtype=float) @ T, data, label)
+    if result is not None and label == "calibrated" and result.measurement_chain is not None:
         stats = _with_expectation(stats, result, data, label)
     return stats
+
+
+def _refit_scored(result: CalibrationResult, data: Measurements) -> ValidationStats:
+    """A calibration's frame refitted to ``data``: each row scored with the frame fitted on
+    the other rows (K-fold), expected error with that frame's uncertainty; the in-sample
+    fit (every row) beside it."""
+    from robocal.identify.register import fit_frame, frozen_robot, score_registration
+
+    robot = frozen_robot(result, data)
+    assert data.position is not None  # validate checked
+    score = score_registration(robot, data.position)
+    fit = fit_frame(robot, data.position)
+    T = fit.T_device_base @ result.predict(data.q, frame=np.eye(4))
+    in_sample = dataclasses.replace(validation_statistics(T, data, "refit"), scoring="in-sample")
+    held_out = _position_statistics(score.error_vectors, "refit")
+    robot_ms = result.position_uncertainty(data.q, "base") ** 2
+    return dataclasses.replace(
+        held_out,
+        parameter_rms=math.sqrt(float(np.mean(robot_ms))),
+        expected_rms=score.expected_rms,
+        scatter="registration",
+        scoring=score.scoring,
+        in_sample=in_sample,
+    )
 
 
 def _with_expectation(
@@ -172,15 +211,19 @@ def validation_statistics(predicted: Array, data: Measurements, frame: str = "gi
     """Error statistics of predicted tool frames ``(n, 4, 4)`` (device frame) against the
     measured positions (and orientations) of ``data``; ``frame`` says how the device
     frame was obtained."""
-    d = predicted[:, :3, 3] - data.position
+    stats = _position_statistics(predicted[:, :3, 3] - data.position, frame)
+    if data.orientation is None:
+        return stats
+    w = spatial.matrix_to_rotvec(predicted[:, :3, :3] @ np.swapaxes(data.orientation, -1, -2))
+    a = np.linalg.norm(w, axis=1)
+    return dataclasses.replace(stats, orientation_mean=float(a.mean()), orientation_max=float(a.max()))
+
+
+def _position_statistics(d: Array, frame: str) -> ValidationStats:
+    """The statistics of position errors ``d`` ``(n, 3)`` (predicted - measured, m)."""
     e = np.linalg.norm(d, axis=1)
-    o_mean = o_max = None
-    if data.orientation is not None:
-        w = spatial.matrix_to_rotvec(predicted[:, :3, :3] @ np.swapaxes(data.orientation, -1, -2))
-        a = np.linalg.norm(w, axis=1)
-        o_mean, o_max = float(a.mean()), float(a.max())
     return ValidationStats(
-        n=data.n,
+        n=len(d),
         mean=float(e.mean()),
         rms=float(np.sqrt(np.mean(e**2))),
         max=float(e.max()),
@@ -190,8 +233,6 @@ def validation_statistics(predicted: Array, data: Measurements, frame: str = "gi
         frame=frame,
         errors=e,
         error_vectors=d,
-        orientation_mean=o_mean,
-        orientation_max=o_max,
     )
 
 
