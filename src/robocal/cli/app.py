@@ -44,6 +44,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "Error statistics of a calibrated model on (held-out) measurements; for a constraint file "
         "(point, plane, pair/distance_mm columns) its own figures.",
     ),
+    "register": (
+        "register",
+        "Re-register a calibration's device frame (--tool: and tool point) on a few poses.",
+    ),
     "reproduce": (
         "experiments",
         "Reproduce a seed's experiment and print its published numbers next to robocal's.",
