@@ -247,6 +247,7 @@ def _field(row, key: str) -> str:
 def _type(pg, row, key: str, value: str) -> None:
     box = pg.locator(_field(row, key))
     box.fill(value)
+    box.press("Enter")  # a field applies on Enter or when left (not on every key)
 
 
 def test_builder_types_the_ur10_and_saves_the_cli_model_file(page, shots, tmp_path):

@@ -33,17 +33,32 @@ header b { font-size: 1.2rem; margin-right: 1rem; }
 .toolbar > div { display: inline-block; }
 button { padding: 0.25rem 0.6rem; cursor: pointer; }
 button.primary { background: #1f77b4; color: white; border: 1px solid #1f77b4; }
-.joint-row, .joint-head { display: flex; gap: 0.25rem; align-items: center; margin: 0.1rem 0; }
-.joint-head span { color: #555; font-size: 0.85rem; margin-right: 1.5rem; }
-.rownum { width: 2.2em; text-align: right; color: #555; }
+/* the builder's joint table: one table, so every heading sits over its column at any width;
+   each box is as wide as its text (field-sizing), so no typed or computed number is cut */
+table.joint-table { border-collapse: collapse; margin: 0.2rem 0; font-size: 0.9rem; }
+table.joint-table th { color: #555; font-weight: normal; font-size: 0.85rem; padding: 0.1rem 0.2rem; }
+table.joint-table td { border: none; padding: 0.1rem 0.2rem; vertical-align: middle; }
+table.joint-table tr.subhead th { padding-top: 0.5rem; }
+table.joint-table tr.msgrow td { padding: 0; }
+table.joint-table td.acts { white-space: nowrap; }
+.rownum { text-align: right; color: #555; }
 .field { font-family: inherit; }
-input.field { border: 1px solid #bbb; padding: 0.15rem 0.25rem; }
+/* Dash's box has size containment (it never grows with its text): the form's boxes do */
+.dash-input-container.field { width: auto; container-type: normal; height: 28px; }
+.dash-input-container.field input { field-sizing: content; flex: 0 0 auto; min-width: 4ch;
+  padding: 0.1rem 0.3rem; font-variant-numeric: tabular-nums; }
 .invalid, .invalid input { border-color: #d62728 !important; background: #fdecea !important; }
 .dash-input-container.invalid { outline: 2px solid #d62728; }
 .rowmsg { color: #d62728; font-size: 0.85rem; margin-left: 2.6em; }
+.rowmsg:empty { display: none; }
 .type, .type label { display: inline-flex; } .type label, .catalog label { margin-right: 0.5rem; }
-.joint-head span { display: inline-block; box-sizing: border-box; }
 .joint-row .dash-input-container { box-sizing: border-box; }
+td.params .param { display: inline-block; margin-right: 0.7rem; white-space: nowrap; }
+/* the builder below 1500 px: the table above the view, each the page's full width */
+@media (max-width: 1500px) {
+  .page.builder { flex-wrap: wrap; }
+  .page.builder > .left, .page.builder > .right { flex: 1 1 100%; }
+}
 .meta label { margin-right: 1rem; }
 .note, .hint { color: #666; font-size: 0.85rem; margin-left: 0.5rem; }
 .message { margin: 0.3rem 0; min-height: 1.2em; }

@@ -16,23 +16,23 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
 from dash import ALL, Dash, Input, Output, State, callback_context, dcc, html, no_update
 
+from robocal.apps.gui.builder_views import builder_figure, built_view
 from robocal.apps.gui.form import (
     TCP_FIELDS,
     BuilderForm,
     FormCheck,
     build_form,
+    check_form,
     form_from_catalog,
     form_from_geometry_text,
     form_from_urdf,
     geometry_yaml,
-    link_rows,
     model_file_text,
 )
 
-__all__ = ["BLANK_JOINT", "builder_figure", "layout", "register"]
+__all__ = ["BLANK_JOINT", "builder_figure", "layout", "register"]  # builder_figure: as before
 
 BLANK_JOINT = {
     "name": "",
@@ -76,69 +76,107 @@ def _fid(row: int | str, key: str) -> dict[str, Any]:
     return {"kind": "field", "row": row, "key": key}
 
 
-def _input(row: int | str, key: str, value: str, width: str = "5.5em") -> dcc.Input:
+#: a field's value is sent when the user presses Enter or leaves the field, not on every key:
+#: the model is checked and built once per edit.  (Dash's timed debounce is not used: its timer
+#: fires after "+ add joint" has re-rendered the form, on a box that no longer exists, and a
+#: value typed just before the click would be lost.)
+FIELD_DEBOUNCE = True
+
+
+def _input(row: int | str, key: str, value: str) -> dcc.Input:
+    # the box is as wide as its text (CSS field-sizing): "-1.547337813e-09" shows in full
     return dcc.Input(
         id=_fid(row, key),
         value=value,
         type="text",
-        debounce=False,
+        debounce=FIELD_DEBOUNCE,
         className="field",
-        style={"width": width},
         placeholder=_LABELS.get(key, key),
     )
 
 
-def _joint_row(i: int, row: Mapping[str, str], n: int) -> html.Div:
-    cells: list[Any] = [html.Span(f"{i + 1}", className="rownum")]
-    cells.append(_input(i, "name", row.get("name", ""), "9em"))
+#: the joint table's columns: (heading, what the column holds)
+_JOINT_COLUMNS = (
+    ("#", "joint number"),
+    ("name", "the joint's name"),
+    ("type", "R revolute, P prismatic"),
+    ("x mm", "position from the previous joint, base axes"),
+    ("y mm", "position from the previous joint, base axes"),
+    ("z mm", "position from the previous joint, base axes"),
+    ("axis x", "axis direction, base axes"),
+    ("axis y", "axis direction, base axes"),
+    ("axis z", "axis direction, base axes"),
+    ("lower", "lower limit, deg (mm for P)"),
+    ("upper", "upper limit, deg (mm for P)"),
+    ("", ""),
+)
+_TCP_HEAD = ("", "", "", "x mm", "y mm", "z mm", "roll °", "pitch °", "yaw °", "", "", "")
+
+
+def _head_row(titles: Sequence[str], hints: Sequence[str] = ()) -> html.Tr:
+    hints = tuple(hints) or ("",) * len(titles)
+    return html.Tr([html.Th(t, title=h or None) for t, h in zip(titles, hints, strict=True)])
+
+
+def _message_row(row: int | str) -> html.Tr:
+    cell = html.Td(html.Div(id={"kind": "rowmsg", "row": row}, className="rowmsg"), colSpan=12)
+    return html.Tr(cell, className="msgrow")
+
+
+def _joint_row(i: int, row: Mapping[str, str], n: int) -> list[html.Tr]:
+    cells: list[Any] = [
+        html.Td(f"{i + 1}", className="rownum"),
+        html.Td(_input(i, "name", row.get("name", ""))),
+    ]
     cells.append(
-        dcc.RadioItems(
-            id=_fid(i, "type"),
-            options=[{"label": "R", "value": "revolute"}, {"label": "P", "value": "prismatic"}],
-            value=row.get("type", "revolute"),
-            inline=True,
-            className="field type",
+        html.Td(
+            dcc.RadioItems(
+                id=_fid(i, "type"),
+                options=[{"label": "R", "value": "revolute"}, {"label": "P", "value": "prismatic"}],
+                value=row.get("type", "revolute"),
+                inline=True,
+                className="field type",
+            )
         )
     )
-    cells += [_input(i, k, row.get(k, "")) for k in ("px", "py", "pz")]
-    cells += [_input(i, k, row.get(k, ""), "4em") for k in ("ax", "ay", "az")]
-    cells += [_input(i, k, row.get(k, ""), "4.5em") for k in ("lo", "hi")]
+    cells += [html.Td(_input(i, k, row.get(k, ""))) for k in ("px", "py", "pz", "ax", "ay", "az", "lo", "hi")]
     buttons = [
         html.Button("↑", id={"kind": "act", "op": "up", "row": i}, disabled=i == 0, title="move up"),
         html.Button("↓", id={"kind": "act", "op": "down", "row": i}, disabled=i == n - 1, title="move down"),
         html.Button("✕", id={"kind": "act", "op": "remove", "row": i}, disabled=n == 1, title="remove"),
     ]
-    return html.Div(
-        [
-            html.Div(cells + buttons, className="joint-row"),
-            html.Div(id={"kind": "rowmsg", "row": i}, className="rowmsg"),
-        ],
-        className="joint",
-    )
+    cells.append(html.Td(buttons, className="acts"))
+    return [html.Tr(cells, className="joint-row"), _message_row(i)]
+
+
+def _tcp_rows(tcp: Mapping[str, str]) -> list[html.Tr]:
+    cells = [html.Td("TCP", className="rownum"), html.Td("tool point", className="hint"), html.Td("")]
+    cells += [html.Td(_input("tcp", k, tcp.get(k, ""))) for k in TCP_FIELDS]
+    cells += [html.Td(""), html.Td(""), html.Td("")]
+    return [html.Tr(cells, className="joint-row"), _message_row("tcp")]
 
 
 def render_form(form: BuilderForm) -> list[Any]:
-    """The form's components for ``form`` (meta, joints, TCP)."""
+    """The form's components for ``form``: the model's name and title, then one table whose
+    columns line up at every width (joints, then the TCP under its own headings)."""
     n = len(form.joints)
-    widths = (("#", "2.2em"), ("name", "9em"), ("type", "5.6em"), ("x mm", "5.5em"), ("y mm", "5.5em"))
-    widths += (("z mm", "5.5em"), ("axis x", "4em"), ("axis y", "4em"), ("axis z", "4em"))
-    widths += (("lower", "4.5em"), ("upper", "4.5em"))
-    header = html.Div(
-        [html.Span(h, style={"width": w, "margin": 0}) for h, w in widths]
-        + [html.Span("position: from the previous joint, base axes; limits ° (mm for P)")],
-        className="joint-head",
-    )
-    tcp_row = html.Div(
-        [html.Span("TCP", className="rownum")]
-        + [_input("tcp", k, form.tcp.get(k, "")) for k in TCP_FIELDS]
-        + [html.Span("position rel. to the last joint (mm); roll-pitch-yaw ° (empty: not given)")],
-        className="joint-row",
+    body: list[html.Tr] = []
+    for i, row in enumerate(form.joints):
+        body += _joint_row(i, row, n)
+    table = html.Table(
+        [
+            html.Thead(_head_row([c for c, _ in _JOINT_COLUMNS], [h for _, h in _JOINT_COLUMNS])),
+            html.Tbody(body),
+            html.Tbody([html.Tr(_head_row(_TCP_HEAD).children, className="subhead"), *_tcp_rows(form.tcp)]),
+        ],
+        className="joint-table",
+        id="joint-table",
     )
     return [
         html.Div(
             [
-                html.Label(["model name ", _input("meta", "name", form.name, "12em")]),
-                html.Label(["title ", _input("meta", "title", form.title, "26em")]),
+                html.Label(["model name ", _input("meta", "name", form.name)]),
+                html.Label(["title ", _input("meta", "title", form.title)]),
                 dcc.RadioItems(
                     id=_fid("meta", "measure"),
                     options=[
@@ -154,13 +192,13 @@ def render_form(form: BuilderForm) -> list[Any]:
             className="meta",
         ),
         html.Div(
-            "Base: the world frame (x, y, z as drawn); joint 1's position is measured from its origin.",
+            "Base: the world frame (x, y, z as drawn). Each joint's position is measured from the "
+            "previous joint (joint 1's from the base origin), in base axes; limits in ° (mm for P). "
+            "The TCP's position is relative to the last joint (mm), its roll-pitch-yaw in ° "
+            "(empty: not given). Enter or Tab applies a field.",
             className="note",
         ),
-        header,
-        *[_joint_row(i, row, n) for i, row in enumerate(form.joints)],
-        tcp_row,
-        html.Div(id={"kind": "rowmsg", "row": "tcp"}, className="rowmsg"),
+        table,
     ]
 
 
@@ -212,7 +250,7 @@ def layout(catalog: Sequence[str]) -> html.Div:
                 className="right",
             ),
         ],
-        className="page",
+        className="page builder",
     )
 
 
@@ -243,81 +281,6 @@ def _decode(contents: str) -> str:
         return base64.b64decode(contents.split(",", 1)[1]).decode("utf-8")
     except (IndexError, binascii.Error, UnicodeDecodeError):
         raise ValueError("the file is not UTF-8 text") from None
-
-
-# ----------------------------------------------------------------------- the view
-def builder_figure(result) -> Any:
-    """The model's 3D view (:func:`robocal.model.view.model_figure`) with every joint axis
-    drawn as a dashed line through its joint, and room around the labels."""
-    import plotly.graph_objects as go
-
-    from robocal.model.view import model_figure, padded_scene
-
-    model = result.model
-    fig = model_figure(model, title=f"{model.name}: {model.dof} joints, zero position")
-    fig.update_layout(
-        scene_camera={"eye": {"x": 1.1, "y": -1.25, "z": 0.7}, "center": {"x": 0, "y": 0, "z": -0.1}}
-    )
-    frames = model.joint_frames(np.zeros(model.dof))
-    axes = [s.axis for s in model.steps if s.joint is not None]
-    pts = (
-        np.concatenate([frames[:, :3, 3], model.fk(np.zeros(model.dof))[None, :3, 3], np.zeros((1, 3))]) * 1e3
-    )
-    size = max(float(np.ptp(pts, axis=0).max()), 100.0)
-    xs, ys, zs = [], [], []
-    for F, k in zip(frames, axes, strict=True):
-        o, u = F[:3, 3] * 1e3, F[:3, k]
-        a, b = o - 0.18 * size * u, o + 0.18 * size * u
-        xs += [a[0], b[0], None]
-        ys += [a[1], b[1], None]
-        zs += [a[2], b[2], None]
-    fig.add_trace(
-        go.Scatter3d(
-            x=xs, y=ys, z=zs, mode="lines", name="joint axes",
-            line={"color": "#9467bd", "width": 3, "dash": "dash"}, hoverinfo="skip",
-        )
-    )  # fmt: skip
-    fig.update_layout(
-        height=560,
-        uirevision="builder",
-        scene=padded_scene(pts, pad=0.25 * size),  # labels stay inside
-    )
-    return fig
-
-
-def _links_table(result) -> tuple[html.Table, str]:
-    rows, count = link_rows(result)
-    body = []
-    for r in rows:
-        params = []
-        for name, free in r.parameters:
-            params.append(html.B(name) if free else html.Span(name, className="dim"))
-            params.append(" ")
-        status = "ok" if r.verdict == "ok" and r.continuity in ("continuous", "-") else "bad"
-        body.append(
-            html.Tr(
-                [
-                    html.Td(r.link),
-                    html.Td(r.label),
-                    html.Td(r.equation, className="eq"),
-                    html.Td(params),
-                    html.Td(f"{r.verdict}; {r.continuity}", className=status),
-                ]
-            )
-        )
-    head = html.Tr(
-        [
-            html.Th(h)
-            for h in (
-                "link",
-                "parameterisation",
-                "equation",
-                "parameters (bold: identified)",
-                "rank; continuity",
-            )
-        ]
-    )
-    return html.Table([html.Thead(head), html.Tbody(body)], className="links"), count
 
 
 def _messages(check: FormCheck, ids: Sequence[Mapping[str, Any]]) -> list[Any]:
@@ -365,8 +328,8 @@ def _register_form(app: Dash) -> None:
         Input({"kind": "field", "row": ALL, "key": ALL}, "value"),
         State({"kind": "rowmsg", "row": ALL}, "id"),
     )
-    def live(_values, message_ids):
-        return _live(_values, message_ids)
+    def live(_values: list[Any], message_ids: list[dict[str, Any]]) -> tuple[Any, ...]:
+        return _live(callback_context.inputs_list[0], message_ids)
 
 
 def _register_files(app: Dash) -> None:
@@ -419,16 +382,20 @@ def _restructure(_add, _acts, catalog, geometry, urdf, geometry_name, urdf_name,
     return render_form(form), ""
 
 
-def _live(_values, message_ids):
-    items = callback_context.inputs_list[0]
+def _live(items: Sequence[Mapping[str, Any]], message_ids: Sequence[Mapping[str, Any]]) -> tuple[Any, ...]:
+    """Check every field (cheap) and, when the form is valid, show its model (built once per
+    geometry, :func:`_built_view`)."""
     form = form_from_fields(items)
-    check, result = build_form(form)
+    check = check_form(form)
+    view = None
+    if check.ok and check.geometry is not None:
+        check, view = built_view(form, geometry_yaml(check.geometry))
     classes = [
         "field invalid" if (i["id"]["row"], i["id"]["key"]) in check.errors else "field" for i in items
     ]
     messages = _messages(check, message_ids)
     general = html.Span("; ".join(check.general), className="error") if check.general else ""
-    if result is None:
+    if view is None:
         return (
             classes,
             messages,
@@ -437,9 +404,7 @@ def _live(_values, message_ids):
             "the model is not built: fix the marked fields",
             general,
         )
-    table, count = _links_table(result)
-    warn = [html.Div(w, className="warning") for w in result.warnings]
-    return classes, messages, builder_figure(result), table, [count, *warn], general
+    return classes, messages, *view, general
 
 
 def _save_geometry(_n, _values):

@@ -45,6 +45,7 @@ __all__ = [
     "geometry_yaml",
     "link_rows",
     "model_file_text",
+    "shown_value",
 ]
 
 #: Joint fields of the form: name, type, position x y z (mm), axis x y z, limits (deg or mm).
@@ -317,6 +318,8 @@ class LinkRow:
         label: the parameterisation and its seed 000 equation number.
         equation: the link transform as a product of elementary motions.
         parameters: ``(name, identified)`` in chain order.
+        values: each parameter's nominal value as shown, with its unit (``"612.7 mm"``,
+            ``"90°"``), in the order of ``parameters``.
         verdict: the link parameterisation's rank check (``ok`` / ``near-singular`` / ``singular``).
         continuity: the distal joint's continuity check, ``"continuous"`` or what is wrong.
     """
@@ -325,8 +328,17 @@ class LinkRow:
     label: str
     equation: str
     parameters: tuple[tuple[str, bool], ...]
+    values: tuple[str, ...]
     verdict: str
     continuity: str
+
+
+def shown_value(value_si: float, rotation: bool) -> str:
+    """A parameter's value for the page: mm or degrees, as many digits as the number needs
+    (up to 10 significant, :func:`_text`), with the unit."""
+    if rotation:
+        return f"{_text(math.degrees(value_si))}°"
+    return f"{_text(value_si * 1000.0)} mm"
 
 
 def link_rows(result: BuildResult) -> tuple[tuple[LinkRow, ...], str]:
@@ -339,6 +351,7 @@ def link_rows(result: BuildResult) -> tuple[tuple[LinkRow, ...], str]:
     verdicts = {c.index: c for c in check.links}
     continuity = {c.joint: c for c in check.continuity}
     free = set(model.free_names)
+    steps = {s.name: s for s in model.steps}
     names = ["base", *model.joint_names, "TCP"]
     rows = []
     for info in result.links:
@@ -357,6 +370,7 @@ def link_rows(result: BuildResult) -> tuple[tuple[LinkRow, ...], str]:
                 info.label,
                 equation,
                 tuple((p, p in free) for p in info.parameters),
+                tuple(shown_value(steps[p].value, steps[p].is_rotation) for p in info.parameters),
                 verdict,
                 cont,
             )
