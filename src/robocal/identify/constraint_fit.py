@@ -17,13 +17,14 @@ each known distance, the plane residual.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.constraints import ConstraintProblem
+from robocal.identify.constraints import ConstraintProblem, NominalPrior
 from robocal.identify.options import Pruning
 from robocal.identify.problem import measurement_chain
 from robocal.identify.solvers import solve
@@ -94,6 +95,7 @@ class ConstraintResult:
         rms_before, rms_after: RMS weighted residual times σ (m) at the start and after.
         residual_std: σ̂ of the tool point (m) from the residuals.
         kinds: the measurement kinds used.
+        prior: the prior toward the nominal geometry the fit used (None: a least-squares fit).
     """
 
     model: Model
@@ -116,6 +118,7 @@ class ConstraintResult:
     message: str
     kinds: tuple[str, ...]
     figures: ConstraintFigures | None = field(default=None)
+    prior: NominalPrior | None = field(default=None)
 
     def summary_lines(self) -> list[str]:
         """A short human summary (mm, deg)."""
@@ -127,6 +130,8 @@ class ConstraintResult:
             f"residual: {self.rms_before * 1e3:.3f} mm -> {self.rms_after * 1e3:.3f} mm RMS "
             f"(sigma-hat {self.residual_std * 1e3:.3f} mm)",
         ]
+        if self.prior is not None:
+            lines.append(self.prior.line())
         scene = {"redundant", "no effect"}
         seen = [d.name for d in self.dropped if d.reason in scene]
         if seen:
@@ -155,7 +160,7 @@ def _start_frame(robot: Model, data: ConstraintSet, tool: Array | None) -> tuple
     T_tool = np.eye(4)
     if tool is not None:
         T_tool[:3, 3] = tool
-    T_frame, _ = initial_frames_and_tools(T_flange[None], data.position[tracked][None], T_tool=T_tool,
+    T_frame, _ = initial_frames_and_tools(T_flange[None], data.positions[tracked][None], T_tool=T_tool,
                                           fit_frame=True, fit_tool=False)  # fmt: skip
     return T_frame[0], True
 
@@ -165,8 +170,9 @@ def _start_planes(p: Array, data: ConstraintSet) -> Array:
     planes = np.zeros((data.n_planes, 4))
     for k in range(data.n_planes):
         if not data.unknown_plane(k):
-            n = data.known_planes[k, :3] / np.linalg.norm(data.known_planes[k, :3])
-            planes[k] = [*n, data.known_planes[k, 3]]
+            stated = data.planes_stated[k]
+            n = stated[:3] / np.linalg.norm(stated[:3])
+            planes[k] = [*n, stated[3]]
             continue
         on = p[data.plane == k]
         if len(on) < 3:
@@ -178,10 +184,11 @@ def _start_planes(p: Array, data: ConstraintSet) -> Array:
 
 
 def build_constraint_problem(
-    robot: Model, data: ConstraintSet, tool: Array | None = None
+    robot: Model, data: ConstraintSet, tool: Array | None = None, prior: NominalPrior | None = None
 ) -> ConstraintProblem:
     """The problem at its start values; ``tool``: a tool point (m) on the robot's end to
-    fit with it, or None (the robot's end is the tool point)."""
+    fit with it, or None (the robot's end is the tool point); ``prior``: a prior of the
+    robot's parameters about their values in ``robot``."""
     if data.q.shape[1] != robot.dof:
         raise ValueError(
             f"the data has {data.q.shape[1]} joint columns but model {robot.name!r} has {robot.dof} joints"
@@ -191,7 +198,8 @@ def build_constraint_problem(
     if tool is not None:
         T_tool = np.eye(4)
         T_tool[:3, 3] = tool
-    chain = measurement_chain(robot, T_frame, T_tool, "position", fit_frame)
+    # measurement_chain takes None for no tool (its annotation says Array)
+    chain = measurement_chain(robot, T_frame, T_tool, "position", fit_frame)  # type: ignore[arg-type]
     p = chain.fk(data.q)[:, :3, 3]
     points = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
     planes = _start_planes(p, data)
@@ -199,7 +207,8 @@ def build_constraint_problem(
     plane_start = np.array([[0.0, 0.0, planes[k, 3]] for k in unknown]).reshape(-1)
     full0 = np.concatenate([chain.free_values, points.reshape(-1), plane_start])
     size = float(np.median(robot_sizes(robot.fk(data.q)[None])))
-    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3))
+    weights = None if prior is None else prior.weights(chain, robot.names)
+    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
 
 
 # ---------------------------------------------------------------------- the fit
@@ -245,6 +254,7 @@ def identifiable(problem: ConstraintProblem):
     """The rank test (scene unknowns first, then the device frame, the tool, the robot) on
     the Jacobian at consistent data (:meth:`ConstraintProblem.consistent_jacobian`)."""
     J = problem.consistent_jacobian(problem.x0) * problem.free_scale
+    J = J[: len(J) - problem.n_prior_rows]  # what the measurements see, not the prior
     return identifiable_set(J, problem.free_names, roles=problem.roles)
 
 
@@ -257,6 +267,7 @@ def calibrate_constraints(
     fixed: tuple[str, ...] = (),
     pruning: Pruning | None = None,
     known_noise: bool = False,
+    prior: NominalPrior | None = None,
 ) -> ConstraintResult:
     """Identify the robot (and the points, planes, device frame) from constraint data.
 
@@ -268,12 +279,21 @@ def calibrate_constraints(
         fixed: parameters held at their values.
         pruning: the pruning thresholds (None: no pruning beyond the rank test).
         known_noise: the covariance uses ``data.sigma`` as the noise (else σ̂ from the residuals).
+        prior: a prior of the robot's geometry about the model's values (a MAP fit; the
+            rank test still drops what the measurements cannot see; pruning judges the
+            posterior σ).  The measurements are weighted by their noise: ``data.sigma``
+            with ``known_noise``, else σ̂ of a least-squares fit first (a stated σ ten
+            times the real one would make the prior ten times too strong).  None: least
+            squares.
     """
+    if prior is not None and not known_noise:
+        plain = calibrate_constraints(model, data, tool=tool, level=level, fixed=fixed)
+        data = dataclasses.replace(data, sigma=max(plain.residual_std, 1e-9))
     if level == 1:
         model = model.fixed([s.name for s in model.steps if s.joint is None])
     if fixed:
         model = model.fixed(fixed)
-    problem = build_constraint_problem(model, data, tool)
+    problem = build_constraint_problem(model, data, tool, prior)
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
@@ -285,7 +305,8 @@ def calibrate_constraints(
     if pruning is not None:
         problem, x, cov, refit = _prune(problem, x, cov, pruning, dropped, known_noise)
         fit = refit or fit
-    return _result(problem, model, x, cov, fit, dropped, selection.kept, tool is not None)
+    result = _result(problem, model, x, cov, fit, dropped, selection.kept, tool is not None)
+    return dataclasses.replace(result, prior=prior)
 
 
 def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintResult:
@@ -297,7 +318,7 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
     tool = np.array([values[f"tcp_{c}"] for c in "xyz"]) if has_tool else None
     T_frame = chain.with_free_values(full[: problem.layout.n_chain]).fk(np.zeros((1, model.dof)))[0]
     T_frame = T_frame @ np.linalg.inv(_robot_and_tool(robot, tool).fk(np.zeros((1, model.dof)))[0])
-    r0, r = problem.residual(problem.x0), problem.residual(x)
+    r0, r = problem.measurement_residual(problem.x0), problem.measurement_residual(x)
     sigma = problem.data.sigma
     dof = max(len(r) - len(x), 1)
     figures = constraint_figures(robot, problem.data, tool, T_frame)

@@ -21,6 +21,11 @@ constraint's gradient.  The unknowns are the chain's free parameters followed by
 points' coordinates and the planes' parameters; :func:`robocal.identify.constraint_fit`
 fits them with the engine's stages.
 
+An optional :class:`NominalPrior` adds one row per robot parameter,
+``(θ - θ_nominal) / σ_prior`` (a Gaussian prior around the nominal geometry: the fit is
+the MAP estimate), after the measurement rows; the rank test and the residual figures use
+the measurement rows only.
+
 What a kind cannot see is a null space of this Jacobian: rigid motions of the whole scene
 for fixed points (the base frame), motion within the plane for a plane, every absolute
 position for distances; a scale needs a known length (a distance).
@@ -38,10 +43,48 @@ from numpy.typing import NDArray
 from robocal.measure.constraint_set import ConstraintSet
 from robocal.model.chain import Model, Role
 
-__all__ = ["ConstraintProblem", "plane_normal"]
+__all__ = ["ConstraintProblem", "NominalPrior", "plane_normal"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class NominalPrior:
+    """A Gaussian prior of the robot's geometry around its nominal values (a MAP fit).
+
+    Few configurations in one region of joint space determine some parameter
+    combinations poorly; the prior holds those near the nominal geometry instead of
+    letting the noise set them (ridge regression in the measurement's units).  The
+    measured tool (``tool_*``, ``tcp_*``: a ball whose offset is nominal only) and the
+    device frame get none.
+
+    Attributes:
+        length_std: σ of each length parameter about its nominal value (m).
+        angle_std: σ of each angle parameter about its nominal value (rad).
+    """
+
+    length_std: float = 0.3e-3
+    angle_std: float = 5e-3
+
+    def __post_init__(self) -> None:
+        if not (self.length_std > 0 and self.angle_std > 0):
+            raise ValueError("a prior's length_std and angle_std must be > 0 (m, rad)")
+
+    def weights(self, chain: Model, robot_names: tuple[str, ...]) -> Array:
+        """``(p_chain,)`` 1/σ per free chain parameter (1/m, 1/rad); 0 where no prior."""
+        out = []
+        for step in (s for s in chain.steps if s.free):
+            robot = step.name in robot_names and not step.name.startswith(("tool_", "tcp_"))
+            out.append(0.0 if not robot else 1.0 / (self.angle_std if step.is_rotation else self.length_std))
+        return np.array(out, dtype=float)
+
+    def line(self) -> str:
+        """How the summary names it (mm, mrad)."""
+        return (
+            f"prior toward the nominal geometry: lengths sigma {self.length_std * 1e3:g} mm, "
+            f"angles sigma {self.angle_std * 1e3:g} mrad"
+        )
 
 
 def plane_normal(n0: Array, tangents: Array, ab: Array) -> tuple[Array, Array]:
@@ -93,8 +136,11 @@ class ConstraintProblem:
     rows = 3  # one group of rows for the residual variance (stages.uncertainty)
     n_effects = 0
 
-    def __init__(self, chain: Model, data: ConstraintSet, full0: Array, planes0: Array, length_scale: float):
+    def __init__(self, chain: Model, data: ConstraintSet, full0: Array, planes0: Array, length_scale: float,
+                 prior_weight: Array | None = None):  # fmt: skip
         self.chain, self.data, self.length_scale = chain, data, float(length_scale)
+        # (p_chain,) 1/σ of a prior about full0's chain values (NominalPrior.weights), or None
+        self.prior_weight = None if prior_weight is None else np.asarray(prior_weight, dtype=float)
         planes = tuple(k for k in range(data.n_planes) if data.unknown_plane(k))
         self.layout = _Layout(len(chain.free_names), data.n_points, planes)
         self.full0 = np.asarray(full0, dtype=float)
@@ -221,7 +267,7 @@ class ConstraintProblem:
             out[b] = out[a] + delta * (d.pair_length / np.linalg.norm(delta, axis=1))[:, None]
         if d.position is not None:
             tracked = d.tracked
-            out[tracked] = d.position[tracked]
+            out[tracked] = d.positions[tracked]
         return out
 
     def plane_values(self, x: Array) -> Array:
@@ -249,7 +295,7 @@ class ConstraintProblem:
         r_parts, J_parts = [], []
         tracked = d.tracked
         if tracked.any():
-            r_parts.append((p[tracked] - d.position[tracked]).reshape(-1))
+            r_parts.append((p[tracked] - d.positions[tracked]).reshape(-1))
             J_parts.append(Jp[tracked].reshape(-1, lay.size))
         on_point = np.flatnonzero(d.point >= 0)
         if len(on_point):
@@ -271,7 +317,37 @@ class ConstraintProblem:
             r, J = self._point_distance_rows(full)
             r_parts.append(r / d.distance_sigma)
             J_parts.append(J / d.distance_sigma)
+        if self.n_prior_rows:
+            r, J = self._prior_rows(full)
+            r_parts.append(r)
+            J_parts.append(J)
         return np.concatenate(r_parts), np.concatenate(J_parts)
+
+    @property
+    def _prior_columns(self) -> IntArray:
+        """The chain columns (of ``full``) with a prior that are not fixed."""
+        if self.prior_weight is None:
+            return np.zeros(0, dtype=np.intp)
+        n = self.layout.n_chain
+        return np.flatnonzero((self.prior_weight > 0) & self.keep[:n])
+
+    @property
+    def n_prior_rows(self) -> int:
+        """How many prior rows follow the measurement rows (0 without a prior)."""
+        return len(self._prior_columns)
+
+    def _prior_rows(self, full: Array) -> tuple[Array, Array]:
+        """``(θ - θ_nominal)/σ`` of each chain unknown with a prior (already weighted)."""
+        on = self._prior_columns
+        w = self.prior_weight[on] if self.prior_weight is not None else np.zeros(0)
+        J = np.zeros((len(on), self.layout.size))
+        J[np.arange(len(on)), on] = w
+        return w * (full[on] - self.full0[on]), J
+
+    def measurement_residual(self, x: Array) -> Array:
+        """Weighted residuals of the measurements alone (no prior rows)."""
+        r = self.residual(x)
+        return r[: len(r) - self.n_prior_rows]
 
     def _point_rows(self, full: Array, p: Array, Jp: Array, rows: IntArray) -> tuple[Array, Array]:
         k = self.data.point[rows]
@@ -320,7 +396,7 @@ class ConstraintProblem:
         return length - d.point_length, J
 
     def residual(self, x: Array, weighted: bool = True) -> Array:
-        """Weighted residuals ``(m,)`` (``weighted=False``: m)."""
+        """Weighted residuals ``(m,)`` (``weighted=False``: m), the prior rows last."""
         r = self._blocks(x)[0]
         return r if weighted else r * self.data.sigma
 

@@ -93,6 +93,22 @@ class ConstraintSet:
         return np.all(np.isfinite(self.position), axis=1)
 
     @property
+    def positions(self) -> Array:
+        """``(n, 3)`` the tracker positions (m), NaN rows where none measured."""
+        if self.position is None:
+            return np.full((self.n, 3), np.nan)
+        return np.asarray(self.position, dtype=float)
+
+    @property
+    def planes_stated(self) -> Array:
+        """``(P, 4)`` the stated planes (unit normal, offset in m), NaN rows unknown."""
+        out = np.full((self.n_planes, 4), np.nan)
+        if self.known_planes is not None:
+            known = np.asarray(self.known_planes, dtype=float)[: self.n_planes]
+            out[: len(known)] = known
+        return out
+
+    @property
     def kinds(self) -> tuple[str, ...]:
         """The kinds present: ``point``, ``plane``, ``distance``, ``tracker``."""
         found = [
