@@ -49,6 +49,7 @@ from robocal.model.chain_batch import perturbation_layout, to_homogeneous
 from robocal.model.chain_compiled import (
     FK_ONE,
     FLOAT64,
+    Evaluation,
     evaluate_compiled,
     fk_one_entry,
     joint_jacobian_one,
@@ -115,7 +116,7 @@ class Model:
 
     @property
     def joint_types(self) -> tuple[JointType, ...]:
-        return tuple(s.joint_type for s in self.steps if s.joint is not None)
+        return tuple(t for s in self.steps if (t := s.joint_type) is not None)  # None: not a joint
 
     @property
     def joint_limits(self) -> Array:
@@ -143,7 +144,7 @@ class Model:
     @cached_property
     def roles(self) -> dict[str, Role]:
         """Each parameter's :class:`Role`, by name."""
-        return {s.name: s.role for s in self.steps}
+        return {s.name: s.role for s in self.steps if s.role is not None}  # set by every Step
 
     def names_with_role(self, role: Role) -> tuple[str, ...]:
         """Names of the parameters with ``role``, in chain order."""
@@ -197,7 +198,7 @@ class Model:
         if unknown := [n for n in selected if n not in self._index]:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
         steps = list(self.steps)
-        for i in map(self._index.get, selected):
+        for i in (self._index[name] for name in selected):
             steps[i] = steps[i]._with_free(free)
         return self._derived(tuple(steps), "values")
 
@@ -287,6 +288,7 @@ class Model:
             T = self._kernel_forward(kernels, q, d, keep_anchors=True)[1]
             return T[0] if single else T
         _, anchors = self._forward(q, d, keep_anchors=True)
+        assert anchors is not None  # keep_anchors
         T = np.zeros((len(q), self.dof, 4, 4))
         T[:, :, :3, :] = anchors[1:].transpose(3, 0, 1, 2)
         T[:, :, 3, 3] = 1.0
@@ -341,7 +343,7 @@ class Model:
         self,
         q: Array,
         perturbations: Array | None,
-        steps: Sequence[int],
+        steps: Sequence[int] | NDArray[np.intp],
         orientation: bool = True,
         values: Array | None = None,
         tilt: bool = False,
@@ -352,6 +354,7 @@ class Model:
         if segments is None:
             segments = self._segments if values is None else self._segment_data(values)
         F, anchors = self._forward(q, perturbations, keep_anchors=True, values=values, segments=segments)
+        assert anchors is not None  # keep_anchors
         return chain_batch.columns(
             self._plan, segments[1], F, anchors, perturbations, steps, orientation, tilt
         )
@@ -391,7 +394,7 @@ class Model:
         joint_columns: bool = False,
         perturbation_columns: bool = False,
         compiled: bool | None = None,
-    ) -> tuple[Array, ...]:
+    ) -> Evaluation:
         """Tool frames and identification Jacobian for other parameter values, without
         building a new model (the inner loop of the solvers).
 
@@ -436,8 +439,8 @@ class Model:
         )
         J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(J.shape[2] * J.shape[1], len(steps))
         J_free = J[:, np.searchsorted(steps, free)] if jacobian else None
-        out: tuple[Array, ...] = (to_homogeneous(F), J_free)
-        J_joints = J[:, np.searchsorted(steps, joints)] if need_joints else None
+        out: Evaluation = (to_homogeneous(F), J_free)
+        J_joints = J[:, np.searchsorted(steps, joints)]  # (rows, dof); empty without need_joints
         if joint_columns:
             out += (J_joints,)
         if perturbation_columns:
@@ -482,8 +485,13 @@ class Model:
     def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
         """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
-        one = type(q) is np.ndarray and q.ndim == 1 and q.dtype is FLOAT64 and perturbations is None
-        if one and (J := joint_jacobian_one(self, q)) is not None:  # one configuration: ~0.7 µs
+        if (  # one configuration: ~0.7 µs
+            type(q) is np.ndarray
+            and q.ndim == 1
+            and q.dtype is FLOAT64
+            and perturbations is None
+            and (J := joint_jacobian_one(self, q)) is not None
+        ):
             return J
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))

@@ -51,8 +51,7 @@ def forward(
     if perturbations is not None:
         qt = qt + perturbations[:, :, 2].T
     rot = np.array(plan.joint_rot, dtype=bool)
-    cos = np.cos(qt[rot]) if rot.any() else None  # one trig call for all revolute joints
-    sin = np.sin(qt[rot]) if rot.any() else None
+    cos, sin = np.cos(qt[rot]), np.sin(qt[rot])  # one trig call each for all revolute joints
     constant = ~np.all(seg_T == EYE4, axis=(1, 2))  # segments that change the frame
     anchors = None
     if keep_anchors:
@@ -72,7 +71,7 @@ def forward(
             tilt_a, tilt_b = perturbations[:, j, 0], perturbations[:, j, 1]
             rotate_rows(F, (k + 1) % 3, np.cos(tilt_a), np.sin(tilt_a))
             rotate_rows(F, (k + 2) % 3, np.cos(tilt_b), np.sin(tilt_b))
-        if keep_anchors:
+        if anchors is not None:  # keep_anchors
             anchors[j + 1] = F
         if constant[j + 1]:
             F = np.matmul(seg_T[j + 1].T, F)  # each row r of [R | p]: (4, 4)ᵀ @ (4, n)
@@ -85,7 +84,7 @@ def columns(
     F: Array,
     anchors: Array,
     perturbations: Array | None,
-    steps: Sequence[int],
+    steps: Sequence[int] | NDArray[np.intp],
     orientation: bool = True,
     tilt: bool = False,
 ) -> tuple[Array, ...]:
@@ -108,14 +107,14 @@ def columns(
     A fixed handful of whole-array operations, whatever the chain's length: at a
     hundred poses the cost is the number of numpy calls, not the arithmetic.
     """
-    steps = np.asarray(steps, dtype=np.intp)
+    idx = np.asarray(steps, dtype=np.intp)
     n = F.shape[-1]
-    m = len(steps)
+    m = len(idx)
     rows = 6 if orientation else 3
-    loc = local[steps]
-    a_loc = loc[np.arange(m), :3, plan.step_axis[steps]]  # (m, 3) axis in the anchor frame
+    loc = local[idx]
+    a_loc = loc[np.arange(m), :3, plan.step_axis[idx]]  # (m, 3) axis in the anchor frame
     c_loc = cross_rows(a_loc, loc[:, :3, 3])  # (m, 3) a_l × o_l
-    step_anchor = plan.anchor_of[steps]
+    step_anchor = plan.anchor_of[idx]
     A = np.empty((m, 3, n))  # world axes R a_l
     RC = np.empty((m, 3, n))  # R (a_l × o_l)
     bounds = np.flatnonzero(np.diff(step_anchor)) + 1
@@ -147,7 +146,7 @@ def columns(
     J[:, :3] -= RC
     if orientation:
         J[:, 3:] = A
-    for c in np.flatnonzero(~plan.step_rot[steps]):  # slices: a boolean mask would copy
+    for c in np.flatnonzero(~plan.step_rot[idx]):  # slices: a boolean mask would copy
         J[c, :3] = A[c]
         if orientation:
             J[c, 3:] = 0.0

@@ -18,6 +18,7 @@ from robocal.model.chain_plan import Plan
 __all__ = [
     "FK_ONE",
     "Direct",
+    "Evaluation",
     "direct",
     "evaluate_compiled",
     "fk_one_entry",
@@ -29,6 +30,13 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+#: What :meth:`robocal.model.chain.Model.evaluate` returns: the tool frames ``T``
+#: ``(n, 4, 4)``, the identification Jacobian (None when not asked for), then the joint
+#: columns and the perturbation columns, each when asked for.  Its length and the Jacobian's
+#: None depend on the flags, which a tuple type cannot say (``tuple[Array, Array | None,
+#: *tuple[Array, ...]]`` makes every ``out[2]`` an error): the items are ``Any`` until the
+#: kernels' results become named records (issue 32 item 2).
+Evaluation = tuple[Any, ...]
 FLOAT64 = np.dtype(np.float64)
 KERNELS: list = []  # the kernels module once imported (a list: no `global` statement needed)
 #: :func:`fk_one_entry` once looked up (None: no numba).  One entry point for every model,
@@ -187,7 +195,7 @@ def evaluate_compiled(
     jacobian: bool,
     joint_columns: bool,
     perturbation_columns: bool,
-) -> tuple[Array, ...]:
+) -> Evaluation:
     """:meth:`robocal.model.chain.Model.evaluate` by the compiled kernels (same returns);
     ``free``: the step indices of the Jacobian's columns (empty without ``jacobian``)."""
     if not jacobian and not joint_columns and not perturbation_columns:
@@ -195,7 +203,7 @@ def evaluate_compiled(
     T, J, P = kernel_evaluate(
         plan, data, q, d, free, 6 if rows == "pose" else 3, joint_columns, perturbation_columns
     )
-    out: tuple[Array, ...] = (T, J if jacobian else None)
+    out: Evaluation = (T, J if jacobian else None)
     if joint_columns:
         out += (np.ascontiguousarray(P[:, :, 2]),)
     if perturbation_columns:

@@ -204,7 +204,8 @@ def derived_copy(model: Any, steps: tuple, shared: tuple[str, ...], **changes: A
     names, motions and joints are ``model``'s own).  The solvers derive several models per
     calibration."""
     derived = object.__new__(type(model))
-    fields = {name: model.__dict__[name] for name in _field_names(type(model))}
+    cls: type = type(model)  # a class is hashable (mypy sees type[Any] otherwise)
+    fields = {name: model.__dict__[name] for name in _field_names(cls)}
     derived.__dict__.update(fields, steps=steps, **changes)
     derived.__dict__.update({k: model.__dict__[k] for k in shared if k in model.__dict__})
     return derived

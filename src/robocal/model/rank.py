@@ -166,11 +166,12 @@ def identifiable_subset(
     n_preferred = sum(1 for k in ordered if names[k] in rank_pref) if prefer else None
     cols, rank, rel = _pivoted_rank(Js[:, ordered], ordered, n_preferred, 1e-6 if rtol is None else rtol)
     kept_cols, red_cols = cols[:rank], cols[rank:]
-    coef = unexplained = None
+    fit = None
     if red_cols and explain and kept_cols:
-        coef = np.linalg.lstsq(Js[:, kept_cols], Js[:, red_cols], rcond=None)[0]
-        unexplained = np.linalg.norm(Js[:, red_cols] - Js[:, kept_cols] @ coef, axis=0)
-    return _subset(names, norm, zero, cols, kept_cols, red_cols, rel, (coef, unexplained, threshold))
+        kept, redundant = Js[:, kept_cols], Js[:, red_cols]
+        coef = _lstsq(kept, redundant)
+        fit = coef, np.linalg.norm(redundant - kept @ coef, axis=0)
+    return _subset(names, norm, zero, cols, kept_cols, red_cols, rel, fit, threshold)
 
 
 def preference_subset(
@@ -192,7 +193,7 @@ def preference_subset(
     kept_cols = [c for c, k in zip(ordered, keep.tolist(), strict=True) if k]
     red_cols = [c for c, k in zip(ordered, keep.tolist(), strict=True) if not k]
     return _subset(names, norm, zero, list(ordered), kept_cols, red_cols, rel,
-                   (coef, unexplained, threshold) if explain else (None, None, threshold))  # fmt: skip
+                   (coef, unexplained) if explain else None, threshold)  # fmt: skip
 
 
 def _subset(
@@ -203,20 +204,20 @@ def _subset(
     kept_cols: list[int],
     red_cols: list[int],
     rel: Array,
-    absorbing: tuple[Array | None, Array | None, float],
+    fit: tuple[Array, Array] | None,
+    threshold: float,
 ) -> IdentifiableSubset:
     """The :class:`IdentifiableSubset` of a rank test: columns ``cols`` in test order, the
-    kept and the redundant ones, ``|R_kk|`` along ``cols``; ``absorbing``: the redundant
-    columns' coefficients in the kept ones and what they leave (None: not explained) and
-    the smallest listed coefficient."""
-    coef, unexplained, threshold = absorbing
+    kept and the redundant ones, ``|R_kk|`` along ``cols``; ``fit``: the redundant
+    columns' coefficients in the kept ones and what they leave (None: not explained);
+    ``threshold``: the smallest listed coefficient."""
     zero_cols = np.flatnonzero(zero).tolist()
     dropped = {k: Dropped(names[k], "no effect") for k in zero_cols}
     if red_cols:
-        if coef is None:
+        if fit is None:
             dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
         else:
-            dropped.update(_absorbers(norm, names, kept_cols, red_cols, coef, unexplained, threshold))
+            dropped.update(_absorbers(norm, names, kept_cols, red_cols, fit[0], fit[1], threshold))
     kept = tuple(names[k] for k in sorted(kept_cols))
     pivots = tuple(names[k] for k in (*cols, *zero_cols))
     r_diag = np.concatenate([rel, np.zeros(len(zero_cols))]) if zero_cols else rel
@@ -332,9 +333,14 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
         keep = _gram_schmidt(A, tolerance)
         fit = _absorbing(A, keep, tolerance)
         if fit is None:  # cannot happen: Gram-Schmidt keeps a basis of the span
-            coefs = np.linalg.lstsq(A[:, keep], A[:, ~keep], rcond=None)[0]
+            coefs = _lstsq(A[:, keep], A[:, ~keep])
             fit = coefs, np.linalg.norm(A[:, ~keep] - A[:, keep] @ coefs, axis=0)
     return keep, fit[0], diag, fit[1]
+
+
+def _lstsq(K: Array, D: Array) -> Array:
+    """The least-squares coefficients ``(k, d)`` of the columns of ``D`` in those of ``K``."""
+    return np.linalg.lstsq(K, D, rcond=None)[0].astype(np.float64, copy=False)
 
 
 def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> tuple[Array, Array] | None:
@@ -346,7 +352,7 @@ def _absorbing(A: Array, keep: NDArray[np.bool_], tolerance: float) -> tuple[Arr
         return np.zeros((K.shape[1], 0)), np.zeros(0)
     if not K.shape[1]:
         return None
-    coefs = np.linalg.lstsq(K, D, rcond=None)[0]
+    coefs = _lstsq(K, D)
     left = np.linalg.norm(D - K @ coefs, axis=0)
     return (coefs, left) if np.all(left <= tolerance) else None
 

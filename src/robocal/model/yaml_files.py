@@ -24,7 +24,7 @@ class ModelFileError(ValueError):
 class _DuplicateKeyCheck:
     """Refuses a key that appears twice in a mapping (mixed into the loaders below)."""
 
-    def construct_mapping(self, node, deep=False):  # type: ignore[no-untyped-def]
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         # YAML lets a later key silently replace an earlier one: a typo'd copy-paste would
         # then change a model without a word, so a repeated key is an error here
         seen: dict[Any, Any] = {}
@@ -86,7 +86,7 @@ class _NoAliasLoader(_DuplicateKeyCheck, yaml.SafeLoader):
     duplicate-key check, refusing YAML aliases (they allow exponential 'billion laughs'
     blow-up)."""
 
-    def compose_node(self, parent, index):  # type: ignore[no-untyped-def]
+    def compose_node(self, parent: yaml.Node | None, index: object) -> yaml.Node | None:
         if self.check_event(yaml.AliasEvent):
             event = self.peek_event()
             raise yaml.constructor.ConstructorError(
