@@ -167,6 +167,7 @@ def validate_command(
         data, note, extra["rows"] = _own_rows(rows, all_rows, directory, data_path)
         notes.append(note)
     else:
+        assert data_path is not None  # own_data reads the calibration's own file without --data
         data = read_data(data_path, result.model, **values)
     if own is None and data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
         data = data.split_rows("test")

@@ -224,11 +224,11 @@ def fit_frame(robot: FrozenRobot, measured: Array, tool: bool = False, max_itera
     try:
         T = spatial.fit_rigid_transform(robot.point, measured, weights=w)
     except ValueError as err:
-        raise ValueError(f"the poses cannot determine a device frame ({err})") from None
+        raise ValueError(f"degenerate poses: they cannot determine a device frame ({err})") from None
     p = robot.tool.copy()
     for _ in range(max_iterations):
         J, r = _weighted_system(robot, measured, T, p, tool, w)
-        step = -np.linalg.lstsq(J, r, rcond=None)[0]
+        step = np.asarray(-np.linalg.lstsq(J, r, rcond=None)[0], dtype=float)
         T, p = _apply(T, step[:6]), p + (step[6:] if tool else 0.0)
         if np.max(np.abs(step)) < 1e-12:
             break
@@ -239,7 +239,7 @@ def fit_frame(robot: FrozenRobot, measured: Array, tool: bool = False, max_itera
         T_device_base=T,
         tool=p,
         tool_fitted=tool,
-        covariance=np.linalg.inv(J.T @ J),
+        covariance=np.asarray(np.linalg.inv(J.T @ J), dtype=float),
         variance_factor=float(r @ r / dof) if dof > 0 else math.nan,
         residuals=r.reshape(-1, 3) / np.sqrt(w)[:, None],
     )

@@ -77,7 +77,7 @@ class ValidationStats:
             "axis_rms_mm": [v * 1e3 for v in self.axis_rms],
             "frame": self.frame,
         }
-        if self.orientation_mean is not None:
+        if self.orientation_mean is not None and self.orientation_max is not None:
             out["orientation_mean_deg"] = float(np.degrees(self.orientation_mean))
             out["orientation_max_deg"] = float(np.degrees(self.orientation_max))
         if self.expected_rms is not None and self.parameter_rms is not None:
@@ -211,6 +211,8 @@ def validation_statistics(predicted: Array, data: Measurements, frame: str = "gi
     """Error statistics of predicted tool frames ``(n, 4, 4)`` (device frame) against the
     measured positions (and orientations) of ``data``; ``frame`` says how the device
     frame was obtained."""
+    if data.position is None:
+        raise ValueError("the validation data has no measured positions")
     stats = _position_statistics(predicted[:, :3, 3] - data.position, frame)
     if data.orientation is None:
         return stats
@@ -222,14 +224,16 @@ def validation_statistics(predicted: Array, data: Measurements, frame: str = "gi
 def _position_statistics(d: Array, frame: str) -> ValidationStats:
     """The statistics of position errors ``d`` ``(n, 3)`` (predicted - measured, m)."""
     e = np.linalg.norm(d, axis=1)
+    ax, ay, az = (float(v) for v in np.abs(d).mean(axis=0))
+    rx, ry, rz = (float(v) for v in np.sqrt(np.mean(d**2, axis=0)))
     return ValidationStats(
         n=len(d),
         mean=float(e.mean()),
         rms=float(np.sqrt(np.mean(e**2))),
         max=float(e.max()),
         p95=float(np.percentile(e, 95)),
-        axis_mean_abs=tuple(float(v) for v in np.abs(d).mean(axis=0)),
-        axis_rms=tuple(float(v) for v in np.sqrt(np.mean(d**2, axis=0))),
+        axis_mean_abs=(ax, ay, az),
+        axis_rms=(rx, ry, rz),
         frame=frame,
         errors=e,
         error_vectors=d,
