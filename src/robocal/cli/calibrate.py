@@ -7,7 +7,6 @@ import dataclasses
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.table import Table
 
@@ -29,7 +28,6 @@ from robocal.cli.options import (
     out_option,
     robot_and_chain,
 )
-from robocal.cli.reading import read_data
 from robocal.cli.validate import _stats_table, _validation_notes
 from robocal.console import console, fail, safe
 
@@ -175,31 +173,16 @@ def calibrate_command(
                                             force=force)  # fmt: skip
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
-    reader = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
-    reader |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
-    data = read_data(data_path, model, **reader)
-    if data.position is None:
-        raise fail(
-            f"{data_path}: no measured positions (columns x, y, z) to calibrate against; map the file's "
-            "columns with e.g. --columns 'x=meas_x,y=meas_y,z=meas_z'"
-        )
-    data, noise_sigma = _with_noise(data, noise, data_path)
-    train, test = _split(data, train_n, seed)
-    model = _chain_to_calibrate(model, from_catalog, chain, measure, data)
-    settings = dict(method=method, measure=measure, compliance=compliance, level=level, loss=loss)
-    settings |= dict(residual=residual, effects=_effects(effects))
-    settings |= {"bounds": bounds} if bounds is not None else {}
-    settings |= {"per_pose": True} if per_pose else {}
-    settings |= {"tool_guess": tool_guess} if tool_guess is not None else {}
-    result = _calibrate(model, train, data_path, settings)
-    result = _record(result, data_path, reader, noise_sigma, train_n, seed, train)
-    validation = None
-    if test is not None:
-        import robocal as rc
+    from robocal.workflow import CalibrateRequest, FitOptions, ReaderOptions
 
-        validation = rc.validate(result, test)
-        result = _physics_only_held_out(result.with_validation(validation.to_dict()), test)
-    _save(result, out, report, train, test)
+    reader = ReaderOptions(length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete)
+    fit = FitOptions(method, measure, residual, compliance, level, loss, _effects(effects), bounds, per_pose,
+                     None if tool_guess is None else tuple(float(v) for v in tool_guess))  # fmt: skip
+    noise_m = _noise(noise)
+    request = CalibrateRequest(data_path, model, out, reader, fit, chain, from_catalog, noise_m, train_n,
+                               seed, report, force)  # fmt: skip
+    run = _run(request, noise, method, residual)
+    result, validation = run.result, run.validation
     _print_result(result)
     if validation is not None:
         console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
@@ -210,18 +193,102 @@ def calibrate_command(
         console.print(f"report: {out / 'report.html'}", highlight=False)
 
 
-def _check_out(out: Path, force: bool) -> None:
-    """Refuse an output that is a file, holds a result (without --force) or is being written."""
-    from robocal.outdir import FolderBusyError, check_not_busy
+def _run(request, noise: str | None, method: str, residual: str):
+    """:func:`robocal.workflow.calibrate_file` with its stages shown (a spinner while it
+    calibrates and while it writes the report) and its refusal as one ``error:`` line naming
+    the option or the file."""
+    import robocal.workflow as workflow
 
-    if out.exists() and not out.is_dir():
-        raise fail(f"--out {out} is a file; give a directory for model.yaml and result.json")
-    if (out / "result.json").exists() and not force:
-        raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
-    try:  # before the work: a second writer learns it at once, not after the calibration
-        check_not_busy(out)
-    except FolderBusyError as err:
+    what = method + (", choosing the model by cross-validation" if residual != "none" else "")
+    with _Stages(what) as stages:
+        try:
+            return workflow.calibrate_file(
+                dataclasses.replace(request, progress=stages.enter, notify=_notify)
+            )
+        except workflow.CalibrateFileError as err:
+            raise fail(_cli_message(err, request.out, request.train_n, noise)) from None
+
+
+class _Stages:
+    """The CLI's view of the stages: the kernels' first-use note and a spinner while calibrating,
+    a spinner while writing the report."""
+
+    def __init__(self, what: str) -> None:
+        from contextlib import ExitStack
+
+        self.what = what
+        self.stack = ExitStack()
+
+    def enter(self, stage: str, fraction: float) -> None:
+        from robocal.identify.kernel_cache import first_use
+
+        self.stack.close()
+        if stage == "calibrate":
+            self.stack.enter_context(first_use(console))
+            self.stack.enter_context(console.status(f"calibrating ({self.what}) ..."))
+        elif stage == "report":
+            self.stack.enter_context(console.status("writing the report ..."))
+
+    def __enter__(self) -> _Stages:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stack.close()
+
+
+def _notify(kind: str, text: str) -> None:
+    """A line of the use case as the command line prints it."""
+    from robocal.console import err_console, warn
+
+    if kind == "warning":
+        warn(as_cli_text(text))
+    elif kind == "dropped":
+        err_console.print(f"{text} (--incomplete drop)", highlight=False)
+    else:
+        console.print(text, highlight=False)
+
+
+def _cli_message(err, out: Path | None, train_n: int | None, noise: str | None) -> str:
+    """A refusal of the use case in the command line's words (its options)."""
+    if err.field == "noise_m" and noise is not None and "sigma columns" not in err.problem:
+        return f"--noise {noise}: {err.problem}"
+    if err.field == "noise_m":
+        return f"--noise: {err.problem}"
+    if err.field == "train_n":
+        return f"--train-n {train_n}: {err.problem}"
+    if err.field == "out" and "already holds" in err.problem:
+        return f"{out} already holds a calibration result; use --force to overwrite it"
+    if err.field == "out" and "is a file" in err.problem:
+        return f"--out {out} is a file; give a directory for model.yaml and result.json"
+    return as_cli_text(str(err))
+
+
+def _noise(noise: str | None) -> float | None:
+    """``--noise`` in m (None without it), its range checked."""
+    if noise is None:
+        return None
+    from robocal.measure.simulate import parse_quantity_option
+    from robocal.workflow import CalibrateFileError, check_noise
+
+    try:
+        sigma = float(parse_quantity_option(noise, "length", "--noise"))
+        check_noise(sigma)
+    except CalibrateFileError as err:
+        raise fail(f"--noise {noise}: {err.problem}") from None
+    except ValueError as err:
         raise fail(str(err)) from None
+    return sigma
+
+
+def _check_out(out: Path, force: bool) -> None:
+    """Refuse an output that is a file, holds a result (without --force) or is being written:
+    before the constraint files' path too, and before the data is read."""
+    from robocal.workflow import CalibrateFileError, check_out
+
+    try:
+        check_out(out, force)
+    except CalibrateFileError as err:
+        raise fail(_cli_message(err, out, None, None)) from None
 
 
 def _check_choices(measure, residual, loss, method, bounds, per_pose) -> None:
@@ -247,133 +314,11 @@ def _check_choices(measure, residual, loss, method, bounds, per_pose) -> None:
         raise fail("--per-pose needs --method pinv")
 
 
-def _with_noise(data, noise: str | None, data_path: Path):
-    """``data`` with the ``--noise`` σ on every row, and that σ in m (None without --noise)."""
-    if noise is None:
-        return data, None
-    from robocal.measure.dataset import MAX_SIGMA, MIN_SIGMA
-    from robocal.measure.simulate import parse_quantity_option
-
-    try:
-        sigma = parse_quantity_option(noise, "length", "--noise")
-    except ValueError as err:
-        raise fail(str(err)) from None
-    if not MIN_SIGMA <= sigma <= MAX_SIGMA:
-        raise fail(
-            f"--noise {noise}: a standard deviation between {MIN_SIGMA * 1e3:g} mm and "
-            f"{MAX_SIGMA * 1e3:g} mm, e.g. 0.03mm"
-        )
-    if data.sigma is not None:
-        raise fail(f"--noise: {data_path} has its own sigma columns; leave --noise out")
-    return dataclasses.replace(data, sigma=np.full((data.n, 3), sigma)), float(sigma)
-
-
-def _split(data, train_n: int | None, seed: int):
-    """The calibration rows and the held-out rows (None): ``--train-n`` random rows, else the
-    file's set column, else every row."""
-    if train_n is not None:
-        if not 0 < train_n < data.n:
-            raise fail(f"--train-n {train_n} must be between 1 and {data.n - 1} (the file has {data.n} rows)")
-        split = data.with_split(train_n, seed=seed)
-        return split.split_rows("train"), split.split_rows("test")
-    if data.split is not None and "test" in set(data.split.tolist()):
-        return data.split_rows("train"), data.split_rows("test")
-    return data, None
-
-
 def _effects(effects: str | None):
     """``--effects``: a mode, or the list of effect kinds."""
     if effects is None or effects in ("none", "predict", "identify"):
         return effects
-    return [k.strip() for k in effects.split(",") if k.strip()]
-
-
-def _physics_only_held_out(result, test):
-    """A hybrid's stored physics-only fit (what a URDF or UR kinematics export carries)
-    scored on the same held-out poses, so the export can state both errors."""
-    record = result.records.get("physics_only")
-    if not isinstance(record, dict) or result.model.residual is None:
-        return result
-    import robocal as rc
-    from robocal.compensate.export import kinematic_part
-
-    physics = rc.validate(kinematic_part(result).calibrated, test)
-    held_out = {"held_out_mean_mm": physics.mean * 1e3, "held_out_n": physics.n}
-    return result.with_records(physics_only={**record, **held_out})
-
-
-def _calibrate(model, train, data_path: Path, settings: dict):
-    """rc.calibrate with a spinner; the data's problem as one line naming the file."""
-    import robocal as rc
-    from robocal.identify.kernel_cache import first_use
-
-    what = settings["method"] + (
-        ", choosing the model by cross-validation" if settings["residual"] != "none" else ""
-    )
-    try:
-        with first_use(console), console.status(f"calibrating {model.name} on {train.n} poses ({what}) ..."):
-            return rc.calibrate(model, train, **settings)
-    except ValueError as err:
-        message = as_cli_text(str(err))  # the data's problem: name the file unless the message does
-        raise fail(message if str(data_path) in message else f"{data_path}: {message}") from None
-
-
-def _record(result, data_path: Path, reader: dict, noise_sigma, train_n, seed: int, train):
-    """The result with its provenance: the data file, its hash, the reader options and the split."""
-    from robocal.identify.calibrate import file_hash
-    from robocal.identify.provenance import Provenance
-
-    sha256 = file_hash(data_path)
-    provenance = Provenance.record(data_path, sha256, reader, noise_sigma, train_n, seed)
-    return result.with_provenance(
-        provenance, data_file=str(data_path), data_sha256=sha256, train_n=train.n, seed=seed
-    )
-
-
-def _save(result, out: Path, report: bool, train, test) -> None:
-    """model.yaml, measurement_model.yaml, result.json (and report.html): all or nothing."""
-    from robocal.outdir import FolderBusyError
-
-    def write_report_too(stage_dir: Path) -> None:
-        from robocal.evaluate.report import write_report
-        from robocal.outdir import read_run_id
-
-        run_id = read_run_id(stage_dir / "result.json")  # the report is one file of this result
-        with console.status("writing the report ..."):
-            write_report(result, stage_dir / "report.html", data=train, test_data=test, run_id=run_id)
-
-    try:
-        result.save(out, also=write_report_too if report else None)
-    except FolderBusyError as err:
-        raise fail(str(err)) from None
-
-
-def _chain_to_calibrate(model, from_catalog: bool, chain: str | None, measure: str | None, data):
-    """The model the command calibrates, announced in one line: for a catalog ROBOT the complete
-    model built from the robot's geometry (``--chain catalog``: the catalog's chain), for a
-    model file the file's chain (``--chain complete``: the complete model built from
-    it); a chain calibrated as it is gets the parameterisation warnings of rc.calibrate."""
-    from robocal.model.complete import calibration_model
-
-    effective = measure or ("pose" if data.orientation is not None else "position")
-    complete = chain == "complete" or (chain is None and from_catalog)
-    if complete:
-        try:
-            built = calibration_model(model, effective)
-        except ValueError as err:
-            raise fail(f"no complete model of {model.name}: {err}") from None
-        option = "" if from_catalog and chain is None else " (--chain complete)"
-        plain = " (--chain catalog: the catalog's chain)" if from_catalog else ""
-        console.print(
-            f"model: {built.name}, the complete model built from {model.name}'s joint geometry for "
-            f"{effective} measurements{option}{plain}",
-            highlight=False,
-        )
-        return built
-    what = "the catalog's chain (--chain catalog)" if from_catalog else "the model file's chain"
-    console.print(f"model: {model.name}, {what} as it is", highlight=False)
-    # its parameterisation warnings come with the calibration's (rc.calibrate checks every chain)
-    return model
+    return tuple(k.strip() for k in effects.split(",") if k.strip())
 
 
 def _print_result(result) -> None:

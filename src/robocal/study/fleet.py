@@ -49,37 +49,28 @@ def _sha256(path: Path) -> str:
 
 
 def _fleet_task(item: _FleetItem) -> tuple[dict[str, Any], Any]:
-    """Read, calibrate and validate one measurement file: ``(row, CalibrationResult | None)``."""
-    from robocal.identify.calibrate import calibrate
-    from robocal.identify.validate import validate
-    from robocal.measure.dataset import read_measurements
+    """Read, calibrate and validate one measurement file (:func:`robocal.workflow.calibrate_file`,
+    as ``robocal calibrate``; the result is saved where the table is): ``(row,
+    CalibrationResult | None)``."""
+    from robocal.workflow import CalibrateRequest, FitOptions, ReaderOptions, calibrate_file
 
     t0 = time.perf_counter()
     row: dict[str, Any] = dict.fromkeys(FLEET_COLUMNS, "")
     row["file"] = item.name
     try:
         row["sha256"] = _sha256(item.path)
-        data = read_measurements(item.path, model=item.model, **item.read_options)
-        train, test = data, None
-        if data.split is not None and "test" in set(data.split.tolist()):
-            train, test = data.split_rows("train"), data.split_rows("test")
-        model = item.model
-        if item.complete:
-            from robocal.model.complete import calibration_model
-
-            measure = item.calibrate_options.get("measure") or (
-                "pose" if data.orientation is not None else "position"
-            )
-            model = calibration_model(model, measure)
-        result = calibrate(model, train, **item.calibrate_options)
-        result = result.with_records(data_file=str(item.path), data_sha256=row["sha256"], train_n=train.n)
-        _fill_fit(row, result, train.n, 0.0)
+        fit = FitOptions.from_kwargs(item.calibrate_options)
+        chain = "complete" if item.complete else None
+        request = CalibrateRequest(
+            item.path, item.model, None, ReaderOptions(**item.read_options), fit, chain
+        )
+        run = calibrate_file(request)
+        result = run.result
+        _fill_fit(row, result, run.train.n, 0.0)
         row.pop("iterations", None)
         row.pop("dropped", None)
-        if test is not None:
-            stats = validate(result, test)
-            result = result.with_validation(stats.to_dict())
-            row.update(_stats(stats.errors))
+        if run.validation is not None:
+            row.update(_stats(run.validation.errors))
     except Exception as err:
         row.update(status="error", message=" ".join(str(err).split()) or type(err).__name__)
         result = None

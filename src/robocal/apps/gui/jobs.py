@@ -1,14 +1,14 @@
 """Calibrations run in a separate process, so that the page stays live and can cancel them.
 
 :class:`CalibrationJob` describes a run (file, reader options, model, method); the
-process reads the file, splits off the held-out rows, calibrates (``rc.calibrate``),
-validates (``rc.validate``), saves the result (``result.save``: ``model.yaml`` and
-``result.json``) with the calibration and held-out rows (``train.csv``, ``test.csv``)
-and writes the HTML report (``robocal.evaluate.report.write_report``), reporting each
-stage through a queue.  robocal's solvers give no progress callback, so the progress
-is the stage reached; cancelling terminates the process (a thread could not be
-stopped), and nothing of a cancelled run is kept.  Everything it does is robocal's
-public API: the GUI holds no calibration logic.
+process runs the use case :func:`robocal.workflow.calibrate_file`, the one the command
+line's ``robocal calibrate`` runs (read, split off the held-out rows, calibrate, record
+the provenance, validate, save ``model.yaml`` and ``result.json`` and write the HTML
+report), then writes the calibration and held-out rows (``train.csv``, ``test.csv``) and
+the per-pose errors the page plots (``errors.json``).  The use case's progress callback
+reports each stage through a queue (the progress is the stage reached); cancelling
+terminates the process (a thread could not be stopped), and nothing of a cancelled run is
+kept.  The GUI holds no calibration logic.
 """
 
 from __future__ import annotations
@@ -19,10 +19,11 @@ import shutil
 import threading
 import time
 import traceback
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from robocal.workflow.request import STAGES as WORKFLOW_STAGES
 
 __all__ = [
     "MAX_UPLOAD_BYTES",
@@ -40,14 +41,9 @@ __all__ = [
 #: the page checks the size before sending (calibrate_page) and says why
 MAX_UPLOAD_BYTES = 32 * 1024 * 1024
 
-#: The stages of a run and the share of the bar each one completes.
-STAGES = (
-    ("read", "reading the measurements", 0.05),
-    ("calibrate", "calibrating", 0.80),
-    ("validate", "validating on the held-out poses", 0.88),
-    ("save", "saving the result", 0.92),
-    ("report", "writing the HTML report", 1.0),
-)
+#: The stages of a run (key, text, share of the bar done when it starts): the use case's
+#: (:data:`robocal.workflow.STAGES`), reported through its progress callback
+STAGES = WORKFLOW_STAGES
 
 
 @dataclass(frozen=True)
@@ -112,72 +108,66 @@ def _send(queue, kind: str, *payload: Any) -> None:
     queue.put((kind, *payload))
 
 
-def _stage(queue, name: str) -> None:
+def _stage(queue, name: str, fraction: float = 0.0) -> None:
     for key, text, _ in STAGES:
         if key == name:
-            _send(queue, "stage", key, text)
+            _send(queue, "stage", key, text, fraction)
+
+
+def request_of(job: CalibrationJob, queue) -> Any:
+    """The use case's request (:class:`robocal.workflow.CalibrateRequest`) of ``job``, its
+    stages and the reader's warnings reported on ``queue``."""
+    import robocal as rc
+    from robocal.workflow import CalibrateRequest, FitOptions, ReaderOptions
+
+    tool = None if job.tool_mm is None else tuple(v * 1e-3 for v in job.tool_mm)
+    fit = FitOptions(method=job.method, measure=job.measure, residual=job.residual,
+                     compliance=job.compliance, tool_guess_m=tool)  # fmt: skip
+    noise_m = None if job.noise_mm is None else job.noise_mm * 1e-3
+
+    def notify(kind: str, text: str) -> None:
+        if kind in ("warning", "dropped"):
+            _send(queue, "warning", text)
+
+    return CalibrateRequest(
+        job.data, rc.load_model(job.model_file), job.out, ReaderOptions(**job.reader), fit,
+        noise_m=noise_m, train_n=job.train_n, seed=job.seed, report=True, force=True,
+        progress=lambda stage, fraction: _stage(queue, stage, fraction), notify=notify,
+    )  # fmt: skip
 
 
 def _run(job: CalibrationJob, queue) -> None:
-    """The process: every stage of the run; results in ``job.out``, the outcome on ``queue``."""
-    import numpy as np
-
+    """The process: :func:`robocal.workflow.calibrate_file` (read, split, calibrate, record,
+    validate, save, report) and the files the page shows beside it; the outcome on ``queue``."""
     import robocal as rc
-    from robocal.evaluate.report import write_report
-    from robocal.identify.calibrate import file_hash
-    from robocal.measure.dataset import MeasurementFileError, MeasurementWarning
+    import robocal.workflow as workflow
+    from robocal.model.files import ModelFileError
 
     try:
         _stage(queue, "read")
-        model = rc.load_model(job.model_file)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", MeasurementWarning)
-            data = rc.read_measurements(job.data, model=model, **job.reader)
-        for w in caught:
-            if isinstance(w.message, MeasurementWarning):
-                _send(queue, "warning", str(w.message))
-        if data.position is None:
-            raise ValueError("no measured positions (columns x, y, z): map the file's columns")
-        if job.noise_mm is not None:
-            if data.sigma is not None:
-                raise ValueError("the file has its own sigma columns: leave the noise empty")
-            data = dataclasses.replace(data, sigma=np.full((data.n, 3), job.noise_mm * 1e-3))
-        train, test = data, None
-        if job.train_n is not None:
-            if not 0 < job.train_n < data.n:
-                raise ValueError(
-                    f"calibration poses: between 1 and {data.n - 1} (the file has {data.n} rows)"
-                )
-            split = data.with_split(job.train_n, seed=job.seed)
-            train, test = split.split_rows("train"), split.split_rows("test")
-        _stage(queue, "calibrate")
-        options: dict[str, Any] = {"compliance": job.compliance, "measure": job.measure}
-        if job.tool_mm is not None:
-            options["tool_guess"] = np.asarray(job.tool_mm, dtype=float) * 1e-3
-        result = rc.calibrate(model, train, method=job.method, residual=job.residual, **options)
-        result = result.with_records(
-            data_file=job.data.name, data_sha256=file_hash(job.data), train_n=train.n, seed=job.seed
-        )
-        validation = None
-        if test is not None:
-            _stage(queue, "validate")
-            validation = rc.validate(result, test)
-            result = result.with_validation(validation.to_dict())
-        _stage(queue, "save")
-        result = result.save(job.out)  # carries the saved files' run id (for the report)
-        rc.write_measurements(train, job.out / "train.csv")
-        if test is not None:
-            rc.write_measurements(test, job.out / "test.csv")
-        _write_errors(job.out / "errors.json", result, train, validation)
+        run = workflow.calibrate_file(request_of(job, queue))
+        rc.write_measurements(run.train, job.out / "train.csv")
+        if run.test is not None:
+            rc.write_measurements(run.test, job.out / "test.csv")
+        _write_errors(job.out / "errors.json", run.result, run.train, run.validation)
         _send(queue, "saved", str(job.out))
-        _stage(queue, "report")
-        write_report(result, job.out / "report.html", data=train, test_data=test)
         _send(queue, "done", str(job.out))
-    except (MeasurementFileError, ValueError) as err:
-        _send(queue, "error", str(err).replace(str(job.data), job.data.name))
+    except (workflow.CalibrateFileError, ModelFileError) as err:
+        _send(queue, "error", _gui_message(err).replace(str(job.data), job.data.name))
     except Exception as err:  # an unexpected failure still ends the run with one line
         _send(queue, "error", f"calibration failed: {type(err).__name__}: {err}")
         _send(queue, "trace", traceback.format_exc())
+
+
+def _gui_message(err: Exception) -> str:
+    """A refusal in the page's words (its controls, not the API's fields)."""
+    problem = getattr(err, "problem", str(err))
+    field_name = getattr(err, "field", None)
+    if field_name == "train_n":
+        return f"calibration poses: {problem}"
+    if field_name == "noise_m":
+        return f"device noise: {problem}"
+    return str(err)
 
 
 def _write_errors(path: Path, result, train, validation) -> None:
@@ -371,11 +361,7 @@ class JobRunner:
 def _apply(state: JobState, kind: str, payload: list[Any]) -> None:
     """One report of the child on the run's state."""
     if kind == "stage":
-        key, text = payload
-        order = [k for k, _, _ in STAGES]
-        state.stage, state.text = key, text
-        i = order.index(key)
-        state.fraction = STAGES[i - 1][2] if i else 0.0
+        state.stage, state.text, state.fraction = payload
     elif kind == "saved":
         state.saved = True
     elif kind == "warning":
