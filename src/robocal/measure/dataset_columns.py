@@ -351,3 +351,72 @@ class _ColumnResolver(_ReaderState):
             cols = self._group(_ANGLES, f"orientation='euler:{ori.seq}'", True)
             return cols, f"euler:{ori.seq}:{ori.unit or self.angle_unit}"
         return [], ""
+
+
+# ----------------------------------------------------------------------- guessing the columns
+#: Joint column families the reader recognises, each ``(pattern, first number)``: UR's RTDE
+#: log ``actual_q_0..5``, ``rostopic echo -p /joint_states`` ``field.position0..``, and
+#: ``joint_1`` / ``j1`` / ``A1`` / ``axis1`` numbering.
+_JOINT_FAMILIES = (
+    (re.compile(r"actual_q_(\d+)$"), 0),
+    (re.compile(r"field\.position(\d+)$"), 0),
+    (re.compile(r"(?:joint|j|a|axis)[ _]?(\d+)(?:_joint)?$", re.IGNORECASE), None),
+)
+#: ROS joint names of the common arms, in chain order (UR: ``shoulder_pan_joint`` ...).
+_ROS_CHAINS = (
+    ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
+     "wrist_3_joint"),
+    tuple(f"panda_joint{i}" for i in range(1, 8)),
+    tuple(f"joint_a{i}" for i in range(1, 8)),
+)  # fmt: skip
+#: Prefixes of a measuring device's position columns (``measurement_x`` ...): never the
+#: robot's own idea of its pose (``actual_TCP_pose_0``, ``Goal x``).
+_DEVICE_PREFIX = re.compile(r"(meas\w*|track\w*|laser\w*|marker\w*|smr\w*|probe\w*)[ _.]?$", re.IGNORECASE)
+
+
+def guess_columns(header: Sequence[str]) -> dict[str, str]:
+    """The renames (robocal name -> file column, as ``columns=``) the header suggests.
+
+    Joints: ``q1..qN`` as they are; else UR ``actual_q_0..``, ROS ``joint_states`` names
+    (``shoulder_pan_joint`` ...), ``field.position0..``, ``joint_1``/``j1``/``A1``.
+    Position: ``x, y, z`` as they are; else a measuring device's ``measurement_x`` ... (the
+    commanded or the robot's own pose columns are never taken).  Orientation, sigma,
+    temperature and set only under their own names: a guessed convention could read
+    angles wrongly.  Returns only renames (columns already named as robocal names are not
+    listed)."""
+    names = [h.strip() for h in header]
+    present = set(names)
+    renames: dict[str, str] = {}
+    if "q1" not in present:
+        renames |= {f"q{j + 1}": c for j, c in enumerate(_guess_joints(names))}
+    if not {"x", "y", "z"} & present:
+        renames |= _guess_position(names)
+    return renames
+
+
+def _guess_joints(names: Sequence[str]) -> list[str]:
+    """The joint columns in order (the first family found with joint 1 present), or []."""
+    for chain in _ROS_CHAINS:
+        found = [c for c in chain if c in names]
+        if found and found == list(chain[: len(found)]):
+            return found
+    for pattern, first in _JOINT_FAMILIES:
+        numbered = {int(m.group(1)): n for n in names if (m := pattern.match(n))}
+        start = first if first is not None else (0 if 0 in numbered else 1)
+        joints = []
+        while start + len(joints) in numbered:
+            joints.append(numbered[start + len(joints)])
+        if joints:
+            return joints
+    return []
+
+
+def _guess_position(names: Sequence[str]) -> dict[str, str]:
+    """``x, y, z`` from one device prefix with all three axes (``measurement_x`` ...), or {}."""
+    for name in names:
+        if name[-1:].lower() != "x" or not _DEVICE_PREFIX.fullmatch(name[:-1]):
+            continue
+        trio = {axis: name[:-1] + (axis if name[-1] == "x" else axis.upper()) for axis in "xyz"}
+        if all(c in names for c in trio.values()):
+            return trio
+    return {}

@@ -53,6 +53,8 @@ table.joint-table td.acts { white-space: nowrap; }
 .rowmsg:empty { display: none; }
 .type, .type label { display: inline-flex; } .type label, .catalog label { margin-right: 0.5rem; }
 .joint-row .dash-input-container { box-sizing: border-box; }
+table.colmap td { padding: 0.05rem 0.4rem; vertical-align: middle; }
+table.colmap .role { min-width: 11em; } table.colmap td.colname { font-family: ui-monospace, monospace; }
 td.params .param { display: inline-block; margin-right: 0.7rem; white-space: nowrap; }
 /* the builder below 1500 px: the table above the view, each the page's full width */
 @media (max-width: 1500px) {

@@ -18,48 +18,29 @@ from typing import Any
 
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
-from robocal.apps.gui import runs_page
-from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
+from robocal.apps.gui import columns_view, export_page, runs_page
 from robocal.apps.gui.calibrate_views import (
-    _compensate,
+    KEEP,
     _decode_bytes,
     _float,
     _problems,
+    _radio,
     _raw_head,
     _read,
+    _row,
     preview_table,
 )
+from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
+from robocal.apps.gui.columns_view import gui_words
 from robocal.apps.gui.jobs import MAX_UPLOAD_BYTES, CalibrationJob, JobRunner, public_text, read_options
 from robocal.outdir import atomic_write_bytes, atomic_write_text
 
 __all__ = ["RUN_STATES", "layout", "register"]
 
-#: the controls keep their values over a reload of the tab (its session storage)
-KEEP = {"persistence": True, "persistence_type": "session"}
-
-
-def _radio(
-    ident: str, options: Sequence[str], value: str, labels: Sequence[str] | None = None
-) -> dcc.RadioItems:
-    labels = labels or options
-    return dcc.RadioItems(
-        id=ident,
-        options=[{"label": lab, "value": v} for v, lab in zip(options, labels, strict=True)],
-        value=value,
-        inline=True,
-        **KEEP,
-    )
-
-
-def _row(label: str, control: Any, hint: str = "") -> html.Div:
-    return html.Div(
-        [html.Span(label, className="lab"), control, html.Span(hint, className="hint")], className="opt"
-    )
-
 
 def layout(catalog: Sequence[str]) -> html.Div:
     """The calibration page."""
-    reader, model, after = _reader_fieldset(), _model_fieldset(catalog), _after_fieldset()
+    reader, model, after = _reader_fieldset(), _model_fieldset(catalog), export_page.fieldset()
     return html.Div(
         [
             html.Div([reader, html.Div(id="csv-preview")], className="left"),
@@ -73,6 +54,8 @@ def layout(catalog: Sequence[str]) -> html.Div:
             dcc.Store(id="cal-finished"),
             dcc.Store(id="csv-upload"),
             dcc.Store(id="csv-file", storage_type="session"),
+            dcc.Store(id="column-header"),  # the file's header as the mapping read it
+            dcc.Store(id="column-renames", storage_type="session"),  # the mapping as columns=
             dcc.Download(id="cal-download"),
         ],
         className="page",
@@ -96,11 +79,17 @@ def _reader_fieldset() -> html.Fieldset:
                 dcc.Input(id="opt-orientation", value="auto", style={"width": "12em"}, **reread),
                 "auto | none | quaternion | rotvec | euler:SEQ[:deg|rad]",
             ),
-            _row(
-                "column renames",
-                dcc.Input(id="opt-columns", value="", style={"width": "46em"}, **reread),
-                "q1=file_column, x=..., (robocal name = the file's)",
+            html.Div(
+                [
+                    html.Span("columns", className="lab"),
+                    html.Span(
+                        "what each column of the file holds (guessed from the header)", className="hint"
+                    ),
+                ],
+                className="opt",
             ),
+            html.Div(id="column-map"),
+            html.Div(id="column-message", className="message"),
             _row("incomplete rows", _radio("opt-incomplete", ("error", "drop"), "error")),
             _row("joint limits", _radio("opt-limits", ("error", "warn", "ignore"), "error")),
         ]
@@ -166,30 +155,6 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
     )
 
 
-def _after_fieldset() -> html.Fieldset:
-    return html.Fieldset(
-        [
-            html.Legend("compensate targets and export (after a calibration)"),
-            dcc.Upload(
-                html.Button("compensate a targets CSV (name, x, y, z [, qw..qz])"), id="upload-targets"
-            ),
-            _row("targets in", _radio("targets-unit", ("m", "mm"), "mm")),
-            _row(
-                "targets frame",
-                _radio("targets-frame", ("base", "measurement"), "base", ("robot base", "device")),
-            ),
-            html.Div(
-                [
-                    html.Button("calibrated URDF", id="export-urdf"),
-                    html.Button("UR kinematics YAML", id="export-ur"),
-                ],
-                className="toolbar",
-            ),
-            html.Div(id="export-message", className="message"),
-        ]
-    )
-
-
 # ----------------------------------------------------------------------- callbacks
 def register(app: Dash, workdir: Path) -> None:
     """The calibration page's callbacks; files live in ``workdir`` (uploads, runs)."""
@@ -198,7 +163,7 @@ def register(app: Dash, workdir: Path) -> None:
     page = _Page(workdir, runner)
     _register_data(app, page)
     runs_page.register(app, runner, workdir, RUN_STATES, lambda session, *a: _start_run(page, session, *a))
-    _register_export(app, page)
+    export_page.register(app, workdir)
 
 
 _READER_INPUTS = (
@@ -206,7 +171,7 @@ _READER_INPUTS = (
     ("opt-angle", "value"),
     ("opt-sep", "value"),
     ("opt-decimal", "value"),
-    ("opt-columns", "value"),
+    ("column-renames", "data"),
     ("opt-orientation", "value"),
     ("opt-incomplete", "value"),
     ("opt-limits", "value"),
@@ -267,6 +232,8 @@ def _register_data(app: Dash, page: _Page) -> None:
             return html.Span(file["error"], className="error", id="upload-error")
         return file["label"]
 
+    columns_view.register(app, page.data_file)
+
     @app.callback(
         Output("csv-preview", "children"),
         Input("csv-file", "data"),
@@ -276,25 +243,6 @@ def _register_data(app: Dash, page: _Page) -> None:
     )
     def preview(file, *args):
         return _preview(page, (file or {}).get("token"), *args)
-
-
-def _register_export(app: Dash, page: _Page) -> None:
-    """Compensation of uploaded targets and the exports, from the saved result."""
-
-    @app.callback(
-        Output("cal-download", "data"),
-        Output("export-message", "children"),
-        Input("upload-targets", "contents"),
-        Input("export-urdf", "n_clicks"),
-        Input("export-ur", "n_clicks"),
-        State("upload-targets", "filename"),
-        State("targets-unit", "value"),
-        State("targets-frame", "value"),
-        State("cal-run-id", "data"),
-        prevent_initial_call=True,
-    )
-    def compensate_or_export(targets, _urdf, _ur, filename, unit, frame, run_id):
-        return _compensate_or_export(page, targets, _urdf, _ur, filename, unit, frame, run_id)
 
 
 class _Page:
@@ -346,7 +294,7 @@ def _preview(page: _Page, token, *args):
     if path is None:
         return html.Div("open a measurement CSV", className="hint")
     try:
-        opts = read_options(*options)
+        opts = _reader_options(options)
         model = page.model_for(choice, built, "position")
         data, warns = _read(path, opts, model)
     except ValueError as err:
@@ -361,20 +309,30 @@ def _preview(page: _Page, token, *args):
     )
     return [
         html.Div(summary, className="ok", id="csv-summary"),
-        *[html.Div(f"warning: {w}", className="warning") for w in warns],
+        *[html.Div(f"warning: {gui_words(w)}", className="warning") for w in warns],
         preview_table(data, None if model is None else model.joint_types),
         html.H4("the file's first lines"),
         _raw_head(path),
     ]
 
 
+def _reader_options(values: Sequence[Any]) -> dict[str, Any]:
+    """The reader's keyword options from the page's values (in :data:`_READER_INPUTS`'
+    order); ValueError with the column mapping's problem when it has one."""
+    length, angle, sep, decimal, columns, orientation, incomplete, limits = values
+    columns = columns or {}
+    if "error" in columns:
+        raise ValueError(columns["error"])
+    return read_options(length, angle, sep, decimal, columns.get("columns"), orientation, incomplete, limits)
+
+
 def _start_run(page: _Page, session: str, *args: Any) -> tuple:
     """Check the page's values and queue the run: ``(run_id, status)``, or ``(no_update, the
     error)`` when a value is wrong."""
-    options = read_options(*args[:8])
     choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, file = args[8:]
     path = page.data_file((file or {}).get("token"))
     try:
+        options = _reader_options(args[:8])
         if path is None:
             raise ValueError("open a measurement CSV first")
         if choice is None:
@@ -400,7 +358,7 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
         if noise_mm is not None and not noise_mm > 0:
             raise ValueError("device noise: a positive standard deviation in mm")
     except ValueError as err:
-        message = public_text(str(err), page.workdir)
+        message = gui_words(public_text(str(err), page.workdir))
         return no_update, html.Span(message, className="error", id="cal-error")
     from robocal.model.files import save_model
 
@@ -423,33 +381,3 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
     )
     page.runner.start(job, run_id, session, model.name)
     return run_id, f"calibrating {model.name} on {path.name} ..."
-
-
-def _compensate_or_export(page: _Page, targets, _urdf, _ur, filename, unit, frame, run_id):
-    from dash import callback_context
-
-    from robocal.identify.calibrate import CalibrationResult
-
-    trigger = callback_context.triggered_id
-    if run_id is None or not (page.workdir / "runs" / run_id / "result.json").is_file():
-        return no_update, html.Span("calibrate first", className="error")
-    result = CalibrationResult.load(page.workdir / "runs" / run_id)
-    try:
-        if trigger == "upload-targets":
-            return _compensate(result, targets, filename, unit, frame)
-        if trigger == "export-urdf":
-            from robocal.compensate.export import export_urdf
-
-            ex, _ = export_urdf(result)  # its notes: the physics-only fit used, what it leaves out
-            notes = "; ".join(ex.notes) or "everything calibrated is carried"
-            return {"content": ex.text, "filename": f"{result.model.name}_calibrated.urdf"}, notes
-        from robocal.compensate.export import export_ur_kinematics, kinematic_part, left_out
-
-        part = kinematic_part(result)
-        kin = export_ur_kinematics(part.calibrated)
-        notes = "; ".join((*part.notes, *(m.note for m in left_out(part.calibrated))))
-        return {"content": kin.to_yaml(), "filename": "default_kinematics.yaml"}, (
-            f"UR kinematics written; {notes}" if notes else "UR kinematics written"
-        )
-    except ValueError as err:
-        return no_update, html.Span(str(err), className="error")

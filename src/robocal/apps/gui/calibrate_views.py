@@ -15,9 +15,34 @@ from typing import Any
 import numpy as np
 from dash import dcc, html
 
+from robocal.apps.gui.columns_view import gui_words
 from robocal.outdir import atomic_write_bytes
 
 PREVIEW_ROWS = 12
+
+
+# ----------------------------------------------------------------------- controls
+#: the controls keep their values over a reload of the tab (its session storage)
+KEEP = {"persistence": True, "persistence_type": "session"}
+
+
+def _radio(
+    ident: str, options: Sequence[str], value: str, labels: Sequence[str] | None = None
+) -> dcc.RadioItems:
+    labels = labels or options
+    return dcc.RadioItems(
+        id=ident,
+        options=[{"label": lab, "value": v} for v, lab in zip(options, labels, strict=True)],
+        value=value,
+        inline=True,
+        **KEEP,
+    )
+
+
+def _row(label: str, control: Any, hint: str = "") -> html.Div:
+    return html.Div(
+        [html.Span(label, className="lab"), control, html.Span(hint, className="hint")], className="opt"
+    )
 
 
 # ----------------------------------------------------------------------- reading
@@ -64,7 +89,13 @@ def preview_table(data, joint_types: Sequence[str] | None = None) -> html.Table:
 def _problems(err, path: Path) -> html.Div:
     problems = [p for p in getattr(err, "problems", []) if p.severity == "error"][:20]
     rows = [
-        html.Tr([html.Td("" if p.row is None else str(p.row)), html.Td(p.column or ""), html.Td(p.message)])
+        html.Tr(
+            [
+                html.Td("" if p.row is None else str(p.row)),
+                html.Td(p.column or ""),
+                html.Td(gui_words(p.message)),
+            ]
+        )
         for p in problems
     ]
     table = (
@@ -75,7 +106,9 @@ def _problems(err, path: Path) -> html.Div:
         if rows
         else ""
     )
-    message = str(err).replace(str(path), path.name)  # the name the user knows, not the upload's copy
+    message = gui_words(
+        str(err).replace(str(path), path.name)
+    )  # the name the user knows; the page's controls
     return html.Div([html.Div(message, className="error", id="csv-error"), table])
 
 
@@ -220,7 +253,17 @@ def _float(text: str | None, what: str) -> float | None:
     return value
 
 
-def _compensate(result, contents: str, filename: str | None, unit: str, frame: str):
+def _compensate(
+    result: Any,
+    contents: str,
+    filename: str | None,
+    unit: str,
+    frame: str,
+    sep: str | None = None,
+    decimal: str = ".",
+) -> tuple[dict[str, str], str]:
+    """Compensate the uploaded targets CSV (``unit``: m/mm; ``sep``: None to sniff; ``decimal``
+    ``.`` or ``,``): the compensated commands' file and the page's line."""
     import robocal as rc
     from robocal.compensate.target_files import read_targets
 
@@ -229,7 +272,7 @@ def _compensate(result, contents: str, filename: str | None, unit: str, frame: s
         path = Path(tmp) / name
         atomic_write_bytes(path, _decode_bytes(contents))
         try:
-            targets = read_targets(path, length_unit=unit)
+            targets = read_targets(path, length_unit=unit, sep=sep, decimal=decimal)
         except ValueError as err:
             raise ValueError(str(err).replace(str(path), name)) from None
     comp = rc.compensate_targets(result, targets.values, names=targets.names, frame=frame)
