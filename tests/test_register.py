@@ -2,8 +2,10 @@
 honest scoring (issue 34 item 4) on virtual robots whose device was moved."""
 
 import csv
+import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -194,3 +196,58 @@ def test_validate_refit_frame_is_scored_on_rows_it_did_not_fit(saved):
     assert stats["frame"] == "refit" and stats["scoring"] == "5-fold"
     assert stats["rms_mm"] > stats["in_sample"]["rms_mm"]
     assert 0.6 < stats["expected_rms_mm"] / stats["rms_mm"] < 1.6
+
+
+REAL = (
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "ur10_laser_tracker" / "measurements_grid.csv"
+)
+COLUMNS = (
+    "q1=shoulder_pan_joint,q2=shoulder_lift_joint,q3=elbow_joint,q4=wrist_1_joint,q5=wrist_2_joint,"
+    "q6=wrist_3_joint,x=measurement_x,y=measurement_y,z=measurement_z"
+)
+
+
+def _real_days(tmp_path):
+    """Series A split by day: the first four days and the last (one file each)."""
+    header, *lines = REAL.read_text().splitlines()
+    last = [line for line in lines if line.startswith("20200718")]
+    first = [line for line in lines if not line.startswith("20200718")]
+    paths = tmp_path / "first.csv", tmp_path / "last.csv"
+    for path, rows in zip(paths, (first, last), strict=True):
+        path.write_text("\n".join([header, *rows]) + "\n")
+    reader = dict(length_unit="mm", sep=";", decimal=",", orientation="none", columns=COLUMNS)
+    return [rc.read_measurements(p, **reader) for p in paths]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not REAL.is_file(), reason="the real UR10 data (../shared/data/ur10_laser_tracker) is absent"
+)
+def test_real_ur10_calibrated_on_the_first_days_registered_on_the_last(tmp_path):
+    """Series A: calibrated on 300 poses of the first four days (default model choice),
+    re-registered on 20 / 50 poses of the last day, scored on the rest of that day."""
+    first, last = _real_days(tmp_path)
+    train = first.subset(np.random.default_rng(0).permutation(first.n)[:300])
+    sigma = np.full((train.n, 3), 0.03e-3)  # the tracker's noise, as --noise 0.03mm
+    model = rc.calibration_model(rc.robot("ur10"), "position")
+    train = dataclasses.replace(train, sigma=sigma)
+    result = rc.calibrate(model, train, tool_guess=[0, 0, 0.109], residual="auto")  # the CLI's default
+    last = dataclasses.replace(last, sigma=np.full((last.n, 3), 0.03e-3))
+    for m in (20, 50):
+        for seed in range(3):
+            order = np.random.default_rng(seed).permutation(last.n)
+            few, rest = last.subset(order[:m]), last.subset(order[m:])
+            robot = frozen_robot(result, few)
+            score = score_registration(robot, few.position)
+            fit = fit_frame(robot, few.position)
+            held = frozen_robot(result, rest)
+            e = np.linalg.norm(fit.predict(held) - rest.position, axis=1)
+            rms, expected = np.sqrt(np.mean(e**2)), np.sqrt(np.mean(fit.expected_ms(held)))
+            print(
+                f"{m} poses, seed {seed}: rest mean {e.mean() * 1e3:.3f} RMS {rms * 1e3:.3f} "
+                f"p95 {np.percentile(e, 95) * 1e3:.3f} max {e.max() * 1e3:.3f} mm, "
+                f"expected {expected * 1e3:.3f} (ratio {expected / rms:.2f}); K-fold RMS "
+                f"{score.rms * 1e3:.3f} expected {score.expected_rms * 1e3:.3f} (ratio {score.ratio:.2f})"
+            )
+            assert e.mean() < 0.2e-3
+            assert 0.8 < expected / rms < 1.3 and 0.7 < score.ratio < 1.5
