@@ -68,6 +68,7 @@ from robocal.identify.residual_cv import (
 from robocal.identify.residual_fit import (
     _CHUNK,
     Hyper,
+    Index,
     _layout,
     _one_blas_thread,
     _prior,
@@ -265,7 +266,7 @@ class _PhysicsFits:
     base_name: str
     base: Any
 
-    def fit(self, name: str, train: Array) -> PhysicalFit:
+    def fit(self, name: str, train: Index) -> PhysicalFit:
         """Variant ``name`` calibrated on the poses ``train``, with its residuals and Jacobians."""
         data = self.data
         everything = len(train) == data.n
@@ -278,10 +279,10 @@ class _PhysicsFits:
         p, P, J = PhysicalFit(result, np.empty(0), np.empty(0), np.empty(0)).predict(q)
         return PhysicalFit(result, data.position[train] - p, P, J)
 
-    def usable(self) -> tuple[dict[str, Callable[[Array], PhysicalFit]], dict[str, PhysicalFit]]:
+    def usable(self) -> tuple[dict[str, Callable[[Index], PhysicalFit]], dict[str, PhysicalFit]]:
         """``(fit functions, fits on all poses)`` of the variants that can be calibrated on all
         poses; one that cannot is left out of the choice."""
-        usable: dict[str, Callable[[Array], PhysicalFit]] = {}
+        usable: dict[str, Callable[[Index], PhysicalFit]] = {}
         full: dict[str, PhysicalFit] = {}
         for name in self.variants:
             try:  # a variant that cannot be calibrated on these poses is left out of the choice
@@ -320,7 +321,7 @@ def _refit_with_residual(
     return result
 
 
-def _memo(fit: Callable[[Array], PhysicalFit], whole: PhysicalFit, n: int) -> Callable[[Array], PhysicalFit]:
+def _memo(fit: Callable[[Index], PhysicalFit], whole: PhysicalFit, n: int) -> Callable[[Index], PhysicalFit]:
     """``fit`` that returns ``whole`` for all ``n`` poses instead of calibrating again."""
     return lambda train: whole if len(train) == n else fit(train)
 

@@ -7,8 +7,9 @@ likelihood (:func:`fit_joint_fourier`; the method, memory and time:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,6 +22,7 @@ from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, 
 __all__ = ["Hyper", "fit_joint_fourier"]
 
 Array = NDArray[np.float64]
+Index = NDArray[np.integer[Any]]  # indices (of coefficients, joints, poses)
 
 _CHUNK = 2048  # poses per chunk of the design matrix
 MAX_AMPLITUDE = 2e-3  # rad, the largest prior RMS of a joint's angle error
@@ -141,7 +143,7 @@ class _Raw:
     def __add__(self, other: _Raw) -> _Raw:
         return _Raw(*(getattr(self, f.name) + getattr(other, f.name) for f in dataclasses.fields(self)))
 
-    def projected(self, keep: Array) -> tuple[_Normal, _Solver]:
+    def projected(self, keep: Index) -> tuple[_Normal, _Solver]:
         """The normal equations of the coefficients ``keep`` in the complement of ``J``'s
         columns (the physical parameters' least squares eliminated: ``G = AᵀA − AᵀJ (JᵀJ)⁻¹
         JᵀA``), and the solver of the physical parameters' step."""
@@ -172,7 +174,7 @@ class _Solver:
         scaled = X / (self.scale[:, None] if X.ndim == 2 else self.scale)
         return solve_triangular(self.L, scaled, lower=True, check_finite=False)
 
-    def step(self, keep: Array | None = None, c: Array | None = None) -> Array:
+    def step(self, keep: Index | None = None, c: Array | None = None) -> Array:
         """``(p,)`` the physical parameters' least squares ``(JᵀJ)⁻¹ Jᵀ(r − A c)`` (``c`` the
         coefficients ``keep``; None: ``(JᵀJ)⁻¹ Jᵀ r``)."""
         rhs = self.raw.Jr if c is None else self.raw.Jr - self.raw.JA[:, keep] @ c
@@ -207,7 +209,7 @@ def _raw_blocks(q: Array, r: Array, P: Array, template: JointAngleResidual, J: A
     return _Raw(np.triu(AA) + np.triu(AA, 1).T, JA, Ar, JJ, Jr, rr, r.size)
 
 
-def _keep(template: JointAngleResidual, top: int, H: int) -> Array:
+def _keep(template: JointAngleResidual, top: int, H: int) -> Index:
     """The coefficients of H harmonics among those of ``top`` (joint by joint)."""
     return (np.arange(len(template.joints))[:, None] * 2 * top + np.arange(2 * H)).reshape(-1)
 
@@ -232,7 +234,7 @@ def _apply(learned: JointAngleResidual, q: Array, P: Array) -> Array:
     return np.einsum("nrk,nk->nr", cols, learned.angle_errors(q))
 
 
-def _prior(theta: Array, groups: Array, freq: Array) -> Array:
+def _prior(theta: Array, groups: Index, freq: Array) -> Array:
     """log prior variance per coefficient from ``theta = [log a_j..., log ℓ, log σ]``."""
     k = len(theta) - 2
     return 2.0 * theta[:k][groups] + _spectrum(theta[k], freq)[0]
@@ -248,7 +250,7 @@ def _posterior(G: Array, b: Array, log_s: Array, noise2: float) -> tuple[Array, 
     return L, d * v, v
 
 
-def _nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: Array, freq: Array):
+def _nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: Index, freq: Array):
     k = len(theta) - 2
     log_s = _prior(theta, groups, freq)
     noise2 = float(np.exp(2.0 * theta[-1]))
@@ -267,7 +269,7 @@ def _nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: A
     return float(nll), grad
 
 
-def _nll_and_grad_dual(theta: Array, A: Array, r: Array, rr: float, N: int, groups: Array, freq: Array):
+def _nll_and_grad_dual(theta: Array, A: Array, r: Array, rr: float, N: int, groups: Index, freq: Array):
     """:func:`_nll_and_grad` from the design ``A`` ``(N, m)`` and residuals ``r`` ``(N,)``
     instead of ``G`` and ``b``, through the ``(N, N)`` matrix ``M = I + Ã Ãᵀ/σ²``
     (``Ã = A S^½``): ``det K = det M``, ``K⁻¹ = I − Ãᵀ M⁻¹ Ã/σ²`` (Woodbury).  The same
@@ -310,7 +312,7 @@ def _inverse_lower(L: Array) -> Array:
     return Linv
 
 
-def _layout(template: JointAngleResidual) -> tuple[Array, Array]:
+def _layout(template: JointAngleResidual) -> tuple[Index, Array]:
     H = template.harmonics
     groups = np.repeat(np.arange(len(template.joints)), 2 * H)
     freq = np.tile(np.repeat(np.arange(1, H + 1), 2), len(template.joints)).astype(float)
@@ -364,6 +366,7 @@ def fit_joint_fourier(
         gram = _grams(q, residuals, P, template, [harmonics], J)[harmonics]
     with _one_blas_thread():
         model, hyper = _fit(template, gram, hyper, start)
+    model = model.covering(q)  # fades within its prior's correlation length of the poses' angles
     rms = np.sqrt(np.mean(model.angle_errors(q) ** 2, axis=0))
     return dataclasses.replace(model, angle_rms=tuple(float(v) for v in rms)), hyper
 
@@ -410,7 +413,8 @@ def _evidence(
         (np.log(1e-4), np.log(2.0)),
         (np.log(1e-7), np.log(1e-2)),
     ]
-    fun, data = _nll_and_grad, (G, b)
+    fun: Callable[..., tuple[float, Array]] = _nll_and_grad
+    data: tuple[Any, ...] = (G, b)
     if normal.A is not None and _dual_is_cheaper(*normal.A.shape):
         fun, data = _nll_and_grad_dual, (normal.A, normal.r)
     opt = minimize(

@@ -116,14 +116,20 @@ class JointAngleResidual:
             variance proportional to ``exp(-(h ℓ)²/2)`` (normalised so that the amplitude is
             the RMS of the joint's angle error).
         coverage: per joint, the angle intervals ``((lo, hi), ...)`` (rad) the calibration
-            poses covered (angles closer than ``2 FADE`` joined).  Where the data says
+            poses covered (angles closer than ``2 fade_width`` joined).  Where the data says
             nothing — beyond the range or in a gap — a Fourier series would go on
             oscillating (a UR10 with a 0.28 rad gap in its shoulder angles: 5 mrad, 8 mm at
-            the tool), so each joint's angle error fades to zero within ``FADE`` rad of its
-            covered intervals (cos² taper); None: no fading.
+            the tool), so each joint's angle error fades to zero within ``fade_width`` rad
+            of its covered intervals (cos² taper); None: no fading.
         angle_rms: per joint, the RMS (rad) of the learned angle error over the calibration
             poses: where the residual fades out, an error of about this size is what it no
             longer predicts (its share of the predicted uncertainty there).
+        fade_width: how far (rad) beyond its coverage an angle error fades out: the prior's
+            correlation length ``length_scale``, at least :data:`FADE` (:meth:`covering`);
+            a smooth residual is supported by its data that far (a virtual UR10 with
+            ℓ = 0.24 rad lost 15 % of its accuracy inside its poses' range to gaps of
+            0.2-0.3 rad faded at 0.1), a rough one (the real UR10: ℓ ≈ 0.06 rad at 48
+            harmonics) not beyond :data:`FADE`.
     """
 
     joints: tuple[str, ...]
@@ -136,6 +142,7 @@ class JointAngleResidual:
     length_scale: float
     coverage: tuple[tuple[tuple[float, float], ...], ...] | None = None
     angle_rms: tuple[float, ...] | None = None
+    fade_width: float = FADE
 
     kind = "joint_fourier"
 
@@ -154,6 +161,8 @@ class JointAngleResidual:
             raise ValueError("residual: coefficients and covariance must be finite")
         if not (self.harmonics >= 1 and np.isfinite(self.noise_std) and self.noise_std >= 0):
             raise ValueError("residual: harmonics must be >= 1 and noise_std finite and >= 0")
+        if not (math.isfinite(self.fade_width) and self.fade_width > 0):
+            raise ValueError(f"residual: fade_width must be finite and > 0 rad, got {self.fade_width!r}")
         if self.coverage is not None:
             cover = tuple(tuple((float(lo), float(hi)) for lo, hi in joint) for joint in self.coverage)
             ok = len(cover) == len(self.joints) and all(
@@ -272,12 +281,22 @@ class JointAngleResidual:
 
     def fade(self, q: ArrayLike) -> Array:
         """``(n, k)`` weight of each joint's learned angle error at ``q``: 1 on the covered
-        angles, 0 from ``FADE`` rad away (all ones without coverage)."""
+        angles, 0 from ``fade_width`` rad away (all ones without coverage)."""
         angles = np.atleast_2d(np.asarray(q, dtype=float))[:, list(self.joint_index)]
         if self.coverage is None:
             return np.ones_like(angles)
         outside = np.stack([_distance(angles[:, k], joint) for k, joint in enumerate(self.coverage)], axis=1)
-        return np.cos(0.5 * np.pi * np.minimum(outside / FADE, 1.0)) ** 2
+        return np.cos(0.5 * np.pi * np.minimum(outside / self.fade_width, 1.0)) ** 2
+
+    def covering(self, q: ArrayLike) -> JointAngleResidual:
+        """This residual with the coverage of the calibration poses ``q`` ``(n, dof)`` and a
+        fade width of its prior's correlation length (at least :data:`FADE`): the
+        GP's posterior is supported about ``length_scale`` from its data (the spectral
+        weights ``exp(-(h ℓ)²/2)`` are a Gaussian kernel of width ℓ on the circle)."""
+        width = max(FADE, float(self.length_scale))
+        angles = np.atleast_2d(np.asarray(q, dtype=float))
+        cover = tuple(covered_intervals(angles[:, j], 2 * width) for j in self.joint_index)
+        return dataclasses.replace(self, coverage=cover, fade_width=width)
 
     # ------------------------------------------------------------------ files
     def to_dict(self, covariance: bool = False) -> dict[str, Any]:
@@ -298,6 +317,8 @@ class JointAngleResidual:
             out["coverage"] = [[[lo, hi] for lo, hi in joint] for joint in self.coverage]
         if self.angle_rms is not None:
             out["angle_rms"] = [float(v) for v in self.angle_rms]
+        if self.fade_width != FADE:  # older files: FADE
+            out["fade_rad"] = float(self.fade_width)
         if covariance:  # the upper triangle, row by row (the matrix is symmetric)
             out["covariance_upper"] = self.covariance_upper()
         return out
@@ -345,6 +366,7 @@ class JointAngleResidual:
             if data.get("coverage") is None
             else tuple(tuple(tuple(pair) for pair in joint) for joint in data["coverage"]),
             angle_rms=None if data.get("angle_rms") is None else tuple(float(v) for v in data["angle_rms"]),
+            fade_width=float(data.get("fade_rad", FADE)),
         )
         upper = data.get("covariance_upper")
         return learned if upper is None else learned.with_covariance_upper(upper)
