@@ -335,7 +335,8 @@ def build(
     n = len(geo)
     for i in range(1, n + 1):
         g = geo[i - 1]
-        joint = Joint(g.name, tuple(g.limits) if g.limits is not None else None)
+        assert g.name is not None  # named by _normalise
+        joint = Joint(g.name, g.limits)  # Joint checks and stores (lower, upper)
         if i < n:
             _joint_link(b, i, g.type, joint, geo[i], points[i], axes[i])
         else:

@@ -23,6 +23,7 @@ import numpy as np
 
 from robocal.model.builder import BuildResult, JointGeometry, Tcp, build
 from robocal.model.chain import Body, Model
+from robocal.model.steps import JointType
 
 __all__ = ["build_complete", "calibration_model", "geometry_from_model"]
 
@@ -42,20 +43,15 @@ def geometry_from_model(model: Model) -> tuple[list[JointGeometry], Tcp]:
     if model.dof == 0:
         raise ValueError(f"model {model.name!r} has no joints")
     frames = model.joint_frames(np.zeros(model.dof))
-    joint_steps = [s for s in model.steps if s.joint is not None]
+    joint_steps = [(s, s.joint) for s in model.steps if s.joint is not None]
     joints = []
     previous = np.zeros(3)
-    for F, step in zip(frames, joint_steps, strict=True):
+    for F, (step, joint) in zip(frames, joint_steps, strict=True):
         point = F[:3, 3]
-        joints.append(
-            JointGeometry(
-                step.joint_type,
-                tuple((point - previous).tolist()),
-                tuple(F[:3, step.axis].tolist()),
-                step.joint.name,
-                step.joint.limits,
-            )
-        )
+        x, y, z = (point - previous).tolist()
+        ax, ay, az = F[:3, step.axis].tolist()
+        kind: JointType = "revolute" if step.is_rotation else "prismatic"  # Step.joint_type of a joint
+        joints.append(JointGeometry(kind, (x, y, z), (ax, ay, az), joint.name, joint.limits))
         previous = point
     T = model.fk(np.zeros(model.dof))
     tcp = Tcp(tuple((T[:3, 3] - previous).tolist()), tuple(map(tuple, T[:3, :3].tolist())))
@@ -104,10 +100,10 @@ def _carry_bodies(source: Model, target: Model) -> tuple[Body, ...]:
         if body.inertia is not None:
             Ixx, Iyy, Izz, Ixy, Ixz, Iyz = body.inertia
             I_new = R @ np.array([[Ixx, Ixy, Ixz], [Ixy, Iyy, Iyz], [Ixz, Iyz, Izz]]) @ R.T
-            inertia = tuple(float(v) for v in (*np.diag(I_new), I_new[0, 1], I_new[0, 2], I_new[1, 2]))
-        bodies.append(
-            dataclasses.replace(body, frame=frame, com=tuple(float(v) for v in com), inertia=inertia)
-        )
+            d = np.diag(I_new).tolist()
+            inertia = (d[0], d[1], d[2], float(I_new[0, 1]), float(I_new[0, 2]), float(I_new[1, 2]))
+        x, y, z = com.tolist()
+        bodies.append(dataclasses.replace(body, frame=frame, com=(x, y, z), inertia=inertia))
     return tuple(bodies)
 
 

@@ -111,7 +111,7 @@ def sequence(
     for k, (motion, value, name, flag) in enumerate(zip(motions, values, names, flags, strict=True)):
         joint = None
         if k == joint_step:
-            joint = Joint(joint_name or f"q_{name}", tuple(limits) if limits is not None else None)
+            joint = Joint(joint_name or f"q_{name}", limits)  # Joint checks and stores (lower, upper)
         steps.append(Step(motion, name, value, free=flag, joint=joint, role=role))
     return steps
 

@@ -49,7 +49,7 @@ def _se3(T: np.ndarray):
     return pin.SE3(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))
 
 
-def to_pinocchio(model: Model, gravity: np.ndarray | None = None):
+def to_pinocchio(model: Model, gravity: ArrayLike | None = None):  # -> pinocchio.Model
     """A ``pinocchio.Model`` equivalent to ``model`` at its current parameter values.
 
     Joint ``j`` of robocal is Pinocchio joint ``j + 1`` (0 is the universe); the
@@ -257,19 +257,18 @@ def _mass_points(model: Model, payload: Payload | None) -> tuple[NDArray[np.intp
     # (identity for a joint step: the joint frame itself)
     after = local[steps] @ elementaries(plan.step_axis[steps], plan.step_rot[steps], model.values[steps])
     after[plan.step_joint[steps]] = np.eye(4)
-    joints = plan.anchor_of[steps] - 1 + plan.step_joint[steps]
     masses = [b.mass for b in model.bodies]
     centres = [T[:3, :3] @ np.asarray(b.com) + T[:3, 3] for T, b in zip(after, model.bodies, strict=True)]
-    joints = list(joints)
+    hung = (plan.anchor_of[steps] - 1 + plan.step_joint[steps]).tolist()  # the joint each body hangs from
     if payload is not None and payload.mass > 0:
-        joints.append(model.dof - 1)
+        hung.append(model.dof - 1)
         masses.append(payload.mass)
         centres.append(seg_T[-1][:3, :3] @ np.asarray(payload.com) + seg_T[-1][:3, 3])
-    keep = [k for k, j in enumerate(joints) if j >= 0]  # bodies before the first joint: fixed
-    joints = [joints[k] for k in keep]
+    keep = [k for k, j in enumerate(hung) if j >= 0]  # bodies before the first joint: fixed
+    joints = np.array([hung[k] for k in keep], dtype=np.intp)
     masses = [masses[k] for k in keep]
     centres = [centres[k] for k in keep]
-    return np.array(joints, dtype=np.intp), np.array(masses), np.array(centres).reshape(-1, 3)
+    return joints, np.array(masses), np.array(centres).reshape(-1, 3)
 
 
 def _static_wrenches(model: Model, q: Array, gravity: ArrayLike | None, payload: Payload | None) -> Array:
@@ -310,6 +309,7 @@ def _static_wrenches(model: Model, q: Array, gravity: ArrayLike | None, payload:
             g,
         )
     _, anchors = model._forward(q, None, keep_anchors=True)  # (dof + 1, 3, 4, n), [R | p] rows
+    assert anchors is not None  # keep_anchors
     frames = anchors[1:]  # the frame after joint j: (dof, 3, 4, n)
     R, o = frames[:, :, :3], frames[:, :, 3]  # (dof, 3, 3, n), (dof, 3, n)
     # masses and first moments hanging from each joint, then summed from the tool back

@@ -50,7 +50,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypedDict
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, model_validator
@@ -190,15 +190,27 @@ class _ModelFile(BaseModel):
         return self
 
 
+def _scaled(pair: Pair | None, scale: float) -> tuple[float, float] | None:
+    """``(lower, upper)`` in SI from a file's units (``scale``: SI per file unit)."""
+    if pair is None:
+        return None
+    lo, hi = pair
+    return lo * scale, hi * scale
+
+
+class _JointOptions(TypedDict):
+    """The joint keywords of :func:`robocal.model.conventions.dh` (and mdh, hayati)."""
+
+    joint: Literal["revolute", "prismatic"]
+    joint_name: str | None
+    limits: tuple[float, float] | None
+    free: bool
+
+
 def _step(spec: _StepSpec, units: _Units) -> Step:
     scale = ANGLE_SCALE[units.angle] if spec.motion[0] == "R" else LENGTH_SCALE[units.length]
-    joint = None
-    if spec.joint is not None:
-        lim = None
-        if spec.limits is not None:
-            lim = tuple(v * scale for v in spec.limits)
-        joint = Joint(spec.joint, lim)
-    bounds = None if spec.bounds is None else tuple(v * scale for v in spec.bounds)
+    joint = None if spec.joint is None else Joint(spec.joint, _scaled(spec.limits, scale))
+    bounds = _scaled(spec.bounds, scale)
     role = None if spec.role is None else Role(spec.role)  # None: from the name (older files)
     return Step(spec.motion, spec.param, spec.value * scale, spec.free, bounds, joint, role)
 
@@ -206,8 +218,8 @@ def _step(spec: _StepSpec, units: _Units) -> Step:
 def _link_steps(row: _LinkRow, i: int, convention: str, units: _Units) -> list[Step]:
     L, A = LENGTH_SCALE[units.length], ANGLE_SCALE[units.angle]
     limit_scale = A if row.type == "revolute" else L
-    limits = None if row.limits is None else tuple(v * limit_scale for v in row.limits)
-    common = dict(joint=row.type, joint_name=row.joint, limits=limits, free=row.free)
+    limits = _scaled(row.limits, limit_scale)
+    common = _JointOptions(joint=row.type, joint_name=row.joint, limits=limits, free=row.free)
     if convention == "dh":
         if row.beta is not None:
             raise ValueError(f"links[{i - 1}]: 'beta' is not a DH parameter (use convention: hayati)")
@@ -297,12 +309,16 @@ def model_from_dict(data: Any, origin: str = "<dict>") -> Model:
     try:
         steps: list[Step] = [_step(s, units) for s in spec.base]
         if spec.links:
+            assert spec.convention is not None  # checked by _ModelFile._one_form
             for i, row in enumerate(spec.links, start=1):
                 steps += _link_steps(row, i, spec.convention, units)
         steps += [_step(s, units) for s in spec.chain]
         steps += [_step(s, units) for s in spec.tool]
         L = LENGTH_SCALE[units.length]
-        bodies = [Body(b.name, b.frame, b.mass, tuple(c * L for c in b.com), b.inertia) for b in spec.bodies]
+        bodies = [
+            Body(b.name, b.frame, b.mass, (b.com[0] * L, b.com[1] * L, b.com[2] * L), b.inertia)
+            for b in spec.bodies
+        ]
         model = Model(
             name=spec.name,
             steps=tuple(steps),

@@ -54,6 +54,10 @@ class _GeometryFile(BaseModel):
     tcp: _TcpSpec = _TcpSpec()
 
 
+def _times(v: tuple[float, float, float], scale: float) -> tuple[float, float, float]:
+    return v[0] * scale, v[1] * scale, v[2] * scale
+
+
 def read_geometry_file(
     path: str | Path,
 ) -> tuple[str, tuple[JointGeometry, ...], Tcp, Measure, float, str, str]:
@@ -75,8 +79,9 @@ def read_geometry_file(
     for j in spec.joints:
         lim = None
         if j.limits is not None:
-            lim = tuple(v * (A if j.type == "revolute" else L) for v in j.limits)
-        joints.append(JointGeometry(j.type, tuple(v * L for v in j.position), j.axis, j.name, lim))
+            scale = A if j.type == "revolute" else L
+            lim = (j.limits[0] * scale, j.limits[1] * scale)
+        joints.append(JointGeometry(j.type, _times(j.position, L), j.axis, j.name, lim))
     rotation = None
     if spec.tcp.rpy is not None and spec.tcp.quaternion is not None:
         raise GeometryError(f"{path}: tcp: give either rpy or quaternion, not both")
@@ -90,9 +95,7 @@ def read_geometry_file(
                 f"{path}: tcp.quaternion: {list(spec.tcp.quaternion)} has norm {norm:.3g}, not 1 (w, x, y, z)"
             )
         rotation = spatial.quaternion_to_matrix(np.asarray(spec.tcp.quaternion) / norm)
-    tcp = Tcp(
-        tuple(v * L for v in spec.tcp.position), None if rotation is None else tuple(map(tuple, rotation))
-    )
+    tcp = Tcp(_times(spec.tcp.position, L), None if rotation is None else tuple(map(tuple, rotation)))
     tol = DEFAULT_PARALLEL_TOLERANCE if spec.parallel_tolerance is None else spec.parallel_tolerance * A
     try:
         _normalise(joints, tcp)

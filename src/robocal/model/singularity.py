@@ -24,6 +24,7 @@ Three checks, all at the nominal parameter values:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -147,8 +148,10 @@ def _link_checks(model: Model, measure: str, scale: float, near: float) -> list[
             continue
         # the link's transform from the frame before step lo to the frame before step hi
         names = [s.name for s in steps[lo:hi]]
+        f: Callable[[np.ndarray], np.ndarray]  # the link's parameter values -> what it must reach
         if hi < len(steps):
             nxt = steps[hi]
+            assert nxt.joint is not None  # hi: a joint step's index
             target = (
                 "axis line of joint " + nxt.joint.name
                 if nxt.is_rotation
@@ -156,22 +159,26 @@ def _link_checks(model: Model, measure: str, scale: float, near: float) -> list[
             )
             needed = 4 if nxt.is_rotation else 2
 
-            def f(x, lo=lo, hi=hi, nxt=nxt):
+            def to_axis(x, lo=lo, hi=hi, nxt=nxt):
                 T = np.eye(4)
                 for s, v in zip(steps[lo:hi], x, strict=True):
                     T = T @ _elem(s.motion, v)
                 line = _plucker(T, nxt.axis, scale)
                 return line if nxt.is_rotation else line[:3]
+
+            f = to_axis
         else:
             target = "tool pose" if measure == "pose" else "tool position"
             needed = 6 if measure == "pose" else 3
 
-            def f(x, lo=lo, hi=hi):
+            def to_tool(x, lo=lo, hi=hi):
                 T = np.eye(4)
                 for s, v in zip(steps[lo:hi], x, strict=True):
                     T = T @ _elem(s.motion, v)
                 out = T[:3, 3] / scale
                 return np.concatenate([out, T[:3, :3].ravel()]) if measure == "pose" else out
+
+            f = to_tool
 
         x0 = np.array([s.value for s in steps[lo:hi]])
         J = _numeric_jacobian(f, x0)
@@ -249,12 +256,12 @@ def _continuity(model: Model, measure: str, scale: float, eps: float) -> list[Co
 
     J = _geometry_jacobian(model, measure, scale) * xs  # per dimensionless parameter
     G0 = g(x0 / xs)
-    out = []
+    out: list[ContinuityCheck] = []
     if model.dof == 0:
         return out
     frames = model.joint_frames(np.zeros(model.dof))
     offset = 0
-    for j, step in enumerate(s for s in model.steps if s.joint is not None):
+    for j, (step, joint) in enumerate((s, s.joint) for s in model.steps if s.joint is not None):
         width = 6 if step.is_rotation else 3
         u = frames[j, :3, step.axis]
         o = frames[j, :3, 3]
@@ -274,7 +281,7 @@ def _continuity(model: Model, measure: str, scale: float, eps: float) -> list[Co
             worst_change = max(worst_change, float(np.abs(dx).max()) / eps)
             worst_residual = max(worst_residual, float(np.linalg.norm(J @ dx - dG)) / eps)
         continuous = worst_residual < 1e-3 and worst_change < 1e3
-        out.append(ContinuityCheck(step.joint.name, eps, worst_change, worst_residual, continuous))
+        out.append(ContinuityCheck(joint.name, eps, worst_change, worst_residual, continuous))
         offset += width
     return out
 

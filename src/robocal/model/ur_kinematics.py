@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 from robocal import spatial
 from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
 from robocal.model.chain import Model, Role
+from robocal.model.geometry import Measure
 from robocal.model.urdf_export import rpy_from_matrix, urdf_origin
 
 __all__ = [
@@ -169,7 +170,7 @@ def ur_kinematics(model: Model, T_base_urbase: ArrayLike | None = None, hash: st
 def read_ur_kinematics(
     path: str | Path,
     *,
-    measure: str = "pose",
+    measure: Measure = "pose",
     name: str | None = None,
     limits: Mapping[str, tuple[float, float]] | None = None,
 ) -> Model:
@@ -180,7 +181,7 @@ def read_ur_kinematics(
 def build_from_ur_kinematics(
     path: str | Path,
     *,
-    measure: str = "pose",
+    measure: Measure = "pose",
     name: str | None = None,
     limits: Mapping[str, tuple[float, float]] | None = None,
 ) -> BuildResult:

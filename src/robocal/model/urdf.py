@@ -16,11 +16,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 
 from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
 from robocal.model.chain import Model
+from robocal.model.geometry import JointType, Measure
 
 __all__ = ["URDFError", "build_from_urdf", "default_tip", "geometry_from_urdf", "model_from_urdf"]
 
@@ -85,7 +87,12 @@ class _Tree:
     joints: list[dict]
 
 
+@overload
+def _numbers(text: str, count: int, what: str, line: int) -> tuple[float, ...]: ...
+@overload
+def _numbers(text: str | None, count: int, what: str, line: int) -> tuple[float, ...] | None: ...
 def _numbers(text: str | None, count: int, what: str, line: int) -> tuple[float, ...] | None:
+    """``count`` finite numbers from an attribute's text (None: the attribute is absent)."""
     if text is None:
         return None
     try:
@@ -256,10 +263,10 @@ def _check_tree(path: Path, joints: list[dict]) -> None:
             state[name] = 2
 
 
-def _joint_axis(joint_model) -> tuple[str, np.ndarray]:
+def _joint_axis(joint_model) -> tuple[JointType, np.ndarray]:
     """(type, axis in the joint frame) of a Pinocchio 1-DOF joint model."""
     name = joint_model.shortname()
-    kind = None
+    kind: JointType | None = None
     if name.startswith("JointModelR"):
         kind = "revolute"
     elif name.startswith("JointModelP"):
@@ -381,8 +388,8 @@ def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, l
     chain = _chain(tree, tip_link)
     if not _movable(chain):
         raise URDFError(f"{path}: link {tip_link!r} is not moved by any joint")
-    for j in chain:
-        _check_chain_joint(path, j)
+    for joint in chain:
+        _check_chain_joint(path, joint)
     try:
         pm = pin.buildModelFromXML(_chain_urdf(tree, chain))
     except (RuntimeError, ValueError) as err:
@@ -400,10 +407,10 @@ def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, l
         M = data.oMi[j]
         axis = M.rotation @ local_axis
         origin = np.array(M.translation)
-        idx = pm.joints[j].idx_q
+        iq = pm.joints[j].idx_q
         limits = None
         if pm.joints[j].nq == 1:  # continuous joints are stored as (cos, sin): no limits
-            lo, hi = float(pm.lowerPositionLimit[idx]), float(pm.upperPositionLimit[idx])
+            lo, hi = float(pm.lowerPositionLimit[iq]), float(pm.upperPositionLimit[iq])
             limits = (lo, hi) if np.isfinite(lo) and np.isfinite(hi) and lo < hi else None
         joints.append(JointGeometry(kind, tuple(origin - previous), tuple(axis), pm.names[j], limits))
         previous = origin
@@ -416,7 +423,7 @@ def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, l
 
 def build_from_urdf(
     path: str | Path,
-    measure: str = "pose",
+    measure: Measure = "pose",
     tip: str | None = None,
     name: str | None = None,
 ) -> BuildResult:
@@ -433,7 +440,7 @@ def build_from_urdf(
 
 
 def model_from_urdf(
-    path: str | Path, measure: str = "pose", tip: str | None = None, name: str | None = None
+    path: str | Path, measure: Measure = "pose", tip: str | None = None, name: str | None = None
 ) -> Model:
     """The calibration model of a URDF robot (see :func:`build_from_urdf`)."""
     return build_from_urdf(path, measure, tip, name).model

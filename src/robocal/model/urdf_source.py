@@ -17,7 +17,7 @@ from robocal.model.urdf import URDFError
 Array = NDArray[np.float64]
 
 
-def urdf_origin(xyz: Sequence[float], rpy: Sequence[float]) -> Array:
+def urdf_origin(xyz: Sequence[float] | Array, rpy: Sequence[float] | Array) -> Array:
     """The 4x4 transform of a URDF ``<origin xyz rpy>`` (m, rad)."""
     r, p, y = rpy
     return spatial.homogeneous(spatial.rotz(y) @ spatial.roty(p) @ spatial.rotx(r), xyz)

@@ -88,7 +88,7 @@ def num(v: float) -> str:
     return text[:-2] if text.endswith(".0") else text
 
 
-def triple(values: Sequence[float]) -> str:
+def triple(values: Iterable[float]) -> str:
     return " ".join(num(v) for v in values)
 
 
