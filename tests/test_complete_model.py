@@ -3,7 +3,6 @@ parameterisation warnings, and the simulated UR10 whose parallel axes are tilted
 
 import json
 import math
-import time
 
 import numpy as np
 import pytest
@@ -144,10 +143,7 @@ def test_geometry_from_model_reads_axes_about_any_local_axis():
 
 def test_parameterisation_warnings():
     dh = rc.robot("ur10")
-    parameterisation_warnings(dh, "position")  # warm up
-    t = time.perf_counter()
-    warnings = parameterisation_warnings(dh, "position")
-    seconds = time.perf_counter() - t
+    warnings = parameterisation_warnings(dh, "position")  # its time: benchmarks/bench_checks.py
     assert len(warnings) == 1
     text = warnings[0]
     # the links between the parallel axes of joints 2, 3 and 4 (DH singular there)
@@ -155,7 +151,6 @@ def test_parameterisation_warnings():
     assert "shoulder_lift, elbow, wrist_1" in text  # their tilts cannot be followed
     assert "link 1 " not in text and "link 4 " not in text
     assert "rc.calibration_model('ur10', 'position')" in text and "robocal calibrate ur10" in text
-    assert seconds < 0.2, seconds  # ~25 ms on the development VM
     for measure in ("position", "pose"):
         assert parameterisation_warnings(rc.calibration_model("ur10", measure), measure) == []
     # a model that is not in the catalog gets the generic fix

@@ -12,7 +12,6 @@ import json
 import os
 import shutil
 import signal
-import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +26,7 @@ from robocal.measure.dataset import write_measurements
 from robocal.measure.poses import random_poses
 from robocal.model.catalog import robot
 
-SECONDS = 10
+SECONDS = 180  # a hang guard (SIGALRM): a hang fails the case instead of blocking the run
 UR10_URDF = Path(__file__).parent / "data" / "ur10.urdf"
 GEOMETRY = Path(__file__).parents[1] / "examples" / "geometry" / "irb2400.yaml"
 
@@ -112,9 +111,8 @@ def _materialise(case: Case, base: Path, where: Path) -> list[str]:
     return [a.format(dir=where, base=base) for a in case.args]
 
 
-def _check(case: Case, result, where: Path, seconds: float) -> None:
+def _check(case: Case, result, where: Path) -> None:
     output = result.output
-    assert seconds < SECONDS, f"{case.id}: {seconds:.1f} s"
     assert "Traceback" not in output, output
     assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
     assert result.exit_code == case.code, (case.id, result.exit_code, output)
@@ -137,10 +135,9 @@ def _check(case: Case, result, where: Path, seconds: float) -> None:
 
 def _run(case: Case, base: Path, tmp_path: Path) -> None:
     args = _materialise(case, base, tmp_path)
-    start = time.perf_counter()
     with time_limit():
         result = CliRunner().invoke(app, args)
-    _check(case, result, tmp_path, time.perf_counter() - start)
+    _check(case, result, tmp_path)
 
 
 def _replace_cell(row: int, col: int, value: str):
