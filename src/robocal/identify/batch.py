@@ -29,6 +29,7 @@ from robocal import spatial
 from robocal.identify.guards import CalibrationGuardError, check_data, check_rank, check_solution
 from robocal.identify.observability import Dropped
 from robocal.identify.problem import TOOL_PREFIX, frame_steps, measurement_chain
+from robocal.identify.rules import Rules
 from robocal.identify.solvers import levenberg_marquardt_batch
 from robocal.identify.stages import (
     identifiable_set,
@@ -228,9 +229,10 @@ def calibrate_batch(
     data: Sequence[Measurements],
     *,
     tool_guess: ArrayLike | None = None,
-    max_std: float = 5e-4,
-    max_std_ratio: float = 3.0,
+    max_std: float = Rules.max_std,
+    max_std_ratio: float = Rules.max_std_ratio,
     max_iterations: int = 200,
+    rules: Rules | None = None,
 ) -> list[BatchFit | CalibrationGuardError]:
     """Calibrate many robots of the same model at once (position measurements).
 
@@ -251,6 +253,9 @@ def calibrate_batch(
             median σ), as in ``rc.calibrate``.
         max_iterations: as ``rc.calibrate``'s (Levenberg–Marquardt evaluations:
             ``max_iterations · (p + 1)``).
+        rules: screening, pruning and variance rules as one value
+            (:class:`~robocal.identify.rules.Rules`, ``rc.calibrate``'s from its pruning
+            options); given, it replaces ``max_std`` and ``max_std_ratio``.
 
     Returns:
         Per measurement set a :class:`BatchFit`, or the
@@ -286,9 +291,8 @@ def calibrate_batch(
             out[k] = err
     todo = [k for k in range(len(data)) if out[k] is None]
     if todo:
-        fits = _Batch(
-            model, [data[k] for k in todo], tool_guess, max_std, max_std_ratio, max_iterations
-        ).run()
+        rules = rules if rules is not None else Rules(float(max_std), float(max_std_ratio))
+        fits = _Batch(model, [data[k] for k in todo], tool_guess, rules, max_iterations).run()
         for k, fit in zip(todo, fits, strict=True):
             out[k] = fit
     return [o for o in out if o is not None]
@@ -302,12 +306,11 @@ class _Batch:
         model: Model,
         data: Sequence[Measurements],
         tool_guess: ArrayLike | None,
-        max_std: float,
-        max_std_ratio: float,
+        rules: Rules,
         max_iterations: int,
     ) -> None:
         self.model, self.data, self.tool_guess = model, data, tool_guess
-        self.max_std, self.max_std_ratio, self.max_iterations = max_std, max_std_ratio, max_iterations
+        self.rules, self.max_iterations = rules, max_iterations
         K, n = len(data), data[0].n
         self.K, self.n = K, n
         self.qs = [d.q for d in data]
@@ -359,7 +362,7 @@ class _Batch:
             pending = []
             for members in groups.values():
                 idx = np.array(members, dtype=np.intp)
-                mask = masks[idx[0]]
+                mask = masks[idx[0]].copy()  # a copy: the loop below prunes members' rows of masks
                 cols = self.free[mask]
                 group = _Group(
                     self.chain, self.V[idx], [self.qs[k] for k in idx], self.ys[idx], self.w[idx], cols
@@ -371,11 +374,12 @@ class _Batch:
                     tolerance=1e-10,
                 )
                 for i, k in enumerate(idx):
-                    _, cov, std, _, cond = uncertainty(fit.r[i], fit.J[i], 3, bool(self.known[k]))
+                    _, cov, std, _, cond = uncertainty(fit.r[i], fit.J[i], 3, bool(self.known[k]), self.rules)
                     J_plain = (fit.J[i] / group.w[i][:, None]).reshape(n, 3, -1)
+                    rules = self.rules
                     found = (
                         poorly_identifiable(
-                            std, tool_displacement_scale(J_plain), self.max_std, self.max_std_ratio
+                            std, tool_displacement_scale(J_plain), rules.max_std, rules.max_std_ratio
                         )
                         if fit.success[i]
                         else None
@@ -436,7 +440,7 @@ class _Batch:
         cols = np.flatnonzero(mask)
         effect = tool_displacement_scale(J0_plain[:, cols].reshape(self.n, 3, -1))
         found = screen_unidentifiable(
-            r0, J0[:, cols], effect, self.max_std, self.max_std_ratio, known_noise=bool(self.known[k])
+            r0, J0[:, cols], effect, known_noise=bool(self.known[k]), rules=self.rules
         )
         for c, sigma in found:
             mask[cols[c]] = False

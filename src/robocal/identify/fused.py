@@ -24,8 +24,9 @@ from numpy.typing import NDArray
 from robocal.identify.lm_numpy import lm_message
 from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.problem_setup import Run
+from robocal.identify.rules import Rules
 from robocal.identify.solve_result import SolveResult
-from robocal.identify.stages import chi2_bounds, preference_columns
+from robocal.identify.stages import Covariance, preference_columns
 from robocal.model.rank import preference_subset
 
 __all__ = ["FirstPass", "applies", "fit", "rank_test"]
@@ -88,11 +89,11 @@ def rank_test(run: Run) -> FirstPass | None:
 
 
 @functools.lru_cache(maxsize=64)
-def _chi2_table(m: int, p: int) -> tuple[Array, Array]:
-    """:func:`chi2_bounds` for ``m`` rows and 0 to ``p`` unknowns (by number of unknowns;
-    at least one degree of freedom), read-only: the same for every calibration of a data
-    set's size, and the inverse χ² costs ~50 µs."""
-    tables = chi2_bounds(np.maximum(m - np.arange(p + 1), 1.0))
+def _chi2_table(m: int, p: int, rules: Rules) -> tuple[Array, Array]:
+    """:meth:`Rules.chi2_bounds` for ``m`` rows and 0 to ``p`` unknowns (by number of
+    unknowns; at least one degree of freedom), read-only: the same for every calibration
+    of a data set's size, and the inverse χ² costs ~50 µs."""
+    tables = rules.chi2_bounds(np.maximum(m - np.arange(p + 1), 1.0))
     for table in tables:
         table.flags.writeable = False
     return tables
@@ -110,9 +111,9 @@ def fit(run: Run, first: FirstPass) -> bool:
     dropped = {d.name for d in first.selection.dropped}
     live = np.array([k for k, name in enumerate(names) if name not in dropped], dtype=np.intp)
     m, p = len(problem.weights), len(names)
-    bounds = _chi2_table(m, p) if run.known_noise else (np.zeros(p + 1),) * 2
-    pruning = options.pruning
-    screening = (float(pruning.max_std), float(pruning.max_std_ratio), 3.0, bool(run.known_noise))
+    rules = Rules.of(options.pruning)
+    bounds = _chi2_table(m, p, rules) if run.known_noise else (np.zeros(p + 1),) * 2
+    screening = rules.screening(run.known_noise)
     budget = int(run.solver["max_iterations"])
     t = time.perf_counter()
     (status, screened, screened_sigma, pruned, pruned_sigma, live, x0, x, success, evaluations, total,
@@ -135,5 +136,5 @@ def fit(run: Run, first: FirstPass) -> bool:
                           len(history), int(evaluations), history.tolist(), rw[0], Jw[0])  # fmt: skip
     run.evaluations += int(total)
     s2, cov, std, corr, cond = covariance
-    run.covariance = (float(s2), cov, std, corr, float(cond))
+    run.covariance = Covariance(float(s2), cov, std, corr, float(cond))
     return True

@@ -28,7 +28,8 @@ import numba
 import numpy as np
 
 from robocal.identify.lm_kernels import accept, propose, start
-from robocal.identify.stage_kernels import _median, normal_covariance, screen
+from robocal.identify.rules import NO_CANDIDATE
+from robocal.identify.stage_kernels import normal_covariance, prune_candidate, screen, variance_factor
 from robocal.model.kernels import segment_data
 from robocal.model.kernels_evaluate import evaluate
 
@@ -176,11 +177,9 @@ def _uncertainty(chi2, G, m, chi2_low, chi2_high, known_noise):
     ``Σr²`` (``chi2``) and normal matrix ``G`` ``(p, p)``: σ̂², covariance, standard
     deviations, correlations, condition number and whether the normal matrix is regular
     enough (else the staged pipeline's SVD path).  ``chi2_low``/``chi2_high`` ``[p]``: the χ²
-    test's bounds for ``p`` unknowns (:func:`residual_variance`)."""
+    test's bounds for ``p`` unknowns (the rule: :func:`robocal.identify.rules.variance_factor`)."""
     p = G.shape[0]
-    s2 = chi2 / max(float(m - p), 1.0)
-    if known_noise and chi2_low[p] <= chi2 <= chi2_high[p]:
-        s2 = 1.0
+    s2 = variance_factor(chi2, float(m - p), known_noise, chi2_low[p], chi2_high[p])
     cov, std, corr, lam, ok = normal_covariance(G, s2)
     cond = math.sqrt(lam[p - 1] / lam[0]) if ok else math.inf
     return s2, cov, std, corr, cond, ok
@@ -307,8 +306,8 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         if not ok or len(std) < 2:
             break
         move = std * _displacement_scale(last[2])
-        worst = np.argmax(move)
-        if move[worst] <= max(max_std, max_std_ratio * _median(move)):
+        worst = prune_candidate(move, max_std, max_std_ratio, 1.0)  # the rule after a fit: margin 1
+        if worst == NO_CANDIDATE:
             break
         pruned[n_pruned], pruned_sigma[n_pruned] = live[worst], move[worst]
         n_pruned += 1

@@ -106,10 +106,14 @@ class PerPose:
 @dataclass(frozen=True)
 class Pruning:
     """Unknowns whose σ as tool displacement exceeds ``max_std`` (m) and ``max_std_ratio``
-    times the median are fixed and the fit repeated."""
+    times the median are fixed and the fit repeated; before the fit, those beyond
+    ``screen_margin`` times that threshold are fixed at once; ``significance``: each tail of
+    the χ² test of a stated noise (the decision rules: :class:`robocal.identify.rules.Rules`)."""
 
     max_std: float = 5e-4
     max_std_ratio: float = 3.0
+    screen_margin: float = 3.0
+    significance: float = 1e-3
 
 
 @dataclass(frozen=True)

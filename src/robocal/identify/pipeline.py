@@ -41,6 +41,7 @@ from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.options import CalibrationOptions
 from robocal.identify.problem_setup import LEVELS, Run, build_problem, parse_level, without_measured_tool
 from robocal.identify.result import CalibrationResult, Diagnostics
+from robocal.identify.rules import Rules
 from robocal.identify.solvers import METHODS, solve
 from robocal.identify.stages import (
     identifiable_set,
@@ -166,15 +167,20 @@ def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------- 5. screening
+def _rules(run: Run) -> Rules:
+    """The decision rules of this calibration (its pruning options)."""
+    return Rules.of(run.options.pruning)
+
+
 def _screen(run: Run) -> None:
     """The hopeless unknowns, fixed before the first fit (they would be pruned anyway);
     not for ``bounded`` (its bounds keep a poorly determined unknown from running away)."""
     if run.method == "bounded":
         return
-    problem, x0, pruning = run.problem, run.x0, run.options.pruning
+    problem, x0 = run.problem, run.x0
     r, J = problem.residual(x0), problem.jacobian(x0)
-    found = screen_unidentifiable(r, J, problem.effect_scale(x0), pruning.max_std, pruning.max_std_ratio,
-                                  known_noise=run.known_noise)  # fmt: skip
+    found = screen_unidentifiable(r, J, problem.effect_scale(x0), known_noise=run.known_noise,
+                                  rules=_rules(run))  # fmt: skip
     if found:
         names = problem.free_names
         run.dropped += [Dropped(names[c], "poorly identifiable", sigma=sigma) for c, sigma in found]
@@ -194,7 +200,7 @@ def _solve(run: Run, x_start: Array) -> None:
     r, J = run.fit.r, run.fit.J
     if r is None or J is None:
         r, J = run.problem.residual(run.x), run.problem.jacobian(run.x)
-    run.covariance = uncertainty(r, J, run.problem.rows, run.known_noise)
+    run.covariance = uncertainty(r, J, run.problem.rows, run.known_noise, _rules(run))
 
 
 def _prune(run: Run) -> None:
@@ -202,14 +208,12 @@ def _prune(run: Run) -> None:
     start values (the dropped unknown may have dragged others along a nearly flat valley
     of the first fit: real UR10 data, plain DH, a5 +143 mm).  Not after an unconverged
     fit (its σ say nothing) nor a bounded one (its bounds keep every unknown in range)."""
-    pruning = run.options.pruning
+    rules = _rules(run)
     if not run.fit.success or run.method == "bounded":
         return
     for _ in range(len(run.x) - 1):
-        std = run.covariance[2]
-        found = poorly_identifiable(
-            std, run.problem.effect_scale(run.x), pruning.max_std, pruning.max_std_ratio
-        )
+        std = run.covariance.std
+        found = poorly_identifiable(std, run.problem.effect_scale(run.x), rules.max_std, rules.max_std_ratio)
         if found is None:
             return
         worst, sigma = found
@@ -231,7 +235,7 @@ def _hold_effects(run: Run) -> None:
         names = problem.free_names
         held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
         peaks = dict(zip(problem.effect_names, np.abs(problem.effect_basis).max(axis=(1, 2, 3)), strict=True))
-        x_held, verdicts = effects_to_hold(names, run.x, run.covariance[1], held_at, peaks)
+        x_held, verdicts = effects_to_hold(names, run.x, run.covariance.covariance, held_at, peaks)
         if not verdicts:
             return
         run.dropped += verdicts

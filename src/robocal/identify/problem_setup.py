@@ -19,7 +19,7 @@ from robocal.identify.options import CalibrationOptions, check_load_model
 from robocal.identify.problem import Problem, measurement_chain
 from robocal.identify.result import CalibrationWarning
 from robocal.identify.solvers import SolveResult
-from robocal.identify.stages import initial_frames_and_tools, robot_sizes
+from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_sizes
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model, Role
 
@@ -90,7 +90,7 @@ class Run:
     x0: Array | None = None
     x: Array | None = None
     fit: SolveResult | None = None
-    covariance: tuple[float, Array, Array, Array, float] | None = None
+    covariance: Covariance | None = None
     solve_seconds: float = 0.0
     evaluations: int = 0
     effect_names: tuple[str, ...] = ()

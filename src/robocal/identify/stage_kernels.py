@@ -26,11 +26,25 @@ import math
 import numba
 import numpy as np
 
+from robocal.identify import rules
 from robocal.model.rank_kernels import cholesky
 
-__all__ = ["covariance", "normal_covariance", "normal_inverse", "normalised", "screen"]
+__all__ = [
+    "covariance",
+    "normal_covariance",
+    "normal_inverse",
+    "normalised",
+    "prune_candidate",
+    "screen",
+    "variance_factor",
+]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+# the decision rules of robocal.identify.rules, compiled: the one definition that the
+# staged pipeline (from Python), the fused kernels and the screening below all call
+prune_candidate = _jit(rules.prune_candidate)
+variance_factor = _jit(rules.variance_factor)
 
 # an eigenvalue ratio at or below this: the normal matrix is numerically singular
 SINGULAR = 1e-14
@@ -179,8 +193,8 @@ def screen(G, g, rr, m, scale, screening, columns, sigmas):
         move = np.empty(k)
         for a in range(k):
             move[a] = math.sqrt(s2 * inverse[a, a]) / norms[a] * scale[live[a]]
-        worst = np.argmax(move)
-        if move[worst] <= margin * max(max_std, max_std_ratio * _median(move)):
+        worst = prune_candidate(move, max_std, max_std_ratio, margin)
+        if worst == rules.NO_CANDIDATE:
             break
         columns[count] = live[worst]
         sigmas[count] = move[worst]

@@ -23,14 +23,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.identify.observability import IdentifiableSubset, identifiable_subset
+from robocal.identify.rules import NO_CANDIDATE, Rules
 from robocal.model.chain import Role
 
 __all__ = [
+    "Covariance",
     "chi2_bounds",
     "identifiable_set",
     "initial_frames_and_tools",
@@ -208,10 +211,12 @@ def screen_unidentifiable(
     r: Array,
     J: Array,
     scale: Array,
-    max_std: float = 5e-4,
-    max_std_ratio: float = 3.0,
-    margin: float = 3.0,
+    max_std: float = Rules.max_std,
+    max_std_ratio: float = Rules.max_std_ratio,
+    margin: float = Rules.screen_margin,
     known_noise: bool = False,
+    *,
+    rules: Rules | None = None,
 ) -> list[tuple[int, float]]:
     """Unknowns the measurements leave far beyond the pruning thresholds, found before
     any fit: their column indices and σ as tool displacement (m), worst first.
@@ -228,7 +233,8 @@ def screen_unidentifiable(
     unknowns often become determined once their partner is fixed); borderline cases are
     left to the pruning after the fit.  A numerically singular problem is left to the
     fit and its checks.  Compiled: :func:`robocal.identify.stage_kernels.screen` (from the
-    normal equations).
+    normal equations).  ``rules``: the thresholds as one value (:class:`Rules`; in place
+    of ``max_std``, ``max_std_ratio`` and ``margin``).
     """
     from robocal.identify import stage_kernels as sk
 
@@ -236,21 +242,36 @@ def screen_unidentifiable(
     p = J.shape[1]
     columns, sigmas = np.empty(p, dtype=np.intp), np.empty(p)
     G, g, rr = np.ascontiguousarray(J.T @ J), J.T @ r, float(r @ r)  # the normal equations
-    screening = (float(max_std), float(max_std_ratio), float(margin), bool(known_noise))
+    if rules is None:
+        rules = Rules(float(max_std), float(max_std_ratio), float(margin))
+    screening = rules.screening(known_noise)
     count = sk.screen(G, g, rr, len(r), np.asarray(scale, dtype=float), screening, columns, sigmas)
     return list(zip(columns[:count].tolist(), sigmas[:count].tolist(), strict=True))
 
 
 # ---------------------------------------------------------------------- uncertainty and pruning
+class Covariance(NamedTuple):
+    """The uncertainty of a fit (:func:`uncertainty`): σ̂² (the variance factor of the
+    weighted residuals), covariance ``(p, p)`` and standard deviations ``(p,)`` of the
+    unknowns (their units: m, rad), correlations ``(p, p)`` and the condition number of
+    the unit-norm weighted Jacobian.  A named record; it unpacks as the 5-tuple it replaces."""
+
+    variance: float
+    covariance: Array
+    std: Array
+    correlation: Array
+    condition: float
+
+
 def uncertainty(
-    r: Array, J: Array, rows: int, known_noise: bool = False
-) -> tuple[float, Array, Array, Array, float]:
-    """σ̂², covariance, standard deviations, correlations and condition number of a fit
-    with weighted residuals ``r`` ``(m,)`` and Jacobian ``J`` ``(m, p)``, ``rows`` (3 or 6)
-    rows per pose.
+    r: Array, J: Array, rows: int, known_noise: bool = False, rules: Rules | None = None
+) -> Covariance:
+    """The :class:`Covariance` of a fit with weighted residuals ``r`` ``(m,)`` and Jacobian
+    ``J`` ``(m, p)``, ``rows`` (3 or 6) rows per pose.
 
     The covariance is σ̂²(JᵀWJ)⁻¹ with σ̂² from :func:`residual_variance` (1 when the
-    weights come from a stated noise the residuals agree with).  Pose measurements have
+    weights come from a stated noise the residuals agree with; ``rules``: its χ² test's
+    significance).  Pose measurements have
     two groups of rows whose relative weight is a choice (``orientation_weight``), not a
     noise ratio: each group gets its own σ̂² (its share of the degrees of freedom) and
     the covariance is the sandwich (JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹ of the weighted rows,
@@ -262,13 +283,14 @@ def uncertainty(
     from robocal.identify import stage_kernels as sk
 
     m, p = J.shape
-    row_s2 = _row_variances(r, m, p, rows, known_noise)
+    significance = (rules or _DEFAULT_RULES).significance
+    row_s2 = _row_variances(r, m, p, rows, known_noise, significance)
     s2 = float(row_s2[0]) if m else 1.0
     uniform = rows == 3 or bool(np.all(row_s2 == s2))
     J = np.ascontiguousarray(J, dtype=float)
     cov, std, corr, lam, ok = sk.covariance(J, row_s2, uniform)
     if ok:  # cond(Jn) < 1e6: the normal matrix keeps enough digits, and gives the condition number
-        return s2, cov, std, corr, math.sqrt(lam[-1] / lam[0])
+        return Covariance(s2, cov, std, corr, math.sqrt(lam[-1] / lam[0]))
     Jn, norms, _, _ = normal_inverse(J)
     sv = np.linalg.svd(Jn, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
@@ -280,21 +302,24 @@ def uncertainty(
     outer = np.outer(std, std)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.where(outer > 0, cov / outer, 0.0)
-    return s2, cov, std, corr, cond
+    return Covariance(s2, cov, std, corr, cond)
 
 
-def _row_variances(r: Array, m: int, p: int, rows: int, known_noise: bool) -> Array:
+_DEFAULT_RULES = Rules()
+
+
+def _row_variances(r: Array, m: int, p: int, rows: int, known_noise: bool, significance: float) -> Array:
     """``(m,)`` the variance factor of each row (:func:`residual_variance`): one for
     positions; for poses one per group (positions, orientations), each with its share of
     the degrees of freedom."""
     if rows == 3:  # positions only: one group
-        return np.full(m, residual_variance(float(r @ r), m - p, known_noise))
+        return np.full(m, residual_variance(float(r @ r), m - p, known_noise, significance))
     position = np.tile(np.arange(rows) < 3, m // rows)
     row_s2 = np.empty(m)
     for group, known in ((position, known_noise), (~position, False)):
         if group.any():
             dof = group.sum() - p * group.sum() / m
-            row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known)
+            row_s2[group] = residual_variance(float(r[group] @ r[group]), dof, known, significance)
     return row_s2
 
 
@@ -305,17 +330,21 @@ def poorly_identifiable(
 
     σ as a tool displacement (``std`` times ``scale``, both ``(p,)``) beyond the absolute
     threshold ``max_std`` and beyond ``max_std_ratio`` times the median of all unknowns'
-    (noisy data makes every σ large; that is not a reason): the worst such one."""
-    if len(std) < 2:  # the last unknown is never pruned
-        return None
-    move = std * scale
-    worst = int(np.argmax(move))
-    if move[worst] <= max(max_std, max_std_ratio * median(move)):
+    (noisy data makes every σ large; that is not a reason): the worst such one.  The rule
+    is :func:`robocal.identify.rules.prune_candidate`, compiled (the fused kernels call
+    the same)."""
+    from robocal.identify import stage_kernels as sk
+
+    move = np.ascontiguousarray(std * scale, dtype=float)
+    worst = int(sk.prune_candidate(move, float(max_std), float(max_std_ratio), 1.0))
+    if worst == NO_CANDIDATE:
         return None
     return worst, float(move[worst])
 
 
-def residual_variance(chi2: float, dof: float, known: bool, significance: float = 1e-3) -> float:
+def residual_variance(
+    chi2: float, dof: float, known: bool, significance: float = Rules.significance
+) -> float:
     """The variance factor of weighted residuals for a covariance, ``χ²/dof`` or 1.
 
     With weights 1/σ from a stated noise (``known``) the factor is 1 — the Cramér–Rao
@@ -324,19 +353,19 @@ def residual_variance(chi2: float, dof: float, known: bool, significance: float 
     data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``
     (``dof`` at least 1).
     """
+    from robocal.identify import stage_kernels as sk
+
     dof = max(float(dof), 1.0)
-    estimated = float(chi2) / dof
-    if not known:
-        return estimated
-    low, high = chi2_bounds(np.array([dof]), significance)
-    return 1.0 if low[0] <= chi2 <= high[0] else estimated
+    low = high = math.nan  # no test without a stated noise (and no scipy.special)
+    if known:
+        bounds = chi2_bounds(np.array([dof]), significance)
+        low, high = float(bounds[0][0]), float(bounds[1][0])
+    return float(sk.variance_factor(float(chi2), dof, bool(known), low, high))
 
 
-def chi2_bounds(dof: Array, significance: float = 1e-3) -> tuple[Array, Array]:
+def chi2_bounds(dof: Array, significance: float = Rules.significance) -> tuple[Array, Array]:
     """The χ² values ``(k,)`` below and above which :func:`residual_variance` rejects a stated
     noise for ``dof`` ``(k,)`` degrees of freedom: ``P(χ² ≤ low) = P(χ² ≥ high) =
     significance`` (the compiled fit, :mod:`robocal.identify.fused_kernels`, takes them as
     tables: numba cannot call scipy.special)."""
-    import scipy.special
-
-    return scipy.special.chdtri(dof, 1.0 - significance), scipy.special.chdtri(dof, significance)
+    return Rules(significance=significance).chi2_bounds(dof)
