@@ -403,7 +403,7 @@ def _guess_joints(names: Sequence[str]) -> list[str]:
     for pattern, first in _JOINT_FAMILIES:
         numbered = {int(m.group(1)): n for n in names if (m := pattern.match(n))}
         start = first if first is not None else (0 if 0 in numbered else 1)
-        joints = []
+        joints: list[str] = []
         while start + len(joints) in numbered:
             joints.append(numbered[start + len(joints)])
         if joints:

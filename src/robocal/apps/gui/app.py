@@ -108,7 +108,7 @@ def create_app(workdir: Path):
         external_stylesheets=[],
         assets_folder=str(workdir / "assets"),  # none: the style is in the page
         suppress_callback_exceptions=True,
-        update_title=None,
+        update_title="",  # the tab title stays "robocal" while callbacks run
         compress=True,  # flask-compress: the 6 MB of JavaScript travel gzipped
     )
     app.index_string = INDEX
@@ -247,5 +247,5 @@ def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") 
     try:
         app.run(host=host, port=port, debug=False)
     finally:
-        app.robocal_runner.cancel_all()
+        app.server.extensions["robocal_runner"].cancel_all()
         shutil.rmtree(workdir, ignore_errors=True)

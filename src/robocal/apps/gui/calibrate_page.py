@@ -19,8 +19,8 @@ from typing import Any
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
 from robocal.apps.gui import columns_view, export_page, runs_page
+from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.calibrate_views import (
-    KEEP,
     _decode_bytes,
     _float,
     _problems,
@@ -29,8 +29,8 @@ from robocal.apps.gui.calibrate_views import (
     _read,
     _row,
     preview_table,
+    text_input,
 )
-from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.columns_view import gui_words
 from robocal.apps.gui.jobs import MAX_UPLOAD_BYTES, CalibrationJob, JobRunner, public_text, read_options
 from robocal.outdir import atomic_write_bytes, atomic_write_text
@@ -64,7 +64,6 @@ def layout(catalog: Sequence[str]) -> html.Div:
 
 def _reader_fieldset() -> html.Fieldset:
     # the reader's text options: re-read once the typing pauses
-    reread = {"type": "text", "debounce": 0.5, **KEEP}
     return html.Fieldset(
         [
             html.Legend("measurement file and reader options"),
@@ -76,7 +75,7 @@ def _reader_fieldset() -> html.Fieldset:
             _row("decimal mark", _radio("opt-decimal", (".", ","), ".")),
             _row(
                 "orientation",
-                dcc.Input(id="opt-orientation", value="auto", style={"width": "12em"}, **reread),
+                text_input("opt-orientation", "auto", "12em", debounce=0.5),
                 "auto | none | quaternion | rotvec | euler:SEQ[:deg|rad]",
             ),
             html.Div(
@@ -97,7 +96,6 @@ def _reader_fieldset() -> html.Fieldset:
 
 
 def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
-    text = {"type": "text", "debounce": False, **KEEP}
     return html.Fieldset(
         [
             html.Legend("model and method"),
@@ -109,7 +107,8 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
                     + [{"label": n, "value": n} for n in catalog],
                     value=None,
                     inline=True,
-                    **KEEP,
+                    persistence=True,
+                    persistence_type="session",
                 ),
                 "catalog robots: their complete model (rc.calibration_model)",
             ),
@@ -122,22 +121,25 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
             ),
             _row(
                 "calibration poses",
-                dcc.Input(id="cal-train-n", value="100", style={"width": "6em"}, **text),
+                text_input("cal-train-n", "100", "6em"),
                 "random rows to calibrate on; the rest are held out (empty: all rows)",
             ),
-            _row("seed", dcc.Input(id="cal-seed", value="0", style={"width": "4em"}, **text)),
+            _row("seed", text_input("cal-seed", "0", "4em")),
             _row(
                 "tool start mm",
-                dcc.Input(id="cal-tool", value="", style={"width": "10em"}, **text),
+                text_input("cal-tool", "", "10em"),
                 "x, y, z of the measured point from the flange (empty: fitted from zero)",
             ),
             _row(
                 "device noise mm",
-                dcc.Input(id="cal-noise", value="", style={"width": "6em"}, **text),
+                text_input("cal-noise", "", "6em"),
                 "1σ per axis, for the fit-to-noise test (empty: not tested)",
             ),
             dcc.Checklist(
-                id="cal-compliance", options=[{"label": "identify joint compliance", "value": "yes"}], **KEEP
+                id="cal-compliance",
+                options=[{"label": "identify joint compliance", "value": "yes"}],
+                persistence=True,
+                persistence_type="session",
             ),
             html.Div(
                 [
@@ -159,7 +161,7 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
 def register(app: Dash, workdir: Path) -> None:
     """The calibration page's callbacks; files live in ``workdir`` (uploads, runs)."""
     runner = JobRunner(workdir / "runs")
-    app.robocal_runner = runner  # for shutting down
+    app.server.extensions["robocal_runner"] = runner  # for shutting down (serve)
     page = _Page(workdir, runner)
     _register_data(app, page)
     runs_page.register(app, runner, workdir, RUN_STATES, lambda session, *a: _start_run(page, session, *a))
@@ -265,7 +267,7 @@ class _Page:
                 return rc.load_model(path)
             finally:
                 path.unlink(missing_ok=True)
-        return rc.calibration_model(choice, measure)
+        return rc.calibration_model(choice, "pose" if measure == "pose" else "position")
 
     def data_file(self, token: str | None) -> Path | None:
         """The uploaded file of this page (each upload has its own directory)."""

@@ -23,7 +23,7 @@ PREVIEW_ROWS = 12
 
 # ----------------------------------------------------------------------- controls
 #: the controls keep their values over a reload of the tab (its session storage)
-KEEP = {"persistence": True, "persistence_type": "session"}
+KEEP: dict[str, Any] = {"persistence": True, "persistence_type": "session"}
 
 
 def _radio(
@@ -35,7 +35,22 @@ def _radio(
         options=[{"label": lab, "value": v} for v, lab in zip(options, labels, strict=True)],
         value=value,
         inline=True,
-        **KEEP,
+        persistence=True,
+        persistence_type="session",
+    )
+
+
+def text_input(ident: str, value: str, width: str, debounce: bool | float = False) -> dcc.Input:
+    """A text box kept over a reload of the tab (``debounce``: seconds of no typing before its
+    value is sent; False: every key)."""
+    return dcc.Input(
+        id=ident,
+        value=value,
+        type="text",
+        debounce=debounce,
+        style={"width": width},
+        persistence=True,
+        persistence_type="session",
     )
 
 

@@ -105,7 +105,7 @@ def mapping_table(path: Path, sep: str | None, decimal: str) -> list[Any]:
         sample = first[k].strip() if k < len(first) else ""
         dropdown = dcc.Dropdown(
             id={"kind": "colrole", "col": k},
-            options=options,  # type: ignore[arg-type]  # Dash's option dicts
+            options=options,
             value=role,
             clearable=False,
             searchable=False,

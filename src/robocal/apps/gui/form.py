@@ -139,7 +139,8 @@ def check_form(form: BuilderForm) -> FormCheck:
         tcp_values[key] = value
     if errors:
         return FormCheck(errors, (), None)
-    tcp: dict[str, Any] = {"position": [_exact(tcp_values[k]) for k in ("tx", "ty", "tz")]}
+    position = [v for k in ("tx", "ty", "tz") if (v := tcp_values[k]) is not None]  # all given here
+    tcp: dict[str, Any] = {"position": [_exact(v) for v in position]}
     rpy = [tcp_values[k] for k in ("roll", "pitch", "yaw")]
     if any(v is not None for v in rpy):
         tcp["rpy"] = [_exact(v or 0.0) for v in rpy]
@@ -168,7 +169,7 @@ def _check_joint(
     if kind not in ("revolute", "prismatic"):
         errors[(i, "type")] = f"joint {i + 1}: revolute or prismatic"
     axis = [values[k] for k in ("ax", "ay", "az")]
-    if all(v is not None for v in axis) and float(np.linalg.norm(axis)) < 1e-12:
+    if all(v is not None for v in axis) and float(np.linalg.norm([v or 0.0 for v in axis])) < 1e-12:
         for k in ("ax", "ay", "az"):
             errors[(i, k)] = f"joint {i + 1}: the axis has zero length"
     lo, hi = values["lo"], values["hi"]
@@ -219,7 +220,7 @@ def build_form(form: BuilderForm) -> tuple[FormCheck, BuildResult | None]:
     geometry, e.g. coincident axes) and the build result (None when it failed).
     """
     check = check_form(form)
-    if not check.ok:
+    if not check.ok or check.geometry is None:
         return check, None
     try:
         geometry = _load_text(geometry_yaml(check.geometry), "the form")

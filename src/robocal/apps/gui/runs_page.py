@@ -131,7 +131,7 @@ def _poll(runner: JobRunner, workdir: Path, n: int, run_id: str | None, phase: s
     now = f"{run_id}:{state.status}:{state.saved}"
     changed = now != phase
     report: Any = no_update
-    if changed:
+    if changed and run_id is not None:
         report = _report_links(run_id, state.status == "done") if state.saved else ""
     finished = run_id if changed and state.saved else no_update
     return _bar(state), _status(state, workdir), report, finished, now, n + 1 if state.active else n
@@ -158,6 +158,11 @@ def _status(state: JobState, workdir: Path) -> list[Any]:
     return [html.Span(error, className="error", id="cal-error"), *warns]
 
 
+def _data_attributes(**values: str) -> dict[str, Any]:
+    """``data-*`` attributes of an html component (``run="x"`` -> ``data-run="x"``)."""
+    return {f"data-{k}": v for k, v in values.items()}
+
+
 def _run_table(infos: list[RunInfo], session_id: str | None, current: str | None) -> Any:
     if not infos:
         return html.Div("no runs yet", className="hint")
@@ -176,7 +181,7 @@ def _run_table(infos: list[RunInfo], session_id: str | None, current: str | None
                     else html.Button("open", id={"kind": "open-run", "run": i.run_id}, className="open-run")
                 ),
             ],
-            **{"data-run": i.run_id},
+            **_data_attributes(run=i.run_id),
         )
         for i in infos[:20]
     ]
