@@ -91,3 +91,126 @@ def test_every_exported_name_resolves(package):
     assert all(len(name) > 1 for name in lazy), sorted(name for name in lazy if len(name) == 1)
     missing = [name for name in module.__all__ if not hasattr(module, name)]
     assert not missing, f"{package}: {missing}"
+
+
+#: Files that ``mypy src/robocal`` may still report errors in: the engine, the residual, the
+#: register/validate commands and the GUI, being rewritten by other work of issues 32-36 while
+#: the rest of the package was made clean (issue 32 item 6).  Each name is a path under
+#: src/robocal; empty this set when they land.
+EXCLUDED = frozenset(
+    {
+        *(
+            f"identify/{name}.py"
+            for name in [
+                "pipeline",
+                "fused",
+                "fused_kernels",
+                "stages",
+                "batch",
+                "solvers",
+                "lm_numpy",
+                "lm_kernels",
+                "stage_kernels",
+                "start_kernels",
+                "calibrate",
+                "problem",
+                "problem_setup",
+                "result",
+                "solve_result",
+                "guards",
+                "effects",
+                "streaming",
+                "residual",
+                "residual_fit",
+                "residual_cv",
+                "register",
+                "validate",
+            ]
+        ),
+        "cli/register.py",
+        "cli/validate.py",
+        *(f"apps/gui/{path.name}" for path in (ROOT / "src" / "robocal" / "apps" / "gui").glob("*.py")),
+    }
+)
+
+
+#: Files of the rest of the package not yet made clean (113 errors at the last count): measure,
+#: model and evaluate are clean; cli, compensate, demo, experiments, study and a few of identify
+#: are next.  Remove a file's name here when mypy reports nothing in it.
+NOT_YET_CLEAN = frozenset(
+    {
+        "cli/app.py",
+        "cli/calibrate.py",
+        "cli/compensate.py",
+        "cli/errors.py",
+        "cli/export.py",
+        "cli/measure.py",
+        "cli/poses.py",
+        "cli/study.py",
+        "compensate/compensation.py",
+        "compensate/export.py",
+        "compensate/paths.py",
+        "compensate/program_config.py",
+        "compensate/program_filter.py",
+        "compensate/program_krl.py",
+        "compensate/program_rapid.py",
+        "compensate/program_urscript.py",
+        "compensate/safety.py",
+        "console.py",
+        "csvfile.py",
+        "demo/__init__.py",
+        "demo/console.py",
+        "experiments/seed000.py",
+        "experiments/seed001.py",
+        "experiments/seed003.py",
+        "experiments/seed003_pen.py",
+        "experiments/seed003_trajectory.py",
+        "identify/constraint_poses.py",
+        "identify/design_bound.py",
+        "identify/diagnose.py",
+        "identify/kernel_cache.py",
+        "identify/measured_tool.py",
+        "identify/pose_selection.py",
+        "identify/tilt_identification.py",
+        "measure/constraint_data.py",
+        "study/config.py",
+        "study/prepare.py",
+        "study/tasks.py",
+    }
+)
+
+
+def _mypy_errors_by_file(output: str) -> dict[str, int]:
+    """``{path under src/robocal: error count}`` from mypy's output lines ``path:line: error: ...``."""
+    counts: dict[str, int] = {}
+    for line in output.splitlines():
+        path, _, rest = line.partition(":")
+        if path.startswith("src/robocal/") and ": error:" in rest:
+            name = path.removeprefix("src/robocal/")
+            counts[name] = counts.get(name, 0) + 1
+    return counts
+
+
+def test_mypy_is_clean_on_the_package(tmp_path):
+    """``mypy src/robocal`` (the configuration of pyproject.toml) reports no error outside
+    :data:`EXCLUDED` and :data:`NOT_YET_CLEAN` (issue 32 item 6)."""
+    pytest.importorskip("mypy", reason="mypy is not installed (pip install -e '.[test]')")
+    command = [sys.executable, "-m", "mypy", "--cache-dir", str(tmp_path / "cache"), "src/robocal"]
+    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert result.returncode in (0, 1), result.stdout + result.stderr  # 1: errors found, 2: mypy failed
+    errors = _mypy_errors_by_file(result.stdout)
+    outside = {name: n for name, n in errors.items() if name not in EXCLUDED | NOT_YET_CLEAN}
+    shown = "\n".join(
+        line
+        for line in result.stdout.splitlines()
+        if line.split(":")[0].removeprefix("src/robocal/") in outside
+    )
+    assert not outside, f"mypy errors in {outside}:\n{shown}"
+
+
+def test_the_mypy_error_count_reads_mypy_lines():
+    output = (
+        "src/robocal/a.py:3: error: x  [misc]\nsrc/robocal/a.py:4: note: y\n"
+        "src/robocal/b/c.py:1: error: z  [index]\nFound 2 errors in 2 files\n"
+    )
+    assert _mypy_errors_by_file(output) == {"a.py": 1, "b/c.py": 1}

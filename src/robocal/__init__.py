@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from robocal._lazy import lazy_package
 
@@ -75,7 +75,9 @@ __all__ = [
 ]
 
 
-def model_from_urdf(path: str | Path, measure: str = "pose", tip: str | None = None) -> Model:
+def model_from_urdf(
+    path: str | Path, measure: Literal["position", "pose"] = "pose", tip: str | None = None
+) -> Model:
     """A complete, minimal, singularity-free calibration model of a URDF robot."""
     from robocal.model.urdf import model_from_urdf as _from_urdf  # Pinocchio: imported on use
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
@@ -12,7 +12,20 @@ from rich.text import Text
 from robocal.cli.options import CONTEXT, Force, Robot, measure_option, out_option, resolve_model
 from robocal.console import console, fail, input_problem, refuse_overwrite, safe, warn
 
+if TYPE_CHECKING:
+    from robocal.model.geometry import Measure
+
 __all__ = ["register"]
+
+#: ``--measure``'s choices, typed
+_MEASURES: dict[str, Measure] = {"position": "position", "pose": "pose"}
+
+
+def _measure(value: str) -> Measure:
+    """``--measure`` checked: ``position`` or ``pose``."""
+    if value not in _MEASURES:
+        raise fail(f"--measure must be 'position' or 'pose', got {value!r}")
+    return _MEASURES[value]
 
 
 def _is_ur_kinematics(path: Path) -> bool:
@@ -69,8 +82,7 @@ def build_command(
     from robocal.model.files import save_model
     from robocal.model.urdf import URDFError, build_from_urdf
 
-    if measure not in (None, "position", "pose"):
-        raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
+    chosen = None if measure is None else _measure(measure)  # None: the geometry file's
     from robocal.model.catalog import is_geometry_file, robots
 
     catalog = not geometry.is_file() and str(geometry).lower() in robots()
@@ -81,12 +93,12 @@ def build_command(
         raise fail(problem)
     try:
         if geometry.suffix.lower() == ".urdf":
-            result = build_from_urdf(geometry, measure or "pose", tip)
+            result = build_from_urdf(geometry, chosen or "pose", tip)
         elif not catalog and _is_ur_kinematics(geometry):  # a UR factory calibration (kinematics YAML)
             from robocal.model.ur_kinematics import URKinematicsError, build_from_ur_kinematics
 
             try:
-                result = build_from_ur_kinematics(geometry, measure=measure or "pose")
+                result = build_from_ur_kinematics(geometry, measure=chosen or "pose")
             except URKinematicsError as err:
                 raise fail(str(err)) from None
         elif catalog or not is_geometry_file(geometry):  # a chain: build from its joint geometry
@@ -94,9 +106,9 @@ def build_command(
 
             chain = resolve_model(str(geometry))
             origin = f"the catalog model {chain.name!r}" if catalog else None
-            result = build_complete(chain, measure or "pose", origin)
+            result = build_complete(chain, chosen or "pose", origin)
         else:
-            result = load_geometry(geometry).build(measure)
+            result = load_geometry(geometry).build(chosen)
     except (GeometryError, URDFError, ValueError) as err:
         raise fail(str(err)) from None
     model = result.model
@@ -147,10 +159,9 @@ def check_command(
     """Check a model for parameterisation singularities and discontinuities (exit 1 if any)."""
     from robocal.model.singularity import check_model
 
-    if measure not in ("position", "pose"):
-        raise fail(f"--measure must be 'position' or 'pose', got {measure!r}")
+    chosen = _measure(measure)
     model = resolve_model(robot)
-    result = check_model(model, measure)
+    result = check_model(model, chosen)
     table = Table(title=f"{model.name}: link parameterisations", title_justify="left")
     for col in ("link", "parameters", "places", "rank", "verdict"):
         table.add_column(col)
