@@ -37,7 +37,7 @@ def _fused_and_staged(model, data, **options):
     calls = []
     original = fused.fit
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(fused, "fit", lambda run, first: calls.append(1) or original(run, first))
+        m.setattr(fused, "fit", lambda *args: calls.append(1) or original(*args))
         compiled = rc.calibrate(model, data, tool_guess=TOOL, **options)
     assert calls, "the fused stages did not run"
     with pytest.MonkeyPatch.context() as m:

@@ -65,7 +65,7 @@ def test_fused_stages_agree_with_the_staged_pipeline(monkeypatch, name, n, seed,
     model, data = _data(name, n, seed)
     calls = []
     original = fused.fit
-    monkeypatch.setattr(fused, "fit", lambda run, first: calls.append(1) or original(run, first))
+    monkeypatch.setattr(fused, "fit", lambda *args: calls.append(1) or original(*args))
     result = rc.calibrate(model, data, **options)
     assert calls, "the compiled stages did not run"
     _assert_same(result, _staged(monkeypatch, model, data, **options))

@@ -5,9 +5,12 @@ calibration, and the one ``bench_calibrate`` times.
 :func:`rank_test` evaluates the problem at its start values and runs the sequential rank
 test (:func:`robocal.model.rank.preference_subset`) on the columns the compiled first pass
 prepared; :func:`fit` runs screening, the fit, its covariance and pruning in one compiled
-call (:func:`robocal.identify.fused_kernels.fit`) and leaves the pipeline's working state
-as the staged functions would (:func:`robocal.identify.pipeline._calibrate_once` calls
-them where this does not apply, and after a nearly singular covariance).  Every number
+call (:func:`robocal.identify.fused_kernels.fit`) and returns the frozen
+:class:`~robocal.identify.problem_setup.Fit` the staged functions would
+(:func:`robocal.identify.pipeline._calibrate_once` calls them where this does not apply,
+and after a nearly singular covariance).  The decisions (screening, pruning, the variance
+factor) are :mod:`robocal.identify.rules`': a frozen :class:`~robocal.identify.rules.Rules`
+handed to the kernels as a tuple and tables.  Every number
 comes from the kernels the staged pipeline calls; ``tests/test_fused.py`` holds the two
 to round-off.  Units: SI (m, rad).
 """
@@ -16,14 +19,16 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.lm_numpy import lm_message
 from robocal.identify.observability import Dropped, IdentifiableSubset
-from robocal.identify.problem_setup import Run
+from robocal.identify.problem_setup import Fit, Run, Selection
 from robocal.identify.rules import Rules
 from robocal.identify.solve_result import SolveResult
 from robocal.identify.stages import Covariance, preference_columns
@@ -68,6 +73,39 @@ def _chain_data(run: Run) -> tuple:
             plan.joint_rot_array, plan.anchor_of, plan.joint_steps)  # fmt: skip
 
 
+class _FirstPass(NamedTuple):
+    """:func:`robocal.identify.fused_kernels.first_pass`'s result, by name."""
+
+    frames: Array  # (n, 4, 4) tool frames at the start values
+    r: Array  # (3n,) unweighted residuals (m)
+    J: Array  # (3n, p) unweighted Jacobian
+    norm: Array  # (p,) norms of the scaled Jacobian's columns
+    zero: NDArray[np.bool_]  # (p,) which of them are zero
+    ordered: NDArray[np.intp]  # the non-zero columns in preference order
+    At: Array  # (k, m) those columns with unit norm, transposed
+    finite: bool
+
+
+class _Fused(NamedTuple):
+    """:func:`robocal.identify.fused_kernels.fit`'s result, by name."""
+
+    status: int
+    screened: NDArray[np.intp]  # free-column indices screened before the fit
+    screened_sigma: Array  # their σ (m)
+    pruned: NDArray[np.intp]  # free-column indices pruned after fits
+    pruned_sigma: Array
+    live: NDArray[np.intp]  # the final unknowns' free-column indices
+    x0: Array  # their start values
+    x: Array  # their fitted values
+    success: bool
+    evaluations: int  # of the last fit
+    total: int  # of all fits
+    history: Array  # the last fit's RMS history
+    last: tuple[Array, Array, Array, Array, Array]  # frames, r, J, weighted r and J at x
+    covariance: tuple[float, Array, Array, Array, float]  # as stages.Covariance
+    J0: Array  # the first Jacobian's columns of the final unknowns
+
+
 def rank_test(run: Run) -> FirstPass | None:
     """The first evaluation and the identifiable set (as
     :func:`robocal.identify.stages.identifiable_set` on the scaled Jacobian); None when the
@@ -79,13 +117,13 @@ def rank_test(run: Run) -> FirstPass | None:
     names = problem.free_names
     free_steps = np.flatnonzero(chain.free_mask)
     data = _chain_data(run)
-    T, r, J, norm, zero, ordered, At, finite = kernels.first_pass(
+    out = _FirstPass(*kernels.first_pass(
         data, chain.values, free_steps, float(problem.length_scale), preference_columns(names, chain.roles)
-    )
-    if not finite or not len(ordered):
+    ))  # fmt: skip
+    if not out.finite or not len(out.ordered):
         return None
-    selection = preference_subset(At.T, ordered.tolist(), norm, zero, names)
-    return FirstPass((T, r, J), selection, data, free_steps)
+    selection = preference_subset(out.At.T, out.ordered.tolist(), out.norm, out.zero, names)
+    return FirstPass((out.frames, out.r, out.J), selection, data, free_steps)
 
 
 @functools.lru_cache(maxsize=64)
@@ -99,42 +137,40 @@ def _chi2_table(m: int, p: int, rules: Rules) -> tuple[Array, Array]:
     return tables
 
 
-def fit(run: Run, first: FirstPass) -> bool:
-    """Screening, the fit, its covariance and pruning over the identifiable set; the
-    pipeline's state (problem, unknowns, dropped, fit, covariance) set as the staged
-    functions set it.  False (nothing changed) when a covariance's normal matrix is nearly
-    singular: the staged functions then take the SVD path."""
+def fit(run: Run, first: FirstPass, solver: Mapping[str, Any], rules: Rules) -> Fit | None:
+    """Screening, the fit, its covariance and pruning over the identifiable set, as the
+    staged functions fit it (``solver``: the settings of the LM fit, ``rules``: the
+    decisions').  None when a covariance's normal matrix is nearly singular: the staged
+    functions then take the SVD path."""
     from robocal.identify import fused_kernels as kernels
 
-    problem, options = run.problem, run.options
+    problem = run.problem
     names = problem.free_names
     dropped = {d.name for d in first.selection.dropped}
     live = np.array([k for k, name in enumerate(names) if name not in dropped], dtype=np.intp)
     m, p = len(problem.weights), len(names)
-    rules = Rules.of(options.pruning)
     bounds = _chi2_table(m, p, rules) if run.known_noise else (np.zeros(p + 1),) * 2
-    screening = rules.screening(run.known_noise)
-    budget = int(run.solver["max_iterations"])
+    budget = int(solver["max_iterations"])
     t = time.perf_counter()
-    (status, screened, screened_sigma, pruned, pruned_sigma, live, x0, x, success, evaluations, total,
-     history, last, covariance, J0) = kernels.fit(first.data, problem.chain.values, first.free_steps, live,
-                                                  first.evaluation, screening, bounds, budget,
-                                                  TOLERANCE)  # fmt: skip
-    if status != kernels.OK:
-        return False
-    run.solve_seconds += time.perf_counter() - t
-    columns, sigmas = screened.tolist() + pruned.tolist(), screened_sigma.tolist() + pruned_sigma.tolist()
+    out = _Fused(*kernels.fit(first.data, problem.chain.values, first.free_steps, live, first.evaluation,
+                              rules.screening(run.known_noise), bounds, budget, TOLERANCE))  # fmt: skip
+    if out.status != kernels.OK:
+        return None
+    seconds = time.perf_counter() - t
+    columns = out.screened.tolist() + out.pruned.tolist()
+    sigmas = out.screened_sigma.tolist() + out.pruned_sigma.tolist()
     poor = [Dropped(names[c], "poorly identifiable", sigma=s) for c, s in zip(columns, sigmas, strict=True)]
-    run.dropped = list(first.selection.dropped) + poor
-    run.problem = problem.fix([d.name for d in run.dropped])
-    T, _, J, rw, Jw = last
-    run.problem._cache[(x.tobytes(), True)] = (T, J)  # the evaluations the result and checks read
-    run.problem._cache[(x0.tobytes(), True)] = (first.evaluation[0], J0)
-    run.x0, run.x = x0, x
-    max_evaluations = budget * (len(live) + 1)
-    run.fit = SolveResult(x, bool(success), lm_message(bool(success), int(evaluations), max_evaluations),
-                          len(history), int(evaluations), history.tolist(), rw[0], Jw[0])  # fmt: skip
-    run.evaluations += int(total)
-    s2, cov, std, corr, cond = covariance
-    run.covariance = Covariance(float(s2), cov, std, corr, float(cond))
-    return True
+    all_dropped = (*first.selection.dropped, *poor)
+    fixed = problem.fix([d.name for d in all_dropped])
+    x, x0 = out.x, out.x0
+    T, _, J, rw, Jw = out.last
+    fixed._cache[(x.tobytes(), True)] = (T, J)  # the evaluations the result and checks read
+    fixed._cache[(x0.tobytes(), True)] = (first.evaluation[0], out.J0)
+    success, evaluations = bool(out.success), int(out.evaluations)
+    message = lm_message(success, evaluations, budget * (len(out.live) + 1))
+    solved = SolveResult(
+        x, success, message, len(out.history), evaluations, out.history.tolist(), rw[0], Jw[0]
+    )
+    s2, cov, std, corr, cond = out.covariance
+    covariance = Covariance(float(s2), cov, std, corr, float(cond))
+    return Fit(Selection(fixed, x0, all_dropped, solver), x, solved, covariance, int(out.total), seconds)

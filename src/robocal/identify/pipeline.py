@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -39,7 +40,16 @@ from robocal.identify.guards import check_data, check_rank
 from robocal.identify.kernel_cache import work_clock
 from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.options import CalibrationOptions
-from robocal.identify.problem_setup import LEVELS, Run, build_problem, parse_level, without_measured_tool
+from robocal.identify.problem import Problem
+from robocal.identify.problem_setup import (
+    LEVELS,
+    Fit,
+    Run,
+    Selection,
+    build_problem,
+    parse_level,
+    without_measured_tool,
+)
 from robocal.identify.result import CalibrationResult, Diagnostics
 from robocal.identify.rules import Rules
 from robocal.identify.solvers import METHODS, solve
@@ -103,32 +113,31 @@ def _check_inputs(
 
 
 # ---------------------------------------------------------------------- 4. identifiable set
-def _identifiable(run: Run, hold: dict | None) -> None:
+def _identifiable(run: Run, hold: dict | None) -> Selection:
     """The identifiable set, preferring the frame, then the tool, then the robot in chain
     order (one factorisation of the scaled Jacobian at the start values); the rank guard;
     joint effects the caller holds."""
     problem = run.problem
-    selection = identifiable_set(problem.scaled_jacobian(problem.x0), problem.free_names,
-                                 roles=problem.chain.roles)  # fmt: skip
-    _rank_guard(run, selection)
-    _fix_unidentifiable(run, selection, hold)
-    run.solver = _solver_options(run, selection.dropped)
+    subset = identifiable_set(problem.scaled_jacobian(problem.x0), problem.free_names,
+                              roles=problem.chain.roles)  # fmt: skip
+    _rank_guard(run, subset)
+    selection = _fix_unidentifiable(problem, subset, hold)
+    return dataclasses.replace(selection, solver=_solver_options(run, selection.problem, subset.dropped))
 
 
-def _rank_guard(run: Run, selection: IdentifiableSubset) -> None:
+def _rank_guard(run: Run, subset: IdentifiableSubset) -> None:
     """The rank guard's warnings (or its refusal) for the identifiable set."""
     setup = run.options.setup
     for text in check_rank(run.given_model, run.data, measure=run.measure, frame=setup.frame, tool=setup.tool,
-                           tool_guess=setup.tool_guess, kept=selection.kept,
+                           tool_guess=setup.tool_guess, kept=subset.kept,
                            candidates=run.problem.free_names):  # fmt: skip
         run.warn("rank", text)
 
 
-def _fix_unidentifiable(run: Run, selection: IdentifiableSubset, hold: dict | None) -> None:
-    """The problem with the unidentifiable unknowns and the held joint effects fixed."""
-    problem = run.problem
-    if selection.dropped:
-        problem = problem.fix([d.name for d in selection.dropped])
+def _fix_unidentifiable(problem: Problem, subset: IdentifiableSubset, hold: dict | None) -> Selection:
+    """``problem`` with the unidentifiable unknowns and the held joint effects fixed."""
+    if subset.dropped:
+        problem = problem.fix([d.name for d in subset.dropped])
     held = [
         why if isinstance(why, Dropped) else Dropped(name, "undetermined", detail=str(why))
         for name, why in (hold or {}).items()
@@ -136,16 +145,15 @@ def _fix_unidentifiable(run: Run, selection: IdentifiableSubset, hold: dict | No
     ]
     if held:
         problem = problem.fix([d.name for d in held])
-    run.problem, run.x0 = problem, problem.x0
-    run.dropped = list(selection.dropped) + held
+    return Selection(problem, problem.x0, (*subset.dropped, *held))
 
 
-def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
-    """The chosen method's settings (each method takes only its own)."""
+def _solver_options(run: Run, problem: Problem, rank_dropped: Sequence[Dropped]) -> dict[str, Any]:
+    """The chosen method's settings for ``problem``'s unknowns (each method takes only its own)."""
     o, method = run.options, run.method
     solver: dict[str, Any] = {"max_iterations": o.setup.max_iterations}
     if method == "lm" and o.loss.loss != "linear":  # where a robust loss starts to down-weight
-        f_scale = o.loss.f_scale * float(np.median(run.problem.weights.reshape(run.data.n, -1)[:, :3]))
+        f_scale = o.loss.f_scale * float(np.median(problem.weights.reshape(run.data.n, -1)[:, :3]))
         solver |= {"loss": o.loss.loss, "f_scale": f_scale}
     elif method in ("pinv", "influence"):
         p = o.per_pose
@@ -159,7 +167,9 @@ def _solver_options(run: Run, rank_dropped: list[Dropped]) -> dict[str, Any]:
             }
     elif method == "bounded":
         robot = set(run.model.names)
-        lo, hi, widened = bounded_method_bounds(o.bounds.value, run.problem, rank_dropped, run.length, robot)
+        lo, hi, widened = bounded_method_bounds(
+            o.bounds.value, problem, list(rank_dropped), run.length, robot
+        )
         if widened is not None:
             run.warn("bounds-widened", widened)
         solver["bounds"] = (lo, hi)
@@ -172,91 +182,104 @@ def _rules(run: Run) -> Rules:
     return Rules.of(run.options.pruning)
 
 
-def _screen(run: Run) -> None:
+def _screen(run: Run, selection: Selection) -> Selection:
     """The hopeless unknowns, fixed before the first fit (they would be pruned anyway);
     not for ``bounded`` (its bounds keep a poorly determined unknown from running away)."""
     if run.method == "bounded":
-        return
-    problem, x0 = run.problem, run.x0
+        return selection
+    problem, x0 = selection.problem, selection.x0
     r, J = problem.residual(x0), problem.jacobian(x0)
     found = screen_unidentifiable(r, J, problem.effect_scale(x0), known_noise=run.known_noise,
                                   rules=_rules(run))  # fmt: skip
-    if found:
-        names = problem.free_names
-        run.dropped += [Dropped(names[c], "poorly identifiable", sigma=sigma) for c, sigma in found]
-        run.problem = problem.fix([names[c] for c, _ in found])
-        run.x0 = run.problem.x0
+    if not found:
+        return selection
+    names = problem.free_names
+    poor = tuple(Dropped(names[c], "poorly identifiable", sigma=sigma) for c, sigma in found)
+    problem = problem.fix([names[c] for c, _ in found])
+    return dataclasses.replace(selection, problem=problem, x0=problem.x0, dropped=selection.dropped + poor)
 
 
 # ---------------------------------------------------------------------- 6. solve, prune, hold
-def _solve(run: Run, x_start: Array) -> None:
-    """One fit from ``x_start`` and the uncertainty at its solution (from the solver's
-    last Jacobian when it has it: no second evaluation)."""
+def _solve(run: Run, selection: Selection, x_start: Array, before: Fit | None = None) -> Fit:
+    """One fit of ``selection`` from ``x_start`` and the uncertainty at its solution (from
+    the solver's last Jacobian when it has it: no second evaluation); ``before``: the
+    pass's previous fit (its evaluations and seconds are counted on)."""
     t = time.perf_counter()
-    run.fit = solve(run.problem, x_start, run.method, **run.solver)
-    run.solve_seconds += time.perf_counter() - t
-    run.evaluations += run.fit.evaluations
-    run.x = run.fit.x
-    r, J = run.fit.r, run.fit.J
+    solved = solve(selection.problem, x_start, run.method, **selection.solver)
+    seconds = time.perf_counter() - t
+    r, J = solved.r, solved.J
     if r is None or J is None:
-        r, J = run.problem.residual(run.x), run.problem.jacobian(run.x)
-    run.covariance = uncertainty(r, J, run.problem.rows, run.known_noise, _rules(run))
+        r, J = selection.problem.residual(solved.x), selection.problem.jacobian(solved.x)
+    covariance = uncertainty(r, J, selection.problem.rows, run.known_noise, _rules(run))
+    evaluations, solve_seconds = (0, 0.0) if before is None else (before.evaluations, before.solve_seconds)
+    return Fit(
+        selection, solved.x, solved, covariance, evaluations + solved.evaluations, solve_seconds + seconds
+    )
 
 
-def _prune(run: Run) -> None:
+def _prune(run: Run, fit: Fit) -> Fit:
     """Drop what these measurements cannot determine, worst first, and refit from the
     start values (the dropped unknown may have dragged others along a nearly flat valley
     of the first fit: real UR10 data, plain DH, a5 +143 mm).  Not after an unconverged
     fit (its σ say nothing) nor a bounded one (its bounds keep every unknown in range)."""
     rules = _rules(run)
-    if not run.fit.success or run.method == "bounded":
-        return
-    for _ in range(len(run.x) - 1):
-        std = run.covariance.std
-        found = poorly_identifiable(std, run.problem.effect_scale(run.x), rules.max_std, rules.max_std_ratio)
+    if not fit.solve.success or run.method == "bounded":
+        return fit
+    for _ in range(len(fit.x) - 1):
+        selection = fit.selection
+        scale = selection.problem.effect_scale(fit.x)
+        found = poorly_identifiable(fit.covariance.std, scale, rules.max_std, rules.max_std_ratio)
         if found is None:
-            return
+            break
         worst, sigma = found
-        names = run.problem.free_names
-        run.dropped.append(Dropped(names[worst], "poorly identifiable", sigma=sigma))
-        run.problem = run.problem.fix([names[worst]])
-        run.x0 = run.x0[np.arange(len(run.x)) != worst]
-        _solve(run, run.x0)
+        names = selection.problem.free_names
+        pruned = dataclasses.replace(
+            selection,
+            problem=selection.problem.fix([names[worst]]),
+            x0=selection.x0[np.arange(len(fit.x)) != worst],
+            dropped=(*selection.dropped, Dropped(names[worst], "poorly identifiable", sigma=sigma)),
+        )
+        fit = _solve(run, pruned, pruned.x0, fit)
+    return fit
 
 
-def _hold_effects(run: Run) -> None:
+def _hold_effects(run: Run, fit: Fit) -> Fit:
     """Joint effects are physical (≥ 0) and identified only when the data tells them from
     zero: the others are held at their start values and the fit repeated from the
     linearised solution with them held (:func:`effects_to_hold`)."""
-    for _ in range(run.problem.n_effects if run.fit.success else 0):
-        problem = run.problem
+    for _ in range(fit.selection.problem.n_effects if fit.solve.success else 0):
+        selection = fit.selection
+        problem = selection.problem
         if not problem.n_effects:
-            return
+            break
         names = problem.free_names
         held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
         peaks = dict(zip(problem.effect_names, np.abs(problem.effect_basis).max(axis=(1, 2, 3)), strict=True))
-        x_held, verdicts = effects_to_hold(names, run.x, run.covariance.covariance, held_at, peaks)
+        x_held, verdicts = effects_to_hold(names, fit.x, fit.covariance.covariance, held_at, peaks)
         if not verdicts:
-            return
-        run.dropped += verdicts
+            break
         held = {v.name for v in verdicts}
         keep = np.array([name not in held for name in names], dtype=bool)
-        run.problem = problem.fix([v.name for v in verdicts])
-        run.x0, x_start = run.x0[keep], x_held[keep]
+        solver = dict(selection.solver)
+        x_start = x_held[keep]
         if run.method == "bounded":
-            run.solver["bounds"] = tuple(b[keep] for b in run.solver["bounds"])
-            x_start = np.clip(x_start, *run.solver["bounds"])
-        _solve(run, x_start)
+            solver["bounds"] = tuple(b[keep] for b in solver["bounds"])
+            x_start = np.clip(x_start, *solver["bounds"])
+        kept = Selection(problem.fix([v.name for v in verdicts]), selection.x0[keep],
+                         (*selection.dropped, *verdicts), solver)  # fmt: skip
+        fit = _solve(run, kept, x_start, fit)
+    return fit
 
 
 # ---------------------------------------------------------------------- 7. the result
-def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
+def _calibrated_models(run: Run, fit: Fit) -> tuple[Model, Model, Array]:
     """The calibrated measurement chain, the calibrated robot (tool appended, the given
     model's free flags) and ``T_device_base`` (4x4)."""
     from robocal.model import kernels  # numba: imported on first use
 
-    chain, given = run.problem.chain, run.given_model
-    calibrated_chain = chain.with_free_values(run.x[: len(run.x) - run.problem.n_effects])
+    problem, x = fit.selection.problem, fit.x
+    chain, given = problem.chain, run.given_model
+    calibrated_chain = chain.with_free_values(x[: len(x) - problem.n_effects])
     n_frame = len(chain.names_with_role(Role.DEVICE))  # the frame steps come first
     plan = chain._plan
     T_device_base = kernels.leading_frame(calibrated_chain.values, plan.step_axis, plan.step_rot, n_frame)
@@ -272,7 +295,7 @@ def _calibrated_models(run: Run) -> tuple[Model, Model, Array]:
     if run.plan.mode != "none" and run.plan.kinds:
         from robocal.model.joints import effects_from_values
 
-        estimated = dict(zip(run.problem.free_names, run.x, strict=True))
+        estimated = dict(zip(problem.free_names, x, strict=True))
         pairs = zip(run.effect_names, run.effect_kinds, run.effect_start, strict=True)
         effect_values = {pair: estimated.get(c, s0) for c, pair, s0 in pairs}
         calibrated = dataclasses.replace(
@@ -287,32 +310,33 @@ def _mean_square(r: Array) -> float:
     return float(p @ p) / len(r)
 
 
-def _assemble(run: Run, t_start: float) -> CalibrationResult:
+def _assemble(run: Run, fit: Fit, t_start: float) -> CalibrationResult:
     """The frozen result of this pass (warnings and diagnostics added by :func:`diagnose`)."""
-    problem, x, n = run.problem, run.x, run.data.n
+    selection, x, n = fit.selection, fit.x, run.data.n
+    problem = selection.problem
     names = problem.free_names
     r_plain = problem.residual(x, weighted=False).reshape(n, problem.rows)
-    r_start = problem.residual(run.x0, weighted=False).reshape(n, problem.rows)
-    _, cov, std, corr, cond = run.covariance
+    r_start = problem.residual(selection.x0, weighted=False).reshape(n, problem.rows)
+    cov = fit.covariance
     after = _mean_square(r_plain)
-    chain, calibrated, T_device_base = _calibrated_models(run)
+    chain, calibrated, T_device_base = _calibrated_models(run, fit)
     effects = run.options.joint_effects
     level = run.level if run.level is not None else (3 if run.plan.mode != "none" else 2)
     return CalibrationResult(
         model=calibrated, T_device_base=T_device_base, measure=run.measure, method=run.method,
-        names=names, estimates=x, nominal=run.x0, std=std, covariance=cov, correlation=corr,
-        dropped=tuple(run.dropped),
+        names=names, estimates=x, nominal=selection.x0, std=cov.std, covariance=cov.covariance,
+        correlation=cov.correlation, dropped=selection.dropped,
         residual_std=math.sqrt(after * n / max(3 * n - len(x), 1)),
         rms_before=math.sqrt(_mean_square(r_start)), rms_after=math.sqrt(after),
-        condition_number=cond, n=n, success=run.fit.success, message=run.fit.message,
-        iterations=run.fit.iterations, seconds=work_clock() - t_start, measurement_chain=chain,
+        condition_number=cov.condition, n=n, success=fit.solve.success, message=fit.solve.message,
+        iterations=fit.solve.iterations, seconds=work_clock() - t_start, measurement_chain=chain,
         compliance={
             effect[1]: float(v)
             for name, v in zip(problem.effect_names, x[len(x) - problem.n_effects :], strict=True)
             if (effect := effect_of(name)) is not None and effect[0] == "compliance"
         },
         gravity=effects.gravity, payload=effects.payload, residuals=r_plain,
-        diagnostics=Diagnostics(solve_seconds=run.solve_seconds, evaluations=run.evaluations, level=level,
+        diagnostics=Diagnostics(solve_seconds=fit.solve_seconds, evaluations=fit.evaluations, level=level,
                                 effects=run.plan.mode),
     )  # fmt: skip
 
@@ -323,36 +347,39 @@ def _calibrate_once(
 ) -> CalibrationResult:
     """Stages 2-8 for the joint loads of ``load_model``'s geometry."""
     build_problem(run, load_model)
-    if not _fused(run, hold):
-        _identifiable(run, hold)
-        _fit_staged(run)
-    _hold_effects(run)
-    result = _assemble(run, t_start)
-    bounds = run.solver.get("bounds") if run.method == "bounded" else None
-    at_bounds = None if bounds is None else parameters_at_bounds(result.names, run.x, *bounds)
-    return diagnose(result, run.problem, run.data, run.warnings, run.known_noise, run.options.loss.loss,
-                    run.x0, at_bounds, run.orientation_hint)  # fmt: skip
+    fit = _fused(run, hold)
+    if fit is None:
+        fit = _fit_staged(run, _identifiable(run, hold))
+    fit = _hold_effects(run, fit)
+    result = _assemble(run, fit, t_start)
+    selection = fit.selection
+    bounds = selection.solver.get("bounds") if run.method == "bounded" else None
+    at_bounds = None if bounds is None else parameters_at_bounds(result.names, fit.x, *bounds)
+    return diagnose(result, selection.problem, run.data, run.warnings, run.known_noise, run.options.loss.loss,
+                    selection.x0, at_bounds, run.orientation_hint)  # fmt: skip
 
 
-def _fused(run: Run, hold: dict | None) -> bool:
-    """Stages 4-6 as compiled calls (:mod:`robocal.identify.fused`) where they apply; False
+def _fused(run: Run, hold: dict | None) -> Fit | None:
+    """Stages 4-6 as compiled calls (:mod:`robocal.identify.fused`) where they apply; None
     where they do not (the staged functions run them)."""
     first = fused.rank_test(run) if fused.applies(run) else None
     if first is None:
-        return False
+        return None
     _rank_guard(run, first.selection)
-    run.solver = _solver_options(run, first.selection.dropped)  # lm's: the problem does not matter
-    if not fused.fit(run, first):  # a nearly singular covariance: the staged SVD path
-        _fix_unidentifiable(run, first.selection, hold)
-        _fit_staged(run)
-    return True
+    solver = _solver_options(run, run.problem, first.selection.dropped)  # lm's: the problem does not matter
+    fit = fused.fit(run, first, solver, _rules(run))
+    if fit is None:  # a nearly singular covariance: the staged SVD path
+        selection = dataclasses.replace(
+            _fix_unidentifiable(run.problem, first.selection, hold), solver=solver
+        )
+        fit = _fit_staged(run, selection)
+    return fit
 
 
-def _fit_staged(run: Run) -> None:
+def _fit_staged(run: Run, selection: Selection) -> Fit:
     """Stages 5-6 by the staged functions: screening, the fit, pruning."""
-    _screen(run)
-    _solve(run, run.x0)
-    _prune(run)
+    screened = _screen(run, selection)
+    return _prune(run, _solve(run, screened, screened.x0))
 
 
 def calibrate_physics(

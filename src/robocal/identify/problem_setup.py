@@ -6,6 +6,7 @@ perturbations known in advance.  Units: SI (m, rad)."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,7 +24,7 @@ from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model, Role
 
-__all__ = ["LEVELS", "Run", "build_problem", "parse_level", "without_measured_tool"]
+__all__ = ["LEVELS", "Fit", "Run", "Selection", "build_problem", "parse_level", "without_measured_tool"]
 
 Array = NDArray[np.float64]
 
@@ -84,21 +85,39 @@ class Run:
     orientation_hint: str = ""
     known_noise: bool = False
     length: float = 1.0
-    solver: dict[str, Any] = field(default_factory=dict)
-    dropped: list[Dropped] = field(default_factory=list)
-    problem: Problem | None = None
-    x0: Array | None = None
-    x: Array | None = None
-    fit: SolveResult | None = None
-    covariance: Covariance | None = None
-    solve_seconds: float = 0.0
-    evaluations: int = 0
+    problem: Problem = field(default=None, repr=False)  # type: ignore[assignment]  # set by build_problem
     effect_names: tuple[str, ...] = ()
     effect_kinds: tuple[tuple[str, str], ...] = ()
     effect_start: Array | None = None
 
     def warn(self, code: str, message: str) -> None:
         self.warnings.append(CalibrationWarning(code, message))
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The unknowns of a fit: ``problem`` (its free unknowns), their start values ``x0``
+    ``(p,)``, the unknowns left out so far and why, and the solver's settings for them
+    (:func:`robocal.identify.solvers.solve`'s keywords)."""
+
+    problem: Problem
+    x0: Array
+    dropped: tuple[Dropped, ...]
+    solver: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A fit of a :class:`Selection`: the solution ``x`` ``(p,)``, the solver's result and
+    the covariance there; ``evaluations`` and ``solve_seconds``: of all fits of the pass so
+    far (screening, pruning and held effects refit)."""
+
+    selection: Selection
+    x: Array
+    solve: SolveResult
+    covariance: Covariance
+    evaluations: int
+    solve_seconds: float
 
 
 # ---------------------------------------------------------------------- 2. start values
