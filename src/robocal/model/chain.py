@@ -476,23 +476,16 @@ class Model:
         if rows not in ("position", "pose"):
             raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
         q, single = check_q(q, self)
-        _, _, P = self.evaluate(
-            q, rows=rows, jacobian=False, perturbations=perturbations, perturbation_columns=True
-        )
-        P = P.reshape(len(q), 3 if rows == "position" else 6, self.dof, 3)
+        out = self.evaluate(q, None, rows, False, perturbations, perturbation_columns=True)  # no J
+        P = out[2].reshape(len(q), 3 if rows == "position" else 6, self.dof, 3)
         return P[0] if single else P
 
     def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
         """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
         in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
-        if (  # one configuration: ~0.7 µs
-            type(q) is np.ndarray
-            and q.ndim == 1
-            and q.dtype is FLOAT64
-            and perturbations is None
-            and (J := joint_jacobian_one(self, q)) is not None
-        ):
-            return J
+        if type(q) is np.ndarray and q.ndim == 1 and q.dtype is FLOAT64 and perturbations is None:  # noqa: SIM102
+            if (J := joint_jacobian_one(self, q)) is not None:  # one configuration: ~0.7 µs
+                return J
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         kernels = _kernels(None)
