@@ -1,5 +1,5 @@
 """Levenberg-Marquardt: the compiled iteration (robocal.identify.lm_kernels) against its numpy
-reference (``robocal.identify.lm_numpy.levenberg_marquardt_batch_numpy``), in the same run.
+reference (``tests/reference_lm.py``: ``levenberg_marquardt_batch_numpy``), in the same run.
 
 The problem is ``bench_calibrate``'s: a 100-pose UR10 (27 unknowns, 300 weighted residuals),
 captured where ``rc.calibrate`` calls the solver.  Rows (per call):
@@ -35,13 +35,15 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(1, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # tests.reference_lm
+from tests.reference_lm import levenberg_marquardt_batch_numpy  # the numpy reference: the tests'
+
 import readme_table
 import robocal as rc
 import robocal.identify.batch as batch_engine
 import robocal.identify.pipeline as pipeline
 from bench_calibrate import problem
 from robocal.identify import solvers
-from robocal.identify.lm_numpy import levenberg_marquardt_batch_numpy
 
 FIRST_CALL = """
 import time

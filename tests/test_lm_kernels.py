@@ -1,5 +1,5 @@
 """The compiled Levenberg-Marquardt iteration (robocal.identify.lm_kernels) against its numpy
-reference (robocal.identify.lm_numpy.levenberg_marquardt_batch_numpy): the same steps, stops,
+reference (tests/reference_lm.py: levenberg_marquardt_batch_numpy): the same steps, stops,
 histories and solutions, for one problem and for a batch whose problems stop at different
 iterations; and the damped Cholesky step where the damped matrix is not positive definite."""
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from robocal.identify import lm_kernels
-from robocal.identify.lm_numpy import damped_steps, levenberg_marquardt_batch_numpy
 from robocal.identify.solvers import levenberg_marquardt, levenberg_marquardt_batch
+from tests.reference_lm import damped_steps, levenberg_marquardt_batch_numpy
 
 
 class _Exponentials:

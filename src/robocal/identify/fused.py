@@ -26,11 +26,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.lm_numpy import lm_message
 from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.problem_setup import Fit, Run, Selection
 from robocal.identify.rules import Rules
-from robocal.identify.solve_result import SolveResult
+from robocal.identify.solve_result import SolveResult, lm_message
 from robocal.identify.stages import Covariance, preference_columns
 from robocal.model.rank import preference_subset
 

@@ -7,7 +7,7 @@ Jacobians at the trial points (a Python callback), :func:`accept` (cost, gain ra
 acceptance, Nielsen's damping update).  The arithmetic is small (for a 100-pose UR10, 300
 rows and 27 columns: one ``JᵀJ`` and a 27 x 27 Cholesky per problem); numpy would spend
 about 25 calls of overhead per iteration on it, which is why it is compiled here.  The
-numpy version, :func:`robocal.identify.lm_numpy.levenberg_marquardt_batch_numpy`, is the
+numpy version, ``tests/reference_lm.py``'s ``levenberg_marquardt_batch_numpy``, is the
 reference ``tests/test_lm_kernels.py`` holds these kernels to.
 
 The state of the ``K`` problems is kept at their batch indices (no compaction): ``ids[:n]``

@@ -35,8 +35,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.lm_numpy import BatchSolveResult
-from robocal.identify.solve_result import SolveResult
+from robocal.identify.solve_result import BatchSolveResult, SolveResult
 
 __all__ = [
     "METHODS",
@@ -134,7 +133,7 @@ def levenberg_marquardt_batch(
     Compiled (:mod:`robocal.identify.lm_kernels`): an iteration is one kernel call before
     the evaluation (scaling, normal equations, damped Cholesky step, stop tests) and one
     after it (gain ratio, acceptance, damping).  It agrees with the numpy iteration
-    (:mod:`robocal.identify.lm_numpy`, the tests' reference) to round-off; ``JᵀJ`` is formed
+    (``tests/reference_lm.py``, the tests' reference) to round-off; ``JᵀJ`` is formed
     before the scaling, so Jacobian entries must stay within about 1e±150.
 
     Args:
