@@ -54,6 +54,12 @@ def _load(source: Path):
 
     restore(source)  # a writer killed mid-swap on a system without atomic exchange
     if source.is_dir():
+        if not (source / "result.json").is_file() and (source / "constraints.json").is_file():
+            from robocal.cli.report_constraints import load_constraint_folder, note_constraint_base
+
+            constraint = load_constraint_folder(source)  # its calibrated robot, its base nominal: say so
+            note_constraint_base(constraint, "corrected relative to the nominal base")
+            return constraint.model
         if not (source / "result.json").is_file():
             raise fail(
                 f"{source} holds no calibration result (result.json); run robocal calibrate --out {source}"
@@ -175,9 +181,10 @@ def compensate_command(
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     if frame == "measurement" and not isinstance(calibrated, CalibrationResult):
         raise fail(
-            f"--frame measurement needs a calibration directory (its identified frame); {source} is a model"
+            f"--frame measurement needs a calibration directory with a device frame; {source} has none"
         )
     nominal_model = _checked_nominal(calibrated, nominal)
+    nominal_model = _constraint_start(source, program is not None) if nominal_model is None else nominal_model
     q_start = None if q0 is None else joint_values(q0, model, "--q0", angle_unit, length_unit)
     reader = dict(length_unit=length_unit, angle_unit=angle_unit, sep=sep, decimal=decimal)
     if targets is not None:
@@ -284,6 +291,15 @@ def print_target_table(rows: list[dict]) -> None:
     if len(shown) < len(rows):
         more = len(rows) - len(shown)
         console.print(f"  ({more} more corrected targets in the table file)", highlight=False)
+
+
+def _constraint_start(source: Path, required: bool):
+    """A constraint calibration's start model (the default ``--nominal``), else None."""
+    if not (source.is_dir() and (source / "constraints.json").is_file()):
+        return None
+    from robocal.cli.report_constraints import constraint_nominal
+
+    return constraint_nominal(source, required)
 
 
 def _checked_nominal(calibrated, nominal: str | None):

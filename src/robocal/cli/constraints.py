@@ -116,7 +116,7 @@ def calibrate_constraint_file(
                                        prior=NominalPrior())  # fmt: skip
     except ValueError as err:
         raise fail(f"{data_path}: {err}") from None
-    _save(result, out, data_path, stated)
+    _save(result, out, data_path, stated, angle_unit)
     for line in result.summary_lines():
         console.print(safe(line), highlight=False, soft_wrap=True)
     console.print(f"wrote {out / 'model.yaml'} and {out / RESULT_FILE}", highlight=False)
@@ -134,6 +134,7 @@ def _result_doc(result, data_path: Path, stated) -> dict:
         "success": result.success,
         "names": list(result.names),
         "estimates": result.estimates.tolist(),
+        "start": result.start.tolist(),  # the nominal model: the report's and validate's "before"
         "std": result.std.tolist(),
         "not_identifiable": [{"name": d.name, "reason": d.reason} for d in result.dropped],
         "points_m": result.points.tolist(),
@@ -148,14 +149,14 @@ def _result_doc(result, data_path: Path, stated) -> dict:
     }
 
 
-def _save(result, out: Path, data_path: Path, stated) -> None:
+def _save(result, out: Path, data_path: Path, stated, angle_unit: str = "rad") -> None:
     """model.yaml and constraints.json, all or nothing."""
     from robocal.model.files import save_model
     from robocal.outdir import FolderBusyError, transaction
 
     if out.exists() and not out.is_dir():
         raise fail(f"--out {out} is a file; give a directory")
-    doc = _result_doc(result, data_path, stated)
+    doc = _result_doc(result, data_path, stated) | {"angle_unit": angle_unit}  # how to read the file again
     try:
         with transaction(out, ("model.yaml", RESULT_FILE)) as stage:
             save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)

@@ -80,12 +80,21 @@ def urdf_command(
     from robocal.model.urdf import URDFError
 
     calibrated = _load_checked(source)
+    constraint = _constraint_calibration(source)
     if device_link is not None and not isinstance(calibrated, CalibrationResult):
-        raise fail(f"--device-link needs a calibration directory (its device frame); {source} is a model")
+        what = "a constraint calibration (no measuring device)" if constraint else "a model"
+        raise fail(f"--device-link needs a calibration directory (its device frame); {source} is {what}")
     mapping = _joint_map(joint_map)
+    extra = {} if constraint is None else {"nominal": constraint.nominal, "notes": (constraint.base_note(),)}
     try:
         ex, _ = export_urdf(
-            calibrated, urdf, tip=tip, device_link=device_link, tool_link=tool_link, joint_map=mapping
+            calibrated,
+            urdf,
+            tip=tip,
+            device_link=device_link,
+            tool_link=tool_link,
+            joint_map=mapping,
+            **extra,
         )
     except FileNotFoundError as err:
         raise fail(str(err)) from None
@@ -140,6 +149,20 @@ def ur_kinematics_command(
         )
     for note in (*part.notes, *(m.note for m in left_out(part.calibrated))):
         err_console.print(f"[yellow]note:[/] {safe(note)}", highlight=False, markup=True)
+    constraint = _constraint_calibration(source)
+    if constraint is not None and constraint.unseen:
+        err_console.print(f"[yellow]note:[/] {safe(constraint.base_note())}", highlight=False, markup=True)
+
+
+def _constraint_calibration(source: Path):
+    """The constraint calibration in folder ``source`` (:mod:`robocal.cli.report_constraints`), or None."""
+    from robocal.identify.constraint_result import is_constraint_folder
+
+    if not is_constraint_folder(source):
+        return None
+    from robocal.cli.report_constraints import load_constraint_folder
+
+    return load_constraint_folder(source)
 
 
 def _load_checked(source: Path):
@@ -149,7 +172,8 @@ def _load_checked(source: Path):
     from robocal.compensate.export import check_exportable, check_result_files
     from robocal.identify.calibrate import CalibrationResult
 
-    calibrated = _load(source)
+    constraint = _constraint_calibration(source)
+    calibrated = _load(source) if constraint is None else constraint.model
     try:
         if isinstance(calibrated, CalibrationResult):
             check_result_files(source, calibrated)
@@ -302,6 +326,10 @@ def filter_command(
         raise fail(f"-o {out}: write a {language} program with the suffix of {program.name}")
     calibrated = _load(calibration)
     nominal_model = None if nominal is None else resolve_model(nominal)
+    if nominal is None and _constraint_calibration(calibration) is not None:
+        from robocal.cli.report_constraints import constraint_nominal
+
+        nominal_model = constraint_nominal(calibration, required=True)  # the program's robot
     from robocal.identify.measured_tool import probe_for
 
     try:  # the calibration's measured tool unless --probe says otherwise; a disagreeing one refused

@@ -72,6 +72,16 @@ def report_command(
 ) -> None:
     """Write the self-contained HTML report of a calibration (works offline)."""
     refuse_overwrite(out, force, "report")
+    from robocal.identify.constraint_result import is_constraint_folder
+
+    if is_constraint_folder(directory):  # fixed points, planes, distances: the kind's own report
+        from robocal.cli.report_constraints import constraint_report
+
+        if iso9283_log is not None:
+            raise fail("--iso9283: the report of a constraint calibration does not take a measurement log")
+        given = _given(ctx, "angle_unit")
+        constraint_report(directory, out, data_path, test_path, angle_unit if given else None, title)
+        return
     from robocal.cli.reading import load_result
     from robocal.evaluate.report import write_report
 
@@ -86,6 +96,11 @@ def report_command(
     except ValueError as err:
         raise fail(str(err)) from None
     console.print(f"wrote {path}", highlight=False)
+
+
+def _given(ctx: typer.Context, name: str) -> bool:
+    """Whether option ``name`` was given on the command line (not its default)."""
+    return getattr(ctx.get_parameter_source(name), "name", None) in ("COMMANDLINE", "ENVIRONMENT")
 
 
 def _data_sets(ctx: typer.Context, directory: Path, result, data_path, test_path, values: dict):

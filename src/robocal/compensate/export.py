@@ -281,6 +281,7 @@ def export_urdf(
     tool_link: str | None = None,
     samples: int = 200,
     joint_map: dict[str, str] | None = None,
+    notes: tuple[str, ...] = (),
 ) -> tuple[URDFExport, tuple[LeftOut, ...]]:
     """A calibrated URDF (see :func:`robocal.model.urdf_export.calibrated_urdf`) and what
     it leaves out.
@@ -294,6 +295,8 @@ def export_urdf(
         samples: configurations for sizing what is left out.
         joint_map: model joint -> source URDF joint, where the names differ (default: by
             name, else by chain order; checked and stated).
+        notes: more to state in the file's comment (e.g. a constraint calibration's
+            nominal base frame).
 
     A hybrid calibration exports its best physics-only calibration (:func:`kinematic_part`).
     """
@@ -311,7 +314,7 @@ def export_urdf(
         if device_link is not None:
             raise ValueError("a device link needs a calibration result (its device frame)")
     missing = left_out(calibrated, samples)
-    notes = [*part.notes, *(m.note for m in missing)]
+    notes = [*part.notes, *notes, *(m.note for m in missing)]
     if device_link is None and frame is not None:
         notes.append("the measuring device's frame is not in this file (device link not requested)")
     ex = calibrated_urdf(

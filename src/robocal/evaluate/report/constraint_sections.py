@@ -1,0 +1,236 @@
+"""The page of a constraint calibration (:mod:`.constraint_collect`), one function per section.
+
+No position-error tables: without a measuring device there are no measured positions to
+compare with.  Each kind's own figures instead, before (the nominal robot) and after.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robocal.evaluate.report import markup as m
+from robocal.evaluate.report.constraint_collect import ConstraintReport, DataSetFigures, rms
+from robocal.identify.constraint_fit import ConstraintFigures
+
+__all__ = ["render_constraint_report", "write_constraint_report"]
+
+Section = tuple[str, str, str] | None
+
+
+def _mm(value: float | None, digits: int = 3) -> str:
+    return m.f(None if value is None else value * 1e3, digits)
+
+
+Row = tuple[str, float | None, float]
+
+
+def _rows(before: ConstraintFigures | None, after: ConstraintFigures) -> list[Row]:
+    """One row per figure: what, before and after (m; |error| for signed errors)."""
+    out: list[Row] = []
+
+    def add(what: str, attr: str) -> None:
+        old = None if before is None else np.abs(getattr(before, attr))
+        for k, v in enumerate(np.abs(getattr(after, attr))):
+            out.append((what.format(k=k), None if old is None else float(old[k]), float(v)))
+
+    add("point {k}: RMS spread", "point_spread")
+    add("known distance {k}: |error|", "point_distance_error")
+    add("plane {k}: RMS residual", "plane_rms")
+    if len(after.pair_error):
+        b = None if before is None else rms(before.pair_error)
+        out.append(("ball-bar distances: RMS error", b, rms(after.pair_error)))
+        b = None if before is None else float(np.abs(before.pair_error).max())
+        out.append(("ball-bar distances: max |error|", b, float(np.abs(after.pair_error).max())))
+    return out
+
+
+def _headline(s: DataSetFigures) -> tuple[str, float | None, float]:
+    """The set's main figure: the RMS spread over all points, else the plane or distance RMS."""
+    for label, attr in (
+        ("RMS spread around the fixed points", "point_spread"),
+        ("RMS plane residual", "plane_rms"),
+        ("RMS ball-bar distance error", "pair_error"),
+    ):
+        if len(getattr(s.after, attr)):
+            before = None if s.before is None else rms(getattr(s.before, attr))
+            return label, before, rms(getattr(s.after, attr))
+    return "no figures", None, float("nan")
+
+
+def _card(label: str, value_html: str, sub: str) -> str:
+    return (
+        f"<div class='card'><div class='label'>{m.e(label)}</div><div class='value'>{value_html}</div>"
+        f"<div class='sub'>{m.e(sub)}</div></div>"
+    )
+
+
+def _before_after(before: float | None, after: float) -> str:
+    text = f"<span class='after'>{_mm(after)} mm</span>"
+    return text if before is None else f"<span class='before'>{_mm(before)}</span> → {text}"
+
+
+def summary(r: ConstraintReport, figs: m.Figures) -> Section:
+    cal = r.calibration
+    cards = ""
+    for s in reversed(r.sets):  # held-out first: the figure that matters
+        label, before, after = _headline(s)
+        cards += _card(f"{label} ({s.label})", _before_after(before, after), f"{s.n} poses of {s.source}")
+    cards += _card("fit residual (calibration data)", _before_after(cal.rms_before, cal.rms_after),
+                   "converged" if cal.success else "the fit did NOT converge")  # fmt: skip
+    held = f"{len(cal.unseen)} not identifiable, {len(cal.poorly_identified)} held at nominal"
+    cards += _card("identified robot parameters", str(len(cal.robot_names)), held)
+    text = (
+        f"{m.e(cal.model.name)} calibrated from {m.e(', '.join(cal.kinds))} constraints "
+        "(no measuring device). "
+        "Before = the nominal robot, after = the calibrated one, each judged by the constraints alone: "
+        "the spread of the tool point around each fixed point's centroid, the error of each known "
+        "distance, the residual of each plane. There are no position errors: no device measured positions."
+    )
+    if cal.nominal is None:
+        text += " This folder does not record the nominal robot: after only."
+    body = f"<div class='cards'>{cards}</div>" + m.note(text)
+    body += "".join(m.note(m.e(why)) for why in r.missing)
+    return "summary", "Summary", m.section("summary", "Summary", body)
+
+
+def _bar_figure(rows: list[Row], title: str) -> Any:
+    import plotly.graph_objects as go
+
+    names = [m.plot_text(row[0]) for row in rows]
+    fig = go.Figure()
+    if all(row[1] is not None for row in rows):
+        before = [row[1] * 1e3 for row in rows if row[1] is not None]
+        fig.add_trace(go.Bar(x=names, y=before, name="before (nominal)", marker_color=m.BEFORE))
+    fig.add_trace(go.Bar(x=names, y=[row[2] * 1e3 for row in rows], name="after", marker_color=m.AFTER))
+    fig.update_layout(barmode="group", title=m.plot_text(title), yaxis_title="mm", margin={"t": 60})
+    return fig
+
+
+def _radial_figure(s: DataSetFigures) -> Any:
+    from robocal.evaluate.report.figures import histogram_pair_figure
+
+    fig = histogram_pair_figure(
+        s.radial_before, s.radial_after, f"distance of each pose from its point ({s.label})"
+    )
+    fig.update_xaxes(title_text="distance from the point's centroid mm")
+    return fig
+
+
+def kind_figures(r: ConstraintReport, figs: m.Figures) -> Section:
+    if not r.sets:
+        return None
+    body = ""
+    for i, s in enumerate(r.sets):
+        rows = _rows(s.before, s.after)
+        body += f"<h3>{m.e(s.label)}: {m.e(s.source)} ({s.n} poses, {m.e(', '.join(s.kinds))})</h3>"
+        cells = [[what, _mm(b), _mm(a)] for what, b, a in rows]
+        body += m.table(["figure", "before (nominal) mm", "after (calibrated) mm"], cells)
+        body += figs.html(_bar_figure(rows, f"{s.label}: before and after"), f"constraint-bars-{i}", 380)
+        if len(s.radial_after):
+            body += figs.html(_radial_figure(s), f"constraint-radial-{i}", 340)
+    intro = (
+        "Each kind's own figures (mm): a fixed point's RMS spread is the RMS distance of the tool points "
+        "from their centroid; a known distance's error is the centroids' distance minus the stated one; "
+        "a plane's residual is the RMS distance from the plane (the stated one, else the best fit)."
+    )
+    return "figures", "Constraint figures", m.section("figures", "Constraint figures", body, intro)
+
+
+def _parameter_rows(r: ConstraintReport) -> list[list[str]]:
+    cal = r.calibration
+    nominal = None if cal.nominal is None else dict(zip(cal.nominal.names, cal.nominal.values, strict=True))
+    steps = {s.name: s for s in cal.model.steps}
+    rows = []
+    for name, value, std in zip(cal.names, cal.estimates, cal.std, strict=True):
+        if name not in steps:
+            continue
+        scale, unit = (1.0, "rad") if steps[name].is_rotation else (1e3, "mm")
+        start = None if nominal is None else nominal[name]
+        delta = None if start is None else (value - start) * scale
+        rows.append([name, unit, m.g(None if start is None else start * scale, 6), m.g(value * scale, 6),
+                     m.g(delta, 4), m.g(std * scale, 3)])  # fmt: skip
+    return rows
+
+
+def identifiability(r: ConstraintReport, figs: m.Figures) -> Section:
+    cal = r.calibration
+    body = m.table(["parameter", "unit", "nominal", "estimate", "Δ", "σ"], _parameter_rows(r),
+                   caption="identified robot parameters")  # fmt: skip
+    reasons = dict(cal.dropped)
+    unseen = [[n, reasons[n], "nominal (not identifiable)"] for n in cal.unseen]
+    unseen += [[n, reasons[n], "nominal (σ too large)"] for n in cal.poorly_identified]
+    body += m.table(["parameter", "reason", "value used"], unseen, caption="not identified")
+    body += m.note(m.e(cal.base_note() + "."))
+    body += m.note(
+        "What this calibration does not give: the robot's absolute position accuracy in a measuring "
+        "device's frame. Check it with a tracker file when you have one (robocal validate DIR --data FILE)."
+    )
+    return (
+        "identifiability",
+        "Identifiability",
+        m.section("identifiability", "What the constraints can see", body),
+    )
+
+
+def scene(r: ConstraintReport, figs: m.Figures) -> Section:
+    cal = r.calibration
+    rows = [[f"point {k}", *(m.f(v * 1e3) for v in p)] for k, p in enumerate(cal.points)]
+    body = m.table(
+        ["fixed point", "x mm", "y mm", "z mm"], rows, caption="estimated in the (nominal) base frame"
+    )
+    body += m.table(
+        ["stated distance", "mm"], [[f"point {a} – point {b}", m.f(d * 1e3)] for a, b, d in cal.distances]
+    )
+    planes = [[f"plane {k}", *(m.f(v, 5) for v in p[:3]), m.f(p[3] * 1e3)] for k, p in enumerate(cal.planes)]
+    body += m.table(["plane", "nx", "ny", "nz", "offset mm"], planes)
+    return ("scene", "Scene", m.section("scene", "Scene", body)) if body else None
+
+
+def provenance(r: ConstraintReport, figs: m.Figures) -> Section:
+    cal = r.calibration
+    prior = cal.prior
+    rows = [
+        ["calibration file", str(cal.data_path) if cal.data_path else "–"],
+        ["its SHA-256", cal.data_sha256 or "–"],
+        ["measurements", ", ".join(cal.kinds)],
+        ["fit", "MAP with a prior toward the nominal geometry" if prior else "least squares"],
+        ["run id", cal.run_id or "–"],
+        ["robocal", r.version],
+    ]
+    if prior:
+        rows.insert(4, ["prior σ", f"lengths {_mm(prior.get('length_std_m'))} mm, "
+                                   f"angles {m.g(prior.get('angle_std_rad'))} rad"])  # fmt: skip
+    return "provenance", "Provenance", m.section("provenance", "Provenance", m.table(["", ""], rows))
+
+
+SECTIONS = (summary, kind_figures, identifiability, scene, provenance)
+
+
+def render_constraint_report(r: ConstraintReport) -> str:
+    """The report as one self-contained HTML page (plotly.js embedded once)."""
+    figs = m.Figures()
+    shown = [s for s in (render(r, figs) for render in SECTIONS) if s is not None]
+    cal = r.calibration
+    subtitle = (
+        f"{m.e(cal.model.title or cal.model.name)} · {m.e(', '.join(cal.kinds))} constraints (no tracker)"
+        + "".join(f" · {s.n} {m.e(s.label)} poses" for s in r.sets)
+    )
+    return m.page(
+        r.title, subtitle, [(i, label) for i, label, _ in shown], "".join(h for _, _, h in shown), r.version
+    )
+
+
+def write_constraint_report(r: ConstraintReport, out_path: str | Path) -> Path:
+    """Write the page of ``r`` to ``out_path`` atomically, stamped with the folder's run id
+    (``<meta name="robocal-run">``, :mod:`robocal.outdir`)."""
+    from robocal.model.files import atomic_write_text
+    from robocal.run_ids import run_id_meta
+
+    page = render_constraint_report(r)
+    if r.calibration.run_id is not None:
+        head = '<meta charset="utf-8">'
+        page = page.replace(head, head + "\n" + run_id_meta(r.calibration.run_id), 1)
+    return atomic_write_text(Path(out_path), page)
