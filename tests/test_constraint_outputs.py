@@ -206,3 +206,66 @@ def test_a_joint_program_needs_the_robot_the_calibration_started_from(folder, tm
     for command in (["filter", str(out), str(program)], ["compensate", str(out), "--program", str(program)]):
         res = runner.invoke(app, [*command, "-o", str(tmp_path / "g.csv")])
         assert res.exit_code == 2 and "--nominal" in res.output and not (tmp_path / "g.csv").exists()
+
+
+PANDA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ball_in_socket"
+
+
+def _placement_file(name: str, path: Path) -> None:
+    """MUKCa's recordings of one placement (two sockets) as a constraint file."""
+    holes = [np.loadtxt(PANDA / "panda_1" / name / f"hole_{h}.csv", delimiter=",") for h in (0, 1)]
+    rows = [[*q, h] for h, qs in enumerate(holes) for q in qs]
+    header = ",".join([f"q{j}" for j in range(1, 8)] + ["point"])
+    path.write_text(
+        header + "\n" + "\n".join(",".join(repr(float(v)) for v in r[:7]) + f",{r[7]}" for r in rows)
+    )
+
+
+@pytest.mark.skipif(not PANDA.is_dir(), reason="../shared/data/ball_in_socket is absent")
+def test_real_panda_report_and_urdf_of_its_description(tmp_path):
+    """The real Panda (MUKCa): calibrated on one placement through the command line, judged
+    on another in the report, exported into its own URDF with the ball link: Pinocchio's
+    ball centre is the calibrated model's."""
+    from robocal.model.files import save_model
+    from robocal.model.urdf import model_from_urdf
+
+    urdf = PANDA / "urdf" / "panda.urdf"
+    save_model(model_from_urdf(urdf, measure="position", tip="ball_link"), tmp_path / "panda.yaml")
+    for name in ("front", "right"):
+        _placement_file(name, tmp_path / f"{name}.csv")
+    out = tmp_path / "cal"
+    train = tmp_path / "front.csv"
+    res = runner.invoke(app, ["calibrate", str(tmp_path / "panda.yaml"), "--data", str(train),
+                              "--distance", "0,1=50mm", "--out", str(out)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(
+        app, ["report", str(out), "--test-data", str(tmp_path / "right.csv"), "-o", str(tmp_path / "r.html")]
+    )
+    assert res.exit_code == 0, res.output
+    cal = load_constraint_calibration(out)
+    held = read_constraints(tmp_path / "right.csv", 7, distances=list(cal.distances))
+    before, after = constraint_figures(cal.nominal, held), constraint_figures(cal.model, held)
+    assert after.point_spread.max() < before.point_spread.min() / 5  # nominal: ~9 mm; calibrated: < 1 mm
+    assert abs(after.point_distance_error[0]) < abs(before.point_distance_error[0])
+    text = _cells((tmp_path / "r.html").read_text())
+    assert re.search(rf"known distance 0: \|error\|\s+{abs(before.point_distance_error[0]) * 1e3:.3f}", text)
+    res = runner.invoke(
+        app,
+        [
+            "export",
+            "urdf",
+            str(out),
+            "--urdf",
+            str(urdf),
+            "--tip",
+            "ball_link",
+            "-o",
+            str(tmp_path / "p.urdf"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    q = np.random.default_rng(0).uniform(-1.5, 1.5, (20, 7))
+    q_pin = np.hstack([q, np.zeros((20, 2))])  # the fingers, off the chain
+    np.testing.assert_allclose(
+        _pin_frames(tmp_path / "p.urdf", "ball_link", q_pin), cal.model.fk(q), atol=1e-9
+    )
