@@ -100,7 +100,7 @@ class FitOptions:
     effects: str | tuple[str, ...] | None = None
     bounds: str | None = None
     per_pose: bool = False
-    tool_guess_m: tuple[float, float, float] | None = None
+    tool_guess_m: tuple[float, ...] | None = None  # (x, y, z)
     more: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
 
     @classmethod
@@ -111,7 +111,7 @@ class FitOptions:
         more = {k: v for k, v in options.items() if k not in names and k != "tool_guess"}
         tool = options.get("tool_guess")
         guess = None if tool is None else tuple(float(v) for v in tool)
-        return cls(**known, tool_guess_m=guess, more=MappingProxyType(more))  # type: ignore[arg-type]
+        return cls(**known, tool_guess_m=guess, more=MappingProxyType(more))
 
     def as_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`robocal.calibrate`: the method and every setting that
