@@ -17,6 +17,7 @@ import pytest
 
 import robocal as rc
 from robocal.identify.residual_cv import CVCandidate, CVTable, _one_standard_error
+from robocal.model.residual import FADE, JointAngleResidual
 from tests.test_residual import NOISE, PROBE, _measure, _truth, _ur10
 
 TRAIN_LIMIT = np.array([math.pi, 0.6, 0.8, math.pi, math.pi, math.pi])  # rad, |q| of the training poses
@@ -124,3 +125,36 @@ def test_the_cv_table_keeps_its_tail_and_reads_older_tables():
     assert math.isnan(old.candidates[0].cv_p95)
     assert "cv_p95_mm" not in old.to_dict()["candidates"][0]  # never a NaN in result.json
     assert any("<- chosen" in line for line in old.lines())
+
+
+# ------------------------------------------------------------------ the fade's width
+def _smooth(length_scale: float) -> JointAngleResidual:
+    m = 2 * 4
+    return JointAngleResidual(
+        ("elbow",), (2,), 4, np.full(m, 1e-4), np.zeros((m, m)), 1e-5, (1e-4,), length_scale
+    )
+
+
+def test_the_fade_reaches_as_far_as_the_priors_correlation_length():
+    """A gap of 0.3 rad in the calibration's angles: a smooth residual (ℓ = 0.25 rad) spans
+    it, a rough one (ℓ = 0.05 rad) fades out in it within 0.1 rad of each side."""
+    dense = np.zeros((40, 6))
+    dense[:, 2] = np.r_[np.linspace(-1.0, -0.15, 20), np.linspace(0.15, 1.0, 20)]
+    middle = np.zeros((1, 6))
+    smooth, rough = _smooth(0.25).covering(dense), _smooth(0.05).covering(dense)
+    assert smooth.fade_width == pytest.approx(0.25) and rough.fade_width == pytest.approx(0.1)
+    assert smooth.fade(middle)[0, 0] == 1.0  # the 0.3 rad gap is covered
+    assert rough.fade(middle)[0, 0] < 1e-12  # 0.15 rad from the data: faded out
+    beyond = np.zeros((1, 6))
+    beyond[0, 2] = 1.2  # 0.2 rad past the last angle: partly for the smooth one, gone for the rough
+    assert 0.0 < smooth.fade(beyond)[0, 0] < 1.0 and rough.fade(beyond)[0, 0] < 1e-12
+
+
+def test_the_fade_width_goes_through_the_model_file():
+    learned = _smooth(0.25).covering(np.zeros((3, 6)) + np.array([0, 0, 0.5, 0, 0, 0]))
+    back = JointAngleResidual.from_dict(learned.to_dict(), ("a", "b", "elbow", "d", "e", "f"))
+    assert back.fade_width == learned.fade_width and back.coverage == learned.coverage
+    older = {k: v for k, v in learned.to_dict().items() if k != "fade_rad"}  # a file from before
+    assert JointAngleResidual.from_dict(older, ("a", "b", "elbow", "d", "e", "f")).fade_width == FADE
+    with pytest.raises(ValueError, match="fade_width"):
+        dataclasses.replace(learned, fade_width=float("nan"))

@@ -34,9 +34,12 @@ numbers of harmonics, :func:`~robocal.identify.residual_cv._fold_raws`).  Each f
 maximises its own evidence from the hyperparameters found on all poses (fixing those
 leaked the held-out fold into the choice, which then picked a residual for robots without
 one).  The simplest candidate within three standard errors of the lowest mean
-cross-validated error wins (:func:`~robocal.identify.residual_cv._one_standard_error`).  Held-out
-data never enters.  The whole stage runs on one BLAS thread (idle OpenBLAS threads doubled
-its CPU time on a 2-core machine).
+cross-validated error wins (:func:`~robocal.identify.residual_cv._one_standard_error`); once
+that is a learned residual, its harmonics are the fewest within one standard error of the
+lowest residual candidate, and a residual whose CV error at the 95th percentile is above
+the physics alone's is no candidate (the tail).  Held-out data never enters.  The whole
+stage runs on one BLAS thread (idle OpenBLAS threads doubled its CPU time on a 2-core
+machine).
 
 The evidence fit is in :mod:`robocal.identify.residual_fit`, the model choice in
 :mod:`robocal.identify.residual_cv`; this module is the calibration stage that runs both
