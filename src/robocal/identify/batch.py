@@ -314,7 +314,7 @@ class _Batch:
         K, n = len(data), data[0].n
         self.K, self.n = K, n
         self.qs = [d.q for d in data]
-        self.ys = np.stack([d.position for d in data])
+        self.ys = np.stack([d.position for d in data if d.position is not None])  # all have (checked)
         T_tool0 = np.eye(4)
         if tool_guess is not None:
             g = np.asarray(tool_guess, dtype=float)

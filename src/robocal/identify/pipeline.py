@@ -250,7 +250,7 @@ def _hold_effects(run: Run, fit: Fit) -> Fit:
     for _ in range(fit.selection.problem.n_effects if fit.solve.success else 0):
         selection = fit.selection
         problem = selection.problem
-        if not problem.n_effects:
+        if not problem.n_effects or problem.effect_start is None or problem.effect_basis is None:
             break
         names = problem.free_names
         held_at = dict(zip(problem.effect_names, problem.effect_start.tolist(), strict=True))
@@ -292,7 +292,7 @@ def _calibrated_models(run: Run, fit: Fit) -> tuple[Model, Model, Array]:
     effects = () if run.plan.mode == "none" else given.joint_effects
     notes = (given.notes + " calibrated").strip()
     calibrated = derived_copy(given, robot_steps, (), notes=notes, joint_effects=effects)
-    if run.plan.mode != "none" and run.plan.kinds:
+    if run.plan.mode != "none" and run.plan.kinds and run.effect_start is not None:
         from robocal.model.joints import effects_from_values
 
         estimated = dict(zip(problem.free_names, x, strict=True))

@@ -71,9 +71,10 @@ def _valued(template: tuple[Step, ...], values) -> list[Step]:
 
 
 def measurement_chain(
-    robot: Model, T_device_base: Array, tool: Array, measure: str, fit_frame: bool
+    robot: Model, T_device_base: Array, tool: Array | None, measure: str, fit_frame: bool
 ) -> Model:
-    """The chain predicting observations in the device frame (see the module docstring)."""
+    """The chain predicting observations in the device frame (see the module docstring;
+    ``tool`` None: no tool, the model's end is measured)."""
     fixed_frame = fit_frame or not np.allclose(T_device_base, np.eye(4))
     pose_tool = tool is not None and measure == "pose"
     template = _chain_template(robot, (fixed_frame, fit_frame, tool is not None, pose_tool))

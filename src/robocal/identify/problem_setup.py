@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,6 +61,18 @@ def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     return dataclasses.replace(model, steps=model.steps[:k]), T
 
 
+def _positions(data: Measurements) -> Array:
+    """The measured positions ``(n, 3)`` (m); the pipeline's checks refuse data without."""
+    if data.position is None:
+        raise ValueError("the measurements have no positions to calibrate against")
+    return data.position
+
+
+def _zeros(names: Any) -> dict[str, Any]:
+    """``{name: 0.0}`` for each of ``names`` (fields for :func:`dataclasses.replace`)."""
+    return dict.fromkeys(names, 0.0)
+
+
 def _as_frame(value: Any) -> Array:
     """A tool or frame given as a position (3,) or a 4x4 transform, as 4x4."""
     g = np.asarray(value, dtype=float)
@@ -78,7 +90,7 @@ class Run:
     data: Measurements
     method: str
     options: CalibrationOptions
-    measure: str
+    measure: Literal["position", "pose"]
     plan: EffectPlan
     level: int | None
     warnings: list[CalibrationWarning] = field(default_factory=list)
@@ -136,10 +148,11 @@ def _start_values(run: Run) -> tuple[Array, Array, Array, bool]:
     if setup.tool is not None and not isinstance(setup.tool, str):
         T_tool0 = _as_frame(setup.tool)
     T_flange = run.model.fk(data.q)
+    orientation = data.orientation if run.measure == "pose" else None
     T_frame, T_tool = initial_frames_and_tools(
         T_flange[None],
-        data.position[None],
-        orientation=data.orientation[None] if run.measure == "pose" else None,
+        _positions(data)[None],
+        orientation=None if orientation is None else orientation[None],
         T_tool=T_tool0,
         T_frame=T_known,
         fit_frame=fit_frame,
@@ -152,8 +165,9 @@ def _start_values(run: Run) -> tuple[Array, Array, Array, bool]:
 def _row_weights(run: Run, rows: int) -> Array:
     """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``."""
     data, weights = run.data, run.options.weights
-    run.known_noise = weights.by == "sigma" and data.sigma is not None
-    position = 1.0 / np.maximum(data.sigma, 1e-12) if run.known_noise else np.ones((data.n, 3))
+    sigma = data.sigma if weights.by == "sigma" else None
+    run.known_noise = sigma is not None
+    position = np.ones((data.n, 3)) if sigma is None else 1.0 / np.maximum(sigma, 1e-12)
     if rows == 3:
         return position
     w = np.empty((data.n, 6))
@@ -188,7 +202,7 @@ def _effect_terms(run: Run, load_model: Model | None) -> tuple[Array | None, Arr
     identified = set(run.effect_kinds)
     rest = [
         dataclasses.replace(
-            x, **{EFFECT_PREFIXES[k][1]: 0.0 for k in EFFECT_KINDS if (k, x.joint) in identified}
+            x, **_zeros(EFFECT_PREFIXES[k][1] for k in EFFECT_KINDS if (k, x.joint) in identified)
         )
         for x in model.joint_effects
     ]
@@ -220,7 +234,7 @@ def build_problem(run: Run, load_model: Model | None) -> None:
         learned = run.model.residual.perturbations(data.q, run.model.dof)
         known = learned if known is None else known + learned
     start = run.effect_start if run.plan.mode != "none" else None
-    run.problem = Problem(chain, data.q, data.position, data.orientation if rows == 6 else None,
+    run.problem = Problem(chain, data.q, _positions(data), data.orientation if rows == 6 else None,
                           w.reshape(-1), run.length, basis, run.effect_names, known, start)  # fmt: skip
     if rows == 6:
         _check_orientations(run)

@@ -98,7 +98,7 @@ def initial_frames_and_tools(
     status = sk.frames_and_tools(  # the kernel reads (K, n, ...) arrays unchecked: broadcast here
         np.ascontiguousarray(T_flange, dtype=float),
         _pose_array(position, (K, n, 3)),
-        _pose_array(orientation, (K, n, 3, 3)) if has_orientation else _NO_ORIENTATION,
+        _pose_array(orientation, (K, n, 3, 3)) if orientation is not None else _NO_ORIENTATION,
         has_orientation,
         T_frame,
         T_tool,
