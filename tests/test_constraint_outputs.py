@@ -109,6 +109,45 @@ def test_report_refuses_an_edited_model_and_notes_a_changed_file(folder, tmp_pat
     assert not (tmp_path / "r2.html").exists()
 
 
+@pytest.mark.parametrize(("kind", "headline"), [("plane", "RMS plane residual"), ("distance", "ball-bar")])
+def test_report_of_plane_and_distance_calibrations(kind, headline, tmp_path):
+    data = tmp_path / f"{kind}.csv"
+    res = runner.invoke(app, ["simulate", "ur10", "--kind", kind, "--n", "40", "--count", "3", "--seed", "5",
+                              "-o", str(data)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "cal"
+    assert runner.invoke(app, ["calibrate", "ur10", "--data", str(data), "--out", str(out)]).exit_code == 0
+    res = runner.invoke(app, ["report", str(out), "-o", str(tmp_path / "r.html")])
+    assert res.exit_code == 0, res.output
+    text = _cells((tmp_path / "r.html").read_text())
+    cal = load_constraint_calibration(out)
+    figures = constraint_figures(cal.model, read_constraints(data, 6))
+    values = figures.plane_rms if kind == "plane" else np.abs(figures.pair_error).max(keepdims=True)
+    assert headline in text and all(f"{v * 1e3:.3f}" in text for v in values)
+    assert re.search(r"base_x\s+(redundant|no effect)\s+nominal", text)  # the placement is not seen
+
+
+@pytest.mark.parametrize(
+    "damage",
+    ["{not json", '{"kind": "tracker"}', '{"kind": "constraints", "names": ["a2"], "estimates": [1e9]}'],
+)
+def test_a_damaged_constraint_record_is_one_line_everywhere(folder, tmp_path, damage):
+    out = _copy(folder, tmp_path)
+    (out / "constraints.json").write_text(damage)
+    targets = tmp_path / "t.csv"
+    targets.write_text("name,x,y,z\nt1,0.5,0.2,0.6\n")
+    for command in (
+        ["report", str(out), "-o", str(tmp_path / "o.html")],
+        ["export", "urdf", str(out), "-o", str(tmp_path / "o.urdf")],
+        ["export", "ur-kinematics", str(out), "-o", str(tmp_path / "o.yaml")],
+        ["compensate", str(out), "--targets", str(targets), "-o", str(tmp_path / "o.csv")],
+    ):
+        res = runner.invoke(app, command)
+        lines = [line for line in res.output.splitlines() if line.startswith("error:")]
+        assert res.exit_code == 2 and len(lines) == 1 and "constraints.json" in lines[0] + res.output, command
+        assert "Traceback" not in res.output and not list(tmp_path.glob("o.*")), command
+
+
 def _pin_frames(path: Path, frame: str, q: np.ndarray) -> np.ndarray:
     pin = pytest.importorskip("pinocchio")
     pm = pin.buildModelFromUrdf(str(path))

@@ -193,9 +193,12 @@ def load_constraint_calibration(directory: str | Path) -> ConstraintCalibration:
     path = directory / CONSTRAINT_FILE
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as err:  # not there, not UTF-8, not JSON, too deep
+        raise ValueError(f"{path}: cannot read the constraint calibration: {err}") from None
+    try:
         model = load_model(directory / "model.yaml")
-    except (OSError, ValueError, RecursionError, ModelFileError) as err:
-        raise ValueError(f"{directory}: cannot read the constraint calibration: {err}") from None
+    except (OSError, ValueError, ModelFileError) as err:
+        raise ValueError(f"{directory / 'model.yaml'}: cannot read the calibrated model: {err}") from None
     if not isinstance(doc, dict) or doc.get("kind") != "constraints":
         raise ValueError(f"{path}: not a robocal constraint calibration")
     run_id = doc.get("run_id")

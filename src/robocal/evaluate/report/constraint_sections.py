@@ -139,6 +139,11 @@ def kind_figures(r: ConstraintReport, figs: m.Figures) -> Section:
     return "figures", "Constraint figures", m.section("figures", "Constraint figures", body, intro)
 
 
+def _clean(value: float | None) -> float | None:
+    """Rounding noise of a nominal value (1e-16 rad, -0) shown as 0."""
+    return None if value is None else (0.0 if abs(value) < 1e-12 else value)
+
+
 def _parameter_rows(r: ConstraintReport) -> list[list[str]]:
     cal = r.calibration
     nominal = None if cal.nominal is None else dict(zip(cal.nominal.names, cal.nominal.values, strict=True))
@@ -150,8 +155,8 @@ def _parameter_rows(r: ConstraintReport) -> list[list[str]]:
         scale, unit = (1.0, "rad") if steps[name].is_rotation else (1e3, "mm")
         start = None if nominal is None else nominal[name]
         delta = None if start is None else (value - start) * scale
-        rows.append([name, unit, m.g(None if start is None else start * scale, 6), m.g(value * scale, 6),
-                     m.g(delta, 4), m.g(std * scale, 3)])  # fmt: skip
+        rows.append([name, unit, m.g(_clean(None if start is None else start * scale), 6),
+                     m.g(_clean(value * scale), 6), m.g(delta, 4), m.g(std * scale, 3)])  # fmt: skip
     return rows
 
 
