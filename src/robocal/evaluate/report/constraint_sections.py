@@ -78,6 +78,10 @@ def summary(r: ConstraintReport, figs: m.Figures) -> Section:
     for s in reversed(r.sets):  # held-out first: the figure that matters
         label, before, after = _headline(s)
         cards += _card(f"{label} ({s.label})", _before_after(before, after), f"{s.n} poses of {s.source}")
+        if len(s.after.point_distance_error) and len(s.after.point_spread):  # the sockets' stated distance
+            old = None if s.before is None else rms(s.before.point_distance_error)
+            cards += _card(f"known distance error, RMS ({s.label})",
+                           _before_after(old, rms(s.after.point_distance_error)), f"{s.source}")  # fmt: skip
     cards += _card("fit residual (calibration data)", _before_after(cal.rms_before, cal.rms_after),
                    "converged" if cal.success else "the fit did NOT converge")  # fmt: skip
     held = f"{len(cal.unseen)} not identifiable, {len(cal.poorly_identified)} held at nominal"
