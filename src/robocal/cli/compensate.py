@@ -400,8 +400,8 @@ def _print(result, robot: str, source: Path) -> None:
     console.print(table)
     if s["expected_error_after_mm"]["mean"] is None:
         console.print(
-            "  (a bare model file carries no uncertainty: give the calibration folder for the "
-            "error to expect after compensation)",
+            "  (a bare model file or a constraint calibration carries no uncertainty here: a tracker "
+            "calibration folder gives the error to expect after compensation)",
             highlight=False,
         )
 
