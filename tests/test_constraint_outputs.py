@@ -91,6 +91,23 @@ def test_report_escapes_file_names_and_reads_the_recorded_file(folder, tmp_path)
     assert f"{train.name} (50 poses" in _cells(html)
 
 
+def test_another_robots_file_is_refused_by_report_and_validate(folder, tmp_path):
+    out, _, held, _ = folder
+    seven = tmp_path / "seven.csv"  # a 7-joint robot's recording: q7 would be dropped unseen
+    lines = held.read_text().splitlines()
+    seven.write_text("\n".join([lines[0].replace("q6,", "q6,q7,")] + [_add_q7(r) for r in lines[1:]]))
+    for command in (["report", str(out), "--test-data", str(seven), "-o", str(tmp_path / "r.html")],
+                    ["validate", str(out), "--data", str(seven)]):  # fmt: skip
+        res = runner.invoke(app, command)
+        assert res.exit_code == 2 and "q7" in res.output and "Traceback" not in res.output, res.output
+    assert not (tmp_path / "r.html").exists()
+
+
+def _add_q7(row: str) -> str:
+    cells = row.split(",")
+    return ",".join([*cells[:6], "0.3", *cells[6:]])
+
+
 def test_report_refuses_an_edited_model_and_notes_a_changed_file(folder, tmp_path):
     out = _copy(folder, tmp_path)
     doc = json.loads((out / "constraints.json").read_text())

@@ -155,6 +155,8 @@ def read_constraints(
         raise ConstraintFileError(
             f"{path}: no joint column(s) {', '.join(missing)} (header: {short(','.join(header), 80)})"
         )
+    if f"q{dof + 1}" in header:  # another robot's file: its last joints would be dropped unseen
+        raise ConstraintFileError(f"{path}: a joint column q{dof + 1}, but the robot has {dof} joints")
     if not any(set(cols) <= set(header) for cols in KIND_COLUMNS.values()):
         raise ConstraintFileError(f"{path}: no constraint column (point, plane, or pair and distance_mm)")
     col = {name: header.index(name) for name in header}
