@@ -46,3 +46,23 @@ def test_reorientation_needs_commanded_orientations_too():
     row = _row(half, 9)
     assert not row.measured
     assert "orientation" in row.summary and "shape" not in row.summary, row.summary
+
+
+def test_a_per_robot_pose_set_without_n_is_refused_by_name(tmp_path):
+    """mypy: ``random_poses(model, spec.n)`` with ``n: int | None``.  A per-robot random pose
+    set without ``n`` used to pass the study's checks and fail every robot's row with a
+    TypeError (``int() argument ... not 'NoneType'``); it is now refused before any work."""
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    cfg = tmp_path / "study.yaml"
+    cfg.write_text(
+        "name: t\nrobot: ur5\nrobots: 1\n"
+        "pose_sets:\n  - {name: a, per_robot: true}\ndevices:\n  - {name: d}\n"
+    )
+    out = tmp_path / "o"
+    result = CliRunner().invoke(app, ["study", str(cfg), "--out", str(out), "--workers", "0"])
+    assert result.exit_code == 2, result.output
+    assert "pose_sets[0]" in result.output and "'n'" in result.output, result.output
+    assert not (out / "results.csv").exists()

@@ -108,7 +108,7 @@ def tolerate_terminal_encoding() -> None:
 class _SafeConsole(Console):
     """A Rich console that never lets a string crash it or reach the terminal raw."""
 
-    def render_str(self, text: str, **kwargs):  # type: ignore[override]
+    def render_str(self, text: str, **kwargs):
         text = plain(text)
         try:
             return super().render_str(text, **kwargs)

@@ -337,9 +337,9 @@ def to_numbers(
     bad = ~np.isfinite(values)
     if bad.any():
         flagged = {m for m, _, _ in problems}
-        for m in np.flatnonzero(bad):
-            if int(m) not in flagged:
-                problems.append((int(m), "not-finite", f"value {short(cells[m].strip())} is not finite"))
+        for row in map(int, np.flatnonzero(bad)):
+            if row not in flagged:
+                problems.append((row, "not-finite", f"value {short(cells[row].strip())} is not finite"))
         values[bad] = np.nan
         problems.sort()
     return values, problems

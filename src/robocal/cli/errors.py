@@ -136,7 +136,7 @@ class RobocalGroup(TyperGroup):
 
         tidy_help(self)  # every subcommand is built by now: no `<bool>` shown for a flag
 
-    def invoke(self, ctx):  # type: ignore[override]
+    def invoke(self, ctx):
         try:
             return super().invoke(ctx)
         except Exception as exc:

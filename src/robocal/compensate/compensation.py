@@ -247,10 +247,9 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     invariants of :mod:`robocal.compensate.safety` (a refused target keeps its nominal
     command), and the bookkeeping.  ``solved``: commands found otherwise (seed 003 eq. 5.22
     for paths), put through the same invariants instead of the IK."""
-    opts = {"kind": kind, "tool_axis": tool_axis, "orientation_weight": orientation_weight}
     res = solved or solve_ik(
         setup.real, T, q0=q_nominal, restarts=0, tol=tol, tol_angle=tol_angle, max_iter=max_iter,
-        joint_effects=setup.effects, **opts,
+        joint_effects=setup.effects, kind=kind, tool_axis=tool_axis, orientation_weight=orientation_weight,
     )  # fmt: skip
     q, reached = res.q.copy(), res.reachable.copy()
     before, angle_before = _errors(_predict(setup, q_nominal), T, kind, tool_axis)
@@ -261,8 +260,9 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     bound = safety.joint_bound(size, sigma, near, setup.real.joint_types)
     if near.any():
         damped = solve_regularized(
-            setup.real, T[near], q_nominal[near], damping=safety.DAMPING, joint_effects=setup.effects, **opts
-        )
+            setup.real, T[near], q_nominal[near], damping=safety.DAMPING, joint_effects=setup.effects,
+            kind=kind, tool_axis=tool_axis, orientation_weight=orientation_weight,
+        )  # fmt: skip
         revolute = np.array([t == "revolute" for t in setup.real.joint_types])
         q[near] = q_nominal[near] + safety.limit_damped(damped.q - q_nominal[near], bound[near], revolute)
     verdict = safety.judge(

@@ -314,9 +314,9 @@ def export_urdf(
         if device_link is not None:
             raise ValueError("a device link needs a calibration result (its device frame)")
     missing = left_out(calibrated, samples)
-    notes = [*part.notes, *notes, *(m.note for m in missing)]
+    stated = [*part.notes, *notes, *(m.note for m in missing)]
     if device_link is None and frame is not None:
-        notes.append("the measuring device's frame is not in this file (device link not requested)")
+        stated.append("the measuring device's frame is not in this file (device link not requested)")
     ex = calibrated_urdf(
         model,
         source,
@@ -325,7 +325,7 @@ def export_urdf(
         T_device_base=frame,
         device_link=device_link,
         tool_link=tool_link,
-        notes=notes,
+        notes=stated,
         joint_map=joint_map,
     )
     return ex, missing

@@ -179,10 +179,9 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
     T, kind_ = _path_targets(setup, q_nom, targets, kind, frame)
     labels = _names(names, len(q_nom))
     if method == "ik":
-        opts = {"tol": tol, "tol_angle": tol_angle, "max_iter": max_iter}
-        opts |= {"orientation_weight": orientation_weight, "tool_axis": tool_axis}
         base = _correct(
-            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, **opts,
+            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, tol=tol, tol_angle=tol_angle,
+            max_iter=max_iter, orientation_weight=orientation_weight, tool_axis=tool_axis,
             max_joint_change=max_joint_change,
         )  # fmt: skip
     elif method == "jacobian":

@@ -93,6 +93,12 @@ def _cfx(model: Model, q: Array) -> int:
     return sum(min(b) << k for k, b in enumerate(_cfx_bits(model, q)))
 
 
+def _abb_digits(t: ProgramTarget) -> tuple[int, ...]:
+    """ABB's written ``cf1, cf4, cf6[, cfx]`` (the RAPID reader keeps a confdata only when
+    all four are integers; only KUKA's ``(T, S)`` may hold a missing ``None``)."""
+    return tuple(c for c in t.config or () if c is not None)
+
+
 def _config_changes(t: ProgramTarget, q: Array, model: Model | None = None) -> list[str]:
     """How joint values ``q`` (rad) differ from the target's written configuration: one
     entry per bit or digit (``[]``: they meet it).  Without ``model`` the status / cfx
@@ -114,11 +120,12 @@ def _config_changes(t: ProgramTarget, q: Array, model: Model | None = None) -> l
                 if status >> k & 1 not in allowed:
                     out.append(f"S bit {k} ({names[k]}) {status >> k & 1} -> {min(allowed)}")
         return out
-    for j, cf, name in zip((0, 3, 5), t.config[:3], ("cf1", "cf4", "cf6"), strict=True):
+    digits = _abb_digits(t)
+    for j, cf, name in zip((0, 3, 5), digits[:3], ("cf1", "cf4", "cf6"), strict=True):
         if not math.floor((deg[j] - eps) / 90.0) <= cf <= math.floor((deg[j] + eps) / 90.0):
             out.append(f"{name} {cf} -> {math.floor(deg[j] / 90.0)}")
-    if len(t.config) > 3 and model is not None:
-        cfx = t.config[3]
+    if len(digits) > 3 and model is not None:
+        cfx = digits[3]
         bits = _cfx_bits(model, q)
         if not 0 <= cfx < 8 or any(cfx >> k & 1 not in b for k, b in enumerate(bits)):
             out.append(f"cfx {cfx} -> {sum(min(b) << k for k, b in enumerate(bits))}")
@@ -146,8 +153,9 @@ def _config_starts(t: ProgramTarget, model: Model, rng: np.random.Generator, n: 
         if status is not None:
             q[:, 4] = np.where(status >> 2 & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
     else:
-        for j, cf in zip((0, 3, 5), t.config[:3], strict=True):
+        digits = _abb_digits(t)
+        for j, cf in zip((0, 3, 5), digits[:3], strict=True):
             q[:, j] = np.radians(90.0 * (cf + rng.uniform(0.1, 0.9, n)))
-        if len(t.config) > 3:
-            q[:, 4] = np.where(t.config[3] & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
+        if len(digits) > 3:
+            q[:, 4] = np.where(digits[3] & 1, -np.abs(q[:, 4]), np.abs(q[:, 4]))
     return np.clip(q, lim[:, 0], lim[:, 1])

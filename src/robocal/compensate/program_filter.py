@@ -8,6 +8,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -266,7 +267,16 @@ def execution_order(texts: dict[str, str], parsed: _Parsed) -> list[int]:
     return list(dict.fromkeys(i for _, _, i in order))
 
 
-def _solve_pose(t: ProgramTarget, real: Model, nom: Model, goal: Array, kind: str, q_prev: Array, rng, opts):
+def _solve_pose(
+    t: ProgramTarget,
+    real: Model,
+    nom: Model,
+    goal: Array,
+    kind: Literal["position", "pose"],
+    q_prev: Array,
+    rng: np.random.Generator,
+    opts: dict[str, Any],
+) -> tuple[Compensation, str | None]:
     """Compensate one Cartesian target from ``q_prev``; when the nominal solution misses the
     written configuration (KUKA S/T, ABB cf/cfx), starts within it choose the branch.
     Returns the result and the change description (None: the configuration is met or not

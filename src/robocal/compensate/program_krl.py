@@ -252,10 +252,10 @@ def _krl_outputs(path: Path, out: Path, labels: list[str], overwrite: bool) -> d
 def _check_krl_pair(src: Path, src_text: str, dat: Path, dat_text: str) -> None:
     """Refuse a KRL .src and .dat of different runs (a write killed between the two
     renames, or files copied together by hand): their targets would not match."""
-    names = krl_module_name(src_text), krl_module_name(dat_text)
-    if None not in names and names[0].upper() != names[1].upper():
+    module, datmodule = krl_module_name(src_text), krl_module_name(dat_text)
+    if module is not None and datmodule is not None and module.upper() != datmodule.upper():
         raise ProgramError(
-            f"{src} (DEF {names[0]}) and {dat} (DEFDAT {names[1]}) are not one module: "
+            f"{src} (DEF {module}) and {dat} (DEFDAT {datmodule}) are not one module: "
             "a .src and its .dat must name the same module"
         )
     a, b = krl_run_id(src_text), krl_run_id(dat_text)

@@ -166,11 +166,12 @@ def _rapid_declarations(
                 _rapid_pose(text, g[0], path, f"wobjdata {name}: {w}")
                 for g, w in zip(groups[:2], ("uframe", "oframe"), strict=False)
             ]
-            if len(frames) != 2 or any(f is None for f in frames):
+            uframe, oframe = (*frames, None, None)[:2]
+            if uframe is None or oframe is None:
                 line = _line_of(text, b)
                 raise ProgramError(f"{path}: line {line}: wobjdata {name} needs uframe and oframe")
             if data is not None:
-                data["wobjs"][name.upper()] = frames[0] @ frames[1]
+                data["wobjs"][name.upper()] = uframe @ oframe
             continue
         t, _ = _rapid_target(text, b, kind, dof, name, path)
         targets.append(t)
@@ -223,8 +224,8 @@ def _rapid_moves(
             else:
                 first = re.match(r"[\\\w]+", arg_text)
                 reason = _rapid_not_a_name(arg_text, first)
-                if reason is not None:
-                    unsupported.append(Unsupported(path, line, m.group(0).strip(), reason))
+                if reason is not None or first is None:  # (no name: a reason is given)
+                    unsupported.append(Unsupported(path, line, m.group(0).strip(), reason or ""))
                     break
                 k = len(args) - len(arg_text) + first.end()
                 if uses is not None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Literal
 
 from robocal import spatial
 from robocal.compensate.program_syntax import (
@@ -30,7 +31,9 @@ _UR_ANY_ASSIGN = re.compile(r"^[ \t]*(?:(?:global|local)\s+)?([A-Za-z_]\w*)\s*=(
 _UR_TCP = re.compile(r"\bset_tcp\s*\(\s*p\[")
 
 
-def _ur_literal(text: str, i: int, dof: int, what: str, path: str) -> tuple[str, list[_Token], int] | None:
+def _ur_literal(
+    text: str, i: int, dof: int, what: str, path: str
+) -> tuple[Literal["joint", "pose"], list[_Token], int] | None:
     """At ``i`` a ``p[...]`` (pose) or ``[...]`` (joint list): kind, tokens, end."""
     pose = text[i] == "p"
     b = i + 1 if pose else i
@@ -105,13 +108,13 @@ def _parse_urscript(
                 unsupported.append(Unsupported(path, line, _line_text(text, m.start()), reason))
     _reassigned(text, path, names, literal_at, unsupported)
     tool = None
-    m = _UR_TCP.search(text)
-    if m:
-        lit = _ur_literal(text, m.end() - 2, dof, "set_tcp", path)
+    tcp = _UR_TCP.search(text)
+    if tcp:
+        lit = _ur_literal(text, tcp.end() - 2, dof, "set_tcp", path)
         if lit is not None:
             v = [t.value for t in lit[1]]
             if not all(map(math.isfinite, v)):
-                raise ProgramError(f"{path}: line {_line_of(text, m.start())}: set_tcp: not finite numbers")
+                raise ProgramError(f"{path}: line {_line_of(text, tcp.start())}: set_tcp: not finite numbers")
             tool = spatial.homogeneous(spatial.rotvec_to_matrix(v[3:]), v[:3])
     targets.sort(key=lambda t: t.tokens[0].start)
     return targets, unsupported, tool

@@ -106,7 +106,7 @@ def sigma_min(
     if not len(q):
         return np.zeros(0)
     J = _task_jacobian(model, np.asarray(q, dtype=float), effects, kind, tool_axis)
-    return np.linalg.svd(J, compute_uv=False)[:, -1]
+    return np.asarray(np.linalg.svd(J, compute_uv=False)[:, -1], dtype=float)
 
 
 def joint_bound(error: Array, sigma: Array, damped: NDArray[np.bool_], joint_types: tuple[str, ...]) -> Array:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Iterator, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 
 def summary_numbers(result, before, after, after_geo, ev, seconds, report_path) -> dict[str, Any]:
@@ -101,6 +101,10 @@ def print_summary(numbers: Mapping[str, Any]) -> None:
         console.print(f"[bold]report:[/] {safe(numbers['report'])}", highlight=False, markup=True)
 
 
+if TYPE_CHECKING:
+    from rich.progress import Progress
+
+
 class Steps:
     """Rich progress over the demo's steps, or silence."""
 
@@ -108,7 +112,7 @@ class Steps:
         self.names = names
         self.verbose = verbose
         self.timings: dict[str, float] = {}
-        self._progress = None
+        self._progress: Progress | None = None  # while the steps run with verbose output
 
     @contextlib.contextmanager
     def running(self) -> Iterator[Steps]:

@@ -74,7 +74,8 @@ def _subset(pool: ConstraintSet, units: list[NDArray[np.intp]], chosen: list[int
     lengths = [float(pool.pair_length[k]) for k, (a, _) in enumerate(pool.pairs) if int(a) in where]
     return ConstraintSet(pool.q[rows], pool.point[rows], pool.plane[rows],
                          pairs=np.array(pairs, dtype=np.intp).reshape(-1, 2),
-                         pair_length=lengths, point_pairs=pool.point_pairs, point_length=pool.point_length,
+                         pair_length=np.array(lengths), point_pairs=pool.point_pairs,
+                         point_length=pool.point_length,
                          known_planes=pool.known_planes, sigma=pool.sigma)  # fmt: skip
 
 

@@ -121,7 +121,9 @@ def design_efficiency_bound(
     return DesignBound(o1, best, p, p / best, ratio, o1 * ratio, q_best)
 
 
-def _variance_function(model: Model, rows: Rows, names: Sequence[str], L: Array) -> Callable[[Array], Array]:
+def _variance_function(
+    model: Model, rows: Rows, names: Sequence[str], L: NDArray[np.floating]
+) -> Callable[[Array], Array]:
     """``d(q) = trace(B_q M⁻¹ B_qᵀ)`` of configurations ``X`` ``(k, dof)`` -> ``(k,)``, with
     ``L`` the Cholesky factor of the design's information ``M`` (``"tolerance"`` scaling)."""
     r, p = (3 if rows == "position" else 6), len(names)

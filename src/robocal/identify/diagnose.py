@@ -24,6 +24,7 @@ from robocal.identify.result import CalibrationResult, CalibrationWarning
 from robocal.identify.stages import median
 from robocal.measure.dataset import Measurements
 from robocal.model.chain import Model
+from robocal.model.geometry import Measure
 
 __all__ = ["diagnose", "outlier_poses", "parameterisation_warnings"]
 
@@ -32,13 +33,13 @@ _NO_SIGMA = np.zeros((0, 3))  # position_errors' "no stated noise"
 
 
 @functools.lru_cache(maxsize=64)
-def _cached_parameterisation_warnings(model: Model, measure: str) -> tuple[str, ...]:
+def _cached_parameterisation_warnings(model: Model, measure: Measure) -> tuple[str, ...]:
     from robocal.model.singularity import parameterisation_warnings as warnings
 
     return tuple(warnings(model, measure))
 
 
-def parameterisation_warnings(model: Model, measure: str) -> list[str]:
+def parameterisation_warnings(model: Model, measure: Measure) -> list[str]:
     """Why ``model`` is a poor chain to calibrate (singular or discontinuous at its nominal
     values: e.g. plain DH for parallel axes), with the fix; ``[]`` for a complete model.
     15-25 ms per chain, so cached per model (models are immutable and hashable)."""
@@ -93,10 +94,10 @@ def _distance_objective(problem: Problem, x0: Array, x: Array) -> dict[str, Any]
 def _rms_rose(result: CalibrationResult, pose_errors: Array) -> str | None:
     """A warning when a sum-of-distances fit raised the RMS error (legitimately: it fits
     most poses and leaves a minority with large errors), or ``None``."""
-    if result.rms_after <= result.rms_before:
+    mean = result.diagnostics.objective  # seed 001's objective: set by method="bounded"
+    if result.rms_after <= result.rms_before or mean is None:
         return None
     large = int(np.sum(pose_errors > 3.0 * float(np.median(pose_errors))))
-    mean = result.diagnostics.objective
     return (
         f"the RMS error rose from {result.rms_before * 1e3:.4g} to {result.rms_after * 1e3:.4g} mm while the "
         f"mean distance fell from {mean['mean_distance_before'] * 1e3:.4g} to "

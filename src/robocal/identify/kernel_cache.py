@@ -76,7 +76,7 @@ _LISTENER: list[Any] = []  # the numba listener timing compilations, once regist
 def _listener() -> Any:
     from numba.core import event
 
-    class _CompileTimer(event.Listener):  # type: ignore[misc]
+    class _CompileTimer(event.Listener):
         """Seconds spent in outermost compilations (nested ones are inside them)."""
 
         def __init__(self) -> None:

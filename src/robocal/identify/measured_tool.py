@@ -73,8 +73,9 @@ START_REPORT_M = 5e-3
 UNDETERMINED_STD_M = 0.5e-3
 
 
-def _mm(v: Sequence[float]) -> str:
-    return ", ".join(f"{x * 1e3:.2f}" for x in v)
+def _mm(v: ArrayLike) -> str:
+    """``"x, y, z"`` in mm of a vector in m."""
+    return ", ".join(f"{x * 1e3:.2f}" for x in np.asarray(v, dtype=float).reshape(-1))
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,7 @@ class PoseSelection:
     passes: int
 
 
-def _logdet_gain(Minv_solve: Array, B: Array) -> Array:
+def _logdet_gain(Minv_solve: NDArray[np.floating], B: Array) -> Array:
     """``log det(I + B_c M⁻¹ B_cᵀ)`` for candidate blocks ``B`` ``(N, r, p)``, given
     ``X = M⁻¹ Bᵀ`` laid out as ``(N, p, r)``."""
     G = B @ Minv_solve + np.eye(B.shape[1])

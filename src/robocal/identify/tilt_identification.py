@@ -346,7 +346,7 @@ def identify_tilt(
             break
     r = (data.tilt - _predict(model, data, mounts, names, x, eta, gravity)) * w
     J = _jacobian(model, data, mounts, names, x, eta, gravity)[:, keep] * w[:, None]
-    cov = np.linalg.inv(J.T @ J)
+    cov = np.asarray(np.linalg.inv(J.T @ J), dtype=float)
     return TiltFit(
         names=tuple(names[i] for i in keep),
         values=x[keep],

@@ -228,7 +228,8 @@ def _assemble(path, q, point, plane, xyz, pair, length, distances, sigma) -> Con
             q, point_arr, np.array(plane, dtype=np.intp),
             position=position if np.isfinite(position).any() else None,
             pairs=pairs, pair_length=lengths,
-            point_pairs=[(a, b) for a, b, _ in distances], point_length=[d for *_, d in distances],
+            point_pairs=np.array([(a, b) for a, b, _ in distances], dtype=np.intp).reshape(-1, 2),
+            point_length=np.array([d for *_, d in distances], dtype=float),
             sigma=sigma,
         )  # fmt: skip
     except ValueError as err:
@@ -254,10 +255,10 @@ def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> st
         if "plane" in kinds:
             row.append(str(data.plane[i]) if data.plane[i] >= 0 else "")
         if "distance" in kinds:
-            k, length = pair_of.get(i, (None, None))
-            row += ["", ""] if k is None else [str(k), repr(float(length) * 1e3)]
+            pair = pair_of.get(i)
+            row += ["", ""] if pair is None else [str(pair[0]), repr(float(pair[1]) * 1e3)]
         if "tracker" in kinds:
-            row += ["", "", ""] if not data.tracked[i] else [repr(float(v)) for v in data.position[i]]
+            row += ["", "", ""] if not data.tracked[i] else [repr(float(v)) for v in data.positions[i]]
         writer.writerow(row)
     text = out.getvalue()
     if path is not None:

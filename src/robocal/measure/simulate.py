@@ -135,7 +135,7 @@ def _commanded(robot: VirtualRobot, q: ArrayLike | Measurements) -> tuple[Array,
 def simulate(
     robot: VirtualRobot,
     q: ArrayLike | Measurements,
-    seed: int | None = None,
+    seed: int | np.random.Generator | None = None,
     *,
     metadata: Mapping[str, str] | None = None,
 ) -> Measurements:
@@ -145,7 +145,8 @@ def simulate(
         robot: the virtual robot.
         q: commanded joint values ``(n, dof)`` (rad, m), or the :class:`Measurements` of
             a poses file (its joint names and train/test split are kept).
-        seed: seeds the device noise; the same seed gives identical measurements.
+        seed: seeds the device noise (or a generator to draw it from); the same seed gives
+            identical measurements.
         metadata: extra metadata strings.
 
     Returns:
@@ -164,7 +165,7 @@ def simulate(
         "robot": robot.nominal.name,
         "device": robot.device.kind,
         "frame": "device (T_device_base unknown to the calibration)",
-        "seed": "none" if seed is None else str(seed),
+        "seed": "a generator" if isinstance(seed, np.random.Generator) else str(seed).lower(),
     }
     meta.update(metadata or {})
     return Measurements(

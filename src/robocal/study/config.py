@@ -156,7 +156,7 @@ class StudyConfig(BaseModel):
     def _quantities(self) -> StudyConfig:
         from robocal.measure.simulate import parse_quantity
 
-        checks = [
+        checks: list[tuple[str, float | str, Literal["length", "angle"]]] = [
             ("errors.length", self.errors.length, "length"),
             ("errors.angle", self.errors.angle, "angle"),
         ]

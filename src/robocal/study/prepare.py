@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.model.chain import Model
+from robocal.model.geometry import Measure
 from robocal.study.config import DeviceSpec, PoseSetSpec, StudyConfig, StudyError, _quantity, _seed
 
 Array = NDArray[np.float64]
@@ -83,7 +84,7 @@ class _Prepared:
     max_std: float
 
 
-def _built_model(path: str, measure: str) -> Model:
+def _built_model(path: str, measure: Measure) -> Model:
     from robocal.model.builder import GeometryError, load_geometry
 
     try:
@@ -98,14 +99,18 @@ def _prepare(config: StudyConfig) -> _Prepared:
     tool = np.asarray(config.tool, dtype=float) * 1e-3
     devices = {d.name: _make_device(d, tool, i) for i, d in enumerate(config.devices)}
     if config.geometry is not None:
-        measure = "position" if all(d.measures == "position" for d in devices.values()) else "pose"
+        measure: Measure = "position" if all(d.measures == "position" for d in devices.values()) else "pose"
         nominal = _built_model(config.geometry, measure)
-    else:
+    elif config.robot is not None:
         nominal = _resolve_model(config.robot)
+    else:  # pragma: no cover - the configuration's check asks for one of them
+        raise StudyError("give 'robot' or 'geometry'")
     sets: dict[str, Array | None] = {}
     for i, s in enumerate(config.pose_sets):
         if s.per_robot and s.kind != "random":
             raise StudyError(f"pose_sets[{i}] ({s.name}): per_robot draws need kind 'random'")
+        if s.per_robot and s.n is None:  # each robot's draw would fail on its own row
+            raise StudyError(f"pose_sets[{i}] ({s.name}): kind 'random' needs 'n' (number of poses)")
         sets[s.name] = None if s.per_robot else _pose_set(config, s, i, nominal)
     from robocal.measure.poses import random_poses
 

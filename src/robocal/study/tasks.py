@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal.study.config import Case, _seed
 from robocal.study.prepare import _Prepared
+
+if TYPE_CHECKING:
+    from robocal.measure.measurements import Measurements
 
 Array = NDArray[np.float64]
 
@@ -82,7 +85,7 @@ def _stats(errors: Array) -> dict[str, float]:
     }
 
 
-def _simulate_case(chunk: _Chunk, k: int):
+def _simulate_case(chunk: _Chunk, k: int) -> tuple[Measurements, Measurements, Array]:
     """True robot, calibration data, validation data and noise-free truth of robot ``k``."""
     from robocal.measure.poses import random_poses
     from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
@@ -104,8 +107,10 @@ def _simulate_case(chunk: _Chunk, k: int):
     robot = VirtualRobot(prep.nominal, true, device)
     q = prep.pose_sets[chunk.pose_set]
     if q is None:  # a new random draw for every robot
-        spec = config.pose_sets[i_set]
-        q = random_poses(prep.nominal, spec.n, seed=np.random.default_rng(_seed(config, 5, i_set, k)))
+        n = config.pose_sets[i_set].n
+        if n is None:  # pragma: no cover - refused when the study is prepared
+            raise ValueError("a per-robot pose set needs 'n'")
+        q = random_poses(prep.nominal, n, seed=np.random.default_rng(_seed(config, 5, i_set, k)))
     data = simulate(robot, q, seed=np.random.default_rng(_seed(config, 1, k, i_set, i_dev)))
     test = simulate(robot, prep.q_test, seed=np.random.default_rng(_seed(config, 2, k, i_dev)))
     truth = device.predict(robot.T_base_tool(prep.q_test)).position
@@ -158,7 +163,7 @@ def _run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
 
     prep = chunk.prepared
     rows: dict[int, dict[str, Any]] = {}
-    sims: dict[int, tuple] = {}
+    sims: dict[int, tuple[Measurements, Measurements, Array]] = {}
     t0 = time.perf_counter()
     for k in chunk.robots:
         case = Case(k, chunk.pose_set, chunk.device)
