@@ -220,8 +220,11 @@ def test_validate_a_constraint_folder_on_a_held_out_placement(folder):
     assert res.exit_code == 0, res.output
     cal = load_constraint_calibration(out)
     spread = constraint_figures(cal.model, read_constraints(held, cal.model.dof)).point_spread
-    for k, s in enumerate(spread):
-        assert f"point {k}: RMS spread {s * 1e3:.3f} mm" in res.output
+    before = constraint_figures(cal.nominal, read_constraints(held, cal.model.dof)).point_spread
+    after_part, before_part = res.output.split("before calibration")
+    for k, (s, b) in enumerate(zip(spread, before, strict=True)):
+        assert f"point {k}: RMS spread {s * 1e3:.3f} mm" in after_part
+        assert f"point {k}: RMS spread {b * 1e3:.3f} mm" in before_part
 
 
 def test_compensate_corrects_relative_to_the_nominal_base_and_refuses_the_device_frame(folder, tmp_path):

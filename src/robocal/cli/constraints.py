@@ -192,6 +192,14 @@ def validate_constraint_file(
                   highlight=False)  # fmt: skip
     for line in figures.lines():
         console.print("  " + line, highlight=False)
+    if (directory / RESULT_FILE).is_file():  # a constraint calibration: the robot it started from too
+        from robocal.cli.report_constraints import load_constraint_folder
+
+        nominal = load_constraint_folder(directory).nominal
+        if nominal is not None:
+            console.print("before calibration (the nominal robot):", highlight=False)
+            for line in constraint_figures(nominal, data).lines():
+                console.print("  " + line, highlight=False)
 
 
 def simulate_constraint_file(
