@@ -17,7 +17,7 @@ import pytest
 
 import robocal as rc
 from robocal.identify.residual_cv import CVCandidate, CVTable, _one_standard_error
-from robocal.model.residual import FADE, JointAngleResidual
+from robocal.model.residual import FADE, JointAngleResidual, fourier_basis
 from tests.test_residual import NOISE, PROBE, _measure, _truth, _ur10
 
 TRAIN_LIMIT = np.array([math.pi, 0.6, 0.8, math.pi, math.pi, math.pi])  # rad, |q| of the training poses
@@ -158,3 +158,25 @@ def test_the_fade_width_goes_through_the_model_file():
     assert JointAngleResidual.from_dict(older, ("a", "b", "elbow", "d", "e", "f")).fade_width == FADE
     with pytest.raises(ValueError, match="fade_width"):
         dataclasses.replace(learned, fade_width=float("nan"))
+
+
+def test_the_first_harmonics_go_on_where_the_rest_fades():
+    """Outside the coverage only the global harmonics (eccentricity, ellipticity) remain;
+    the angle errors, the basis and the position covariance agree on it."""
+    learned = dataclasses.replace(_smooth(0.05), coverage=(((-1.0, 1.0),),), global_harmonics=2)
+    q = np.zeros((3, 6))
+    q[:, 2] = [0.5, 1.5, 2.5]  # inside, 0.5 rad and 1.5 rad beyond the coverage
+    first_two = learned.coefficients.copy()
+    first_two[4:] = 0.0
+    plain = fourier_basis(q[:, [2]], 4)[:, 0]
+    np.testing.assert_allclose(
+        learned.angle_errors(q)[:, 0], [plain[0] @ learned.coefficients, *(plain[1:] @ first_two)]
+    )
+    np.testing.assert_allclose(learned.basis(q)[:, 0] @ learned.coefficients, learned.angle_errors(q)[:, 0])
+    P = np.zeros((3, 3, 6, 3))
+    P[:, 0, 2, 2] = 1.0  # x moves 1 m per rad of the elbow
+    C = np.diag(np.linspace(1.0, 2.0, 8)) * 1e-8
+    cov = dataclasses.replace(learned, covariance=C, angle_rms=(0.0,)).position_covariance(q, P)[:, 0, 0]
+    B = learned.basis(q)[:, 0]
+    np.testing.assert_allclose(cov, np.einsum("nh,hk,nk->n", B, C, B))
+    assert cov[2] > 0.0  # the kept harmonics' uncertainty remains outside

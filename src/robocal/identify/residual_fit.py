@@ -367,7 +367,12 @@ def fit_joint_fourier(
     with _one_blas_thread():
         model, hyper = _fit(template, gram, hyper, start)
     model = model.covering(q)  # fades within its prior's correlation length of the poses' angles
-    rms = np.sqrt(np.mean(model.angle_errors(q) ** 2, axis=0))
+    # the size of what fades (the harmonics above the global ones) on the calibration poses
+    fading = model.coefficients.reshape(len(model.joints), harmonics, 2).copy()
+    fading[:, : model.global_harmonics] = 0.0
+    rms = np.sqrt(
+        np.mean(dataclasses.replace(model, coefficients=fading.reshape(-1)).angle_errors(q) ** 2, axis=0)
+    )
     return dataclasses.replace(model, angle_rms=tuple(float(v) for v in rms)), hyper
 
 

@@ -34,10 +34,23 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FADE", "JointAngleResidual", "covered_intervals", "fourier_basis", "one_blas_thread"]
+__all__ = [
+    "FADE",
+    "GLOBAL_HARMONICS",
+    "JointAngleResidual",
+    "covered_intervals",
+    "fourier_basis",
+    "one_blas_thread",
+]
 
 Array = NDArray[np.float64]
 FADE = 0.1  # rad: outside its calibrated range a joint's learned angle error fades out over this
+#: harmonics (once and twice per revolution: a gear's or encoder's eccentricity and
+#: ellipticity) that a fit keeps where the rest fades: a property of the whole joint, fitted
+#: from all its angles (the hybrid's physics is fitted together with them: fading them
+#: left it without its partner).  Series A's CV at 100 poses: lower with them kept in 4 of
+#: 5 seeds, equal in one (docs/concepts/residual.md)
+GLOBAL_HARMONICS = 2
 
 
 def covered_intervals(angles: ArrayLike, gap: float = 0.2) -> tuple[tuple[float, float], ...]:
@@ -121,15 +134,18 @@ class JointAngleResidual:
             oscillating (a UR10 with a 0.28 rad gap in its shoulder angles: 5 mrad, 8 mm at
             the tool), so each joint's angle error fades to zero within ``fade_width`` rad
             of its covered intervals (cos² taper); None: no fading.
-        angle_rms: per joint, the RMS (rad) of the learned angle error over the calibration
-            poses: where the residual fades out, an error of about this size is what it no
-            longer predicts (its share of the predicted uncertainty there).
+        angle_rms: per joint, the RMS (rad) of the learned angle error's fading part (the
+            harmonics above ``global_harmonics``) over the calibration poses: where the
+            residual fades out, an error of about this size is what it no longer predicts
+            (its share of the predicted uncertainty there).
         fade_width: how far (rad) beyond its coverage an angle error fades out: the prior's
             correlation length ``length_scale``, at least :data:`FADE` (:meth:`covering`);
             a smooth residual is supported by its data that far (a virtual UR10 with
             ℓ = 0.24 rad lost 15 % of its accuracy inside its poses' range to gaps of
             0.2-0.3 rad faded at 0.1), a rough one (the real UR10: ℓ ≈ 0.06 rad at 48
             harmonics) not beyond :data:`FADE`.
+        global_harmonics: the first harmonics, which never fade (0 in files from before:
+            all fade; :data:`GLOBAL_HARMONICS` from a fit).
     """
 
     joints: tuple[str, ...]
@@ -143,6 +159,7 @@ class JointAngleResidual:
     coverage: tuple[tuple[tuple[float, float], ...], ...] | None = None
     angle_rms: tuple[float, ...] | None = None
     fade_width: float = FADE
+    global_harmonics: int = 0
 
     kind = "joint_fourier"
 
@@ -161,6 +178,8 @@ class JointAngleResidual:
             raise ValueError("residual: coefficients and covariance must be finite")
         if not (self.harmonics >= 1 and np.isfinite(self.noise_std) and self.noise_std >= 0):
             raise ValueError("residual: harmonics must be >= 1 and noise_std finite and >= 0")
+        if not 0 <= self.global_harmonics <= self.harmonics:
+            raise ValueError(f"residual: global_harmonics must lie in 0..{self.harmonics}")
         if not (math.isfinite(self.fade_width) and self.fade_width > 0):
             raise ValueError(f"residual: fade_width must be finite and > 0 rad, got {self.fade_width!r}")
         if self.coverage is not None:
@@ -189,7 +208,8 @@ class JointAngleResidual:
         B = fourier_basis(angles, self.harmonics)
         if self.coverage is None:
             return B
-        return B * self.fade(q)[:, :, None]
+        B[:, :, 2 * self.global_harmonics :] *= self.fade(q)[:, :, None]
+        return B
 
     def angle_errors(self, q: ArrayLike) -> Array:
         """``(n, k)`` angle errors δθ (rad) of the modelled joints at ``q`` ``(n, dof)``.
@@ -202,8 +222,14 @@ class JointAngleResidual:
         c1, s1 = np.cos(angles), np.sin(angles)
         c, s = c1.copy(), s1.copy()
         out = c * coef[:, 0, 0] + s * coef[:, 0, 1]
+        kept = np.zeros_like(out)  # the global harmonics' sum (they never fade)
+        split = 0 if self.coverage is None else self.global_harmonics
         cs, sc, tmp = np.empty_like(c), np.empty_like(c), np.empty_like(c)
-        for h in range(1, self.harmonics):
+        for h in range(1, self.harmonics + 1):
+            if h == split:  # harmonics 1..split summed: keep them apart from the fading rest
+                kept, out = out, np.zeros_like(out)
+            if h == self.harmonics:
+                break
             np.multiply(c, c1, out=cs)
             np.multiply(s, s1, out=tmp)
             np.multiply(s, c1, out=sc)
@@ -212,7 +238,7 @@ class JointAngleResidual:
             np.add(sc, s, out=s)  # sin((h+1) q) = sin(h q) cos q + cos(h q) sin q
             out += np.multiply(c, coef[:, h, 0], out=tmp)
             out += np.multiply(s, coef[:, h, 1], out=tmp)
-        return out if self.coverage is None else out * self.fade(q)
+        return out if self.coverage is None else kept + out * self.fade(q)
 
     def perturbations(self, q: ArrayLike, dof: int | None = None) -> Array:
         """Joint perturbations ``(n, dof, 3)`` (δα, δβ, δθ; only δθ is non-zero) at ``q``."""
@@ -240,7 +266,7 @@ class JointAngleResidual:
         B = fourier_basis(q[:, list(self.joint_index)], self.harmonics)  # (n, k, 2H)
         fade = None if self.coverage is None else self.fade(q)  # (n, k), once for both uses
         if fade is not None:
-            B *= fade[:, :, None]
+            B[:, :, 2 * self.global_harmonics :] *= fade[:, :, None]
         cols = P[:, :3, list(self.joint_index), 2]  # (n, 3, k): position per rad of each joint
         cov = cols @ self._basis_covariance(B) @ np.swapaxes(cols, 1, 2)
         if fade is not None:
@@ -289,14 +315,16 @@ class JointAngleResidual:
         return np.cos(0.5 * np.pi * np.minimum(outside / self.fade_width, 1.0)) ** 2
 
     def covering(self, q: ArrayLike) -> JointAngleResidual:
-        """This residual with the coverage of the calibration poses ``q`` ``(n, dof)`` and a
-        fade width of its prior's correlation length (at least :data:`FADE`): the
+        """This residual with the coverage of the calibration poses ``q`` ``(n, dof)``, its
+        first :data:`GLOBAL_HARMONICS` harmonics kept everywhere and the rest faded over a
+        width of its prior's correlation length (at least :data:`FADE`): the
         GP's posterior is supported about ``length_scale`` from its data (the spectral
         weights ``exp(-(h ℓ)²/2)`` are a Gaussian kernel of width ℓ on the circle)."""
         width = max(FADE, float(self.length_scale))
         angles = np.atleast_2d(np.asarray(q, dtype=float))
         cover = tuple(covered_intervals(angles[:, j], 2 * width) for j in self.joint_index)
-        return dataclasses.replace(self, coverage=cover, fade_width=width)
+        kept = min(GLOBAL_HARMONICS, self.harmonics)
+        return dataclasses.replace(self, coverage=cover, fade_width=width, global_harmonics=kept)
 
     # ------------------------------------------------------------------ files
     def to_dict(self, covariance: bool = False) -> dict[str, Any]:
@@ -319,6 +347,8 @@ class JointAngleResidual:
             out["angle_rms"] = [float(v) for v in self.angle_rms]
         if self.fade_width != FADE:  # older files: FADE
             out["fade_rad"] = float(self.fade_width)
+        if self.global_harmonics:  # older files: 0, every harmonic fades
+            out["global_harmonics"] = int(self.global_harmonics)
         if covariance:  # the upper triangle, row by row (the matrix is symmetric)
             out["covariance_upper"] = self.covariance_upper()
         return out
@@ -367,6 +397,7 @@ class JointAngleResidual:
             else tuple(tuple(tuple(pair) for pair in joint) for joint in data["coverage"]),
             angle_rms=None if data.get("angle_rms") is None else tuple(float(v) for v in data["angle_rms"]),
             fade_width=float(data.get("fade_rad", FADE)),
+            global_harmonics=int(data.get("global_harmonics", 0)),
         )
         upper = data.get("covariance_upper")
         return learned if upper is None else learned.with_covariance_upper(upper)
