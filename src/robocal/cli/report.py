@@ -70,7 +70,9 @@ def report_command(
         ),
     ] = None,
 ) -> None:
-    """Write the self-contained HTML report of a calibration (works offline)."""
+    """Write the self-contained HTML report of a calibration (works offline).
+
+    A constraint calibration (points, planes, distances): its kind's figures on its file and --test-data."""
     refuse_overwrite(out, force, "report")
     from robocal.identify.constraint_result import is_constraint_folder
 
