@@ -66,3 +66,84 @@ def test_a_per_robot_pose_set_without_n_is_refused_by_name(tmp_path):
     assert result.exit_code == 2, result.output
     assert "pose_sets[0]" in result.output and "'n'" in result.output, result.output
     assert not (out / "results.csv").exists()
+
+
+def _cli_options():
+    """``(command path, option)`` of every option of every ``robocal`` command (all modules)."""
+    import typer
+
+    from robocal.cli.app import COMMANDS, app, module_commands
+
+    group = typer.main.get_group(app)
+    commands = {
+        name: command for module, _ in COMMANDS.values() for name, command in module_commands(module).items()
+    }
+    commands |= {name: c for name, c in group.commands.items() if name not in commands}
+    stack = list(commands.items())
+    while stack:
+        path, command = stack.pop()
+        stack += [(f"{path} {name}", sub) for name, sub in getattr(command, "commands", {}).items()]
+        yield from ((path, p) for p in command.params)
+
+
+def _choices(param) -> tuple[str, ...] | None:
+    descriptor = getattr(param, "type_descriptor", None)
+    if descriptor is None or not descriptor.is_choice:
+        return None
+    return tuple(descriptor.choices)
+
+
+def test_every_choice_of_the_command_line_is_a_table_of_the_api():
+    """One table of allowed choices (issue 32 item 6): an option with fixed choices offers
+    exactly one of :mod:`robocal.choices`' tuples, the values of the ``Literal`` the API takes."""
+    from typing import get_args
+
+    from robocal import choices
+    from robocal.compensate.compensation import Frame
+    from robocal.identify.observability_indices import IndexName
+    from robocal.measure.dataset_columns import IncompleteMode
+    from robocal.measure.ik_starts import TargetKind
+    from robocal.measure.measurements import LimitsMode
+    from robocal.model.geometry import Measure
+
+    tables = {getattr(choices, name) for name in choices.__all__ if name.isupper()}
+    for alias, table in [
+        (LimitsMode, choices.LIMITS_MODES),
+        (IncompleteMode, choices.INCOMPLETE_MODES),
+        (TargetKind, choices.TARGET_KINDS),
+        (Frame, choices.FRAMES),
+        (IndexName, choices.INDEX_NAMES),
+        (Measure, choices.MEASURES),
+    ]:
+        assert get_args(alias) == table  # the API's Literal is the table's
+    found = {}
+    for path, param in _cli_options():
+        offered = _choices(param)
+        if offered is not None:
+            assert offered in tables, (
+                f"robocal {path} {param.opts}: {offered} is not a table of robocal.choices"
+            )
+            found[(path, param.opts[0])] = offered
+    # the options that used to spell their choices by hand are choices of the one table now
+    for path, option, table in [
+        ("data check", "--limits", choices.LIMITS_MODES),
+        ("data check", "--incomplete", choices.INCOMPLETE_MODES),
+        ("compensate", "--frame", choices.FRAMES),
+        ("compensate", "--kind", choices.TARGET_KINDS),
+        ("simulate", "--distribution", choices.DISTRIBUTIONS),
+        ("poses", "--index", choices.INDEX_NAMES),
+        ("poses", "--method", choices.POSE_METHODS),
+    ]:
+        assert found.get((path, option)) == table, (path, option, sorted(found))
+
+
+def test_a_choice_outside_the_table_is_refused_by_the_option(tmp_path):
+    """The command line refuses a value outside the table before any work, naming the option."""
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    out = tmp_path / "p.csv"
+    result = CliRunner().invoke(app, ["poses", "ur5", "--n", "6", "--kind", "elbow", "-o", str(out)])
+    assert result.exit_code == 2 and "--kind" in result.output, result.output
+    assert not out.exists()

@@ -34,6 +34,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from robocal.choices import Frame, TargetKind
 from robocal.cli.options import Decimal, Force, Json, Sep, joint_values, out_option, resolve_model
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 from robocal.safe_output import strict_json
@@ -90,7 +91,7 @@ ProgramOption = Annotated[
     ),
 ]
 FrameOption = Annotated[
-    str,
+    Frame,
     typer.Option("--frame", metavar="base|measurement", help="base | measurement: the frame of the targets"),
 ]
 LengthUnitOption = Annotated[
@@ -106,7 +107,7 @@ AngleUnitOption = Annotated[
     ),
 ]
 KindOption = Annotated[
-    str | None,
+    TargetKind | None,
     typer.Option(
         "--kind",
         metavar="position|pose|axis",
@@ -167,14 +168,10 @@ def compensate_command(
 
     if (targets is None) == (program is None):
         raise fail("give exactly one of --targets FILE (Cartesian) or --program FILE (joint program)")
-    if frame not in ("base", "measurement"):
-        raise fail(f"--frame must be base or measurement, got {frame!r}")
     if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
         raise fail(
             f"units: --length-unit m|mm|um and --angle-unit rad|deg, got {length_unit!r}, {angle_unit!r}"
         )
-    if kind not in (None, "position", "pose", "axis"):
-        raise fail(f"--kind must be position, pose or axis, got {kind!r}")
     if out is not None and out.suffix.lower() not in (".csv", ".json", ".txt"):
         raise fail(f"-o {out}: the output must be a .csv or .json file")
     calibrated = _load(source)
@@ -191,8 +188,10 @@ def compensate_command(
         result, source_file = _compensate_targets(
             calibrated, targets, nominal_model, kind, frame, q_start, reader
         )
-    else:
+    elif program is not None:
         result, source_file = _filter_program(calibrated, model, program, nominal_model, kind, reader)
+    else:  # pragma: no cover - exactly one of them was given (checked above)
+        raise fail("give --targets FILE or --program FILE")
     if out is not None:
         from robocal.compensate.result import table_path
 

@@ -19,7 +19,7 @@ import re
 import warnings
 from collections import defaultdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -27,6 +27,7 @@ from rich.table import Table
 from rich.text import Text
 
 from robocal import spatial
+from robocal.choices import Distribution
 from robocal.cli.options import (
     CONTEXT,
     AngleUnit,
@@ -102,8 +103,8 @@ def _problem_table(problems: list[Problem], title: str) -> Table:
 def _summary(data: Measurements, path: Path, model, length_unit: str, angle_unit: str) -> list[str]:
     """Print the column table of a clean file; return the facts to print under it."""
     table = Table(title=f"{path}: {data.n} rows, clean", title_justify="left")
-    for col in ("column", "meaning", "min", "max", "unit"):
-        table.add_column(col, justify="right" if col in ("min", "max") else "left")
+    for heading in ("column", "meaning", "min", "max", "unit"):
+        table.add_column(heading, justify="right" if heading in ("min", "max") else "left")
     types = model.joint_types if model is not None else ("revolute",) * data.dof
     names = model.joint_names if model is not None else data.joint_names
     for j in range(data.dof):
@@ -163,7 +164,7 @@ def data_check(
     from robocal.measure.dataset import check_measurements, read_measurements
 
     model = _model(robot)
-    options = dict(
+    options: dict[str, Any] = dict(  # the reader's keyword options, as the CLI gives them
         length_unit=length_unit,
         angle_unit=angle_unit,
         sep=sep,
@@ -242,7 +243,7 @@ TolOption = Annotated[
     typer.Option("--tol", metavar="NAME=VALUE", help="per-parameter tolerance, e.g. theta2=0.2deg"),
 ]
 DistributionOption = Annotated[
-    str,
+    Distribution,
     typer.Option("--distribution", metavar="uniform|normal", help="uniform in ±tol, or normal (σ = tol)"),
 ]
 DevicePoseOption = Annotated[
@@ -326,8 +327,6 @@ def simulate_command(
         return _simulate_inclinometer(model, poses, out, noise, seed, drawn)
     if device not in DEVICES:
         raise fail(f"--device: unknown device {device!r}; known: {', '.join(DEVICES)}")
-    if distribution not in ("uniform", "normal"):
-        raise fail(f"--distribution must be uniform or normal, got {distribution!r}")
     tolerances = _tolerances(tol or [])
     try:
         dev = _device(device, noise, device_pose, tool_offset)
@@ -363,11 +362,14 @@ def simulate_command(
     )
 
 
-def _simulate_inclinometer(model, poses, out, noise, seed, drawn: tuple) -> None:
+def _simulate_inclinometer(
+    model, poses, out, noise, seed, drawn: tuple[list[str] | None, str, str, Distribution]
+) -> None:
     """``simulate --device inclinometer``; ``drawn``: --tol, --length-tol, --angle-tol, --distribution."""
     from robocal.cli.inclinometer import simulate_inclinometer
 
-    draw = lambda: _true_model(model, _tolerances(drawn[0] or []), *drawn[1:], seed)[0]  # noqa: E731
+    tol, length_tol, angle_tol, distribution = drawn
+    draw = lambda: _true_model(model, _tolerances(tol or []), length_tol, angle_tol, distribution, seed)[0]  # noqa: E731
     simulate_inclinometer(model, draw, poses, out, noise, seed)
 
 
@@ -422,7 +424,7 @@ def _device(device: str, noise: str | None, device_pose: str | None, tool_offset
 
 
 def _true_model(
-    model, tolerances: dict, length_tol: str, angle_tol: str, distribution: str, seed: int | None
+    model, tolerances: dict, length_tol: str, angle_tol: str, distribution: Distribution, seed: int | None
 ):
     """The drawn true robot, and the length and angle tolerances in m and rad."""
     from robocal.measure.simulate import draw_true_model, parse_quantity_option
@@ -443,7 +445,7 @@ def _true_model(
         length=length,
         angle=angle,
         distribution=distribution,
-        seed=model_rng,  # type: ignore[arg-type]
+        seed=model_rng,
     )
     return true, length, angle
 

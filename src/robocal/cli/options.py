@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
+from robocal.choices import IncompleteMode, LimitsMode
 from robocal.console import fail
 
 if TYPE_CHECKING:
@@ -142,13 +143,13 @@ Orientation = Annotated[
     ),
 ]
 Limits = Annotated[
-    str,
+    LimitsMode,
     typer.Option(
         "--limits", metavar="error|warn|ignore", help="what to do with joint values beyond the model's limits"
     ),
 ]
 Incomplete = Annotated[
-    str,
+    IncompleteMode,
     typer.Option(
         "--incomplete",
         metavar="error|drop",

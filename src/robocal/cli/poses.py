@@ -16,7 +16,6 @@ ordered so that all joints move between consecutive poses.
 
 from __future__ import annotations
 
-from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -24,6 +23,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from robocal.choices import IndexName, PoseMethod, TargetKind
 from robocal.cli import options
 from robocal.cli.options import Force, Robot, length_vector, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
@@ -36,13 +36,6 @@ MAX_POSES = 100_000
 MAX_POOL = 100_000
 
 
-class Method(StrEnum):
-    random = "random"
-    optimal = "optimal"
-    iso9283 = "iso9283"
-    diagonal = "diagonal"
-
-
 def _region(text: str | None) -> np.ndarray | None:
     if text is None:
         return None
@@ -53,7 +46,7 @@ def _region(text: str | None) -> np.ndarray | None:
 
 
 MethodOption = Annotated[
-    Method,
+    PoseMethod,
     typer.Option("--method", metavar="random|optimal|iso9283|diagonal", help="how to choose the poses"),
 ]
 NOption = Annotated[
@@ -67,7 +60,10 @@ NOption = Annotated[
     ),
 ]
 IndexOption = Annotated[
-    str, typer.Option("--index", metavar="O1..O5", help="index maximised by --method optimal")
+    IndexName,
+    typer.Option(
+        "--index", metavar="O1..O5", help="index maximised by --method optimal", case_sensitive=False
+    ),
 ]
 PoolOption = Annotated[
     int,
@@ -83,7 +79,7 @@ RowsOption = Annotated[
     ),
 ]
 KindOption = Annotated[
-    str | None,
+    TargetKind | None,
     typer.Option("--kind", metavar="position|pose|axis", help="iso9283/diagonal: the IK constraint"),
 ]
 RegionOption = Annotated[
@@ -99,7 +95,7 @@ RegionOption = Annotated[
 def poses_command(
     robot: Robot,
     out: Annotated[Path, out_option("poses CSV to write (SI units)")],
-    method: MethodOption = Method.random,
+    method: MethodOption = "random",
     n: NOption = None,
     seed: Annotated[int, options.seed()] = 0,
     index: IndexOption = "O1",
@@ -117,24 +113,19 @@ def poses_command(
     if rows in ("point", "plane", "distance"):  # a socket, a plate, a ball-bar (robocal.cli.constraints)
         from robocal.cli.constraints import plan_constraint_poses
 
-        return plan_constraint_poses(m, rows, out, n=n or 30, pool=pool, index=index.upper(), seed=seed)
-    index = index.upper()
-    if index not in ("O1", "O2", "O3", "O4", "O5"):
-        raise fail(f"--index {index!r}: expected one of O1, O2, O3, O4, O5")
+        return plan_constraint_poses(m, rows, out, n=n or 30, pool=pool, index=index, seed=seed)
     if rows not in ("position", "pose"):
         raise fail(f"--rows {rows!r}: expected 'position' or 'pose'")
-    if kind is not None and kind not in ("pose", "axis", "position"):
-        raise fail(f"--kind {kind!r}: expected 'pose', 'axis' or 'position'")
     box = _region(region)
-    meta = {"robot": m.name, "method": method.value, "seed": str(seed)}
+    meta = {"robot": m.name, "method": method, "seed": str(seed)}
     try:
-        if method is Method.random:
+        if method == "random":
             from robocal.measure.poses import random_poses
 
             q = random_poses(m, n or 30, seed=seed)
-        elif method is Method.optimal:
+        elif method == "optimal":
             q = _optimal(m, n or 30, pool, index, rows, seed, meta)
-        elif method is Method.iso9283:
+        elif method == "iso9283":
             q = _iso9283(m, n, kind, box, seed, meta)
         else:
             q = _diagonal(m, n or 118, kind, box, seed)

@@ -86,7 +86,7 @@ def study_command(
     from robocal.study import StudyError, load_study_config, run_study
 
     if not config.is_file():
-        problem = input_problem(config, "study file")
+        problem = input_problem(config, "study file") or f"study file {config}: not a file"
         raise fail(f"study file {problem}" if problem.endswith("does not exist") else problem)
     try:
         cfg = load_study_config(config)

@@ -60,7 +60,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal import spatial
+from robocal import choices, spatial
 from robocal.compensate import safety
 from robocal.compensate.nominal_ik import nominal_solutions
 from robocal.compensate.result import Compensation
@@ -73,7 +73,7 @@ __all__ = ["compensate_targets", "filter_program", "nominal_model"]
 
 Array = NDArray[np.float64]
 Calibrated = CalibrationResult | Model
-Frame = Literal["base", "measurement"]
+Frame = choices.Frame  # the one table of choices (robocal.choices)
 
 
 # ---------------------------------------------------------------------- models

@@ -13,6 +13,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from robocal import choices
 from robocal.model.chain import Model
 from robocal.model.rank import IdentifiableSubset, identifiable_subset
 
@@ -29,7 +30,7 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-IndexName = Literal["O1", "O2", "O3", "O4", "O5"]
+IndexName = choices.IndexName  # the one table of choices (robocal.choices)
 Rows = Literal["position", "pose"]
 INDICES: tuple[str, ...] = ("O1", "O2", "O3", "O4", "O5")
 

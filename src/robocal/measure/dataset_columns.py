@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Literal, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal import csvfile
+from robocal import choices, csvfile
 from robocal.measure.measurements import (
     _ANGLES,
     _KNOWN,
@@ -89,7 +89,7 @@ _short = csvfile.short
 
 #: Problems that make a row incomplete: with ``incomplete="drop"`` the row is left out.
 INCOMPLETE_CODES = frozenset({"empty", "not-a-number", "not-finite", "ragged"})
-IncompleteMode = Literal["error", "drop"]
+IncompleteMode = choices.IncompleteMode  # the one table of choices (robocal.choices)
 
 #: Problems of one kind listed at most (one more line counts the rest): a file with a
 #: million bad cells must not cost a million messages' memory.

@@ -5,16 +5,17 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import Literal, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from robocal import choices
 from robocal.model.chain import Model
 
 Array = NDArray[np.float64]
-TargetKind = Literal["position", "pose", "axis"]
+TargetKind = choices.TargetKind  # the one table of choices (robocal.choices)
 
 
 _POOL_SEED = 20240917  # the seed pool is fixed: results depend on `seed` only through random restarts

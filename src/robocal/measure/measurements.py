@@ -12,6 +12,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal import choices
+
 Array = NDArray[np.float64]
 
 
@@ -60,7 +62,7 @@ PROBLEM_CODES = {
 }
 #: A measured position farther than this from the device (m) is a wrong cell, not a reach
 MAX_POSITION = 1e4
-LimitsMode = Literal["error", "warn", "ignore"]
+LimitsMode = choices.LimitsMode  # the one table of choices (robocal.choices)
 
 _POSITION = ("x", "y", "z")
 _QUATERNION = ("qw", "qx", "qy", "qz")

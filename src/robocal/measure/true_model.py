@@ -18,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 
+from robocal.choices import Distribution
 from robocal.model.chain import Model
 from robocal.units import ANGLE_UNITS, LENGTH_UNITS, SPELLINGS
 
@@ -70,7 +71,7 @@ def draw_true_model(
     *,
     length: float | str = 0.5e-3,
     angle: float | str = math.radians(0.05),
-    distribution: Literal["uniform", "normal"] = "uniform",
+    distribution: Distribution = "uniform",
     seed: int | np.random.Generator | None = None,
     params: Literal["free", "all"] | Iterable[str] = "free",
 ) -> Model:

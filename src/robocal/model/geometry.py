@@ -11,12 +11,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from robocal import spatial
+from robocal import choices, spatial
 
 JointType = Literal["revolute", "prismatic"]
 
 
-Measure = Literal["position", "pose"]
+Measure = choices.Measure  # the one table of choices (robocal.choices)
 
 
 DEFAULT_PARALLEL_TOLERANCE = math.radians(45.0)
