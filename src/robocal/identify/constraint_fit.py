@@ -198,8 +198,7 @@ def build_constraint_problem(
     if tool is not None:
         T_tool = np.eye(4)
         T_tool[:3, 3] = tool
-    # measurement_chain takes None for no tool (its annotation says Array)
-    chain = measurement_chain(robot, T_frame, T_tool, "position", fit_frame)  # type: ignore[arg-type]
+    chain = measurement_chain(robot, T_frame, T_tool, "position", fit_frame)  # T_tool None: no tool
     p = chain.fk(data.q)[:, :3, 3]
     points = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
     planes = _start_planes(p, data)
