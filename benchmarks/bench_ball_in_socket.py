@@ -24,7 +24,7 @@ Models, side by side:
 * complete LS: every parameter of the complete position model these data can identify
   (the rank test drops the base frame: fixed points cannot see it; pruning drops the poorly
   determined, ``rc.Pruning`` defaults), least squares;
-* complete + prior: the same with :class:`~robocal.identify.constraints.NominalPrior`'s
+* complete + prior: the same with :class:`~robocal.identify.constraints.model.NominalPrior`'s
   default (lengths σ 0.3 mm, angles σ 5 mrad about the nominal geometry; the measurements
   weighted by σ̂ of the least-squares fit): ``robocal calibrate`` of a constraint file.
 
@@ -48,11 +48,11 @@ from pathlib import Path
 
 import numpy as np
 
-from robocal.identify.constraint_fit import calibrate_constraints, constraint_figures
-from robocal.identify.constraints import NominalPrior
+from robocal.identify.constraints.fit import calibrate_constraints, constraint_figures
+from robocal.identify.constraints.model import NominalPrior
 from robocal.identify.options import Pruning
-from robocal.measure.constraint_set import ConstraintSet
-from robocal.model.urdf import URDFError, model_from_urdf
+from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.model.urdf.read import URDFError, model_from_urdf
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "ball_in_socket"
 PLACEMENTS = ("front", "right", "back-high")

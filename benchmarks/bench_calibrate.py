@@ -45,8 +45,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import readme_table
 import robocal as rc
 from robocal.measure.devices import LaserTracker
-from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
-from robocal.model.builder import Tcp, load_geometry
+from robocal.measure.simulate import VirtualRobot, simulate
+from robocal.measure.true_model import draw_true_model
+from robocal.model.builder import load_geometry
+from robocal.model.geometry import Tcp
 
 ROOT = Path(__file__).resolve().parents[1]
 #: CPU time of this thread: robocal and every baseline run on one thread (BLAS threads 1), so

@@ -4,11 +4,11 @@ Two cases from issue 38 (bounded work):
 
 * a URScript of ``--targets`` joint targets ``movej([...])`` (every one corrected through a
   calibrated UR10 whose geometry differs from the nominal by ~2 mm / 0.2°): the wall time of
-  :func:`robocal.compensate.programs.filter_program_text`, split into parsing (with the
+  :func:`robocal.compensate.programs.filter_file.filter_program_text`, split into parsing (with the
   comment/string mask), correction and rewriting; linear-time parsing and rewriting keep the
   whole in seconds;
 * a comment-only program of ``--comment-mb`` MB given to
-  :func:`robocal.compensate.programs.filter_program_file`: refused before it is read when above
+  :func:`robocal.compensate.programs.filter_file.filter_program_file`: refused before it is read when above
   the size cap (``MAX_PROGRAM_BYTES``), else filtered; the peak memory allocated while filtering
   (tracemalloc) is reported: a small multiple of the file size.
 
@@ -61,8 +61,8 @@ def _pose_program(n: int) -> str:
 
 def bench_long(text: str, what: str) -> None:
     import robocal as rc
-    from robocal.compensate import program_filter as steps
-    from robocal.compensate.programs import filter_program_text
+    import robocal.compensate.programs.steps as steps
+    from robocal.compensate.programs.filter_file import filter_program_text
     from robocal.measure import draw_true_model
 
     nominal = rc.robot("ur10")
@@ -85,7 +85,7 @@ def bench_long(text: str, what: str) -> None:
 _MEMORY_SCRIPT = """
 import sys, time, tracemalloc
 import robocal as rc
-from robocal.compensate.programs import ProgramError, filter_program_file
+from robocal.compensate.programs.filter_file import ProgramError, filter_program_file
 model = rc.robot("ur10")
 tracemalloc.start()
 t0 = time.perf_counter()

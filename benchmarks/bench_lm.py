@@ -1,4 +1,4 @@
-"""Levenberg-Marquardt: the compiled iteration (robocal.identify.lm_kernels) against its numpy
+"""Levenberg-Marquardt: the compiled iteration (robocal.identify.kernels.lm) against its numpy
 reference (``tests/reference_lm.py``: ``levenberg_marquardt_batch_numpy``), in the same run.
 
 The problem is ``bench_calibrate``'s: a 100-pose UR10 (27 unknowns, 300 weighted residuals),

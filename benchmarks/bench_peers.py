@@ -96,7 +96,7 @@ def _median_time(fn, repeats: int) -> tuple[float, object]:
 def run_robocal(repeats: int) -> list[dict]:
     import robocal as rc
     from robocal.measure import Measurements
-    from robocal.model.urdf import build_from_urdf
+    from robocal.model.urdf.read import build_from_urdf
 
     complete = build_from_urdf(URDF, "position", TIP).model
     offsets = [s.name for s in complete.steps if s.joint is not None]

@@ -39,7 +39,7 @@ def cv_error(model: rc.Model, data: rc.Measurements, ratio: float, **options) ->
 
 
 def main() -> None:
-    from robocal.model.urdf import build_from_urdf
+    from robocal.model.urdf.read import build_from_urdf
 
     cases: list[tuple[str, rc.Model, rc.Measurements, dict]] = []
     series_a = read(DATA)

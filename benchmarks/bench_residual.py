@@ -10,7 +10,7 @@
   10,000 training poses (physics alone, then the default hybrid path), against one that
   only reads the data.  The residual's design
   matrix is never held whole (its Gram matrix is accumulated over chunks of 2,048 poses,
-  ``robocal.identify.residual``), so the residual adds O(m²) + one chunk; the physical
+  ``robocal.identify.residual.stage``), so the residual adds O(m²) + one chunk; the physical
   fit's Jacobians are O(n p).
 
 The 10,000-pose fits (issue 20's target: the hybrid ≤ 30 s) report wall and CPU time of

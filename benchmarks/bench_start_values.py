@@ -1,4 +1,4 @@
-"""Start values of a calibration: the compiled kernel (robocal.identify.start_kernels, behind
+"""Start values of a calibration: the compiled kernel (robocal.identify.kernels.start, behind
 ``initial_frames_and_tools``) against the numpy implementation it replaced
 (``tests/test_start_kernels.py::reference``), in the same run.
 

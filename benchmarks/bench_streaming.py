@@ -54,7 +54,7 @@ def run(n: int, mode: str) -> dict:
     """One size in this process: data, then the streaming or the dense calibration."""
     import robocal as rc
     from robocal.identify.streaming import refit
-    from robocal.measure.dataset import Measurements
+    from robocal.measure.measurements import Measurements
 
     model, q, position = make_data(n)
     t0 = time.perf_counter()

@@ -73,7 +73,7 @@ def check(path: str | os.PathLike[str], name: str) -> str | None:
 
 def write_block(path: str | os.PathLike[str], name: str, body: str) -> None:
     """Replace the block ``name`` of the file ``path`` (atomically)."""
-    from robocal.model.files import atomic_write_bytes
+    from robocal.outdir import atomic_write_bytes
 
     path = Path(path)
     text = replace_block(path.read_text(encoding="utf-8"), name, body)

@@ -28,15 +28,12 @@ import numpy as np
 import scipy.optimize
 
 import robocal as rc
-from robocal.identify.observability import (
-    design_efficiency_bound,
-    identifiable_parameters,
-    observability,
-    scaled_jacobian,
-    select_poses,
-)
-from robocal.measure.ik import random_configurations
-from robocal.measure.poses import position_sigma_min, random_poses
+from robocal.identify.design_bound import design_efficiency_bound
+from robocal.identify.observability_indices import identifiable_parameters, observability, scaled_jacobian
+from robocal.identify.pose_selection import select_poses
+from robocal.measure.ik_starts import random_configurations
+from robocal.measure.pose_set import position_sigma_min
+from robocal.measure.poses import random_poses
 from robocal.model.catalog import robots
 
 N_POSES = 30

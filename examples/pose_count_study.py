@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 import robocal as rc
-from robocal.identify.observability import identifiable_parameters, observability, select_poses
+from robocal.identify.observability_indices import identifiable_parameters, observability
+from robocal.identify.pose_selection import select_poses
 from robocal.measure.poses import random_poses
 
 COUNTS = (8, 10, 12, 15, 20, 30, 50, 100)

@@ -58,7 +58,7 @@ def walkthrough() -> None:
     for label, result in runs.items():
         print(f"  {label:<34} {rc.validate(result, test).mean * 1e3:.4f} mm")
     print("\nthe simultaneous calibration's joint parameters (± 1σ):")
-    from robocal.identify.calibrate import effect_lines
+    from robocal.identify.effects import effect_lines
 
     for line in effect_lines(runs["simultaneous (level 3)"].effect_estimates()):
         print("  " + line)

@@ -1,6 +1,6 @@
 """The Levenberg-Marquardt iteration of
 :func:`robocal.identify.solvers.levenberg_marquardt_batch` in numpy: the reference its
-compiled kernels (:mod:`robocal.identify.lm_kernels`) are tested against
+compiled kernels (:mod:`robocal.identify.kernels.lm`) are tested against
 (``tests/test_lm_kernels.py``) and timed against (``benchmarks/bench_lm.py``).  Nothing in
 ``src`` runs it (moved from ``robocal.identify.lm_numpy``, issue 32).
 

@@ -8,15 +8,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.model.builder import (
-    GeometryError,
-    JointGeometry,
-    Tcp,
-    build,
-    build_model,
-    geometry_fk,
-    load_geometry,
-)
+from robocal.model.builder import build, build_model, load_geometry
+from robocal.model.geometry import GeometryError, JointGeometry, Tcp, geometry_fk
 from robocal.model.singularity import check_model
 
 GEOMETRY = Path(__file__).resolve().parents[1] / "examples" / "geometry"

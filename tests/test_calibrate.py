@@ -9,11 +9,14 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify.calibrate import CalibrationResult, screen_unidentifiable
-from robocal.measure.dataset import Measurements
+from robocal.identify.result import CalibrationResult
+from robocal.identify.stages import screen_unidentifiable
 from robocal.measure.devices import LaserTracker
-from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
-from robocal.model.builder import Tcp, load_geometry
+from robocal.measure.measurements import Measurements
+from robocal.measure.simulate import VirtualRobot, simulate
+from robocal.measure.true_model import draw_true_model
+from robocal.model.builder import load_geometry
+from robocal.model.geometry import Tcp
 
 GEOMETRY = Path(__file__).resolve().parents[1] / "examples" / "geometry"
 TRACKER = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.2, -0.1, 2.5]), [2.2, -1.1, 0.4])
@@ -357,7 +360,7 @@ def test_compliance_columns_of_the_prediction_match_finite_differences():
 
 
 def test_fit_to_noise_of_gaussian_residuals_and_of_an_unmodelled_error():
-    from robocal.identify.guards import fit_to_noise
+    from robocal.identify.noise_check import fit_to_noise
 
     rng = np.random.default_rng(8)
     sigma = np.full((400, 3), 2e-5)
@@ -570,7 +573,7 @@ def test_bounded_fit_widens_bounds_of_absorbing_parameters_only_when_asked(ur10_
 
 
 def test_parameters_at_bounds_lists_exactly_those_at_a_bound():
-    from robocal.identify.calibrate import parameters_at_bounds
+    from robocal.identify.bounds import parameters_at_bounds
 
     names = ["at_lower", "at_upper", "inside", "beyond", "one_sided", "free"]
     lo = np.array([-1.0, -1.0, -1.0, -1.0, 0.0, -np.inf])

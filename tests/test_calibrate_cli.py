@@ -10,7 +10,8 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
-from robocal.measure.dataset import Measurements, write_measurements
+from robocal.measure.dataset.writer import write_measurements
+from robocal.measure.measurements import Measurements
 
 runner = CliRunner()
 TRACKER = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.1, 0.2, -2.0]), [1.5, 2.0, -0.2])
@@ -19,7 +20,7 @@ TRACKER = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.1, 0.2, -2.0]), 
 @pytest.fixture(scope="module")
 def measured(tmp_path_factory):
     """A UR10 with 0.3 mm / 0.03° errors measured by a tracker at a 109 mm probe, in mm."""
-    from robocal.measure.simulate import draw_true_model
+    from robocal.measure.true_model import draw_true_model
 
     model = rc.robot("ur10")
     true = draw_true_model(model, length=3e-4, angle=np.radians(0.03), seed=2)
@@ -152,9 +153,7 @@ def test_validate_and_calibrate_corner_cases(measured, tmp_path):
     path, _ = measured
     base = ["--length-unit", "mm", "--tool", "0,0,109mm"]
     out = tmp_path / "cal"
-    result = runner.invoke(
-        app, ["calibrate", "ur10", "--data", str(path), *base, "--out", str(out)]
-    )
+    result = runner.invoke(app, ["calibrate", "ur10", "--data", str(path), *base, "--out", str(out)])
     assert result.exit_code == 0, result.output
     # --out naming a file: refused before the fit
     (tmp_path / "afile").write_text("x")

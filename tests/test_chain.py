@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.model.chain import Joint, Model, Step
+from robocal.model.chain import Model
 from robocal.model.conventions import dh, frame6, model_from_steps, tool_point
+from robocal.model.steps import Joint, Step
 from robocal.spatial import pose_error
 from tests.reference import product
 

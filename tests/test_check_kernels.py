@@ -1,4 +1,4 @@
-"""The compiled checks of the data (robocal.identify.check_kernels) against the numpy
+"""The compiled checks of the data (robocal.identify.kernels.check) against the numpy
 expressions they replace, and the messages of robocal.identify.guards.check_data."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify.check_kernels import data_ranges, position_errors
 from robocal.identify.guards import CalibrationGuardError, check_data
-from robocal.measure.dataset import Measurements
+from robocal.identify.kernels.check import data_ranges, position_errors
+from robocal.measure.measurements import Measurements
 
 
 @pytest.mark.parametrize("n", [1, 2, 57])
@@ -71,7 +71,7 @@ def test_position_errors_match_numpy(rows):
 def test_fit_to_noise_from_sums_is_the_numpy_formula():
     from scipy.stats import chi2 as chi2_distribution
 
-    from robocal.identify.guards import fit_to_noise  # re-exported from noise_check
+    from robocal.identify.noise_check import fit_to_noise  # re-exported from noise_check
 
     rng = np.random.default_rng(5)
     sigma = rng.uniform(1e-5, 3e-5, (60, 3))

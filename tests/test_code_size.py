@@ -20,6 +20,7 @@ MAX_MODULE_LINES = 500
 MAX_FUNCTION_LINES = 80
 _LONG = re.compile(r"#\s*long:\s*\S.{5,}")
 
+
 def _has_reason(lines: list[str], *line_numbers: int) -> bool:
     return any(1 <= n <= len(lines) and _LONG.search(lines[n - 1]) for n in line_numbers)
 

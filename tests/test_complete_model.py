@@ -10,9 +10,10 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli import app
-from robocal.measure.dataset import write_measurements
+from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.devices import LaserTracker
-from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
+from robocal.measure.simulate import VirtualRobot, simulate
+from robocal.measure.true_model import draw_true_model
 from robocal.model.complete import geometry_from_model
 from robocal.model.dynamics import gravity_torques
 from robocal.model.singularity import check_model, parameterisation_warnings
@@ -84,7 +85,7 @@ def test_bodies_are_re_expressed_with_their_inertia():
     its world pose: same com and inertia in the base frame at any q."""
     import dataclasses
 
-    from robocal.model.chain import Body
+    from robocal.model.steps import Body
 
     catalog = rc.robot("ur10")
     body = Body("probe", "alpha3", 1.5, (0.1, -0.02, 0.05), (0.02, 0.03, 0.04, 0.001, -0.002, 0.003))
@@ -112,8 +113,9 @@ def test_bodies_are_re_expressed_with_their_inertia():
 def test_geometry_from_model_reads_axes_about_any_local_axis():
     """Joints about the x or y axis of their step, and a prismatic joint: the geometry
     reproduces the chain, and so does the model built from it."""
-    from robocal.model.builder import geometry_fk
-    from robocal.model.chain import Joint, Model, Step
+    from robocal.model.chain import Model
+    from robocal.model.geometry import geometry_fk
+    from robocal.model.steps import Joint, Step
 
     steps = (
         Step("Tz", "h", 0.3),
@@ -243,7 +245,7 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     complete model with --chain complete; --chain catalog is refused with --model."""
     import dataclasses
 
-    from robocal.measure.dataset import Measurements
+    from robocal.measure.measurements import Measurements
 
     robot = tilted_ur10(1)
     q = poses(robot.nominal, 60, 7)
@@ -260,9 +262,7 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     assert "model: ur10_complete, the complete model built from ur10's joint geometry for pose" in flat(
         result.output
     )
-    result = runner.invoke(
-        app, [*base, "ur10", "--measure", "position", "--out", str(tmp_path / "b")]
-    )
+    result = runner.invoke(app, [*base, "ur10", "--measure", "position", "--out", str(tmp_path / "b")])
     assert result.exit_code == 0, result.output
     assert "for position measurements" in flat(result.output)
     path = rc.save_model(dataclasses.replace(rc.robot("ur10"), name="my_ur10"), tmp_path / "my_ur10.yaml")
@@ -271,14 +271,10 @@ def test_cli_chain_choice_for_pose_data_and_model_files(tmp_path):
     assert "model: my_ur10, the model file's chain as it is" in flat(result.output)
     assert "warning: the my_ur10 chain cannot describe" in flat(result.stdout)
     assert "rc.calibration_model(model, 'pose')" in flat(result.stdout)
-    result = runner.invoke(
-        app, [*base, str(path), "--chain", "complete", "--out", str(tmp_path / "d")]
-    )
+    result = runner.invoke(app, [*base, str(path), "--chain", "complete", "--out", str(tmp_path / "d")])
     assert result.exit_code == 0, result.output
     assert "model: my_ur10_complete" in flat(result.output) and "warning: the" not in flat(result.output)
-    result = runner.invoke(
-        app, [*base, str(path), "--chain", "catalog", "--out", str(tmp_path / "e")]
-    )
+    result = runner.invoke(app, [*base, str(path), "--chain", "catalog", "--out", str(tmp_path / "e")])
     assert result.exit_code != 0 and "--chain catalog is for a catalog ROBOT" in flat(result.output)
     result = runner.invoke(app, [*base, "ur10", "--chain", "dh", "--out", str(tmp_path / "f")])
     assert result.exit_code != 0 and "complete or catalog" in flat(result.output)

@@ -15,10 +15,10 @@ import pytest
 from typer.testing import CliRunner
 
 from robocal.cli import app
-from robocal.identify.constraint_fit import constraint_figures
-from robocal.identify.constraint_result import load_constraint_calibration
-from robocal.measure.constraint_data import read_constraints, write_constraints
-from robocal.measure.constraint_sim import simulate_constraints
+from robocal.identify.constraints.fit import constraint_figures
+from robocal.identify.constraints.result import load_constraint_calibration
+from robocal.measure.constraints.data import read_constraints, write_constraints
+from robocal.measure.constraints.sim import simulate_constraints
 from robocal.measure.true_model import draw_true_model
 from robocal.model.catalog import robot
 from robocal.model.complete import calibration_model
@@ -286,7 +286,7 @@ def test_real_panda_report_and_urdf_of_its_description(tmp_path):
     on another in the report, exported into its own URDF with the ball link: Pinocchio's
     ball centre is the calibrated model's."""
     from robocal.model.files import save_model
-    from robocal.model.urdf import model_from_urdf
+    from robocal.model.urdf.read import model_from_urdf
 
     urdf = PANDA / "urdf" / "panda.urdf"
     save_model(model_from_urdf(urdf, measure="position", tip="ball_link"), tmp_path / "panda.yaml")

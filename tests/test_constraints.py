@@ -12,23 +12,23 @@ import pytest
 
 import robocal as rc
 from robocal import spatial
-from robocal.identify.constraint_fit import (
+from robocal.identify.constraints.fit import (
     build_constraint_problem,
     calibrate_constraints,
     constraint_figures,
     kind_identifiable,
 )
 from robocal.identify.options import Pruning
-from robocal.measure.constraint_data import (
+from robocal.measure.constraints.data import (
     ConstraintFileError,
     constraint_kind,
     parse_distance,
     read_constraints,
     write_constraints,
 )
-from robocal.measure.constraint_set import ConstraintSet
-from robocal.measure.constraint_sim import simulate_constraints
-from robocal.measure.ik import random_configurations
+from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.measure.constraints.sim import simulate_constraints
+from robocal.measure.ik_starts import random_configurations
 from robocal.measure.true_model import draw_true_model
 
 BASE = {"base_x", "base_y", "base_rx", "base_ry", "theta1", "d1"}  # the complete model's base frame
@@ -223,7 +223,7 @@ def panda_model():
     finger's ``<mimic>`` (off the chain) removed first if ``model build`` refuses it."""
     import tempfile
 
-    from robocal.model.urdf import URDFError, model_from_urdf
+    from robocal.model.urdf.read import URDFError, model_from_urdf
 
     urdf = PANDA / "urdf" / "panda.urdf"
     try:
@@ -331,7 +331,7 @@ def test_cli_refuses_bad_constraint_input_in_one_line(tmp_path):
 
 @pytest.mark.parametrize("kind", ["point", "plane", "distance"])
 def test_pose_planning_on_each_kinds_jacobian(ur10, kind):
-    from robocal.identify.constraint_poses import select_constraint_poses
+    from robocal.identify.constraints.poses import select_constraint_poses
 
     pool, _ = simulate_constraints(
         ur10, kind, 240 if kind == "distance" else 120, sigma=1e-9, count=3, seed=2

@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify.constraint_fit import (
+from robocal.identify.constraints.fit import (
     build_constraint_problem,
     calibrate_constraints,
     constraint_figures,
 )
-from robocal.identify.constraints import NominalPrior
+from robocal.identify.constraints.model import NominalPrior
 from robocal.identify.options import Pruning
-from robocal.measure.constraint_data import write_constraints
-from robocal.measure.constraint_set import ConstraintSet
-from robocal.measure.constraint_sim import simulate_constraints
+from robocal.measure.constraints.data import write_constraints
+from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.measure.constraints.sim import simulate_constraints
 from robocal.measure.true_model import draw_true_model
 
 BASE = {"base_x", "base_y", "base_rx", "base_ry", "theta1", "d1"}  # the complete model's base frame
@@ -117,7 +117,7 @@ def test_prior_must_be_positive():
 
 # ---------------------------------------------------------------------- the real Panda
 def _panda():
-    from robocal.model.urdf import URDFError, model_from_urdf
+    from robocal.model.urdf.read import URDFError, model_from_urdf
 
     urdf = PANDA / "urdf" / "panda.urdf"
     try:

@@ -11,15 +11,11 @@ from typer.testing import CliRunner
 import robocal as rc
 from robocal import spatial
 from robocal.cli import app
-from robocal.measure.dataset import (
-    MeasurementFileError,
-    Measurements,
-    MeasurementWarning,
-    check_measurements,
-    read_measurements,
-    write_measurements,
-)
-from robocal.model.chain import Joint, Model, Step
+from robocal.measure.dataset.read import check_measurements, read_measurements
+from robocal.measure.dataset.writer import write_measurements
+from robocal.measure.measurements import MeasurementFileError, Measurements, MeasurementWarning
+from robocal.model.chain import Model
+from robocal.model.steps import Joint, Step
 
 runner = CliRunner()
 

@@ -7,19 +7,17 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from robocal import spatial
+from robocal.measure.device_base import look_at
 from robocal.measure.devices import (
     DEVICES,
-    CalibrationPlate,
     Camera,
     LaserTracker,
     OpticalCMM,
-    PenOnPaper,
     device_from_dict,
-    look_at,
     make_device,
     marker_triangle,
-    plate_points,
 )
+from robocal.measure.plates import CalibrationPlate, PenOnPaper, plate_points
 
 
 def random_transforms(n, rng, scale=1.0):

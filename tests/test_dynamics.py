@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.model.chain import Body, Joint, Model, Step
+from robocal.model.chain import Model
 from robocal.model.dynamics import Payload, gravity_torques, joint_moments, joint_wrenches, to_pinocchio
+from robocal.model.steps import Body, Joint, Step
 
 pin = pytest.importorskip("pinocchio")
 G = 9.81
@@ -191,7 +192,7 @@ def test_static_pass_equals_pinocchio_rnea(name, compiled, monkeypatch):
     from robocal.model.dynamics import _rnea_wrenches, _static_wrenches
 
     if not compiled:
-        monkeypatch.setattr(chain, "_kernels", lambda compiled=None: None)
+        monkeypatch.setattr(chain, "kernels_loader", lambda compiled=None: None)
 
     model = rc.robot(name)
     rng = np.random.default_rng(11)

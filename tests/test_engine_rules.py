@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify import fused, rules, stage_kernels
+import robocal.identify.kernels.stage as stage_kernels
+from robocal.identify import fused, rules
 from robocal.identify.batch import calibrate_batch
 from robocal.identify.options import Pruning
 from robocal.identify.rules import NO_CANDIDATE, Rules

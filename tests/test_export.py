@@ -13,10 +13,11 @@ from typer.testing import CliRunner
 import robocal as rc
 from robocal import spatial
 from robocal.cli import app
-from robocal.model.chain import Step
+from robocal.model.steps import Step
 from robocal.model.ur_kinematics import URKinematicsError, read_ur_kinematics, ur_kinematics
-from robocal.model.urdf import URDFError, build_from_urdf
-from robocal.model.urdf_export import calibrated_urdf, rpy_from_matrix
+from robocal.model.urdf.export import calibrated_urdf
+from robocal.model.urdf.read import URDFError, build_from_urdf
+from robocal.model.urdf.xml_text import rpy_from_matrix
 
 pin = pytest.importorskip("pinocchio")
 DATA = Path(__file__).parent / "data"
@@ -195,7 +196,8 @@ def test_catalog_robot_gets_a_kinematic_urdf_of_its_own(tmp_path, name):
 
 def test_puma560_with_tilted_parallel_axes(tmp_path):
     """PUMA 560 rebuilt by the builder (its ∥ pair gets a Hayati β), calibrated with a tilt."""
-    from robocal.model.builder import JointGeometry, Tcp, build
+    from robocal.model.builder import build
+    from robocal.model.geometry import JointGeometry, Tcp
 
     puma = rc.robot("puma560")
     F = puma.joint_frames(np.zeros(6))

@@ -18,11 +18,11 @@ import robocal as rc
 from robocal import spatial
 from robocal.cli import app
 from robocal.compensate.export import export_urdf, kinematic_part
-from robocal.identify.calibrate import CalibrationResult
-from robocal.model.chain import Role
+from robocal.identify.result import CalibrationResult
+from robocal.model.steps import Role
 from robocal.model.ur_kinematics import read_ur_kinematics, ur_kinematics_fk
-from robocal.model.urdf import build_from_urdf
-from robocal.model.urdf_xml import attr, check_name, comment_text
+from robocal.model.urdf.read import build_from_urdf
+from robocal.model.urdf.xml_text import attr, check_name, comment_text
 
 DATA = Path(__file__).parent / "data"
 UR10_URDF = DATA / "ur10.urdf"
@@ -81,7 +81,7 @@ def _tool_points(T):
 
 
 def _q(model, n=25, seed=5):
-    from robocal.measure.ik import random_configurations
+    from robocal.measure.ik_starts import random_configurations
 
     return random_configurations(model, n, np.random.default_rng(seed))
 
@@ -249,7 +249,7 @@ def test_names_from_a_source_urdf_are_escaped(tmp_path):
     src.write_text(text)
     nominal = build_from_urdf(src, measure="position").model
     result_model = dataclasses.replace(nominal, steps=nominal.steps)
-    from robocal.model.urdf_export import calibrated_urdf
+    from robocal.model.urdf.export import calibrated_urdf
 
     ex = calibrated_urdf(result_model, src, T_device_base=np.eye(4), device_link="world")
     root = ET.fromstring(ex.text)

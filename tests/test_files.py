@@ -6,7 +6,8 @@ import pytest
 import yaml
 
 import robocal as rc
-from robocal.model.files import ModelFileError, load_model, model_from_dict, save_model
+from robocal.model.files import load_model, model_from_dict, save_model
+from robocal.model.yaml_files import ModelFileError
 
 
 @pytest.mark.parametrize("name", rc.robots())

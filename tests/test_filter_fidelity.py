@@ -10,10 +10,12 @@ import pytest
 from typer.testing import CliRunner
 
 import robocal as rc
+import robocal.compensate.programs.filter_file as programs
 from robocal.cli import app
-from robocal.compensate import programs
 from robocal.compensate.compensation import filter_program
-from robocal.compensate.programs import ProgramError, filter_program_file, filter_program_text, krl_run_id
+from robocal.compensate.programs.filter_file import filter_program_file, filter_program_text
+from robocal.compensate.programs.krl import krl_run_id
+from robocal.compensate.programs.syntax import ProgramError
 from robocal.measure import draw_true_model
 
 EXAMPLES = Path(__file__).parents[1] / "examples" / "programs"

@@ -12,10 +12,11 @@ import pytest
 from typer.testing import CliRunner
 
 import robocal as rc
+import robocal.compensate.programs.filter_file as pg
+import robocal.compensate.programs.steps as steps
+import robocal.compensate.programs.values as program_values
 from robocal import spatial
 from robocal.cli import app
-from robocal.compensate import program_filter as steps
-from robocal.compensate import programs as pg
 from robocal.compensate.result import table_path
 from robocal.compensate.safety import MAX_DAMPED, sigma_min
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
@@ -83,7 +84,7 @@ def _read_back(out, language: str, dof: int, joint_types) -> list:
     texts = {k: v for k, v in texts.items() if not k.endswith(".table.csv")}
     parsed = steps.parse_program(texts, language, dof)
     units = steps.program_units(language, "m", "rad")
-    return [(t.name, t.kind, pg._read_value(t, units, joint_types, False)) for t in parsed.targets]
+    return [(t.name, t.kind, program_values.read_value(t, units, joint_types, False)) for t in parsed.targets]
 
 
 # The calibration was given the probe as built (tool_guess = 100 mm); its identified tool also

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify import fused, fused_kernels
+import robocal.identify.kernels.fused as fused_kernels
+from robocal.identify import fused
 from robocal.identify.options import Pruning, Weights
 from robocal.identify.stages import chi2_bounds, residual_variance
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
@@ -141,7 +142,7 @@ def test_fused_kernels_pass_no_constants_to_the_shared_kernels():
 def test_preference_puts_the_device_frame_then_the_tool_then_the_rest_in_chain_order():
     from robocal.identify.problem import measurement_chain
     from robocal.identify.stages import preference_columns, preference_order
-    from robocal.model.chain import Role
+    from robocal.model.steps import Role
 
     chain = measurement_chain(rc.robot("ur10"), np.eye(4), np.eye(4), "position", True)
     names = (*chain.free_names, "compliance_j2")  # an effect coefficient: no role, last

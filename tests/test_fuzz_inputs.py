@@ -19,16 +19,19 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import robocal as rc
+import robocal.measure.dataset.read as dataset_module
 from robocal.cli import app
 from robocal.cli.options import as_cli_text
 from robocal.identify.guards import CalibrationGuardError, check_problem, check_solution
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
-from robocal.measure import dataset as dataset_module
-from robocal.measure.dataset import MeasurementFileError, read_measurements
+from robocal.measure.dataset.read import read_measurements
+from robocal.measure.measurements import MeasurementFileError
 from robocal.measure.poses import random_poses
-from robocal.model.builder import GeometryError, load_geometry
-from robocal.model.files import ModelFileError, load_model
-from robocal.model.urdf import URDFError, model_from_urdf
+from robocal.model.builder import load_geometry
+from robocal.model.files import load_model
+from robocal.model.geometry import GeometryError
+from robocal.model.urdf.read import URDFError, model_from_urdf
+from robocal.model.yaml_files import ModelFileError
 from robocal.study import StudyError, load_study_config
 
 BROKEN = Path(__file__).parent / "data" / "broken"

@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 from robocal.apps.gui.columns_view import column_roles, gui_words, renames_from_roles
-from robocal.measure.dataset_columns import guess_columns
+from robocal.measure.dataset.columns import guess_columns
 from tests.test_gui import SERIES_A_COLUMNS, _open_calibration, _radio, browser, gui_url, page  # noqa: F401
 
 UR_RTDE = ["timestamp", *[f"actual_q_{i}" for i in range(6)], *[f"actual_TCP_pose_{i}" for i in range(6)]]

@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 
 from robocal import outdir
-from robocal.outdir import FolderBusyError, ForeignFileError, transaction
+from robocal.folder_lock import FolderBusyError
+from robocal.outdir import transaction
+from robocal.run_ids import ForeignFileError
 
 OWNED = ("model.yaml", "result.json", "report.html")
 
@@ -164,7 +166,7 @@ def test_the_calibrate_command_refuses_to_replace_its_input_model(tmp_path):
 
     from robocal.cli import app
     from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
-    from robocal.measure.dataset import write_measurements
+    from robocal.measure.dataset.writer import write_measurements
     from robocal.measure.poses import random_poses
     from robocal.model.catalog import robot
     from robocal.model.files import save_model
@@ -261,7 +263,7 @@ def one_file_fleet(tmp_path):
     import numpy as np
 
     from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
-    from robocal.measure.dataset import write_measurements
+    from robocal.measure.dataset.writer import write_measurements
     from robocal.measure.poses import random_poses
     from robocal.model.catalog import robot
 

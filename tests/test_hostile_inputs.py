@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from robocal.cli import app
 from robocal.console import tolerate_terminal_encoding
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
-from robocal.measure.dataset import write_measurements
+from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.ik import solve_ik
 from robocal.measure.poses import random_poses
 from robocal.model.catalog import robot
@@ -91,14 +91,14 @@ def test_nearest_start_of_a_far_target_is_a_pool_configuration():
     overflows (it reports no neighbour at an infinite distance)."""
     from types import SimpleNamespace
 
-    from robocal.measure.ik_starts import _nearest_pool, _seed_pool
+    from robocal.measure.ik_starts import _seed_pool, nearest_pool
 
     ur10 = robot("ur10")
     T = np.tile(np.eye(4), (3, 1, 1))
     T[:, :3, 3] = [[1e200, 0, 0], [0, -1e300, 1e300], [0.4, 0.1, 0.5]]
     for kind in ("position", "pose"):
         problem = SimpleNamespace(model=ur10, T=T, kind=kind, w=0.5, k=2)
-        q = _nearest_pool(problem, 2000, np.arange(3), rank=1)
+        q = nearest_pool(problem, 2000, np.arange(3), rank=1)
         assert q.shape == (3, ur10.dof) and np.all(np.isfinite(q))
         pool_q, pool_T = _seed_pool(ur10, 2000)
         assert all(any(np.array_equal(row, p) for p in pool_q) for row in q)
@@ -325,7 +325,8 @@ def test_gui_answers_a_robot_outside_the_catalog_with_400(gui, caplog, tmp_path)
 
 
 def test_gui_refuses_an_upload_beyond_its_limit_before_reading_it(gui, caplog):
-    from robocal.apps.gui.app import MAX_REQUEST_BYTES, MAX_UPLOAD_BYTES
+    from robocal.apps.gui.app import MAX_REQUEST_BYTES
+    from robocal.apps.gui.jobs import MAX_UPLOAD_BYTES
 
     _, client = gui
     assert MAX_REQUEST_BYTES >= MAX_UPLOAD_BYTES * 4 // 3  # a file at the limit fits, in base64

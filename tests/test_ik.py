@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.measure.ik import random_configurations, solve_ik
+from robocal.measure.ik import solve_ik
+from robocal.measure.ik_starts import random_configurations
 
 
 @pytest.mark.parametrize("name", ["ur10", "katana450", "puma560", "irb2400", "li2016_3dof"])

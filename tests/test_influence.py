@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.experiments.seed003 import influence_experiment, katana_setup, thesis_problem
+from robocal.experiments.seed003 import influence_experiment, thesis_problem
+from robocal.experiments.seed003_setup import katana_setup
 from robocal.identify.influence import deviation_steps, influence_analysis, per_pose_sets
-from robocal.measure.dataset import Measurements
+from robocal.measure.measurements import Measurements
 
 
 @pytest.fixture(scope="module")

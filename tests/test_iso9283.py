@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import robocal.evaluate.iso9283.characteristics as iso
 from robocal import spatial
 from robocal.cli import app
-from robocal.evaluate import iso9283 as iso
-from robocal.evaluate.iso9283_log import Iso9283Log, Iso9283LogError, read_iso9283_log, write_iso9283_log
-from robocal.evaluate.iso9283_report import evaluate_log, results_html
-from robocal.evaluate.iso9283_sim import LogErrors, LogPlan, simulate_log
+from robocal.evaluate.iso9283.log import Iso9283Log, Iso9283LogError, read_iso9283_log, write_iso9283_log
+from robocal.evaluate.iso9283.report import evaluate_log, results_html
+from robocal.evaluate.iso9283.sim import LogErrors, LogPlan, simulate_log
 from robocal.evaluate.metrics import path_accuracy
-from robocal.measure.poses import Cube
+from robocal.measure.cube import Cube
 from robocal.model.catalog import robot
 
 runner = CliRunner()

@@ -11,14 +11,15 @@ from typer.testing import CliRunner
 import robocal as rc
 from robocal import spatial
 from robocal.cli import app
-from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.dataset import write_measurements
+from robocal.identify.result import CalibrationResult
+from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.devices import LaserTracker, OpticalCMM
 from robocal.measure.poses import random_poses
-from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
-from robocal.model.chain import Body, Joint, JointEffects, Model, Step
+from robocal.measure.simulate import VirtualRobot, simulate
+from robocal.measure.true_model import draw_true_model
+from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
-from robocal.model.files import ModelFileError, load_model, model_from_dict, save_model
+from robocal.model.files import load_model, model_from_dict, save_model
 from robocal.model.joints import (
     JointTilting,
     clearance_radius,
@@ -29,6 +30,8 @@ from robocal.model.joints import (
     load_moments,
     tilt_angles,
 )
+from robocal.model.steps import Body, Joint, JointEffects, Step
+from robocal.model.yaml_files import ModelFileError
 
 pytest.importorskip("pinocchio")
 D = math.radians(1)

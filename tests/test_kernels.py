@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.model.chain import Joint, Model, Step
+from robocal.model.chain import Model
+from robocal.model.steps import Joint, Step
 
 pytest.importorskip("numba")
 
@@ -96,10 +97,10 @@ def test_identification_jacobian_and_fused_evaluation(case, rows):
 def test_block_kernels_over_several_blocks(name):
     """The structure-of-arrays kernels (batch FK, the identification Jacobian without
     perturbations) over two full blocks of poses and a partial one."""
-    from robocal.model.kernels import _BLOCK
+    from robocal.model.kernels import BLOCK
 
     model = MODELS[name]()
-    q = np.random.default_rng(3).uniform(-2.5, 2.5, (2 * _BLOCK + 3, model.dof))
+    q = np.random.default_rng(3).uniform(-2.5, 2.5, (2 * BLOCK + 3, model.dof))
     close(model.fk(q, compiled=True), model.fk(q, compiled=False))
     for rows in ("position", "pose"):
         for a, b in zip(model.fk_jacobian(q, rows, compiled=True), model.fk_jacobian(q, rows, compiled=False),
@@ -113,13 +114,13 @@ def test_joint_jacobian_and_perturbation_jacobian(case):
 
     compiled = model.joint_jacobian(q, pert)
     P = model.perturbation_jacobian(q, "pose", pert)
-    original = chain._kernels
+    original = chain.kernels_loader
     try:
-        chain._kernels = lambda compiled=None: None  # the numpy path throughout
+        chain.kernels_loader = lambda compiled=None: None  # the numpy path throughout
         close(compiled, model.joint_jacobian(q, pert))
         close(P, model.perturbation_jacobian(q, "pose", pert))
     finally:
-        chain._kernels = original
+        chain.kernels_loader = original
 
 
 def test_calibration_is_the_same_with_the_numpy_path(monkeypatch):
@@ -131,7 +132,7 @@ def test_calibration_is_the_same_with_the_numpy_path(monkeypatch):
     robot = rc.measure.VirtualRobot(model, true, rc.measure.LaserTracker(p_tool_target=np.array([0, 0, 0.1])))
     data = rc.measure.simulate(robot, rc.measure.random_poses(model, 30, seed=4), seed=1)
     fast = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])
-    monkeypatch.setattr(chain, "_kernels", lambda compiled=None: None)
+    monkeypatch.setattr(chain, "kernels_loader", lambda compiled=None: None)
     ref = rc.calibrate(model, data, tool_guess=[0, 0, 0.1])
     np.testing.assert_allclose(fast.model.values, ref.model.values, rtol=0, atol=1e-10)
 

@@ -1,4 +1,4 @@
-"""The compiled Levenberg-Marquardt iteration (robocal.identify.lm_kernels) against its numpy
+"""The compiled Levenberg-Marquardt iteration (robocal.identify.kernels.lm) against its numpy
 reference (tests/reference_lm.py: levenberg_marquardt_batch_numpy): the same steps, stops,
 histories and solutions, for one problem and for a batch whose problems stop at different
 iterations; and the damped Cholesky step where the damped matrix is not positive definite."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from robocal.identify import lm_kernels
+import robocal.identify.kernels.lm as lm_kernels
 from robocal.identify.solvers import levenberg_marquardt, levenberg_marquardt_batch
 from tests.reference_lm import damped_steps, levenberg_marquardt_batch_numpy
 

@@ -7,16 +7,18 @@ import pytest
 from scipy import stats
 
 from robocal import spatial
-from robocal.evaluate.metrics import (
+from robocal.evaluate.error_tables import (
     ERROR_QUANTITIES,
     PoseErrors,
     error_table,
     improvement,
-    iso9283_pose_characteristics,
     mean_ci,
+    pose_errors,
+)
+from robocal.evaluate.metrics import (
+    iso9283_pose_characteristics,
     path_accuracy,
     pose_accuracy,
-    pose_errors,
     pose_repeatability,
 )
 

@@ -6,19 +6,20 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify.observability import (
+from robocal.identify.design_bound import design_efficiency_bound
+from robocal.identify.observability_indices import (
     column_scales,
-    design_efficiency_bound,
     identifiable_parameters,
-    identifiable_subset,
     observability,
     observability_indices,
     parameter_tolerances,
-    select_poses,
     singular_values,
 )
+from robocal.identify.pose_selection import select_poses
 from robocal.measure.poses import random_poses
-from robocal.model.chain import Joint, Model, Step
+from robocal.model.chain import Model
+from robocal.model.rank import identifiable_subset
+from robocal.model.steps import Joint, Step
 
 
 def _matrix_with_singular_values(s, rows, seed=0):

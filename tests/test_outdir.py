@@ -15,7 +15,9 @@ import pytest
 from typer.testing import CliRunner
 
 from robocal import outdir
-from robocal.outdir import FolderBusyError, FolderMixedError, check_consistent, read_run_id, transaction
+from robocal.folder_lock import FolderBusyError
+from robocal.outdir import transaction
+from robocal.run_ids import FolderMixedError, check_consistent, read_run_id
 
 OWNED = ("a.yaml", "b.yaml", "result.json", "old_only.txt")
 
@@ -135,7 +137,7 @@ def test_the_calibrate_command_refuses_a_folder_being_written(tmp_path):
 
     from robocal.cli import app
     from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
-    from robocal.measure.dataset import write_measurements
+    from robocal.measure.dataset.writer import write_measurements
     from robocal.measure.poses import random_poses
     from robocal.model.catalog import robot
 
@@ -218,7 +220,7 @@ def test_a_folder_with_sub_folders_is_written_in_place_and_kept(tmp_path):
 
 
 def test_a_killed_single_file_writer_leaves_nothing_the_next_one_keeps(tmp_path):
-    from robocal.model.files import atomic_write_text
+    from robocal.outdir import atomic_write_text
 
     target = tmp_path / "poses.csv"
     killed = subprocess.Popen([sys.executable, "-c", "pass"])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from robocal import spatial
-from robocal.measure.devices import PenOnPaper
 from robocal.measure.pen_trace import PRELOAD, across_deviation, pen_trace
+from robocal.measure.plates import PenOnPaper
 
 RADIUS = 0.1
 

@@ -9,16 +9,8 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify.calibrate import (
-    CalibrationOptions,
-    CalibrationResult,
-    CalibrationWarning,
-    JointEffects,
-    Pruning,
-    RobustLoss,
-    Weights,
-)
-from robocal.identify.options import Bounds
+from robocal.identify.options import Bounds, CalibrationOptions, JointEffects, Pruning, RobustLoss, Weights
+from robocal.identify.result import CalibrationResult, CalibrationWarning
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure.poses import random_poses
 

@@ -4,15 +4,14 @@ import numpy as np
 import pytest
 
 import robocal as rc
+from robocal.measure.cube import Cube
+from robocal.measure.diagonal_poses import diagonal_plane_poses
 from robocal.measure.ik import solve_ik
+from robocal.measure.pose_set import order_all_joints_move, position_sigma_min
 from robocal.measure.poses import (
-    Cube,
-    diagonal_plane_poses,
     iso9283_poses,
-    order_all_joints_move,
     plane_grid,
     poses_for_points,
-    position_sigma_min,
     random_poses,
     read_poses,
     write_poses,

@@ -9,10 +9,15 @@ import pytest
 from typer.testing import CliRunner
 
 import robocal as rc
+import robocal.compensate.programs.config as program_config
+import robocal.compensate.programs.krl as program_krl
+import robocal.compensate.programs.rapid as program_rapid
+import robocal.compensate.programs.values as program_values
 from robocal import spatial
 from robocal.cli import app
 from robocal.compensate.compensation import nominal_model
-from robocal.compensate.programs import ProgramError, filter_program_file, filter_program_text
+from robocal.compensate.programs.filter_file import filter_program_file, filter_program_text
+from robocal.compensate.programs.syntax import ProgramError
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
 from robocal.measure.ik import solve_ik
 
@@ -99,7 +104,7 @@ def _program(q_joint, T_pose, q_before_pose=None):
 def test_closed_loop_filtered_program_lands_on_its_targets(cell, tmp_path):
     """Targets in the robot base frame as the calibration located it in the cell; the
     program's tool is the tracker's probe, so the tracker sees where the targets land."""
-    from robocal.compensate.programs import _parse_urscript
+    from robocal.compensate.programs.urscript import parse_urscript
 
     nominal, robot, result, held_out = cell
     T_probe = spatial.transl(*PROBE)
@@ -115,7 +120,7 @@ def test_closed_loop_filtered_program_lands_on_its_targets(cell, tmp_path):
     res = filter_program_file(path, result, out, probe=PROBE)
     assert res.reachable.all() and res.branch_kept.all(), res.problems
     # what the controller is told, run on the true robot (the controller's IK: nominal model)
-    targets, _, tool = _parse_urscript(out.read_text(), 6, "filtered")
+    targets, _, tool = parse_urscript(out.read_text(), 6, "filtered")
     targets = sorted(targets, key=lambda t: (t.kind, t.line))  # 8 movej, then the approach movej
     np.testing.assert_allclose(tool, T_probe)
     got_joint = np.array([[t.value for t in tg.tokens] for tg in targets if tg.kind == "joint"])
@@ -179,9 +184,7 @@ def test_malformed_programs_name_file_and_line_and_write_nothing(tmp_path, name,
     with pytest.raises(ProgramError, match=message):
         filter_program_file(path, rc.robot("ur10"), out)
     assert not out.exists()
-    res = runner.invoke(
-        app, ["filter", str(_model_file(tmp_path)), str(path), "-o", str(out)]
-    )
+    res = runner.invoke(app, ["filter", str(_model_file(tmp_path)), str(path), "-o", str(out)])
     assert res.exit_code == 2 and not out.exists()
 
 
@@ -226,14 +229,14 @@ def _turn(q):
 
 def _status(q, model):
     """KUKA's status S (bits 0-2) of joint values ``q``."""
-    from robocal.compensate.programs import _status
+    from robocal.compensate.programs.config import _status
 
     return _status(model or rc.robot("kr16"), q)
 
 
 def _cf(q, model):
     """ABB's cf1, cf4, cf6 (quadrants of axes 1, 4, 6) and cfx."""
-    from robocal.compensate.programs import _cfx
+    from robocal.compensate.programs.config import _cfx
 
     return ",".join(str(int(np.floor(np.degrees(q[j]) / 90))) for j in (0, 3, 5)) + f",{_cfx(model, q)}"
 
@@ -289,7 +292,6 @@ def _rapid(q_joint, T_pose, q_before_pose, q_config=None, model=None):
 
 @pytest.mark.parametrize(("language", "robot_name"), [("krl", "kr16"), ("rapid", "irb120")])
 def test_closed_loop_krl_and_rapid(tmp_path, language, robot_name):
-    from robocal.compensate import programs as pg
 
     nominal = rc.robot(robot_name)
     true = draw_true_model(nominal, length=1e-3, angle=np.radians(0.1), seed=5)
@@ -308,12 +310,13 @@ def test_closed_loop_krl_and_rapid(tmp_path, language, robot_name):
     assert res.reachable.all() and res.branch_kept.all() and not res.problems, res.problems
     assert not res.unsupported
     # read back what the controller gets, run it on the true robot
-    units = pg._UNITS[language]
+    units = program_values.UNITS[language]
     got = {}
     for label, text in res.texts.items():
-        parsed = pg._parse_krl(text, 6, label)[0] if language == "krl" else pg._parse_rapid(text, 6, label)[0]
+        parse = program_krl.parse_krl if language == "krl" else program_rapid.parse_rapid
+        parsed = parse(text, 6, label)[0]
         for t in parsed:
-            got[t.name] = pg._read_value(t, units, nominal.joint_types, False)
+            got[t.name] = program_values.read_value(t, units, nominal.joint_types, False)
     n_j = len(q_joint)
     prefix_j, prefix_p = ("XJ", "XP") if language == "krl" else ("j", "p")
     got_joint = np.array([got[f"{prefix_j}{k}"] for k in range(n_j)])
@@ -442,7 +445,6 @@ def test_filter_refuses_a_tool_given_in_millimetres(cell, tmp_path, option, valu
 def test_written_configuration_chooses_the_branch(language):
     """The same Cartesian target in two configurations (A5/axis 4 and 6 flipped): each
     corrected in its own branch; the approach configuration is the other one."""
-    from robocal.compensate import programs as pg
 
     robot = "kr16" if language == "krl" else "irb120"
     nominal = rc.robot(robot)
@@ -458,21 +460,22 @@ def test_written_configuration_chooses_the_branch(language):
     res = filter_program_text(texts, language, moved, nominal, tool=T_probe)
     assert not res.problems, res.problems
     pose = next(t for t in res.targets if t.kind == "pose")
-    units = pg._UNITS[language]
+    units = program_values.UNITS[language]
     label = pose.file
     parsed = (
-        pg._parse_krl(res.texts[label], 6, label)[0]
+        program_krl.parse_krl(res.texts[label], 6, label)[0]
         if language == "krl"
-        else pg._parse_rapid(res.texts[label], 6, label)[0]
+        else program_rapid.parse_rapid(res.texts[label], 6, label)[0]
     )
-    P = pg._read_value(next(t for t in parsed if t.kind == "pose"), units, nominal.joint_types, False)
+    pose = next(t for t in parsed if t.kind == "pose")
+    P = program_values.read_value(pose, units, nominal.joint_types, False)
     # the controller solves it in branch b (where it was written): the real robot lands on T
     from robocal.measure.ik import solve_ik
 
     q_ctrl = solve_ik(
         nominal, P[None] @ spatial.inverse(T_probe), kind="pose", q0=q_b, restarts=0, tol=1e-12
     ).q[0]
-    assert pg._config_ok(pose, q_ctrl) and np.abs(q_ctrl - q_b).max() < 0.05
+    assert program_config.config_ok(pose, q_ctrl) and np.abs(q_ctrl - q_b).max() < 0.05
     assert np.linalg.norm((moved.fk(q_ctrl) @ T_probe)[:3, 3] - T[:3, 3]) < 1e-6  # the written resolution
 
 
@@ -481,7 +484,6 @@ def test_written_status_or_cfx_not_reachable_is_reported_and_left_as_written(lan
     """A target written 'overhead' (KUKA S bit 0, ABB cfx digit 4) while T / cf1 pins
     axis 1 in front: no solution in that configuration; reported with file, line, name
     and the bit, left as written; a nominal calibration leaves it byte-identical."""
-    from robocal.compensate import programs as pg
 
     robot = "kr16" if language == "krl" else "irb120"
     nominal = rc.robot(robot)
@@ -492,11 +494,11 @@ def test_written_status_or_cfx_not_reachable_is_reported_and_left_as_written(lan
     texts = (_krl if language == "krl" else _rapid)(q_a[None], T[None], q_a[None])
     label = "prog.dat" if language == "krl" else "prog.mod"
     if language == "krl":
-        s = pg._status(nominal, q_a)
+        s = program_config._status(nominal, q_a)
         texts[label] = texts[label].replace(f"S {s},", f"S 'B{s ^ 1:03b}',")  # KRL binary literal
         name, what = "XP0", "S bit 0 (overhead) 1 -> 0"
     else:
-        c = pg._cfx(nominal, q_a)
+        c = program_config._cfx(nominal, q_a)
         texts[label] = texts[label].replace(f",{c}],[9E9", f",{c ^ 4}],[9E9")
         name, what = "p0", f"cfx {c ^ 4} -> {c}"
     line = next(k + 1 for k, s in enumerate(texts[label].splitlines()) if name + "=" in s or name + ":=" in s)
@@ -586,7 +588,6 @@ def test_cli_config_dat_and_strict_configuration_change(tmp_path):
     """--config-dat names the $config.dat (a missing one: one line, exit 2); a target
     reachable only in another configuration is a warning naming file, line and target,
     exit 1 with --strict."""
-    from robocal.compensate import programs as pg
 
     nominal = rc.robot("kr16")
     moved = nominal.with_free_values(nominal.free_values + 5e-4)
@@ -594,7 +595,7 @@ def test_cli_config_dat_and_strict_configuration_change(tmp_path):
     q_a = np.radians([10.0, -70.0, 80.0, 30.0, 40.0, 20.0])
     T = nominal.fk(q_a) @ spatial.transl(*PROBE)
     texts = _krl(q_a[None], T[None], q_a[None])
-    s = pg._status(nominal, q_a)
+    s = program_config._status(nominal, q_a)
     texts["prog.dat"] = texts["prog.dat"].replace(f"S {s},", f"S {s ^ 1},")
     texts["prog.src"] = texts["prog.src"].replace(
         "; generated for the closed-loop test", "$TOOL = TOOL_DATA[1]"

@@ -16,8 +16,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from robocal import spatial
-from robocal.model.chain import Joint, Model, Step
+from robocal.model.chain import Model
 from robocal.model.files import load_model, save_model
+from robocal.model.steps import Joint, Step
 from tests.reference import ELEMENTARY
 
 FAST = settings(max_examples=60, deadline=None)

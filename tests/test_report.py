@@ -139,7 +139,7 @@ def test_report_lists_other_joint_effects_when_the_result_has_them(calibration):
 
 
 def test_report_shows_the_iso9283_characteristics_of_a_log(calibration, tmp_path):
-    from robocal.evaluate.iso9283_log import Iso9283Log, write_iso9283_log
+    from robocal.evaluate.iso9283.log import Iso9283Log, write_iso9283_log
 
     result = calibration[0]
     c = np.array([0.5, 0.0, 0.4])

@@ -15,7 +15,13 @@ import pytest
 
 import robocal as rc
 from robocal import spatial
-from robocal.identify.residual import _gram, _layout, _nll_and_grad, _template, fit_joint_fourier
+from robocal.identify.residual.fit import (
+    fit_joint_fourier,
+    gram_matrix,
+    layout,
+    nll_and_grad,
+    residual_template,
+)
 from robocal.model.builder import load_geometry
 from robocal.model.residual import JointAngleResidual, covered_intervals, fourier_basis
 
@@ -84,16 +90,16 @@ def test_evidence_gradient_matches_finite_differences():
     q = rng.uniform(-3, 3, (40, 3))
     P = rng.normal(size=(40, 3, 3, 3))
     r = rng.normal(size=(40, 3)) * 1e-4
-    template = _template(["a", "b", "c"], [0, 1, 2], 5)
-    G, b, rr, N = _gram(q, r, P, template)
-    groups, freq = _layout(template)
+    template = residual_template(["a", "b", "c"], [0, 1, 2], 5)
+    G, b, rr, N = gram_matrix(q, r, P, template)
+    groups, freq = layout(template)
     theta = np.r_[np.log([1e-4, 3e-4, 2e-5]), np.log(0.3), np.log(1e-4)]
-    _, grad = _nll_and_grad(theta, G, b, rr, N, groups, freq)
+    _, grad = nll_and_grad(theta, G, b, rr, N, groups, freq)
     h = 1e-6
     numeric = [
         (
-            _nll_and_grad(theta + e, G, b, rr, N, groups, freq)[0]
-            - _nll_and_grad(theta - e, G, b, rr, N, groups, freq)[0]
+            nll_and_grad(theta + e, G, b, rr, N, groups, freq)[0]
+            - nll_and_grad(theta - e, G, b, rr, N, groups, freq)[0]
         )
         / (2 * h)
         for e in np.eye(len(theta)) * h

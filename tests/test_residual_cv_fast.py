@@ -14,17 +14,17 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify import residual as stage
-from robocal.identify import residual_cv as cv
+import robocal.identify.residual.cv as cv
+import robocal.identify.residual.stage as stage
 from robocal.identify.pipeline import calibrate_physics
-from robocal.identify.residual_cv import cross_validate_residual, cross_validate_residual_refitted
-from robocal.identify.residual_fit import (
+from robocal.identify.residual.cv import cross_validate_residual, cross_validate_residual_refitted
+from robocal.identify.residual.fit import (
     Hyper,
-    _grams,
-    _one_blas_thread,
-    _template,
     fit_joint_fourier,
+    gram_matrices,
+    one_blas_thread_limit,
     posterior_mean,
+    residual_template,
 )
 from tests.test_complete_model import poses, simulate, tilted_ur10
 from tests.test_residual import PROBE, _case, _ur10
@@ -32,7 +32,7 @@ from tests.test_residual import PROBE, _case, _ur10
 
 def _choices(model: rc.Model, data: rc.Measurements, refit_folds: bool, harmonics: tuple[int, ...]):
     """The CV table of ``calibrate_with_residual``'s candidates (on one BLAS thread, as there)."""
-    with _one_blas_thread():
+    with one_blas_thread_limit():
         return _table(model, data, refit_folds, harmonics)
 
 
@@ -103,8 +103,8 @@ def test_posterior_mean_is_the_fitted_coefficients():
     r = rng.normal(scale=1e-4, size=(50, 3))
     hyper = Hyper((3e-4, 1e-4), 0.05, 2e-5)
     learned, _ = fit_joint_fourier(q, r, P, ["a", "b"], [1, 2], 4, hyper=hyper)
-    template = _template(["a", "b"], [1, 2], 4, q)
-    normal = _grams(q, r, P, template, [4], None)[4]
+    template = residual_template(["a", "b"], [1, 2], 4, q)
+    normal = gram_matrices(q, r, P, template, [4], None)[4]
     np.testing.assert_allclose(posterior_mean(template, normal, hyper), learned.coefficients, rtol=1e-10)
 
 
@@ -115,8 +115,8 @@ def test_nested_blas_limits_hold_and_restore():
         return [i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
 
     before = blas_threads()
-    with _one_blas_thread():
-        with _one_blas_thread():
+    with one_blas_thread_limit():
+        with one_blas_thread_limit():
             assert all(n == 1 for n in blas_threads())
         assert all(n == 1 for n in blas_threads())  # the inner exit does not lift the outer limit
     assert blas_threads() == before

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.identify.residual_cv import CVCandidate, CVTable, _one_standard_error
+from robocal.identify.residual.cv import CVCandidate, CVTable, _one_standard_error
 from robocal.model.residual import FADE, JointAngleResidual, fourier_basis
 from tests.test_residual import NOISE, PROBE, _measure, _truth, _ur10
 

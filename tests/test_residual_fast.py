@@ -9,14 +9,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from robocal.identify.residual import (
-    _apply,
-    _gram,
-    _grams,
-    _layout,
-    _nll_and_grad,
-    _nll_and_grad_dual,
-    _template,
+from robocal.identify.residual.fit import (
+    apply,
+    gram_matrices,
+    gram_matrix,
+    layout,
+    nll_and_grad,
+    nll_and_grad_dual,
+    residual_template,
 )
 
 JOINTS = ["a", "b", "c", "d"]
@@ -44,8 +44,8 @@ def _explicit(q, r, P, template, J):
 @pytest.mark.parametrize("n", [50, 2500])  # one chunk; two chunks and a part
 def test_block_gram_equals_the_design_products(n):
     q, r, P, J = _problem(n)
-    template = _template(JOINTS, [0, 1, 2, 4], 6, q)
-    G, b, rr, N = _gram(q, r, P, template, J)
+    template = residual_template(JOINTS, [0, 1, 2, 4], 6, q)
+    G, b, rr, N = gram_matrix(q, r, P, template, J)
     G0, b0, rr0, N0 = _explicit(q, r, P, template, J)
     assert N == N0 and rr == pytest.approx(rr0, rel=1e-12)
     np.testing.assert_allclose(G, G0, rtol=0, atol=1e-12 * np.abs(G0).max())
@@ -55,10 +55,10 @@ def test_block_gram_equals_the_design_products(n):
 @pytest.mark.parametrize("n", [30, 400])  # few equations (the design kept), many
 def test_one_gram_serves_every_number_of_harmonics(n):
     q, r, P, J = _problem(n, 1)
-    grams = _grams(q, r, P, _template(JOINTS, [0, 1, 2, 4], 1, q), [2, 5, 9], J)
+    grams = gram_matrices(q, r, P, residual_template(JOINTS, [0, 1, 2, 4], 1, q), [2, 5, 9], J)
     assert (grams[9].A is not None) == (r.size < 4 * 2 * 9)
     for H in (2, 5, 9):
-        G0, b0, rr0, N0 = _explicit(q, r, P, _template(JOINTS, [0, 1, 2, 4], H, q), J)
+        G0, b0, rr0, N0 = _explicit(q, r, P, residual_template(JOINTS, [0, 1, 2, 4], H, q), J)
         assert grams[H].N == N0 and grams[H].rr == pytest.approx(rr0, rel=1e-12)
         np.testing.assert_allclose(grams[H].G, G0, rtol=0, atol=1e-12 * np.abs(G0).max())
         np.testing.assert_allclose(grams[H].b, b0, rtol=0, atol=1e-12 * np.abs(b0).max())
@@ -66,26 +66,26 @@ def test_one_gram_serves_every_number_of_harmonics(n):
 
 def test_the_dual_evidence_is_the_same_function():
     q, r, P, J = _problem(20, 2)
-    template = _template(JOINTS, [0, 1, 2, 4], 8, q)
-    normal = _grams(q, r, P, template, [8], J)[8]
+    template = residual_template(JOINTS, [0, 1, 2, 4], 8, q)
+    normal = gram_matrices(q, r, P, template, [8], J)[8]
     assert normal.A is not None and normal.A.shape == (60 - 7, 64)
-    groups, freq = _layout(template)
+    groups, freq = layout(template)
     rng = np.random.default_rng(3)
     for _ in range(3):
         theta = np.r_[np.log(rng.uniform(1e-5, 1e-3, 4)), np.log(rng.uniform(0.01, 1)), np.log(1e-4)]
-        nll, grad = _nll_and_grad(theta, normal.G, normal.b, normal.rr, normal.N, groups, freq)
-        nll_d, grad_d = _nll_and_grad_dual(theta, normal.A, normal.r, normal.rr, normal.N, groups, freq)
+        nll, grad = nll_and_grad(theta, normal.G, normal.b, normal.rr, normal.N, groups, freq)
+        nll_d, grad_d = nll_and_grad_dual(theta, normal.A, normal.r, normal.rr, normal.N, groups, freq)
         assert nll_d == pytest.approx(nll, rel=1e-10)
         np.testing.assert_allclose(grad_d, grad, rtol=1e-8, atol=1e-8 * np.abs(grad).max())
 
 
 def test_the_correction_from_angle_errors_is_the_design_times_the_coefficients():
     q, _, P, _ = _problem(300, 4)
-    template = _template(JOINTS, [0, 1, 2, 4], 5, q)
+    template = residual_template(JOINTS, [0, 1, 2, 4], 5, q)
     c = np.random.default_rng(5).normal(0, 1e-4, template.size)
     learned = dataclasses.replace(template, coefficients=c)
     expected = np.einsum("nrm,m->nr", learned.design(q, P), learned.coefficients)
-    np.testing.assert_allclose(_apply(learned, q, P), expected, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(apply(learned, q, P), expected, rtol=0, atol=1e-13)
 
 
 def test_angle_errors_sum_the_basis():
@@ -93,7 +93,7 @@ def test_angle_errors_sum_the_basis():
     with and without the fade outside the covered angles."""
     q, _, _, _ = _problem(500, 6)
     for covered in (None, q[:100]):
-        template = _template(JOINTS, [0, 1, 2, 4], 7, covered)
+        template = residual_template(JOINTS, [0, 1, 2, 4], 7, covered)
         c = np.random.default_rng(7).normal(0, 1e-4, template.size)
         learned = dataclasses.replace(template, coefficients=c)
         expected = np.einsum("nkh,kh->nk", learned.basis(q), c.reshape(4, -1))
@@ -104,7 +104,7 @@ def test_position_covariance_and_cross_map_are_the_design_products():
     """A C Aᵀ per pose through the per-joint basis covariance (in chunks of poses), and
     A Xᵀ without the design, against the design itself (with the fade and without)."""
     q, _, P, _ = _problem(300, 7)
-    template = _template(JOINTS, [0, 1, 2, 4], 5, q)
+    template = residual_template(JOINTS, [0, 1, 2, 4], 5, q)
     rng = np.random.default_rng(8)
     F = rng.normal(size=(template.size, template.size))
     learned = dataclasses.replace(template, covariance=F @ F.T * 1e-10)

@@ -14,10 +14,11 @@ import yaml
 
 import robocal as rc
 from robocal.identify.problem import measurement_chain
-from robocal.model.chain import Role, Step
 from robocal.model.conventions import frame6, model_from_steps
-from robocal.model.files import ModelFileError, load_model, model_from_dict, model_to_dict, save_model
+from robocal.model.files import load_model, model_from_dict, model_to_dict, save_model
 from robocal.model.joints import effect_of
+from robocal.model.steps import Role, Step
+from robocal.model.yaml_files import ModelFileError
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "robocal"
 
@@ -89,7 +90,7 @@ def test_an_unknown_role_is_refused_naming_the_step():
 
 
 def test_a_tool_is_stripped_by_its_role_not_its_name():
-    from robocal.identify.calibrate import _without_measured_tool
+    from robocal.identify.problem_setup import without_measured_tool as _without_measured_tool
 
     robot = rc.robot("ur10")
     model = model_from_steps("ur10+probe", [*robot.steps, *frame6("probe", 0, 0, 0.1, role=Role.TOOL)])

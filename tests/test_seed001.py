@@ -8,9 +8,9 @@ import pytest
 from typer.testing import CliRunner
 
 from robocal.cli import app
-from robocal.experiments import seed001
+from robocal.experiments import seed001, seed001_report, seed001_setup
 from robocal.identify.calibrate import calibrate
-from robocal.measure.devices import CalibrationPlate
+from robocal.measure.plates import CalibrationPlate
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +112,7 @@ def test_printed_tables_put_the_seed_next_to_robocal(quick):
     console.width = 120
     try:
         with console.capture() as captured:
-            seed001._print(numbers)
+            seed001_report.print_numbers(numbers)
     finally:
         console.width = width
     text = " ".join(captured.get().split())
@@ -129,7 +129,7 @@ def test_bounded_fit_with_large_backlash_fits_the_majority_and_does_not_fail():
     nominal = seed001.nominal_arm()
     true = seed001.true_arm(7, nominal)
     board = CalibrationPlate.tilted(seed001.BOARD_CENTER, roll=0.0, pitch=0.0)
-    data = seed001.calibration_data(true, board, seed001._backlash(2.0), seed=7)
+    data = seed001.calibration_data(true, board, seed001_setup.backlash_of(2.0), seed=7)
     result = calibrate(nominal, data, method="bounded", frame=board.T_device_base, tool=None)
     objective = result.metadata["objective"]
     assert result.success and objective["after"] < 0.9 * objective["before"]

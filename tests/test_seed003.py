@@ -8,7 +8,9 @@ import pytest
 from typer.testing import CliRunner
 
 from robocal.cli import app
-from robocal.experiments.seed003 import THESIS, THESIS_GEOMETRIC_ERRORS, compensate_path, pose_errors
+from robocal.experiments.seed003 import THESIS
+from robocal.experiments.seed003_setup import THESIS_GEOMETRIC_ERRORS, pose_errors
+from robocal.experiments.seed003_trajectory import compensate_path
 
 pytest.importorskip("pinocchio")
 

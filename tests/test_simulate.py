@@ -9,19 +9,13 @@ from typer.testing import CliRunner
 import robocal as rc
 from robocal import spatial
 from robocal.cli import app
-from robocal.measure.dataset import Measurements, read_measurements, write_measurements
+from robocal.measure.dataset.read import read_measurements
+from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.devices import Camera, LaserTracker, OpticalCMM
-from robocal.measure.simulate import (
-    EncoderNoise,
-    PayloadCompliance,
-    VirtualRobot,
-    draw_true_model,
-    load_truth,
-    parse_quantity,
-    save_simulation,
-    simulate,
-    truth_path,
-)
+from robocal.measure.joint_effects import EncoderNoise, PayloadCompliance
+from robocal.measure.measurements import Measurements
+from robocal.measure.simulate import VirtualRobot, load_truth, save_simulation, simulate, truth_path
+from robocal.measure.true_model import draw_true_model, parse_quantity
 
 runner = CliRunner()
 N = 20_000

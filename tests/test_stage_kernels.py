@@ -1,4 +1,4 @@
-"""The compiled linear algebra between the fits (robocal.identify.stage_kernels, behind
+"""The compiled linear algebra between the fits (robocal.identify.kernels.stage, behind
 robocal.identify.stages) against the numpy code it replaced, kept here as the reference."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The compiled start values (robocal.identify.start_kernels, numba, behind
+"""The compiled start values (robocal.identify.kernels.start, numba, behind
 robocal.identify.stages.initial_frames_and_tools) against the numpy implementation they
 replaced, kept here as the reference: K = 1 and K > 1, position and pose data, every
 fit_frame / fit_tool combination, given tools and frames, to 1e-12; and the same errors."""
@@ -198,7 +198,7 @@ def _lapack_nearest(A):
 def test_jacobi_nearest_rotation_matches_lapack():
     """Random 3x3 matrices over ten decades, rank 2, nearly rotations, and equal smaller
     singular values: the same polar factor and singular values as LAPACK's SVD."""
-    from robocal.identify.start_kernels import _nearest_rotation
+    from robocal.identify.kernels.start import _nearest_rotation
 
     rng = np.random.default_rng(11)
     for trial in range(2000):

@@ -14,14 +14,14 @@ import pytest
 
 import robocal as rc
 from robocal import spatial
-from robocal.experiments.seed003 import katana_setup
-from robocal.identify.calibrate import EFFECT_SIGNIFICANCE, effect_verdict
+from robocal.experiments.seed003_setup import katana_setup
+from robocal.identify.effects import EFFECT_SIGNIFICANCE, effect_verdict
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure.poses import random_poses
-from robocal.model.chain import JointEffects
 from robocal.model.dynamics import Payload
 from robocal.model.files import STIFFNESS_SCALE
 from robocal.model.joints import JointTilting
+from robocal.model.steps import JointEffects
 
 pytest.importorskip("pinocchio")
 
@@ -285,7 +285,7 @@ def test_learned_residual_stage_holds_the_effects_it_confounds(monkeypatch):
     3σ of zero (the real UR10's wrists: -136 ± 400 µrad/N·m): it is held at zero, the
     physics refitted, and the reason names the learned angle errors.  Here the joint
     uncertainty is inflated 50x for wrist_1 to force the case."""
-    from robocal.identify import residual as stage
+    import robocal.identify.residual.stage as stage
 
     joint_uncertainty = stage._joint_uncertainty
 
@@ -298,8 +298,13 @@ def test_learned_residual_stage_holds_the_effects_it_confounds(monkeypatch):
     effects = tuple(JointEffects(j, compliance=c) for j, c in UR10_COMPLIANCE.items())
     geometric, true, data = ur10_twin(effects, (0.0, 0.0, -9.81), None, 0, n=40)
     result = rc.calibrate(
-        geometric, data, tool_guess=TARGET, compliance=True, residual="joint_fourier",
-        residual_harmonics=1, cv_folds=2,
+        geometric,
+        data,
+        tool_guess=TARGET,
+        compliance=True,
+        residual="joint_fourier",
+        residual_harmonics=1,
+        cv_folds=2,
     )
     assert result.model.residual is not None
     held = dropped(result)["compliance_wrist_1"]

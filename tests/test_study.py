@@ -299,7 +299,7 @@ def test_failing_case_reports_its_input_and_is_retried(tmp_path, monkeypatch):
     again = run_study(_config(robots=3), out, workers=0)
     assert again.computed == 1 and again.errors == 0
     assert (
-        study._Table(out / "results.csv", study.RESULT_COLUMNS, "case").rows[bad[0]["case"]]["status"] == "ok"
+        study.Table(out / "results.csv", study.RESULT_COLUMNS, "case").rows[bad[0]["case"]]["status"] == "ok"
     )
 
 
@@ -307,7 +307,7 @@ def test_a_failed_task_becomes_error_rows(tmp_path, monkeypatch):
     def crash(chunk):
         raise MemoryError("worker ran out of memory")
 
-    monkeypatch.setattr(study.run, "_run_chunk", crash)  # as run_study submits it
+    monkeypatch.setattr(study.run, "run_chunk", crash)  # as run_study submits it
     run = run_study(_config(robots=2), tmp_path / "s", workers=0)
     rows = _rows(tmp_path / "s" / "results.csv")
     assert run.errors == 4 and all(r["status"] == "error" for r in rows)

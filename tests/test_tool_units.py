@@ -137,7 +137,7 @@ def test_the_identified_tool_is_stored_and_a_far_start_value_reported(cal):
     assert saved["measured_tool"]["position_mm"] == pytest.approx(list(np.asarray(tool.position_m) * 1e3))
     assert saved["measured_tool"]["given_mm"] == pytest.approx([0, 0, 120])
     assert "tool-start" in saved["warning_codes"]
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
 
     again = measured_tool(CalibrationResult.load(folder))
     assert again is not None and again.given_m == pytest.approx(tool.given_m)

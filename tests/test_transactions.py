@@ -11,9 +11,11 @@ import pytest
 
 import robocal as rc
 from robocal import outdir
-from robocal.measure.dataset import read_measurements, write_measurements
+from robocal.measure.dataset.read import read_measurements
+from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.devices import LaserTracker
-from robocal.measure.simulate import VirtualRobot, draw_true_model, load_truth, save_simulation, simulate
+from robocal.measure.simulate import VirtualRobot, load_truth, save_simulation, simulate
+from robocal.measure.true_model import draw_true_model
 
 SIM_FILES = ("meas.csv", "meas.truth.yaml", "meas.true_model.yaml", "meas.nominal_model.yaml")
 
@@ -125,7 +127,7 @@ def _krl_program(folder: Path) -> Path:
 
 @pytest.mark.parametrize("fail", ["write-dat", "rename-dat", "rename-src"])
 def test_filtered_krl_program_is_written_both_or_neither(tmp_path, monkeypatch, fail):
-    from robocal.compensate.programs import filter_program_file
+    from robocal.compensate.programs.filter_file import filter_program_file
 
     kr16 = rc.robot("kr16")
     program = _krl_program(tmp_path / "in")
@@ -150,7 +152,7 @@ def test_filtered_krl_program_is_written_both_or_neither(tmp_path, monkeypatch, 
     monkeypatch.undo()
     assert _snapshot(out.parent) == before
     filter_program_file(program, kr16, out)  # and then it works, the pair stamped with one run id
-    from robocal.compensate.programs import krl_run_id
+    from robocal.compensate.programs.krl import krl_run_id
 
     written = {n: b.decode("latin-1") for n, b in _snapshot(out.parent).items()}
     assert sorted(written) == ["pick.dat", "pick.src"]
@@ -164,7 +166,7 @@ def test_filtered_krl_program_is_written_both_or_neither(tmp_path, monkeypatch, 
 
 
 def test_failed_first_filter_leaves_neither_file(tmp_path, monkeypatch):
-    from robocal.compensate.programs import filter_program_file
+    from robocal.compensate.programs.filter_file import filter_program_file
 
     program = _krl_program(tmp_path / "in")
     out = tmp_path / "out" / "pick.src"
@@ -225,7 +227,7 @@ def test_study_summary_and_plot_are_written_together(tmp_path, monkeypatch):
 # ------------------------------------------------------------------ the report carries its result's run id
 def test_report_carries_the_run_id_and_a_foreign_report_is_refused(tmp_path):
     from robocal.evaluate.report import write_report
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
 
     ur10 = rc.robot("ur10")
     dev = LaserTracker(p_tool_target=[0.0, 0.0, 0.1], sigma=15e-6)

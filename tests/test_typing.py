@@ -20,7 +20,7 @@ import robocal
 
 ROOT = Path(__file__).resolve().parents[1]
 USAGE = ROOT / "tests" / "typing" / "public_api.py"
-CHECKED = ["src/robocal/__init__.py", "src/robocal/_lazy.py", "src/robocal/spatial.py"]
+CHECKED = ["src/robocal/__init__.py", "src/robocal/lazy_imports.py", "src/robocal/spatial.py"]
 
 
 def test_mypy_accepts_the_public_api(tmp_path):

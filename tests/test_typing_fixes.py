@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 
 from robocal import spatial
-from robocal.evaluate.iso9283_log import Iso9283Log
-from robocal.evaluate.iso9283_report import evaluate_log
+from robocal.evaluate.iso9283.log import Iso9283Log
+from robocal.evaluate.iso9283.report import evaluate_log
 
 
 def _reorientation_log(cycles: int = 3, samples: int = 40) -> Iso9283Log:
@@ -101,7 +101,7 @@ def test_every_choice_of_the_command_line_is_a_table_of_the_api():
     from robocal import choices
     from robocal.compensate.compensation import Frame
     from robocal.identify.observability_indices import IndexName
-    from robocal.measure.dataset_columns import IncompleteMode
+    from robocal.measure.dataset.columns import IncompleteMode
     from robocal.measure.ik_starts import TargetKind
     from robocal.measure.measurements import LimitsMode
     from robocal.model.geometry import Measure

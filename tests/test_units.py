@@ -31,7 +31,7 @@ def test_an_unknown_unit_names_where_it_came_from():
 
 
 def test_the_readers_use_the_table():
-    from robocal.measure.simulate import parse_quantity
+    from robocal.measure.true_model import parse_quantity
 
     assert parse_quantity("5µm", "length") == pytest.approx(5e-6)
     assert parse_quantity("2mrad", "angle") == pytest.approx(2e-3)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import robocal as rc
-from robocal.model.urdf import URDFError, build_from_urdf, geometry_from_urdf
+from robocal.model.urdf.read import URDFError, build_from_urdf, geometry_from_urdf
 
 pin = pytest.importorskip("pinocchio")
 UR10_URDF = Path(__file__).parent / "data" / "ur10.urdf"

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 import robocal as rc
 from robocal.cli.app import app
-from robocal.model.urdf import URDFError, build_from_urdf, default_tip, geometry_from_urdf
+from robocal.model.urdf.read import URDFError, build_from_urdf, default_tip, geometry_from_urdf
 
 pin = pytest.importorskip("pinocchio")
 
@@ -51,7 +51,7 @@ def test_public_description_builds_with_the_urdf_forward_kinematics(name, tip, d
 
 def test_default_tip_is_the_deepest_link_of_the_single_longest_chain():
     """UR5e: base, ft_frame and flange -> tool0 hang off the chain; tool0 is the deepest."""
-    from robocal.model.urdf import _load
+    from robocal.model.urdf.read import _load
 
     assert default_tip(DATA / "ur5e.urdf", _load(DATA / "ur5e.urdf")[1]) == "tool0"
 

@@ -17,7 +17,8 @@ import robocal as rc
 import robocal.workflow as workflow
 from robocal.apps.gui import jobs
 from robocal.cli import app
-from robocal.measure.dataset import Measurements, write_measurements
+from robocal.measure.dataset.writer import write_measurements
+from robocal.measure.measurements import Measurements
 from robocal.model.files import save_model
 
 runner = CliRunner()
@@ -29,7 +30,7 @@ TRACKER = rc.spatial.homogeneous(rc.spatial.rotvec_to_matrix([0.1, 0.2, -2.0]), 
 def inputs(tmp_path_factory):
     """A UR10 (its complete position model, as a model file) with 0.3 mm / 0.03° errors
     measured at a 109 mm probe by a tracker: 60 poses in m, no noise columns."""
-    from robocal.measure.simulate import draw_true_model
+    from robocal.measure.true_model import draw_true_model
 
     model = rc.calibration_model("ur10", "position")
     true = draw_true_model(model, length=3e-4, angle=np.radians(0.03), seed=2)

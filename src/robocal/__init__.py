@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Literal
 
-from robocal._lazy import lazy_package
+from robocal.lazy_imports import lazy_package
 
-# Loaded on first use (robocal._lazy): the command line starts without numpy (robocal.spatial),
+# Loaded on first use (robocal.lazy_imports): the command line starts without numpy (robocal.spatial),
 # importlib.metadata (the version) or numpy's heavier neighbours (scipy.stats, Pinocchio,
 # plotly, Dask); tests/test_startup.py checks it.
 lazy_package(
@@ -20,14 +20,19 @@ lazy_package(
     {
         "robocal._version": ("__version__",),
         "robocal.compensate.compensation": ("compensate_targets",),
-        "robocal.identify.calibrate": ("CalibrationResult", "calibrate"),
+        "robocal.identify.calibrate": ("calibrate",),
+        "robocal.identify.result": ("CalibrationResult",),
         "robocal.identify.validate": ("cross_validate", "validate"),
-        "robocal.measure.dataset": ("Measurements", "read_measurements", "write_measurements"),
-        "robocal.model.chain": ("Body", "Joint", "JointEffects", "Model", "Step"),
-        "robocal.model.complete": ("calibration_model",),
-        "robocal.model.files": ("ModelFileError", "load_model", "save_model"),
-        "robocal.model.catalog": ("robot", "robots"),
+        "robocal.measure.dataset.read": ("read_measurements",),
+        "robocal.measure.dataset.writer": ("write_measurements",),
+        "robocal.measure.measurements": ("Measurements",),
         "robocal.model.builder": ("build_model",),
+        "robocal.model.catalog": ("robot", "robots"),
+        "robocal.model.chain": ("Model",),
+        "robocal.model.complete": ("calibration_model",),
+        "robocal.model.files": ("load_model", "save_model"),
+        "robocal.model.steps": ("Body", "Joint", "JointEffects", "Step"),
+        "robocal.model.yaml_files": ("ModelFileError",),
     },
     submodules=("spatial",),
 )
@@ -38,14 +43,19 @@ if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_t
     from robocal import spatial
     from robocal._version import __version__
     from robocal.compensate.compensation import compensate_targets
-    from robocal.identify.calibrate import CalibrationResult, calibrate
+    from robocal.identify.calibrate import calibrate
+    from robocal.identify.result import CalibrationResult
     from robocal.identify.validate import cross_validate, validate
-    from robocal.measure.dataset import Measurements, read_measurements, write_measurements
+    from robocal.measure.dataset.read import read_measurements
+    from robocal.measure.dataset.writer import write_measurements
+    from robocal.measure.measurements import Measurements
     from robocal.model.builder import build_model
     from robocal.model.catalog import robot, robots
-    from robocal.model.chain import Body, Joint, JointEffects, Model, Step
+    from robocal.model.chain import Model
     from robocal.model.complete import calibration_model
-    from robocal.model.files import ModelFileError, load_model, save_model
+    from robocal.model.files import load_model, save_model
+    from robocal.model.steps import Body, Joint, JointEffects, Step
+    from robocal.model.yaml_files import ModelFileError
 
 
 __all__ = [
@@ -79,6 +89,6 @@ def model_from_urdf(
     path: str | Path, measure: Literal["position", "pose"] = "pose", tip: str | None = None
 ) -> Model:
     """A complete, minimal, singularity-free calibration model of a URDF robot."""
-    from robocal.model.urdf import model_from_urdf as _from_urdf  # Pinocchio: imported on use
+    from robocal.model.urdf.read import model_from_urdf as _from_urdf  # Pinocchio: imported on use
 
     return _from_urdf(path, measure, tip)

@@ -28,7 +28,7 @@ from robocal.cli.options import (
     out_option,
     robot_and_chain,
 )
-from robocal.cli.validate import _stats_table, _validation_notes
+from robocal.cli.validate import stats_table, validation_notes
 from robocal.console import console, fail, safe
 
 __all__ = ["register"]
@@ -185,8 +185,8 @@ def calibrate_command(
     result, validation = run.result, run.validation
     _print_result(result)
     if validation is not None:
-        console.print(_stats_table(f"held-out validation ({validation.n} poses)", validation))
-        for note in _validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
+        console.print(stats_table(f"held-out validation ({validation.n} poses)", validation))
+        for note in validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
             console.print(note, highlight=False, markup=True)
     console.print(f"wrote {out / 'model.yaml'} and {out / 'result.json'}", highlight=False)
     if report:
@@ -267,7 +267,7 @@ def _noise(noise: str | None) -> float | None:
     """``--noise`` in m (None without it), its range checked."""
     if noise is None:
         return None
-    from robocal.measure.simulate import parse_quantity_option
+    from robocal.measure.true_model import parse_quantity_option
     from robocal.workflow import CalibrateFileError, check_noise
 
     try:
@@ -293,7 +293,7 @@ def _check_out(out: Path, force: bool) -> None:
 
 def _check_choices(measure, residual, loss, method, bounds, per_pose) -> None:
     """One line naming the option for a value it does not take, or a combination that does not go."""
-    from robocal.identify.calibrate import BOUNDS_CHOICES
+    from robocal.identify.options import BOUNDS_CHOICES
     from robocal.identify.solvers import METHODS
 
     if measure not in (None, "position", "pose"):
@@ -337,7 +337,7 @@ def _print_result(result) -> None:
     table = Table(title="identified parameters", title_justify="left")
     for col in ("parameter", "start", "estimate", "delta", "σ", "unit"):
         table.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
-    from robocal.identify.calibrate import display_unit, effect_lines
+    from robocal.identify.effects import display_unit, effect_lines
 
     rot = {s.name: s.is_rotation for s in (result.measurement_chain or result.model).steps}
     for n, v0, v, s in zip(result.names, result.nominal, result.estimates, result.std, strict=True):

@@ -47,10 +47,11 @@ CALIBRATION = typer.Argument(
 )
 
 
-def _load(source: Path):
+def load(source: Path):
     """A CalibrationResult from a directory, or a Model from a model file."""
-    from robocal.identify.calibrate import CalibrationResult
-    from robocal.model.files import ModelFileError, load_model
+    from robocal.identify.result import CalibrationResult
+    from robocal.model.files import load_model
+    from robocal.model.yaml_files import ModelFileError
     from robocal.outdir import restore
 
     restore(source)  # a writer killed mid-swap on a system without atomic exchange
@@ -164,7 +165,7 @@ def compensate_command(
         from robocal.compensate.result import table_path
 
         refuse_overwrite(table_path(out), force, "per-target table")
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
 
     if (targets is None) == (program is None):
         raise fail("give exactly one of --targets FILE (Cartesian) or --program FILE (joint program)")
@@ -174,7 +175,7 @@ def compensate_command(
         )
     if out is not None and out.suffix.lower() not in (".csv", ".json", ".txt"):
         raise fail(f"-o {out}: the output must be a .csv or .json file")
-    calibrated = _load(source)
+    calibrated = load(source)
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     if frame == "measurement" and not isinstance(calibrated, CalibrationResult):
         raise fail(
@@ -220,7 +221,7 @@ def finish_filtered(result, out: Path, partial: bool, strict: bool) -> None:
     ``out``; refused targets (already named with file, line and reason) exit 1 unless
     ``--partial``; ``--strict``: any other warning exits 1 too."""
     from robocal.compensate.result import table_csv, table_path
-    from robocal.model.files import atomic_write_text
+    from robocal.outdir import atomic_write_text
 
     rows = list(result.table)
     print_target_table(rows)
@@ -306,8 +307,8 @@ def _checked_nominal(calibrated, nominal: str | None):
     robot's model would turn every target into nonsense)."""
     if nominal is None:
         return None
-    from robocal.compensate.program_frames import check_nominal
-    from robocal.compensate.program_syntax import ProgramError
+    from robocal.compensate.programs.frames import check_nominal
+    from robocal.compensate.programs.syntax import ProgramError
 
     model = resolve_model(nominal)
     try:

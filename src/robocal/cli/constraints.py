@@ -2,7 +2,7 @@
 
 ``robocal calibrate ROBOT --data FILE`` calibrates from them when the file has a ``point``,
 ``plane`` or ``pair``/``distance_mm`` column (or ``--measure point|plane|distance``;
-:mod:`robocal.measure.constraint_data` documents the file); ``robocal simulate ROBOT --kind
+:mod:`robocal.measure.constraints.data` documents the file); ``robocal simulate ROBOT --kind
 KIND`` makes such a file with known truth; ``robocal validate DIR --data FILE`` reports a
 constraint file's own figures (spread around each point, distance errors, plane residual).
 A result folder holds ``model.yaml`` (the calibrated robot) and ``constraints.json``.
@@ -35,7 +35,7 @@ RESULT_FILE = "constraints.json"
 
 def is_constraint_file(path: Path, measure: str | None) -> bool:
     """Whether ``path`` holds constraint measurements (its columns, or ``--measure``)."""
-    from robocal.measure.constraint_data import constraint_kind
+    from robocal.measure.constraints.data import constraint_kind
 
     if measure in CONSTRAINT_MEASURES:
         return True
@@ -43,7 +43,7 @@ def is_constraint_file(path: Path, measure: str | None) -> bool:
 
 
 def _distances(items: list[str] | None) -> list[tuple[int, int, float]]:
-    from robocal.measure.constraint_data import parse_distance
+    from robocal.measure.constraints.data import parse_distance
 
     try:
         return [parse_distance(item) for item in items or []]
@@ -52,7 +52,7 @@ def _distances(items: list[str] | None) -> list[tuple[int, int, float]]:
 
 
 def _read(path: Path, dof: int, angle_unit: str, distances, sigma: float):
-    from robocal.measure.constraint_data import ConstraintFileError, read_constraints
+    from robocal.measure.constraints.data import ConstraintFileError, read_constraints
 
     if angle_unit not in ("rad", "deg"):
         raise fail(f"--angle-unit {angle_unit!r}: rad or deg")
@@ -99,14 +99,14 @@ def calibrate_constraint_file(
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
     file's chain) from a constraint file; write ``out``/model.yaml and constraints.json.
 
-    The fit is the MAP estimate under :class:`~robocal.identify.constraints.NominalPrior`'s
+    The fit is the MAP estimate under :class:`~robocal.identify.constraints.model.NominalPrior`'s
     default (lengths σ 0.3 mm, angles σ 5 mrad about the nominal geometry; the measurements
     weighted by σ̂ of a least-squares fit): on the real
     Panda's ball-in-socket recordings, leave-one-placement-out cross-validation put the
     held-out spread at 0.94 mm with it against 1.04 mm by least squares
     (benchmarks/bench_ball_in_socket.py)."""
-    from robocal.identify.constraint_fit import calibrate_constraints
-    from robocal.identify.constraints import NominalPrior
+    from robocal.identify.constraints.fit import calibrate_constraints
+    from robocal.identify.constraints.model import NominalPrior
     from robocal.identify.options import Pruning
 
     stated = _distances(distances)
@@ -123,7 +123,7 @@ def calibrate_constraint_file(
 
 
 def _result_doc(result, data_path: Path, stated) -> dict:
-    from robocal.identify.calibrate import file_hash
+    from robocal.identify.result_io import file_hash
 
     return {
         "kind": "constraints",
@@ -151,8 +151,9 @@ def _result_doc(result, data_path: Path, stated) -> dict:
 
 def _save(result, out: Path, data_path: Path, stated, angle_unit: str = "rad") -> None:
     """model.yaml and constraints.json, all or nothing."""
+    from robocal.folder_lock import FolderBusyError
     from robocal.model.files import save_model
-    from robocal.outdir import FolderBusyError, transaction
+    from robocal.outdir import transaction
 
     if out.exists() and not out.is_dir():
         raise fail(f"--out {out} is a file; give a directory")
@@ -170,7 +171,7 @@ def validate_constraint_file(
 ) -> None:
     """The calibrated model of ``directory`` (and the model it started from, when it is a
     constraint calibration) on a constraint file: each kind's own figures."""
-    from robocal.identify.constraint_fit import constraint_figures
+    from robocal.identify.constraints.fit import constraint_figures
     from robocal.model.files import load_model
 
     if not (directory / "model.yaml").is_file():
@@ -208,8 +209,8 @@ def simulate_constraint_file(
 ) -> None:  # fmt: skip
     """Simulate ``kind`` on a true robot drawn around ``model``; write ``out`` and
     ``out``.truth.json (the true parameters and scene)."""
-    from robocal.measure.constraint_data import write_constraints
-    from robocal.measure.constraint_sim import simulate_constraints
+    from robocal.measure.constraints.data import write_constraints
+    from robocal.measure.constraints.sim import simulate_constraints
     from robocal.measure.true_model import draw_true_model, parse_quantity_option
 
     if kind not in CONSTRAINT_MEASURES:
@@ -253,9 +254,9 @@ def plan_constraint_poses(model, kind: str, out: Path, *, n: int, pool: int, ind
     distances) of a seeded pool satisfying the constraint on the nominal robot (two sockets
     0.5 m apart, three planes, 300 mm pairs) maximising ``index`` on the kind's Jacobian;
     written as a constraint file (joint columns and labels) to record."""
-    from robocal.identify.constraint_poses import select_constraint_poses
-    from robocal.measure.constraint_data import write_constraints
-    from robocal.measure.constraint_sim import simulate_constraints
+    from robocal.identify.constraints.poses import select_constraint_poses
+    from robocal.measure.constraints.data import write_constraints
+    from robocal.measure.constraints.sim import simulate_constraints
     from robocal.model.complete import calibration_model
 
     if index not in ("O1", "O2", "O3", "O4", "O5"):

@@ -69,12 +69,13 @@ def explain(exc: BaseException) -> tuple[str, int] | None:
 
 def _input_errors() -> tuple[type[BaseException], ...]:
     """The error classes whose messages name the input (imported only when one is needed)."""
-    from robocal.compensate.programs import ProgramError
-    from robocal.measure.dataset import MeasurementFileError
-    from robocal.model.builder import GeometryError
-    from robocal.model.files import ModelFileError
-    from robocal.model.urdf import URDFError
-    from robocal.outdir import FolderBusyError, FolderMixedError
+    from robocal.compensate.programs.syntax import ProgramError
+    from robocal.folder_lock import FolderBusyError
+    from robocal.measure.measurements import MeasurementFileError
+    from robocal.model.geometry import GeometryError
+    from robocal.model.urdf.read import URDFError
+    from robocal.model.yaml_files import ModelFileError
+    from robocal.run_ids import FolderMixedError
     from robocal.study import StudyError
 
     return (

@@ -33,7 +33,7 @@ def _check_readme(readme: Path, names: list[str]) -> str:
 def _write_md(md: Path, name: str, numbers: dict[str, Any], quick: bool) -> str:
     """Write ``md/NAME.md``; return the README block of ``name``."""
     from robocal.experiments.reproductions import SECTIONS, readme_block, render_markdown
-    from robocal.model.files import atomic_write_text
+    from robocal.outdir import atomic_write_text
 
     title, sections_of = SECTIONS[name]
     sections = sections_of(numbers)
@@ -98,7 +98,7 @@ def reproduce_command(
             blocks[n] = _write_md(md, n, numbers, quick)
     if readme is not None and readme_text is not None:
         from robocal.experiments.reproductions import replace_readme_block
-        from robocal.model.files import atomic_write_text
+        from robocal.outdir import atomic_write_text
 
         for n, block in blocks.items():
             readme_text = replace_readme_block(readme_text, n, block)

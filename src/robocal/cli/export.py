@@ -75,9 +75,9 @@ def urdf_command(
     """A URDF whose forward kinematics are the calibrated model's (joint offsets folded into origins)."""
     refuse_overwrite(out, force, "URDF")
     from robocal.compensate.export import export_urdf
-    from robocal.identify.calibrate import CalibrationResult
-    from robocal.model.files import atomic_write_text
-    from robocal.model.urdf import URDFError
+    from robocal.identify.result import CalibrationResult
+    from robocal.model.urdf.read import URDFError
+    from robocal.outdir import atomic_write_text
 
     calibrated = _load_checked(source)
     constraint = _constraint_calibration(source)
@@ -133,7 +133,7 @@ def ur_kinematics_command(
         kin = export_ur_kinematics(part.calibrated, None, T_base_urbase=base)
     except ValueError as err:
         raise fail(f"{source}: {err}") from None
-    from robocal.model.files import atomic_write_text
+    from robocal.outdir import atomic_write_text
 
     atomic_write_text(out, kin.to_yaml())
     console.print(
@@ -156,7 +156,7 @@ def ur_kinematics_command(
 
 def _constraint_calibration(source: Path):
     """The constraint calibration in folder ``source`` (:mod:`robocal.cli.report_constraints`), or None."""
-    from robocal.identify.constraint_result import is_constraint_folder
+    from robocal.identify.constraints.result import is_constraint_folder
 
     if not is_constraint_folder(source):
         return None
@@ -168,12 +168,12 @@ def _constraint_calibration(source: Path):
 def _load_checked(source: Path):
     """The calibration (or model) to export, refused when its files disagree (a hand-edited
     ``model.yaml``) or its numbers cannot be a robot's (a 1e308 device frame)."""
-    from robocal.cli.compensate import _load
+    from robocal.cli.compensate import load
     from robocal.compensate.export import check_exportable, check_result_files
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
 
     constraint = _constraint_calibration(source)
-    calibrated = _load(source) if constraint is None else constraint.model
+    calibrated = load(source) if constraint is None else constraint.model
     try:
         if isinstance(calibrated, CalibrationResult):
             check_result_files(source, calibrated)
@@ -311,8 +311,9 @@ def filter_command(
     refuse_overwrite(out, force, "program")
     refuse_overwrite(table_path(out), force, "per-target table")
 
-    from robocal.cli.compensate import _load
-    from robocal.compensate.programs import ProgramError, filter_program_file, language_of
+    from robocal.cli.compensate import load
+    from robocal.compensate.programs.filter_file import filter_program_file, language_of
+    from robocal.compensate.programs.syntax import ProgramError
 
     if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
         raise fail(
@@ -324,7 +325,7 @@ def filter_command(
         raise fail(str(err)) from None
     if language_of(out) != language and not (language == "krl" and out.suffix.lower() == ".src"):
         raise fail(f"-o {out}: write a {language} program with the suffix of {program.name}")
-    calibrated = _load(calibration)
+    calibrated = load(calibration)
     nominal_model = None if nominal is None else resolve_model(nominal)
     if nominal is None and _constraint_calibration(calibration) is not None:
         from robocal.cli.report_constraints import constraint_nominal

@@ -40,7 +40,7 @@ def simulate_inclinometer(
     """Readings of the true robot ``draw()`` (geometry drawn as ``simulate`` draws it, the
     model's joint effects) at the poses of ``poses``, written to ``out`` with the truth
     beside it; bad input exits with one line."""
-    from robocal.measure.dataset import MeasurementFileError
+    from robocal.measure.measurements import MeasurementFileError
 
     try:
         _simulate(model, draw(), poses, out, noise, seed)
@@ -51,10 +51,10 @@ def simulate_inclinometer(
 
 
 def _simulate(model, true, poses: Path, out: Path, noise: str | None, seed: int | None) -> None:
-    from robocal.measure.dataset import read_measurements
+    from robocal.measure.dataset.read import read_measurements
     from robocal.measure.inclinometer import simulate_readings
-    from robocal.measure.simulate import parse_quantity_option
     from robocal.measure.tilt_csv import write_tilt_readings
+    from robocal.measure.true_model import parse_quantity_option
     from robocal.outdir import atomic_write_text
 
     kwargs = {}

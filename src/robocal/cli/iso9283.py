@@ -44,10 +44,11 @@ def iso9283_command(
     force: Force = False,
 ) -> None:
     """The fourteen ISO 9283 characteristics of a measurement log (those it cannot support: why)."""
-    from robocal.evaluate.iso9283_log import Iso9283LogError, read_iso9283_log
-    from robocal.evaluate.iso9283_report import EvaluationOptions, evaluate_log, results_html, results_text
-    from robocal.measure.simulate import parse_quantity_option
-    from robocal.model.files import atomic_write_text
+    from robocal.evaluate.iso9283.eval_pose import EvaluationOptions
+    from robocal.evaluate.iso9283.log import Iso9283LogError, read_iso9283_log
+    from robocal.evaluate.iso9283.report import evaluate_log, results_html, results_text
+    from robocal.measure.true_model import parse_quantity_option
+    from robocal.outdir import atomic_write_text
 
     if out is not None:
         refuse_overwrite(out, force, "report")
@@ -81,9 +82,9 @@ def iso9283_command(
 
 def simulate_log_command(robot: str, log: Path, seed: int | None, noise: str | None, force: bool) -> None:
     """Write a simulated ISO 9283 log of ROBOT and its truth (``LOG.truth.yaml``)."""
-    from robocal.evaluate.iso9283_log import save_simulated_log
-    from robocal.evaluate.iso9283_sim import LogErrors, simulate_log
-    from robocal.measure.simulate import parse_quantity_option
+    from robocal.evaluate.iso9283.log import save_simulated_log
+    from robocal.evaluate.iso9283.sim import LogErrors, simulate_log
+    from robocal.measure.true_model import parse_quantity_option
 
     refuse_overwrite(log, force, "log")
     model = resolve_model(robot)

@@ -9,7 +9,7 @@ Commands:
                      -o meas.csv
         simulated measurements of a robot with drawn errors, and their truth beside them
     robocal simulate ROBOT --log -o LOG.csv [--seed 1] [--noise 0.005mm]
-        a simulated ISO 9283 measurement log and its truth (robocal.evaluate.iso9283_sim)
+        a simulated ISO 9283 measurement log and its truth (robocal.evaluate.iso9283.sim)
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from robocal.console import console, err_console, fail, refuse_overwrite, safe
 from robocal.measure.devices import DEVICES, make_device
 
 if TYPE_CHECKING:  # the readers and the simulator are imported by the commands that use them
-    from robocal.measure.dataset import Measurements, Problem
+    from robocal.measure.measurements import Measurements, Problem
 
 __all__ = ["register"]
 
@@ -77,7 +77,7 @@ def _rows_text(rows: list[int | None], limit: int = 6) -> str:
 
 
 def _problem_table(problems: list[Problem], title: str) -> Table:
-    from robocal.measure.dataset import PROBLEM_CODES
+    from robocal.measure.measurements import PROBLEM_CODES
 
     groups: dict[tuple, list[Problem]] = defaultdict(list)
     for p in problems:
@@ -161,7 +161,7 @@ def data_check(
     incomplete: Incomplete = "error",
 ) -> None:
     """List every problem of a measurement file, or summarise it if it is clean."""
-    from robocal.measure.dataset import check_measurements, read_measurements
+    from robocal.measure.dataset.read import check_measurements, read_measurements
 
     model = _model(robot)
     options: dict[str, Any] = dict(  # the reader's keyword options, as the CLI gives them
@@ -318,7 +318,7 @@ def simulate_command(
         return simulate_log_command(robot, out, seed, noise, force)
     if poses is None or out is None:
         raise fail("give --poses POSES.csv and -o OUT.csv (or --log -o LOG.csv for an ISO 9283 log)")
-    from robocal.measure.dataset import MeasurementFileError
+    from robocal.measure.measurements import MeasurementFileError
 
     refuse_overwrite(out, force, "measurement file")
     model = _model(robot)
@@ -402,8 +402,8 @@ def _tolerances(items: list[str]) -> dict[str, str]:
 
 def _device(device: str, noise: str | None, device_pose: str | None, tool_offset: str | None):
     """The measuring device of ``--device`` with ``--noise``, ``--device-pose``, ``--tool-offset``."""
-    from robocal.measure.dataset import MAX_SIGMA
-    from robocal.measure.simulate import parse_quantity_option
+    from robocal.measure.measurements import MAX_SIGMA
+    from robocal.measure.true_model import parse_quantity_option
 
     kwargs = {}
     if device_pose is not None:
@@ -427,7 +427,7 @@ def _true_model(
     model, tolerances: dict, length_tol: str, angle_tol: str, distribution: Distribution, seed: int | None
 ):
     """The drawn true robot, and the length and angle tolerances in m and rad."""
-    from robocal.measure.simulate import draw_true_model, parse_quantity_option
+    from robocal.measure.true_model import draw_true_model, parse_quantity_option
 
     length = parse_quantity_option(length_tol, "length", "--length-tol")
     angle = parse_quantity_option(angle_tol, "angle", "--angle-tol")
@@ -452,7 +452,7 @@ def _true_model(
 
 def _simulate(model, true, dev, poses: Path, seed: int | None, train: float | None):
     """The virtual robot and its simulated measurements at the poses of ``--poses``."""
-    from robocal.measure.dataset import read_measurements
+    from robocal.measure.dataset.read import read_measurements
     from robocal.measure.simulate import VirtualRobot, simulate
 
     q = read_measurements(poses, model=model)

@@ -30,7 +30,7 @@ def _measure(value: str) -> Measure:
 
 def _is_ur_kinematics(path: Path) -> bool:
     """Whether a YAML file is a UR kinematics file (a top-level ``kinematics:`` mapping)."""
-    from robocal.model.files import ModelFileError, read_yaml
+    from robocal.model.yaml_files import ModelFileError, read_yaml
 
     try:  # read_yaml: the size and entry limits are checked before the file is parsed
         data = read_yaml(path, "model")
@@ -78,9 +78,10 @@ def build_command(
 ) -> None:
     """Build a complete, minimal, singularity-free model from joint geometry (Motta et al., seed 000)."""
     refuse_overwrite(out, force, "model file")
-    from robocal.model.builder import GeometryError, load_geometry
+    from robocal.model.builder import load_geometry
     from robocal.model.files import save_model
-    from robocal.model.urdf import URDFError, build_from_urdf
+    from robocal.model.geometry import GeometryError
+    from robocal.model.urdf.read import URDFError, build_from_urdf
 
     chosen = None if measure is None else _measure(measure)  # None: the geometry file's
     from robocal.model.catalog import is_geometry_file, robots

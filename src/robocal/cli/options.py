@@ -181,7 +181,7 @@ def resolve_model(name_or_path: str | Path) -> Model:
     """The robot named on the command line (:func:`robocal.model.catalog.find_model`); exit 2
     with its one line when there is none."""
     from robocal.model.catalog import find_model
-    from robocal.model.files import ModelFileError
+    from robocal.model.yaml_files import ModelFileError
 
     try:
         return find_model(name_or_path)

@@ -138,7 +138,8 @@ def poses_command(
 def _optimal(m, count: int, pool: int, index: str, rows: str, seed: int, meta: dict) -> np.ndarray:
     """``--method optimal``: ``count`` poses of a random pool maximising ``index``; the
     observability table printed."""
-    from robocal.identify.observability import identifiable_parameters, observability, select_poses
+    from robocal.identify.observability_indices import identifiable_parameters, observability
+    from robocal.identify.pose_selection import select_poses
     from robocal.measure.poses import random_poses
 
     if pool < count:
@@ -185,7 +186,7 @@ def _iso9283(m, n: int | None, kind: str | None, box, seed: int, meta: dict) -> 
 
 def _diagonal(m, n: int, kind: str | None, box, seed: int) -> np.ndarray:
     """``--method diagonal``: the thesis' poses on the cube's diagonal planes (seed 003)."""
-    from robocal.measure.poses import diagonal_plane_poses
+    from robocal.measure.diagonal_poses import diagonal_plane_poses
 
     with console.status("building the diagonal-plane poses..."):
         ps = diagonal_plane_poses(m, n=n, kind=kind or "position", region=box, seed=seed)  # type: ignore[arg-type]

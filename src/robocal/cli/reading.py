@@ -27,7 +27,8 @@ def read_data(
     limits="error",
     incomplete="error",
 ):
-    from robocal.measure.dataset import MeasurementFileError, MeasurementWarning, read_measurements
+    from robocal.measure.dataset.read import read_measurements
+    from robocal.measure.measurements import MeasurementFileError, MeasurementWarning
 
     if path.is_dir():
         raise fail(f"{path} is a directory; --data takes a measurement file")
@@ -71,7 +72,7 @@ def _given_options(ctx: typer.Context, values: dict) -> dict:
 def load_result(directory: Path):
     """The calibration result in ``directory`` (exit 2 with one line when there is none or it
     cannot be read); a writer killed mid-swap is undone first."""
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
     from robocal.outdir import restore
 
     restore(directory)  # a writer killed mid-swap on a system without atomic exchange
@@ -93,8 +94,8 @@ def own_data(ctx: typer.Context, directory: Path, result, data_path: Path | None
     SHA-256); with the recorded file as ``data_path``, reader options given on the command
     line replace the recorded ones.
     """
-    from robocal.identify.calibrate import file_hash
     from robocal.identify.provenance import Provenance, split_rows
+    from robocal.identify.result_io import file_hash
 
     provenance = Provenance.from_metadata(result.metadata)
     if provenance is None:

@@ -112,7 +112,7 @@ def register_command(
 def _check_out(calibration: Path, out: Path, force: bool) -> None:
     """Refuse NEW = CAL, a file, a folder holding something else than a robocal result, a
     result without --force, or a folder being written."""
-    from robocal.outdir import FolderBusyError, check_not_busy
+    from robocal.folder_lock import FolderBusyError, check_not_busy
 
     if out.resolve() == calibration.resolve():
         raise fail(
@@ -162,7 +162,8 @@ def _with_provenance(result, data_path: Path, reader: dict):
 
 
 def _save(result, out: Path) -> None:
-    from robocal.outdir import FolderBusyError, ForeignFileError
+    from robocal.folder_lock import FolderBusyError
+    from robocal.run_ids import ForeignFileError
 
     try:
         result.save(out)

@@ -74,7 +74,7 @@ def report_command(
 
     A constraint calibration (points, planes, distances): its kind's figures on its file and --test-data."""
     refuse_overwrite(out, force, "report")
-    from robocal.identify.constraint_result import is_constraint_folder
+    from robocal.identify.constraints.result import is_constraint_folder
 
     if is_constraint_folder(directory):  # fixed points, planes, distances: the kind's own report
         from robocal.cli.report_constraints import constraint_report
@@ -144,8 +144,8 @@ def _evaluation(directory: Path, iso9283_log: Path | None) -> dict | None:
         if not isinstance(evaluation, dict):
             raise fail(f"{ev_path}: not a robocal evaluation (a JSON object expected)")
     if iso9283_log is not None:
-        from robocal.evaluate.iso9283_log import read_iso9283_log
-        from robocal.evaluate.iso9283_report import evaluate_log
+        from robocal.evaluate.iso9283.log import read_iso9283_log
+        from robocal.evaluate.iso9283.report import evaluate_log
 
         try:  # a bad log is an Iso9283LogError, a ValueError naming file, row and column
             iso = evaluate_log(read_iso9283_log(iso9283_log)).to_dict()

@@ -17,9 +17,9 @@ __all__ = ["constraint_nominal", "constraint_report", "load_constraint_folder", 
 
 
 def load_constraint_folder(directory: Path):
-    """The :class:`~robocal.identify.constraint_result.ConstraintCalibration` in
+    """The :class:`~robocal.identify.constraints.result.ConstraintCalibration` in
     ``directory`` (exit 2 with one line when it cannot be read or its files disagree)."""
-    from robocal.identify.constraint_result import load_constraint_calibration
+    from robocal.identify.constraints.result import load_constraint_calibration
 
     try:
         return load_constraint_calibration(directory)
@@ -47,7 +47,7 @@ def note_constraint_base(cal, use: str) -> None:
 
 
 def _read(path: Path, cal, angle_unit: str):
-    from robocal.measure.constraint_data import ConstraintFileError, read_constraints
+    from robocal.measure.constraints.data import ConstraintFileError, read_constraints
 
     try:
         return read_constraints(path, cal.model.dof, angle_unit=angle_unit, distances=list(cal.distances))

@@ -31,7 +31,7 @@ CALIBRATION_DIR = typer.Argument(
 )
 
 
-def _stats_table(title: str, stats) -> Table:
+def stats_table(title: str, stats) -> Table:
     table = Table(title=title, title_justify="left")
     for col in ("poses", "mean mm", "RMS mm", "p95 mm", "max mm", "|x| |y| |z| mean mm", "frame"):
         table.add_column(col, justify="right")
@@ -48,7 +48,7 @@ def _stats_table(title: str, stats) -> Table:
     return table
 
 
-def _validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
+def validation_notes(stats, result, frame_note: bool = True) -> tuple[list[str], str | None]:
     """Lines under a validation table (how the device frame was obtained unless
     ``frame_note`` is False, the error the calibration expected) and a warning when the
     error is far from what it should be."""
@@ -177,14 +177,14 @@ def validate_command(
         stats = rc.validate(result, data, refit_frame=refit_frame)
     except ValueError as err:
         raise fail(f"{data_path}: {as_cli_text(str(err))}") from None
-    more_notes, warning = _validation_notes(stats, result)
+    more_notes, warning = validation_notes(stats, result)
     notes += more_notes
     if warning:
         extra["warning"] = warning
     if as_json:
         print(strict_json(stats.to_dict() | extra))
         return
-    console.print(_stats_table(f"{result.model.name} on {data_path.name} ({data.n} poses)", stats))
+    console.print(stats_table(f"{result.model.name} on {data_path.name} ({data.n} poses)", stats))
     for note in filter(None, notes):
         console.print(note, highlight=False, markup=True)
 

@@ -2,7 +2,7 @@
 Cartesian targets, calibration filters for joint programs, path correction (full IK or
 seed 003 eq. 5.22) and off-line program files (``robocal compensate``)."""
 
-from robocal._lazy import lazy_package
+from robocal.lazy_imports import lazy_package
 
 lazy_package(
     __name__,

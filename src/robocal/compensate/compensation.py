@@ -64,10 +64,12 @@ from robocal import choices, spatial
 from robocal.compensate import safety
 from robocal.compensate.nominal_ik import nominal_solutions
 from robocal.compensate.result import Compensation
-from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.ik import IKResult, PerturbationFunction, TargetKind, solve_ik
+from robocal.identify.result import CalibrationResult
+from robocal.measure.ik import IKResult, PerturbationFunction, solve_ik
 from robocal.measure.ik_regularized import solve_regularized
-from robocal.model.chain import Model, Role
+from robocal.measure.ik_starts import TargetKind
+from robocal.model.chain import Model
+from robocal.model.steps import Role
 
 __all__ = ["compensate_targets", "filter_program", "nominal_model"]
 
@@ -103,7 +105,7 @@ def _with_tool(nominal: Model, real: Model) -> Model:
 
 
 @dataclass(frozen=True)
-class _Setup:
+class Setup:
     real: Model
     nominal: Model
     has_nominal: bool
@@ -119,9 +121,9 @@ class _Setup:
         return self.result.expected_position_error(q)
 
 
-def _setup(
+def compensation_setup(
     calibrated: Calibrated, nominal: Model | None, joint_effects: PerturbationFunction | None
-) -> _Setup:
+) -> Setup:
     if isinstance(calibrated, CalibrationResult):
         real = calibrated.model
         effects: PerturbationFunction | None = calibrated.joint_perturbations
@@ -147,17 +149,17 @@ def _setup(
         )
     nom = _with_tool(nom, real)
     result = calibrated if isinstance(calibrated, CalibrationResult) else None
-    return _Setup(real, nom, has_nominal, effects, frame, result)
+    return Setup(real, nom, has_nominal, effects, frame, result)
 
 
-def _predict(setup: _Setup, q: Array) -> Array:
+def predict(setup: Setup, q: Array) -> Array:
     """Tool frames ``(n, 4, 4)`` of the real robot (base frame) at commands ``q``."""
     d = None if setup.effects is None else setup.effects(q)
     return setup.real.fk(q, d)
 
 
 # ---------------------------------------------------------------------- targets
-def _as_frames(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Array, TargetKind]:
+def as_frames(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Array, TargetKind]:
     """``(n, 4, 4)`` target frames and the resolved kind."""
     T = np.asarray(targets, dtype=float)
     if T.ndim in (1, 2) and T.shape[-1:] == (3,):
@@ -177,7 +179,7 @@ def _as_frames(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[
     return T, kind
 
 
-def _to_base(T: Array, frame: Frame | ArrayLike, setup: _Setup) -> Array:
+def to_base(T: Array, frame: Frame | ArrayLike, setup: Setup) -> Array:
     """Targets given in ``frame`` -> the robot's base frame."""
     if isinstance(frame, str):
         if frame == "base":
@@ -199,7 +201,7 @@ def _to_base(T: Array, frame: Frame | ArrayLike, setup: _Setup) -> Array:
     return spatial.inverse(T_frame_base) @ T
 
 
-def _errors(T: Array, T_target: Array, kind: TargetKind, tool_axis: int) -> tuple[Array, Array]:
+def errors(T: Array, T_target: Array, kind: TargetKind, tool_axis: int) -> tuple[Array, Array]:
     """Position (m) and orientation (rad) errors ``(n,)`` of ``T`` against the targets."""
     dist = np.linalg.norm(T[:, :3, 3] - T_target[:, :3, 3], axis=1)
     if kind == "position":
@@ -217,7 +219,7 @@ def _default_kind(dof: int) -> TargetKind:
 
 
 # ---------------------------------------------------------------------- core
-def _names(names: Sequence[str] | None, n: int) -> tuple[str, ...]:
+def joint_names(names: Sequence[str] | None, n: int) -> tuple[str, ...]:
     if names is None:
         return tuple(str(i + 1) for i in range(n))
     out = tuple(str(v) for v in names)
@@ -226,8 +228,8 @@ def _names(names: Sequence[str] | None, n: int) -> tuple[str, ...]:
     return out
 
 
-def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed through
-    setup: _Setup,
+def correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed through
+    setup: Setup,
     T: Array,
     kind: TargetKind,
     q_nominal: Array,
@@ -252,7 +254,7 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
         joint_effects=setup.effects, kind=kind, tool_axis=tool_axis, orientation_weight=orientation_weight,
     )  # fmt: skip
     q, reached = res.q.copy(), res.reachable.copy()
-    before, angle_before = _errors(_predict(setup, q_nominal), T, kind, tool_axis)
+    before, angle_before = errors(predict(setup, q_nominal), T, kind, tool_axis)
     sigma = safety.sigma_min(setup.real, q_nominal, setup.effects, kind, tool_axis)
     near = sigma < safety.SINGULAR_SIGMA
     # |e| weighted as sigma_min's Jacobian (1 m per rad)
@@ -271,7 +273,7 @@ def _correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed t
     )  # fmt: skip
     refused = np.array([st == "refused" for st in verdict.status], dtype=bool)
     q[refused] = q_nominal[refused]  # left as written: the controller's own command
-    after, angle_after = _errors(_predict(setup, q), T, kind, tool_axis)
+    after, angle_after = errors(predict(setup, q), T, kind, tool_axis)
     if not setup.has_nominal:
         before, angle_before = np.full(len(T), np.nan), np.full(len(T), np.nan)
     change = np.abs(q - q_nominal).max(axis=1) if len(T) else np.zeros(0)
@@ -355,14 +357,14 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
     Returns:
         :class:`Compensation` with commands, nominal commands and predicted errors.
     """
-    setup = _setup(calibrated, nominal_model, joint_effects)
-    T, kind_ = _as_frames(targets, kind)
-    T = _to_base(T, frame, setup)
-    labels = _names(names, len(T))
+    setup = compensation_setup(calibrated, nominal_model, joint_effects)
+    T, kind_ = as_frames(targets, kind)
+    T = to_base(T, frame, setup)
+    labels = joint_names(names, len(T))
     ik = {"kind": kind_, "seed": seed, "tol": tol, "tol_angle": tol_angle, "max_iter": max_iter}
     ik |= {"tool_axis": tool_axis, "orientation_weight": orientation_weight}
     nom, held = nominal_solutions(setup.nominal, T, q0, restarts, ik)
-    return _correct(
+    return correct(
         setup,
         T,
         kind_,
@@ -379,7 +381,7 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
     )
 
 
-def _program(q: ArrayLike, dof: int, what: str) -> Array:
+def program(q: ArrayLike, dof: int, what: str) -> Array:
     qa = np.asarray(q, dtype=float)
     if qa.ndim == 1:
         qa = qa[None]
@@ -422,19 +424,19 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
             ``"position"`` (default for fewer).
         Other arguments: as for :func:`compensate_targets`.
     """
-    setup = _setup(calibrated, nominal_model, joint_effects)
-    q = _program(q_program, setup.real.dof, "q_program")
+    setup = compensation_setup(calibrated, nominal_model, joint_effects)
+    q = program(q_program, setup.real.dof, "q_program")
     kind_ = kind or _default_kind(setup.real.dof)
     if kind_ not in ("position", "pose", "axis"):
         raise ValueError(f"kind must be 'position', 'pose' or 'axis', got {kind_!r}")
     T = setup.nominal.fk(q)
-    return _correct(
+    return correct(
         setup,
         T,
         kind_,
         q,
         np.ones(len(q), dtype=bool),
-        _names(names, len(q)),
+        joint_names(names, len(q)),
         tol=tol,
         tol_angle=tol_angle,
         max_iter=max_iter,

@@ -1,7 +1,7 @@
 """The calibrated robot leaves robocal: a calibrated URDF and UR kinematics from a
 calibration, with what they cannot carry stated and measured.
 
-* :func:`export_urdf` — :func:`robocal.model.urdf_export.calibrated_urdf` for a
+* :func:`export_urdf` — :func:`robocal.model.urdf.export.calibrated_urdf` for a
   :class:`~robocal.identify.calibrate.CalibrationResult` (or a model): the nominal
   model (the calibration's start values) places the links on their joints, the device
   frame ``T_device_base`` and the measured tool may be added as a fixed joint pair,
@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.identify.calibrate import CalibrationResult
+from robocal.identify.result import CalibrationResult
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
 from robocal.model.ur_kinematics import URKinematics, ur_kinematics
-from robocal.model.urdf_export import URDFExport, calibrated_urdf
+from robocal.model.urdf.export import URDFExport, calibrated_urdf
+from robocal.outdir import atomic_write_text
 
 __all__ = [
     "KinematicPart",
@@ -90,7 +90,8 @@ def kinematic_part(calibrated: CalibrationResult | Model) -> KinematicPart:
 
 def _physics_only(result: CalibrationResult, record: dict) -> CalibrationResult:
     """The stored physics-only calibration as a result (model, device frame, compliance)."""
-    from robocal.model.files import ModelFileError, model_from_dict
+    from robocal.model.files import model_from_dict
+    from robocal.model.yaml_files import ModelFileError
 
     where = "result.json: physics_only"
     try:
@@ -218,7 +219,7 @@ class LeftOut:
 def left_out(calibrated: CalibrationResult | Model, n: int = 200, seed: int = 0) -> tuple[LeftOut, ...]:
     """What a kinematic export leaves out of ``calibrated``, measured at ``n`` random
     configurations within the joint limits (seeded)."""
-    from robocal.measure.ik import random_configurations
+    from robocal.measure.ik_starts import random_configurations
 
     model = calibrated.model if isinstance(calibrated, CalibrationResult) else calibrated
     out: list[LeftOut] = []
@@ -283,7 +284,7 @@ def export_urdf(
     joint_map: dict[str, str] | None = None,
     notes: tuple[str, ...] = (),
 ) -> tuple[URDFExport, tuple[LeftOut, ...]]:
-    """A calibrated URDF (see :func:`robocal.model.urdf_export.calibrated_urdf`) and what
+    """A calibrated URDF (see :func:`robocal.model.urdf.export.calibrated_urdf`) and what
     it leaves out.
 
     Args:

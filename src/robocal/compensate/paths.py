@@ -14,19 +14,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.compensate.compensation import (
-    _as_frames,
-    _correct,
-    _errors,
-    _names,
-    _predict,
-    _program,
-    _Setup,
-    _setup,
-    _to_base,
+    Setup,
+    as_frames,
+    compensation_setup,
+    correct,
+    errors,
+    joint_names,
+    predict,
+    program,
+    to_base,
 )
 from robocal.compensate.result import Compensation
-from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.ik import IKResult, PerturbationFunction, TargetKind
+from robocal.identify.result import CalibrationResult
+from robocal.measure.ik import IKResult, PerturbationFunction
+from robocal.measure.ik_starts import TargetKind
 from robocal.measure.paths import joint_path
 from robocal.model.chain import Model
 
@@ -73,7 +74,7 @@ class PathCompensation(Compensation):
 
 
 def _eq522(
-    setup: _Setup,
+    setup: Setup,
     q_nominal: Array,
     T: Array,
     kind: TargetKind,
@@ -105,27 +106,27 @@ def _eq522(
 
 
 def _path_targets(
-    setup: _Setup, q_nom: Array, targets: ArrayLike | None, kind: TargetKind | None, frame: Frame | ArrayLike
+    setup: Setup, q_nom: Array, targets: ArrayLike | None, kind: TargetKind | None, frame: Frame | ArrayLike
 ) -> tuple[Array, TargetKind]:
     """The path's target frames ``(n, 4, 4)`` in the base frame (default: the nominal
     model's along ``q_nom``) and what of them is imposed."""
     kind_: TargetKind = kind or ("pose" if setup.real.dof >= 6 else "position")
     if targets is None:
         return setup.nominal.fk(q_nom), kind_
-    T, _ = _as_frames(targets, "auto")
+    T, _ = as_frames(targets, "auto")
     if len(T) != len(q_nom):
         raise ValueError(f"{len(T)} targets for a path of {len(q_nom)} samples")
     if kind_ != "position" and np.asarray(targets).shape[-1:] == (3,):
         kind_ = "position"
-    return _to_base(T, frame, setup), kind_
+    return to_base(T, frame, setup), kind_
 
 
-def _jacobian_solved(setup: _Setup, q: Array, q_nom: Array, T: Array, kind: TargetKind, iterations: int):
+def _jacobian_solved(setup: Setup, q: Array, q_nom: Array, T: Array, kind: TargetKind, iterations: int):
     """Eq. 5.22's commands ``q`` as an :class:`IKResult` for the invariants of
     :mod:`robocal.compensate.safety`: a sample counts as solved when the step did not make
     its error worse (one step leaves a second-order residual by design)."""
-    after, angle_after = _errors(_predict(setup, q), T, kind, 2)
-    before, angle_before = _errors(_predict(setup, q_nom), T, kind, 2)
+    after, angle_after = errors(predict(setup, q), T, kind, 2)
+    before, angle_before = errors(predict(setup, q_nom), T, kind, 2)
     ok = np.isfinite(after) & (np.hypot(after, angle_after) <= np.hypot(before, angle_before) + 1e-12)
     n = len(q)
     return IKResult(
@@ -174,12 +175,12 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
             larger than this (rad or m) is reported as a jump.
         Other arguments: as for :func:`compensate_targets`.
     """
-    setup = _setup(calibrated, nominal_model, joint_effects)
-    q_nom = _program(q_path, setup.real.dof, "q_path")
+    setup = compensation_setup(calibrated, nominal_model, joint_effects)
+    q_nom = program(q_path, setup.real.dof, "q_path")
     T, kind_ = _path_targets(setup, q_nom, targets, kind, frame)
-    labels = _names(names, len(q_nom))
+    labels = joint_names(names, len(q_nom))
     if method == "ik":
-        base = _correct(
+        base = correct(
             setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, tol=tol, tol_angle=tol_angle,
             max_iter=max_iter, orientation_weight=orientation_weight, tool_axis=tool_axis,
             max_joint_change=max_joint_change,
@@ -189,7 +190,7 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
             raise ValueError(f"iterations must be >= 1, got {iterations}")
         q = _eq522(setup, q_nom, T, kind_, int(iterations), float(damping))
         solved = _jacobian_solved(setup, q, q_nom, T, kind_, int(iterations))
-        base = _correct(
+        base = correct(
             setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, tol=tol, tol_angle=tol_angle,
             max_iter=max_iter, orientation_weight=orientation_weight, tool_axis=tool_axis,
             max_joint_change=max_joint_change, solved=solved,
@@ -236,9 +237,9 @@ def compensate_cartesian_path(
         q0: ``(dof,)`` configuration choosing the branch at the first sample.
         options: passed to :func:`compensate_path`.
     """
-    setup = _setup(calibrated, nominal_model, options.get("joint_effects"))
-    T, kind_ = _as_frames(targets, "auto" if kind is None else kind)
-    T = _to_base(T, frame, setup)
+    setup = compensation_setup(calibrated, nominal_model, options.get("joint_effects"))
+    T, kind_ = as_frames(targets, "auto" if kind is None else kind)
+    T = to_base(T, frame, setup)
     nominal = joint_path(setup.nominal, T, kind=kind_, q0=q0, tool_axis=options.get("tool_axis", 2))
     targets_base = T[:, :3, 3] if kind_ == "position" else T
     return compensate_path(

@@ -13,10 +13,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.ik import TargetKind
+from robocal.identify.result import CalibrationResult
+from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.outdir import atomic_write_text
 from robocal.safe_output import csv_text, strict_json
 from robocal.units import joint_unit_factors
 

@@ -45,7 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.measure.ik import PerturbationFunction, TargetKind
+from robocal.measure.ik import PerturbationFunction
+from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
 
 __all__ = [
@@ -132,11 +133,11 @@ def _sides(model: Model, q: Array) -> Array:
     arms with fewer than 6 joints."""
     if model.dof < 6:
         return np.full((len(q), 3), np.nan)
-    from robocal.compensate.program_config import _arm_sides  # the KUKA/ABB definitions
+    from robocal.compensate.arm_geometry import arm_sides  # the KUKA/ABB definitions
 
     out = np.empty((len(q), 3))
     for i, qi in enumerate(q):
-        out[i, :2] = _arm_sides(model, qi)
+        out[i, :2] = arm_sides(model, qi)
         # the wrist's side, whatever the winding: sin q5 (0 at both wrist singularities, 0 and π)
         out[i, 2] = math.sin(qi[4])
     return out

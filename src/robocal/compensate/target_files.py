@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import csvfile, spatial
-from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.ik import TargetKind
+from robocal.identify.result import CalibrationResult
+from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
 from robocal.units import joint_unit_factors, unit_factor
 
@@ -23,7 +23,6 @@ __all__ = ["TargetFileError", "Targets", "read_program", "read_targets"]
 Array = NDArray[np.float64]
 Calibrated = CalibrationResult | Model
 Frame = Literal["base", "measurement"]
-
 
 
 # ---------------------------------------------------------------------- files
@@ -170,4 +169,3 @@ def read_program(
     types = list(joint_types) if joint_types is not None else ["revolute"] * dof
     f = np.array([angle if t == "revolute" else length for t in types])
     return names, q * f
-

@@ -35,7 +35,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.model.chain import Body, Model
+from robocal.model.chain import Model
+from robocal.model.steps import Body
 
 __all__ = [
     "DEFAULT_ROBOT",
@@ -274,7 +275,7 @@ class _Demo:
     def draw_robot(self) -> None:
         from robocal.measure.devices import LaserTracker
         from robocal.measure.poses import random_poses
-        from robocal.measure.simulate import draw_true_model
+        from robocal.measure.true_model import draw_true_model
         from robocal.model.dynamics import gravity_torques
 
         nominal, rng = self.nominal, self.rng
@@ -307,7 +308,8 @@ class _Demo:
 
     def virtual(self, noise_seed: int) -> Any:
         """The real robot measured by the tracker, its encoders' noise seeded with ``noise_seed``."""
-        from robocal.measure.simulate import EncoderNoise, VirtualRobot
+        from robocal.measure.joint_effects import EncoderNoise
+        from robocal.measure.simulate import VirtualRobot
 
         effects = [GravityCompliance(self.compliance), EncoderNoise(self.encoder, noise_seed)]
         return VirtualRobot(self.nominal, self.true, self.tracker, effects)
@@ -319,13 +321,13 @@ class _Demo:
         it as well (only for a fixed full orientation; None otherwise: a search)."""
         if self.iso is None or self.iso.cube is None or self.iso.info.get("kind") != "pose":
             return None
-        from robocal.measure.poses import Cube
+        from robocal.measure.cube import Cube
 
         centre = self.iso.cube.center - np.asarray(self.iso.orientation) @ self.tool
         return Cube(center=centre, side=self.iso.cube.side)
 
     def plan_poses(self, n_calibration: int, n_validation: int) -> None:
-        from robocal.identify.observability import select_poses
+        from robocal.identify.pose_selection import select_poses
         from robocal.measure.poses import iso9283_poses, random_poses
 
         selection = select_poses(self.nominal, self.pool, n_calibration)
@@ -462,15 +464,16 @@ class _Demo:
         if out is None:
             return
         from robocal.evaluate.report import write_report
-        from robocal.measure.dataset import write_measurements
-        from robocal.model.files import atomic_write_text, save_model
+        from robocal.measure.dataset.writer import write_measurements
+        from robocal.model.files import save_model
+        from robocal.outdir import atomic_write_text
         from robocal.safe_output import strict_json
 
         result = self.result.with_records(source="robocal demo", robot=self.robot, seed=self.seed)
         ev = self.ev
         if not self.quick:  # ISO 9283's fourteen characteristics, from a simulated timed log
-            from robocal.evaluate.iso9283_report import evaluate_log
-            from robocal.evaluate.iso9283_sim import simulate_log
+            from robocal.evaluate.iso9283.report import evaluate_log
+            from robocal.evaluate.iso9283.sim import simulate_log
 
             try:  # the test cube of the poses above, for the bare robot: no second search (~1.5 s)
                 log = simulate_log(self.nominal, seed=self.seed, cube=self._flange_cube())
@@ -480,7 +483,7 @@ class _Demo:
         ev["timings_s"] = dict(timings)
 
         def the_rest(stage: Path) -> None:  # written with the result, all or nothing
-            from robocal.outdir import read_run_id
+            from robocal.run_ids import read_run_id
 
             run_id = read_run_id(stage / "result.json")  # each file carries the result's run id
             write_measurements(self.train, stage / "train.csv", run_id=run_id)

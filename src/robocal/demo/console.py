@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING, Any
 
 
 def summary_numbers(result, before, after, after_geo, ev, seconds, report_path) -> dict[str, Any]:
-    from robocal.evaluate.metrics import improvement, iso9283_pose_characteristics, path_accuracy
+    from robocal.evaluate.error_tables import improvement
+    from robocal.evaluate.metrics import iso9283_pose_characteristics, path_accuracy
 
     out: dict[str, Any] = {
         "robot": ev["robot"],
@@ -49,7 +50,7 @@ def print_summary(numbers: Mapping[str, Any]) -> None:
     from rich.table import Table
 
     from robocal.console import console, safe
-    from robocal.identify.guards import FitToNoise
+    from robocal.identify.noise_check import FitToNoise
 
     held = numbers["held_out"]
     table = Table(title=f"robocal demo — {numbers['robot']}: held-out poses", title_justify="left")

@@ -1,7 +1,7 @@
 """Evaluation — did it work, shown to a person: ISO 9283 metrics, the seeds' error
 tables and the self-contained HTML report."""
 
-from robocal._lazy import lazy_package
+from robocal.lazy_imports import lazy_package
 
 lazy_package(
     __name__,

@@ -14,13 +14,13 @@ Array = NDArray[np.float64]
 ISO_ANGLES = "xyz"  # a, b, c: extrinsic rotations about the base x, y, z axes
 
 
-def _wrap(angle: ArrayLike) -> Array:
+def wrap(angle: ArrayLike) -> Array:
     """Angles wrapped to (−π, π]."""
     a = np.asarray(angle, dtype=float)
     return np.pi - np.mod(np.pi - a, 2 * np.pi)
 
 
-def _split(poses: ArrayLike, what: str) -> tuple[Array, Array | None]:
+def split_poses(poses: ArrayLike, what: str) -> tuple[Array, Array | None]:
     """Positions ``(..., 3)`` and rotations ``(..., 3, 3)`` (or None) of positions
     ``(..., 3)`` or frames ``(..., 4, 4)``."""
     a = np.asarray(poses, dtype=float)
@@ -31,6 +31,6 @@ def _split(poses: ArrayLike, what: str) -> tuple[Array, Array | None]:
     raise ValueError(f"{what} must be positions (..., 3) or frames (..., 4, 4) in m, got shape {a.shape}")
 
 
-def _angle_deltas(R: Array, R_c: Array, seq: str) -> Array:
+def angle_deltas(R: Array, R_c: Array, seq: str) -> Array:
     """Euler angles of ``R`` minus those of ``R_c``, wrapped, ``(..., 3)`` rad."""
-    return _wrap(spatial.matrix_to_euler(R, seq) - spatial.matrix_to_euler(R_c, seq))
+    return wrap(spatial.matrix_to_euler(R, seq) - spatial.matrix_to_euler(R_c, seq))

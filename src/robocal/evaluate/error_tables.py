@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special  # Student's t quantile; scipy.stats costs robocal report 0.5 s to import
 
-from robocal.evaluate.deviations import _angle_deltas, _split
+from robocal.evaluate.deviations import angle_deltas, split_poses
 
 Array = NDArray[np.float64]
 
@@ -65,13 +65,13 @@ def pose_errors(attained: ArrayLike, commanded: ArrayLike, euler: str = "ZXZ") -
         commanded: the same shape.
         euler: Euler sequence of ΔΦ, Δθ, ΔΨ (seed 003: ``"ZXZ"``).
     """
-    p, R = _split(attained, "attained")
-    pc, Rc = _split(commanded, "commanded")
+    p, R = split_poses(attained, "attained")
+    pc, Rc = split_poses(commanded, "commanded")
     if p.shape != pc.shape or p.ndim != 2:
         raise ValueError(f"attained {p.shape} and commanded {pc.shape} must both be (n, 3) or (n, 4, 4)")
     angles = None
     if R is not None and Rc is not None:
-        angles = _angle_deltas(R, Rc, euler)
+        angles = angle_deltas(R, Rc, euler)
     return PoseErrors(p - pc, angles, euler)
 
 

@@ -64,7 +64,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.evaluate.deviations import ISO_ANGLES, _angle_deltas, _split, _wrap
+from robocal.evaluate.deviations import ISO_ANGLES, angle_deltas, split_poses, wrap
 from robocal.evaluate.error_tables import (
     ERROR_QUANTITIES,
     ErrorTable,
@@ -128,8 +128,8 @@ def pose_accuracy(attained: ArrayLike, commanded: ArrayLike, angles: str = ISO_A
         angles: Euler sequence of the orientation angles a, b, c (scipy convention;
             default ``"xyz"``, rotations about the base x, y, z axes).
     """
-    p, R = _split(attained, "attained")
-    pc, Rc = _split(commanded, "commanded")
+    p, R = split_poses(attained, "attained")
+    pc, Rc = split_poses(commanded, "commanded")
     p = np.atleast_2d(p)
     if p.ndim != 2 or pc.shape != (3,):
         raise ValueError(
@@ -141,7 +141,7 @@ def pose_accuracy(attained: ArrayLike, commanded: ArrayLike, angles: str = ISO_A
     d = bary - pc
     abc = None
     if R is not None and Rc is not None:
-        abc = _wrap(_angle_deltas(R.reshape(-1, 3, 3), Rc, angles).mean(axis=0))
+        abc = wrap(angle_deltas(R.reshape(-1, 3, 3), Rc, angles).mean(axis=0))
     return PoseAccuracy(float(np.linalg.norm(d)), d, abc, bary, len(p))
 
 
@@ -171,7 +171,7 @@ def pose_repeatability(attained: ArrayLike, angles: str = ISO_ANGLES) -> PoseRep
         attained: ``(n, 3)`` positions or ``(n, 4, 4)`` frames (m).
         angles: Euler sequence of a, b, c (see :func:`pose_accuracy`).
     """
-    p, R = _split(attained, "attained")
+    p, R = split_poses(attained, "attained")
     if p.ndim != 2 or len(p) < 2:
         raise ValueError(f"pose repeatability needs n >= 2 attained poses (n, 3), got shape {p.shape}")
     n = len(p)
@@ -180,7 +180,7 @@ def pose_repeatability(attained: ArrayLike, angles: str = ISO_ANGLES) -> PoseRep
     S_l = float(np.sqrt(np.sum((dist - l_mean) ** 2) / (n - 1)))
     abc = None
     if R is not None:
-        a = _angle_deltas(R, R[0], angles)  # relative to one attained pose: no wrap across ±π
+        a = angle_deltas(R, R[0], angles)  # relative to one attained pose: no wrap across ±π
         abc = 3.0 * np.sqrt(np.sum((a - a.mean(axis=0)) ** 2, axis=0) / (n - 1))
     return PoseRepeatability(l_mean + 3.0 * S_l, l_mean, S_l, abc, n)
 
@@ -320,7 +320,7 @@ def _crossing_angles(R: Array, seg: Array, u: Array, R_c: Array, seq: str) -> Ar
     if ok.any():
         R0, R1 = R[seg[ok]], R[seg[ok] + 1]
         step = spatial.matrix_to_rotvec(np.swapaxes(R0, -1, -2) @ R1) * u[ok, None]
-        out[ok] = _angle_deltas(R0 @ spatial.rotvec_to_matrix(step), R_c[ok], seq)
+        out[ok] = angle_deltas(R0 @ spatial.rotvec_to_matrix(step), R_c[ok], seq)
     return out
 
 
@@ -348,10 +348,10 @@ def path_accuracy(
     that every cycle stops short of) gets NaN and is left out of AT and RT; an error is
     raised if that leaves no point.
     """
-    c, R_c = _split(commanded, "commanded path")
+    c, R_c = split_poses(commanded, "commanded path")
     if c.ndim != 2 or len(c) < 2:
         raise ValueError(f"commanded path must be (m >= 2, 3) points (m), got shape {c.shape}")
-    split = [_split(p, f"attained path {j}") for j, p in enumerate(attained)]
+    split = [split_poses(p, f"attained path {j}") for j, p in enumerate(attained)]
     if not split:
         raise ValueError("path accuracy needs at least one attained path")
     for j, (p, _) in enumerate(split):

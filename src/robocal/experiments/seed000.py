@@ -144,10 +144,11 @@ def _links_table(name: str) -> tuple[list[dict[str, Any]], Any]:
 def _fifteen_points(name: str, built_model, seed: int, quick: bool) -> dict[str, Any]:
     """Calibrate the built model and the catalog DH model from 15 O1-optimal pose measurements."""
     import robocal as rc
-    from robocal.identify.observability import select_poses
+    from robocal.identify.pose_selection import select_poses
     from robocal.measure.devices import OpticalCMM
     from robocal.measure.poses import random_poses
-    from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
+    from robocal.measure.simulate import VirtualRobot, simulate
+    from robocal.measure.true_model import draw_true_model
     from robocal.model.catalog import robot
 
     rng = np.random.default_rng(seed)
@@ -301,9 +302,9 @@ def _print(numbers: dict[str, Any]) -> None:
 
 def _write(out: Path, numbers: dict[str, Any], reports: dict[str, Any]) -> None:
     from robocal.evaluate.report import write_report
-    from robocal.model.files import atomic_write_text, save_model
+    from robocal.model.files import save_model
     from robocal.model.view import write_model_view
-    from robocal.outdir import transaction
+    from robocal.outdir import atomic_write_text, transaction
 
     kinds = ("built.yaml", "model.html", "report.html")
     owned = ["seed000.json", *(f"{name}_{kind}" for name in reports for kind in kinds)]

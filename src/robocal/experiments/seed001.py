@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.compensate import compensate_cartesian_path, compensate_targets
-from robocal.experiments.seed001_report import _differences, _plot, _print, _report, _sweep_row
+from robocal.experiments.seed001_report import differences, plot, print_numbers, report, sweep_row
 from robocal.experiments.seed001_setup import (
     BACKLASH_DEG,
     BOARD_CENTER,
@@ -61,7 +61,7 @@ from robocal.experiments.seed001_setup import (
     Q_BRANCH,
     SWEEP_DEG,
     DirectionalBacklash,
-    _backlash,
+    backlash_of,
     nominal_arm,
     spline_targets,
     table_arm,
@@ -71,10 +71,11 @@ from robocal.experiments.seed001_setup import (
 from robocal.experiments.seed001_setup import Q_HOME as Q_HOME
 from robocal.identify.calibrate import calibrate
 from robocal.identify.guards import CalibrationGuardError
-from robocal.measure.dataset import Measurements
-from robocal.measure.devices import CalibrationPlate, Camera
+from robocal.measure.devices import Camera
 from robocal.measure.ik import solve_ik
+from robocal.measure.measurements import Measurements
 from robocal.measure.paths import joint_path
+from robocal.measure.plates import CalibrationPlate
 from robocal.measure.simulate import VirtualRobot, simulate
 from robocal.model.chain import Model
 from robocal.safe_output import strict_json
@@ -182,7 +183,7 @@ def experiment(arm_seed: int, play_deg: float, noise_seed: int = 0) -> dict[str,
     and the spline.  Returns plain numbers (mm, %)."""
     nominal = nominal_arm()
     true = true_arm(arm_seed, nominal)
-    backlash = _backlash(play_deg)
+    backlash = backlash_of(play_deg)
     camera = Camera()
     executed = VirtualRobot(nominal, true, camera, joint_effects=backlash)
     P = verification_points()
@@ -227,11 +228,11 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         rows = []
         for play in SWEEP_DEG:
             runs = [experiment(s, play, noise_seed=s) for s in range(N_ARMS)]
-            rows.append(_sweep_row(play, runs))
+            rows.append(sweep_row(play, runs))
         numbers["sweep"] = {"arms": N_ARMS, "rows": rows}
-    numbers["differences"] = _differences(numbers)
+    numbers["differences"] = differences(numbers)
     if verbose:
-        _print(numbers)
+        print_numbers(numbers)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -240,8 +241,8 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         write_together(  # the numbers, their report and their plot: all of this run or none
             {
                 out / "results.json": (strict_json(numbers, indent=2) + "\n").encode("utf-8"),
-                out / "report.md": _report(numbers).encode("utf-8"),
-                out / "trajectory_errors.png": _plot(numbers),
+                out / "report.md": report(numbers).encode("utf-8"),
+                out / "trajectory_errors.png": plot(numbers),
             }
         )
         if verbose:

@@ -46,7 +46,7 @@ def _bounds_difference(variants: list[dict[str, Any]]) -> str:
     )
 
 
-def _differences(numbers: dict[str, Any]) -> list[str]:
+def differences(numbers: dict[str, Any]) -> list[str]:
     variants = numbers["variants"]
     clean, worst = variants[0]["boards"], variants[-1]
     no_bl = list(_improvements(clean, "points").values()) or [math.nan]
@@ -115,7 +115,7 @@ def _differences(numbers: dict[str, Any]) -> list[str]:
     return out
 
 
-def _sweep_row(play: float, runs: list[dict[str, Any]]) -> dict[str, Any]:
+def sweep_row(play: float, runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean and sd of the improvements (%) over the arms whose fit succeeded, by board,
     and the failed fits (arm seed and message)."""
     row: dict[str, Any] = {"backlash_play_deg": play}
@@ -155,7 +155,7 @@ def _failure_lines(numbers: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _print(numbers: dict[str, Any]) -> None:
+def print_numbers(numbers: dict[str, Any]) -> None:
     from rich.table import Table
 
     from robocal.console import console
@@ -230,7 +230,7 @@ def _print(numbers: dict[str, Any]) -> None:
         console.print(f"  - {line}", highlight=False)
 
 
-def _report(numbers: dict[str, Any]) -> str:
+def report(numbers: dict[str, Any]) -> str:
     lines = [
         "# Seed 001 reproduced: calibration table, bounded L1 calibration, compensation",
         "",
@@ -277,7 +277,7 @@ def _report(numbers: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _plot(numbers: dict[str, Any]) -> bytes:
+def plot(numbers: dict[str, Any]) -> bytes:
     """Errors along the spline before and after, per board, for the table arm (like the
     seed's Fig. 10a), as PNG bytes."""
     import matplotlib

@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal.measure.ik import solve_ik
 from robocal.measure.paths import cubic_spline
-from robocal.measure.simulate import draw_true_model
+from robocal.measure.true_model import draw_true_model
 from robocal.model.catalog import robot
 from robocal.model.chain import Model
 
@@ -149,7 +149,7 @@ class DirectionalBacklash:
         return d
 
 
-def _backlash(play_deg: float) -> DirectionalBacklash | None:
+def backlash_of(play_deg: float) -> DirectionalBacklash | None:
     if play_deg <= 0:
         return None
     b = math.radians(play_deg)

@@ -62,7 +62,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.experiments.seed003_inclinometer import inclinometer_experiment, print_inclinometer
-from robocal.experiments.seed003_report import _mean_sd, _notes, _print, _write, table_3_4_notes
+from robocal.experiments.seed003_report import mean_sd, notes, print_numbers, table_3_4_notes, write
 from robocal.experiments.seed003_setup import ABOVE_TABLE as ABOVE_TABLE
 from robocal.experiments.seed003_setup import (
     BASE_OFFSET,
@@ -74,11 +74,11 @@ from robocal.experiments.seed003_setup import (
     THESIS,
     THESIS_GEOMETRIC_ERRORS,
     KatanaSetup,
-    _measure,
-    _measured_frames,
-    _summary,
     katana_setup,
+    measure,
+    measured_frames,
     pose_errors,
+    summary,
 )
 from robocal.experiments.seed003_setup import CUBE_CENTER as CUBE_CENTER
 from robocal.experiments.seed003_setup import CUBE_SIDE as CUBE_SIDE
@@ -118,13 +118,13 @@ def static_experiment(setup: KatanaSetup, noise_seed: int = 1) -> dict[str, Any]
     calibration and held-out poses (simulated measurements, seed ``noise_seed``)."""
     import robocal as rc
 
-    train = _measure(setup, setup.train_q, noise_seed)
-    test = _measure(setup, setup.test_q, noise_seed + 1000)
-    T_train, T_test = _measured_frames(train), _measured_frames(test)
+    train = measure(setup, setup.train_q, noise_seed)
+    test = measure(setup, setup.test_q, noise_seed + 1000)
+    T_train, T_test = measured_frames(train), measured_frames(test)
     out: dict[str, Any] = {"calibration": {}, "held_out": {}, "per_pose": {}, "results": {}}
-    out["calibration"]["before"] = _summary(pose_errors(T_train, setup.geometric.fk(train.q)))
+    out["calibration"]["before"] = summary(pose_errors(T_train, setup.geometric.fk(train.q)))
     e_before = pose_errors(T_test, setup.geometric.fk(test.q))
-    out["held_out"]["before"] = _summary(e_before)
+    out["held_out"]["before"] = summary(e_before)
     out["per_pose"]["before"] = e_before[:10, 3].tolist()
     from robocal.model.joints import joint_perturbations
 
@@ -137,9 +137,9 @@ def static_experiment(setup: KatanaSetup, noise_seed: int = 1) -> dict[str, Any]
         model = setup.geometric if which == "geometric" else setup.nominal
         result = rc.calibrate(model, train, frame="fixed", tool=None, measure="position", **options)
         out["results"][key] = result
-        out["calibration"][key] = _summary(pose_errors(T_train, result.predict(train.q)))
+        out["calibration"][key] = summary(pose_errors(T_train, result.predict(train.q)))
         e = pose_errors(T_test, result.predict(test.q))
-        out["held_out"][key] = _summary(e)
+        out["held_out"][key] = summary(e)
         out["per_pose"][key] = e[:10, 3].tolist()
     return out
 
@@ -200,9 +200,9 @@ def influence_experiment(setup: KatanaSetup, noise_seeds: tuple[int, ...] = (1,)
     analysis = None
     identified: dict[str, dict[str, float]] = {}
     for draw, noise_seed in enumerate(noise_seeds):
-        train = _measure(setup, setup.train_q, noise_seed)
-        test = _measure(setup, setup.test_q, noise_seed + 1000)
-        T_train, T_test = _measured_frames(train), _measured_frames(test)
+        train = measure(setup, setup.train_q, noise_seed)
+        test = measure(setup, setup.test_q, noise_seed + 1000)
+        T_train, T_test = measured_frames(train), measured_frames(test)
         problem, robot = thesis_problem(setup, train)
         x0 = problem.x0
         if analysis is None:
@@ -232,9 +232,9 @@ def influence_experiment(setup: KatanaSetup, noise_seeds: tuple[int, ...] = (1,)
     out: dict[str, Any] = {
         "influence_analysis": analysis.table(),
         "table_3_4": {k: np.mean([d["average"] for d in v], axis=0).tolist() for k, v in per_draw.items()},
-        "calibration_dP": {k: _mean_sd([d["average"][3] for d in v]) for k, v in per_draw.items()},
-        "calibration_rms_dP": {k: _mean_sd([d["rms_dP"] for d in v]) for k, v in per_draw.items()},
-        "held_out_dP": {k: _mean_sd([d["held_out_dP"] for d in v]) for k, v in per_draw.items()},
+        "calibration_dP": {k: mean_sd([d["average"][3] for d in v]) for k, v in per_draw.items()},
+        "calibration_rms_dP": {k: mean_sd([d["rms_dP"] for d in v]) for k, v in per_draw.items()},
+        "held_out_dP": {k: mean_sd([d["held_out_dP"] for d in v]) for k, v in per_draw.items()},
         "identified_mm_deg": identified,
         "true_mm_deg": {k: v / _unit(setup, k) for k, v in THESIS_GEOMETRIC_ERRORS.items()},
         "labels": {k: label for k, (label, _) in TABLE_3_4_METHODS.items()},
@@ -323,8 +323,8 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
     runs = [static_experiment(setup, noise_seed=seed) for seed in noise_seeds(draws)]
     first = runs[0]
     keys = ["before", *STATIC_METHODS]
-    held = {k: _mean_sd([r["held_out"][k]["average"][3] for r in runs]) for k in keys}
-    calib = {k: _mean_sd([r["calibration"][k]["average"][3] for r in runs]) for k in keys}
+    held = {k: mean_sd([r["held_out"][k]["average"][3] for r in runs]) for k in keys}
+    calib = {k: mean_sd([r["calibration"][k]["average"][3] for r in runs]) for k in keys}
     robust_setup = katana_setup(n_test=n_test, joint_parameter_error=0.25, error_seed=3)
     robust = static_experiment(robust_setup, noise_seed=5)
     static = {f"{k}_static": first["results"][k] for k in ("simultaneous", "simultaneous_measured")}
@@ -359,12 +359,12 @@ def run(out: Path | None = None, quick: bool = False, verbose: bool = True) -> d
         },
         "thesis": THESIS,
     }
-    numbers["notes"] = _notes(numbers, first)
+    numbers["notes"] = notes(numbers, first)
     numbers["table_3_4_notes"] = table_3_4_notes(chapter_3)
     numbers["seconds"] = round(time.perf_counter() - t0, 2)
     if verbose:
-        _print(numbers, first)
+        print_numbers(numbers, first)
         print_inclinometer(inclinometer)
     if out is not None:
-        _write(Path(out), numbers, trajectory)
+        write(Path(out), numbers, trajectory)
     return numbers

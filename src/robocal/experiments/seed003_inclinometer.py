@@ -88,7 +88,7 @@ def design_configurations(
     """``n`` configurations ``(n, dof)`` picked greedily from random ones to maximise
     ``log det`` of the identifiable parameters' information at the model's own joint
     effects (the "measured" Table 5.2 values)."""
-    from robocal.identify.tilt_identification import _visible, parameter_names, tilt_jacobian
+    from robocal.identify.tilt_identification import parameter_names, tilt_jacobian, visible
     from robocal.measure.inclinometer import TiltReadings, channel_rows
 
     q = _candidates(model, sensors, candidates, np.random.default_rng(seed))
@@ -106,7 +106,7 @@ def design_configurations(
     }
     x = np.array([prior.get(n_, 0.0) for n_ in names])
     J = tilt_jacobian(model, dummy, sensors, names, x)
-    keep, _ = _visible(J, names)
+    keep, _ = visible(J, names)
     J = J[:, keep] / np.linalg.norm(J[:, keep], axis=0)
     per = J.reshape(len(q), -1, J.shape[1])  # (configurations, channels, parameters)
     info = 1e-6 * np.eye(J.shape[1])

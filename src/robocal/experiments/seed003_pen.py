@@ -36,7 +36,7 @@ THESIS_PEN_QUOTE = (
 def _paper(circle) -> Any:
     """The sheet in the circle's plane, its origin at the centre (x along ``u``, z the normal)."""
     from robocal import spatial
-    from robocal.measure.devices import PenOnPaper
+    from robocal.measure.plates import PenOnPaper
 
     T = spatial.homogeneous(np.stack([circle.u, circle.v, circle.normal], axis=1), circle.center)
     return PenOnPaper(T_device_base=spatial.inverse(T))
@@ -80,14 +80,14 @@ def _check(pen, printed_xy: Array, actual: Array, target: Array, rng) -> dict[st
 def _calibrated(setup: KatanaSetup, path, n_calibration: int, noise_seed: int):
     """The thesis' calibration (tilting predicted first) from CMM samples of the circle."""
     import robocal as rc
-    from robocal.experiments.seed003_setup import _measure
+    from robocal.experiments.seed003_setup import measure
     from robocal.experiments.seed003_trajectory import TRAJECTORY_METHODS
     from robocal.measure.devices import OpticalCMM
 
     device = OpticalCMM(T_device_base=np.eye(4), working_range=None, sigma=NOISE)
     setup = dataclasses.replace(setup, device=device)
     idx = np.linspace(0, len(path.q), n_calibration, endpoint=False).astype(int)
-    data = _measure(setup, path.q[idx], noise_seed, path.qd[idx], path.qdd[idx])
+    data = measure(setup, path.q[idx], noise_seed, path.qd[idx], path.qdd[idx])
     options = TRAJECTORY_METHODS["tilting"][2]
     return rc.calibrate(setup.nominal, data, frame="fixed", tool=None, measure="position",
                         velocities=path.qd[idx], accelerations=path.qdd[idx], **options)  # fmt: skip
@@ -100,12 +100,12 @@ def pen_experiment(
     state, the mean |deviation| the trace and the potentiometer show and the truth's
     (across, out of the paper, along the path; mm) and the samples where the pen lifted."""
     from robocal.experiments.seed003_inclinometer import katana_robots
-    from robocal.experiments.seed003_trajectory import _thesis_paths, compensate_path
+    from robocal.experiments.seed003_trajectory import compensate_path, thesis_paths
     from robocal.measure.paths import THESIS_CIRCLE_MM, Circle, circle_through
     from robocal.model.joints import joint_perturbations
 
     setup = setup or katana_robots()
-    circle_path_, line_path_ = _thesis_paths(setup, n_samples)
+    circle_path_, line_path_ = thesis_paths(setup, n_samples)
     c = circle_through(THESIS_CIRCLE_MM * MM)
     pen = _paper(Circle(c.center + BASE_OFFSET, c.radius, c.normal, c.u))
     result = _calibrated(setup, circle_path_, n_calibration, noise_seed)

@@ -34,7 +34,7 @@ def _table(title: str, rows: dict[str, dict[str, list[float]]], thesis: dict | N
     return table
 
 
-def _mean_sd(values: list[float]) -> dict[str, float]:
+def mean_sd(values: list[float]) -> dict[str, float]:
     a = np.asarray(values, dtype=float)
     return {"mean": float(a.mean()), "sd": float(a.std(ddof=1)) if len(a) > 1 else 0.0}
 
@@ -43,7 +43,7 @@ def _fmt3(values: list[float]) -> str:
     return " ".join(f"{v:.3f}" for v in values)
 
 
-def _notes(numbers: dict[str, Any], first: dict[str, Any]) -> list[str]:
+def notes(numbers: dict[str, Any], first: dict[str, Any]) -> list[str]:
     """Where the simulation agrees with the thesis and where (and why) it does not."""
     cal, held = numbers["calibration_average_dP"], numbers["held_out_average_dP"]
     t45 = THESIS["table_4_5"]["average"]
@@ -184,7 +184,7 @@ def _print_table_3_4(t34: dict[str, Any]) -> None:
     console.print(table)
 
 
-def _print(numbers: dict[str, Any], first: dict[str, Any]) -> None:
+def print_numbers(numbers: dict[str, Any], first: dict[str, Any]) -> None:
     from robocal.console import console
 
     thesis = THESIS["table_4_5"]
@@ -268,7 +268,7 @@ def _markdown(numbers: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> None:
+def write(out: Path, numbers: dict[str, Any], trajectory: dict[str, Any]) -> None:
     out.mkdir(parents=True, exist_ok=True)
 
     import matplotlib

@@ -169,8 +169,10 @@ def katana_setup(
     two-stage method is given) by a uniform relative error in ±this (seeded).
     """
     import robocal as rc
+    from robocal.measure.cube import Cube
     from robocal.measure.devices import OpticalCMM
-    from robocal.measure.poses import Cube, diagonal_plane_poses, random_poses
+    from robocal.measure.diagonal_poses import diagonal_plane_poses
+    from robocal.measure.poses import random_poses
 
     nominal = rc.robot("katana450")
     true = nominal.with_values({k: nominal.step(k).value + v for k, v in THESIS_GEOMETRIC_ERRORS.items()})
@@ -204,9 +206,9 @@ def katana_setup(
     )
 
 
-def _measure(setup: KatanaSetup, q: Array, seed: int, qd: Array | None = None, qdd: Array | None = None):
+def measure(setup: KatanaSetup, q: Array, seed: int, qd: Array | None = None, qdd: Array | None = None):
     """What the CMM sees of the true robot at commanded ``q`` (with its joint effects)."""
-    from robocal.measure.dataset import Measurements
+    from robocal.measure.measurements import Measurements
     from robocal.model.joints import joint_perturbations
 
     T = setup.true.fk(q, joint_perturbations(setup.true, q, qd, qdd))
@@ -225,7 +227,7 @@ def pose_errors(T_actual: Array, T_predicted: Array) -> Array:
     return np.column_stack([np.abs(dp), np.linalg.norm(dp, axis=1), de])
 
 
-def _summary(errors: Array) -> dict[str, list[float]]:
+def summary(errors: Array) -> dict[str, list[float]]:
     return {
         "minimum": errors.min(axis=0).tolist(),
         "maximum": errors.max(axis=0).tolist(),
@@ -233,7 +235,7 @@ def _summary(errors: Array) -> dict[str, list[float]]:
     }
 
 
-def _measured_frames(data) -> Array:
+def measured_frames(data) -> Array:
     T = np.tile(np.eye(4), (data.n, 1, 1))
     T[:, :3, 3] = data.position
     T[:, :3, :3] = data.orientation

@@ -14,7 +14,7 @@ from robocal.experiments.seed003_setup import (
     CIRCLE_PERIOD,
     MM,
     KatanaSetup,
-    _measure,
+    measure,
 )
 
 Array = NDArray[np.float64]
@@ -100,7 +100,7 @@ def trajectory_experiment(
     import robocal as rc
     from robocal.model.joints import joint_perturbations, load_moments
 
-    circle, line = _thesis_paths(setup, n_samples)
+    circle, line = thesis_paths(setup, n_samples)
     target, q, qd, qdd = circle
     line_target, line_q, line_qd, line_qdd = line
 
@@ -117,7 +117,7 @@ def trajectory_experiment(
     stiffness_alone = np.linalg.norm(setup.true.fk(q, sag)[:, :3, 3] - setup.true.fk(q)[:, :3, 3], axis=1)
     step = n_samples // n_calibration
     idx = np.arange(0, n_samples, step)[:n_calibration]
-    data = _measure(setup, q[idx], noise_seed, qd[idx], qdd[idx])
+    data = measure(setup, q[idx], noise_seed, qd[idx], qdd[idx])
     stiffness_only = dataclasses.replace(
         setup.nominal,
         joint_effects=tuple(
@@ -167,7 +167,7 @@ class _Path(NamedTuple):
     qdd: Array  # rad/s²
 
 
-def _thesis_paths(setup: KatanaSetup, n_samples: int) -> tuple[_Path, _Path]:
+def thesis_paths(setup: KatanaSetup, n_samples: int) -> tuple[_Path, _Path]:
     """The thesis' circle (period :data:`CIRCLE_PERIOD`) and its 200 mm line in 2 s, as the
     controller's joint paths: nearest to the configuration that reaches the circle's centre."""
     from robocal.measure.ik import solve_ik

@@ -1,6 +1,6 @@
 """Step 3 of a calibration — what the parameters really are: identification and validation."""
 
-from robocal._lazy import lazy_package
+from robocal.lazy_imports import lazy_package
 
 lazy_package(
     __name__,

@@ -27,7 +27,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.identify.guards import CalibrationGuardError, check_data, check_rank, check_solution
-from robocal.identify.observability import Dropped
 from robocal.identify.problem import TOOL_PREFIX, frame_steps, measurement_chain
 from robocal.identify.rules import Rules
 from robocal.identify.solvers import levenberg_marquardt_batch
@@ -40,8 +39,10 @@ from robocal.identify.stages import (
     tool_displacement_scale,
     uncertainty,
 )
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Joint, Model, Step
+from robocal.measure.measurements import Measurements
+from robocal.model.chain import Model
+from robocal.model.rank import Dropped
+from robocal.model.steps import Joint, Step
 
 __all__ = ["BatchFit", "augmented_chain", "batch_positions", "calibrate_batch"]
 
@@ -266,7 +267,7 @@ def calibrate_batch(
         ValueError: no positions, different pose counts or a joint count that does not
             fit the model.
     """
-    from robocal.identify.pipeline import without_measured_tool
+    from robocal.identify.problem_setup import without_measured_tool
 
     if not data:
         return []

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.observability import Dropped
 from robocal.identify.problem import Problem
 from robocal.model.chain import Model
+from robocal.model.rank import Dropped
 
 __all__ = ["AT_BOUND_TOLERANCE", "bounded_method_bounds", "default_bounds", "parameters_at_bounds"]
 

@@ -61,12 +61,13 @@ from robocal.identify.options import (
     Setup,
     Weights,
 )
-from robocal.identify.pipeline import LEVELS, calibrate_physics, parse_level
-from robocal.identify.pipeline import without_measured_tool as _without_measured_tool
+from robocal.identify.pipeline import calibrate_physics
+from robocal.identify.problem_setup import LEVELS, parse_level
+from robocal.identify.problem_setup import without_measured_tool as _without_measured_tool
 from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
 from robocal.identify.result_io import RESULT_FILES, file_hash
 from robocal.identify.stages import initial_frames_and_tools, screen_unidentifiable
-from robocal.measure.dataset import Measurements
+from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 
 __all__ = [
@@ -253,7 +254,7 @@ def calibrate(
             ``robocal calibrate``) or ``"joint_fourier"`` (always the learned residual; CV
             chooses the harmonics only).
         residual_harmonics: the numbers of harmonics CV chooses from (default
-            :data:`robocal.identify.residual.DEFAULT_HARMONICS`).
+            :data:`robocal.identify.residual.stage.DEFAULT_HARMONICS`).
         cv_folds: folds of the cross-validation.
 
     Joint effects are physical: an identified clearance tilt, backlash or compliance is at
@@ -275,7 +276,7 @@ def calibrate(
         model = dataclasses.replace(model, residual=None)
     if residual == "none":
         return _with_tool_facts(calibrate_physics(model, data, method, physics), physics.setup, data)
-    from robocal.identify.residual import calibrate_with_residual
+    from robocal.identify.residual.stage import calibrate_with_residual
 
     result = calibrate_with_residual(
         calibrate_physics, model, data, method, physics.keywords(),

@@ -22,7 +22,7 @@ from robocal.identify.noise_check import FitToNoise
 from robocal.identify.problem import Problem
 from robocal.identify.result import CalibrationResult, CalibrationWarning
 from robocal.identify.stages import median
-from robocal.measure.dataset import Measurements
+from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 from robocal.model.geometry import Measure
 
@@ -166,7 +166,7 @@ def diagnose(
     Raises:
         CalibrationGuardError: the solution guard's (with the orientation hint, if any).
     """
-    from robocal.identify import check_kernels  # numba: imported on first use
+    import robocal.identify.kernels.check as check_kernels  # numba: imported on first use
 
     out = list(warnings)
     r = np.ascontiguousarray(result.residuals)

@@ -3,7 +3,7 @@ estimated: their units, whether an estimate stands (:func:`effect_verdict`) and 
 hold at their start values (:func:`effects_to_hold`).
 
 Its own module so that the calibration (:mod:`robocal.identify.calibrate`) and the learned
-residual's refits (:mod:`robocal.identify.residual`) share it without importing each other.
+residual's refits (:mod:`robocal.identify.residual.stage`) share it without importing each other.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ calibration, and the one ``bench_calibrate`` times.
 :func:`rank_test` evaluates the problem at its start values and runs the sequential rank
 test (:func:`robocal.model.rank.preference_subset`) on the columns the compiled first pass
 prepared; :func:`fit` runs screening, the fit, its covariance and pruning in one compiled
-call (:func:`robocal.identify.fused_kernels.fit`) and returns the frozen
+call (:func:`robocal.identify.kernels.fused.fit`) and returns the frozen
 :class:`~robocal.identify.problem_setup.Fit` the staged functions would
 (:func:`robocal.identify.pipeline._calibrate_once` calls them where this does not apply,
 and after a nearly singular covariance).  The decisions (screening, pruning, the variance
@@ -26,12 +26,11 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.problem_setup import Fit, Run, Selection
 from robocal.identify.rules import Rules
 from robocal.identify.solve_result import SolveResult, lm_message
 from robocal.identify.stages import Covariance, preference_columns
-from robocal.model.rank import preference_subset
+from robocal.model.rank import Dropped, IdentifiableSubset, preference_subset
 
 __all__ = ["FirstPass", "applies", "fit", "rank_test"]
 
@@ -43,7 +42,7 @@ TOLERANCE = 1e-10  # the Levenberg-Marquardt tolerance of robocal.identify.solve
 class FirstPass:
     """The evaluation at the start values (frames ``(n, 4, 4)``, unweighted residuals
     ``(3n,)`` and Jacobian ``(3n, p)``), the rank test's identifiable set and the
-    problem's ``data`` tuple of :mod:`robocal.identify.fused_kernels`."""
+    problem's ``data`` tuple of :mod:`robocal.identify.kernels.fused`."""
 
     evaluation: tuple[Array, Array, Array]
     selection: IdentifiableSubset
@@ -64,7 +63,7 @@ def applies(run: Run) -> bool:
 
 
 def _chain_data(run: Run) -> tuple:
-    """The ``data`` tuple of :mod:`robocal.identify.fused_kernels`."""
+    """The ``data`` tuple of :mod:`robocal.identify.kernels.fused`."""
     problem = run.problem
     plan = problem.chain._plan
     return (np.ascontiguousarray(problem.q, dtype=float), np.ascontiguousarray(problem.position, dtype=float),
@@ -73,7 +72,7 @@ def _chain_data(run: Run) -> tuple:
 
 
 class _FirstPass(NamedTuple):
-    """:func:`robocal.identify.fused_kernels.first_pass`'s result, by name."""
+    """:func:`robocal.identify.kernels.fused.first_pass`'s result, by name."""
 
     frames: Array  # (n, 4, 4) tool frames at the start values
     r: Array  # (3n,) unweighted residuals (m)
@@ -86,7 +85,7 @@ class _FirstPass(NamedTuple):
 
 
 class _Fused(NamedTuple):
-    """:func:`robocal.identify.fused_kernels.fit`'s result, by name."""
+    """:func:`robocal.identify.kernels.fused.fit`'s result, by name."""
 
     status: int
     screened: NDArray[np.intp]  # free-column indices screened before the fit
@@ -109,7 +108,7 @@ def rank_test(run: Run) -> FirstPass | None:
     """The first evaluation and the identifiable set (as
     :func:`robocal.identify.stages.identifiable_set` on the scaled Jacobian); None when the
     Jacobian is not finite or has no non-zero column (the staged rank test explains)."""
-    from robocal.identify import fused_kernels as kernels  # numba: imported on first use
+    import robocal.identify.kernels.fused as kernels  # numba: imported on first use
 
     problem = run.problem
     chain = problem.chain
@@ -141,7 +140,7 @@ def fit(run: Run, first: FirstPass, solver: Mapping[str, Any], rules: Rules) -> 
     staged functions fit it (``solver``: the settings of the LM fit, ``rules``: the
     decisions').  None when a covariance's normal matrix is nearly singular: the staged
     functions then take the SVD path."""
-    from robocal.identify import fused_kernels as kernels
+    import robocal.identify.kernels.fused as kernels
 
     problem = run.problem
     names = problem.free_names

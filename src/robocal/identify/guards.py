@@ -34,8 +34,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.identify.noise_check import FitToNoise, fit_to_noise  # re-exported: the guards
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model, Role
+from robocal.measure.measurements import Measurements
+from robocal.model.chain import Model
+from robocal.model.steps import Role
 
 __all__ = [
     "CalibrationGuardError",
@@ -129,7 +130,7 @@ def _generic(
     Cached: a model's identifiable set does not depend on the data."""
     key = (model, measure, _transform_key(frame), _transform_key(tool), _transform_key(tool_guess), n, seed)
     if key not in _GENERIC:
-        from robocal.measure.ik import random_configurations
+        from robocal.measure.ik_starts import random_configurations
 
         chain = _measurement_chain(model, measure, frame, tool, tool_guess)
         q = random_configurations(model, n, np.random.default_rng(seed))
@@ -198,7 +199,7 @@ def check_data(model: Model, data: Measurements) -> list[str]:
         raise CalibrationGuardError(
             f"the data has {data.dof} joint columns but model {model.name!r} has {model.dof} joints"
         )
-    from robocal.identify import check_kernels  # numba: imported on first use
+    import robocal.identify.kernels.check as check_kernels  # numba: imported on first use
 
     if data.n == 0:
         raise CalibrationGuardError("no measured poses")

@@ -40,11 +40,11 @@ KERNELS = (
     ("robocal.model.kernels", "forward"),
     ("robocal.model.kernels_evaluate", "evaluate"),
     ("robocal.model.rank_kernels", "sequential_test"),
-    ("robocal.identify.start_kernels", "frames_and_tools"),
-    ("robocal.identify.lm_kernels", "propose"),
-    ("robocal.identify.stage_kernels", "screen"),
-    ("robocal.identify.fused_kernels", "fit"),
-    ("robocal.identify.check_kernels", "data_ranges"),
+    ("robocal.identify.kernels.start", "frames_and_tools"),
+    ("robocal.identify.kernels.lm", "propose"),
+    ("robocal.identify.kernels.stage", "screen"),
+    ("robocal.identify.kernels.fused", "fit"),
+    ("robocal.identify.kernels.check", "data_ranges"),
 )
 
 FIRST_USE_NOTICE = (

@@ -38,7 +38,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.model.chain import Model, Role
+from robocal.model.chain import Model
+from robocal.model.steps import Role
 
 __all__ = [
     "AGREE_SIGMAS",
@@ -306,7 +307,7 @@ def probe_for(calibrated: Any, given: ArrayLike | None, what: str = "--probe") -
     (``calibrate --tool``) if it agrees with the identified one, else the identified tool
     itself.  ``given`` unchanged for a bare model or a calibration without a tool.  What
     separates the tool as built from the identified one is kept with the robot's flange
-    (:mod:`robocal.compensate.program_frames`).
+    (:mod:`robocal.compensate.programs.frames`).
 
     Raises:
         ValueError: ``given`` disagrees with the identified tool (names ``what``).

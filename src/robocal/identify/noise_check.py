@@ -118,7 +118,7 @@ def fit_to_noise(
     is then ``mean(Σ σ²) (3n - p) / 3n``; whatever the mean squared residual exceeds
     that by is error the model does not represent.
     """
-    from robocal.identify import check_kernels  # numba: imported on first use
+    import robocal.identify.kernels.check as check_kernels  # numba: imported on first use
 
     r = np.ascontiguousarray(residuals, dtype=float).reshape(-1, 3)
     s = np.ascontiguousarray(sigma, dtype=float).reshape(-1, 3)

@@ -18,7 +18,7 @@
 Joint-effect load passes (:func:`_with_load_passes`) repeat 2-8 with the joint loads of
 the calibrated geometry.  The residual model (:func:`robocal.calibrate` with
 ``residual=...``) and the uncertainty of the learned residual are stages of
-:mod:`robocal.identify.residual` around this one.  Units: SI (m, rad).
+:mod:`robocal.identify.residual.stage` around this one.  Units: SI (m, rad).
 """
 
 from __future__ import annotations
@@ -38,7 +38,6 @@ from robocal.identify.diagnose import diagnose, parameterisation_warnings
 from robocal.identify.effects import effect_plan, effects_to_hold
 from robocal.identify.guards import check_data, check_rank
 from robocal.identify.kernel_cache import work_clock
-from robocal.identify.observability import Dropped, IdentifiableSubset
 from robocal.identify.options import CalibrationOptions
 from robocal.identify.problem import Problem
 from robocal.identify.problem_setup import (
@@ -59,10 +58,12 @@ from robocal.identify.stages import (
     screen_unidentifiable,
     uncertainty,
 )
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model, Role
+from robocal.measure.measurements import Measurements
+from robocal.model.chain import Model
 from robocal.model.chain_plan import derived_copy
 from robocal.model.joints import effect_of
+from robocal.model.rank import Dropped, IdentifiableSubset
+from robocal.model.steps import Role
 
 __all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
 

@@ -31,9 +31,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
-from robocal.model.chain import Model, Role, Step
+from robocal.model.chain import Model
 from robocal.model.chain_plan import derived_copy
 from robocal.model.conventions import frame6, sequence
+from robocal.model.steps import Role, Step
 
 __all__ = ["FRAME_PREFIX", "TOOL_PREFIX", "Problem", "frame_steps", "measurement_chain"]
 

@@ -15,14 +15,15 @@ from numpy.typing import NDArray
 
 from robocal import spatial
 from robocal.identify.effects import EffectPlan
-from robocal.identify.observability import Dropped
 from robocal.identify.options import CalibrationOptions, check_load_model
 from robocal.identify.problem import Problem, measurement_chain
 from robocal.identify.result import CalibrationWarning
-from robocal.identify.solvers import SolveResult
+from robocal.identify.solve_result import SolveResult
 from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_sizes
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Model, Role
+from robocal.measure.measurements import Measurements
+from robocal.model.chain import Model
+from robocal.model.rank import Dropped
+from robocal.model.steps import Role
 
 __all__ = ["LEVELS", "Fit", "Run", "Selection", "build_problem", "parse_level", "without_measured_tool"]
 

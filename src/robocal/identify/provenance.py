@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from robocal.measure.dataset import Measurements
+from robocal.measure.measurements import Measurements
 
 __all__ = ["READER_DEFAULTS", "Provenance", "SplitRows", "split_rows"]
 

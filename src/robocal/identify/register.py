@@ -32,8 +32,8 @@ from numpy.typing import NDArray
 
 from robocal import spatial
 from robocal.identify.result import CalibrationResult
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Role
+from robocal.measure.measurements import Measurements
+from robocal.model.steps import Role
 
 __all__ = [
     "FRAME_NAMES",

@@ -22,15 +22,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.identify.effects import display_unit, effect_lines
-from robocal.identify.guards import FitToNoise
-from robocal.identify.observability import Dropped
-from robocal.model.chain import Model, Role
+from robocal.identify.noise_check import FitToNoise
+from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
 from robocal.model.joints import effect_of
+from robocal.model.rank import Dropped
+from robocal.model.steps import Role
 
 if TYPE_CHECKING:
     from robocal.identify.provenance import Provenance
-    from robocal.identify.residual import CVTable
+    from robocal.identify.residual.cv import CVTable
 
 __all__ = ["CalibrationResult", "CalibrationWarning", "Diagnostics"]
 
@@ -82,8 +83,8 @@ class Diagnostics:
     objective: Mapping[str, Any] | None = None
 
     def cv_table(self) -> CVTable | None:
-        """The cross-validation table as a :class:`~robocal.identify.residual.CVTable`."""
-        from robocal.identify.residual import CVTable
+        """The cross-validation table as a :class:`~robocal.identify.residual.stage.CVTable`."""
+        from robocal.identify.residual.cv import CVTable
 
         return None if self.cv is None else CVTable.from_dict(dict(self.cv))
 
@@ -423,7 +424,7 @@ class CalibrationResult:
         the calibration did not consider one)."""
         if self.diagnostics.cv is None:
             return []
-        from robocal.identify.residual import CVTable
+        from robocal.identify.residual.cv import CVTable
 
         lines = CVTable.from_dict(dict(self.diagnostics.cv)).lines()
         learned = self.model.residual

@@ -23,10 +23,12 @@ from typing import Any
 import numpy as np
 
 from robocal.identify.effects import parameter_unit
-from robocal.identify.guards import FitToNoise
-from robocal.identify.observability import Dropped
+from robocal.identify.noise_check import FitToNoise
 from robocal.model.dynamics import Payload
-from robocal.model.files import ModelFileError, atomic_write_text, load_model, save_model
+from robocal.model.files import load_model, save_model
+from robocal.model.rank import Dropped
+from robocal.model.yaml_files import ModelFileError
+from robocal.outdir import atomic_write_text
 from robocal.safe_output import strict_json
 
 __all__ = ["RESULT_FILES", "file_hash", "load_result_fields", "metadata_dict", "result_dict", "save_result"]
@@ -192,7 +194,7 @@ def save_result(result: Any, directory: str | Path, also: Callable[[Path], objec
 def load_result_fields(directory: str | Path) -> dict[str, Any]:
     """:meth:`CalibrationResult.load`: the result's fields read from ``directory`` (its
     ``warnings`` as ``(code, message)`` pairs and its ``diagnostics`` as keywords)."""
-    from robocal.outdir import check_consistent
+    from robocal.run_ids import check_consistent
 
     directory = Path(directory)
     path = directory / "result.json"

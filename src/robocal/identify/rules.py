@@ -11,10 +11,10 @@ A calibration decides three things besides the fit itself:
   passes the two-sided χ² test at :attr:`Rules.significance` (:func:`variance_factor`).
 
 The staged pipeline (:mod:`robocal.identify.pipeline`), the compiled fused stages
-(:mod:`robocal.identify.fused_kernels`) and the batched engine
+(:mod:`robocal.identify.kernels.fused`) and the batched engine
 (:mod:`robocal.identify.batch`) all take their thresholds from one :class:`Rules` value
 and their arithmetic from the functions here: numba compiles these same functions
-(:mod:`robocal.identify.stage_kernels`), and Python calls the compiled ones, so no rule is
+(:mod:`robocal.identify.kernels.stage`), and Python calls the compiled ones, so no rule is
 written twice.  The functions use only what numba compiles (loops over float arrays).
 Units: SI (m); σ are tool displacements (m).
 """
@@ -68,7 +68,7 @@ class Rules:
 
     def screening(self, known_noise: bool) -> tuple[float, float, float, bool]:
         """The screening kernel's settings ``(max_std, max_std_ratio, margin, known_noise)``
-        (:func:`robocal.identify.stage_kernels.screen`)."""
+        (:func:`robocal.identify.kernels.stage.screen`)."""
         return (float(self.max_std), float(self.max_std_ratio), float(self.screen_margin), bool(known_noise))
 
     def chi2_bounds(self, dof: Array) -> tuple[Array, Array]:

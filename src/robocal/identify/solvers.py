@@ -130,7 +130,7 @@ def levenberg_marquardt_batch(
     parameters, or after ``max_evaluations`` evaluations; unconverged also when no damping
     makes its normal matrix positive definite (NaN or inf in its Jacobian).
 
-    Compiled (:mod:`robocal.identify.lm_kernels`): an iteration is one kernel call before
+    Compiled (:mod:`robocal.identify.kernels.lm`): an iteration is one kernel call before
     the evaluation (scaling, normal equations, damped Cholesky step, stop tests) and one
     after it (gain ratio, acceptance, damping).  It agrees with the numpy iteration
     (``tests/reference_lm.py``, the tests' reference) to round-off; ``JᵀJ`` is formed
@@ -143,7 +143,7 @@ def levenberg_marquardt_batch(
             it must not write into them afterwards.
         x0: ``(K, p)`` start values.
     """
-    from robocal.identify import lm_kernels as kernels  # numba: imported on first use
+    import robocal.identify.kernels.lm as kernels  # numba: imported on first use
 
     x = np.array(x0, dtype=float)
     K, p = x.shape

@@ -28,9 +28,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.identify.observability import IdentifiableSubset, identifiable_subset
 from robocal.identify.rules import NO_CANDIDATE, Rules
-from robocal.model.chain import Role
+from robocal.model.rank import IdentifiableSubset, identifiable_subset
+from robocal.model.steps import Role
 
 __all__ = [
     "Covariance",
@@ -68,7 +68,7 @@ def initial_frames_and_tools(
     closed-form fits (Kabsch/Horn for ``T_device_base``, the mean of the least-squares
     tool points, and for pose data the nearest rotation of the tool's orientation).
 
-    Computed by :func:`robocal.identify.start_kernels.frames_and_tools` (numba; numpy's
+    Computed by :func:`robocal.identify.kernels.start.frames_and_tools` (numba; numpy's
     batched form cost ~20 calls on 3x3 matrices per round, 200 µs for one robot).
 
     Args:
@@ -88,7 +88,7 @@ def initial_frames_and_tools(
             (nearly) collinear.
         numpy.linalg.LinAlgError: the flange frames, start tool or orientations are not finite.
     """
-    from robocal.identify import start_kernels as sk  # numba: imported on first use
+    import robocal.identify.kernels.start as sk  # numba: imported on first use
 
     K, n = T_flange.shape[:2]
     if T_flange.shape[2:] != (4, 4):
@@ -185,11 +185,11 @@ def normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
     the normalised normal matrix ``JnᵀJn`` (the inverse is meaningful only when the
     smallest eigenvalue is well above round-off).
 
-    Compiled (:func:`robocal.identify.stage_kernels.normal_inverse`: eigenvalues without
+    Compiled (:func:`robocal.identify.kernels.stage.normal_inverse`: eigenvalues without
     vectors, the inverse from a Cholesky factorisation); a numerically singular matrix
     (smallest eigenvalue at most 1e-14 of the largest, or a failed factorisation) gets
     the inverse from the eigendecomposition instead."""
-    from robocal.identify import stage_kernels as sk  # numba: imported on first use
+    import robocal.identify.kernels.stage as sk  # numba: imported on first use
 
     Jn, norms, lam, inverse, ok = sk.normal_inverse(np.ascontiguousarray(J, dtype=float))
     if not ok:
@@ -232,11 +232,11 @@ def screen_unidentifiable(
     of 3 on simulated DH UR10s).  Worst first, re-evaluated after each (correlated
     unknowns often become determined once their partner is fixed); borderline cases are
     left to the pruning after the fit.  A numerically singular problem is left to the
-    fit and its checks.  Compiled: :func:`robocal.identify.stage_kernels.screen` (from the
+    fit and its checks.  Compiled: :func:`robocal.identify.kernels.stage.screen` (from the
     normal equations).  ``rules``: the thresholds as one value (:class:`Rules`; in place
     of ``max_std``, ``max_std_ratio`` and ``margin``).
     """
-    from robocal.identify import stage_kernels as sk
+    import robocal.identify.kernels.stage as sk
 
     r, J = np.asarray(r, dtype=float), np.asarray(J, dtype=float)
     p = J.shape[1]
@@ -277,10 +277,10 @@ def uncertainty(
     the covariance is the sandwich (JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹ of the weighted rows,
     which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
     UR10 with an optical CMM twice).  Compiled
-    (:func:`robocal.identify.stage_kernels.covariance`) unless the normal matrix is nearly
+    (:func:`robocal.identify.kernels.stage.covariance`) unless the normal matrix is nearly
     singular (eigenvalue ratio ≤ 1e-12): then the condition number comes from the singular
     values and the inverse is the pseudo-inverse."""
-    from robocal.identify import stage_kernels as sk
+    import robocal.identify.kernels.stage as sk
 
     m, p = J.shape
     significance = (rules or _DEFAULT_RULES).significance
@@ -333,7 +333,7 @@ def poorly_identifiable(
     (noisy data makes every σ large; that is not a reason): the worst such one.  The rule
     is :func:`robocal.identify.rules.prune_candidate`, compiled (the fused kernels call
     the same)."""
-    from robocal.identify import stage_kernels as sk
+    import robocal.identify.kernels.stage as sk
 
     move = np.ascontiguousarray(std * scale, dtype=float)
     worst = int(sk.prune_candidate(move, float(max_std), float(max_std_ratio), 1.0))
@@ -353,7 +353,7 @@ def residual_variance(
     data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``
     (``dof`` at least 1).
     """
-    from robocal.identify import stage_kernels as sk
+    import robocal.identify.kernels.stage as sk
 
     dof = max(float(dof), 1.0)
     low = high = math.nan  # no test without a stated noise (and no scipy.special)
@@ -366,6 +366,6 @@ def residual_variance(
 def chi2_bounds(dof: Array, significance: float = Rules.significance) -> tuple[Array, Array]:
     """The χ² values ``(k,)`` below and above which :func:`residual_variance` rejects a stated
     noise for ``dof`` ``(k,)`` degrees of freedom: ``P(χ² ≤ low) = P(χ² ≥ high) =
-    significance`` (the compiled fit, :mod:`robocal.identify.fused_kernels`, takes them as
+    significance`` (the compiled fit, :mod:`robocal.identify.kernels.fused`, takes them as
     tables: numba cannot call scipy.special)."""
     return Rules(significance=significance).chi2_bounds(dof)

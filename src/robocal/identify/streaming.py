@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.identify.solvers import SolveResult
+from robocal.identify.solve_result import SolveResult
 from robocal.model.chain import Model
 
 __all__ = ["DEFAULT_CHUNK", "NormalEquations", "StreamingFit", "levenberg_marquardt_streaming", "refit"]

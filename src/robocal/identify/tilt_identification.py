@@ -262,11 +262,11 @@ def _geometry_axes(model, F: Array, W: Array, wanted: set[str]) -> dict[str, tup
 
 
 def _jacobian(model, data, mounts, names, x, eta, gravity) -> Array:
-    from robocal.measure.inclinometer import _sensor_vectors
+    from robocal.measure.inclinometer import sensor_vectors
 
     model = _geometry(model, names, x)
     d = _perturbations(model, data.q, eta, names, x)
-    v, sign, idx, F = _sensor_vectors(model, data.q, data.link, data.axis, mounts, d)
+    v, sign, idx, F = sensor_vectors(model, data.q, data.link, data.axis, mounts, d)
     up = up_vector(gravity)
     cos_r = np.sqrt(np.clip(1.0 - (v @ up) ** 2, 1e-12, None))
     W = _axes(model, F, d)  # (m, dof, 3 perturbations, 3 xyz)
@@ -287,7 +287,7 @@ def _jacobian(model, data, mounts, names, x, eta, gravity) -> Array:
     return J
 
 
-def _visible(J: Array, names: Sequence[str]) -> tuple[list[int], dict[str, str]]:
+def visible(J: Array, names: Sequence[str]) -> tuple[list[int], dict[str, str]]:
     """Columns the readings can determine, and the reason for each of the others."""
     norms = np.linalg.norm(J, axis=0)
     dropped: dict[str, str] = {}
@@ -336,7 +336,7 @@ def identify_tilt(
     mounts = _mounts(data, sensors)
     w = 1.0 / data.sigma
     x = np.zeros(len(names))
-    keep, dropped = _visible(_jacobian(model, data, mounts, names, x, eta, gravity), names)
+    keep, dropped = visible(_jacobian(model, data, mounts, names, x, eta, gravity), names)
     for _ in range(iterations):
         r = (data.tilt - _predict(model, data, mounts, names, x, eta, gravity)) * w
         J = _jacobian(model, data, mounts, names, x, eta, gravity)[:, keep] * w[:, None]

@@ -27,8 +27,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.identify.calibrate import CalibrationResult, calibrate
-from robocal.measure.dataset import Measurements
+from robocal.identify.calibrate import calibrate
+from robocal.identify.result import CalibrationResult
+from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 
 __all__ = ["ValidationStats", "cross_validate", "validate", "validation_statistics"]

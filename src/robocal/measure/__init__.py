@@ -1,11 +1,11 @@
 """Step 2 of a calibration — what was observed: datasets, devices, simulation, poses."""
 
-from robocal._lazy import lazy_package
+from robocal.lazy_imports import lazy_package
 
 lazy_package(
     __name__,
     {
-        "robocal.measure.dataset": (
+        "robocal.measure.dataset.read": (
             "MeasurementFileError",
             "Measurements",
             "MeasurementWarning",

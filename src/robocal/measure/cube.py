@@ -39,7 +39,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.measure.ik import TargetKind, random_configurations, solve_ik
+from robocal.measure.ik import solve_ik
+from robocal.measure.ik_starts import TargetKind, random_configurations
 from robocal.model.chain import Model
 
 Array = NDArray[np.float64]
@@ -64,7 +65,7 @@ DIAGONAL_PLANES: dict[int, tuple[int, int, int, int]] = {
 TOOL_DOWN = np.diag([1.0, -1.0, -1.0])
 
 
-def _check_plane(plane: int) -> int:
+def check_plane(plane: int) -> int:
     if plane not in DIAGONAL_PLANES:
         raise ValueError(f"diagonal plane must be 1, 2, 3 or 4 (ISO 9283 C1-C2-C7-C8 ...), got {plane!r}")
     return int(plane)
@@ -103,12 +104,12 @@ class Cube:
 
     def plane_corners(self, plane: int = 1) -> Array:
         """``(4, 3)`` corners of an ISO 9283 diagonal plane, in cyclic order (m)."""
-        return self.corners[list(DIAGONAL_PLANES[_check_plane(plane)])]
+        return self.corners[list(DIAGONAL_PLANES[check_plane(plane)])]
 
     def plane_points(self, plane: int = 1, shape: tuple[int, int] = (5, 5)) -> Array:
         """``(a*b, 3)`` grid on a diagonal plane (m), ``shape = (a, b)`` points along
         the plane's first edge (a cube edge) and its second edge (a face diagonal)."""
-        return self.at(_unit_plane_grid(plane, shape))
+        return self.at(unit_plane_grid(plane, shape))
 
     def iso_points(self, plane: int = 1, fraction: float = 0.1) -> Array:
         """``(5, 3)`` ISO 9283 positions P1..P5 on a diagonal plane (m).
@@ -119,11 +120,11 @@ class Cube:
         return self.at(_unit_iso_points(plane, fraction))
 
 
-def _unit_plane_grid(plane: int, shape: tuple[int, int]) -> Array:
+def unit_plane_grid(plane: int, shape: tuple[int, int]) -> Array:
     a, b = (int(v) for v in shape)
     if a < 2 or b < 2:
         raise ValueError(f"plane grid shape must be at least (2, 2), got {shape!r}")
-    c = CUBE_CORNERS[list(DIAGONAL_PLANES[_check_plane(plane)])]
+    c = CUBE_CORNERS[list(DIAGONAL_PLANES[check_plane(plane)])]
     s, t = np.meshgrid(np.linspace(0, 1, a), np.linspace(0, 1, b), indexing="ij")
     s, t = s.reshape(-1, 1), t.reshape(-1, 1)
     # bilinear map of the rectangle c0 -> c1 (edge) and c0 -> c3 (face diagonal)
@@ -133,21 +134,21 @@ def _unit_plane_grid(plane: int, shape: tuple[int, int]) -> Array:
 def _unit_iso_points(plane: int, fraction: float) -> Array:
     if not 0 < fraction < 0.5:
         raise ValueError(f"ISO 9283 fraction of the diagonal must be in (0, 0.5), got {fraction!r}")
-    c = CUBE_CORNERS[list(DIAGONAL_PLANES[_check_plane(plane)])]
+    c = CUBE_CORNERS[list(DIAGONAL_PLANES[check_plane(plane)])]
     opposite = c[[2, 3, 0, 1]]  # the diagonals are c0-c2 and c1-c3
     return np.vstack([[0.5, 0.5, 0.5], c + fraction * (opposite - c)])
 
 
-def _unique_rows(points: Array, decimals: int = 9) -> Array:
+def unique_rows(points: Array, decimals: int = 9) -> Array:
     _, first = np.unique(np.round(points, decimals), axis=0, return_index=True)
     return points[np.sort(first)]
 
 
 def _check_points(planes: Sequence[int], grid: int, fraction: float = 0.1) -> Array:
     """Unit-cube check points: a grid x grid lattice on each plane plus its P1..P5."""
-    pts = [_unit_plane_grid(p, (grid, grid)) for p in planes]
+    pts = [unit_plane_grid(p, (grid, grid)) for p in planes]
     pts += [_unit_iso_points(p, fraction) for p in planes]
-    return _unique_rows(np.vstack(pts))
+    return unique_rows(np.vstack(pts))
 
 
 def _frames(points: Array, R: Array) -> Array:
@@ -155,7 +156,7 @@ def _frames(points: Array, R: Array) -> Array:
 
 
 @dataclass(frozen=True)
-class _Constraint:
+class Constraint:
     kind: TargetKind
     R: Array
     tool_axis: int
@@ -164,9 +165,9 @@ class _Constraint:
         return points if self.kind == "position" else _frames(points, self.R)
 
 
-def _constraint(
+def constraint(
     model: Model, kind: TargetKind | None, orientation: ArrayLike | None, tool_axis: int
-) -> _Constraint:
+) -> Constraint:
     if kind is None:
         kind = "pose" if model.dof >= 6 else "axis"
     if kind not in ("position", "pose", "axis"):
@@ -174,11 +175,11 @@ def _constraint(
     R = TOOL_DOWN if orientation is None else np.asarray(orientation, dtype=float)
     if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
         raise ValueError(f"orientation must be a 3x3 rotation matrix, got {np.asarray(orientation)!r}")
-    return _Constraint(kind, R, tool_axis)
+    return Constraint(kind, R, tool_axis)
 
 
-def _solve(
-    model: Model, con: _Constraint, points: Array, q0: Array | None, restarts: int, seed: int
+def solve(
+    model: Model, con: Constraint, points: Array, q0: Array | None, restarts: int, seed: int
 ) -> tuple[NDArray[np.bool_], Array]:
     res = solve_ik(
         model,
@@ -195,7 +196,7 @@ def _solve(
 
 def _bisect_sides(
     model: Model,
-    con: _Constraint,
+    con: Constraint,
     unit: Array,
     centers: Array,
     seeds: Array,
@@ -223,7 +224,7 @@ def _bisect_sides(
             return lo, seeds
         mid = 0.5 * (lo[todo] + hi[todo])
         pts = (centers[todo, None, :] + mid[:, None, None] * offsets[None]).reshape(-1, 3)
-        reached, q = _solve(model, con, pts, seeds[todo].reshape(-1, dof), restarts=1, seed=seed)
+        reached, q = solve(model, con, pts, seeds[todo].reshape(-1, dof), restarts=1, seed=seed)
         ok = np.all(reached.reshape(len(todo), P), axis=1)  # every check point reached
         q = q.reshape(len(todo), P, dof)
         good, bad = todo[ok], todo[~ok]
@@ -293,8 +294,8 @@ def largest_cube(  # noqa: PLR0913 - keyword-only search options of a public fun
     Returns:
         The cube (centre and side in m).
     """
-    con = _constraint(model, kind, orientation, tool_axis)
-    planes = tuple(_check_plane(p) for p in planes)
+    con = constraint(model, kind, orientation, tool_axis)
+    planes = tuple(check_plane(p) for p in planes)
     if resolution <= 0:
         raise ValueError(f"resolution must be positive (m), got {resolution!r}")
     rng = np.random.default_rng(seed)
@@ -332,11 +333,11 @@ def _search_box(model: Model, region: ArrayLike | None, rng: np.random.Generator
 
 
 def _fixed_centre(
-    model: Model, con: _Constraint, box: Array, center: ArrayLike, seed: int
+    model: Model, con: Constraint, box: Array, center: ArrayLike, seed: int
 ) -> tuple[Array, Array, Array]:
     """The given centre ``(1, 3)``, its configuration ``(1, dof)`` and the side's upper bound ``(1,)``."""
     centers = np.asarray(center, dtype=float).reshape(1, 3)
-    ok, q_c = _solve(model, con, centers, None, restarts=20, seed=seed)
+    ok, q_c = solve(model, con, centers, None, restarts=20, seed=seed)
     if not ok[0]:
         raise ValueError(
             f"cube centre {centers[0].tolist()} m is not reachable by {model.name!r} "
@@ -350,7 +351,7 @@ def _fixed_centre(
 
 def _cloud_candidates(
     model: Model,
-    con: _Constraint,
+    con: Constraint,
     box: Array,
     samples: int,
     candidates: int,
@@ -360,7 +361,7 @@ def _cloud_candidates(
     """Stage 1: the best well-separated centres ``(K, 3)`` of a reachability point cloud, their
     configurations ``(K, dof)`` and upper bounds of their sides ``(K,)`` (m)."""
     cloud = box[0] + rng.random((samples, 3)) * (box[1] - box[0])
-    ok, q_cloud = _solve(model, con, cloud, None, restarts=6, seed=seed)
+    ok, q_cloud = solve(model, con, cloud, None, restarts=6, seed=seed)
     if not ok.any():
         raise ValueError(
             f"no reachable point found for {model.name!r} with the imposed tool orientation "
@@ -381,7 +382,7 @@ def _cloud_candidates(
 
 def _compass_search(
     model: Model,
-    con: _Constraint,
+    con: Constraint,
     unit: Array,
     box: Array,
     start: tuple[Array, float, Array],
@@ -401,7 +402,7 @@ def _compass_search(
         lo = max(L - 2 * step, 0.0)
         room = 2.0 * np.minimum(trial - box[0], box[1] - trial).min(axis=1)  # cube stays in box
         pts = (trial[:, None, :] + lo * (unit - 0.5)[None]).reshape(-1, 3)
-        ok, q_t = _solve(model, con, pts, np.tile(q_best, (len(trial), 1)), 1, seed)
+        ok, q_t = solve(model, con, pts, np.tile(q_best, (len(trial), 1)), 1, seed)
         ok = ok.reshape(len(trial), P).all(axis=1) & (room > lo)
         improved = False
         if ok.any():

@@ -68,7 +68,7 @@ def _rigid(T: ArrayLike, what: str) -> Array:
     return T
 
 
-def _vector(v: ArrayLike, shape: tuple[int, ...], what: str) -> Array:
+def vector(v: ArrayLike, shape: tuple[int, ...], what: str) -> Array:
     a = np.array(v, dtype=float)
     if a.shape != shape or not np.all(np.isfinite(a)):
         raise ValueError(f"{what} must be finite numbers shaped {shape}, got {a.shape}")
@@ -76,7 +76,7 @@ def _vector(v: ArrayLike, shape: tuple[int, ...], what: str) -> Array:
     return a
 
 
-def _nonneg(value: float, what: str) -> float:
+def nonneg(value: float, what: str) -> float:
     value = float(value)
     if not (math.isfinite(value) and value >= 0):
         raise ValueError(f"{what} must be finite and >= 0, got {value!r}")
@@ -92,13 +92,13 @@ def _poses(T_base_tool: ArrayLike) -> Array:
     return T
 
 
-def _pose_list(idx: NDArray[np.intp], limit: int = 8) -> str:
+def pose_list(idx: NDArray[np.intp], limit: int = 8) -> str:
     shown = ", ".join(str(int(i)) for i in idx[:limit])
     return shown + (f" ... ({len(idx)} poses)" if len(idx) > limit else "")
 
 
 # The default placement of a device: a tracker for an arm of about 1 m reach at the base origin.
-_TRACKER_POSE = spatial.compose(spatial.transl(2.5, 0.8, 0.3), spatial.homogeneous(spatial.rotz(np.pi - 0.3)))
+TRACKER_POSE = spatial.compose(spatial.transl(2.5, 0.8, 0.3), spatial.homogeneous(spatial.rotz(np.pi - 0.3)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,13 +108,13 @@ class Device:
     kind: ClassVar[str] = ""
     measures: ClassVar[Literal["position", "pose"]] = "position"
 
-    T_device_base: Array = field(default_factory=lambda: spatial.inverse(_TRACKER_POSE))
+    T_device_base: Array = field(default_factory=lambda: spatial.inverse(TRACKER_POSE))
     p_tool_target: Array = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "T_device_base", _rigid(self.T_device_base, f"{self.kind}: T_device_base"))
         object.__setattr__(
-            self, "p_tool_target", _vector(self.p_tool_target, (3,), f"{self.kind}: p_tool_target")
+            self, "p_tool_target", vector(self.p_tool_target, (3,), f"{self.kind}: p_tool_target")
         )
 
     @property

@@ -69,13 +69,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.measure.device_base import (
-    _TRACKER_POSE,
+    TRACKER_POSE,
     Device,
     Observations,
-    _nonneg,
-    _pose_list,
-    _vector,
     look_at,
+    nonneg,
+    pose_list,
+    vector,
 )
 from robocal.measure.inclinometer import Inclinometer
 from robocal.measure.plates import CalibrationPlate, PenOnPaper, plate_points
@@ -127,7 +127,7 @@ class LaserTracker(Device):
     kind: ClassVar[str] = "laser-tracker"
     measures: ClassVar[Literal["position", "pose"]] = "position"
 
-    T_device_base: Array = field(default_factory=lambda: spatial.inverse(_TRACKER_POSE))
+    T_device_base: Array = field(default_factory=lambda: spatial.inverse(TRACKER_POSE))
     p_tool_target: Array = field(default_factory=lambda: np.zeros(3))
     sigma: float = 20e-6
     sigma_per_m: float = 0.0
@@ -136,13 +136,13 @@ class LaserTracker(Device):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "sigma", _nonneg(self.sigma, "laser-tracker: sigma"))
-        object.__setattr__(self, "sigma_per_m", _nonneg(self.sigma_per_m, "laser-tracker: sigma_per_m"))
+        object.__setattr__(self, "sigma", nonneg(self.sigma, "laser-tracker: sigma"))
+        object.__setattr__(self, "sigma_per_m", nonneg(self.sigma_per_m, "laser-tracker: sigma_per_m"))
         if self.acceptance_angle is not None:
             object.__setattr__(
-                self, "acceptance_angle", _nonneg(self.acceptance_angle, "laser-tracker: acceptance_angle")
+                self, "acceptance_angle", nonneg(self.acceptance_angle, "laser-tracker: acceptance_angle")
             )
-        axis = _vector(self.target_axis, (3,), "laser-tracker: target_axis")
+        axis = vector(self.target_axis, (3,), "laser-tracker: target_axis")
         if np.linalg.norm(axis) == 0:
             raise ValueError("laser-tracker: target_axis must not be zero")
         axis = axis / np.linalg.norm(axis)
@@ -161,7 +161,7 @@ class LaserTracker(Device):
             raise ValueError(
                 f"laser-tracker: the reflector turns {np.degrees(angle[bad[0]]):.1f} deg away from the "
                 f"line of sight (acceptance {np.degrees(self.acceptance_angle):.1f} deg) at pose(s) "
-                f"{_pose_list(bad)}: the beam is lost"
+                f"{pose_list(bad)}: the beam is lost"
             )
 
     def _sigma(self, F: Array) -> Array:
@@ -207,7 +207,7 @@ class OpticalCMM(Device):
     def __post_init__(self) -> None:
         super().__post_init__()
         _check_markers(self)
-        object.__setattr__(self, "sigma", _nonneg(self.sigma, f"{self.kind}: sigma"))
+        object.__setattr__(self, "sigma", nonneg(self.sigma, f"{self.kind}: sigma"))
         if self.working_range is not None:
             lo, hi = (float(v) for v in self.working_range)
             if not 0 <= lo < hi:
@@ -231,7 +231,7 @@ class OpticalCMM(Device):
             i = bad[0]
             raise ValueError(
                 f"{self.kind}: markers at {d[i].min():.3f}-{d[i].max():.3f} m from the device at pose(s) "
-                f"{_pose_list(bad)}, outside the working range {lo:g}-{hi:g} m; move the device "
+                f"{pose_list(bad)}, outside the working range {lo:g}-{hi:g} m; move the device "
                 "(T_device_base)"
             )
 
@@ -285,9 +285,9 @@ class Camera(OpticalCMM):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "depth_ratio", _nonneg(self.depth_ratio, "camera: depth_ratio"))
+        object.__setattr__(self, "depth_ratio", nonneg(self.depth_ratio, "camera: depth_ratio"))
         if self.half_fov is not None:
-            object.__setattr__(self, "half_fov", _nonneg(self.half_fov, "camera: half_fov"))
+            object.__setattr__(self, "half_fov", nonneg(self.half_fov, "camera: half_fov"))
 
     @property
     def sigma_lateral(self) -> float:
@@ -308,7 +308,7 @@ class Camera(OpticalCMM):
         if bad.size:
             where = "behind the camera" if self.half_fov is None else "outside the field of view"
             raise ValueError(
-                f"camera: markers {where} at pose(s) {_pose_list(bad)}; move the camera (T_device_base)"
+                f"camera: markers {where} at pose(s) {pose_list(bad)}; move the camera (T_device_base)"
             )
 
     def _sigma(self, F: Array) -> Array:

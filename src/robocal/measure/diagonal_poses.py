@@ -10,17 +10,18 @@ from numpy.typing import ArrayLike, NDArray
 from robocal.measure.cube import (
     CUBE_CORNERS,
     DIAGONAL_PLANES,
+    Constraint,
     Cube,
-    _check_plane,
-    _Constraint,
-    _constraint,
-    _solve,
-    _unique_rows,
-    _unit_plane_grid,
+    check_plane,
+    constraint,
     largest_cube,
+    solve,
+    unique_rows,
+    unit_plane_grid,
 )
 from robocal.measure.cube import TOOL_DOWN as TOOL_DOWN
-from robocal.measure.ik import TargetKind, random_configurations, solve_ik
+from robocal.measure.ik import solve_ik
+from robocal.measure.ik_starts import TargetKind, random_configurations
 from robocal.measure.pose_set import PoseSet, order_all_joints_move, position_sigma_min
 from robocal.model.chain import Model
 
@@ -29,12 +30,12 @@ Array = NDArray[np.float64]
 
 # ------------------------------------------------------------------------ thesis poses
 def _ray_limits(
-    model: Model, con: _Constraint, origin: Array, directions: Array, s_max: Array, seed: int
+    model: Model, con: Constraint, origin: Array, directions: Array, s_max: Array, seed: int
 ) -> Array:
     """Farthest reachable distance (m) from ``origin`` along each unit direction, by
     bisection on IK reachability (the first boundary crossing it brackets)."""
     lo, hi = np.zeros(len(directions)), np.asarray(s_max, dtype=float).copy()
-    ok, q0 = _solve(model, con, origin[None], None, restarts=20, seed=seed)
+    ok, q0 = solve(model, con, origin[None], None, restarts=20, seed=seed)
     if not ok[0]:
         raise ValueError(f"ray origin {origin.tolist()} m is not reachable by {model.name!r}")
     seeds = np.repeat(q0, len(directions), axis=0)
@@ -43,7 +44,7 @@ def _ray_limits(
         if not len(todo):
             return lo
         mid = 0.5 * (lo[todo] + hi[todo])
-        ok, q = _solve(model, con, origin + mid[:, None] * directions[todo], seeds[todo], 2, seed)
+        ok, q = solve(model, con, origin + mid[:, None] * directions[todo], seeds[todo], 2, seed)
         lo[todo[ok]] = mid[ok]
         seeds[todo[ok]] = q[ok]
         hi[todo[~ok]] = mid[~ok]
@@ -91,8 +92,8 @@ def diagonal_plane_poses(  # noqa: PLR0913 - keyword-only options of a public fu
         ``info["min_joint_change_rad"]``, the smallest joint change between consecutive
         poses.
     """
-    con = _constraint(model, kind, orientation, tool_axis)
-    planes = tuple(_check_plane(p) for p in planes)
+    con = constraint(model, kind, orientation, tool_axis)
+    planes = tuple(check_plane(p) for p in planes)
     if not 0 < boundary_fraction <= 1:
         raise ValueError(f"boundary_fraction must be in (0, 1], got {boundary_fraction!r}")
     if cube is None:
@@ -133,7 +134,7 @@ def diagonal_plane_poses(  # noqa: PLR0913 - keyword-only options of a public fu
 
 def _boundary_points(
     model: Model,
-    con: _Constraint,
+    con: Constraint,
     cube: Cube,
     planes: tuple[int, ...],
     n_b: int,
@@ -167,7 +168,7 @@ def _boundary_points(
 
 
 def _pick_solutions(
-    model: Model, con: _Constraint, pts: Array, solutions: int, min_sigma: float, rng: np.random.Generator
+    model: Model, con: Constraint, pts: Array, solutions: int, min_sigma: float, rng: np.random.Generator
 ) -> tuple[Array, NDArray[np.bool_], NDArray[np.bool_]]:
     """IK from ``solutions`` random starts per point; per point one reached solution drawn at
     random among those with position σ_min >= ``min_sigma``. Returns ``q`` ``(m, dof)``,
@@ -194,6 +195,6 @@ def _pick_solutions(
 
 def _plane_lattice(cube: Cube, planes: tuple[int, ...], grid: int) -> Array:
     """A ``grid x grid`` lattice on each diagonal plane (shared points once), centre first, m."""
-    unit = _unique_rows(np.vstack([_unit_plane_grid(p, (grid, grid)) for p in planes]))
+    unit = unique_rows(np.vstack([unit_plane_grid(p, (grid, grid)) for p in planes]))
     centre_first = np.argsort(np.abs(unit - 0.5).sum(axis=1), kind="stable")
     return cube.at(unit[centre_first])

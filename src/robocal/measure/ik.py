@@ -53,7 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.measure.ik_starts import TargetKind, _nearest_pool, random_configurations
+from robocal.measure.ik_starts import TargetKind, nearest_pool, random_configurations
 from robocal.model.chain import Model
 
 __all__ = [
@@ -134,7 +134,7 @@ class IKResult:
         )
 
 
-def _targets(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Array, TargetKind]:
+def target_array(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Array, TargetKind]:
     """Targets as ``(n, 4, 4)`` frames plus the resolved kind."""
     T = np.asarray(targets, dtype=float)
     if kind == "auto":
@@ -169,7 +169,7 @@ def _targets(targets: ArrayLike, kind: TargetKind | Literal["auto"]) -> tuple[Ar
     return T, kind
 
 
-class _Problem:
+class Problem:
     """Residuals and Jacobians of one IK problem, batched over configurations."""
 
     def __init__(
@@ -241,7 +241,7 @@ def _lm_step(J: Array, e: Array, mu: Array) -> Array:
 
 
 def _run_lm(
-    problem: _Problem,
+    problem: Problem,
     q_start: Array,
     idx: NDArray[np.intp],
     limits: Array,
@@ -344,11 +344,11 @@ def solve_ik(  # noqa: PLR0913 - keyword-only options of a public function
     Returns:
         :class:`IKResult`; ``q`` is ``(n, dof)`` even for a single target.
     """
-    T, kind = _targets(targets, kind)
+    T, kind = target_array(targets, kind)
     n, dof = len(T), model.dof
     _check_options(tool_axis, restarts, max_iter, tol, tol_angle)
     q_start = None if q0 is None else _start_configurations(q0, n, model)
-    problem = _Problem(model, T, kind, tool_axis, float(orientation_weight), joint_effects)
+    problem = Problem(model, T, kind, tool_axis, float(orientation_weight), joint_effects)
     if n == 0:
         empty = np.zeros(0)
         zeros = np.zeros(0, np.int64)
@@ -409,7 +409,7 @@ class _Search:
 
     def __init__(
         self,
-        problem: _Problem,
+        problem: Problem,
         rng: np.random.Generator,
         tol: float,
         tol_angle: float,
@@ -429,7 +429,7 @@ class _Search:
         """Starts for targets ``rows``: their ``rank``-th nearest pool configurations."""
         if self.seed_pool <= 0 or rank >= min(self.max_rank, self.seed_pool):
             return None
-        return _nearest_pool(self.problem, self.seed_pool, rows, rank)
+        return nearest_pool(self.problem, self.seed_pool, rows, rank)
 
     def run(self, q_start: Array, rows: NDArray[np.intp]) -> tuple[Array, Array, Array, NDArray[np.int64]]:
         return _run_lm(

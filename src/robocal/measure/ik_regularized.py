@@ -19,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.measure.ik import IKResult, PerturbationFunction, TargetKind, _Problem, _targets
+from robocal.measure.ik import IKResult, PerturbationFunction, Problem, target_array
+from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
 
 __all__ = ["solve_regularized"]
@@ -54,9 +55,9 @@ def solve_regularized(
         :class:`IKResult`; ``reachable`` is all false (a damped solution leaves a residual by
         design: read ``position_error`` and ``angle_error``).
     """
-    T, kind = _targets(targets, kind)
+    T, kind = target_array(targets, kind)
     q_ref = np.asarray(q_ref, dtype=float).reshape(len(T), model.dof)
-    problem = _Problem(model, T, kind, tool_axis, float(orientation_weight), joint_effects)
+    problem = Problem(model, T, kind, tool_axis, float(orientation_weight), joint_effects)
     lim = model.joint_limits
     idx = np.arange(len(T))
     lam2 = float(damping) ** 2

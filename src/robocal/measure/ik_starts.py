@@ -92,7 +92,7 @@ def _within_reach(features: Array) -> Array:
     return features * np.where(largest > _FAR_FEATURE, _FAR_FEATURE / np.maximum(largest, _FAR_FEATURE), 1.0)
 
 
-def _nearest_pool(problem: _Targets, size: int, idx: NDArray[np.intp], rank: int) -> Array:
+def nearest_pool(problem: _Targets, size: int, idx: NDArray[np.intp], rank: int) -> Array:
     """For targets ``idx``: the pool configuration whose tool frame is the ``rank``-th
     nearest (0 = nearest) to the target's, ``(len(idx), dof)``."""
     tree = _seed_tree(problem.model, size, problem.kind, problem.w, problem.k)

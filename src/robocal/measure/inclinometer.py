@@ -174,7 +174,7 @@ def channel_rows(
     return q_rows, link, axis, mounts
 
 
-def _sensor_vectors(model, q: Array, link, axis, mounts: Array, perturbations: Array | None):
+def sensor_vectors(model, q: Array, link, axis, mounts: Array, perturbations: Array | None):
     """Per row: the sensed unit vector (sensor's e_y for x, e_x for y) in the base frame,
     its sign (+1 for x, −1 for y), the joint index of the link and the joint frames."""
     F = model.joint_frames(q, perturbations)
@@ -199,7 +199,7 @@ def readings(
     with joint perturbations ``(m, dof, 3)`` (the joint effects; None for none)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     d = None if perturbations is None else np.asarray(perturbations, dtype=float)
-    v, sign, _, _ = _sensor_vectors(model, q, link, axis, np.asarray(mounts, dtype=float), d)
+    v, sign, _, _ = sensor_vectors(model, q, link, axis, np.asarray(mounts, dtype=float), d)
     return sign * np.arcsin(np.clip(v @ up_vector(gravity), -1.0, 1.0))
 
 

@@ -64,11 +64,11 @@ PROBLEM_CODES = {
 MAX_POSITION = 1e4
 LimitsMode = choices.LimitsMode  # the one table of choices (robocal.choices)
 
-_POSITION = ("x", "y", "z")
-_QUATERNION = ("qw", "qx", "qy", "qz")
-_ANGLES = ("rx", "ry", "rz")
-_SIGMA = ("sx", "sy", "sz")
-_KNOWN = {*_POSITION, *_QUATERNION, *_ANGLES, *_SIGMA, "set", "temperature"}
+POSITION = ("x", "y", "z")
+QUATERNION = ("qw", "qx", "qy", "qz")
+ANGLES = ("rx", "ry", "rz")
+SIGMA = ("sx", "sy", "sz")
+KNOWN = {*POSITION, *QUATERNION, *ANGLES, *SIGMA, "set", "temperature"}
 
 
 class MeasurementFileError(ValueError):

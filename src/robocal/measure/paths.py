@@ -27,7 +27,8 @@ from typing import Unpack
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.measure.ik import IKSettings, TargetKind, solve_ik
+from robocal.measure.ik import IKSettings, solve_ik
+from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
 
 __all__ = [

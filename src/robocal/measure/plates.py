@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.measure.device_base import Device, Observations, _nonneg, _pose_list
+from robocal.measure.device_base import Device, Observations, nonneg, pose_list
 
 Array = NDArray[np.float64]
 
@@ -81,9 +81,9 @@ class CalibrationPlate(Device):
             raise ValueError(f"plate: points must be (k, 3) finite positions (m), got {pts.shape}")
         pts.setflags(write=False)
         object.__setattr__(self, "points", pts)
-        object.__setattr__(self, "sigma", _nonneg(self.sigma, "plate: sigma"))
+        object.__setattr__(self, "sigma", nonneg(self.sigma, "plate: sigma"))
         if self.capture_radius is not None:
-            object.__setattr__(self, "capture_radius", _nonneg(self.capture_radius, "plate: capture_radius"))
+            object.__setattr__(self, "capture_radius", nonneg(self.capture_radius, "plate: capture_radius"))
 
     @classmethod
     def tilted(
@@ -122,7 +122,7 @@ class CalibrationPlate(Device):
         if bad.size:
             raise ValueError(
                 f"plate: the tool tip is {d[bad[0]] * 1000:.1f} mm from the nearest plate point at pose(s) "
-                f"{_pose_list(bad)} (capture radius {self.capture_radius * 1000:g} mm): plan the poses to "
+                f"{pose_list(bad)} (capture radius {self.capture_radius * 1000:g} mm): plan the poses to "
                 "touch the plate's points (CalibrationPlate.points_base)"
             )
 
@@ -162,12 +162,12 @@ class PenOnPaper(Device):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        object.__setattr__(self, "sigma_xy", _nonneg(self.sigma_xy, "pen: sigma_xy"))
-        object.__setattr__(self, "sigma_z", _nonneg(self.sigma_z, "pen: sigma_z"))
+        object.__setattr__(self, "sigma_xy", nonneg(self.sigma_xy, "pen: sigma_xy"))
+        object.__setattr__(self, "sigma_z", nonneg(self.sigma_z, "pen: sigma_z"))
         if self.travel is not None:
-            object.__setattr__(self, "travel", _nonneg(self.travel, "pen: travel"))
+            object.__setattr__(self, "travel", nonneg(self.travel, "pen: travel"))
         if self.size is not None:
-            w, h = (_nonneg(v, "pen: size") for v in self.size)
+            w, h = (nonneg(v, "pen: size") for v in self.size)
             object.__setattr__(self, "size", (w, h))
 
     @staticmethod
@@ -185,14 +185,14 @@ class PenOnPaper(Device):
             if off.size:
                 raise ValueError(
                     f"pen: the pen tip is off the {self.size[0] * 1000:g} x {self.size[1] * 1000:g} mm "
-                    f"sheet at pose(s) {_pose_list(off)}"
+                    f"sheet at pose(s) {pose_list(off)}"
                 )
         if self.travel is not None:
             far = np.flatnonzero(np.abs(p[:, 2]) > self.travel)
             if far.size:
                 raise ValueError(
                     f"pen: the pen tip is {p[far[0], 2] * 1000:.1f} mm from the paper at pose(s) "
-                    f"{_pose_list(far)}, beyond the potentiometer's ±{self.travel * 1000:g} mm travel"
+                    f"{pose_list(far)}, beyond the potentiometer's ±{self.travel * 1000:g} mm travel"
                 )
 
     def _sigma(self, F: Array) -> Array:

@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.measure.cube import TOOL_DOWN as TOOL_DOWN
-from robocal.measure.dataset import Measurements
+from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 
 Array = NDArray[np.float64]

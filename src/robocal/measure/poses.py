@@ -11,7 +11,7 @@
 * :func:`plane_grid`, :func:`poses_for_points` — calibration-plate style grids of
   points and the configurations that reach them.
 * :func:`write_poses`, :func:`read_poses` — a poses file is a measurement CSV with
-  joint columns only (:mod:`robocal.measure.dataset`).
+  joint columns only (:mod:`robocal.measure.dataset.read`).
 
 The cube lives in :mod:`robocal.measure.cube`, :class:`PoseSet` and the ordering in
 :mod:`robocal.measure.pose_set`, seed 003's set in :mod:`robocal.measure.diagonal_poses`;
@@ -32,14 +32,17 @@ from robocal.measure.cube import (
     CUBE_CORNERS,
     DIAGONAL_PLANES,
     Cube,
-    _constraint,
-    _solve,
+    constraint,
     largest_cube,
+    solve,
 )
 from robocal.measure.cube import TOOL_DOWN as TOOL_DOWN
-from robocal.measure.dataset import Measurements, read_measurements, write_measurements
+from robocal.measure.dataset.read import read_measurements
+from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.diagonal_poses import diagonal_plane_poses
-from robocal.measure.ik import TargetKind, random_configurations, solve_ik
+from robocal.measure.ik import solve_ik
+from robocal.measure.ik_starts import TargetKind, random_configurations
+from robocal.measure.measurements import Measurements
 from robocal.measure.pose_set import PoseSet, order_all_joints_move, position_sigma_min
 from robocal.model.chain import Model
 
@@ -105,12 +108,12 @@ def iso9283_poses(
     Raises:
         ValueError: when a pose is not reachable with the imposed orientation.
     """
-    con = _constraint(model, kind, orientation, tool_axis)
+    con = constraint(model, kind, orientation, tool_axis)
     if cube is None:
         cube = largest_cube(model, kind=con.kind, orientation=con.R, tool_axis=tool_axis, seed=seed, **search)  # type: ignore[arg-type]
     points = cube.iso_points(plane, fraction)
-    ok1, q1 = _solve(model, con, points[:1], None, restarts=20, seed=seed)
-    ok, q = _solve(model, con, points[1:], np.repeat(q1, 4, axis=0), restarts=20, seed=seed)
+    ok1, q1 = solve(model, con, points[:1], None, restarts=20, seed=seed)
+    ok, q = solve(model, con, points[1:], np.repeat(q1, 4, axis=0), restarts=20, seed=seed)
     reachable = np.concatenate([ok1, ok])
     q = np.vstack([q1, q])
     if not reachable.all():
@@ -283,7 +286,7 @@ def poses_for_points(
     ``reachable``, not dropped.
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
-    con = _constraint(model, kind, orientation, tool_axis)
+    con = constraint(model, kind, orientation, tool_axis)
     res0 = solve_ik(model, con.targets(pts[:1]), kind=con.kind, q0=q0, seed=seed, tool_axis=tool_axis)
     res = solve_ik(model, con.targets(pts), kind=con.kind, q0=res0.q[0], seed=seed, tool_axis=tool_axis)
     return PoseSet(

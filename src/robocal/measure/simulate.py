@@ -32,13 +32,16 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.measure.dataset import Measurements, write_measurements
-from robocal.measure.devices import Device, device_from_dict
+from robocal.measure.dataset.writer import write_measurements
+from robocal.measure.device_base import Device
+from robocal.measure.devices import device_from_dict
 from robocal.measure.joint_effects import EncoderNoise, JointEffect, PayloadCompliance, effect_from_dict
+from robocal.measure.measurements import Measurements
 from robocal.measure.true_model import draw_true_model, parse_quantity, parse_quantity_option
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text, load_model, save_model
-from robocal.outdir import FolderMixedError, file_set, new_run_id, read_run_id, run_id_line
+from robocal.model.files import load_model, save_model
+from robocal.outdir import atomic_write_text, file_set
+from robocal.run_ids import FolderMixedError, new_run_id, read_run_id, run_id_line
 
 __all__ = [
     "EncoderNoise",

@@ -1,6 +1,6 @@
 """Step 1 of a calibration — what the robot is: chains, conventions, files and the catalog."""
 
-from robocal._lazy import lazy_package
+from robocal.lazy_imports import lazy_package
 
 lazy_package(
     __name__,

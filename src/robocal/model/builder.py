@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from robocal import spatial
-from robocal.model.chain import Joint, Model, Step
+from robocal.model.chain import Model
 from robocal.model.conventions import SCHROER_SETS
 from robocal.model.geometry import (
     DEFAULT_PARALLEL_TOLERANCE,
@@ -53,14 +53,15 @@ from robocal.model.geometry import (
     JointType,
     Measure,
     Tcp,
-    _absolute,
-    _align_xy,
-    _align_zx,
-    _common_normal,
-    _normalise,
+    absolute,
+    align_xy,
+    align_zx,
+    common_normal,
     geometry_fk,
+    normalise,
 )
 from robocal.model.geometry_file import read_geometry_file
+from robocal.model.steps import Joint, Step
 
 __all__ = [
     "BuildResult",
@@ -142,20 +143,20 @@ def _base_link(b: _ChainBuilder, point: np.ndarray, axis: np.ndarray, kind: Join
     c, z = point, axis
     if kind == "prismatic":
         if abs(z[2]) >= b.cos_tol:  # eq. (12) B ∥ JT
-            alpha, beta = _align_xy(z)
+            alpha, beta = align_xy(z)
             b.add(0, "B∥T", 12, ["base_x", "base_y", "base_z", "base_rx", "base_ry"], [*c, alpha, beta])
         else:  # eq. (11) B ⊥ JT
-            gamma, alpha = _align_zx(z)
+            gamma, alpha = align_zx(z)
             b.add(0, "B⊥T", 11, ["base_x", "base_y", "base_z", "base_rz", "base_rx"], [*c, gamma, alpha])
         return
     k = int(np.argmax(np.abs(z)))
     s0 = -c[k] / z[k]
     P = c + s0 * z  # where the axis pierces the base plane normal to the nearest base axis
     if k == 2:  # eq. (15) B ∥ JR
-        alpha, beta = _align_xy(z)
+        alpha, beta = align_xy(z)
         b.add(0, "B∥R", 15, ["base_x", "base_y", "base_rx", "base_ry"], [P[0], P[1], alpha, beta])
     else:
-        gamma, alpha = _align_zx(z)
+        gamma, alpha = align_zx(z)
         if k == 0:  # eq. (13) axis near x
             b.add(0, "B⊥R(x)", 13, ["base_y", "base_z", "base_rz", "base_rx"], [P[1], P[2], gamma, alpha])
         else:  # eq. (14) axis near y
@@ -171,7 +172,7 @@ def _joint_link(
     j = i + 1
     if nxt.type == "revolute":
         if not par:
-            t, s, n = _common_normal(c, z)
+            t, s, n = common_normal(c, z)
             theta = math.atan2(n[1], n[0])
             foot_b = c + s * z
             a = float((foot_b - np.array([0.0, 0.0, t])) @ n)
@@ -189,11 +190,11 @@ def _joint_link(
                 a = math.hypot(P[0], P[1])
                 theta = math.atan2(P[1], P[0]) if a > 1e-12 else 0.0
                 zr = spatial.rotz(-theta) @ z
-                alpha, beta = _align_xy(zr)
+                alpha, beta = align_xy(zr)
                 names = [f"theta{i}", f"a{i}", f"alpha{i}", f"beta{i}", f"p{j}"]
                 b.add(i, "R∥R", 17, names, [theta, a, alpha, beta, -s0], joint)
             else:  # eq. (19)
-                alpha, beta = _align_xy(z)
+                alpha, beta = align_xy(z)
                 names = [f"d{i}", f"x{i}", f"y{i}", f"alpha{i}", f"beta{i}", f"p{j}"]
                 b.add(i, "T∥R", 19, names, [0.0, P[0], P[1], alpha, beta, -s0], joint)
         b.deferred.append(f"p{j}")
@@ -208,15 +209,15 @@ def _joint_link(
             names = [f"theta{i}", f"x{i}", f"y{i}", f"z{i}", f"alpha{i}"]
             b.add(i, "R⊥T", 22, names, [theta, *cr, alpha], joint)
         else:  # eq. (23)
-            alpha, beta = _align_xy(z)
+            alpha, beta = align_xy(z)
             names = [f"theta{i}", f"x{i}", f"y{i}", f"z{i}", f"alpha{i}", f"beta{i}"]
             b.add(i, "R∥T", 23, names, [0.0, *c, alpha, beta], joint)
     elif not par:  # eq. (20)
-        gamma, alpha = _align_zx(z)
+        gamma, alpha = align_zx(z)
         names = [f"d{i}", f"x{i}", f"y{i}", f"theta{i}", f"alpha{i}"]
         b.add(i, "T⊥T", 20, names, [c[2], c[0], c[1], gamma, alpha], joint)
     else:  # eq. (21)
-        alpha, beta = _align_xy(z)
+        alpha, beta = align_xy(z)
         names = [f"d{i}", f"x{i}", f"y{i}", f"alpha{i}", f"beta{i}"]
         b.add(i, "T∥T", 21, names, [c[2], c[0], c[1], alpha, beta], joint)
 
@@ -328,8 +329,8 @@ def build(
         raise ValueError(f"measure must be 'position' or 'pose', got {measure!r}")
     if not 0 < parallel_tolerance < math.pi / 2:
         raise ValueError("parallel_tolerance must lie strictly between 0 and 90 degrees")
-    geo, tcp = _normalise(joints, tcp)
-    points, axes = _absolute(geo)
+    geo, tcp = normalise(joints, tcp)
+    points, axes = absolute(geo)
     b = _ChainBuilder(parallel_tolerance)
     _base_link(b, points[0], axes[0], geo[0].type)
     n = len(geo)
@@ -383,7 +384,7 @@ def build_model(
 
 def _check_reproduces(model: Model, geo, tcp: Tcp, measure: Measure) -> None:
     """Internal consistency: the built chain's frames lie on the given axes at q = 0."""
-    points, axes = _absolute(geo)
+    points, axes = absolute(geo)
     frames = model.joint_frames(np.zeros(model.dof))
     for j, F in enumerate(frames):
         z, o = F[:3, 2], F[:3, 3]

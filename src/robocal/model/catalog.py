@@ -9,7 +9,8 @@ from importlib import resources
 from pathlib import Path
 
 from robocal.model.chain import Model
-from robocal.model.files import ModelFileError, load_model, read_yaml
+from robocal.model.files import load_model
+from robocal.model.yaml_files import ModelFileError, read_yaml
 
 __all__ = ["find_model", "is_geometry_file", "is_model_path", "robot", "robots"]
 

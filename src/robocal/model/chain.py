@@ -66,7 +66,7 @@ __all__ = ["Body", "Joint", "JointEffects", "Model", "Role", "Step"]
 Array = NDArray[np.float64]
 #: cached properties of a model that depend only on its steps' names, motions, joints and roles
 _STRUCTURE = ("names", "roles", "_index", "_plan")
-_kernels = load_kernels  # tests patch it (the numpy path throughout)
+kernels_loader = load_kernels  # tests patch it (the numpy path throughout)
 
 
 @dataclass(frozen=True)
@@ -263,7 +263,7 @@ class Model:
                 return T  # else the general path says what is wrong
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
-        kernels = _kernels(compiled)
+        kernels = kernels_loader(compiled)
         if kernels is not None and d is None:
             plan = self._plan
             seg, _, offsets = self._kernel_segments
@@ -283,7 +283,7 @@ class Model:
         for :meth:`fk`)."""
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
-        kernels = _kernels(compiled)
+        kernels = kernels_loader(compiled)
         if kernels is not None:
             T = self._kernel_forward(kernels, q, d, keep_anchors=True)[1]
             return T[0] if single else T
@@ -375,7 +375,7 @@ class Model:
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
         free = np.flatnonzero(self.free_mask)
-        kernels = _kernels(compiled)
+        kernels = kernels_loader(compiled)
         if kernels is not None:
             T, J, _ = self._kernel_evaluate(kernels, q, d, free, 6 if rows == "pose" else 3)
             return (T[0] if single else T), J
@@ -420,7 +420,7 @@ class Model:
         v = None if values is None else np.asarray(values, dtype=float)
         if v is not None and v.shape != (len(self.steps),):
             raise ValueError(f"values shaped {v.shape}; model {self.name!r} has {len(self.steps)} parameters")
-        kernels = _kernels(compiled)
+        kernels = kernels_loader(compiled)
         if kernels is not None:
             free = np.flatnonzero(self.free_mask) if jacobian else np.zeros(0, dtype=np.intp)
             data = self._kernel_data(kernels, v)
@@ -488,7 +488,7 @@ class Model:
                 return J
         q, single = check_q(q, self)
         d = self._check_perturbations(perturbations, len(q))
-        kernels = _kernels(None)
+        kernels = kernels_loader(None)
         if kernels is not None:
             J = self._kernel_evaluate(kernels, q, d, self._plan.joint_steps, 6)[1].reshape(
                 len(q), 6, self.dof

@@ -21,9 +21,10 @@ from typing import Literal
 
 import numpy as np
 
-from robocal.model.builder import BuildResult, JointGeometry, Tcp, build
-from robocal.model.chain import Body, Model
-from robocal.model.steps import JointType
+from robocal.model.builder import BuildResult, build
+from robocal.model.chain import Model
+from robocal.model.geometry import JointGeometry, Tcp
+from robocal.model.steps import Body, JointType
 
 __all__ = ["build_complete", "calibration_model", "geometry_from_model"]
 

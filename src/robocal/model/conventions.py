@@ -22,7 +22,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Literal
 
-from robocal.model.chain import Body, Joint, Model, Role, Step
+from robocal.model.chain import Model
+from robocal.model.steps import Body, Joint, Role, Step
 
 __all__ = [
     "SCHROER_SETS",

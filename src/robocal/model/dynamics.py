@@ -290,9 +290,9 @@ def _static_wrenches(model: Model, q: Array, gravity: ArrayLike | None, payload:
         raise ValueError(f"gravity must be 3 finite numbers (m/s², base frame), got {gravity!r}")
     joints, masses, centres = _mass_points(model, payload)
     n, dof = q.shape
-    from robocal.model.chain import _kernels
+    from robocal.model.chain import kernels_loader
 
-    kernels = _kernels(None)
+    kernels = kernels_loader(None)
     if kernels is not None:  # compiled: one pass per pose, no numpy call per joint
         order = np.argsort(joints, kind="stable")
         plan = model._plan

@@ -56,7 +56,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, model_validator
 
 from robocal.model import conventions
-from robocal.model.chain import Body, Joint, JointEffects, Model, Role, Step
+from robocal.model.chain import Model
+from robocal.model.steps import Body, Joint, JointEffects, Role, Step
 from robocal.model.yaml_files import ModelFileError, read_yaml  # re-exported
 from robocal.outdir import atomic_write_bytes, atomic_write_text  # the one atomic writer, re-exported
 from robocal.units import ANGLE_UNITS, LENGTH_UNITS, STIFFNESS_UNITS
@@ -386,13 +387,13 @@ def model_to_dict(model: Model) -> dict[str, Any]:
             for b in model.bodies
         ]
     if model.joint_effects:
-        data["joint_effects"] = [_effects_to_dict(e) for e in model.joint_effects]
+        data["joint_effects"] = [effects_to_dict(e) for e in model.joint_effects]
     if model.residual is not None:
         data["residual"] = model.residual.to_dict()
     return data
 
 
-def _effects_to_dict(e: JointEffects) -> dict[str, Any]:
+def effects_to_dict(e: JointEffects) -> dict[str, Any]:
     out: dict[str, Any] = {"joint": e.joint}
     for key in ("clearance_tilt", "backlash", "compliance", "radial_compliance"):
         if getattr(e, key) != 0.0:

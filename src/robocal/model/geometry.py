@@ -63,7 +63,7 @@ def _unit(v: np.ndarray, what: str) -> np.ndarray:
     return v / norm
 
 
-def _normalise(joints: Sequence[JointGeometry | Mapping[str, Any]], tcp) -> tuple[list[JointGeometry], Tcp]:
+def normalise(joints: Sequence[JointGeometry | Mapping[str, Any]], tcp) -> tuple[list[JointGeometry], Tcp]:
     if len(joints) < 1:
         raise GeometryError("the robot needs at least one joint")
     out = [_checked_joint(j, raw) for j, raw in enumerate(joints)]
@@ -124,7 +124,7 @@ def _checked_tcp(tcp: Tcp | Mapping[str, Any] | Sequence[float] | None) -> Tcp:
 
 
 # --------------------------------------------------------------------- geometry
-def _absolute(joints: Sequence[JointGeometry]) -> tuple[np.ndarray, np.ndarray]:
+def absolute(joints: Sequence[JointGeometry]) -> tuple[np.ndarray, np.ndarray]:
     """Absolute joint points ``(n, 3)`` and unit axes ``(n, 3)`` in the base frame."""
     points = np.cumsum([g.position for g in joints], axis=0)
     axes = np.array([g.axis for g in joints], dtype=float)
@@ -138,8 +138,8 @@ def geometry_fk(joints: Sequence[JointGeometry | Mapping[str, Any]], tcp, q: np.
     its axis line through its point; the tool frame at zero is the TCP position with
     its given orientation (identity when none is given).
     """
-    joints, tcp = _normalise(joints, tcp)
-    points, axes = _absolute(joints)
+    joints, tcp = normalise(joints, tcp)
+    points, axes = absolute(joints)
     q = np.atleast_2d(np.asarray(q, dtype=float))
     n = len(q)
     T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
@@ -158,14 +158,14 @@ def geometry_fk(joints: Sequence[JointGeometry | Mapping[str, Any]], tcp, q: np.
     return T @ M
 
 
-def _align_xy(z: np.ndarray) -> tuple[float, float]:
+def align_xy(z: np.ndarray) -> tuple[float, float]:
     """Angles (α, β) with Rx(α) Ry(β) e_z = z (Hayati-style alignment of a near-z axis)."""
     beta = math.asin(float(np.clip(z[0], -1.0, 1.0)))
     alpha = math.atan2(-z[1], z[2])
     return alpha, beta
 
 
-def _align_zx(z: np.ndarray) -> tuple[float, float]:
+def align_zx(z: np.ndarray) -> tuple[float, float]:
     """Angles (γ, α) with Rz(γ) Rx(α) e_z = z (DH-style alignment: x along e_z × z)."""
     s = math.hypot(z[0], z[1])
     gamma = math.atan2(z[0], -z[1]) if s > 1e-15 else 0.0
@@ -173,7 +173,7 @@ def _align_zx(z: np.ndarray) -> tuple[float, float]:
     return gamma, alpha
 
 
-def _common_normal(c: np.ndarray, z: np.ndarray) -> tuple[float, float, np.ndarray]:
+def common_normal(c: np.ndarray, z: np.ndarray) -> tuple[float, float, np.ndarray]:
     """Common normal between the local z axis and the line ``c + s z`` (not parallel).
 
     Returns ``t`` (foot on the z axis at ``t e_z``), ``s`` (foot ``c + s z``) and the

@@ -18,7 +18,7 @@ from robocal.model.geometry import (
     JointGeometry,
     Measure,
     Tcp,
-    _normalise,
+    normalise,
 )
 from robocal.units import ANGLE_UNITS, LENGTH_UNITS
 
@@ -64,7 +64,8 @@ def read_geometry_file(
     """A geometry file's fields, checked and in SI units: name, joints, TCP, measure, parallel
     tolerance (rad), title, source (:func:`robocal.model.builder.load_geometry` makes them a
     :class:`~robocal.model.builder.Geometry`)."""
-    from robocal.model.files import format_validation_error, read_yaml
+    from robocal.model.files import format_validation_error
+    from robocal.model.yaml_files import read_yaml
 
     path = Path(path)
     data = read_yaml(path, "geometry", GeometryError)
@@ -98,7 +99,7 @@ def read_geometry_file(
     tcp = Tcp(_times(spec.tcp.position, L), None if rotation is None else tuple(map(tuple, rotation)))
     tol = DEFAULT_PARALLEL_TOLERANCE if spec.parallel_tolerance is None else spec.parallel_tolerance * A
     try:
-        _normalise(joints, tcp)
+        normalise(joints, tcp)
     except GeometryError as err:
         raise GeometryError(f"{path}: {err}") from None
     return spec.name, tuple(joints), tcp, spec.measure, tol, spec.title, spec.source

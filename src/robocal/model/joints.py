@@ -49,8 +49,9 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.model.chain import JointEffects, Model
+from robocal.model.chain import Model
 from robocal.model.dynamics import Payload, joint_wrenches
+from robocal.model.steps import JointEffects
 
 __all__ = [
     "COMPLIANCE_UNIT",
@@ -447,9 +448,9 @@ class JointTilting:
             "rule": self.rule,
         }
         if self.effects is not None:
-            from robocal.model.files import _effects_to_dict
+            from robocal.model.files import effects_to_dict
 
-            out["effects"] = [_effects_to_dict(e) for e in self.effects]
+            out["effects"] = [effects_to_dict(e) for e in self.effects]
         if self.payload is not None:
             out["payload"] = {
                 "mass": self.payload.mass,

@@ -25,7 +25,7 @@ import math
 import numba
 import numpy as np
 
-from robocal.model.kernels_math import _sincos
+from robocal.model.kernels_math import sincos
 
 __all__ = [
     "fk_into",
@@ -41,13 +41,13 @@ __all__ = [
     "static_wrenches",
 ]
 
-_jit = numba.njit(cache=True, nogil=True)
+jit = numba.njit(cache=True, nogil=True)
 
 
 # _sincos: fdlibm's sin and cos, vectorisable over the poses (robocal.model.kernels_math)
 
 
-@_jit
+@jit
 def _rotate(F, axis, c, s):
     """``F[:, :3] <- F[:, :3] @ rot(axis, angle)`` for a ``(3, 4)`` frame (as chain._rotate_rows)."""
     i = (axis + 1) % 3
@@ -59,7 +59,7 @@ def _rotate(F, axis, c, s):
         F[r, j] = fj * c - fi * s
 
 
-@_jit
+@jit
 def _times_segment(F, S):
     """``F <- F @ S`` in place for a ``(3, 4)`` frame and a ``(4, 4)`` rigid transform."""
     for r in range(3):
@@ -70,7 +70,7 @@ def _times_segment(F, S):
         F[r, 3] = f0 * S[0, 3] + f1 * S[1, 3] + f2 * S[2, 3] + F[r, 3]
 
 
-@_jit
+@jit
 def segment_data(values, step_axis, step_rot, step_joint, dof):
     """Constant segment transforms ``(dof + 1, 4, 4)`` and each step's local frame
     ``(P, 4, 4)`` (as :meth:`~robocal.model.chain.Model._segment_data`)."""
@@ -91,7 +91,7 @@ def segment_data(values, step_axis, step_rot, step_joint, dof):
     return seg, local
 
 
-@_jit
+@jit
 def _times_step(F, axis, rotation, value):
     """``F <- F @ step`` in place for a constant step (a rotation about or a translation
     along local ``axis`` by ``value``)."""
@@ -102,7 +102,7 @@ def _times_step(F, axis, rotation, value):
             F[r, 3] += F[r, axis] * value
 
 
-@_jit
+@jit
 def leading_frame(values, step_axis, step_rot, n):
     """The product ``(4, 4)`` of the first ``n`` steps' transforms at ``values``, none of them
     a joint (as :func:`robocal.spatial.chain_product`: a calibration's device frame)."""
@@ -112,7 +112,7 @@ def leading_frame(values, step_axis, step_rot, n):
     return cur
 
 
-@_jit
+@jit
 def _copy44(src, dst):
     """``dst[...] = src`` for 4 x 4 frames (a loop: numba's slice assignment compiles its
     shape checks and error messages, a third of a second)."""
@@ -121,8 +121,8 @@ def _copy44(src, dst):
             dst[r, c] = src[r, c]
 
 
-@_jit
-def _pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anchors, F, store=True):
+@jit
+def pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anchors, F, store=True):
     """Frames of pose ``p``: the anchors into ``anchors`` ``(dof + 1, 3, 4)`` (0: the base,
     j + 1: after joint j; only with ``store``) and the tool frame into ``F`` ``(3, 4)``."""
     dof = q.shape[1]
@@ -137,15 +137,15 @@ def _pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anc
         if has_pert:
             theta = theta + pert[p, j, 2]
         if joint_rot[j]:
-            sin, cos = _sincos(theta)
+            sin, cos = sincos(theta)
             _rotate(F, k, cos, sin)
         else:
             for r in range(3):
                 F[r, 3] += F[r, k] * theta
         if has_pert:
-            sin, cos = _sincos(pert[p, j, 0])
+            sin, cos = sincos(pert[p, j, 0])
             _rotate(F, (k + 1) % 3, cos, sin)
-            sin, cos = _sincos(pert[p, j, 1])
+            sin, cos = sincos(pert[p, j, 1])
             _rotate(F, (k + 2) % 3, cos, sin)
         if store:
             for r in range(3):
@@ -154,7 +154,7 @@ def _pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anc
         _times_segment(F, seg[j + 1])
 
 
-@_jit
+@jit
 def forward(q, pert, has_pert, seg, offsets, joint_axis, joint_rot, keep_anchors):
     """Tool frames ``(n, 4, 4)`` and, when asked, the frames after each joint
     ``(n, dof, 4, 4)`` (else an empty array)."""
@@ -164,7 +164,7 @@ def forward(q, pert, has_pert, seg, offsets, joint_axis, joint_rot, keep_anchors
     anchors = np.empty((dof + 1, 3, 4))
     F = np.empty((3, 4))
     for p in range(n):
-        _pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anchors, F, keep_anchors)
+        pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anchors, F, keep_anchors)
         for r in range(3):
             for c in range(4):
                 T[p, r, c] = F[r, c]
@@ -178,10 +178,10 @@ def forward(q, pert, has_pert, seg, offsets, joint_axis, joint_rot, keep_anchors
     return T, frames
 
 
-_BLOCK = 256  # poses per block of forward_batch: its frames (3 x 4 x 256 doubles, 24 KB) stay in L1
+BLOCK = 256  # poses per block of forward_batch: its frames (3 x 4 x 256 doubles, 24 KB) stay in L1
 
 
-@_jit
+@jit
 def forward_batch(qt, seg, offsets, joint_axis, joint_rot):
     """Tool frames ``(n, 4, 4)`` of many configurations, ``qt`` ``(dof, n)`` (q transposed).
 
@@ -192,15 +192,15 @@ def forward_batch(qt, seg, offsets, joint_axis, joint_rot):
     cache traffic."""
     n = qt.shape[1]
     T = np.empty((n, 4, 4))
-    F = np.empty((3, 4, _BLOCK))
-    A = np.empty((1, 3, 4, _BLOCK))
-    for start in range(0, n, _BLOCK):
-        _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, min(_BLOCK, n - start), F, A, T, False)
+    F = np.empty((3, 4, BLOCK))
+    A = np.empty((1, 3, 4, BLOCK))
+    for start in range(0, n, BLOCK):
+        anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, min(BLOCK, n - start), F, A, T, False)
     return T
 
 
-@_jit
-def _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, keep):
+@jit
+def anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, keep):
     """Poses ``start .. start + b``: the tool frames into ``F`` ``(3, 4, block)`` and ``T``; with
     ``keep`` the anchors (the base, then the frame after each joint) into ``A``
     ``(dof + 1, 3, 4, block)``."""
@@ -221,7 +221,7 @@ def _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, k
         off = offsets[j]
         if joint_rot[j]:
             for p in range(b):
-                s, c = _sincos(qt[j, start + p] + off)
+                s, c = sincos(qt[j, start + p] + off)
                 for r in range(3):
                     fi = F[r, i1, p]
                     fj = F[r, i2, p]
@@ -255,7 +255,7 @@ def _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, k
         T[start + p, 3, 3] = 1.0
 
 
-@_jit
+@jit
 def static_wrenches(q, seg, offsets, joint_axis, joint_rot, joints, masses, centres, g):
     """Support wrenches at rest ``(n, dof, 6)`` (as
     :func:`robocal.model.dynamics._static_wrenches`, its formulas): for each pose the joint
@@ -267,7 +267,7 @@ def static_wrenches(q, seg, offsets, joint_axis, joint_rot, joints, masses, cent
     pert = np.zeros((1, dof, 3))
     b = joints.shape[0]
     for p in range(n):
-        _pose_forward(q, pert, p, False, seg, offsets, joint_axis, joint_rot, anchors, F)
+        pose_forward(q, pert, p, False, seg, offsets, joint_axis, joint_rot, anchors, F)
         M = 0.0
         S0 = S1 = S2 = 0.0
         k = b - 1  # the masses are sorted by joint

@@ -11,16 +11,16 @@ import math
 import numpy as np
 
 from robocal.model.kernels import (
-    _BLOCK,
-    _anchors_block,
-    _jit,
-    _pose_forward,
+    BLOCK,
+    anchors_block,
+    jit,
+    pose_forward,
 )
 
 __all__ = ["evaluate"]
 
 
-@_jit
+@jit
 def evaluate(
     q,
     pert,
@@ -59,7 +59,7 @@ def evaluate(
     )  # fmt: skip
 
 
-@_jit
+@jit
 def _column_constants(local, step_axis, steps):
     """Per step of ``steps``: its axis ``a_l`` and ``a_l × o_l`` in its anchor's frame."""
     m = steps.shape[0]
@@ -77,7 +77,7 @@ def _column_constants(local, step_axis, steps):
     return a_loc, c_loc
 
 
-@_jit
+@jit
 def _columns_batch(
     q, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis, step_rot, columns, rows
 ):
@@ -90,13 +90,13 @@ def _columns_batch(
     T = np.empty((n, 4, 4))
     J = np.empty((n * rows, m))
     a_loc, c_loc = _column_constants(local, step_axis, columns)
-    F = np.empty((3, 4, _BLOCK))
-    A = np.empty((dof + 1, 3, 4, _BLOCK))  # the anchors: the base (identity), then after each joint
-    D = np.empty((dof + 1, 3, _BLOCK))  # the tool point seen from each anchor, in its axes
-    Jb = np.empty((m, rows, _BLOCK))
-    for start in range(0, n, _BLOCK):
-        b = min(_BLOCK, n - start)
-        _anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, True)
+    F = np.empty((3, 4, BLOCK))
+    A = np.empty((dof + 1, 3, 4, BLOCK))  # the anchors: the base (identity), then after each joint
+    D = np.empty((dof + 1, 3, BLOCK))  # the tool point seen from each anchor, in its axes
+    Jb = np.empty((m, rows, BLOCK))
+    for start in range(0, n, BLOCK):
+        b = min(BLOCK, n - start)
+        anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, True)
         for a in range(dof + 1):
             for p in range(b):
                 d0 = F[0, 3, p] - A[a, 0, 3, p]
@@ -138,7 +138,7 @@ def _columns_batch(
 
 # split into calls, the hot loop would pass and allocate a pose's frames and columns per pose
 # long: one compiled loop over the poses that keeps a pose's frames and columns in registers
-@_jit
+@jit
 def _evaluate_poses(
     q,
     pert,
@@ -193,7 +193,7 @@ def _evaluate_poses(
     d_loc = np.empty((dof + 1, 3))
     F = np.empty((3, 4))
     for p in range(n):
-        _pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anchors, F)
+        pose_forward(q, pert, p, has_pert, seg, offsets, joint_axis, joint_rot, anchors, F)
         for r in range(3):
             for c in range(4):
                 T[p, r, c] = F[r, c]

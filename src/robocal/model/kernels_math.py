@@ -39,7 +39,7 @@ _PIO2_1, _PIO2_1T, _INVPIO2 = (
 
 
 @_jit
-def _sincos(x):
+def sincos(x):
     n = math.floor(x * _INVPIO2 + 0.5)
     r = (x - n * _PIO2_1) - n * _PIO2_1T
     z = r * r

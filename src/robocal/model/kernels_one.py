@@ -17,7 +17,7 @@ import math
 import numba
 import numpy as np
 
-from robocal.model.kernels_math import _sincos
+from robocal.model.kernels_math import sincos
 
 __all__ = ["fk_into", "fk_jacobian_into", "fk_jacobian_many", "fk_jacobian_one", "fk_one", "pack_one"]
 
@@ -48,7 +48,7 @@ def _fk_scalar(q, packed, J, jo, jacobian, W, wo):
     f20, f21, f22, f23 = packed[o + 8], packed[o + 9], packed[o + 10], packed[o + 11]
     kinds = _HEAD + 12 * (dof + 1)
     for j in range(dof):
-        W[wo + 2 * j], W[wo + 2 * j + 1] = _sincos(q[j] + packed[kinds + j])
+        W[wo + 2 * j], W[wo + 2 * j + 1] = sincos(q[j] + packed[kinds + j])
     for j in range(dof):
         revolute = packed[kinds + dof + j] != 0.0
         if jacobian:  # the joint's z axis and origin in the base frame, finished below

@@ -13,7 +13,7 @@ added to the joint perturbations ``(δα, δβ, δθ)`` that every part of roboc
 passes to the chain (FK, Jacobians, IK, compensation, paths, the report).  The
 coefficients carry a Gaussian posterior (mean and covariance, from Bayesian linear
 regression with a prior that is a stationary Gaussian process on each joint's circle:
-amplitude per joint, one spectral length scale; :mod:`robocal.identify.residual`), so
+amplitude per joint, one spectral length scale; :mod:`robocal.identify.residual.stage`), so
 every prediction has a variance.
 
 The candidates compared, the numbers behind this choice and the cross-validated choice

@@ -329,7 +329,7 @@ def _as_calibrated(model: Model, measure: str) -> Model:
     tool after the end (what :func:`robocal.calibrate` adds), so that only the robot's own
     parameterisation is judged, not the missing base and tool parameters of a chain that
     starts at joint 1 or ends at the flange."""
-    from robocal.model.chain import Step
+    from robocal.model.steps import Step
 
     taken = set(model.names)
 

@@ -46,10 +46,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
-from robocal.model.builder import BuildResult, GeometryError, JointGeometry, Tcp, build
-from robocal.model.chain import Model, Role
-from robocal.model.geometry import Measure
-from robocal.model.urdf_export import rpy_from_matrix, urdf_origin
+from robocal.model.builder import BuildResult, build
+from robocal.model.chain import Model
+from robocal.model.geometry import GeometryError, JointGeometry, Measure, Tcp
+from robocal.model.steps import Role
+from robocal.model.urdf.source import urdf_origin
+from robocal.model.urdf.xml_text import rpy_from_matrix
 
 __all__ = [
     "UR_JOINTS",

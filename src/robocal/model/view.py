@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.model.chain import Model
-from robocal.model.files import atomic_write_text
+from robocal.outdir import atomic_write_text
 from robocal.spatial import elementary
 
 __all__ = ["model_figure", "padded_scene", "step_frames", "write_model_view"]

@@ -66,7 +66,7 @@ from robocal.study.config import (
 from robocal.study.fleet import FLEET_COLUMNS, FleetRun, run_fleet
 from robocal.study.run import StudyRun, run_study
 from robocal.study.summary import read_study_summary
-from robocal.study.table import _Table as _Table  # the results table (tests read it)
+from robocal.study.table import Table as Table  # the results table (tests read it)
 from robocal.study.tasks import RESULT_COLUMNS
 
 __all__ = [

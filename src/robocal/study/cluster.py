@@ -137,7 +137,7 @@ def _connect(scheduler: str):
         ) from None
 
 
-class _Executor:
+class Executor:
     """In-process execution or a Dask client (local cluster or a scheduler address)."""
 
     def __init__(self, workers: int | None, scheduler: str | None) -> None:
@@ -195,12 +195,12 @@ class _Executor:
             self.cluster.close()
 
 
-def executor_for(workers: int | None, scheduler: str | None, client: Any = None) -> _Executor:
+def executor_for(workers: int | None, scheduler: str | None, client: Any = None) -> Executor:
     """The executor of a run: ``client`` when given (it stays open after the run), else one
     made for ``workers`` / ``scheduler`` (as :class:`_Executor`)."""
     if client is None:
-        return _Executor(workers, scheduler)
-    executor = _Executor(0, None)
+        return Executor(workers, scheduler)
+    executor = Executor(0, None)
     executor.client = client
     executor.workers = len(client.scheduler_info().get("workers", {}))
     executor.warm_up()

@@ -154,7 +154,7 @@ class StudyConfig(BaseModel):
 
     @model_validator(mode="after")
     def _quantities(self) -> StudyConfig:
-        from robocal.measure.simulate import parse_quantity
+        from robocal.measure.true_model import parse_quantity
 
         checks: list[tuple[str, float | str, Literal["length", "angle"]]] = [
             ("errors.length", self.errors.length, "length"),
@@ -187,7 +187,7 @@ def load_study_config(path: str | os.PathLike[str]) -> StudyConfig:
         StudyError: naming the file and the offending field.
         FileNotFoundError: when the file does not exist.
     """
-    from robocal.model.files import read_yaml
+    from robocal.model.yaml_files import read_yaml
 
     path = Path(path)
     data = read_yaml(path, "study", StudyError)
@@ -237,12 +237,12 @@ def study_cases(config: StudyConfig) -> list[Case]:
     ]
 
 
-def _seed(config: StudyConfig, *parts: int) -> np.random.SeedSequence:
+def seed_sequence(config: StudyConfig, *parts: int) -> np.random.SeedSequence:
     return np.random.SeedSequence([int(config.seed) & 0xFFFFFFFF, *parts])
 
 
-def _quantity(value: Quantity, kind: Literal["length", "angle"], where: str) -> float:
-    from robocal.measure.simulate import parse_quantity
+def quantity(value: Quantity, kind: Literal["length", "angle"], where: str) -> float:
+    from robocal.measure.true_model import parse_quantity
 
     try:
         return parse_quantity(value, kind)

@@ -11,10 +11,10 @@ from pathlib import Path
 from typing import Any
 
 from robocal.model.chain import Model
-from robocal.study.cluster import _Executor, check_workers, executor_for
+from robocal.study.cluster import Executor, check_workers, executor_for
 from robocal.study.config import StudyError
-from robocal.study.table import _Table, remove_table
-from robocal.study.tasks import FIT_COLUMNS, _fill_fit, _stats
+from robocal.study.table import Table, remove_table
+from robocal.study.tasks import FIT_COLUMNS, error_stats, fill_fit
 
 #: Columns of ``fleet.csv``.
 FLEET_COLUMNS = (
@@ -66,11 +66,11 @@ def _fleet_task(item: _FleetItem) -> tuple[dict[str, Any], Any]:
         )
         run = calibrate_file(request)
         result = run.result
-        _fill_fit(row, result, run.train.n, 0.0)
+        fill_fit(row, result, run.train.n, 0.0)
         row.pop("iterations", None)
         row.pop("dropped", None)
         if run.validation is not None:
-            row.update(_stats(run.validation.errors))
+            row.update(error_stats(run.validation.errors))
     except Exception as err:
         row.update(status="error", message=" ".join(str(err).split()) or type(err).__name__)
         result = None
@@ -179,13 +179,13 @@ def run_fleet(  # noqa: PLR0913 - public keyword options, documented in README a
     )
 
 
-def _open_table(path: Path, force: bool) -> _Table:
+def _open_table(path: Path, force: bool) -> Table:
     """The fleet table (its folder made); ``force`` starts it over when robocal wrote it
     (a user's file of that name is refused, never deleted)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     if force:
         remove_table(path, FLEET_COLUMNS)
-    return _Table(path, FLEET_COLUMNS, "file")
+    return Table(path, FLEET_COLUMNS, "file")
 
 
 def _measurement_files(directory: Path, pattern: str) -> list[Path]:
@@ -225,7 +225,7 @@ def _check_names(directory: Path, files: Sequence[Path], out: Path, table_path: 
 
 
 def _fleet_todo(
-    files: Sequence[Path], names: Mapping[Path, str], table: _Table
+    files: Sequence[Path], names: Mapping[Path, str], table: Table
 ) -> tuple[list[Path], list[str], int]:
     """``(files to calibrate, names of files changed since their calibration, files done)``:
     a file without a row, or with an ``error`` row, is (re)calibrated."""
@@ -251,7 +251,8 @@ def _failed_file(item: _FleetItem, err: BaseException) -> tuple[dict[str, Any], 
 def _save(result: Any, target: Path, row: dict[str, Any]) -> tuple[dict[str, Any], Any]:
     """Save ``result`` in ``target``: ``(row, result)``, or an ``error`` row and None when
     the folder holds files robocal did not write or is being written (the other files go on)."""
-    from robocal.outdir import FolderBusyError, FolderMixedError
+    from robocal.folder_lock import FolderBusyError
+    from robocal.run_ids import FolderMixedError
 
     try:
         result.save(target)
@@ -263,10 +264,10 @@ def _save(result: Any, target: Path, row: dict[str, Any]) -> tuple[dict[str, Any
 
 
 def _calibrate_files(
-    executor: _Executor,
+    executor: Executor,
     items: Sequence[_FleetItem],
     out: Path,
-    table: _Table,
+    table: Table,
     report: Callable[[int], None],
 ) -> tuple[int, int]:
     """Calibrate the files, saving each result in ``out/<file stem>`` and its row in the table as

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from robocal.model.chain import Model
 from robocal.model.geometry import Measure
-from robocal.study.config import DeviceSpec, PoseSetSpec, StudyConfig, StudyError, _quantity, _seed
+from robocal.study.config import DeviceSpec, PoseSetSpec, StudyConfig, StudyError, quantity, seed_sequence
 
 Array = NDArray[np.float64]
 
@@ -19,7 +19,7 @@ Array = NDArray[np.float64]
 def _resolve_model(name_or_path: str) -> Model:
     """The study's robot (robocal.model.catalog.find_model); its error as a StudyError."""
     from robocal.model.catalog import find_model
-    from robocal.model.files import ModelFileError
+    from robocal.model.yaml_files import ModelFileError
 
     try:
         return find_model(name_or_path)
@@ -38,7 +38,7 @@ def _make_device(spec: DeviceSpec, p_tool_target: Array, index: int):
     try:
         device = make_device(spec.kind, **options)
         if spec.noise is not None:
-            device = device.with_noise(_quantity(spec.noise, "length", where + ".noise"))
+            device = device.with_noise(quantity(spec.noise, "length", where + ".noise"))
     except (TypeError, ValueError, NotImplementedError) as err:
         raise StudyError(f"{where}: {err}") from None
     return device
@@ -49,7 +49,7 @@ def _pose_set(config: StudyConfig, spec: PoseSetSpec, index: int, model: Model) 
     from robocal.measure.poses import random_poses, read_poses
 
     where = f"pose_sets[{index}] ({spec.name})"
-    seed = np.random.default_rng(_seed(config, 4, index) if spec.seed is None else spec.seed)
+    seed = np.random.default_rng(seed_sequence(config, 4, index) if spec.seed is None else spec.seed)
     try:
         if spec.kind == "file":
             if spec.path is None:
@@ -59,7 +59,7 @@ def _pose_set(config: StudyConfig, spec: PoseSetSpec, index: int, model: Model) 
             raise StudyError(f"{where}: kind {spec.kind!r} needs 'n' (number of poses)")
         if spec.kind == "random":
             return random_poses(model, spec.n, seed=seed)
-        from robocal.identify.observability import select_poses
+        from robocal.identify.pose_selection import select_poses
 
         pool = random_poses(model, max(spec.pool, spec.n), seed=seed)
         chosen = select_poses(model, pool, spec.n, index=spec.index)
@@ -71,7 +71,7 @@ def _pose_set(config: StudyConfig, spec: PoseSetSpec, index: int, model: Model) 
 
 
 @dataclass(frozen=True, eq=False)
-class _Prepared:
+class Prepared:
     """Everything a task needs, computed once by the client (small, picklable)."""
 
     config: StudyConfig
@@ -85,7 +85,8 @@ class _Prepared:
 
 
 def _built_model(path: str, measure: Measure) -> Model:
-    from robocal.model.builder import GeometryError, load_geometry
+    from robocal.model.builder import load_geometry
+    from robocal.model.geometry import GeometryError
 
     try:
         return load_geometry(path).build(measure).model
@@ -95,7 +96,7 @@ def _built_model(path: str, measure: Measure) -> Model:
         raise StudyError(f"geometry: {err}") from None
 
 
-def _prepare(config: StudyConfig) -> _Prepared:
+def prepare(config: StudyConfig) -> Prepared:
     tool = np.asarray(config.tool, dtype=float) * 1e-3
     devices = {d.name: _make_device(d, tool, i) for i, d in enumerate(config.devices)}
     if config.geometry is not None:
@@ -116,10 +117,12 @@ def _prepare(config: StudyConfig) -> _Prepared:
 
     seed = config.validation.seed
     q_test = random_poses(
-        nominal, config.validation.n, seed=np.random.default_rng(_seed(config, 3) if seed is None else seed)
+        nominal,
+        config.validation.n,
+        seed=np.random.default_rng(seed_sequence(config, 3) if seed is None else seed),
     )
-    _quantity(config.errors.length, "length", "errors.length")
-    _quantity(config.errors.angle, "angle", "errors.angle")
+    quantity(config.errors.length, "length", "errors.length")
+    quantity(config.errors.angle, "angle", "errors.angle")
     for name in config.errors.tolerances:
         if name not in nominal.names:
             raise StudyError(f"errors.tolerances: model {nominal.name!r} has no parameter {name!r}")
@@ -136,7 +139,7 @@ def _prepare(config: StudyConfig) -> _Prepared:
             "engine 'batched' needs method 'lm', residual 'none' and position-measuring devices "
             "(laser-tracker); use engine 'calibrate' or 'auto'"
         )
-    return _Prepared(
+    return Prepared(
         config=config,
         nominal=nominal,
         devices=devices,
@@ -144,5 +147,5 @@ def _prepare(config: StudyConfig) -> _Prepared:
         q_test=q_test,
         tool_guess=tool,
         engine=engine,
-        max_std=_quantity(config.max_std, "length", "max_std"),
+        max_std=quantity(config.max_std, "length", "max_std"),
     )

@@ -11,14 +11,14 @@ from typing import Any
 
 import yaml
 
-from robocal.model.files import atomic_write_text
+from robocal.outdir import atomic_write_text
 from robocal.run_ids import ForeignFileError, check_robocal_files, new_run_id, run_id_line
-from robocal.study.cluster import _Executor, check_workers, executor_for
+from robocal.study.cluster import Executor, check_workers, executor_for
 from robocal.study.config import Case, StudyConfig, StudyError, load_study_config, study_cases
-from robocal.study.prepare import _prepare, _Prepared
+from robocal.study.prepare import Prepared, prepare
 from robocal.study.summary import write_summary
-from robocal.study.table import _Table, remove_table, table_cells
-from robocal.study.tasks import RESULT_COLUMNS, _Chunk, _empty_row, _run_chunk
+from robocal.study.table import Table, remove_table, table_cells
+from robocal.study.tasks import RESULT_COLUMNS, Chunk, empty_row, run_chunk
 
 
 @dataclass
@@ -67,7 +67,7 @@ def _identity(dumped: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in dumped.items() if k not in ("robots", "chunk", "dask")}
 
 
-def _chunks(prep: _Prepared, todo: Sequence[Case], size: int) -> list[_Chunk]:
+def _chunks(prep: Prepared, todo: Sequence[Case], size: int) -> list[Chunk]:
     """The tasks: robots of one pose set and device, ``size`` at a time (on two workers,
     tasks shrinking towards the end so both finish together cost more in Dask's overhead
     and smaller batches than the idle tail they saved: 1.77x against 1.85x for 800
@@ -78,7 +78,7 @@ def _chunks(prep: _Prepared, todo: Sequence[Case], size: int) -> list[_Chunk]:
     out = []
     for (pose_set, device), robots in groups.items():
         for i in range(0, len(robots), size):
-            out.append(_Chunk(prep, pose_set, device, tuple(robots[i : i + size])))
+            out.append(Chunk(prep, pose_set, device, tuple(robots[i : i + size])))
     return out
 
 
@@ -122,9 +122,9 @@ def run_study(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _claim_directory(out, config, force)
-    prep = _prepare(config)
+    prep = prepare(config)
     atomic_write_text(out / "study.yaml", _config_text(config))
-    table = _Table(out / "results.csv", RESULT_COLUMNS, "case")
+    table = Table(out / "results.csv", RESULT_COLUMNS, "case")
     cases = study_cases(config)
     done = {c.key for c in cases if c.key in table.rows and table.rows[c.key]["status"] != "error"}
     t0 = time.perf_counter()
@@ -221,38 +221,38 @@ def _claim_directory(out: Path, config: StudyConfig, force: bool) -> None:
         remove_table(results_path, RESULT_COLUMNS)
 
 
-def _prime(executor: _Executor, chunks: Sequence[_Chunk]) -> None:
+def _prime(executor: Executor, chunks: Sequence[Chunk]) -> None:
     """One robot on every worker before the clock starts."""
     if chunks:
         first = chunks[0]
-        executor.prime(_chunk_cells, _Chunk(first.prepared, first.pose_set, first.device, first.robots[:1]))
+        executor.prime(_chunk_cells, Chunk(first.prepared, first.pose_set, first.device, first.robots[:1]))
 
 
-def _failed_chunk(chunk: _Chunk, err: BaseException) -> list[dict[str, Any]]:
+def _failed_chunk(chunk: Chunk, err: BaseException) -> list[dict[str, Any]]:
     """The rows of a task that failed as a whole (a killed worker, out of memory...): an
     ``error`` row per robot naming the task's input (retried on resume)."""
     text = " ".join(f"{type(err).__name__}: {err}".split())
     rows = []
     for k in chunk.robots:
-        row = _empty_row(Case(k, chunk.pose_set, chunk.device), chunk.prepared.engine)
+        row = empty_row(Case(k, chunk.pose_set, chunk.device), chunk.prepared.engine)
         row.update(status="error", message=f"task failed: {text} [input: {chunk.describe()}]")
         rows.append(row)
     return rows
 
 
-def _chunk_cells(chunk: _Chunk) -> list[list[str]]:
-    """A task: the chunk's rows (:func:`_run_chunk`) as results-table cells, formatted where
-    they are computed (on a Dask worker the main process then only writes them; with two
+def _chunk_cells(chunk: Chunk) -> list[list[str]]:
+    """A task: the chunk's rows (:func:`~robocal.study.tasks.run_chunk`) as results-table cells, formatted
+    where they are computed (on a Dask worker the main process then only writes them; with two
     workers on two cores it shares a core with them)."""
-    return table_cells(_run_chunk(chunk), RESULT_COLUMNS)
+    return table_cells(run_chunk(chunk), RESULT_COLUMNS)
 
 
-def _failed_cells(chunk: _Chunk, err: BaseException) -> list[list[str]]:
+def _failed_cells(chunk: Chunk, err: BaseException) -> list[list[str]]:
     return table_cells(_failed_chunk(chunk, err), RESULT_COLUMNS)
 
 
 def _compute(
-    executor: _Executor, chunks: Sequence[_Chunk], table: _Table, report: Callable[[int], None]
+    executor: Executor, chunks: Sequence[Chunk], table: Table, report: Callable[[int], None]
 ) -> tuple[int, int]:
     """Run the chunks and append their rows as they complete: ``(rows computed, error rows)``;
     ``report(rows computed so far)`` after every task."""

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.outdir import new_run_id, write_together
-from robocal.run_ids import figure_png
+from robocal.outdir import write_together
+from robocal.run_ids import figure_png, new_run_id
 from robocal.safe_output import strict_json
 from robocal.study.config import StudyConfig, StudyError
 
@@ -72,7 +72,7 @@ def read_study_summary(out: str | Path) -> dict[str, Any]:
     """
     import json
 
-    from robocal.outdir import read_run_id
+    from robocal.run_ids import read_run_id
 
     out = Path(out)
     path, png = out / "summary.json", out / "summary.png"

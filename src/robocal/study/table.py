@@ -1,4 +1,4 @@
-"""The results tables of studies and fleets: append-only CSV journals (:class:`_Table`)."""
+"""The results tables of studies and fleets: append-only CSV journals (:class:`Table`)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 
 from robocal import csvfile
-from robocal.model.files import atomic_write_text
+from robocal.outdir import atomic_write_text
 from robocal.run_ids import is_own_regular_file
 from robocal.safe_output import csv_text, csv_untext
 from robocal.study.config import StudyError
 
 
-class _Table:
+class Table:
     """An append-only CSV journal: a row is flushed to disk as soon as it is known.
 
     On opening, rows already there are read (a last line cut short by a crash is

@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.study.config import Case, _seed
-from robocal.study.prepare import _Prepared
+from robocal.study.config import Case, seed_sequence
+from robocal.study.prepare import Prepared
 
 if TYPE_CHECKING:
     from robocal.measure.measurements import Measurements
@@ -53,10 +53,10 @@ RESULT_COLUMNS = (
 
 
 @dataclass(frozen=True, eq=False)
-class _Chunk:
+class Chunk:
     """One task: some robots of one pose set and one device."""
 
-    prepared: _Prepared
+    prepared: Prepared
     pose_set: str
     device: str
     robots: tuple[int, ...]
@@ -68,13 +68,13 @@ class _Chunk:
         return f"{span} of pose set {self.pose_set!r}, device {self.device!r} (study seed {seed})"
 
 
-def _empty_row(case: Case, engine: str) -> dict[str, Any]:
+def empty_row(case: Case, engine: str) -> dict[str, Any]:
     row: dict[str, Any] = dict.fromkeys(RESULT_COLUMNS, "")
     row.update(case=case.key, robot=case.robot, pose_set=case.pose_set, device=case.device, engine=engine)
     return row
 
 
-def _stats(errors: Array) -> dict[str, float]:
+def error_stats(errors: Array) -> dict[str, float]:
     """Validation statistics (mm) of position errors ``(m,)`` (m), as rc.validate."""
     return {
         "val_n": len(errors),
@@ -85,10 +85,11 @@ def _stats(errors: Array) -> dict[str, float]:
     }
 
 
-def _simulate_case(chunk: _Chunk, k: int) -> tuple[Measurements, Measurements, Array]:
+def _simulate_case(chunk: Chunk, k: int) -> tuple[Measurements, Measurements, Array]:
     """True robot, calibration data, validation data and noise-free truth of robot ``k``."""
     from robocal.measure.poses import random_poses
-    from robocal.measure.simulate import VirtualRobot, draw_true_model, simulate
+    from robocal.measure.simulate import VirtualRobot, simulate
+    from robocal.measure.true_model import draw_true_model
 
     prep = chunk.prepared
     config = prep.config
@@ -101,7 +102,7 @@ def _simulate_case(chunk: _Chunk, k: int) -> tuple[Measurements, Measurements, A
         length=errors.length,
         angle=errors.angle,
         distribution=errors.distribution,
-        seed=np.random.default_rng(_seed(config, 0, k)),
+        seed=np.random.default_rng(seed_sequence(config, 0, k)),
     )
     device = prep.devices[chunk.device]
     robot = VirtualRobot(prep.nominal, true, device)
@@ -110,14 +111,14 @@ def _simulate_case(chunk: _Chunk, k: int) -> tuple[Measurements, Measurements, A
         n = config.pose_sets[i_set].n
         if n is None:  # pragma: no cover - refused when the study is prepared
             raise ValueError("a per-robot pose set needs 'n'")
-        q = random_poses(prep.nominal, n, seed=np.random.default_rng(_seed(config, 5, i_set, k)))
-    data = simulate(robot, q, seed=np.random.default_rng(_seed(config, 1, k, i_set, i_dev)))
-    test = simulate(robot, prep.q_test, seed=np.random.default_rng(_seed(config, 2, k, i_dev)))
+        q = random_poses(prep.nominal, n, seed=np.random.default_rng(seed_sequence(config, 5, i_set, k)))
+    data = simulate(robot, q, seed=np.random.default_rng(seed_sequence(config, 1, k, i_set, i_dev)))
+    test = simulate(robot, prep.q_test, seed=np.random.default_rng(seed_sequence(config, 2, k, i_dev)))
     truth = device.predict(robot.T_base_tool(prep.q_test)).position
     return data, test, truth
 
 
-def _fill_fit(row: dict[str, Any], fit, n: int, seconds: float) -> None:
+def fill_fit(row: dict[str, Any], fit, n: int, seconds: float) -> None:
     row.update(
         status="ok" if fit.success else "not-converged",
         message="" if fit.success else fit.message,
@@ -133,8 +134,8 @@ def _fill_fit(row: dict[str, Any], fit, n: int, seconds: float) -> None:
     )
 
 
-def _error_row(case: Case, engine: str, chunk: _Chunk, err: BaseException) -> dict[str, Any]:
-    row = _empty_row(case, engine)
+def _error_row(case: Case, engine: str, chunk: Chunk, err: BaseException) -> dict[str, Any]:
+    row = empty_row(case, engine)
     text = " ".join(f"{type(err).__name__}: {err}".split())
     row.update(
         status="error",
@@ -147,12 +148,12 @@ def _error_row(case: Case, engine: str, chunk: _Chunk, err: BaseException) -> di
 def _failed_row(case: Case, engine: str, n: int, err: BaseException) -> dict[str, Any]:
     """The row of a calibration the guards refused (too few poses, rank-deficient poses, a
     diverged fit...): status ``failed`` with the guard's reason (not retried on resume)."""
-    row = _empty_row(case, engine)
+    row = empty_row(case, engine)
     row.update(status="failed", message=" ".join(str(err).split()), n_poses=n)
     return row
 
 
-def _run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
+def run_chunk(chunk: Chunk) -> list[dict[str, Any]]:
     """Simulate, calibrate and validate the robots of one chunk; one row per robot.
 
     A robot whose calibration the guards refuse gets a ``failed`` row with the reason;
@@ -192,7 +193,7 @@ def _run_chunk(chunk: _Chunk) -> list[dict[str, Any]]:
     return [rows[k] for k in chunk.robots]
 
 
-def _calibrate_row(chunk: _Chunk, case: Case, data, test, truth, t_sim: float) -> dict[str, Any]:
+def _calibrate_row(chunk: Chunk, case: Case, data, test, truth, t_sim: float) -> dict[str, Any]:
     from robocal.identify.calibrate import calibrate
     from robocal.identify.validate import validate
 
@@ -206,9 +207,9 @@ def _calibrate_row(chunk: _Chunk, case: Case, data, test, truth, t_sim: float) -
         residual=prep.config.residual,
     )
     stats = validate(result, test)
-    row = _empty_row(case, "calibrate")
-    _fill_fit(row, result, data.n, 0.0)
-    row.update(_stats(stats.errors))
+    row = empty_row(case, "calibrate")
+    fill_fit(row, result, data.n, 0.0)
+    row.update(error_stats(stats.errors))
     true_err = np.linalg.norm(result.predict(prep.q_test)[:, :3, 3] - truth, axis=1)
     row.update(
         true_rms_mm=float(np.sqrt(np.mean(true_err**2)) * 1e3), true_max_mm=float(true_err.max() * 1e3)
@@ -216,7 +217,7 @@ def _calibrate_row(chunk: _Chunk, case: Case, data, test, truth, t_sim: float) -
     return row
 
 
-def _batched_rows(chunk: _Chunk, todo: list[int], sims: dict, rows: dict, t_sim: float) -> None:
+def _batched_rows(chunk: Chunk, todo: list[int], sims: dict, rows: dict, t_sim: float) -> None:
     from robocal.identify.batch import batch_positions, calibrate_batch
     from robocal.identify.guards import CalibrationGuardError
 
@@ -244,9 +245,9 @@ def _batched_rows(chunk: _Chunk, todo: list[int], sims: dict, rows: dict, t_sim:
         for i, (k, fit) in enumerate(fitted):
             case = Case(k, chunk.pose_set, chunk.device)
             data, test, truth = sims[k]
-            row = _empty_row(case, "batched")
-            _fill_fit(row, fit, data.n, 0.0)
-            row.update(_stats(np.linalg.norm(pred[i] - test.position, axis=1)))
+            row = empty_row(case, "batched")
+            fill_fit(row, fit, data.n, 0.0)
+            row.update(error_stats(np.linalg.norm(pred[i] - test.position, axis=1)))
             true_err = np.linalg.norm(pred[i] - truth, axis=1)
             row.update(
                 true_rms_mm=float(np.sqrt(np.mean(true_err**2)) * 1e3),

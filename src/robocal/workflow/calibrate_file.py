@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from robocal.identify.provenance import Provenance
     from robocal.identify.result import CalibrationResult
     from robocal.identify.validate import ValidationStats
-    from robocal.measure.dataset import Measurements
+    from robocal.measure.measurements import Measurements
     from robocal.model.chain import Model
 
 __all__ = ["calibrate_file", "check_noise", "check_out", "split"]
@@ -55,7 +55,7 @@ def calibrate_file(request: CalibrateRequest) -> SavedRun:
 
 def check_out(out: Path, force: bool) -> None:
     """Refuse an output that is a file, holds a result (without ``force``) or is being written."""
-    from robocal.outdir import FolderBusyError, check_not_busy
+    from robocal.folder_lock import FolderBusyError, check_not_busy
 
     if out.exists() and not out.is_dir():
         raise CalibrateFileError(
@@ -71,7 +71,7 @@ def check_out(out: Path, force: bool) -> None:
 
 def check_noise(noise_m: float | None) -> None:
     """Refuse a stated noise (1σ per axis, m) outside what a measuring device gives."""
-    from robocal.measure.dataset import MAX_SIGMA, MIN_SIGMA
+    from robocal.measure.measurements import MAX_SIGMA, MIN_SIGMA
 
     if noise_m is not None and not MIN_SIGMA <= noise_m <= MAX_SIGMA:
         problem = (
@@ -107,7 +107,8 @@ def _notify(request: CalibrateRequest, kind: str, text: str) -> None:
 def _read(request: CalibrateRequest) -> Measurements:
     """The file's rows with positions; the reader's warnings passed on as they come."""
     from robocal.console import input_problem
-    from robocal.measure.dataset import MeasurementFileError, MeasurementWarning, read_measurements
+    from robocal.measure.dataset.read import read_measurements
+    from robocal.measure.measurements import MeasurementFileError, MeasurementWarning
 
     path = request.data
     if path.is_dir():
@@ -186,8 +187,8 @@ def _record(
     result: CalibrationResult, request: CalibrateRequest, train: Measurements
 ) -> tuple[CalibrationResult, Provenance]:
     """The result with its provenance: the data file, its hash, the reader options and the split."""
-    from robocal.identify.calibrate import file_hash
     from robocal.identify.provenance import Provenance
+    from robocal.identify.result_io import file_hash
 
     path = request.data
     sha256 = file_hash(path)
@@ -220,13 +221,13 @@ def _save(
     result: CalibrationResult, request: CalibrateRequest, train: Measurements, test: Measurements | None
 ) -> CalibrationResult:
     """model.yaml, measurement_model.yaml, result.json (and report.html): all or nothing."""
-    from robocal.outdir import FolderBusyError
+    from robocal.folder_lock import FolderBusyError
 
     assert request.out is not None
 
     def write_report_too(stage_dir: Path) -> None:
         from robocal.evaluate.report import write_report
-        from robocal.outdir import read_run_id
+        from robocal.run_ids import read_run_id
 
         _stage(request, "report")
         run_id = read_run_id(stage_dir / "result.json")  # the report is one file of this result

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from robocal.identify.provenance import Provenance
     from robocal.identify.result import CalibrationResult
     from robocal.identify.validate import ValidationStats
-    from robocal.measure.dataset import Measurements
+    from robocal.measure.measurements import Measurements
     from robocal.model.chain import Model
 
 __all__ = [

@@ -21,14 +21,14 @@ from dash import Dash, Input, Output, State, dcc, html, no_update
 from robocal.apps.gui import columns_view, export_page, runs_page
 from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.calibrate_views import (
-    _decode_bytes,
-    _float,
-    _problems,
-    _radio,
-    _raw_head,
-    _read,
-    _row,
+    decode_bytes,
+    parse_float,
     preview_table,
+    problems_view,
+    radio,
+    raw_head,
+    read,
+    row,
     text_input,
 )
 from robocal.apps.gui.columns_view import gui_words
@@ -69,11 +69,11 @@ def _reader_fieldset() -> html.Fieldset:
             html.Legend("measurement file and reader options"),
             dcc.Upload(html.Button("open measurement CSV"), id="upload-csv"),
             html.Span(id="csv-name", className="hint"),
-            _row("lengths", _radio("opt-length", ("m", "mm", "um"), "m")),
-            _row("angles", _radio("opt-angle", ("rad", "deg"), "rad")),
-            _row("separator", _radio("opt-sep", ("auto", ";", ",", "tab", "space"), "auto")),
-            _row("decimal mark", _radio("opt-decimal", (".", ","), ".")),
-            _row(
+            row("lengths", radio("opt-length", ("m", "mm", "um"), "m")),
+            row("angles", radio("opt-angle", ("rad", "deg"), "rad")),
+            row("separator", radio("opt-sep", ("auto", ";", ",", "tab", "space"), "auto")),
+            row("decimal mark", radio("opt-decimal", (".", ","), ".")),
+            row(
                 "orientation",
                 text_input("opt-orientation", "auto", "12em", debounce=0.5),
                 "auto | none | quaternion | rotvec | euler:SEQ[:deg|rad]",
@@ -89,8 +89,8 @@ def _reader_fieldset() -> html.Fieldset:
             ),
             html.Div(id="column-map"),
             html.Div(id="column-message", className="message"),
-            _row("incomplete rows", _radio("opt-incomplete", ("error", "drop"), "error")),
-            _row("joint limits", _radio("opt-limits", ("error", "warn", "ignore"), "error")),
+            row("incomplete rows", radio("opt-incomplete", ("error", "drop"), "error")),
+            row("joint limits", radio("opt-limits", ("error", "warn", "ignore"), "error")),
         ]
     )
 
@@ -99,7 +99,7 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
     return html.Fieldset(
         [
             html.Legend("model and method"),
-            _row(
+            row(
                 "robot",
                 dcc.RadioItems(
                     id="cal-model",
@@ -112,25 +112,25 @@ def _model_fieldset(catalog: Sequence[str]) -> html.Fieldset:
                 ),
                 "catalog robots: their complete model (rc.calibration_model)",
             ),
-            _row("measure", _radio("cal-measure", ("auto", "position", "pose"), "auto")),
-            _row("method", _radio("cal-method", ("lm", "pinv", "bounded", "influence"), "lm")),
-            _row(
+            row("measure", radio("cal-measure", ("auto", "position", "pose"), "auto")),
+            row("method", radio("cal-method", ("lm", "pinv", "bounded", "influence"), "lm")),
+            row(
                 "model choice",
-                _radio("cal-residual", ("auto", "none", "joint_fourier"), "auto"),
+                radio("cal-residual", ("auto", "none", "joint_fourier"), "auto"),
                 "auto: cross-validation chooses compliance and learned joint angle errors",
             ),
-            _row(
+            row(
                 "calibration poses",
                 text_input("cal-train-n", "100", "6em"),
                 "random rows to calibrate on; the rest are held out (empty: all rows)",
             ),
-            _row("seed", text_input("cal-seed", "0", "4em")),
-            _row(
+            row("seed", text_input("cal-seed", "0", "4em")),
+            row(
                 "tool start mm",
                 text_input("cal-tool", "", "10em"),
                 "x, y, z of the measured point from the flange (empty: fitted from zero)",
             ),
-            _row(
+            row(
                 "device noise mm",
                 text_input("cal-noise", "", "6em"),
                 "1σ per axis, for the fit-to-noise test (empty: not tested)",
@@ -279,7 +279,7 @@ class _Page:
 
 def _upload(page: _Page, contents, filename):
     try:
-        data = _decode_bytes(contents)
+        data = decode_bytes(contents)
     except ValueError as err:
         return {"error": str(err)}
     name = Path(filename or "measurements.csv").name or "measurements.csv"
@@ -298,9 +298,9 @@ def _preview(page: _Page, token, *args):
     try:
         opts = _reader_options(options)
         model = page.model_for(choice, built, "position")
-        data, warns = _read(path, opts, model)
+        data, warns = read(path, opts, model)
     except ValueError as err:
-        return [_problems(err, path), html.H4("the file's first lines"), _raw_head(path)]
+        return [problems_view(err, path), html.H4("the file's first lines"), raw_head(path)]
     observed = {
         "joints": "joint values only",
         "position": "positions",
@@ -314,7 +314,7 @@ def _preview(page: _Page, token, *args):
         *[html.Div(f"warning: {gui_words(w)}", className="warning") for w in warns],
         preview_table(data, None if model is None else model.joint_types),
         html.H4("the file's first lines"),
-        _raw_head(path),
+        raw_head(path),
     ]
 
 
@@ -341,13 +341,13 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
             raise ValueError("choose the robot (its model)")
         effective = measure
         if measure == "auto":
-            data, _ = _read(path, options)
+            data, _ = read(path, options)
             effective = "pose" if data.orientation is not None else "position"
         model = page.model_for(choice, built, effective)
-        n = _float(train_n, "calibration poses")
+        n = parse_float(train_n, "calibration poses")
         if n is not None and (n != int(n) or n < 1):
             raise ValueError(f"calibration poses: a whole number, not {train_n!r}")
-        s = _float(seed, "seed")
+        s = parse_float(seed, "seed")
         tool_mm = None
         if (tool or "").strip():
             from robocal.spatial import parse_vector
@@ -356,7 +356,7 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
                 tool_mm = tuple(parse_vector(tool, 3))
             except ValueError as err:
                 raise ValueError(f"tool start: {err}, in mm, e.g. 0, 0, 109 (not {tool!r})") from None
-        noise_mm = _float(noise, "device noise")
+        noise_mm = parse_float(noise, "device noise")
         if noise_mm is not None and not noise_mm > 0:
             raise ValueError("device noise: a positive standard deviation in mm")
     except ValueError as err:

@@ -26,7 +26,7 @@ PREVIEW_ROWS = 12
 KEEP: dict[str, Any] = {"persistence": True, "persistence_type": "session"}
 
 
-def _radio(
+def radio(
     ident: str, options: Sequence[str], value: str, labels: Sequence[str] | None = None
 ) -> dcc.RadioItems:
     labels = labels or options
@@ -54,17 +54,17 @@ def text_input(ident: str, value: str, width: str, debounce: bool | float = Fals
     )
 
 
-def _row(label: str, control: Any, hint: str = "") -> html.Div:
+def row(label: str, control: Any, hint: str = "") -> html.Div:
     return html.Div(
         [html.Span(label, className="lab"), control, html.Span(hint, className="hint")], className="opt"
     )
 
 
 # ----------------------------------------------------------------------- reading
-def _read(path: Path, options: dict[str, Any], model=None):
+def read(path: Path, options: dict[str, Any], model=None):
     """Measurements and the reader's warnings (messages), or raise the reader's error."""
     import robocal as rc
-    from robocal.measure.dataset import MeasurementWarning
+    from robocal.measure.measurements import MeasurementWarning
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", MeasurementWarning)
@@ -101,7 +101,7 @@ def preview_table(data, joint_types: Sequence[str] | None = None) -> html.Table:
     )
 
 
-def _problems(err, path: Path) -> html.Div:
+def problems_view(err, path: Path) -> html.Div:
     problems = [p for p in getattr(err, "problems", []) if p.severity == "error"][:20]
     rows = [
         html.Tr(
@@ -127,7 +127,7 @@ def _problems(err, path: Path) -> html.Div:
     return html.Div([html.Div(message, className="error", id="csv-error"), table])
 
 
-def _raw_head(path: Path, lines: int = 6) -> html.Pre:
+def raw_head(path: Path, lines: int = 6) -> html.Pre:
     with path.open(encoding="utf-8", errors="replace") as f:
         head = [next(f, "") for _ in range(lines)]
     return html.Pre("".join(head)[:4000], className="raw")
@@ -135,7 +135,7 @@ def _raw_head(path: Path, lines: int = 6) -> html.Pre:
 
 # ----------------------------------------------------------------------- results
 def _param_table(result) -> html.Table:
-    from robocal.identify.calibrate import display_unit
+    from robocal.identify.effects import display_unit
 
     rot = {s.name: s.is_rotation for s in (result.measurement_chain or result.model).steps}
     rows = []
@@ -190,7 +190,7 @@ def results_view(out: Path) -> list[Any]:
     """The saved result in ``out`` as the page shows it."""
     import json
 
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
 
     result = CalibrationResult.load(out)
     sets = json.loads((out / "errors.json").read_text(encoding="utf-8"))
@@ -237,7 +237,7 @@ def results_view(out: Path) -> list[Any]:
     ]
 
 
-def _report_links(run_id: str, ready: bool) -> list[Any]:
+def report_links(run_id: str, ready: bool) -> list[Any]:
     files = [
         html.A(f" · {n}", href=f"/runs/{run_id}/{n}", target="_blank") for n in ("model.yaml", "result.json")
     ]
@@ -248,14 +248,14 @@ def _report_links(run_id: str, ready: bool) -> list[Any]:
     ] + files
 
 
-def _decode_bytes(contents: str) -> bytes:
+def decode_bytes(contents: str) -> bytes:
     try:
         return base64.b64decode(contents.split(",", 1)[1])
     except (IndexError, binascii.Error):
         raise ValueError("the upload could not be decoded") from None
 
 
-def _float(text: str | None, what: str) -> float | None:
+def parse_float(text: str | None, what: str) -> float | None:
     s = (text or "").strip().replace(",", ".")
     if not s:
         return None
@@ -268,7 +268,7 @@ def _float(text: str | None, what: str) -> float | None:
     return value
 
 
-def _compensate(
+def compensate(
     result: Any,
     contents: str,
     filename: str | None,
@@ -285,7 +285,7 @@ def _compensate(
     name = Path(filename or "targets.csv").name
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
         path = Path(tmp) / name
-        atomic_write_bytes(path, _decode_bytes(contents))
+        atomic_write_bytes(path, decode_bytes(contents))
         try:
             targets = read_targets(path, length_unit=unit, sep=sep, decimal=decimal)
         except ValueError as err:

@@ -3,7 +3,7 @@
 The header is read with the reader's own CSV code (:func:`robocal.csvfile.read_head`, the
 page's separator and decimal mark); each column gets a role (joint 1..N, x y z, qw..qz,
 rx ry rz, sx sy sz, set, temperature, ignore), prefilled by the reader's guess
-(:func:`robocal.measure.dataset_columns.guess_columns`: UR ``actual_q_0..``, ROS
+(:func:`robocal.measure.dataset.columns.guess_columns`: UR ``actual_q_0..``, ROS
 ``shoulder_pan_joint`` ..., ``q1..qN``, a device's ``measurement_x`` ...).  The roles become
 the reader's ``columns=`` renames; the reader's messages are reworded to name the page's
 controls (:func:`gui_words`).
@@ -44,7 +44,7 @@ def _role_options(n_columns: int) -> list[dict[str, str]]:
 def column_roles(header: Sequence[str]) -> list[str]:
     """Each column's role as the reader would take it: its own name when that is a robocal
     name, else the reader's guess, else ``ignore``."""
-    from robocal.measure.dataset_columns import guess_columns
+    from robocal.measure.dataset.columns import guess_columns
 
     by_column = {column: role for role, column in guess_columns(header).items()}
     own = set(_NAMED) | {f"q{j}" for j in range(1, MAX_JOINTS + 1)}

@@ -10,7 +10,7 @@ from typing import Any
 
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
-from robocal.apps.gui.calibrate_views import _compensate, _radio, _row
+from robocal.apps.gui.calibrate_views import compensate, radio, row
 from robocal.apps.gui.columns_view import gui_words
 from robocal.apps.gui.jobs import read_options
 
@@ -25,12 +25,12 @@ def fieldset() -> html.Fieldset:
             dcc.Upload(
                 html.Button("compensate a targets CSV (name, x, y, z [, qw..qz])"), id="upload-targets"
             ),
-            _row("targets in", _radio("targets-unit", ("m", "mm"), "mm")),
-            _row("separator", _radio("targets-sep", ("auto", ";", ",", "tab"), "auto")),
-            _row("decimal mark", _radio("targets-decimal", (".", ","), ".")),
-            _row(
+            row("targets in", radio("targets-unit", ("m", "mm"), "mm")),
+            row("separator", radio("targets-sep", ("auto", ";", ",", "tab"), "auto")),
+            row("decimal mark", radio("targets-decimal", (".", ","), ".")),
+            row(
                 "targets frame",
-                _radio("targets-frame", ("base", "measurement"), "base", ("robot base", "device")),
+                radio("targets-frame", ("base", "measurement"), "base", ("robot base", "device")),
             ),
             html.Div(
                 [
@@ -93,7 +93,7 @@ def _compensate_or_export(
 ) -> tuple[Any, Any]:
     from dash import callback_context
 
-    from robocal.identify.calibrate import CalibrationResult
+    from robocal.identify.result import CalibrationResult
 
     trigger = callback_context.triggered_id
     if run_id is None or not (workdir / "runs" / run_id / "result.json").is_file():
@@ -103,7 +103,7 @@ def _compensate_or_export(
         if trigger == "upload-targets" and targets is not None:
             sep = read_options(sep=reading.sep)["sep"]
             r = reading
-            return _compensate(result, targets, r.filename, r.unit, r.frame, sep, r.decimal)
+            return compensate(result, targets, r.filename, r.unit, r.frame, sep, r.decimal)
         if trigger == "export-urdf":
             from robocal.compensate.export import export_urdf
 

@@ -26,8 +26,9 @@ import numpy as np
 import yaml
 
 from robocal import spatial
-from robocal.model.builder import BuildResult, Geometry, GeometryError, JointGeometry, Tcp, load_geometry
+from robocal.model.builder import BuildResult, Geometry, load_geometry
 from robocal.model.conventions import SCHROER_SETS
+from robocal.model.geometry import GeometryError, JointGeometry, Tcp
 from robocal.outdir import atomic_write_text
 
 __all__ = [
@@ -297,7 +298,7 @@ def form_from_catalog(name: str) -> BuilderForm:
 
 def form_from_urdf(text: str, label: str = "the URDF") -> BuilderForm:
     """The form of a URDF robot's serial chain (root to the deepest joint's last frame)."""
-    from robocal.model.urdf import URDFError, geometry_from_urdf
+    from robocal.model.urdf.read import URDFError, geometry_from_urdf
 
     with tempfile.TemporaryDirectory(prefix="robocal-gui-") as tmp:
         path = Path(tmp) / "robot.urdf"

@@ -141,7 +141,7 @@ def _run(job: CalibrationJob, queue) -> None:
     validate, save, report) and the files the page shows beside it; the outcome on ``queue``."""
     import robocal as rc
     import robocal.workflow as workflow
-    from robocal.model.files import ModelFileError
+    from robocal.model.yaml_files import ModelFileError
 
     try:
         _stage(queue, "read")
@@ -177,7 +177,7 @@ def _write_errors(path: Path, result, train, validation) -> None:
 
     import robocal as rc
     from robocal.evaluate.report import before_validation
-    from robocal.model.files import atomic_write_text
+    from robocal.outdir import atomic_write_text
 
     def entry(stats) -> dict[str, Any] | None:
         if stats is None:

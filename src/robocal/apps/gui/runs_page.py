@@ -20,7 +20,7 @@ from typing import Any
 
 from dash import ALL, Dash, Input, Output, State, callback_context, html, no_update
 
-from robocal.apps.gui.calibrate_views import _report_links, results_view
+from robocal.apps.gui.calibrate_views import report_links, results_view
 from robocal.apps.gui.jobs import JobRunner, JobState, RunInfo, public_text
 
 __all__ = ["ResultsCache", "register"]
@@ -132,7 +132,7 @@ def _poll(runner: JobRunner, workdir: Path, n: int, run_id: str | None, phase: s
     changed = now != phase
     report: Any = no_update
     if changed and run_id is not None:
-        report = _report_links(run_id, state.status == "done") if state.saved else ""
+        report = report_links(run_id, state.status == "done") if state.saved else ""
     finished = run_id if changed and state.saved else no_update
     return _bar(state), _status(state, workdir), report, finished, now, n + 1 if state.active else n
 

@@ -63,8 +63,8 @@ from robocal.evaluate.report.data import ReportData, ReportOptions, ResultFacts
 from robocal.evaluate.report.facts import before_validation, report_data_from_result, start_chain
 from robocal.evaluate.report.markup import report_css
 from robocal.evaluate.report.render import render_report
-from robocal.identify.calibrate import CalibrationResult
-from robocal.measure.dataset import Measurements
+from robocal.identify.result import CalibrationResult
+from robocal.measure.measurements import Measurements
 
 __all__ = [
     "ReportData",
@@ -99,7 +99,7 @@ def build_report(
 def _load_dir(
     directory: Path,
 ) -> tuple[CalibrationResult, Measurements | None, Measurements | None, dict | None]:
-    from robocal.measure.dataset import read_measurements
+    from robocal.measure.dataset.read import read_measurements
 
     if not (directory / "result.json").is_file():
         raise FileNotFoundError(f"{directory} holds no calibration result (result.json)")
@@ -143,8 +143,8 @@ def write_report(
     Returns:
         ``out_path``.
     """
-    from robocal.model.files import atomic_write_text
-    from robocal.outdir import read_run_id, run_id_meta
+    from robocal.outdir import atomic_write_text
+    from robocal.run_ids import read_run_id, run_id_meta
 
     if isinstance(result_or_dir, CalibrationResult):
         result = result_or_dir

@@ -16,12 +16,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from robocal.evaluate.metrics import (
-    PoseErrors,
-    error_table,
-    improvement,
-    pose_errors,
-)
+from robocal.evaluate.error_tables import PoseErrors, error_table, improvement, pose_errors
 from robocal.evaluate.report.data import (
     ComplianceRow,
     CoverageData,
@@ -35,13 +30,14 @@ from robocal.evaluate.report.data import (
     ResultFacts,
     ValidationData,
 )
-from robocal.evaluate.report.facts import _start_chain, report_data_from_result, start_validation
+from robocal.evaluate.report.facts import report_data_from_result, start_chain_of, start_validation
 from robocal.evaluate.report.markup import AFTER, GEOMETRIC
-from robocal.identify.calibrate import COMPLIANCE_PREFIX, CalibrationResult
+from robocal.identify.effects import COMPLIANCE_PREFIX
+from robocal.identify.result import CalibrationResult
 from robocal.identify.validate import ValidationStats, validate
-from robocal.measure.dataset import Measurements
-from robocal.model.chain import Role
+from robocal.measure.measurements import Measurements
 from robocal.model.joints import effect_of
+from robocal.model.steps import Role
 
 __all__ = ["collect_report"]
 
@@ -118,7 +114,7 @@ def _pose_set(facts: ResultFacts, name: str, data: Measurements, colour: str) ->
 
 
 def _cube_edges(center: Array, side: float) -> Array:
-    from robocal.measure.poses import CUBE_CORNERS
+    from robocal.measure.cube import CUBE_CORNERS
 
     c = np.asarray(center, dtype=float) + side * (CUBE_CORNERS - 0.5)
     edges = [(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)]
@@ -154,7 +150,7 @@ def _coverage(
 
 
 def _observability(facts: ResultFacts, data: Measurements | None) -> tuple[dict[str, float], Array] | None:
-    from robocal.identify.observability import observability, scaled_jacobian, singular_values
+    from robocal.identify.observability_indices import observability, scaled_jacobian, singular_values
 
     chain = facts.measurement_chain
     if data is None or chain is None or not chain.free_names or data.dof != facts.model.dof:
@@ -245,7 +241,7 @@ def _orientation_table(facts: ResultFacts, result: CalibrationResult, data: Meas
     """The seeds' table with orientation errors (x-y-z angles) for pose measurements."""
     from robocal import spatial
 
-    chain = _start_chain(facts)
+    chain = start_chain_of(facts)
     if chain is None or data.orientation is None or data.position is None:
         return None
     T_base_device = spatial.inverse(facts.T_device_base)

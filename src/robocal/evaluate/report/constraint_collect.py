@@ -4,7 +4,7 @@ A constraint calibration has no measuring device: no position errors, no device 
 no ISO 9283 poses.  What it has is each kind's own figures — the spread of the tool point
 around each fixed point, the error of each known distance, the plane residuals — before
 (the nominal robot) and after (the calibrated robot), on the calibration's own file and on
-a held-out file, and what the kind cannot see (:mod:`robocal.identify.constraint_result`).
+a held-out file, and what the kind cannot see (:mod:`robocal.identify.constraints.result`).
 :func:`collect_constraint_report` computes them once into a frozen
 :class:`ConstraintReport`; :mod:`.constraint_sections` renders it.
 """
@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.constraint_fit import ConstraintFigures, constraint_figures, tool_points
-from robocal.identify.constraint_result import ConstraintCalibration
-from robocal.measure.constraint_set import ConstraintSet
+from robocal.identify.constraints.fit import ConstraintFigures, constraint_figures, tool_points
+from robocal.identify.constraints.result import ConstraintCalibration
+from robocal.measure.constraints.data_set import ConstraintSet
 
 __all__ = ["ConstraintReport", "DataSetFigures", "collect_constraint_report", "data_set_figures"]
 

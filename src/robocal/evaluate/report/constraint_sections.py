@@ -13,7 +13,7 @@ import numpy as np
 
 from robocal.evaluate.report import markup as m
 from robocal.evaluate.report.constraint_collect import ConstraintReport, DataSetFigures, rms
-from robocal.identify.constraint_fit import ConstraintFigures
+from robocal.identify.constraints.fit import ConstraintFigures
 
 __all__ = ["render_constraint_report", "write_constraint_report"]
 
@@ -235,7 +235,7 @@ def render_constraint_report(r: ConstraintReport) -> str:
 def write_constraint_report(r: ConstraintReport, out_path: str | Path) -> Path:
     """Write the page of ``r`` to ``out_path`` atomically, stamped with the folder's run id
     (``<meta name="robocal-run">``, :mod:`robocal.outdir`)."""
-    from robocal.model.files import atomic_write_text
+    from robocal.outdir import atomic_write_text
     from robocal.run_ids import run_id_meta
 
     page = render_constraint_report(r)

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.evaluate.metrics import ErrorTable, Improvement, PathAccuracy, PoseCharacteristics
+from robocal.evaluate.error_tables import ErrorTable, Improvement
+from robocal.evaluate.metrics import PathAccuracy, PoseCharacteristics
 from robocal.identify.validate import ValidationStats
 from robocal.model.chain import Model
 
@@ -86,7 +87,7 @@ class ResultFacts:
     effects: Mapping[str, Mapping[str, tuple[float, float | None]]]  # joint -> field -> (value, σ)
     fit_to_noise: str | None  # its one-line summary
     warnings: tuple[str, ...]
-    cv: Any | None  # robocal.identify.residual.CVTable
+    cv: Any | None  # robocal.identify.residual.stage.CVTable
     stored_validation: Mapping[str, Any] | None  # ValidationStats.to_dict() of the held-out rows
     inputs: tuple[tuple[str, str], ...]  # (label, value): data file, its SHA-256, split
     run_id: str | None

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from robocal.evaluate.report.data import ResultFacts
-from robocal.identify.calibrate import CalibrationResult
+from robocal.identify.result import CalibrationResult
 from robocal.identify.validate import ValidationStats
-from robocal.measure.dataset import Measurements
+from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 
 __all__ = ["before_validation", "report_data_from_result", "start_chain"]
@@ -58,7 +58,7 @@ def _inputs(records: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
 def report_data_from_result(result: CalibrationResult) -> ResultFacts:
     """The result's data the report shows, read once (see the module docstring for the
     fields)."""
-    from robocal.outdir import is_run_id
+    from robocal.run_ids import is_run_id
 
     noise = result.fit_to_noise
     stored = result.validation
@@ -95,7 +95,7 @@ def report_data_from_result(result: CalibrationResult) -> ResultFacts:
     )
 
 
-def _start_chain(facts: ResultFacts) -> Model | None:
+def start_chain_of(facts: ResultFacts) -> Model | None:
     chain = facts.measurement_chain
     if chain is None:
         return None
@@ -109,14 +109,14 @@ def start_chain(result: CalibrationResult) -> Model | None:
     """The measurement chain at the identification's start values: the nominal robot
     with the device frame and the tool fitted in closed form (None for results saved
     without their measurement chain)."""
-    return _start_chain(report_data_from_result(result))
+    return start_chain_of(report_data_from_result(result))
 
 
 def start_validation(facts: ResultFacts, data: Measurements) -> ValidationStats | None:
     """Errors of the start model (nominal robot, fitted frame and tool) on ``data``."""
     from robocal.identify.validate import validation_statistics
 
-    chain = _start_chain(facts)
+    chain = start_chain_of(facts)
     if chain is None or data.position is None or data.dof != facts.model.dof:
         return None
     return validation_statistics(chain.fk(data.q), data, "start fit")

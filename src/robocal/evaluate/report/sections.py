@@ -137,7 +137,7 @@ def robot_model(r: ReportData, figs: m.Figures) -> Section:
 
 
 def model_choice(r: ReportData, figs: m.Figures) -> Section | None:
-    from robocal.identify.residual import SELECTION_SE
+    from robocal.identify.residual.cv import SELECTION_SE
 
     mc = r.model_choice
     if mc is None:

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from robocal.evaluate.metrics import ERROR_QUANTITIES, ErrorTable
+from robocal.evaluate.error_tables import ERROR_QUANTITIES, ErrorTable
 from robocal.evaluate.report import figures as fg
 from robocal.evaluate.report import markup as m
 from robocal.evaluate.report.data import ReportData

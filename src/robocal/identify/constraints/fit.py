@@ -1,0 +1,395 @@
+"""Calibrate from constraint measurements (:mod:`robocal.identify.constraints.model`).
+
+The engine's stages on a :class:`~robocal.identify.constraints.model.ConstraintProblem`: start
+values (the points at the nominal tool points' centroids, the planes by a least-squares
+fit to them, the device frame by Kabsch when a tracker measured some poses), the
+identifiable set by the sequential rank test (the scene's unknowns kept first, then the
+device frame, the tool, the robot in chain order), screening, the Levenberg-Marquardt
+fit, pruning of poorly identifiable unknowns and the covariance σ̂²(JᵀJ)⁻¹
+(:mod:`robocal.identify.stages`, :mod:`robocal.identify.solvers`).  The compiled fused
+kernels do not apply: the problem evaluates through numpy (the chain's compiled
+evaluation, the constraint rows in numpy).
+
+:func:`constraint_figures` judges any model on any constraint data (held-out
+placements): the spread of the tool point around each point's centroid, the error of
+each known distance, the plane residual.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
+from robocal.identify.options import Pruning
+from robocal.identify.problem import measurement_chain
+from robocal.identify.solvers import solve
+from robocal.identify.stages import (
+    identifiable_set,
+    initial_frames_and_tools,
+    poorly_identifiable,
+    robot_sizes,
+    screen_unidentifiable,
+    uncertainty,
+)
+from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.model.chain import Model
+from robocal.model.rank import Dropped
+from robocal.model.steps import Role
+
+__all__ = ["ConstraintFigures", "ConstraintResult", "calibrate_constraints", "constraint_figures"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ConstraintFigures:
+    """What a model makes of constraint data (all in m).
+
+    Attributes:
+        point_spread: ``(K,)`` RMS distance of the tool points from their point's centroid.
+        point_distance_error: ``(k,)`` centroid distance minus the stated distance.
+        plane_rms: ``(P,)`` RMS distance of the tool points from their plane (the stated
+            one when known, else the best-fit plane).
+        pair_error: ``(m,)`` distance between the pair's tool points minus the stated length.
+    """
+
+    point_spread: Array
+    point_distance_error: Array
+    plane_rms: Array
+    pair_error: Array
+
+    def lines(self) -> list[str]:
+        """One line per figure (mm)."""
+        mm = 1e3
+        out = [f"point {k}: RMS spread {s * mm:.3f} mm" for k, s in enumerate(self.point_spread)]
+        out += [
+            f"known distance {k}: error {e * mm:+.3f} mm" for k, e in enumerate(self.point_distance_error)
+        ]
+        out += [f"plane {k}: RMS residual {s * mm:.3f} mm" for k, s in enumerate(self.plane_rms)]
+        if len(self.pair_error):
+            rms = math.sqrt(float(np.mean(self.pair_error**2)))
+            out.append(
+                f"distances: RMS error {rms * mm:.3f} mm, "
+                f"max |error| {np.abs(self.pair_error).max() * mm:.3f} mm"
+            )
+        return out
+
+
+@dataclass(frozen=True)
+class ConstraintResult:
+    """A calibration from constraint measurements.
+
+    Attributes:
+        model: the calibrated robot (the given model's parameters at their estimates).
+        tool: ``(3,)`` the tool point on the model's end (m) when one was fitted, else None.
+        T_device_base: ``(4, 4)`` the device frame (identity without tracker rows).
+        names, estimates, start, std: the unknowns kept, their values, start values and σ.
+        covariance, correlation: ``(p, p)``.
+        dropped: what was not identified, and why (never invented: held at the start).
+        identifiable: the names the rank test kept before pruning.
+        points: ``(K, 3)`` the fixed points (m). planes: ``(P, 4)`` normal and offset (m).
+        rms_before, rms_after: RMS weighted residual times σ (m) at the start and after.
+        residual_std: σ̂ of the tool point (m) from the residuals.
+        kinds: the measurement kinds used.
+        prior: the prior toward the nominal geometry the fit used (None: a least-squares fit).
+    """
+
+    model: Model
+    tool: Array | None
+    T_device_base: Array
+    names: tuple[str, ...]
+    estimates: Array
+    start: Array
+    std: Array
+    covariance: Array
+    correlation: Array
+    dropped: tuple[Dropped, ...]
+    identifiable: tuple[str, ...]
+    points: Array
+    planes: Array
+    rms_before: float
+    rms_after: float
+    residual_std: float
+    success: bool
+    message: str
+    kinds: tuple[str, ...]
+    figures: ConstraintFigures | None = field(default=None)
+    prior: NominalPrior | None = field(default=None)
+
+    def summary_lines(self) -> list[str]:
+        """A short human summary (mm, deg)."""
+        robot = [n for n in self.names if not n.startswith(("point", "plane"))]
+        lines = [
+            f"measurements: {', '.join(self.kinds)}; "
+            f"fit {'converged' if self.success else 'FAILED: ' + self.message}",
+            f"identified ({len(robot)}): {', '.join(robot) or '-'}",
+            f"residual: {self.rms_before * 1e3:.3f} mm -> {self.rms_after * 1e3:.3f} mm RMS "
+            f"(sigma-hat {self.residual_std * 1e3:.3f} mm)",
+        ]
+        if self.prior is not None:
+            lines.append(self.prior.line())
+        scene = {"redundant", "no effect"}
+        seen = [d.name for d in self.dropped if d.reason in scene]
+        if seen:
+            lines.append(f"not identifiable from these measurements ({len(seen)}): {', '.join(seen)}")
+        poor = [d.name for d in self.dropped if d.reason not in scene]
+        if poor:
+            lines.append(f"poorly identifiable, held at the start value ({len(poor)}): {', '.join(poor)}")
+        for k, c in enumerate(self.points):
+            lines.append(f"point {k}: ({c[0] * 1e3:.3f}, {c[1] * 1e3:.3f}, {c[2] * 1e3:.3f}) mm")
+        for k, p in enumerate(self.planes):
+            lines.append(
+                f"plane {k}: normal ({p[0]:.5f}, {p[1]:.5f}, {p[2]:.5f}), offset {p[3] * 1e3:.3f} mm"
+            )
+        if self.figures is not None:
+            lines += self.figures.lines()
+        return lines
+
+
+# ---------------------------------------------------------------------- start values
+def _start_frame(robot: Model, data: ConstraintSet, tool: Array | None) -> tuple[Array, bool]:
+    """``T_device_base`` from the tracker rows by Kabsch (identity without), and whether to fit it."""
+    tracked = data.tracked
+    if tracked.sum() < 3:
+        return np.eye(4), False
+    T_flange = robot.fk(data.q[tracked])
+    T_tool = np.eye(4)
+    if tool is not None:
+        T_tool[:3, 3] = tool
+    T_frame, _ = initial_frames_and_tools(T_flange[None], data.positions[tracked][None], T_tool=T_tool,
+                                          fit_frame=True, fit_tool=False)  # fmt: skip
+    return T_frame[0], True
+
+
+def _start_planes(p: Array, data: ConstraintSet) -> Array:
+    """``(P, 4)`` each plane's stated normal and offset, or a least-squares fit to ``p``."""
+    planes = np.zeros((data.n_planes, 4))
+    for k in range(data.n_planes):
+        if not data.unknown_plane(k):
+            stated = data.planes_stated[k]
+            n = stated[:3] / np.linalg.norm(stated[:3])
+            planes[k] = [*n, stated[3]]
+            continue
+        on = p[data.plane == k]
+        if len(on) < 3:
+            raise ValueError(f"plane {k} has {len(on)} poses; an unknown plane needs at least 3")
+        centre = on.mean(axis=0)
+        n = np.linalg.svd(on - centre)[2][-1]
+        planes[k] = [*n, n @ centre]
+    return planes
+
+
+def build_constraint_problem(
+    robot: Model, data: ConstraintSet, tool: Array | None = None, prior: NominalPrior | None = None
+) -> ConstraintProblem:
+    """The problem at its start values; ``tool``: a tool point (m) on the robot's end to
+    fit with it, or None (the robot's end is the tool point); ``prior``: a prior of the
+    robot's parameters about their values in ``robot``."""
+    if data.q.shape[1] != robot.dof:
+        raise ValueError(
+            f"the data has {data.q.shape[1]} joint columns but model {robot.name!r} has {robot.dof} joints"
+        )
+    T_frame, fit_frame = _start_frame(robot, data, tool)
+    T_tool = None
+    if tool is not None:
+        T_tool = np.eye(4)
+        T_tool[:3, 3] = tool
+    chain = measurement_chain(robot, T_frame, T_tool, "position", fit_frame)  # T_tool None: no tool
+    p = chain.fk(data.q)[:, :3, 3]
+    points = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
+    planes = _start_planes(p, data)
+    unknown = [k for k in range(data.n_planes) if data.unknown_plane(k)]
+    plane_start = np.array([[0.0, 0.0, planes[k, 3]] for k in unknown]).reshape(-1)
+    full0 = np.concatenate([chain.free_values, points.reshape(-1), plane_start])
+    size = float(np.median(robot_sizes(robot.fk(data.q)[None])))
+    weights = None if prior is None else prior.weights(chain, robot.names)
+    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
+
+
+# ---------------------------------------------------------------------- the fit
+def _robot_columns(problem: ConstraintProblem) -> NDArray[np.bool_]:
+    """Which unknowns are the chain's (pruned when poorly determined; the scene's never are:
+    a point or a plane the data touches is what the constraint is about)."""
+    scene = set(problem.scene_names)
+    return np.array([n not in scene for n in problem.free_names], dtype=bool)
+
+
+def _prune(problem: ConstraintProblem, x: Array, cov: tuple, pruning: Pruning, dropped: list[Dropped],
+           known_noise: bool):  # fmt: skip
+    """Fix the worst poorly identifiable chain unknown and refit, until none is left."""
+    fit = None
+    for _ in range(len(x) - 1):
+        robot = np.flatnonzero(_robot_columns(problem))
+        scale = problem.effect_scale(x)[robot]
+        found = poorly_identifiable(cov[2][robot], scale, pruning.max_std, pruning.max_std_ratio)
+        if found is None:
+            break
+        worst, sigma = int(robot[found[0]]), found[1]
+        dropped.append(Dropped(problem.free_names[worst], "poorly identifiable", sigma=sigma))
+        problem = problem.fix([problem.free_names[worst]])
+        fit = solve(problem, problem.x0, "lm")
+        x = fit.x
+        cov = uncertainty(problem.residual(x), problem.jacobian(x), 3, known_noise)
+    return problem, x, cov, fit
+
+
+def _screen(problem: ConstraintProblem, pruning: Pruning, known_noise: bool, dropped: list[Dropped]):
+    """The hopeless chain unknowns, fixed before the fit (:func:`screen_unidentifiable`)."""
+    x0 = problem.x0
+    found = screen_unidentifiable(problem.residual(x0), problem.jacobian(x0), problem.effect_scale(x0),
+                                  pruning.max_std, pruning.max_std_ratio,
+                                  known_noise=known_noise)  # fmt: skip
+    robot = _robot_columns(problem)
+    names = [problem.free_names[c] for c, _ in found if robot[c]]
+    dropped += [Dropped(problem.free_names[c], "poorly identifiable", sigma=s) for c, s in found if robot[c]]
+    return problem.fix(names)
+
+
+def identifiable(problem: ConstraintProblem):
+    """The rank test (scene unknowns first, then the device frame, the tool, the robot) on
+    the Jacobian at consistent data (:meth:`ConstraintProblem.consistent_jacobian`)."""
+    J = problem.consistent_jacobian(problem.x0) * problem.free_scale
+    J = J[: len(J) - problem.n_prior_rows]  # what the measurements see, not the prior
+    return identifiable_set(J, problem.free_names, roles=problem.roles)
+
+
+def calibrate_constraints(
+    model: Model,
+    data: ConstraintSet,
+    *,
+    tool: Array | None = None,
+    level: int = 2,
+    fixed: tuple[str, ...] = (),
+    pruning: Pruning | None = None,
+    known_noise: bool = False,
+    prior: NominalPrior | None = None,
+) -> ConstraintResult:
+    """Identify the robot (and the points, planes, device frame) from constraint data.
+
+    Args:
+        model: the robot; its free parameters are the candidates.
+        data: the constraint measurements.
+        tool: a tool point (m) on the model's end fitted with the robot, or None.
+        level: 1 identifies the joint offsets only, 2 every free geometric parameter.
+        fixed: parameters held at their values.
+        pruning: the pruning thresholds (None: no pruning beyond the rank test).
+        known_noise: the covariance uses ``data.sigma`` as the noise (else σ̂ from the residuals).
+        prior: a prior of the robot's geometry about the model's values (a MAP fit; the
+            rank test still drops what the measurements cannot see; pruning judges the
+            posterior σ).  The measurements are weighted by their noise: ``data.sigma``
+            with ``known_noise``, else σ̂ of a least-squares fit first (a stated σ ten
+            times the real one would make the prior ten times too strong).  None: least
+            squares.
+    """
+    if prior is not None and not known_noise:
+        plain = calibrate_constraints(model, data, tool=tool, level=level, fixed=fixed)
+        data = dataclasses.replace(data, sigma=max(plain.residual_std, 1e-9))
+    if level == 1:
+        model = model.fixed([s.name for s in model.steps if s.joint is None])
+    if fixed:
+        model = model.fixed(fixed)
+    problem = build_constraint_problem(model, data, tool, prior)
+    selection = identifiable(problem)
+    dropped = list(selection.dropped)
+    problem = problem.fix(selection.dropped_names)
+    if pruning is not None:
+        problem = _screen(problem, pruning, known_noise, dropped)
+    fit = solve(problem, problem.x0, "lm")
+    x = fit.x
+    cov = uncertainty(problem.residual(x), problem.jacobian(x), 3, known_noise)
+    if pruning is not None:
+        problem, x, cov, refit = _prune(problem, x, cov, pruning, dropped, known_noise)
+        fit = refit or fit
+    result = _result(problem, model, x, cov, fit, dropped, selection.kept, tool is not None)
+    return dataclasses.replace(result, prior=prior)
+
+
+def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintResult:
+    chain = problem.chain
+    full = problem.full(x)
+    calibrated_chain = chain.with_free_values(full[: problem.layout.n_chain])
+    values = dict(zip(calibrated_chain.names, calibrated_chain.values.tolist(), strict=True))
+    robot = model.with_values({n: values[n] for n in model.names})
+    tool = np.array([values[f"tcp_{c}"] for c in "xyz"]) if has_tool else None
+    T_frame = chain.with_free_values(full[: problem.layout.n_chain]).fk(np.zeros((1, model.dof)))[0]
+    T_frame = T_frame @ np.linalg.inv(_robot_and_tool(robot, tool).fk(np.zeros((1, model.dof)))[0])
+    r0, r = problem.measurement_residual(problem.x0), problem.measurement_residual(x)
+    sigma = problem.data.sigma
+    dof = max(len(r) - len(x), 1)
+    figures = constraint_figures(robot, problem.data, tool, T_frame)
+    return ConstraintResult(
+        model=robot, tool=tool, T_device_base=T_frame, names=problem.free_names, estimates=x,
+        start=problem.x0, std=cov[2], covariance=cov[1], correlation=cov[3], dropped=tuple(dropped),
+        identifiable=tuple(kept), points=problem.points(x), planes=problem.plane_values(x),
+        rms_before=sigma * math.sqrt(float(r0 @ r0) / len(r0)),
+        rms_after=sigma * math.sqrt(float(r @ r) / len(r)),
+        residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success),
+        message=str(fit.message),
+        kinds=problem.data.kinds, figures=figures,
+    )  # fmt: skip
+
+
+def _robot_and_tool(robot: Model, tool: Array | None) -> Model:
+    if tool is None:
+        return robot
+    T = np.eye(4)
+    T[:3, 3] = tool
+    return measurement_chain(robot, np.eye(4), T, "position", False)
+
+
+# ---------------------------------------------------------------------- figures
+def tool_points(
+    robot: Model, q: Array, tool: Array | None = None, T_device_base: Array | None = None
+) -> Array:
+    """``(n, 3)`` the tool point (m) in the device frame (the base frame by default)."""
+    p = _robot_and_tool(robot, tool).fk(q)[:, :3, 3]
+    if T_device_base is not None:
+        p = p @ T_device_base[:3, :3].T + T_device_base[:3, 3]
+    return p
+
+
+def constraint_figures(
+    robot: Model, data: ConstraintSet, tool: Array | None = None, T_device_base: Array | None = None
+) -> ConstraintFigures:
+    """What ``robot`` makes of ``data`` (:class:`ConstraintFigures`): needs no fit, so it
+    judges held-out data, a nominal model and a calibrated one alike."""
+    p = tool_points(robot, data.q, tool, T_device_base)
+    centroids = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
+    spread = np.array(
+        [
+            math.sqrt(float(np.mean(np.sum((p[data.point == k] - centroids[k]) ** 2, axis=1))))
+            for k in range(data.n_points)
+        ]
+    )
+    a, b = data.point_pairs.T if len(data.point_pairs) else (np.zeros(0, int), np.zeros(0, int))
+    point_error = (
+        np.linalg.norm(centroids[a] - centroids[b], axis=1) - data.point_length if len(a) else np.zeros(0)
+    )
+    planes = _start_planes(p, data) if data.n_planes else np.zeros((0, 4))
+    plane_rms = np.array(
+        [
+            math.sqrt(float(np.mean((p[data.plane == k] @ planes[k, :3] - planes[k, 3]) ** 2)))
+            for k in range(data.n_planes)
+        ]
+    )
+    pair_error = np.zeros(0)
+    if len(data.pairs):
+        pair_error = np.linalg.norm(p[data.pairs[:, 0]] - p[data.pairs[:, 1]], axis=1) - data.pair_length
+    return ConstraintFigures(spread, point_error, plane_rms, pair_error)
+
+
+def kind_identifiable(
+    robot: Model, data: ConstraintSet, tool: Array | None = None
+) -> tuple[tuple[str, ...], tuple[Dropped, ...]]:
+    """The identifiable set of ``robot``'s parameters from ``data`` (rank test at the start
+    values): the kept robot parameters and what was dropped."""
+    problem = build_constraint_problem(robot, data, tool)
+    selection = identifiable(problem)
+    roles = problem.chain.roles
+    kept = tuple(n for n in selection.kept if roles.get(n) not in (Role.DEVICE,) and n in roles)
+    return kept, selection.dropped

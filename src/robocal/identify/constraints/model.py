@@ -1,0 +1,407 @@
+"""Constraint measurements: calibrate from fixed points, planes and distances (no tracker).
+
+Each measurement states where the tool point ``p_i = FK(q_i)`` (device frame; the robot's
+base frame when no device measures) is, not what it reads:
+
+* **fixed point** ``k``: ``p_i - c_k = 0`` (3 rows; a ball seated in socket ``k``, a sphere
+  probed from many orientations), the point ``c_k`` (m) an unknown estimated with the
+  robot; a known distance ``L`` between points ``a`` and ``b`` adds ``|c_a - c_b| - L = 0``;
+* **plane** ``k``: ``n_k · p_i - d_k = 0`` (1 row), the unit normal and offset (m) unknown
+  (``n = (n0 + a t1 + b t2) / |…|`` around a start normal ``n0`` with tangents ``t1, t2``:
+  no singular direction near the start) or known;
+* **distance**: ``|p_i - p_j| - L = 0`` (1 row) for a pair of poses whose tool points are a
+  known length apart (ball-bar, a table of known points);
+* **tracker point**: ``p_i - y_i = 0`` (3 rows), mixed with the others; the device frame
+  is then estimated too.
+
+Residuals are weighted by 1/σ (the tool point's noise σ, isotropic; σ√2 for a distance
+between two tool points; ``distance_sigma`` for a stated distance between fixed points).
+The Jacobian is analytic: the chain's position Jacobian ``∂p_i/∂θ`` (m per unit) times the
+constraint's gradient.  The unknowns are the chain's free parameters followed by the
+points' coordinates and the planes' parameters; :func:`robocal.identify.constraints.fit`
+fits them with the engine's stages.
+
+An optional :class:`NominalPrior` adds one row per robot parameter,
+``(θ - θ_nominal) / σ_prior`` (a Gaussian prior around the nominal geometry: the fit is
+the MAP estimate), after the measurement rows; the rank test and the residual figures use
+the measurement rows only.
+
+What a kind cannot see is a null space of this Jacobian: rigid motions of the whole scene
+for fixed points (the base frame), motion within the plane for a plane, every absolute
+position for distances; a scale needs a known length (a distance).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.model.chain import Model
+from robocal.model.steps import Role
+
+__all__ = ["ConstraintProblem", "NominalPrior", "plane_normal"]
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class NominalPrior:
+    """A Gaussian prior of the robot's geometry around its nominal values (a MAP fit).
+
+    Few configurations in one region of joint space determine some parameter
+    combinations poorly; the prior holds those near the nominal geometry instead of
+    letting the noise set them (ridge regression in the measurement's units).  The
+    measured tool (``tool_*``, ``tcp_*``: a ball whose offset is nominal only) and the
+    device frame get none.
+
+    Attributes:
+        length_std: σ of each length parameter about its nominal value (m).
+        angle_std: σ of each angle parameter about its nominal value (rad).
+    """
+
+    length_std: float = 0.3e-3
+    angle_std: float = 5e-3
+
+    def __post_init__(self) -> None:
+        if not (self.length_std > 0 and self.angle_std > 0):
+            raise ValueError("a prior's length_std and angle_std must be > 0 (m, rad)")
+
+    def weights(self, chain: Model, robot_names: tuple[str, ...]) -> Array:
+        """``(p_chain,)`` 1/σ per free chain parameter (1/m, 1/rad); 0 where no prior."""
+        out = []
+        for step in (s for s in chain.steps if s.free):
+            robot = step.name in robot_names and not step.name.startswith(("tool_", "tcp_"))
+            out.append(0.0 if not robot else 1.0 / (self.angle_std if step.is_rotation else self.length_std))
+        return np.array(out, dtype=float)
+
+    def line(self) -> str:
+        """How the summary names it (mm, mrad)."""
+        return (
+            f"prior toward the nominal geometry: lengths sigma {self.length_std * 1e3:g} mm, "
+            f"angles sigma {self.angle_std * 1e3:g} mrad"
+        )
+
+
+def plane_normal(n0: Array, tangents: Array, ab: Array) -> tuple[Array, Array]:
+    """The unit normal ``n = (n0 + a t1 + b t2)/|…|`` and its derivatives ``(3, 2)``
+    with respect to ``(a, b)``; ``tangents`` ``(2, 3)``."""
+    v = n0 + ab[0] * tangents[0] + ab[1] * tangents[1]
+    norm = float(np.linalg.norm(v))
+    n = v / norm
+    projector = (np.eye(3) - np.outer(n, n)) / norm
+    return n, projector @ tangents.T
+
+
+def _tangents(n0: Array) -> Array:
+    """Two unit vectors orthogonal to ``n0`` and to each other ``(2, 3)``."""
+    helper = np.eye(3)[int(np.argmin(np.abs(n0)))]
+    t1 = np.cross(n0, helper)
+    t1 /= np.linalg.norm(t1)
+    return np.stack([t1, np.cross(n0, t1)])
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where the scene's unknowns sit in ``x`` after the chain's free parameters."""
+
+    n_chain: int
+    n_points: int
+    planes: tuple[int, ...]  # the unknown planes' indices
+
+    @property
+    def size(self) -> int:
+        return self.n_chain + 3 * self.n_points + 3 * len(self.planes)
+
+    def point(self, k: int) -> int:
+        return self.n_chain + 3 * k
+
+    def plane(self, k: int) -> int:
+        return self.n_chain + 3 * self.n_points + 3 * self.planes.index(k)
+
+
+class ConstraintProblem:
+    """Weighted residuals and their analytic Jacobian for a :class:`ConstraintSet`.
+
+    ``x`` holds the unknowns that are not fixed (:meth:`fix`): the chain's free
+    parameters, then each point's ``x, y, z`` (m), then each unknown plane's ``a, b``
+    (tilts of the normal, rad-like) and ``d`` (offset, m).  The interface is the one the
+    engine's stages and solvers use (``residual``, ``jacobian``, ``x0``, ``free_names``,
+    ``fix``, ``effect_scale``)."""
+
+    rows = 3  # one group of rows for the residual variance (stages.uncertainty)
+    n_effects = 0
+
+    def __init__(self, chain: Model, data: ConstraintSet, full0: Array, planes0: Array, length_scale: float,
+                 prior_weight: Array | None = None):  # fmt: skip
+        self.chain, self.data, self.length_scale = chain, data, float(length_scale)
+        # (p_chain,) 1/σ of a prior about full0's chain values (NominalPrior.weights), or None
+        self.prior_weight = None if prior_weight is None else np.asarray(prior_weight, dtype=float)
+        planes = tuple(k for k in range(data.n_planes) if data.unknown_plane(k))
+        self.layout = _Layout(len(chain.free_names), data.n_points, planes)
+        self.full0 = np.asarray(full0, dtype=float)
+        self.planes0 = np.asarray(planes0, dtype=float)  # (P, 4): start / known normal, offset
+        self.tangents = (
+            np.stack([_tangents(p[:3]) for p in self.planes0]) if len(self.planes0) else np.zeros((0, 2, 3))
+        )
+        self.keep = np.ones(self.layout.size, dtype=bool)
+        self._cache: dict = {}
+
+    # ------------------------------------------------------------------ names and values
+    @functools.cached_property
+    def all_names(self) -> tuple[str, ...]:
+        names = list(self.chain.free_names)
+        names += [f"point{k}_{c}" for k in range(self.data.n_points) for c in "xyz"]
+        names += [f"plane{k}_{c}" for k in self.layout.planes for c in ("a", "b", "d")]
+        return tuple(names)
+
+    @property
+    def free_names(self) -> tuple[str, ...]:
+        return tuple(n for n, k in zip(self.all_names, self.keep, strict=True) if k)
+
+    @property
+    def scene_names(self) -> tuple[str, ...]:
+        return self.all_names[self.layout.n_chain :]
+
+    @property
+    def roles(self) -> dict[str, Role]:
+        """The chain's roles, the scene's unknowns as the device's (kept first by the rank test)."""
+        return {**self.chain.roles, **{n: Role.DEVICE for n in self.scene_names}}
+
+    @property
+    def x0(self) -> Array:
+        return self.full0[self.keep]
+
+    def full(self, x: Array) -> Array:
+        v = self.full0.copy()
+        v[self.keep] = x
+        return v
+
+    def fix(self, names) -> ConstraintProblem:
+        """The same problem with ``names`` held at their start values."""
+        fixed = object.__new__(ConstraintProblem)
+        fixed.__dict__.update(self.__dict__)
+        fixed.keep = self.keep & ~np.isin(np.array(self.all_names), list(names))
+        fixed._cache = {}
+        return fixed
+
+    @functools.cached_property
+    def _full_scale(self) -> Array:
+        rot = [s.is_rotation for s in self.chain.steps if s.free]
+        scene = [
+            self.length_scale if n[-1] in "ab" and n.startswith("plane") else 1.0 for n in self.scene_names
+        ]
+        return np.concatenate([np.where(rot, self.length_scale, 1.0), scene])
+
+    @property
+    def free_scale(self) -> Array:
+        """Displacement (m) per unit of each unknown: 1 for lengths, the robot's size for angles."""
+        return self._full_scale[self.keep]
+
+    def effect_scale(self, x: Array) -> Array:
+        """``(p,)`` displacement (m) per unit of each unknown (pruning judges σ by it): the
+        largest tool displacement over the poses for the chain's, else :attr:`free_scale`."""
+        from robocal.identify.stages import tool_displacement_scale
+
+        Jp = self._chain(x)[1].reshape(self.data.n, 3, -1)
+        scale = self._full_scale.copy()
+        scale[: self.layout.n_chain] = tool_displacement_scale(Jp)
+        return scale[self.keep]
+
+    def scaled_jacobian(self, x: Array) -> Array:
+        return self.jacobian(x) * self.free_scale
+
+    # ------------------------------------------------------------------ evaluation
+    def _chain(self, x: Array) -> tuple[Array, Array]:
+        """Tool points ``(n, 3)`` and their Jacobian ``(3n, p_chain)`` over the chain's free parameters."""
+        full = self.full(np.asarray(x, dtype=float))
+        key = full.tobytes()
+        if key not in self._cache:
+            self._cache.clear()
+            values = self.chain.values.copy()
+            values[self.chain.free_mask] = full[: self.layout.n_chain]
+            T, J = self.chain.evaluate(self.data.q, values, rows="position", jacobian=True)[:2]
+            self._cache[key] = (T[:, :3, 3], J)
+        return self._cache[key]
+
+    def consistent_jacobian(self, x: Array) -> Array:
+        """The weighted Jacobian ``(m, p)`` at consistent data: each pose's joint values
+        moved (IK of the chain at ``x``, a few µm to mm) so that its tool point lies on what
+        it touches (its point, its plane, its tracker position, its pair's length).  There a
+        rigid motion of the whole scene, and without a known length its scale, are exact
+        null vectors whatever the residuals were; at the measured joint values a residual of
+        17 mm on a 0.8 m arm made the base frame's rotations look identifiable (the rank
+        test tells columns apart to 1e-7).  For the rank test only."""
+        from robocal.measure.ik import solve_ik
+
+        full = self.full(np.asarray(x, dtype=float))
+        chain = self.chain.with_free_values(full[: self.layout.n_chain])
+        p = self._chain(x)[0]
+        ik = solve_ik(chain, self._touched(x, p), kind="position", q0=self.data.q, restarts=0, tol=1e-12,
+                      seed_pool=0)  # fmt: skip
+        moved = object.__new__(ConstraintProblem)
+        moved.__dict__.update(self.__dict__)
+        moved.data = dataclasses.replace(self.data, q=ik.q)
+        moved._cache = {}
+        return moved.jacobian(x)
+
+    def _touched(self, x: Array, p: Array) -> Array:
+        """``(n, 3)`` the point each pose's tool point touches (itself for distances only)."""
+        d = self.data
+        out = p.copy()
+        on_plane = d.plane >= 0
+        if on_plane.any():
+            planes = self.plane_values(x)[d.plane[on_plane]]
+            dist = np.einsum("ij,ij->i", p[on_plane], planes[:, :3]) - planes[:, 3]
+            out[on_plane] = p[on_plane] - dist[:, None] * planes[:, :3]
+        on_point = d.point >= 0
+        if on_point.any():
+            out[on_point] = self.points(x)[d.point[on_point]]
+        if len(d.pairs):
+            a, b = d.pairs[:, 0], d.pairs[:, 1]
+            delta = out[b] - out[a]
+            out[b] = out[a] + delta * (d.pair_length / np.linalg.norm(delta, axis=1))[:, None]
+        if d.position is not None:
+            tracked = d.tracked
+            out[tracked] = d.positions[tracked]
+        return out
+
+    def plane_values(self, x: Array) -> Array:
+        """``(P, 4)`` every plane's unit normal and offset (m) at ``x``."""
+        full = self.full(np.asarray(x, dtype=float))
+        out = self.planes0.copy()
+        for k in self.layout.planes:
+            at = self.layout.plane(k)
+            out[k, :3] = plane_normal(self.planes0[k, :3], self.tangents[k], full[at : at + 2])[0]
+            out[k, 3] = full[at + 2]
+        return out
+
+    def points(self, x: Array) -> Array:
+        """``(K, 3)`` the fixed points at ``x`` (m)."""
+        full = self.full(np.asarray(x, dtype=float))
+        return full[self.layout.point(0) : self.layout.point(0) + 3 * self.data.n_points].reshape(-1, 3)
+
+    def _blocks(self, x: Array) -> tuple[Array, Array]:
+        """Weighted residuals ``(m,)`` and Jacobian ``(m, size)`` over every unknown."""
+        full = self.full(np.asarray(x, dtype=float))
+        p, Jc = self._chain(x)
+        d, lay = self.data, self.layout
+        Jp = np.zeros((d.n, 3, lay.size))
+        Jp[:, :, : lay.n_chain] = Jc.reshape(d.n, 3, -1)
+        r_parts, J_parts = [], []
+        tracked = d.tracked
+        if tracked.any():
+            r_parts.append((p[tracked] - d.positions[tracked]).reshape(-1))
+            J_parts.append(Jp[tracked].reshape(-1, lay.size))
+        on_point = np.flatnonzero(d.point >= 0)
+        if len(on_point):
+            r, J = self._point_rows(full, p, Jp, on_point)
+            r_parts.append(r)
+            J_parts.append(J)
+        on_plane = np.flatnonzero(d.plane >= 0)
+        if len(on_plane):
+            r, J = self._plane_rows(full, p, Jp, on_plane)
+            r_parts.append(r)
+            J_parts.append(J)
+        if r_parts:
+            r_parts, J_parts = [np.concatenate(r_parts) / d.sigma], [np.concatenate(J_parts) / d.sigma]
+        if len(d.pairs):
+            r, J = self._pair_rows(p, Jp)
+            r_parts.append(r / (d.sigma * np.sqrt(2)))
+            J_parts.append(J / (d.sigma * np.sqrt(2)))
+        if len(d.point_pairs):
+            r, J = self._point_distance_rows(full)
+            r_parts.append(r / d.distance_sigma)
+            J_parts.append(J / d.distance_sigma)
+        if self.n_prior_rows:
+            r, J = self._prior_rows(full)
+            r_parts.append(r)
+            J_parts.append(J)
+        return np.concatenate(r_parts), np.concatenate(J_parts)
+
+    @property
+    def _prior_columns(self) -> IntArray:
+        """The chain columns (of ``full``) with a prior that are not fixed."""
+        if self.prior_weight is None:
+            return np.zeros(0, dtype=np.intp)
+        n = self.layout.n_chain
+        return np.flatnonzero((self.prior_weight > 0) & self.keep[:n])
+
+    @property
+    def n_prior_rows(self) -> int:
+        """How many prior rows follow the measurement rows (0 without a prior)."""
+        return len(self._prior_columns)
+
+    def _prior_rows(self, full: Array) -> tuple[Array, Array]:
+        """``(θ - θ_nominal)/σ`` of each chain unknown with a prior (already weighted)."""
+        on = self._prior_columns
+        w = self.prior_weight[on] if self.prior_weight is not None else np.zeros(0)
+        J = np.zeros((len(on), self.layout.size))
+        J[np.arange(len(on)), on] = w
+        return w * (full[on] - self.full0[on]), J
+
+    def measurement_residual(self, x: Array) -> Array:
+        """Weighted residuals of the measurements alone (no prior rows)."""
+        r = self.residual(x)
+        return r[: len(r) - self.n_prior_rows]
+
+    def _point_rows(self, full: Array, p: Array, Jp: Array, rows: IntArray) -> tuple[Array, Array]:
+        k = self.data.point[rows]
+        at = self.layout.n_chain + 3 * k
+        c = full[at[:, None] + np.arange(3)]
+        J = Jp[rows].copy()
+        J[np.arange(len(rows))[:, None], np.arange(3)[None, :], at[:, None] + np.arange(3)] -= 1.0
+        return (p[rows] - c).reshape(-1), J.reshape(-1, self.layout.size)
+
+    def _plane_rows(self, full: Array, p: Array, Jp: Array, rows: IntArray) -> tuple[Array, Array]:
+        r = np.empty(len(rows))
+        J = np.zeros((len(rows), self.layout.size))
+        for row, i in enumerate(rows):
+            k = int(self.data.plane[i])
+            if k in self.layout.planes:
+                at = self.layout.plane(k)
+                n, dn = plane_normal(self.planes0[k, :3], self.tangents[k], full[at : at + 2])
+                offset = full[at + 2]
+                J[row, at : at + 2] = p[i] @ dn
+                J[row, at + 2] = -1.0
+            else:
+                n, offset = self.planes0[k, :3], self.planes0[k, 3]
+            r[row] = n @ p[i] - offset
+            J[row] += n @ Jp[i]
+        return r, J
+
+    def _pair_rows(self, p: Array, Jp: Array) -> tuple[Array, Array]:
+        a, b = self.data.pairs[:, 0], self.data.pairs[:, 1]
+        delta = p[a] - p[b]
+        length = np.linalg.norm(delta, axis=1)
+        u = delta / np.maximum(length, 1e-300)[:, None]
+        J = np.einsum("mr,mrp->mp", u, Jp[a] - Jp[b])
+        return length - self.data.pair_length, J
+
+    def _point_distance_rows(self, full: Array) -> tuple[Array, Array]:
+        d, lay = self.data, self.layout
+        c = full[lay.point(0) : lay.point(0) + 3 * d.n_points].reshape(-1, 3)
+        a, b = d.point_pairs[:, 0], d.point_pairs[:, 1]
+        delta = c[a] - c[b]
+        length = np.linalg.norm(delta, axis=1)
+        u = delta / np.maximum(length, 1e-300)[:, None]
+        J = np.zeros((len(a), lay.size))
+        for row in range(len(a)):
+            J[row, lay.point(int(a[row])) : lay.point(int(a[row])) + 3] += u[row]
+            J[row, lay.point(int(b[row])) : lay.point(int(b[row])) + 3] -= u[row]
+        return length - d.point_length, J
+
+    def residual(self, x: Array, weighted: bool = True) -> Array:
+        """Weighted residuals ``(m,)`` (``weighted=False``: m), the prior rows last."""
+        r = self._blocks(x)[0]
+        return r if weighted else r * self.data.sigma
+
+    def jacobian(self, x: Array, weighted: bool = True) -> Array:
+        """d residual / d x ``(m, p)`` over the unknowns not fixed."""
+        J = self._blocks(x)[1][:, self.keep]
+        return J if weighted else J * self.data.sigma

@@ -1,0 +1,241 @@
+"""A constraint calibration read back from its folder.
+
+``robocal calibrate ROBOT --data FILE`` of a constraint file (fixed points, planes,
+distances: :mod:`robocal.cli.constraints`) writes ``model.yaml`` (the calibrated robot)
+and ``constraints.json`` (what was identified, what the data cannot see, the scene) in
+one transaction.  :func:`load_constraint_calibration` reads both back, checked against
+each other, for the report, the exports and compensation.
+
+What such a calibration does not hold, unlike a tracker calibration: a measuring
+device's frame (the points are in the robot's base frame) and the base placement — a
+rigid motion of the robot and its scene together changes no constraint, so the
+parameters placing the chain in the base frame stay at their nominal values
+(:attr:`ConstraintCalibration.unseen`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.model.chain import Model
+
+__all__ = [
+    "CONSTRAINT_FILE",
+    "ConstraintCalibration",
+    "is_constraint_folder",
+    "load_constraint_calibration",
+]
+
+Array = NDArray[np.float64]
+#: the constraint calibration's record beside ``model.yaml``
+CONSTRAINT_FILE = "constraints.json"
+#: reasons of the rank test: the data cannot see the parameter at all (not merely poorly)
+_UNSEEN = ("redundant", "no effect")
+
+
+@dataclass(frozen=True)
+class ConstraintCalibration:
+    """A constraint calibration folder's content (lengths in m, angles in rad).
+
+    Attributes:
+        directory: the folder.
+        model: the calibrated robot (``model.yaml``); its end is the point the
+            constraints held (the ball centre, the probe tip).
+        nominal: the robot before calibration (the estimated parameters at their start
+            values), or None for a folder written before the start values were recorded.
+        kinds: the measurement kinds (``point``, ``plane``, ``distance``).
+        names, estimates, std: the estimated unknowns (robot parameters and the scene's
+            ``point*``/``plane*`` unknowns), their values and 1σ.
+        dropped: ``(name, reason)`` of what was not identified (held at its start value).
+        points: ``(K, 3)`` the fixed points in the base frame. planes: ``(P, 4)`` normal, offset.
+        rms_before, rms_after: the fit's RMS residual at the start and after.
+        success: whether the fit converged.
+        data_path, data_sha256: the calibration's constraint file as recorded.
+        angle_unit: the file's joint angle unit (``rad``/``deg``; None: not recorded).
+        distances: ``(a, b, metres)`` the stated distances between points.
+        prior: ``{"length_std_m", "angle_std_rad"}`` of the prior toward the nominal
+            geometry, or None (a least-squares fit).
+        run_id: the transaction that wrote the folder.
+    """
+
+    directory: Path
+    model: Model
+    nominal: Model | None
+    kinds: tuple[str, ...]
+    names: tuple[str, ...]
+    estimates: Array
+    std: Array
+    dropped: tuple[tuple[str, str], ...]
+    points: Array
+    planes: Array
+    rms_before: float
+    rms_after: float
+    success: bool
+    data_path: Path | None
+    data_sha256: str | None
+    angle_unit: str | None
+    distances: tuple[tuple[int, int, float], ...]
+    prior: dict | None
+    run_id: str | None
+
+    @property
+    def robot_names(self) -> tuple[str, ...]:
+        """The robot's identified parameters (not the scene's unknowns)."""
+        return tuple(n for n in self.names if n in self.model.names)
+
+    @property
+    def unseen(self) -> tuple[str, ...]:
+        """The robot's parameters the data cannot see at all (left nominal), chain order."""
+        names = {n for n, reason in self.dropped if reason in _UNSEEN}
+        return tuple(n for n in self.model.names if n in names)
+
+    @property
+    def poorly_identified(self) -> tuple[str, ...]:
+        """The robot's parameters held at their start value for a too large σ."""
+        names = {n for n, reason in self.dropped if reason not in _UNSEEN}
+        return tuple(n for n in self.model.names if n in names)
+
+    @property
+    def base_steps(self) -> tuple[str, ...]:
+        """The parameters placing the first joint in the base frame (before joint 1)."""
+        out = []
+        for s in self.model.steps:
+            if s.joint is not None:
+                break
+            out.append(s.name)
+        return tuple(out)
+
+    @property
+    def base_identified(self) -> bool:
+        """Whether the data saw every free base parameter (tracker rows in mixed data)."""
+        free = {s.name for s in self.model.steps if s.free}
+        return not any(n in self.unseen for n in self.base_steps if n in free)
+
+    def base_note(self) -> str:
+        """One sentence: what stays nominal and why (for exports and compensation)."""
+        if not self.unseen:
+            return "the constraint data saw every free parameter of the chain"
+        if self.base_identified:
+            return (
+                f"{len(self.unseen)} parameters the {', '.join(self.kinds)} data cannot see stay at their "
+                f"nominal values ({', '.join(self.unseen)})"
+            )
+        return (
+            f"the base frame is nominal: {', '.join(self.kinds)} data cannot see the robot's placement "
+            f"(a rigid motion of the robot and its {_scene(self.kinds)} together changes no measurement), "
+            f"and {len(self.unseen)} parameters it cannot see stay at their nominal values "
+            f"({', '.join(self.unseen)}); "
+            "the chain is calibrated relative to that nominal base"
+        )
+
+
+def _scene(kinds: tuple[str, ...]) -> str:
+    words = {"point": "fixed points", "plane": "planes", "distance": "ball-bar pairs"}
+    return " and ".join(words.get(k, k) for k in kinds) or "scene"
+
+
+def is_constraint_folder(directory: Path) -> bool:
+    """Whether ``directory`` holds a constraint calibration (and no tracker result)."""
+    directory = Path(directory)
+    return (
+        directory.is_dir()
+        and (directory / CONSTRAINT_FILE).is_file()
+        and not (directory / "result.json").is_file()
+    )
+
+
+def _array(doc: dict, key: str, width: int) -> Array:
+    values = np.asarray(doc.get(key) or [], dtype=float).reshape(-1, width)
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{key}: not finite numbers")
+    return values
+
+
+def _check_model(model: Model, names: tuple[str, ...], estimates: Array, where: Path) -> None:
+    """The model must carry the recorded estimates (a hand-edited model.yaml is refused)."""
+    values = dict(zip(model.names, model.values.tolist(), strict=True))
+    for name, estimate in zip(names, estimates.tolist(), strict=True):
+        v = values.get(name)
+        if v is not None and not abs(v - estimate) <= 1e-9 * max(1.0, abs(estimate)):
+            raise ValueError(
+                f"{where / 'model.yaml'}: parameter {name} is {v!r}, {CONSTRAINT_FILE} says {estimate!r}: "
+                "the model does not belong to this calibration; calibrate again"
+            )
+
+
+def _nominal(model: Model, doc: dict, names: tuple[str, ...]) -> Model | None:
+    start = doc.get("start")
+    if not isinstance(start, list) or len(start) != len(names):
+        return None
+    values = {n: float(v) for n, v in zip(names, start, strict=True) if n in model.names}
+    if not all(math.isfinite(v) for v in values.values()):
+        raise ValueError("start: not finite numbers")
+    return model.with_values(values)
+
+
+def load_constraint_calibration(directory: str | Path) -> ConstraintCalibration:
+    """Read a constraint calibration folder (``model.yaml`` + ``constraints.json``).
+
+    Raises:
+        ValueError: a file missing, unreadable or not robocal's, or a ``model.yaml`` that
+            does not carry the recorded estimates or run id (one line naming the file).
+    """
+    from robocal.model.files import load_model
+    from robocal.model.yaml_files import ModelFileError
+    from robocal.run_ids import read_run_id
+
+    directory = Path(directory)
+    path = directory / CONSTRAINT_FILE
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as err:  # not there, not UTF-8, not JSON, too deep
+        raise ValueError(f"{path}: cannot read the constraint calibration: {err}") from None
+    try:
+        model = load_model(directory / "model.yaml")
+    except (OSError, ValueError, ModelFileError) as err:
+        raise ValueError(f"{directory / 'model.yaml'}: cannot read the calibrated model: {err}") from None
+    if not isinstance(doc, dict) or doc.get("kind") != "constraints":
+        raise ValueError(f"{path}: not a robocal constraint calibration")
+    run_id = doc.get("run_id")
+    if run_id is not None and read_run_id(directory / "model.yaml") not in (None, run_id):
+        raise ValueError(
+            f"{directory / 'model.yaml'}: written by another run than {path.name}; calibrate again"
+        )
+    try:
+        names = tuple(str(n) for n in doc["names"])
+        estimates = np.asarray(doc["estimates"], dtype=float).reshape(len(names))
+        _check_model(model, names, estimates, directory)
+        return ConstraintCalibration(
+            directory=directory, model=model, nominal=_nominal(model, doc, names), names=names,
+            estimates=estimates, run_id=run_id if isinstance(run_id, str) else None,
+            **_fields(doc, len(names)),
+        )  # fmt: skip
+    except (KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{path}: not a robocal constraint calibration ({err})") from None
+
+
+def _fields(doc: dict, n: int) -> dict:
+    """The record's plain fields (checked types)."""
+    data = doc.get("data")
+    unit = doc.get("angle_unit")
+    return dict(
+        kinds=tuple(str(k) for k in doc.get("measurements", [])),
+        std=np.asarray(doc.get("std") or [math.nan] * n, dtype=float).reshape(n),
+        dropped=tuple((str(d["name"]), str(d["reason"])) for d in doc.get("not_identifiable", [])),
+        points=_array(doc, "points_m", 3),
+        planes=_array(doc, "planes", 4),
+        rms_before=float(doc.get("rms_before_m", math.nan)),
+        rms_after=float(doc.get("rms_after_m", math.nan)),
+        success=bool(doc.get("success", False)),
+        data_path=None if data is None else Path(str(data)),
+        data_sha256=doc.get("data_sha256") if isinstance(doc.get("data_sha256"), str) else None,
+        angle_unit=unit if unit in ("rad", "deg") else None,
+        distances=tuple((int(a), int(b), float(d)) for a, b, d in doc.get("distances_m", [])),
+        prior=doc.get("prior") if isinstance(doc.get("prior"), dict) else None,
+    )

@@ -1,0 +1,278 @@
+"""Compiled kernels (numba) of the linear algebra between the fits of a calibration:
+the normalised normal matrix and its inverse (:func:`normal_inverse`), the screening of
+hopeless unknowns before the first fit (:func:`screen`) and the covariance of a fit
+(:func:`covariance`, :func:`normal_covariance`), called by :mod:`robocal.identify.stages`
+and the fused kernels.  Screening and the covariance after Levenberg-Marquardt work from
+the normal equations ``JᵀJ`` the solver forms anyway: one product over the rows per
+evaluation.
+
+The matrices are small (for a 100-pose UR10, 300 x 27 Jacobians and 27 x 27 normal
+matrices): numpy spent about forty calls of fixed cost on each screening round and
+covariance, several times the arithmetic, which is why they are compiled.  The numpy
+versions they replace are the reference ``tests/test_stage_kernels.py`` holds them to.
+
+The inverse of the normal matrix comes from a Cholesky factorisation written out here:
+numba offers no ``potri`` and its ``np.linalg.cholesky`` raises on a matrix that is not
+positive definite, which a kernel cannot catch cheaply (the factorisation is
+:func:`robocal.model.rank_kernels.cholesky`).  Compiled with ``cache=True`` (see
+:mod:`robocal.model.kernels`); this module imports numba, so :mod:`robocal.identify.stages`
+imports it on first use only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from robocal.identify import rules
+from robocal.model.rank_kernels import cholesky
+
+__all__ = [
+    "covariance",
+    "normal_covariance",
+    "normal_inverse",
+    "normalised",
+    "prune_candidate",
+    "screen",
+    "variance_factor",
+]
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+# the decision rules of robocal.identify.rules, compiled: the one definition that the
+# staged pipeline (from Python), the fused kernels and the screening below all call
+prune_candidate = _jit(rules.prune_candidate)
+variance_factor = _jit(rules.variance_factor)
+
+# an eigenvalue ratio at or below this: the normal matrix is numerically singular
+SINGULAR = 1e-14
+
+
+@_jit
+def _spd_inverse(A, inverse):
+    """``inverse`` ``(p, p)`` of the symmetric ``A`` from its Cholesky factor ``L``
+    (``A⁻¹ = L⁻ᵀ L⁻¹``); False when ``A`` is not positive definite."""
+    p = A.shape[0]
+    L = np.zeros((p, p))
+    if not cholesky(A, L):
+        return False
+    Li = np.zeros((p, p))  # L⁻¹, lower triangular, by forward substitution
+    for j in range(p):
+        Li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, p):
+            t = 0.0
+            for k in range(j, i):
+                t -= L[i, k] * Li[k, j]
+            Li[i, j] = t / L[i, i]
+    for i in range(p):  # (L⁻ᵀ L⁻¹)_ij = Σ_k≥max(i,j) Li[k, i] Li[k, j]
+        for j in range(i + 1):
+            t = 0.0
+            for k in range(i, p):
+                t += Li[k, i] * Li[k, j]
+            inverse[i, j] = t
+            inverse[j, i] = t
+    return True
+
+
+@_jit
+def normalised(G):
+    """The column norms of a normal matrix ``G = JᵀJ`` ``(p, p)`` (the square roots of its
+    diagonal; 1 for a zero column) and the normal matrix of the unit-norm columns,
+    ``A = G / (norms normsᵀ)``."""
+    p = G.shape[0]
+    norms = np.empty(p)
+    for a in range(p):
+        norms[a] = math.sqrt(G[a, a]) if G[a, a] > 0.0 else 1.0
+    A = np.empty((p, p))
+    for a in range(p):
+        for b in range(p):
+            A[a, b] = G[a, b] / (norms[a] * norms[b])
+    return norms, A
+
+
+@_jit
+def normal_inverse(J):
+    """``J`` ``(m, p)`` with unit-norm columns, the column norms (a zero column's is 1),
+    the ascending eigenvalues of ``A = JnᵀJn`` and its inverse; the last value is False
+    when ``A`` is numerically singular (eigenvalue ratio ≤ :data:`SINGULAR`) or its
+    factorisation failed: then the inverse is not computed."""
+    m, p = J.shape
+    norms = np.empty(p)
+    for j in range(p):
+        s = 0.0
+        for i in range(m):
+            s += J[i, j] * J[i, j]
+        norms[j] = math.sqrt(s) if s > 0.0 else 1.0
+    Jn = np.empty((m, p))
+    for i in range(m):
+        for j in range(p):
+            Jn[i, j] = J[i, j] / norms[j]
+    A = np.dot(Jn.T, Jn)  # BLAS: the one product here large enough to need it
+    lam = np.linalg.eigvalsh(A)
+    inverse = np.empty((p, p))
+    ok = p > 0 and lam[0] > SINGULAR * lam[p - 1] and _spd_inverse(A, inverse)
+    return Jn, norms, lam, inverse, ok
+
+
+@_jit
+def median(v):
+    """The median of a short vector, by insertion sort (numba's ``np.sort`` costs most of
+    a second of compilation)."""
+    s = v.copy()
+    n = len(s)
+    for i in range(1, n):
+        x = s[i]
+        j = i - 1
+        while j >= 0 and s[j] > x:
+            s[j + 1] = s[j]
+            j -= 1
+        s[j + 1] = x
+    return 0.5 * (s[(n - 1) // 2] + s[n // 2])
+
+
+@_jit
+def _norm1(A):
+    """The 1-norm (largest absolute column sum) of ``A`` ``(p, p)``."""
+    largest = 0.0
+    for b in range(A.shape[1]):
+        s = 0.0
+        for a in range(A.shape[0]):
+            s += abs(A[a, b])
+        largest = max(largest, s)
+    return largest
+
+
+@_jit
+def screen(G, g, rr, m, scale, screening, columns, sigmas):
+    """The screening of :func:`robocal.identify.stages.screen_unidentifiable` from the
+    normal equations of the weighted problem — ``G = JᵀJ`` ``(p, p)``, ``g = Jᵀr`` ``(p,)``,
+    ``rr = rᵀr`` over ``m`` rows — the tool displacement per unit ``scale`` ``(p,)`` and its
+    ``screening`` settings ``(max_std, max_std_ratio, margin, known_noise)``.
+    The dropped columns and their σ (m) go to ``columns[:count]`` and ``sigmas[:count]``,
+    worst first.  Returns ``count``.
+
+    Each round works on the block of the columns still in: no product over the rows
+    again.  The one-step residual's squares are ``rr − gₙᵀA⁻¹gₙ`` (``gₙ`` and ``A`` of the
+    unit-norm columns; at the start values the residuals are well above what one step
+    leaves, so the difference keeps its digits).  A numerically singular block — its
+    Cholesky factorisation fails, or the 1-norm condition number ``‖A‖₁‖A⁻¹‖₁`` (at most
+    ``p`` times the eigenvalue ratio's inverse) reaches ``1 / SINGULAR`` — is left to the
+    fit and its checks."""
+    max_std, max_std_ratio, margin, known_noise = screening
+    p = G.shape[0]
+    keep = np.ones(p, dtype=np.bool_)
+    count = 0
+    while p - count > 1:
+        k = p - count
+        live = np.empty(k, dtype=np.intp)
+        n_live = 0
+        for a in range(p):
+            if keep[a]:
+                live[n_live] = a
+                n_live += 1
+        Gk = np.empty((k, k))
+        for a in range(k):
+            for b in range(k):
+                Gk[a, b] = G[live[a], live[b]]
+        norms, A = normalised(Gk)
+        inverse = np.empty((k, k))
+        if not _spd_inverse(A, inverse) or _norm1(A) * _norm1(inverse) >= 1.0 / SINGULAR:
+            break
+        # with a stated noise (weights 1/σ) the variance is 1: far from the solution the
+        # one-step residual still holds nonlinear error (2° errors inflated σ 10-50x)
+        s2 = 1.0
+        if not known_noise:
+            explained = 0.0
+            for a in range(k):
+                ga = g[live[a]] / norms[a]
+                for b in range(k):
+                    explained += ga * inverse[a, b] * (g[live[b]] / norms[b])
+            s2 = max(rr - explained, 0.0) / max(m - k, 1)
+        move = np.empty(k)
+        for a in range(k):
+            move[a] = math.sqrt(s2 * inverse[a, a]) / norms[a] * scale[live[a]]
+        worst = prune_candidate(move, max_std, max_std_ratio, margin)
+        if worst == rules.NO_CANDIDATE:
+            break
+        columns[count] = live[worst]
+        sigmas[count] = move[worst]
+        keep[live[worst]] = False
+        count += 1
+    return count
+
+
+@_jit
+def _sandwich(Jn, row_s2, inverse):
+    """``A⁻¹ Jnᵀ diag(σ̂²) Jn A⁻¹`` ``(p, p)`` (loops: numba's matrix products in several
+    memory layouts cost seconds of compilation)."""
+    m, p = Jn.shape
+    middle = np.zeros((p, p))
+    for i in range(m):
+        for a in range(p):
+            w = Jn[i, a] * row_s2[i]
+            for b in range(p):
+                middle[a, b] += w * Jn[i, b]
+    left = np.zeros((p, p))
+    for a in range(p):
+        for k in range(p):
+            for b in range(p):
+                left[a, b] += inverse[a, k] * middle[k, b]
+    out = np.zeros((p, p))
+    for a in range(p):
+        for k in range(p):
+            for b in range(p):
+                out[a, b] += left[a, k] * inverse[k, b]
+    return out
+
+
+@_jit
+def covariance(J, row_s2, uniform):
+    """Covariance, standard deviations, correlations and the normal matrix's eigenvalues of
+    a fit with weighted Jacobian ``J`` ``(m, p)`` and variance factors ``row_s2`` ``(m,)``
+    per row (``uniform``: all equal, σ̂²(JᵀJ)⁻¹ by :func:`normal_covariance`; otherwise
+    the sandwich ``(JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹``).  The last value is False when the
+    normal matrix's eigenvalue ratio is ≤ 1e-12 or it is not positive definite (the caller
+    uses the SVD)."""
+    if uniform:
+        return normal_covariance(np.dot(J.T, J), row_s2[0])
+    p = J.shape[1]
+    Jn, norms, lam, inverse, ok = normal_inverse(J)
+    if not ok or not lam[0] > 1e-12 * lam[p - 1]:
+        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), lam, False
+    return _in_units(_sandwich(Jn, row_s2, inverse), norms, lam)
+
+
+@_jit
+def normal_covariance(G, s2):
+    """:func:`covariance` with one variance ``s2`` for all rows, from the normal matrix
+    ``G = JᵀJ`` ``(p, p)`` of the weighted Jacobian (a solver's last one: no product over
+    the rows again)."""
+    p = G.shape[0]
+    norms, A = normalised(G)
+    lam = np.linalg.eigvalsh(A)
+    inverse = np.empty((p, p))
+    if not (p > 0 and lam[0] > 1e-12 * lam[p - 1] and _spd_inverse(A, inverse)):
+        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), lam, False
+    return _in_units(s2 * inverse, norms, lam)
+
+
+@_jit
+def _in_units(cov, norms, lam):
+    """The covariance ``cov`` of the unit-norm columns in the columns' own units, its
+    standard deviations and correlations (and ``lam``, passed through)."""
+    p = len(norms)
+    for a in range(p):
+        for b in range(p):
+            cov[a, b] /= norms[a] * norms[b]
+    std = np.empty(p)
+    for a in range(p):
+        std[a] = math.sqrt(max(cov[a, a], 0.0))
+    corr = np.zeros((p, p))
+    for a in range(p):
+        for b in range(p):
+            outer = std[a] * std[b]
+            if outer > 0.0:
+                corr[a, b] = cov[a, b] / outer
+    return cov, std, corr, lam, True

@@ -1,0 +1,507 @@
+# long: the k-fold choice of the learned residual is one concept (candidates, folds, tail and 1-SE rules)
+"""The learned residual's model choice: k-fold cross-validation of the physical variants with
+and without the residual on the training poses (:func:`cross_validate_residual`, the table
+:class:`CVTable`; the method: :mod:`robocal.identify.residual.stage`).  Units: SI (m, rad).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import operator
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.identify.residual.fit import (
+    Hyper,
+    Index,
+    Raw,
+    Solver,
+    apply,
+    evidence,
+    gram_matrices,
+    kept_columns,
+    posterior_mean,
+    raw_blocks,
+    residual_template,
+)
+
+__all__ = [
+    "DEFAULT_HARMONICS",
+    "CVCandidate",
+    "CVTable",
+    "PhysicalFit",
+    "cross_validate_residual",
+    "cross_validate_residual_refitted",
+]
+
+Array = NDArray[np.float64]
+
+#: the numbers of harmonics cross-validation chooses from (per revolution)
+DEFAULT_HARMONICS: tuple[int, ...] = (8, 24, 48)
+#: the relative tolerance of a fold's evidence maximisation (from the hyperparameters found on
+#: all poses): the CV errors of series A and of the tests' robots agree with the full
+#: tolerance's (1e-8) to 1 % and the choices are the same, at two thirds of the evaluations
+FOLD_FTOL = 1e-5
+SELECTION_SE = 3.0  # a more complex candidate must beat the simpler ones by this many standard errors
+#: once a learned residual is chosen, more harmonics must beat fewer by this many standard
+#: errors (Breiman's rule): the prior's spectrum already damps harmonics the data does not
+#: support; series A's CV (5 seeds) put 48 harmonics below 24 by 1.5-4.3 SE at 100 poses
+HARMONICS_SE = 1.0
+
+
+@dataclass(frozen=True)
+class CVCandidate:
+    """One row of the cross-validation table: mean, RMS, 95th percentile and largest
+    position error (m) over the held-out folds of the training poses, and the time of one
+    fit on all of them (s).  The tail (``cv_p95``, ``cv_max``) is NaN in tables written
+    before it was recorded."""
+
+    name: str
+    physics: str
+    harmonics: int | None
+    cv_mean: float
+    cv_rms: float
+    fit_seconds: float
+    cv_p95: float = float("nan")
+    cv_max: float = float("nan")
+
+    def to_dict(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "name": self.name,
+            "physics": self.physics,
+            "harmonics": self.harmonics,
+            "cv_mean_mm": self.cv_mean * 1e3,
+            "cv_rms_mm": self.cv_rms * 1e3,
+            "fit_seconds": self.fit_seconds,
+        }
+        if np.isfinite(self.cv_p95):  # not recorded in older tables: left out, not NaN
+            out.update(cv_p95_mm=self.cv_p95 * 1e3, cv_max_mm=self.cv_max * 1e3)
+        return out
+
+
+@dataclass(frozen=True)
+class CVTable:
+    """The candidates compared and the one chosen (the simplest within ``SELECTION_SE``
+    standard errors of the lowest CV mean error)."""
+
+    folds: int
+    candidates: tuple[CVCandidate, ...]
+    chosen: str
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "folds": self.folds,
+            "chosen": self.chosen,
+            "candidates": [c.to_dict() for c in self.candidates],
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CVTable:
+        rows = tuple(
+            CVCandidate(
+                c["name"],
+                c["physics"],
+                c["harmonics"],
+                c["cv_mean_mm"] / 1e3,
+                c["cv_rms_mm"] / 1e3,
+                c["fit_seconds"],
+                float(c.get("cv_p95_mm", float("nan"))) / 1e3,
+                float(c.get("cv_max_mm", float("nan"))) / 1e3,
+            )
+            for c in data["candidates"]
+        )
+        return cls(int(data["folds"]), rows, str(data["chosen"]))
+
+    def lines(self) -> list[str]:
+        """The table as text lines (mm, ms)."""
+        out = [
+            f"model choice by {self.folds}-fold cross-validation on the calibration poses:",
+            f"  {'candidate':<42} {'mean':>6} {'RMS':>6} {'fit':>6} {'p95':>6} {'max':>6}"
+            "   (CV error mm, fit ms)",
+        ]
+        for c in self.candidates:
+            mark = "  <- chosen" if c.name == self.chosen else ""
+            cv = f"{c.cv_mean * 1e3:6.4f} {c.cv_rms * 1e3:6.4f}"
+            tail = "" if np.isnan(c.cv_p95) else f" {c.cv_p95 * 1e3:6.4f} {c.cv_max * 1e3:6.3f}"
+            out.append(f"  {c.name:<42} {cv} {c.fit_seconds * 1e3:6.0f}{tail}{mark}")
+        return out
+
+
+@dataclass(frozen=True)
+class PhysicalFit:
+    """A physical calibration on some training poses, as the residual stage needs it."""
+
+    result: Any  # the CalibrationResult
+    residuals: Array  # (n_train, 3) measured − predicted, device frame (m)
+    P: Array  # (n_train, 3, dof, 3) perturbation Jacobian
+    J: Array  # (n_train, 3, p) derivatives wrt the estimated physical parameters
+
+    def predict(self, q: Array) -> tuple[Array, Array, Array]:
+        """Positions ``(n, 3)``, perturbation Jacobian and parameter columns at ``q``."""
+        r = self.result
+        P = r.measurement_chain.perturbation_jacobian(q, "position", r.joint_perturbations(q))
+        return r.predict(q)[:, :3, 3], P, r.position_columns(q)
+
+    def held_out(self, q: Array, position: Array, held: Index) -> tuple[Array, Array, Array]:
+        """Residuals ``(h, 3)`` (m), perturbation Jacobian and parameter columns at the poses
+        ``held`` of ``q`` ``(n, dof)`` measured at ``position`` ``(n, 3)``."""
+        p, P, J = self.predict(q[held])
+        return position[held] - p, P, J
+
+
+def cross_validate_residual(
+    q: Array,
+    position: Array,
+    physics: dict[str, Callable[[Index], PhysicalFit]],
+    joint_names: Sequence[str],
+    joint_index: Sequence[int],
+    harmonics: Sequence[int] = DEFAULT_HARMONICS,
+    folds: int = 5,
+    seed: int = 0,
+    include_none: bool = True,
+    normals: dict[str, Any] | None = None,
+) -> tuple[CVTable, dict[str, Hyper]]:
+    """k-fold CV over physical variants × (no residual, Fourier residual with H harmonics).
+
+    ``physics[name](train_indices)`` calibrates that physical variant on those training
+    poses; it is called on all poses only: each fold's physical fit is the Gauss-Newton step
+    from the fit on all poses to the fold's training poses (:func:`_linearised`, the fit's
+    linear response, which is also what the folds add for the residual), solved from the
+    normal equations of all poses minus the fold's (:func:`_fold_raws`).  The reference
+    that calibrates the physics again on every fold is
+    :func:`cross_validate_residual_refitted`.  Returns the table and the hyperparameters
+    found for each residual candidate on all poses; ``normals``, when given, receives each
+    residual candidate's normal equations on all poses by name (the final fit's).
+    """
+    problem = _Problem(q, position, tuple(joint_names), tuple(joint_index), tuple(harmonics))
+    return _cross_validate(problem, physics, folds, seed, include_none, False, normals)
+
+
+def cross_validate_residual_refitted(
+    q: Array,
+    position: Array,
+    physics: dict[str, Callable[[Index], PhysicalFit]],
+    joint_names: Sequence[str],
+    joint_index: Sequence[int],
+    harmonics: Sequence[int] = DEFAULT_HARMONICS,
+    folds: int = 5,
+    seed: int = 0,
+    include_none: bool = True,
+) -> tuple[CVTable, dict[str, Hyper]]:
+    """:func:`cross_validate_residual` with the physics calibrated again on every fold (the
+    reference: 5 folds x 2 variants of nonlinear fits with their own screening and pruning,
+    most of the model choice's time before the linearised folds)."""
+    problem = _Problem(q, position, tuple(joint_names), tuple(joint_index), tuple(harmonics))
+    return _cross_validate(problem, physics, folds, seed, include_none, True, None)
+
+
+def _cross_validate(
+    problem: _Problem,
+    physics: dict[str, Callable[[Index], PhysicalFit]],
+    folds: int,
+    seed: int,
+    include_none: bool,
+    refit_folds: bool,
+    normals: dict[str, Any] | None,
+) -> tuple[CVTable, dict[str, Hyper]]:
+    n = len(problem.q)
+    parts = np.array_split(np.random.default_rng(seed).permutation(n), folds)
+    rows: list[CVCandidate] = []
+    hypers: dict[str, Hyper] = {}
+    per_pose: dict[str, Array] = {}
+    for pname, physics_fit in physics.items():
+        full = physics_fit(np.arange(n))
+        t1 = time.perf_counter()
+        raws = None if refit_folds else _fold_raws(problem, full, parts)
+        specs, fit_time = _fit_candidates(
+            problem, pname, full, include_none, hypers, raws, time.perf_counter() - t1, normals
+        )
+        if raws is not None:
+            errors = _fold_errors_of_raws(problem, full, parts, raws, specs, hypers)
+        else:
+            fold_fit = physics_fit if refit_folds else functools.partial(_linearised, full)
+            errors = _fold_errors(problem, fold_fit, parts, specs, hypers)
+        for name, H in specs:
+            e = errors[name]
+            if not np.all(np.isfinite(e)):
+                continue
+            per_pose[name] = e
+            rms, p95, worst = float(np.sqrt(np.mean(e**2))), float(np.percentile(e, 95)), float(e.max())
+            rows.append(CVCandidate(name, pname, H, float(e.mean()), rms, fit_time[name], p95, worst))
+    if not rows:
+        raise ValueError("no candidate model could be calibrated on every cross-validation fold")
+    return CVTable(folds, tuple(rows), _one_standard_error(rows, per_pose, list(physics)).name), hypers
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """The cross-validation's data: joint values ``(n, dof)``, measured positions ``(n, 3)`` (m),
+    the revolute joints' names and indices, and the numbers of harmonics compared."""
+
+    q: Array
+    position: Array
+    joint_names: tuple[str, ...]
+    joint_index: tuple[int, ...]
+    harmonics: tuple[int, ...]
+
+
+_Spec = tuple[str, int | None]  # a candidate: its name and harmonics (None: physics only)
+
+
+def _fit_candidates(
+    problem: _Problem,
+    pname: str,
+    full: PhysicalFit,
+    include_none: bool,
+    hypers: dict[str, Hyper],
+    raws: list[Raw] | None = None,
+    raw_seconds: float = 0.0,
+    normals: dict[str, Any] | None = None,
+) -> tuple[list[_Spec], dict[str, float]]:
+    """The candidates of one physical variant and the time of their fit on all poses (s); the
+    residual's hyperparameters found on all poses go into ``hypers`` (the folds' start).
+    ``raws``: the folds' unprojected normal equations (:func:`_fold_raws`, their sum is all
+    poses'), taking ``raw_seconds``; ``normals``: as :func:`cross_validate_residual`."""
+    q, names, index, harmonics = problem.q, problem.joint_names, problem.joint_index, problem.harmonics
+    specs: list[_Spec] = [(pname, None)] if include_none else []
+    fit_time: dict[str, float] = {pname: full.result.seconds}
+    t1 = time.perf_counter()
+    if raws is None:
+        grams = gram_matrices(
+            q, full.residuals, full.P, residual_template(names, index, 1, q), harmonics, full.J
+        )
+    else:
+        total, top = functools.reduce(operator.add, raws), max(harmonics)
+        grams = {
+            H: total.projected(kept_columns(residual_template(names, index, 1), top, H))[0] for H in harmonics
+        }
+    gram_time = (time.perf_counter() - t1 + raw_seconds) / len(harmonics)  # shared: each one's share
+    for H in harmonics:
+        t1 = time.perf_counter() - gram_time
+        name = f"{pname} + angle errors H={H}"
+        hyper = evidence(residual_template(names, index, H), grams[H], None)
+        hypers[name] = hyper
+        if normals is not None:
+            normals[name] = grams[H]
+        fit_time[name] = full.result.seconds + time.perf_counter() - t1
+        specs.append((name, H))
+    return specs, fit_time
+
+
+def _fold_raws(problem: _Problem, full: PhysicalFit, parts: Sequence[Index]) -> list[Raw] | None:
+    """Each fold's unprojected normal equations at the largest number of harmonics, from the
+    rows of the fit on all poses (one pass over the poses: a fold's training poses are the sum
+    of the other folds'); None when a fold's training poses give fewer equations than
+    coefficients (the evidence's dual form needs the design: :func:`_fold_errors`)."""
+    names, index, top = problem.joint_names, problem.joint_index, max(problem.harmonics)
+    template = residual_template(names, index, top, problem.q)  # covers every pose: no row faded
+    if 3 * (len(problem.q) - max(len(held) for held in parts)) < template.size:
+        return None
+    return [
+        raw_blocks(problem.q[held], full.residuals[held], full.P[held], template, full.J[held])
+        for held in parts
+    ]
+
+
+def _fold_errors_of_raws(
+    problem: _Problem,
+    full: PhysicalFit,
+    parts: Sequence[Index],
+    raws: list[Raw],
+    specs: Sequence[_Spec],
+    hypers: dict[str, Hyper],
+) -> dict[str, Array]:
+    """:func:`_fold_errors` of the linearised folds (:func:`_linearised`) from the folds'
+    normal equations (:func:`_fold_raws`): a fold's are all poses' minus its own; the
+    physical parameters' step is solved from them too, so only the held-out poses are
+    evaluated.  All ``inf`` when a fold's physical columns are rank deficient."""
+    q, names, index, top = problem.q, problem.joint_names, problem.joint_index, max(problem.harmonics)
+    total = functools.reduce(operator.add, raws)
+    errors = {name: np.empty(len(q)) for name, _ in specs}
+    for held, raw in zip(parts, raws, strict=True):
+        train = total - raw
+        r_held, P_held, J_held = full.residuals[held], full.P[held], full.J[held]
+        try:
+            base = r_held - J_held @ Solver.of(train).step()
+        except np.linalg.LinAlgError:  # the physics is not determined by this fold: not a candidate
+            return {name: np.full(len(q), np.inf) for name, _ in specs}
+        train_q = q[np.setdiff1d(np.arange(len(q)), held)]
+        for name, H in specs:
+            e = base
+            if H is not None:
+                keep = kept_columns(residual_template(names, index, 1), top, H)
+                normal, solver = train.projected(keep)
+                template = residual_template(names, index, H, train_q)  # fades beyond the fold's angles
+                hyper = evidence(template, normal, hypers[name], ftol=FOLD_FTOL)
+                c = posterior_mean(template, normal, hyper)
+                learned = dataclasses.replace(template, coefficients=c, length_scale=hyper.length_scale)
+                learned = learned.covering(train_q)  # the fade of the final fit (fit_joint_fourier)
+                e = r_held - J_held @ solver.step(keep, c) - apply(learned, q[held], P_held)
+            errors[name][held] = np.linalg.norm(e, axis=1)
+    return errors
+
+
+def _fold_errors(
+    problem: _Problem,
+    physics_fit: Callable[[Index], PhysicalFit],
+    parts: Sequence[Index],
+    specs: Sequence[_Spec],
+    hypers: dict[str, Hyper],
+) -> dict[str, Array]:
+    """Each candidate's held-out position error per pose ``(n,)`` (m) over the folds; all
+    ``inf`` when the physical variant cannot be calibrated on a fold (not a candidate)."""
+    everything = np.arange(len(problem.q))
+    errors = {name: np.empty(len(problem.q)) for name, _ in specs}
+    for held in parts:
+        train = np.setdiff1d(everything, held)
+        try:
+            fold = physics_fit(train)
+        except (ValueError, np.linalg.LinAlgError):  # this variant fails on a fold: not a candidate
+            for name, _ in specs:
+                errors[name][:] = np.inf
+            break
+        for name, e in _held_out_errors(problem, fold, train, held, specs, hypers).items():
+            errors[name][held] = e
+    return errors
+
+
+def _held_out_errors(
+    problem: _Problem,
+    fold: PhysicalFit,
+    train: Index,
+    held: Index,
+    specs: Sequence[_Spec],
+    hypers: dict[str, Hyper],
+) -> dict[str, Array]:
+    """Each candidate's position error ``(len(held),)`` (m) at the held-out poses of one fold,
+    fitted on its ``train`` poses (the residual from the hyperparameters found on all poses)."""
+    q, names, index = problem.q, problem.joint_names, problem.joint_index
+    r_held, P_held, J_held = fold.held_out(q, problem.position, held)
+    # least squares of the physical parameters over the fold's training poses, on what the
+    # residual leaves: zero for the physics alone on a converged refit, the Gauss-Newton
+    # step to the fold for a linearised one (:func:`_linearised`)
+    J2 = fold.J.reshape(-1, fold.J.shape[-1])
+    r2 = fold.residuals.reshape(-1)
+    base = r_held - J_held @ np.linalg.lstsq(J2, r2, rcond=None)[0]
+    fold_grams = gram_matrices(
+        q[train],
+        fold.residuals,
+        fold.P,
+        residual_template(names, index, 1, q[train]),
+        problem.harmonics,
+        fold.J,
+    )
+    out = {}
+    for name, H in specs:
+        if H is None:
+            e = base
+        else:
+            template = residual_template(names, index, H, q[train])
+            # the fold's own evidence (the hyperparameters found on all poses, fixed, leaked the
+            # held-out fold into the choice: a 60-pose twin without unmodelled errors chose H=8)
+            hyper = evidence(template, fold_grams[H], hypers[name], ftol=FOLD_FTOL)
+            learned = dataclasses.replace(
+                template, coefficients=posterior_mean(template, fold_grams[H], hyper),
+                length_scale=hyper.length_scale,
+            ).covering(q[train])  # fmt: skip
+            Ac = apply(learned, q[train], fold.P)
+            dg = -np.linalg.lstsq(J2, Ac.reshape(-1), rcond=None)[0]  # linear: adds to the base's
+            moved = J_held @ dg + apply(learned, q[held], P_held)
+            e = base - moved
+        out[name] = np.linalg.norm(e, axis=1)
+    return out
+
+
+@dataclass(frozen=True)
+class _FoldOfWhole(PhysicalFit):
+    """The physical fit on all poses seen from one fold (:func:`_linearised`): its rows at the
+    fold's training poses; at the held-out poses its rows too (nothing evaluated again)."""
+
+    whole: PhysicalFit | None = None
+
+    def held_out(self, q: Array, position: Array, held: Index) -> tuple[Array, Array, Array]:
+        whole = self.whole
+        assert whole is not None
+        return whole.residuals[held], whole.P[held], whole.J[held]
+
+
+def _linearised(whole: PhysicalFit, train: Index) -> PhysicalFit:
+    """The physical fit of a fold's training poses ``train`` as the linear response of the fit
+    on all poses ``whole``: the least squares of its columns on the training rows of its
+    residuals (:func:`_held_out_errors`) is the Gauss-Newton step from ``whole`` to the
+    fold's own fit; the residual's fold fit is its linear response already."""
+    return _FoldOfWhole(whole.result, whole.residuals[train], whole.P[train], whole.J[train], whole)
+
+
+def _one_standard_error(
+    rows: list[CVCandidate], per_pose: dict[str, Array], physics: list[str]
+) -> CVCandidate:
+    """The simplest candidate (fewer harmonics, then the physical variants in the order
+    given) whose CV error is within ``SELECTION_SE`` standard errors of the lowest (Breiman's
+    one-standard-error rule, made stricter), the standard error of the mean of the per-pose
+    differences to the lowest: with few poses the CV errors are noisy, and noise over
+    several candidates is no reason for more parameters.  A virtual UR10 without
+    unmodelled errors, 60 poses, 5 twins (``tests/test_residual.py``): the plain minimum
+    picked a residual in 3 twins (held-out 1.33x the Cramér–Rao bound), one standard error
+    in 1 (1.18x), two in 0 or 1 depending on the optimiser's tolerance, three in none; on
+    the real UR10 the residual wins by 15, 30 and 54 standard errors at 100, 300 and 1,000
+    poses.
+
+    Once the rule picks a learned residual, its number of harmonics (and physical variant)
+    is the simplest within :data:`HARMONICS_SE` standard errors of the lowest residual
+    candidate: 3 SE cost accuracy there (series A, 100 poses: 24 harmonics chosen in 4 of 5
+    seeds where 48 were lower by 1.5-4.3 SE; held-out mean 0.159 -> 0.144 mm) and the prior
+    already damps unsupported harmonics.
+
+    The tail counts too (:func:`_tail_eligible`): a learned residual whose CV error at the
+    95th percentile is above the physics alone's is not a candidate, however low its mean."""
+    eligible = _tail_eligible(rows, per_pose)
+    chosen = _simplest_within(eligible, per_pose, physics, SELECTION_SE)
+    if chosen.harmonics is None:
+        return chosen
+    # a learned residual it is: how many harmonics is a question of the residual candidates
+    learned = [c for c in eligible if c.harmonics is not None]
+    return _simplest_within(learned, per_pose, physics, HARMONICS_SE)
+
+
+def _simplest_within(
+    rows: list[CVCandidate], per_pose: dict[str, Array], physics: list[str], se: float
+) -> CVCandidate:
+    """The simplest of ``rows`` (fewer harmonics, then the physical variants in the order
+    ``physics``) whose mean CV error is within ``se`` standard errors of the lowest's (the
+    standard error of the mean of the per-pose differences)."""
+    lowest = min(rows, key=lambda c: c.cv_mean)
+    for c in sorted(rows, key=lambda c: (c.harmonics or 0, physics.index(c.physics))):
+        d = per_pose[c.name] - per_pose[lowest.name]
+        if d.mean() <= se * d.std(ddof=1) / np.sqrt(len(d)):
+            return c
+    return lowest  # pragma: no cover - the lowest itself always qualifies
+
+
+def _tail_eligible(rows: list[CVCandidate], per_pose: dict[str, Array]) -> list[CVCandidate]:
+    """The candidates whose CV p95 error is not above the lowest p95 of the physics-only
+    candidates by more than its standard error (all rows when there is no physics-only
+    row).  A learned residual that lowers the mean error but raises the tail makes the
+    worst poses worse (issue 34: a real UR10's held-out poses up to 1.56 mm worse than the
+    physics alone): better the physics alone there.  The p95's standard error is the
+    binomial one of the order statistic, ``√(0.95·0.05/n)`` of the poses, read off the
+    candidate's sorted errors."""
+    plain = [c for c in rows if c.harmonics is None]
+    if not plain:
+        return rows
+    limit = min(_p95_upper(per_pose[c.name]) for c in plain)
+    eligible = [c for c in rows if c.harmonics is None or c.cv_p95 <= limit]
+    return eligible
+
+
+def _p95_upper(e: Array) -> float:
+    """The 95th percentile of ``e`` plus one standard error (the binomial order statistic's:
+    the percentile ``95 + 100 √(0.95·0.05/n)``)."""
+    q = min(100.0, 95.0 + 100.0 * float(np.sqrt(0.95 * 0.05 / len(e))))
+    return float(np.percentile(e, q))

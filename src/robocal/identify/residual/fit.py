@@ -1,0 +1,439 @@
+"""The learned residual's evidence fit: Bayesian linear regression of the physical fit's
+position residual on the joints' Fourier angle errors, hyperparameters by type-II maximum
+likelihood (:func:`fit_joint_fourier`; the method, memory and time:
+:mod:`robocal.identify.residual.stage`).  Units: SI (m, rad).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import cho_solve, cholesky, solve_triangular
+from scipy.linalg.lapack import dtrtri
+from scipy.optimize import minimize
+
+from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, one_blas_thread
+
+__all__ = ["Hyper", "fit_joint_fourier"]
+
+Array = NDArray[np.float64]
+Index = NDArray[np.integer[Any]]  # indices (of coefficients, joints, poses)
+
+CHUNK = 2048  # poses per chunk of the design matrix
+MAX_AMPLITUDE = 2e-3  # rad, the largest prior RMS of a joint's angle error
+
+
+@dataclass(frozen=True)
+class Hyper:
+    """Prior amplitude per joint (rad), spectral length scale ℓ (rad) and noise σ (m)."""
+
+    amplitudes: tuple[float, ...]
+    length_scale: float
+    noise: float
+
+
+def gram_matrix(
+    q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None = None
+) -> tuple[Array, Array, float, int]:
+    """``G = AᵀA`` ``(m, m)``, ``b = Aᵀr`` ``(m,)``, ``rᵀr`` and the number of equations,
+    accumulated over chunks of poses.  With the physical model's columns ``J`` ``(n, 3, p)``
+    they are taken in the complement of ``J``'s column space (``A ← (I − QQᵀ) A``): the
+    residual is fitted *jointly* with the physical parameters, which take back whatever
+    part of the angle errors they can represent (a flat prior on them).
+
+    The design is never formed: ``A[n, r, (j, h)] = P_j[n, r] B[n, j, h]`` (joint j's
+    perturbation column times its basis), so block ``(j, j')`` of ``G`` is
+    ``B_jᵀ diag(P_j · P_j') B_j'``: ``k(k+1)/2`` products of ``(2H, n) @ (n, 2H)`` instead of
+    one ``(m, 3n) @ (3n, m)`` (5x fewer operations for six joints, no ``(3n, m)`` temporary).
+    """
+    with one_blas_thread_limit():
+        return _gram_blocks(q, r, P, template, J)
+
+
+one_blas_thread_limit = one_blas_thread  # the stage's BLAS limit (defined with the residual model)
+
+
+@dataclass(frozen=True)
+class _Normal:
+    """What the evidence of one residual layout needs: ``G = AᵀA``, ``b = Aᵀr``, ``rᵀr``, the
+    number of equations ``N``; with few equations (``N`` well below ``m``) also the design
+    itself, ``A`` ``(N, m)`` and ``r`` ``(N,)`` in an orthonormal basis of the complement
+    of the physical columns, for the evidence's dual form (:func:`_nll_and_grad_dual`)."""
+
+    G: Array
+    b: Array
+    rr: float
+    N: int
+    A: Array | None = None
+    r: Array | None = None
+
+
+def gram_matrices(
+    q: Array, r: Array, P: Array, template: JointAngleResidual, harmonics: Sequence[int], J: Array | None
+) -> dict[int, _Normal]:
+    """:func:`_gram` for each number of harmonics in ``harmonics`` from one pass at the
+    largest: the basis of H harmonics is the first ``2H`` columns of each joint's basis of
+    more (the fade depends on the angles only), so its ``G`` and ``b`` are a sub-block.
+    With fewer equations than coefficients the design is kept (:class:`_Normal`)."""
+    top = max(harmonics)
+    m = len(template.joints) * 2 * top
+    big = dataclasses.replace(template, harmonics=top, coefficients=np.zeros(m), covariance=np.zeros((m, m)))
+    if r.size < m:
+        A, y = _complement_design(q, r, P, big, J)
+        G, b, rr, N = A.T @ A, A.T @ y, float(y @ y), len(y)
+    else:
+        (G, b, rr, N), A, y = gram_matrix(q, r, P, big, J), None, None
+    out = {}
+    for H in harmonics:
+        keep = kept_columns(template, top, H)
+        out[H] = _Normal(G[np.ix_(keep, keep)], b[keep], rr, N, None if A is None else A[:, keep], y)
+    return out
+
+
+def _complement_design(
+    q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None
+) -> tuple[Array, Array]:
+    """The design ``(N, m)`` and the residuals ``(N,)`` in an orthonormal basis ``U`` of the
+    complement of ``J``'s columns (``N = 3n − p``; all equations without ``J``): ``UᵀA``
+    gives :func:`_gram`'s ``G``, ``b`` and ``rᵀr`` exactly.  For few poses only (it is
+    ``(3n, m)``)."""
+    A = template.design(q, P).reshape(-1, template.size)
+    y = r.reshape(-1)
+    if J is None:
+        return A, y
+    J2 = J.reshape(-1, J.shape[-1])
+    U = np.linalg.qr(J2, mode="complete")[0][:, J2.shape[1] :]
+    return U.T @ A, U.T @ y
+
+
+def _gram_blocks(
+    q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None
+) -> tuple[Array, Array, float, int]:
+    Q = None if J is None else np.linalg.qr(J.reshape(-1, J.shape[-1]))[0]
+    raw = raw_blocks(q, r, P, template, None if Q is None else Q.reshape(len(q), 3, -1))
+    G, b, rr, N = raw.AA, raw.Ar, raw.rr, raw.N
+    if Q is not None:  # the complement of J's columns: QᵀQ = I
+        G, b = G - raw.JA.T @ raw.JA, b - raw.JA.T @ raw.Jr
+        rr, N = rr - float(raw.Jr @ raw.Jr), N - Q.shape[1]
+    return G, b, rr, N
+
+
+@dataclass(frozen=True)
+class Raw:
+    """The residual's normal equations before the physical columns ``J`` are projected out:
+    ``AᵀA`` ``(m, m)``, ``JᵀA`` ``(p, m)``, ``Aᵀr``, ``JᵀJ``, ``Jᵀr``, ``rᵀr`` and the number of
+    equations.  Sums over poses: a fold's training poses are all poses minus the fold's."""
+
+    AA: Array
+    JA: Array
+    Ar: Array
+    JJ: Array
+    Jr: Array
+    rr: float
+    N: int
+
+    def __sub__(self, other: Raw) -> Raw:
+        return Raw(*(getattr(self, f.name) - getattr(other, f.name) for f in dataclasses.fields(self)))
+
+    def __add__(self, other: Raw) -> Raw:
+        return Raw(*(getattr(self, f.name) + getattr(other, f.name) for f in dataclasses.fields(self)))
+
+    def projected(self, keep: Index) -> tuple[_Normal, Solver]:
+        """The normal equations of the coefficients ``keep`` in the complement of ``J``'s
+        columns (the physical parameters' least squares eliminated: ``G = AᵀA − AᵀJ (JᵀJ)⁻¹
+        JᵀA``), and the solver of the physical parameters' step."""
+        solver = Solver.of(self)
+        W = solver.whiten(self.JA[:, keep])  # (p, m)
+        w = solver.whiten(self.Jr)
+        G = self.AA[np.ix_(keep, keep)] - W.T @ W
+        normal = _Normal(0.5 * (G + G.T), self.Ar[keep] - W.T @ w, self.rr - float(w @ w), self.N - len(w))
+        return normal, solver
+
+
+@dataclass(frozen=True)
+class Solver:
+    """``JᵀJ``'s Cholesky factor with its columns scaled to unit diagonal (their units differ
+    widely), and the pieces of :class:`_Raw` it solves with."""
+
+    L: Array
+    scale: Array
+    raw: Raw
+
+    @classmethod
+    def of(cls, raw: Raw) -> Solver:
+        scale = np.sqrt(np.maximum(np.diag(raw.JJ), 1e-300))
+        return cls(cholesky(raw.JJ / np.outer(scale, scale), lower=True, check_finite=False), scale, raw)
+
+    def whiten(self, X: Array) -> Array:
+        """``L⁻¹ S⁻¹ X``: ``(JᵀJ)⁻¹ = S⁻¹ L⁻ᵀ L⁻¹ S⁻¹``."""
+        scaled = X / (self.scale[:, None] if X.ndim == 2 else self.scale)
+        return solve_triangular(self.L, scaled, lower=True, check_finite=False)
+
+    def step(self, keep: Index | None = None, c: Array | None = None) -> Array:
+        """``(p,)`` the physical parameters' least squares ``(JᵀJ)⁻¹ Jᵀ(r − A c)`` (``c`` the
+        coefficients ``keep``; None: ``(JᵀJ)⁻¹ Jᵀ r``)."""
+        rhs = self.raw.Jr if c is None else self.raw.Jr - self.raw.JA[:, keep] @ c
+        return cho_solve((self.L, True), rhs / self.scale, check_finite=False) / self.scale
+
+
+def raw_blocks(q: Array, r: Array, P: Array, template: JointAngleResidual, J: Array | None) -> Raw:
+    """:class:`_Raw` over chunks of poses; ``J`` ``(n, 3, p)`` (None: no physical columns)."""
+    k, h2 = len(template.joints), 2 * template.harmonics
+    m, p = template.size, 0 if J is None else J.shape[-1]
+    AA, Ar, rr = np.zeros((m, m)), np.zeros(m), 0.0
+    JA, JJ, Jr = np.zeros((p, m)), np.zeros((p, p)), np.zeros(p)
+    index = list(template.joint_index)
+    for s in range(0, len(q), CHUNK):
+        B = template.basis(q[s : s + CHUNK])  # (c, k, 2H)
+        cols = np.ascontiguousarray(P[s : s + CHUNK, :, index, 2])  # (c, 3, k)
+        y = r[s : s + CHUNK]  # (c, 3)
+        W = np.einsum("crj,crl->cjl", cols, cols)  # (c, k, k): P_j · P_l per pose
+        for j in range(k):  # block row j, blocks j' >= j (AᵀA is symmetric)
+            right = (W[:, j, j:, None] * B[:, j:, :]).reshape(len(B), -1)  # (c, (k - j) 2H)
+            AA[j * h2 : (j + 1) * h2, j * h2 :] += B[:, j, :].T @ right
+        Ar += np.einsum("cj,cjh->jh", np.einsum("crj,cr->cj", cols, y), B).reshape(-1)
+        rr += float(np.sum(y * y))
+        if J is not None:
+            Js = J[s : s + CHUNK]  # (c, 3, p)
+            V = np.einsum("cri,crj->jic", Js, cols)  # (k, p, c)
+            for j in range(k):
+                JA[:, j * h2 : (j + 1) * h2] += V[j] @ B[:, j, :]
+            J2 = Js.reshape(-1, p)
+            JJ += J2.T @ J2
+            Jr += J2.T @ y.reshape(-1)
+    return Raw(np.triu(AA) + np.triu(AA, 1).T, JA, Ar, JJ, Jr, rr, r.size)
+
+
+def kept_columns(template: JointAngleResidual, top: int, H: int) -> Index:
+    """The coefficients of H harmonics among those of ``top`` (joint by joint)."""
+    return (np.arange(len(template.joints))[:, None] * 2 * top + np.arange(2 * H)).reshape(-1)
+
+
+def _spectrum(log_ell: float, freq: Array) -> tuple[Array, Array]:
+    """log of the normalised spectral weights per coefficient (they sum to 1 over one
+    joint's coefficients, so that ``a_j`` is the RMS of the joint's angle error) and their
+    derivative wrt ``log ℓ``."""
+    u = -0.5 * (freq * np.exp(log_ell)) ** 2
+    du = -((freq * np.exp(log_ell)) ** 2)
+    _, first = np.unique(freq, return_index=True)
+    w = np.exp(u[first] - u[first].max())
+    log_z = np.log(2.0 * w.sum()) + u[first].max()
+    dlog_z = float(np.sum(w * du[first]) / w.sum())
+    return u - log_z, du - dlog_z
+
+
+def apply(learned: JointAngleResidual, q: Array, P: Array) -> Array:
+    """``A(q) c`` ``(n, r)``: the residual's position (or pose) correction, the angle errors
+    times their perturbation columns (the design itself is not formed)."""
+    cols = P[:, :, list(learned.joint_index), 2]  # (n, r, k)
+    return np.einsum("nrk,nk->nr", cols, learned.angle_errors(q))
+
+
+def prior(theta: Array, groups: Index, freq: Array) -> Array:
+    """log prior variance per coefficient from ``theta = [log a_j..., log ℓ, log σ]``."""
+    k = len(theta) - 2
+    return 2.0 * theta[:k][groups] + _spectrum(theta[k], freq)[0]
+
+
+def _posterior(G: Array, b: Array, log_s: Array, noise2: float) -> tuple[Array, Array, Array]:
+    """Whitened Cholesky factor ``L``, mean ``μ`` and ``v = μ / s^½`` of the coefficients."""
+    d = np.exp(0.5 * log_s)
+    K = (d[:, None] * G * d[None, :]) / noise2
+    K[np.diag_indices_from(K)] += 1.0
+    L = cholesky(K, lower=True, check_finite=False)
+    v = cho_solve((L, True), d * b / noise2, check_finite=False)
+    return L, d * v, v
+
+
+def nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: Index, freq: Array):
+    k = len(theta) - 2
+    log_s = prior(theta, groups, freq)
+    noise2 = float(np.exp(2.0 * theta[-1]))
+    L, mu, v = _posterior(G, b, log_s, noise2)
+    z = solve_triangular(L, np.exp(0.5 * log_s) * b / noise2, lower=True, check_finite=False)
+    nll = 0.5 * (rr / noise2 - z @ z + 2.0 * np.log(np.diag(L)).sum() + N * np.log(noise2))
+    Linv = _inverse_lower(L)
+    kinv_diag = np.einsum("ij,ij->j", Linv, Linv)  # diag of K⁻¹ = Σ_kk / s_k
+    g_s = 0.5 * (1.0 - kinv_diag - v**2)  # ∂nll/∂log s_k
+    gamma = float(np.sum(1.0 - kinv_diag))
+    misfit = rr - 2.0 * mu @ b + mu @ G @ mu
+    grad = np.empty_like(theta)
+    grad[:k] = 2.0 * np.bincount(groups, weights=g_s, minlength=k)
+    grad[k] = float(np.sum(g_s * _spectrum(theta[k], freq)[1]))
+    grad[-1] = 2.0 * 0.5 * (N - gamma - misfit / noise2)  # ∂/∂log σ = 2 ∂/∂log σ²
+    return float(nll), grad
+
+
+def nll_and_grad_dual(theta: Array, A: Array, r: Array, rr: float, N: int, groups: Index, freq: Array):
+    """:func:`_nll_and_grad` from the design ``A`` ``(N, m)`` and residuals ``r`` ``(N,)``
+    instead of ``G`` and ``b``, through the ``(N, N)`` matrix ``M = I + Ã Ãᵀ/σ²``
+    (``Ã = A S^½``): ``det K = det M``, ``K⁻¹ = I − Ãᵀ M⁻¹ Ã/σ²`` (Woodbury).  The same
+    function; cheaper when ``N`` is well below ``m`` (60 poses and 48 harmonics: 155 x 155
+    instead of 576 x 576)."""
+    k = len(theta) - 2
+    log_s = prior(theta, groups, freq)
+    noise2 = float(np.exp(2.0 * theta[-1]))
+    At = A * np.exp(0.5 * log_s)
+    M = (At @ At.T) / noise2
+    M[np.diag_indices_from(M)] += 1.0
+    L = cholesky(M, lower=True, check_finite=False)
+    W = solve_triangular(L, At, lower=True, check_finite=False)
+    kinv_diag = 1.0 - np.einsum("ij,ij->j", W, W) / noise2  # diag of K⁻¹ = Σ_kk / s_k
+    v = At.T @ cho_solve((L, True), r, check_finite=False) / noise2  # μ / s^½
+    Atr = At.T @ r
+    nll = 0.5 * (rr / noise2 - Atr @ v / noise2 + 2.0 * np.log(np.diag(L)).sum() + N * np.log(noise2))
+    g_s = 0.5 * (1.0 - kinv_diag - v**2)
+    gamma = float(np.sum(1.0 - kinv_diag))
+    e = r - At @ v
+    misfit = float(e @ e)
+    grad = np.empty_like(theta)
+    grad[:k] = 2.0 * np.bincount(groups, weights=g_s, minlength=k)
+    grad[k] = float(np.sum(g_s * _spectrum(theta[k], freq)[1]))
+    grad[-1] = 2.0 * 0.5 * (N - gamma - misfit / noise2)
+    return float(nll), grad
+
+
+def _dual_is_cheaper(N: int, m: int) -> bool:
+    """The dual form's operations (``2N²m + N³/3``) below the primal's (``2m³/3``)."""
+    return 2.0 * N * N * m + N**3 / 3.0 < 2.0 * m**3 / 3.0
+
+
+def _inverse_lower(L: Array) -> Array:
+    """``L⁻¹`` of a lower-triangular Cholesky factor (LAPACK's triangular inverse: a third of
+    the work of solving against the identity)."""
+    Linv, info = dtrtri(L, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"triangular inverse failed (info {info})")
+    return Linv
+
+
+def layout(template: JointAngleResidual) -> tuple[Index, Array]:
+    H = template.harmonics
+    groups = np.repeat(np.arange(len(template.joints)), 2 * H)
+    freq = np.tile(np.repeat(np.arange(1, H + 1), 2), len(template.joints)).astype(float)
+    return groups, freq
+
+
+def residual_template(
+    joint_names: Sequence[str], joint_index: Sequence[int], harmonics: int, q: Array | None = None
+) -> JointAngleResidual:
+    """An empty residual of this layout; with ``q`` it covers the angles of ``q``."""
+    m = len(joint_names) * 2 * harmonics
+    ranges = None if q is None else tuple(covered_intervals(q[:, j], 2 * FADE) for j in joint_index)
+    return JointAngleResidual(
+        tuple(joint_names), tuple(joint_index), harmonics, np.zeros(m), np.zeros((m, m)), 0.0,
+        (0.0,) * len(joint_names), 0.0, ranges,
+    )  # fmt: skip
+
+
+def fit_joint_fourier(
+    q: Array,
+    residuals: Array,
+    P: Array,
+    joint_names: Sequence[str],
+    joint_index: Sequence[int],
+    harmonics: int,
+    hyper: Hyper | None = None,
+    J: Array | None = None,
+    start: Hyper | None = None,
+    gram: _Normal | None = None,
+) -> tuple[JointAngleResidual, Hyper]:
+    """Fit per-joint Fourier angle errors to position residuals.
+
+    Args:
+        q: ``(n, dof)`` joint values (rad).
+        residuals: ``(n, 3)`` measured minus predicted position (m) of the physical model.
+        P: ``(n, 3, dof, 3)`` perturbation Jacobian of the physical model at ``q``, in the
+            same frame as ``residuals``.
+        joint_names, joint_index: the joints whose angle errors are modelled.
+        harmonics: H.
+        hyper: fixed hyperparameters (skip the evidence maximisation), e.g. in CV folds.
+        J: ``(n, 3, p)`` the physical model's columns at ``q`` (its derivatives wrt its
+            estimated parameters): fit jointly with them (see :func:`_gram`).
+        start: start values of the evidence maximisation (e.g. the hyperparameters found
+            on all poses, for a CV fold); default a neutral start.
+        gram: the normal equations of these arguments when already computed (:func:`_grams`).
+
+    Returns the residual model and its hyperparameters.
+    """
+    template = residual_template(joint_names, joint_index, harmonics, q)
+    if gram is None:
+        gram = gram_matrices(q, residuals, P, template, [harmonics], J)[harmonics]
+    with one_blas_thread_limit():
+        model, hyper = _fit(template, gram, hyper, start)
+    model = model.covering(q)  # fades within its prior's correlation length of the poses' angles
+    # the size of what fades (the harmonics above the global ones) on the calibration poses
+    fading = model.coefficients.reshape(len(model.joints), harmonics, 2).copy()
+    fading[:, : model.global_harmonics] = 0.0
+    rms = np.sqrt(
+        np.mean(dataclasses.replace(model, coefficients=fading.reshape(-1)).angle_errors(q) ** 2, axis=0)
+    )
+    return dataclasses.replace(model, angle_rms=tuple(float(v) for v in rms)), hyper
+
+
+def _fit(
+    template: JointAngleResidual, normal: _Normal, hyper: Hyper | None, start: Hyper | None
+) -> tuple[JointAngleResidual, Hyper]:
+    """:func:`fit_joint_fourier` from its normal equations (without ``angle_rms``)."""
+    if hyper is None:
+        hyper = evidence(template, normal, start)
+    groups, freq = layout(template)
+    log_s = prior(_theta(hyper), groups, freq)
+    L, mu, _ = _posterior(normal.G, normal.b, log_s, hyper.noise**2)
+    d = np.exp(0.5 * log_s)
+    Linv = _inverse_lower(L)
+    cov = (d[:, None] * (Linv.T @ Linv)) * d[None, :]
+    model = JointAngleResidual(
+        template.joints, template.joint_index, template.harmonics, mu, 0.5 * (cov + cov.T), hyper.noise,
+        hyper.amplitudes, hyper.length_scale, template.coverage,
+    )  # fmt: skip
+    return model, hyper
+
+
+def _theta(hyper: Hyper) -> Array:
+    """``[log a_j..., log ℓ, log σ]`` of ``hyper``."""
+    return np.r_[np.log(hyper.amplitudes), np.log(hyper.length_scale), np.log(hyper.noise)]
+
+
+def evidence(
+    template: JointAngleResidual, normal: _Normal, start: Hyper | None, maxiter: int = 200, ftol: float = 1e-8
+) -> Hyper:
+    """The hyperparameters that maximise the evidence (L-BFGS-B from ``start``, else a
+    neutral start), in its dual form when that is cheaper."""
+    G, b, rr, N = normal.G, normal.b, normal.rr, normal.N
+    groups, freq = layout(template)
+    k = len(template.joints)
+    theta0 = np.r_[np.full(k, np.log(2e-4)), np.log(0.02), np.log(max(float(np.sqrt(rr / N)), 1e-7))]
+    if start is not None:
+        theta0 = _theta(start)
+    # a joint's angle error is physically small: transmission errors of robot gears are
+    # arcminutes (0.3 mrad); 2 mrad bounds the prior well above that and keeps the evidence
+    # out of the degenerate optimum where huge coefficients cancel (seen at H = 12)
+    bounds = [(np.log(1e-9), np.log(MAX_AMPLITUDE))] * k + [
+        (np.log(1e-4), np.log(2.0)),
+        (np.log(1e-7), np.log(1e-2)),
+    ]
+    fun: Callable[..., tuple[float, Array]] = nll_and_grad
+    data: tuple[Any, ...] = (G, b)
+    if normal.A is not None and _dual_is_cheaper(*normal.A.shape):
+        fun, data = nll_and_grad_dual, (normal.A, normal.r)
+    opt = minimize(
+        fun, theta0, args=(*data, rr, N, groups, freq), jac=True,
+        method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter, "ftol": ftol},
+    )  # fmt: skip
+    theta = opt.x
+    return Hyper(
+        tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1]))
+    )
+
+
+def posterior_mean(template: JointAngleResidual, normal: _Normal, hyper: Hyper) -> Array:
+    """``(m,)`` the coefficients' posterior mean (rad) for ``hyper`` (no covariance: what a
+    cross-validation fold needs)."""
+    groups, freq = layout(template)
+    return _posterior(normal.G, normal.b, prior(_theta(hyper), groups, freq), hyper.noise**2)[1]

@@ -1,0 +1,268 @@
+"""Constraint measurement files: fixed points, planes and distances (no tracker needed).
+
+One CSV, one header line, one row per recorded configuration; ``#`` lines are comments:
+
+* joint columns ``q1 … qN`` (rad; ``--angle-unit deg`` for degrees), always;
+* ``point``: the fixed point (0, 1, …) the tool point sat in (ball in socket ``k``);
+* ``plane``: the plane (0, 1, …) the tool point touched;
+* ``pair`` and ``distance_mm``: the two rows with the same ``pair`` id had their tool
+  points ``distance_mm`` apart (ball-bar, a table of known points); both rows state it;
+* ``x, y, z`` (m, optional): a tracker's position of the tool point, blank where none
+  (mixed data: tracker points and socket poses calibrate together).
+
+A blank ``point``/``plane`` cell means the row has no such constraint.  Known distances
+between fixed points are not rows: ``--distance 0,1=50mm`` (points 0 and 1 are 50 mm apart).
+The file's kind (``point``, ``plane``, ``distance``) is told from its columns
+(:func:`constraint_kind`).  Example (``robocal simulate --kind point`` writes one)::
+
+    q1,q2,q3,q4,q5,q6,point
+    0.1,-1.2,1.5,0.3,1.1,0.0,0
+    0.4,-1.0,1.2,0.9,0.7,1.3,0
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from robocal.csvfile import short
+from robocal.measure.constraints.data_set import KINDS, ConstraintSet
+from robocal.units import unit_factor
+
+__all__ = [
+    "KIND_COLUMNS",
+    "ConstraintFileError",
+    "constraint_kind",
+    "parse_distance",
+    "read_constraints",
+    "write_constraints",
+]
+
+KIND_COLUMNS = {"point": ("point",), "plane": ("plane",), "distance": ("pair", "distance_mm")}
+MAX_BYTES = 50_000_000  # a constraint file holds thousands of rows, not gigabytes
+MAX_INDEX = 1000  # points, planes: a handful; an index beyond this is a wrong column
+
+
+class ConstraintFileError(ValueError):
+    """A constraint file that cannot be read; the message names the file, row and column."""
+
+
+def _header(path: Path) -> list[str]:
+    with open(path, encoding="utf-8-sig", newline="") as fh:
+        for line in fh:
+            if line.strip() and not line.lstrip().startswith("#"):
+                return [c.strip() for c in next(csv.reader([line]))]
+    return []
+
+
+def constraint_kind(path: str | Path) -> str | None:
+    """``"point"``, ``"plane"`` or ``"distance"`` when the file has that kind's columns
+    (the first of them in that order; a file may mix them), else None (a tracker file)."""
+    try:
+        columns = set(_header(Path(path)))
+    except (OSError, UnicodeDecodeError):
+        return None
+    for kind in KINDS:
+        if set(KIND_COLUMNS[kind]) <= columns:
+            return kind
+    return None
+
+
+def parse_distance(text: str) -> tuple[int, int, float]:
+    """``"0,1=50mm"`` -> (0, 1, 0.05): points 0 and 1 are 50 mm apart (unit required)."""
+    from robocal.measure.true_model import parse_quantity
+
+    pair, sep, length = text.partition("=")
+    parts = pair.split(",")
+    if not sep or len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise ValueError(f"--distance {text!r}: expected A,B=LENGTH with point numbers, e.g. 0,1=50mm")
+    try:
+        float(length)
+    except ValueError:
+        value = parse_quantity(length.strip(), "length")
+    else:  # a bare number: metres or millimetres? say it
+        raise ValueError(f"--distance {text!r}: give the length with its unit, e.g. {pair}=50mm")
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"--distance {text!r}: the length must be > 0")
+    a, b = int(parts[0]), int(parts[1])
+    if a == b:
+        raise ValueError(f"--distance {text!r}: a distance joins two different points")
+    return a, b, value
+
+
+def _cell(value: str, where: str, integer: bool = False) -> float:
+    text = value.strip()
+    try:
+        number = float(text)
+    except ValueError:
+        raise ConstraintFileError(f"{where}: {short(text)} is not a number") from None
+    if not math.isfinite(number):
+        raise ConstraintFileError(f"{where}: {short(text)} is not a finite number")
+    if integer and (number != int(number) or not 0 <= number <= MAX_INDEX):
+        raise ConstraintFileError(f"{where}: {short(text)} is not an index 0..{MAX_INDEX}")
+    return number
+
+
+def _rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    if not path.is_file():
+        raise ConstraintFileError(f"{path}: no such file")
+    if path.stat().st_size > MAX_BYTES:
+        raise ConstraintFileError(f"{path}: larger than {MAX_BYTES // 1_000_000} MB")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ConstraintFileError(f"{path}: not UTF-8 text") from None
+    lines = [
+        (k + 1, line)
+        for k, line in enumerate(text.splitlines())
+        if line.strip() and not line.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise ConstraintFileError(f"{path}: no header line")
+    header = [c.strip() for c in next(csv.reader([lines[0][1]]))]
+    rows = [(number, next(csv.reader([line]))) for number, line in lines[1:]]
+    return header, rows
+
+
+def _index_column(cells: list[str], where: str) -> int:
+    return -1 if not cells or not cells[0].strip() else int(_cell(cells[0], where, integer=True))
+
+
+def read_constraints(
+    path: str | Path,
+    dof: int,
+    *,
+    angle_unit: str = "rad",
+    distances: Sequence[tuple[int, int, float]] = (),
+    sigma: float = 1e-5,
+) -> ConstraintSet:
+    """Read a constraint file (module docstring) for a robot with ``dof`` joints.
+
+    Raises:
+        ConstraintFileError: a missing column, a bad cell (named by row and column), a pair
+            that is not two rows with one length, a known distance naming a missing point.
+    """
+    path = Path(path)
+    header, rows = _rows(path)
+    joints = [f"q{k + 1}" for k in range(dof)]
+    missing = [c for c in joints if c not in header]
+    if missing:
+        raise ConstraintFileError(
+            f"{path}: no joint column(s) {', '.join(missing)} (header: {short(','.join(header), 80)})"
+        )
+    if f"q{dof + 1}" in header:  # another robot's file: its last joints would be dropped unseen
+        raise ConstraintFileError(f"{path}: a joint column q{dof + 1}, but the robot has {dof} joints")
+    if not any(set(cols) <= set(header) for cols in KIND_COLUMNS.values()):
+        raise ConstraintFileError(f"{path}: no constraint column (point, plane, or pair and distance_mm)")
+    col = {name: header.index(name) for name in header}
+    scale = unit_factor(angle_unit, "angle", "angle_unit")
+    q, point, plane, xyz, pair, length = [], [], [], [], [], []
+    for number, cells in rows:
+        if len(cells) != len(header):
+            raise ConstraintFileError(
+                f"{path}, row {number}: {len(cells)} cells; the header has {len(header)}"
+            )
+
+        def get(name: str, number=number, cells=cells) -> list[str]:
+            return [cells[col[name]]] if name in col else []
+
+        q.append([_cell(cells[col[j]], f"{path}, row {number}, column {j}") * scale for j in joints])
+        point.append(_index_column(get("point"), f"{path}, row {number}, column point"))
+        plane.append(_index_column(get("plane"), f"{path}, row {number}, column plane"))
+        pair.append(_index_column(get("pair"), f"{path}, row {number}, column pair"))
+        length.append(
+            _cell(get("distance_mm")[0], f"{path}, row {number}, column distance_mm") * 1e-3
+            if pair[-1] >= 0
+            else math.nan
+        )
+        xyz.append(_tracker(get, number, path))
+    return _assemble(path, np.array(q).reshape(-1, dof), point, plane, xyz, pair, length, distances, sigma)
+
+
+def _tracker(get, number: int, path: Path) -> list[float]:
+    cells = [c for name in "xyz" for c in get(name)]
+    if len(cells) < 3 or not any(c.strip() for c in cells):
+        return [math.nan] * 3
+    return [_cell(c, f"{path}, row {number}, column {name}") for c, name in zip(cells, "xyz", strict=True)]
+
+
+def _pairs(path: Path, pair: list[int], length: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    """``(m, 2)`` row indices and ``(m,)`` lengths of the distance pairs."""
+    groups: dict[int, list[int]] = {}
+    for row, k in enumerate(pair):
+        if k >= 0:
+            groups.setdefault(k, []).append(row)
+    pairs, lengths = [], []
+    for k, rows in sorted(groups.items()):
+        if len(rows) != 2:
+            raise ConstraintFileError(f"{path}: pair {k} has {len(rows)} rows; a distance joins two")
+        if not math.isclose(length[rows[0]], length[rows[1]], rel_tol=1e-9) or not length[rows[0]] > 0:
+            raise ConstraintFileError(
+                f"{path}: pair {k}: its two rows state different or non-positive distance_mm"
+            )
+        pairs.append(rows)
+        lengths.append(length[rows[0]])
+    return np.array(pairs, dtype=np.intp).reshape(-1, 2), np.array(lengths)
+
+
+def _assemble(path, q, point, plane, xyz, pair, length, distances, sigma) -> ConstraintSet:
+    point_arr = np.array(point, dtype=np.intp)
+    n_points = int(point_arr.max()) + 1 if len(point_arr) else 0
+    for k in range(n_points):
+        if not np.any(point_arr == k):
+            raise ConstraintFileError(
+                f"{path}: points are numbered 0..{n_points - 1} but point {k} has no row"
+            )
+    for a, b, _ in distances:
+        if max(a, b) >= n_points:
+            raise ConstraintFileError(f"--distance {a},{b}: {path} has points 0..{n_points - 1} only")
+    pairs, lengths = _pairs(path, pair, length)
+    position = np.array(xyz, dtype=float).reshape(-1, 3)
+    try:
+        return ConstraintSet(
+            q, point_arr, np.array(plane, dtype=np.intp),
+            position=position if np.isfinite(position).any() else None,
+            pairs=pairs, pair_length=lengths,
+            point_pairs=np.array([(a, b) for a, b, _ in distances], dtype=np.intp).reshape(-1, 2),
+            point_length=np.array([d for *_, d in distances], dtype=float),
+            sigma=sigma,
+        )  # fmt: skip
+    except ValueError as err:
+        raise ConstraintFileError(f"{path}: {err}") from None
+
+
+def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> str:
+    """The CSV text of ``data`` (module docstring); written to ``path`` when given (atomically)."""
+    dof = data.q.shape[1]
+    header = [f"q{k + 1}" for k in range(dof)]
+    kinds = data.kinds
+    header += [c for kind in KINDS if kind in kinds for c in KIND_COLUMNS[kind]]
+    if "tracker" in kinds:
+        header += ["x", "y", "z"]
+    pair_of = {int(i): (k, data.pair_length[k]) for k, rows in enumerate(data.pairs) for i in rows}
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(header)
+    for i in range(data.n):
+        row = [repr(float(v)) for v in data.q[i]]
+        if "point" in kinds:
+            row.append(str(data.point[i]) if data.point[i] >= 0 else "")
+        if "plane" in kinds:
+            row.append(str(data.plane[i]) if data.plane[i] >= 0 else "")
+        if "distance" in kinds:
+            pair = pair_of.get(i)
+            row += ["", ""] if pair is None else [str(pair[0]), repr(float(pair[1]) * 1e3)]
+        if "tracker" in kinds:
+            row += ["", "", ""] if not data.tracked[i] else [repr(float(v)) for v in data.positions[i]]
+        writer.writerow(row)
+    text = out.getvalue()
+    if path is not None:
+        from robocal.outdir import atomic_write_text
+
+        atomic_write_text(path, text)
+    return text

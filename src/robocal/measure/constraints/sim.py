@@ -1,0 +1,118 @@
+"""Simulated constraint measurements with known truth (:mod:`robocal.identify.constraints.model`).
+
+The *true* robot puts its tool point where the constraint says, up to the tool point's
+noise σ (isotropic, m): a ball seated in a socket ``c_k + e``, a probe touching a plane
+``p + (n·e) n``, two tool points ``L + √2 σ e`` apart.  The recorded joint values are
+those the true robot needs for it (IK from random starting configurations, so the
+orientations vary as when the arm is moved by hand); a calibration sees only them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.measure.constraints.data_set import KINDS, ConstraintSet
+from robocal.measure.ik import solve_ik
+from robocal.measure.ik_starts import random_configurations
+from robocal.model.chain import Model
+
+__all__ = ["SceneTruth", "simulate_constraints"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SceneTruth:
+    """The scene a simulation used (m): fixed points ``(K, 3)``, planes ``(P, 4)`` (unit
+    normal, offset), the distance pairs' length."""
+
+    points: Array
+    planes: Array
+    length: float
+
+
+def _reach(true: Model, targets: Array, rng: np.random.Generator) -> tuple[Array, NDArray[np.bool_]]:
+    q0 = random_configurations(true, len(targets), rng=rng)
+    res = solve_ik(true, targets, kind="position", q0=q0, restarts=3, seed=rng, tol=1e-9)
+    return res.q, res.reachable
+
+
+def _workspace(true: Model, rng: np.random.Generator, count: int) -> Array:
+    """``(count, 3)`` tool points of random configurations (reachable by construction)."""
+    return true.fk(random_configurations(true, count, rng=rng))[:, :3, 3]
+
+
+def _points(true, n, n_points, sigma, rng) -> tuple[ConstraintSet, SceneTruth]:
+    centres = _workspace(true, rng, n_points)
+    label = np.arange(n) % n_points
+    q, ok = _reach(true, centres[label] + sigma * rng.standard_normal((n, 3)), rng)
+    data = ConstraintSet(q[ok], label[ok], -np.ones(ok.sum(), dtype=np.intp), sigma=sigma)
+    return data, SceneTruth(centres, np.zeros((0, 4)), 0.0)
+
+
+def _planes(true, n, n_planes, sigma, rng) -> tuple[ConstraintSet, SceneTruth]:
+    normals = rng.standard_normal((n_planes, 3))
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    through = _workspace(true, rng, n_planes)
+    planes = np.column_stack([normals, np.einsum("ij,ij->i", normals, through)])
+    label = np.arange(n) % n_planes
+    p = _workspace(true, rng, n)  # projected onto their plane: reachable near the workspace
+    n_k = planes[label, :3]
+    dist = np.einsum("ij,ij->i", p, n_k) - planes[label, 3]
+    targets = p - dist[:, None] * n_k + sigma * rng.standard_normal((n, 3))
+    q, ok = _reach(true, targets, rng)
+    data = ConstraintSet(q[ok], -np.ones(ok.sum(), dtype=np.intp), label[ok], sigma=sigma)
+    return data, SceneTruth(np.zeros((0, 3)), planes, 0.0)
+
+
+def _distances(true, n, length, sigma, rng) -> tuple[ConstraintSet, SceneTruth]:
+    m = n // 2
+    qa = random_configurations(true, m, rng=rng)
+    pa = true.fk(qa)[:, :3, 3]
+    u = rng.standard_normal((m, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    # each tool point carries noise σ: their distance along u, √2 σ
+    targets = pa + (length + np.sqrt(2) * sigma * rng.standard_normal(m))[:, None] * u
+    qb, ok = _reach(true, targets, rng)
+    q = np.concatenate([qa[ok], qb[ok]])
+    k = int(ok.sum())
+    pairs = np.column_stack([np.arange(k), k + np.arange(k)])
+    none = -np.ones(2 * k, dtype=np.intp)
+    data = ConstraintSet(q, none, none, pairs=pairs, pair_length=np.full(k, length), sigma=sigma)
+    return data, SceneTruth(np.zeros((0, 3)), np.zeros((0, 4)), length)
+
+
+def simulate_constraints(
+    true: Model,
+    kind: str,
+    n: int,
+    *,
+    sigma: float = 1e-5,
+    count: int = 2,
+    length: float = 0.3,
+    seed: int | np.random.Generator | None = 0,
+) -> tuple[ConstraintSet, SceneTruth]:
+    """Constraint data of ``kind`` recorded on the ``true`` robot (module docstring).
+
+    Args:
+        true: the real robot (its end is the tool point).
+        kind: ``"point"``, ``"plane"`` or ``"distance"``.
+        n: poses (distance: ``n // 2`` pairs); targets the robot cannot reach are left out.
+        sigma: the tool point's noise (m).
+        count: fixed points or planes.
+        length: the distance pairs' length (m).
+        seed: the random draw.
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    if n < 2 or count < 1:
+        raise ValueError("n must be >= 2 and count >= 1")
+    rng = np.random.default_rng(seed)
+    if kind == "point":
+        return _points(true, n, count, sigma, rng)
+    if kind == "plane":
+        return _planes(true, n, count, sigma, rng)
+    return _distances(true, n, length, sigma, rng)
