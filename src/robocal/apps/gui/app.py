@@ -76,6 +76,8 @@ fieldset { border: 1px solid #ccc; margin: 0.4rem 0; }
 .opt { margin: 0.2rem 0; } .opt .lab { display: inline-block; width: 9.5em; color: #333; }
 .opt label { margin-right: 0.6rem; }
 .progress { height: 14px; background: #eee; border-radius: 7px; overflow: hidden; margin: 0.4rem 0; }
+.stages { font-size: 0.8rem; color: #555; } .stage { margin-right: 0.8rem; }
+.stage::before { content: "✓ "; color: #1a7f37; } .stage.current::before { content: "▸ "; color: #1f77b4; }
 .bar { height: 100%; width: 0%; background: #1f77b4; transition: width 0.3s; }
 @keyframes pulse { 0% { opacity: 1; } 50% { opacity: 0.55; } 100% { opacity: 1; } }
 pre.cv { font-size: 0.78rem; background: #f6f6f6; padding: 0.3rem; }
@@ -227,18 +229,26 @@ def _guard(app) -> None:
         return response
 
 
-def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") -> None:
-    """Run the app on ``host:port`` until Ctrl-C; open the browser unless told not to."""
+def serve(
+    port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1", workdir: Path | None = None
+) -> None:
+    """Run the app on ``host:port`` until Ctrl-C or SIGTERM; open the browser unless told not to.
+
+    ``workdir``: where uploads, runs and results are kept across restarts (runs cut off by the
+    stop are listed as interrupted by the next server); None: a temporary directory removed
+    when the server stops."""
     import signal
 
     # Ctrl-C (SIGINT) stops the server even when it was started with SIGINT ignored (a
     # background job of a script inherits that): interrupting it is how it ends
     signal.signal(signal.SIGINT, signal.default_int_handler)
     # SIGTERM (kill, systemd, a closing terminal's job control) ends it the same way: the
-    # runs are stopped and the uploaded data removed in the finally below
+    # runs are stopped and (without --workdir) the uploaded data removed in the finally below
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    workdir = Path(tempfile.mkdtemp(prefix="robocal-gui-"))
-    atexit.register(shutil.rmtree, workdir, ignore_errors=True)
+    keep = workdir is not None
+    if workdir is None:
+        workdir = Path(tempfile.mkdtemp(prefix="robocal-gui-"))
+        atexit.register(shutil.rmtree, workdir, ignore_errors=True)
     app = create_app(workdir)
     url = f"http://{host}:{port}/"
     print(f"robocal gui on {url} (Ctrl-C stops it)", flush=True)
@@ -246,6 +256,12 @@ def serve(port: int = 8050, open_browser: bool = True, host: str = "127.0.0.1") 
         threading.Timer(1.0, webbrowser.open, args=(url,)).start()
     try:
         app.run(host=host, port=port, debug=False)
+    except KeyboardInterrupt:
+        pass  # the way it ends (Ctrl-C, SIGTERM): tidy up below, exit 0
     finally:
-        app.server.extensions["robocal_runner"].cancel_all()
-        shutil.rmtree(workdir, ignore_errors=True)
+        runner = app.server.extensions["robocal_runner"]
+        if keep:
+            runner.interrupt_all()
+        else:
+            runner.cancel_all()
+            shutil.rmtree(workdir, ignore_errors=True)

@@ -14,6 +14,7 @@ kept.  The GUI holds no calibration logic.
 from __future__ import annotations
 
 import dataclasses
+import math
 import multiprocessing as mp
 import shutil
 import threading
@@ -205,6 +206,20 @@ class JobState:
     warnings: list[str] = field(default_factory=list)
     started: float = field(default_factory=time.monotonic)
     seconds: float = 0.0
+    #: the stages reached, in order: (key, text, seconds from the start of the run)
+    stages: list[tuple[str, str, float]] = field(default_factory=list)
+
+    def shown_fraction(self, now: float) -> float:
+        """The bar's share: the stage's start, moving toward the next stage's start while the
+        stage lasts (time constant 8 s; it never gets there before the stage ends: the engine
+        reports stages, no finer progress)."""
+        if not self.active or not self.stages:
+            return self.fraction
+        starts = [start for _, _, start in STAGES]
+        later = [f for f in starts if f > self.fraction]
+        end = later[0] if later else 1.0
+        in_stage = max(0.0, now - self.started - self.stages[-1][2])
+        return self.fraction + (end - self.fraction) * (1.0 - math.exp(-in_stage / 8.0))
 
     @property
     def active(self) -> bool:
@@ -276,7 +291,9 @@ class JobRunner:
                 return None
             if run.state.active:
                 run.state.seconds = time.monotonic() - run.state.started
-            return dataclasses.replace(run.state, warnings=list(run.state.warnings))
+            return dataclasses.replace(
+                run.state, warnings=list(run.state.warnings), stages=list(run.state.stages)
+            )
 
     def runs_list(self) -> list[RunInfo]:
         """Every run, newest first."""
@@ -300,16 +317,31 @@ class JobRunner:
             return True
 
     def cancel_all(self) -> None:
-        """Stop every run (the server is stopping)."""
-        self._stop.set()
+        """Stop every run and discard what it wrote (the server is stopping; its work dir goes)."""
+        self._stop.set()  # first: stopping one run must not start a queued one
         for info in self.runs_list():
             if info.status in ("queued", "running"):
                 self.cancel(info.run_id)
 
+    def interrupt_all(self) -> None:
+        """Stop every run and record it as interrupted (the server is stopping; its work dir
+        stays, so that the next server lists these runs as cut off, never as running)."""
+        self._stop.set()
+        with self._lock:
+            for run in self._runs.values():
+                if isinstance(run, _Run) and run.state.active:
+                    _stop_process(run)
+                    run.state.status, run.state.text = "interrupted", "interrupted"
+                    shutil.rmtree(run.job.out, ignore_errors=True)  # a half-written folder
+                    self._finish(run)
+            self._order.clear()
+
     # ------------------------------------------------------------------ inside the lock
     def _advance(self) -> None:
-        """Start the oldest queued run when none is running."""
-        if any(isinstance(r, _Run) and r.state.status == "running" for r in self._runs.values()):
+        """Start the oldest queued run when none is running (and the server is not stopping)."""
+        if self._stop.is_set() or any(
+            isinstance(r, _Run) and r.state.status == "running" for r in self._runs.values()
+        ):
             return
         if not self._order:
             return
@@ -362,6 +394,8 @@ def _apply(state: JobState, kind: str, payload: list[Any]) -> None:
     """One report of the child on the run's state."""
     if kind == "stage":
         state.stage, state.text, state.fraction = payload
+        if not state.stages or state.stages[-1][0] != state.stage:
+            state.stages.append((state.stage, state.text, time.monotonic() - state.started))
     elif kind == "saved":
         state.saved = True
     elif kind == "warning":

@@ -138,7 +138,7 @@ def _poll(runner: JobRunner, workdir: Path, n: int, run_id: str | None, phase: s
 
 
 def _bar(state: JobState) -> dict[str, str]:
-    bar = {"width": f"{100 * state.fraction:.0f}%"}
+    bar = {"width": f"{100 * state.shown_fraction(time.monotonic()):.0f}%"}
     if state.status in ("error", "cancelled", "interrupted"):
         return {"width": "0%"}
     return bar | {"animation": "pulse 1s infinite"} if state.active else bar
@@ -147,15 +147,29 @@ def _bar(state: JobState) -> dict[str, str]:
 def _status(state: JobState, workdir: Path) -> list[Any]:
     warns = [html.Div(f"warning: {w}", className="warning") for w in state.warnings[-5:]]
     if state.active:
-        return [f"{state.text} ({state.seconds:.0f} s)", *warns]
+        return [f"{state.text} ({state.seconds:.0f} s)", _stage_list(state), *warns]
     if state.status == "done":
-        return [f"done in {state.seconds:.1f} s", *warns]
+        return [f"done in {state.seconds:.1f} s", _stage_list(state), *warns]
     if state.status == "interrupted":
         return ["interrupted: the server stopped during this run; calibrate again"]
     if state.status == "cancelled":
         return ["cancelled"]
     error = public_text(state.error or "failed", workdir)
     return [html.Span(error, className="error", id="cal-error"), *warns]
+
+
+def _stage_list(state: JobState) -> html.Div:
+    """The stages reached, in order, each with its seconds (the last one's so far)."""
+    times = [t for *_, t in state.stages] + [state.seconds]
+    items = [
+        html.Span(
+            f"{text} {times[i + 1] - times[i]:.1f} s",
+            className="stage" + (" current" if state.active and i == len(state.stages) - 1 else ""),
+            **_data_attributes(stage=key),
+        )
+        for i, (key, text, _) in enumerate(state.stages)
+    ]
+    return html.Div(items, id="cal-stages", className="stages")
 
 
 def _data_attributes(**values: str) -> dict[str, Any]:
