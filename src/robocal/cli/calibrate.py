@@ -59,7 +59,14 @@ Tool = Annotated[
     ),
 ]
 Compliance = Annotated[bool, typer.Option("--compliance", help="also identify joint compliance")]
-Data = Annotated[Path, typer.Option("--data", metavar="FILE", help="measurement CSV file")]
+Data = Annotated[
+    list[Path],
+    typer.Option(
+        "--data",
+        metavar="FILE",
+        help="measurement CSV file (repeat: tracker and constraint files in one fit)",
+    ),
+]
 
 
 Method = Annotated[str, typer.Option("--method", metavar="lm|pinv|bounded|influence", help="the solver")]
@@ -131,7 +138,7 @@ Distance = Annotated[
 
 def calibrate_command(
     robot: Robot,
-    data_path: Data,
+    data_paths: Data,
     out: OutDir,
     chain: Chain = None,
     measure: Measure = None,
@@ -167,10 +174,11 @@ def calibrate_command(
     _check_out(out, force)
     from robocal.cli.constraints import calibrate_constraint_command, is_constraint_file
 
-    if is_constraint_file(data_path, measure):
-        return calibrate_constraint_command(model, from_catalog, chain, data_path, out, angle_unit=angle_unit,
-                                            distances=distance, level=level, noise=noise,
-                                            force=force)  # fmt: skip
+    data_path = data_paths[0]
+    if len(data_paths) > 1 or is_constraint_file(data_path, measure):  # mixed kinds: one fit
+        return calibrate_constraint_command(model, from_catalog, chain, data_paths, out,
+                                            angle_unit=angle_unit, distances=distance, level=level,
+                                            noise=noise, force=force, length_unit=length_unit)  # fmt: skip
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
     from robocal.workflow import CalibrateRequest, FitOptions, ReaderOptions

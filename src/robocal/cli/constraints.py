@@ -10,6 +10,7 @@ A result folder holds ``model.yaml`` (the calibrated robot) and ``constraints.js
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -25,6 +26,8 @@ __all__ = [
     "calibrate_constraint_file",
     "is_constraint_file",
     "plan_constraint_poses",
+    "print_each_kind",
+    "read_mixed",
     "simulate_constraint_file",
     "validate_constraint_file",
 ]
@@ -68,12 +71,77 @@ def _sigma(noise: str | None) -> float:
     return 1e-4 if noise is None else parse_quantity_option(noise, "length", "--noise")
 
 
+def _read_tracker(path: Path, model, angle_unit: str, length_unit: str, sigma: float):
+    """A tracker file's rows (joint values, x y z in the device frame) as constraint-set rows."""
+    from robocal.measure.constraints.data_set import ConstraintSet
+    from robocal.measure.dataset.read import read_measurements
+    from robocal.measure.measurements import MeasurementFileError
+
+    try:
+        m = read_measurements(path, length_unit=length_unit, angle_unit=angle_unit, model=model)
+    except MeasurementFileError as err:
+        raise fail(str(err)) from None
+    if m.position is None:
+        raise fail(f"{path}: neither constraint columns (point, plane, pair) nor tracker positions (x, y, z)")
+    none = -np.ones(len(m.q), dtype=np.intp)
+    return ConstraintSet(m.q, none, none, position=m.position, sigma=sigma)
+
+
+def read_mixed(paths: list[Path], model, angle_unit: str, length_unit: str, stated, sigma: float):
+    """The files of one fit: ``(first constraint file, tracker files, merged set)``.  The
+    constraint files' points and planes are numbered in the order given (``--distance``
+    names them so); the tracker files' rows have their own noise (estimated in the fit)."""
+    from robocal.measure.constraints.data import constraint_kind
+    from robocal.measure.constraints.data_set import merge_sets
+
+    for path in paths:
+        if not path.is_file():
+            raise fail(f"--data {path}: no such file")
+    constraint = [p for p in paths if constraint_kind(p) is not None]
+    trackers = [p for p in paths if p not in constraint]
+    if not constraint:
+        raise fail("--data: several files calibrate together when one is a constraint file "
+                   "(a point, plane or pair column)")  # fmt: skip
+    one = stated if len(constraint) == 1 else []
+    sets = [_read(p, model.dof, angle_unit, one, sigma) for p in constraint]
+    sets += [_read_tracker(p, model, angle_unit, length_unit, sigma) for p in trackers]
+    try:
+        data = merge_sets(*sets)
+    except ValueError as err:
+        raise fail(f"--data: {err}") from None
+    if stated and len(constraint) > 1:  # the merged numbering: the first file's points first
+        if max(max(a, b) for a, b, _ in stated) >= data.n_points:
+            raise fail(f"--distance: the files have points 0..{data.n_points - 1} only")
+        data = dataclasses.replace(data, point_pairs=[(a, b) for a, b, _ in stated],
+                                   point_length=[d for *_, d in stated])  # fmt: skip
+    return constraint[0], trackers, data
+
+
+def print_each_kind(model, data) -> None:
+    """What each kind alone could identify beside what the union does (mixed data)."""
+    from robocal.identify.constraints.fit import kind_identifiable
+
+    union = set(kind_identifiable(model, data)[0])
+    for kind, rows in (("constraint rows", data.constrained), ("tracker rows", data.tracked)):
+        try:
+            alone = set(kind_identifiable(model, data.select(rows))[0])
+        except ValueError as err:  # too few rows of the kind for its start values
+            console.print(f"{kind} alone: {safe(str(err))}", highlight=False, soft_wrap=True)
+            continue
+        missing = sorted(union - alone, key=list(model.names).index)
+        line = f"{kind} alone ({int(rows.sum())} poses) identify {len(alone)} of the union's {len(union)}"
+        line += f"; not {', '.join(missing)}" if missing else ""
+        console.print(line, highlight=False, soft_wrap=True)
+
+
 def calibrate_constraint_command(
-    model, from_catalog: bool, chain: str | None, data_path: Path, out: Path, *, angle_unit: str,
+    model, from_catalog: bool, chain: str | None, data_path: Path | list[Path], out: Path, *, angle_unit: str,
     distances: list[str] | None, level: str | None, noise: str | None, force: bool = False,
+    length_unit: str = "m",
 ) -> None:  # fmt: skip
-    """``robocal calibrate`` of a constraint file: a catalog robot's complete position model
-    (``--chain catalog``: its published chain), a model file's chain as it is."""
+    """``robocal calibrate`` of a constraint file (or several files: constraint files and
+    tracker files, one fit): a catalog robot's complete position model (``--chain
+    catalog``: its published chain), a model file's chain as it is."""
     if (out / RESULT_FILE).exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     from robocal.model.complete import calibration_model
@@ -89,12 +157,12 @@ def calibrate_constraint_command(
             f"--level {level}: constraint measurements identify level 1 (joint offsets) or 2 (kinematic)"
         )
     calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
-                              level=levels[level], noise=noise)  # fmt: skip
+                              level=levels[level], noise=noise, length_unit=length_unit)  # fmt: skip
 
 
 def calibrate_constraint_file(
-    model, data_path: Path, out: Path, *, angle_unit: str, distances: list[str] | None, level: int | None,
-    noise: str | None,
+    model, data_path: Path | list[Path], out: Path, *, angle_unit: str, distances: list[str] | None,
+    level: int | None, noise: str | None, length_unit: str = "m",
 ) -> None:  # fmt: skip
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
     file's chain) from a constraint file; write ``out``/model.yaml and constraints.json.
@@ -110,15 +178,18 @@ def calibrate_constraint_file(
     from robocal.identify.options import Pruning
 
     stated = _distances(distances)
-    data = _read(data_path, model.dof, angle_unit, stated, _sigma(noise))
+    paths = data_path if isinstance(data_path, list) else [data_path]
+    data_path, trackers, data = read_mixed(paths, model, angle_unit, length_unit, stated, _sigma(noise))
     try:
         result = calibrate_constraints(model, data, level=level or 2, pruning=Pruning(), known_noise=False,
                                        prior=NominalPrior())  # fmt: skip
     except ValueError as err:
-        raise fail(f"{data_path}: {err}") from None
-    _save(result, out, data_path, stated, angle_unit)
+        raise fail(f"{', '.join(str(p) for p in paths)}: {err}") from None
+    _save(result, out, data_path, stated, angle_unit, trackers)
     for line in result.summary_lines():
         console.print(safe(line), highlight=False, soft_wrap=True)
+    if "tracker" in data.kinds and data.constrained.any():
+        print_each_kind(model, data)
     console.print(f"wrote {out / 'model.yaml'} and {out / RESULT_FILE}", highlight=False)
 
 
@@ -149,8 +220,9 @@ def _result_doc(result, data_path: Path, stated) -> dict:
     }
 
 
-def _save(result, out: Path, data_path: Path, stated, angle_unit: str = "rad") -> None:
-    """model.yaml and constraints.json, all or nothing."""
+def _save(result, out: Path, data_path: Path, stated, angle_unit: str = "rad", trackers=()) -> None:
+    """model.yaml and constraints.json, all or nothing (``trackers``: the tracker files
+    fitted with ``data_path``, recorded by name and SHA-256)."""
     from robocal.folder_lock import FolderBusyError
     from robocal.model.files import save_model
     from robocal.outdir import transaction
@@ -158,6 +230,11 @@ def _save(result, out: Path, data_path: Path, stated, angle_unit: str = "rad") -
     if out.exists() and not out.is_dir():
         raise fail(f"--out {out} is a file; give a directory")
     doc = _result_doc(result, data_path, stated) | {"angle_unit": angle_unit}  # how to read the file again
+    if trackers:
+        from robocal.identify.result_io import file_hash
+
+        doc["tracker_data"] = [{"path": str(p), "sha256": file_hash(p)} for p in trackers]
+        doc["noise_per_kind_m"] = dict(result.kind_sigma)
     try:
         with transaction(out, ("model.yaml", RESULT_FILE)) as stage:
             save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
+from robocal.identify.constraints.noise import weigh_by_kind
 from robocal.identify.options import Pruning
 from robocal.identify.problem import measurement_chain
 from robocal.identify.solvers import solve
@@ -97,6 +98,8 @@ class ConstraintResult:
         residual_std: σ̂ of the tool point (m) from the residuals.
         kinds: the measurement kinds used.
         prior: the prior toward the nominal geometry the fit used (None: a least-squares fit).
+        kind_sigma: mixed data: the noise (m) each kind was weighted by, ``(("point", σ),
+            ("tracker", σ_t))`` (estimated unless ``known_noise``); empty for one kind.
     """
 
     model: Model
@@ -120,6 +123,7 @@ class ConstraintResult:
     kinds: tuple[str, ...]
     figures: ConstraintFigures | None = field(default=None)
     prior: NominalPrior | None = field(default=None)
+    kind_sigma: tuple[tuple[str, float], ...] = ()
 
     def summary_lines(self) -> list[str]:
         """A short human summary (mm, deg)."""
@@ -133,6 +137,9 @@ class ConstraintResult:
         ]
         if self.prior is not None:
             lines.append(self.prior.line())
+        if self.kind_sigma:
+            each = ", ".join(f"{kind} {sigma * 1e3:.4f} mm" for kind, sigma in self.kind_sigma)
+            lines.append(f"noise per kind (the rows' weights): {each}")
         scene = {"redundant", "no effect"}
         seen = [d.name for d in self.dropped if d.reason in scene]
         if seen:
@@ -278,7 +285,10 @@ def calibrate_constraints(
         level: 1 identifies the joint offsets only, 2 every free geometric parameter.
         fixed: parameters held at their values.
         pruning: the pruning thresholds (None: no pruning beyond the rank test).
-        known_noise: the covariance uses ``data.sigma`` as the noise (else σ̂ from the residuals).
+        known_noise: the covariance uses ``data.sigma`` (and ``data.tracker_sigma`` for the
+            tracker rows) as the noise; else σ̂ from the residuals, each kind's own when the
+            data mixes tracker rows with constraint rows
+            (:func:`robocal.identify.constraints.noise.weigh_by_kind`).
         prior: a prior of the robot's geometry about the model's values (a MAP fit; the
             rank test still drops what the measurements cannot see; pruning judges the
             posterior σ).  The measurements are weighted by their noise: ``data.sigma``
@@ -286,9 +296,6 @@ def calibrate_constraints(
             times the real one would make the prior ten times too strong).  None: least
             squares.
     """
-    if prior is not None and not known_noise:
-        plain = calibrate_constraints(model, data, tool=tool, level=level, fixed=fixed)
-        data = dataclasses.replace(data, sigma=max(plain.residual_std, 1e-9))
     if level == 1:
         model = model.fixed([s.name for s in model.steps if s.joint is None])
     if fixed:
@@ -297,6 +304,9 @@ def calibrate_constraints(
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
+    mixed = "tracker" in data.kinds and bool(data.constrained.any())
+    if not known_noise and (prior is not None or mixed):  # each kind weighted by its own σ̂
+        problem = problem.with_data(weigh_by_kind(problem))
     if pruning is not None:
         problem = _screen(problem, pruning, known_noise, dropped)
     fit = solve(problem, problem.x0, "lm")
@@ -330,8 +340,15 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
         rms_after=sigma * math.sqrt(float(r @ r) / len(r)),
         residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success),
         message=str(fit.message),
-        kinds=problem.data.kinds, figures=figures,
+        kinds=problem.data.kinds, figures=figures, kind_sigma=_kind_sigma(problem.data),
     )  # fmt: skip
+
+
+def _kind_sigma(data: ConstraintSet) -> tuple[tuple[str, float], ...]:
+    if "tracker" not in data.kinds or not data.constrained.any():
+        return ()
+    constraint = "+".join(k for k in data.kinds if k != "tracker")
+    return ((constraint, float(data.sigma)), ("tracker", data.position_sigma))
 
 
 def _robot_and_tool(robot: Model, tool: Array | None) -> Model:

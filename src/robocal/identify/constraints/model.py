@@ -11,8 +11,9 @@ base frame when no device measures) is, not what it reads:
   no singular direction near the start) or known;
 * **distance**: ``|p_i - p_j| - L = 0`` (1 row) for a pair of poses whose tool points are a
   known length apart (ball-bar, a table of known points);
-* **tracker point**: ``p_i - y_i = 0`` (3 rows), mixed with the others; the device frame
-  is then estimated too.
+* **tracker point**: ``p_i - y_i = 0`` (3 rows), mixed with the others, weighted by the
+  tracker's own σ (``ConstraintSet.tracker_sigma``); the device frame is then estimated
+  too (its start by Kabsch on these rows).
 
 Residuals are weighted by 1/σ (the tool point's noise σ, isotropic; σ√2 for a distance
 between two tool points; ``distance_sigma`` for a stated distance between fixed points).
@@ -244,11 +245,17 @@ class ConstraintProblem:
         p = self._chain(x)[0]
         ik = solve_ik(chain, self._touched(x, p), kind="position", q0=self.data.q, restarts=0, tol=1e-12,
                       seed_pool=0)  # fmt: skip
+        return self.with_data(dataclasses.replace(self.data, q=ik.q)).jacobian(x)
+
+    def with_data(self, data: ConstraintSet, prior: bool = True) -> ConstraintProblem:
+        """The same unknowns, start values and fixed set on ``data`` (the same rows, moved
+        joint values or other noise weights); ``prior=False``: without the prior rows."""
         moved = object.__new__(ConstraintProblem)
         moved.__dict__.update(self.__dict__)
-        moved.data = dataclasses.replace(self.data, q=ik.q)
+        moved.data = data
+        moved.prior_weight = self.prior_weight if prior else None
         moved._cache = {}
-        return moved.jacobian(x)
+        return moved
 
     def _touched(self, x: Array, p: Array) -> Array:
         """``(n, 3)`` the point each pose's tool point touches (itself for distances only)."""
@@ -294,10 +301,6 @@ class ConstraintProblem:
         Jp = np.zeros((d.n, 3, lay.size))
         Jp[:, :, : lay.n_chain] = Jc.reshape(d.n, 3, -1)
         r_parts, J_parts = [], []
-        tracked = d.tracked
-        if tracked.any():
-            r_parts.append((p[tracked] - d.positions[tracked]).reshape(-1))
-            J_parts.append(Jp[tracked].reshape(-1, lay.size))
         on_point = np.flatnonzero(d.point >= 0)
         if len(on_point):
             r, J = self._point_rows(full, p, Jp, on_point)
@@ -310,6 +313,10 @@ class ConstraintProblem:
             J_parts.append(J)
         if r_parts:
             r_parts, J_parts = [np.concatenate(r_parts) / d.sigma], [np.concatenate(J_parts) / d.sigma]
+        tracked = d.tracked
+        if tracked.any():  # each kind weighted by its own noise (mixed data)
+            r_parts.append((p[tracked] - d.positions[tracked]).reshape(-1) / d.position_sigma)
+            J_parts.append(Jp[tracked].reshape(-1, lay.size) / d.position_sigma)
         if len(d.pairs):
             r, J = self._pair_rows(p, Jp)
             r_parts.append(r / (d.sigma * np.sqrt(2)))
@@ -396,12 +403,40 @@ class ConstraintProblem:
             J[row, lay.point(int(b[row])) : lay.point(int(b[row])) + 3] -= u[row]
         return length - d.point_length, J
 
+    def row_groups(self) -> tuple[tuple[str, slice], ...]:
+        """The measurement rows of each noise group in the residual's order: ``constraint``
+        (points, planes; σ), ``tracker`` (its own σ), ``pair`` (σ√2), ``known distance``."""
+        d = self.data
+        sizes = [
+            ("constraint", 3 * int(np.sum(d.point >= 0)) + int(np.sum(d.plane >= 0))),
+            ("tracker", 3 * int(d.tracked.sum())),
+            ("pair", len(d.pairs)),
+            ("known distance", len(d.point_pairs)),
+        ]
+        out, at = [], 0
+        for name, size in sizes:
+            if size:
+                out.append((name, slice(at, at + size)))
+            at += size
+        return tuple(out)
+
+    def row_sigma(self) -> Array:
+        """``(m,)`` each measurement row's noise (m): the weights' inverse."""
+        d = self.data
+        sigma = {"constraint": d.sigma, "pair": d.sigma * np.sqrt(2), "tracker": d.position_sigma,
+                 "known distance": d.distance_sigma}  # fmt: skip
+        out = np.empty(sum(s.stop - s.start for _, s in self.row_groups()))
+        for name, rows in self.row_groups():
+            out[rows] = sigma[name]
+        return out
+
     def residual(self, x: Array, weighted: bool = True) -> Array:
-        """Weighted residuals ``(m,)`` (``weighted=False``: m), the prior rows last."""
+        """Weighted residuals ``(m,)`` (``weighted=False``: the measurement rows in m), the
+        prior rows last."""
         r = self._blocks(x)[0]
-        return r if weighted else r * self.data.sigma
+        return r if weighted else r[: len(r) - self.n_prior_rows] * self.row_sigma()
 
     def jacobian(self, x: Array, weighted: bool = True) -> Array:
         """d residual / d x ``(m, p)`` over the unknowns not fixed."""
         J = self._blocks(x)[1][:, self.keep]
-        return J if weighted else J * self.data.sigma
+        return J if weighted else J[: len(J) - self.n_prior_rows] * self.row_sigma()[:, None]

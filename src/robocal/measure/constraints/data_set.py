@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["KINDS", "ConstraintSet"]
+__all__ = ["KINDS", "ConstraintSet", "merge_sets"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -36,7 +36,10 @@ class ConstraintSet:
         point_length: ``(k,)`` (m).
         known_planes: ``(P, 4)`` unit normal and offset (m) of each plane, NaN rows unknown;
             or None (all unknown).
-        sigma: the tool point's noise (m, isotropic).
+        sigma: the tool point's noise (m, isotropic) in the constraint rows (points,
+            planes, pairs).
+        tracker_sigma: the tracker positions' noise (m, per axis); None: ``sigma``.  Mixed
+            data weights each kind by its own noise.
         distance_sigma: the uncertainty of a stated distance between fixed points (m).
     """
 
@@ -51,6 +54,7 @@ class ConstraintSet:
     known_planes: Array | None = None
     sigma: float = 1e-5
     distance_sigma: float = 1e-6
+    tracker_sigma: float | None = None
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)
@@ -70,8 +74,8 @@ class ConstraintSet:
             raise ValueError(f"a known distance names a point outside 0..{self.n_points - 1}")
         if self.position is not None and np.shape(self.position) != (n, 3):
             raise ValueError(f"tracker positions shaped {np.shape(self.position)}; expected ({n}, 3)")
-        if not self.sigma > 0 or not self.distance_sigma > 0:
-            raise ValueError("sigma and distance_sigma must be > 0 (m)")
+        if not self.sigma > 0 or not self.distance_sigma > 0 or not self.position_sigma > 0:
+            raise ValueError("sigma, tracker_sigma and distance_sigma must be > 0 (m)")
 
     @property
     def n(self) -> int:
@@ -100,6 +104,32 @@ class ConstraintSet:
         return np.asarray(self.position, dtype=float)
 
     @property
+    def position_sigma(self) -> float:
+        """The tracker rows' noise (m): ``tracker_sigma``, else ``sigma``."""
+        return self.sigma if self.tracker_sigma is None else float(self.tracker_sigma)
+
+    @property
+    def constrained(self) -> NDArray[np.bool_]:
+        """``(n,)`` whether pose ``i`` is in a constraint row (a point, a plane or a pair)."""
+        out = (self.point >= 0) | (self.plane >= 0)
+        out[self.pairs.reshape(-1)] = True
+        return out
+
+    def select(self, rows: NDArray[np.bool_]) -> ConstraintSet:
+        """The poses where ``rows`` ``(n,)`` is True (pairs with both poses kept; points and
+        planes keep their numbers, so the known distances and planes still apply)."""
+        rows = np.asarray(rows, dtype=bool)
+        new = np.cumsum(rows) - 1
+        both = rows[self.pairs[:, 0]] & rows[self.pairs[:, 1]] if len(self.pairs) else np.zeros(0, bool)
+        return ConstraintSet(
+            self.q[rows], self.point[rows], self.plane[rows],
+            position=None if self.position is None else self.positions[rows],
+            pairs=new[self.pairs[both]], pair_length=self.pair_length[both],
+            point_pairs=self.point_pairs, point_length=self.point_length, known_planes=self.known_planes,
+            sigma=self.sigma, distance_sigma=self.distance_sigma, tracker_sigma=self.tracker_sigma,
+        )  # fmt: skip
+
+    @property
     def planes_stated(self) -> Array:
         """``(P, 4)`` the stated planes (unit normal, offset in m), NaN rows unknown."""
         out = np.full((self.n_planes, 4), np.nan)
@@ -125,3 +155,33 @@ class ConstraintSet:
             or k >= len(self.known_planes)
             or not np.isfinite(self.known_planes[k]).all()
         )
+
+
+def merge_sets(first: ConstraintSet, *others: ConstraintSet) -> ConstraintSet:
+    """One set of the poses of all: ``others``' points and planes numbered after the ones
+    before them (two files' socket 0 are two sockets), their pairs re-indexed; the noise
+    (``sigma``, ``tracker_sigma``, ``distance_sigma``) and the known planes of ``first``.
+
+    Raises:
+        ValueError: the sets have different numbers of joints.
+    """
+    sets = (first, *others)
+    if len({s.q.shape[1] for s in sets}) > 1:
+        raise ValueError("the files have different numbers of joint columns")
+    point, plane, pairs, point_pairs = [], [], [], []
+    n = n_points = n_planes = 0
+    for s in sets:
+        point.append(np.where(s.point >= 0, s.point + n_points, -1))
+        plane.append(np.where(s.plane >= 0, s.plane + n_planes, -1))
+        pairs.append(s.pairs + n)
+        point_pairs.append(s.point_pairs + n_points)
+        n, n_points, n_planes = n + s.n, n_points + s.n_points, n_planes + s.n_planes
+    tracked = any(s.position is not None for s in sets)
+    return ConstraintSet(
+        np.vstack([s.q for s in sets]), np.concatenate(point), np.concatenate(plane),
+        position=np.vstack([s.positions for s in sets]) if tracked else None,
+        pairs=np.vstack(pairs), pair_length=np.concatenate([s.pair_length for s in sets]),
+        point_pairs=np.vstack(point_pairs), point_length=np.concatenate([s.point_length for s in sets]),
+        known_planes=first.known_planes,  # its planes keep their numbers
+        sigma=first.sigma, distance_sigma=first.distance_sigma, tracker_sigma=first.tracker_sigma,
+    )  # fmt: skip

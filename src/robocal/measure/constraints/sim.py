@@ -19,7 +19,7 @@ from robocal.measure.ik import solve_ik
 from robocal.measure.ik_starts import random_configurations
 from robocal.model.chain import Model
 
-__all__ = ["SceneTruth", "simulate_constraints"]
+__all__ = ["SceneTruth", "simulate_constraints", "simulate_tracker_rows"]
 
 Array = NDArray[np.float64]
 
@@ -116,3 +116,22 @@ def simulate_constraints(
     if kind == "plane":
         return _planes(true, n, count, sigma, rng)
     return _distances(true, n, length, sigma, rng)
+
+
+def simulate_tracker_rows(
+    true: Model,
+    n: int,
+    *,
+    sigma: float = 1e-5,
+    T_device_base: Array | None = None,
+    seed: int | np.random.Generator | None = 0,
+) -> ConstraintSet:
+    """``n`` tracker rows to mix with constraint rows: random configurations of the
+    ``true`` robot and its tool point in the device frame ``T_device_base`` (identity by
+    default) with noise ``sigma`` (m per axis); its ``tracker_sigma`` is ``sigma``."""
+    rng = np.random.default_rng(seed)
+    q = random_configurations(true, n, rng=rng)
+    T = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
+    p = true.fk(q)[:, :3, 3] @ T[:3, :3].T + T[:3, 3] + sigma * rng.standard_normal((n, 3))
+    none = -np.ones(n, dtype=np.intp)
+    return ConstraintSet(q, none, none, position=p, sigma=sigma, tracker_sigma=sigma)
