@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import cho_solve, cholesky, solve_triangular
-from scipy.linalg.lapack import dtrtri
+from scipy.linalg.lapack import dpotrf, dtrtri
 from scipy.optimize import minimize
 
 from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, one_blas_thread
@@ -243,28 +243,46 @@ def prior(theta: Array, groups: Index, freq: Array) -> Array:
 def _posterior(G: Array, b: Array, log_s: Array, noise2: float) -> tuple[Array, Array, Array]:
     """Whitened Cholesky factor ``L``, mean ``μ`` and ``v = μ / s^½`` of the coefficients."""
     d = np.exp(0.5 * log_s)
-    K = (d[:, None] * G * d[None, :]) / noise2
-    K[np.diag_indices_from(K)] += 1.0
-    L = cholesky(K, lower=True, check_finite=False)
+    L = _whitened_factor(G, d, noise2)
     v = cho_solve((L, True), d * b / noise2, check_finite=False)
     return L, d * v, v
 
 
+def _whitened_factor(G: Array, d: Array, noise2: float) -> Array:
+    """The lower Cholesky factor ``(m, m)`` of ``K = D G D / σ² + I`` (``D = diag(d)``), formed
+    in one array and factored in place: the temporaries of ``d[:, None] * G * d[None, :]``
+    and LAPACK's copy to Fortran order cost as much as the factorisation itself at m = 576
+    (the evidence's every evaluation)."""
+    scale = d / np.sqrt(noise2)
+    K = G * scale[:, None]
+    K *= scale[None, :]
+    K[np.diag_indices_from(K)] += 1.0
+    # K is symmetric: its transpose is the same matrix in Fortran order (no copy)
+    L, info = dpotrf(K.T, lower=1, clean=1, overwrite_a=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"Cholesky factorisation failed (info {info})")
+    return L
+
+
 def nll_and_grad(theta: Array, G: Array, b: Array, rr: float, N: int, groups: Index, freq: Array):
     k = len(theta) - 2
-    log_s = prior(theta, groups, freq)
+    spectrum, dspectrum = _spectrum(theta[k], freq)
+    log_s = 2.0 * theta[:k][groups] + spectrum  # prior(theta, groups, freq), its spectrum reused
     noise2 = float(np.exp(2.0 * theta[-1]))
-    L, mu, v = _posterior(G, b, log_s, noise2)
-    z = solve_triangular(L, np.exp(0.5 * log_s) * b / noise2, lower=True, check_finite=False)
+    d = np.exp(0.5 * log_s)
+    L = _whitened_factor(G, d, noise2)
+    z = solve_triangular(L, d * b / noise2, lower=True, check_finite=False)
+    v = solve_triangular(L, z, lower=True, trans="T", check_finite=False)  # K⁻¹ D b / σ² = μ / s^½
+    mu = d * v
     nll = 0.5 * (rr / noise2 - z @ z + 2.0 * np.log(np.diag(L)).sum() + N * np.log(noise2))
-    Linv = _inverse_lower(L)
+    Linv = _inverse_lower(L, overwrite=True)  # L is not used after this
     kinv_diag = np.einsum("ij,ij->j", Linv, Linv)  # diag of K⁻¹ = Σ_kk / s_k
     g_s = 0.5 * (1.0 - kinv_diag - v**2)  # ∂nll/∂log s_k
     gamma = float(np.sum(1.0 - kinv_diag))
     misfit = rr - 2.0 * mu @ b + mu @ G @ mu
     grad = np.empty_like(theta)
     grad[:k] = 2.0 * np.bincount(groups, weights=g_s, minlength=k)
-    grad[k] = float(np.sum(g_s * _spectrum(theta[k], freq)[1]))
+    grad[k] = float(np.sum(g_s * dspectrum))
     grad[-1] = 2.0 * 0.5 * (N - gamma - misfit / noise2)  # ∂/∂log σ = 2 ∂/∂log σ²
     return float(nll), grad
 
@@ -303,10 +321,11 @@ def _dual_is_cheaper(N: int, m: int) -> bool:
     return 2.0 * N * N * m + N**3 / 3.0 < 2.0 * m**3 / 3.0
 
 
-def _inverse_lower(L: Array) -> Array:
+def _inverse_lower(L: Array, overwrite: bool = False) -> Array:
     """``L⁻¹`` of a lower-triangular Cholesky factor (LAPACK's triangular inverse: a third of
-    the work of solving against the identity)."""
-    Linv, info = dtrtri(L, lower=1)
+    the work of solving against the identity); ``overwrite``: in ``L``'s memory when it is
+    in Fortran order (as :func:`_whitened_factor` returns it)."""
+    Linv, info = dtrtri(L, lower=1, overwrite_c=int(overwrite))
     if info != 0:
         raise np.linalg.LinAlgError(f"triangular inverse failed (info {info})")
     return Linv
