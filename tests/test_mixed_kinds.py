@@ -180,3 +180,62 @@ def test_cli_refuses_several_files_without_a_constraint_file(tmp_path, true, fra
     run = CliRunner().invoke(app, [*args, "-o", str(tmp_path / "cal")])
     assert run.exit_code != 0 and "constraint file" in run.output and "Traceback" not in run.output
     assert not (tmp_path / "cal" / "constraints.json").exists()
+
+
+# ---------------------------------------------------------------------- inclinometer planning
+@pytest.fixture(scope="module")
+def katana():
+    from robocal.cli.options import resolve_model
+
+    return resolve_model("katana450")
+
+
+def _sensors(model):
+    from robocal.measure.inclinometer import Inclinometer
+
+    return tuple(Inclinometer.level_at(model, j) for j in model.joint_names)
+
+
+def test_tilt_planning_beats_a_random_choice_on_the_tilt_jacobian(katana):
+    from robocal.identify.tilt_identification import identify_tilt
+    from robocal.identify.tilt_poses import select_tilt_poses, tilt_candidates
+    from robocal.measure.inclinometer import simulate_readings
+    from robocal.measure.poses import random_poses
+
+    sensors = _sensors(katana)
+    pool = random_poses(katana, 200, seed=3)
+    plan = select_tilt_poses(katana, pool, 12, sensors, index="O1")
+    assert plan.q.shape == (12, katana.dof) and tilt_candidates(katana, plan.q, sensors).all()  # all readable
+    assert plan.indices["O1"] > plan.baseline["O1"]
+    assert "compliance_q1" in plan.not_seen  # a rotation about the vertical: no inclinometer sees it
+    random = pool[tilt_candidates(katana, pool, sensors)][:12]
+    sigma = {}
+    for name, q in (("plan", plan.q), ("random", random)):
+        data = simulate_readings(katana, q, sensors, np.random.default_rng(0))
+        fit = identify_tilt(katana, data, sensors)
+        sigma[name] = dict(zip(fit.names, fit.sigma, strict=True))
+    common = set(sigma["plan"]) & set(sigma["random"])
+    ratio = np.array([sigma["plan"][n] / sigma["random"][n] for n in common])
+    assert np.exp(np.mean(np.log(ratio))) < 1.0  # the Cramér-Rao bound is smaller on the plan's readings
+
+
+def test_cli_poses_rows_tilt_feeds_the_inclinometer_simulation(tmp_path):
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    runner = CliRunner()
+    poses = tmp_path / "tilt_poses.csv"
+    run = runner.invoke(app, ["poses", "katana450", "--rows", "tilt", "--n", "10", "--pool", "150",
+                              "--index", "O3", "-o", str(poses)])  # fmt: skip
+    assert run.exit_code == 0, run.output
+    assert "O3" in run.output and "not identifiable: compliance_q1" in run.output
+    readings = tmp_path / "tilt.csv"
+    sim = runner.invoke(app, ["simulate", "katana450", "--device", "inclinometer", "--poses", str(poses),
+                              "-o", str(readings), "--seed", "2"])  # fmt: skip
+    assert sim.exit_code == 0, sim.output
+    fit = runner.invoke(app, ["data", "tilt", str(readings), "katana450"])
+    assert fit.exit_code == 0 and "clearance_q2" in fit.output
+    small = runner.invoke(app, ["poses", "katana450", "--rows", "tilt", "--n", "50", "--pool", "20",
+                                "-o", str(tmp_path / "x.csv")])  # fmt: skip
+    assert small.exit_code != 0 and "--pool" in small.output and not (tmp_path / "x.csv").exists()

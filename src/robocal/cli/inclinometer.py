@@ -6,6 +6,9 @@ the configurations of ``POSES.csv``, on a true robot with drawn geometric errors
 model's joint effects (clearance, backlash, stiffness), and writes the readings CSV
 (docs/inclinometer.md) with the truth beside it (``READINGS.truth.json``).
 
+``robocal poses ROBOT --rows tilt -o POSES.csv`` (:func:`plan_tilt_poses`) chooses the
+configurations to read by O1-O5 on the tilt Jacobian.
+
 ``robocal data tilt READINGS.csv ROBOT`` (:func:`identify_tilt_file`) identifies the joint
 effects, the channels' zeros and the angles of the geometry that turn the sensed links
 from such a file, and prints them with their 1σ and what the readings cannot see.
@@ -23,7 +26,7 @@ import numpy as np
 
 from robocal.console import console, fail, refuse_overwrite, safe
 
-__all__ = ["identify_tilt_file", "simulate_inclinometer"]
+__all__ = ["identify_tilt_file", "plan_tilt_poses", "simulate_inclinometer"]
 
 OFFSET_RANGE_DEG = 0.05  # the channels' zeros drawn within ±this (docs/inclinometer.md)
 
@@ -169,3 +172,36 @@ def identify_tilt_file(
             "units": "rad, rad/(N·m)",
         }
         atomic_write_text(json_out, json.dumps(result, indent=2) + "\n")
+
+
+def plan_tilt_poses(model, out: Path, *, n: int, pool: int, index: str, seed: int) -> None:
+    """``robocal poses ROBOT --rows tilt``: ``n`` configurations of a seeded pool of ``pool``
+    random ones, read by a dual-axis inclinometer on the link after every joint (level at
+    home, as ``simulate --device inclinometer`` places them), maximising ``index`` on the
+    tilt Jacobian (:mod:`robocal.identify.tilt_poses`); written as a poses CSV."""
+    from rich.table import Table
+
+    from robocal.identify.tilt_poses import select_tilt_poses
+    from robocal.measure.poses import random_poses, write_poses
+
+    if pool < n:
+        raise fail(f"--pool {pool} is smaller than --n {n}")
+    try:
+        sel = select_tilt_poses(model, random_poses(model, pool, seed=seed), n, _sensors(model), index=index)
+    except (ValueError, np.linalg.LinAlgError) as err:
+        raise fail(str(err)) from None
+    table = Table(
+        title=f"observability of {n} configurations for the inclinometers ({len(sel.params)} parameters)"
+    )
+    for col in ("index", "chosen", f"first {n} of the pool"):
+        table.add_column(col, justify="right")
+    for name in ("O1", "O2", "O3", "O4", "O5"):
+        table.add_row(name, f"{sel.indices[name]:.4g}", f"{sel.baseline[name]:.4g}")
+    console.print(table)
+    for name, why in sel.not_seen.items():
+        console.print(f"[dim]not identifiable: {safe(name)}: {safe(why)}[/]", highlight=False, markup=True)
+    meta = {"robot": model.name, "method": "optimal", "rows": "tilt", "index": index, "pool": str(pool),
+            "seed": str(seed), "value": repr(sel.value)}  # fmt: skip
+    path = write_poses(out, sel.q, model=model, metadata=meta)
+    what = f"{len(sel.q)} configurations of {safe(model.name)} (inclinometers)"
+    console.print(f"wrote {what} to {safe(str(path))}", highlight=False)

@@ -73,9 +73,9 @@ RowsOption = Annotated[
     str,
     typer.Option(
         "--rows",
-        metavar="position|pose|point|plane|distance",
+        metavar="position|pose|point|plane|distance|tilt",
         help="the quantities that will be measured (point, plane, distance: configurations at a socket, "
-        "on a plate, ball-bar pairs; with the constraint labels)",
+        "on a plate, ball-bar pairs; with the constraint labels; tilt: inclinometers on every link)",
     ),
 ]
 KindOption = Annotated[
@@ -110,6 +110,10 @@ def poses_command(
 
     refuse_overwrite(out, force, "poses file")
     m = resolve_model(robot)
+    if rows == "tilt":  # inclinometer readings (robocal.cli.inclinometer)
+        from robocal.cli.inclinometer import plan_tilt_poses
+
+        return plan_tilt_poses(m, out, n=n or 30, pool=pool, index=index, seed=seed)
     if rows in ("point", "plane", "distance"):  # a socket, a plate, a ball-bar (robocal.cli.constraints)
         from robocal.cli.constraints import plan_constraint_poses
 

@@ -29,7 +29,7 @@ from robocal.identify.observability_indices import (
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.chain import Model
 
-__all__ = ["ConstraintPoseSelection", "select_constraint_poses"]
+__all__ = ["ConstraintPoseSelection", "greedy_blocks", "select_constraint_poses"]
 
 Array = NDArray[np.float64]
 
@@ -97,14 +97,27 @@ def select_constraint_poses(
     selection = identifiable(problem)
     problem = problem.fix(selection.dropped_names)
     J = problem.jacobian(problem.x0) * problem.free_scale
-    p = J.shape[1]
     extra = np.arange(sum(len(r) for r in _unit_rows(pool, units)), len(J))  # known distances: always in
     blocks = [J[r] for r in _unit_rows(pool, units)]
-    base = J[extra]
-    ridge = 1e-9 * float(np.mean(np.sum(J * J, axis=0)))
+    chosen, indices, baseline = greedy_blocks(blocks, n, index, shortlist, base=J[extra])
+    plan = _subset(pool, units, chosen)
+    return ConstraintPoseSelection(plan, index, float(indices[index]), indices, baseline, problem.free_names)
+
+
+def greedy_blocks(
+    blocks: list[Array], n: int, index: str = "O1", shortlist: int = 16, base: Array | None = None
+) -> tuple[list[int], ObservabilityIndices, ObservabilityIndices]:
+    """Choose ``n`` of the candidates' row blocks (each ``(r_k, p)``, columns scaled alike):
+    at each step, of the ``shortlist`` candidates with the largest D-optimal gain
+    ``log det(I + J_k M⁻¹ J_kᵀ)`` the one that maximises ``index`` (O1: the gain itself).
+    ``base``: rows always in (known distances).  Returns the chosen candidates in order,
+    O1..O5 of the choice and of the first ``n`` candidates (a random choice's baseline)."""
+    p = blocks[0].shape[1]
+    base = np.zeros((0, p)) if base is None else base
+    ridge = 1e-9 * float(np.mean([np.sum(b * b) for b in blocks]))
     M = ridge * np.eye(p) + base.T @ base
     chosen: list[int] = []
-    free = np.ones(len(units), dtype=bool)
+    free = np.ones(len(blocks), dtype=bool)
     for _ in range(n):
         Minv = np.linalg.inv(M)
         candidates = np.flatnonzero(free)
@@ -127,8 +140,7 @@ def select_constraint_poses(
         M = M + blocks[k].T @ blocks[k]
     indices = _index(np.vstack([base, *[blocks[k] for k in chosen]]), n, p)
     baseline = _index(np.vstack([base, *blocks[:n]]), n, p)
-    plan = _subset(pool, units, chosen)
-    return ConstraintPoseSelection(plan, index, float(indices[index]), indices, baseline, problem.free_names)
+    return chosen, indices, baseline
 
 
 def _index(J: Array, n: int, p: int) -> ObservabilityIndices:
