@@ -218,7 +218,7 @@ def run_demo(
     demo = _Demo(robot, seed, quick, min(cycles, 5) if quick else cycles)
     steps = Steps(
         [
-            "building the calibration model (seed 000)",
+            "building the calibration model (Motta 2005, seed 000)",
             "drawing the real robot and placing the tracker",
             "planning poses (O1-optimal, held-out, ISO 9283 cube)",
             "simulating the laser-tracker measurements",

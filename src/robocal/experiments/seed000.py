@@ -237,10 +237,10 @@ def _print(numbers: dict[str, Any]) -> None:
     seed = numbers["seed"]
     for name, r in numbers["robots"].items():
         table = Table(
-            title=f"{name}: link parameterisations, Motta et al. (seed 000) eqs. 11-27 vs robocal's builder",
+            title=f"{name}: link parameterisations, Motta 2005 (seed 000) eqs. 11-27 vs robocal's builder",
             title_justify="left",
         )
-        for col in ("link", "axes", "seed 000", "robocal (identified in bold)", "same"):
+        for col in ("link", "axes", "Motta 2005", "robocal (identified in bold)", "same"):
             table.add_column(col)
         for row in r["links"]:
             params = " ".join(
@@ -259,7 +259,7 @@ def _print(numbers: dict[str, Any]) -> None:
             )
         console.print(table)
     summary = Table(
-        title="Motta et al. (seed 000): the numbers beside robocal's "
+        title="Motta 2005 (seed 000): the numbers beside robocal's "
         "(15 O1-optimal pose measurements, 200 held-out poses)",
         title_justify="left",
     )
@@ -292,7 +292,7 @@ def _print(numbers: dict[str, Any]) -> None:
         )
     console.print(summary)
     console.print(
-        f"Motta et al. (seed 000): {seed['parameters_6dof_pose']} parameters for a 6-DOF robot "
+        f"Motta 2005 (seed 000): {seed['parameters_6dof_pose']} parameters for a 6-DOF robot "
         f"with pose measurement, "
         f"{seed['measurement_points']} measurement points suffice; errors {seed['error_before_mm'][0]:g}-"
         f"{seed['error_before_mm'][1]:g} mm before and < {seed['error_after_mm']:g} mm after calibration.",
@@ -319,6 +319,6 @@ def _write(out: Path, numbers: dict[str, Any], reports: dict[str, Any]) -> None:
                 where / f"{name}_report.html",
                 data=train,
                 test_data=test,
-                title=f"Motta et al. (seed 000): {name} built model, 15 pose measurements",
+                title=f"Motta 2005 (seed 000): {name} built model, 15 pose measurements",
             )
         atomic_write_text(where / "seed000.json", strict_json(numbers, indent=2, default=float) + "\n")

@@ -67,6 +67,7 @@ from robocal.identify.problem_setup import without_measured_tool as _without_mea
 from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
 from robocal.identify.result_io import RESULT_FILES, file_hash
 from robocal.identify.stages import initial_frames_and_tools, screen_unidentifiable
+from robocal.identify.streaming_calibrate import Streaming, calibrate_streamed, streams
 from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 
@@ -90,6 +91,7 @@ __all__ = [
     "Pruning",
     "RobustLoss",
     "Setup",
+    "Streaming",
     "Weights",
     "calibrate",
     "calibrate_physics",
@@ -154,6 +156,7 @@ def calibrate(
     residual: ResidualChoice = "none",
     residual_harmonics: int | Sequence[int] | None = None,
     cv_folds: int = 5,
+    streaming: Streaming | None = None,
     **settings: Any,
 ) -> CalibrationResult:
     """Identify the robot's parameters from measurements: the physical model and,
@@ -256,6 +259,12 @@ def calibrate(
         residual_harmonics: the numbers of harmonics CV chooses from (default
             :data:`robocal.identify.residual.stage.DEFAULT_HARMONICS`).
         cv_folds: folds of the cross-validation.
+        streaming: when a large input streams (:class:`~robocal.identify.streaming_calibrate.Streaming`;
+            default: above 50,000 poses with ``method="lm"`` and the linear loss): the
+            decisions (start values, identifiable set, pruning, joint-effect holds, the
+            residual's choice) on a well-spread subsample, then the chosen parameters and the
+            learned residual fitted on all poses from normal equations accumulated by chunks
+            (:mod:`robocal.identify.streaming_calibrate`; ``diagnostics.streaming`` says so).
 
     Joint effects are physical: an identified clearance tilt, backlash or compliance is at
     least :data:`EFFECT_SIGNIFICANCE` σ above zero.  One that the fit puts below zero, or
@@ -274,15 +283,21 @@ def calibrate(
     physics = CalibrationOptions.from_keywords(options, **settings)
     if model.residual is not None:  # a calibrated model calibrated again: its residual is refitted
         model = dataclasses.replace(model, residual=None)
-    if residual == "none":
-        return _with_tool_facts(calibrate_physics(model, data, method, physics), physics.setup, data)
-    from robocal.identify.residual.stage import calibrate_with_residual
 
-    result = calibrate_with_residual(
-        calibrate_physics, model, data, method, physics.keywords(),
-        kind=residual, harmonics=residual_harmonics, folds=cv_folds,
-    )  # fmt: skip
-    return _with_tool_facts(result, physics.setup, data)
+    def dense(some: Measurements, settings: CalibrationOptions) -> CalibrationResult:
+        if residual == "none":
+            return calibrate_physics(model, some, method, settings)
+        from robocal.identify.residual.stage import calibrate_with_residual
+
+        return calibrate_with_residual(
+            calibrate_physics, model, some, method, settings.keywords(),
+            kind=residual, harmonics=residual_harmonics, folds=cv_folds,
+        )  # fmt: skip
+
+    streaming = Streaming() if streaming is None else streaming
+    if streams(data, method, physics, streaming):  # large inputs: decisions on a subsample, fit streamed
+        return _with_tool_facts(calibrate_streamed(dense, data, physics, streaming), physics.setup, data)
+    return _with_tool_facts(dense(data, physics), physics.setup, data)
 
 
 def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements) -> CalibrationResult:

@@ -57,17 +57,16 @@ class Diagnostics:
     """How the calibration went, beyond its estimates.
 
     Attributes:
-        solve_seconds: time in the solver (s); evaluations: residual (and Jacobian)
-            evaluations of all fits.
+        solve_seconds: time in the solver (s); evaluations: of all fits (residual, Jacobian).
         level: calibration level 1-3; effects: joint effects ``"none"``, ``"predict"`` or
             ``"identify"``; load_passes: passes of the joint loads (None: one, or none).
         outlier_poses: indices of poses with residuals far beyond the others.
         fit_to_noise: the residuals against the stated noise (None without one).
-        cv: the cross-validation table of the learned residual's choice (its ``to_dict``),
-            None when no residual was considered; residual_rms_after_mm: RMS error with the
-            learned residual (mm).
+        cv: the learned residual's cross-validation table (``to_dict``; None: no residual
+            considered); residual_rms_after_mm: RMS error with the learned residual (mm).
         at_bounds, objective: ``method="bounded"``: the parameters at a bound, and seed
-            001's objective before and after.
+            001's objective before and after; streaming: poses, subsample, chunk, passes of
+            a large input's streamed fit (:mod:`robocal.identify.streaming_calibrate`), or None.
     """
 
     solve_seconds: float = 0.0
@@ -81,6 +80,7 @@ class Diagnostics:
     residual_rms_after_mm: float | None = None
     at_bounds: tuple[str, ...] | None = None
     objective: Mapping[str, Any] | None = None
+    streaming: Mapping[str, Any] | None = None
 
     def cv_table(self) -> CVTable | None:
         """The cross-validation table as a :class:`~robocal.identify.residual.stage.CVTable`."""

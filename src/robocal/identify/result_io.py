@@ -95,6 +95,8 @@ def metadata_dict(result: Any) -> dict[str, Any]:
         out["cv"] = dict(d.cv)
     if d.residual_rms_after_mm is not None:
         out["residual_rms_after_mm"] = d.residual_rms_after_mm
+    if d.streaming is not None:
+        out["streaming"] = dict(d.streaming)
     out |= dict(result.records)
     if result.provenance is not None:
         out["provenance"] = result.provenance.to_dict()
@@ -250,6 +252,7 @@ def _diagnostics(data: dict[str, Any]) -> dict[str, Any]:
         residual_rms_after_mm=None if rms is None else float(rms),
         at_bounds=None if at_bounds is None else tuple(at_bounds),
         objective=data.get("objective"),
+        streaming=data.get("streaming"),
     )
 
 

@@ -20,16 +20,28 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from robocal.identify.problem import Problem
 from robocal.identify.solve_result import SolveResult
+from robocal.identify.stages import Covariance, residual_variance
 from robocal.model.chain import Model
 
-__all__ = ["DEFAULT_CHUNK", "NormalEquations", "StreamingFit", "levenberg_marquardt_streaming", "refit"]
+__all__ = [
+    "DEFAULT_CHUNK",
+    "ChunkedProblem",
+    "NormalEquations",
+    "StreamingFit",
+    "levenberg_marquardt_streaming",
+    "refit",
+    "streamed_covariance",
+]
 
 Array = NDArray[np.float64]
 
@@ -47,12 +59,27 @@ class NormalEquations:
         Jtr: ``(p,)`` ``Jᵀ r``.
         cost: ``rᵀ r`` (weighted residuals; m² for unit weights).
         rows: number of residuals (3 per pose).
+        position_normal, position_cost, position_rows: the same sums over the position rows
+            alone (pose measurements: the orientation rows are the rest; None: every row
+            is a position row).
     """
 
     JtJ: Array
     Jtr: Array
     cost: float
     rows: int
+    position_normal: Array | None = None
+    position_cost: float | None = None
+    position_rows: int | None = None
+
+
+class StreamedSums(Protocol):
+    """What :func:`levenberg_marquardt_streaming` evaluates: the weighted cost and the
+    normal equations at a parameter point, one pass over the poses each."""
+
+    def cost(self, x: Array) -> float: ...
+
+    def normal_equations(self, x: Array) -> NormalEquations: ...
 
 
 class _PositionData:
@@ -68,7 +95,7 @@ class _PositionData:
         v[self.free] = x
         return v
 
-    def _chunks(self):
+    def _chunks(self) -> Iterator[slice]:
         for lo in range(0, len(self.q), self.chunk):
             yield slice(lo, min(lo + self.chunk, len(self.q)))
 
@@ -98,7 +125,7 @@ class _PositionData:
 
 
 def levenberg_marquardt_streaming(
-    data: _PositionData, x0: Array, *, max_iterations: int = 200, tolerance: float = 1e-10
+    data: StreamedSums, x0: Array, *, max_iterations: int = 200, tolerance: float = 1e-10
 ) -> tuple[SolveResult, NormalEquations]:
     """:func:`~robocal.identify.solvers.levenberg_marquardt` on accumulated normal equations.
 
@@ -240,7 +267,7 @@ def refit(
     x = result.x
     dof_resid = max(ne.rows - len(x), 1)
     s2 = ne.cost / dof_resid
-    covariance = s2 * np.linalg.pinv(ne.JtJ)
+    covariance = np.asarray(s2 * np.linalg.pinv(ne.JtJ), dtype=float)
     fitted = chain.with_free_values(x)
     unweighted = (
         ne.cost if sigma is None else _PositionData(chain, q, position, np.ones((len(q), 3)), chunk).cost(x)
@@ -262,3 +289,102 @@ def refit(
         evaluations=result.evaluations,
         seconds=time.perf_counter() - t0,
     )
+
+
+class ChunkedProblem:
+    """A calibration :class:`~robocal.identify.problem.Problem` over ``n`` poses, built and
+    evaluated one chunk of poses at a time (``problem_of(slice)`` builds a chunk's problem:
+    its joint values, measurements, weights, joint-effect patterns and known
+    perturbations; all chunks share the unknowns ``x``).  Memory: one chunk's Jacobian
+    ``(rows · chunk, p)``; the sums are ``(p, p)``.
+
+    A trial point's cost is the pass that also gives its normal equations (a pass with
+    the Jacobian costs little more than forward kinematics, and an accepted trial needs
+    them): the last pass is kept for the solver's next question."""
+
+    def __init__(self, problem_of: Callable[[slice], Problem], n: int, chunk: int = DEFAULT_CHUNK) -> None:
+        if chunk < 1:
+            raise ValueError(f"chunk must be a positive number of poses, got {chunk}")
+        self.problem_of, self.n, self.chunk = problem_of, int(n), int(chunk)
+        self.passes = 0
+        self._last: tuple[bytes, NormalEquations] | None = None
+
+    def chunks(self) -> Iterator[slice]:
+        """The slices of poses, in order."""
+        for lo in range(0, self.n, self.chunk):
+            yield slice(lo, min(lo + self.chunk, self.n))
+
+    def cost(self, x: Array) -> float:
+        """``rᵀ r`` of the weighted residuals at ``x``."""
+        return self.normal_equations(x).cost
+
+    def normal_equations(self, x: Array) -> NormalEquations:
+        """:class:`NormalEquations` at ``x`` (the position rows' sums too)."""
+        x = np.asarray(x, dtype=float)
+        key = x.tobytes()
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        self.passes += 1
+        p = len(x)
+        JtJ, Jtr, normal_p = np.zeros((p, p)), np.zeros(p), np.zeros((p, p))
+        cost = cost_p = 0.0
+        rows = rows_p = 0
+        for s in self.chunks():
+            problem = self.problem_of(s)
+            r, J = problem.residual(x), problem.jacobian(x)
+            JtJ += J.T @ J
+            Jtr += J.T @ r
+            cost += float(r @ r)
+            rows += len(r)
+            if problem.rows == 6:  # the position rows apart: their own variance factor
+                keep = np.tile(np.arange(6) < 3, len(r) // 6)
+                Jp, rp = J[keep], r[keep]
+                normal_p += Jp.T @ Jp
+                cost_p += float(rp @ rp)
+                rows_p += len(rp)
+        if rows_p == 0:
+            ne = NormalEquations(JtJ, Jtr, cost, rows)
+        else:
+            ne = NormalEquations(JtJ, Jtr, cost, rows, normal_p, cost_p, rows_p)
+        self._last = (key, ne)
+        return ne
+
+    def mean_square_position(self, x: Array) -> float:
+        """The mean squared position error (m², unweighted) over all poses at ``x``."""
+        x = np.asarray(x, dtype=float)
+        total = 0.0
+        for s in self.chunks():
+            problem = self.problem_of(s)
+            r = problem.residual(x, weighted=False).reshape(-1, problem.rows)[:, :3]
+            total += float(np.einsum("ij,ij->", r, r))
+        return total / max(self.n, 1)
+
+
+def streamed_covariance(ne: NormalEquations, known_noise: bool, significance: float) -> Covariance:
+    """The :class:`~robocal.identify.stages.Covariance` of a fit from its accumulated normal
+    equations: the rule of :func:`robocal.identify.stages.uncertainty` (σ̂² per row group
+    by :func:`~robocal.identify.stages.residual_variance`; pose measurements: the sandwich
+    of the two groups), on ``JᵀJ`` instead of ``J``.  Columns scaled to unit norm before
+    the (pseudo-)inverse; the condition number is the scaled ``J``'s (√ of ``JᵀJ``'s)."""
+    p = len(ne.Jtr)
+    norms = np.sqrt(np.maximum(np.diag(ne.JtJ), 1e-300))
+    outer = np.outer(norms, norms)
+    N = ne.JtJ / outer
+    lam = np.linalg.eigvalsh(N)
+    cond = math.sqrt(lam[-1] / lam[0]) if lam[0] > 0 else float("inf")
+    inverse = np.linalg.pinv(N, hermitian=True)
+    if ne.position_normal is None or ne.position_cost is None or ne.position_rows is None:
+        s2 = residual_variance(ne.cost, ne.rows - p, known_noise, significance)
+        cov = s2 * inverse / outer
+    else:  # two groups of rows, each with its share of the degrees of freedom
+        rows_p, rows_w = ne.position_rows, ne.rows - ne.position_rows
+        s2 = residual_variance(ne.position_cost, rows_p - p * rows_p / ne.rows, known_noise, significance)
+        dof_w = rows_w - p * rows_w / ne.rows
+        s2_w = residual_variance(ne.cost - ne.position_cost, dof_w, False, significance)
+        middle = (s2 * ne.position_normal + s2_w * (ne.JtJ - ne.position_normal)) / outer
+        cov = inverse @ middle @ inverse / outer
+    cov = 0.5 * (cov + cov.T)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.where(np.outer(std, std) > 0, cov / np.outer(std, std), 0.0)
+    return Covariance(float(s2), cov, std, corr, cond)

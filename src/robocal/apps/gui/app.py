@@ -100,7 +100,7 @@ def create_app(workdir: Path):
     from flask import abort, send_from_directory
 
     import robocal as rc
-    from robocal.apps.gui import builder_page, calibrate_page
+    from robocal.apps.gui import builder_page, calibrate_page, poses_page
 
     app = Dash(
         __name__,
@@ -126,6 +126,7 @@ def create_app(workdir: Path):
                 value="builder",
                 children=[
                     dcc.Tab(label="Model builder", value="builder", children=builder_page.layout(catalog)),
+                    dcc.Tab(label="Pose planning", value="poses", children=poses_page.layout(catalog)),
                     dcc.Tab(label="Calibration", value="calibrate", children=calibrate_page.layout(catalog)),
                 ],
             ),
@@ -133,6 +134,7 @@ def create_app(workdir: Path):
     )
     builder_page.register(app)
     calibrate_page.register(app, workdir)
+    poses_page.register(app)
     _bound_requests(app.server)
     _guard(app)
     runs = workdir / "runs"

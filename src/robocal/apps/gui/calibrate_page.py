@@ -18,7 +18,7 @@ from typing import Any
 
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
-from robocal.apps.gui import columns_view, export_page, runs_page
+from robocal.apps.gui import columns_view, export_page, program_view, runs_page
 from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.calibrate_views import (
     decode_bytes,
@@ -44,7 +44,7 @@ def layout(catalog: Sequence[str]) -> html.Div:
     return html.Div(
         [
             html.Div([reader, html.Div(id="csv-preview")], className="left"),
-            html.Div([model, html.Div(id="cal-results"), after], className="right"),
+            html.Div([model, html.Div(id="cal-results"), after, program_view.fieldset()], className="right"),
             # fires once per arming (max_intervals = n_intervals + 1): polls never overlap
             dcc.Interval(id="cal-poll", interval=400, max_intervals=0),
             dcc.Interval(id="runs-refresh", interval=3000),
@@ -166,6 +166,7 @@ def register(app: Dash, workdir: Path) -> None:
     _register_data(app, page)
     runs_page.register(app, runner, workdir, RUN_STATES, lambda session, *a: _start_run(page, session, *a))
     export_page.register(app, workdir)
+    program_view.register(app, workdir)
 
 
 _READER_INPUTS = (

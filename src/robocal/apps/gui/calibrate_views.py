@@ -230,11 +230,22 @@ def results_view(out: Path) -> list[Any]:
             ]
         ),
         dcc.Graph(figure=_residual_figure(sets), config={"displaylogo": False}),
+        _points_3d(sets),
         html.H4("identified parameters (σ: one standard deviation)"),
         _param_table(result),
         html.H4("not identified, and why"),
         html.Ul(dropped or [html.Li("none")], id="dropped"),
     ]
+
+
+def _points_3d(sets: dict) -> Any:
+    """The measured points and the error vectors in 3D (:mod:`residual_view`), if recorded."""
+    from robocal.apps.gui.residual_view import residual_figure
+
+    figure = residual_figure(sets)
+    if figure is None:
+        return ""
+    return dcc.Graph(figure=figure, id="residual-3d", config={"displaylogo": False})
 
 
 def report_links(run_id: str, ready: bool) -> list[Any]:

@@ -150,7 +150,7 @@ def _run(job: CalibrationJob, queue) -> None:
         rc.write_measurements(run.train, job.out / "train.csv")
         if run.test is not None:
             rc.write_measurements(run.test, job.out / "test.csv")
-        _write_errors(job.out / "errors.json", run.result, run.train, run.validation)
+        _write_errors(job.out / "errors.json", run.result, run.train, run.validation, run.test)
         _send(queue, "saved", str(job.out))
         _send(queue, "done", str(job.out))
     except (workflow.CalibrateFileError, ModelFileError) as err:
@@ -171,7 +171,7 @@ def _gui_message(err: Exception) -> str:
     return str(err)
 
 
-def _write_errors(path: Path, result, train, validation) -> None:
+def _write_errors(path: Path, result, train, validation, validation_data=None) -> None:
     """The per-pose position errors the page plots (mm) and their statistics: the start model
     and the calibrated one on the calibration poses, the calibrated one on the held-out poses."""
     import json
@@ -189,8 +189,24 @@ def _write_errors(path: Path, result, train, validation) -> None:
         "before": entry(before_validation(result, train)),
         "after": entry(rc.validate(result, train)),
         "held_out": entry(validation),
+        "points": {
+            "train": _error_vectors(result, train),
+            "held_out": _error_vectors(result, validation_data),
+        },
     }
     atomic_write_text(path, json.dumps(sets))
+
+
+def _error_vectors(result, data) -> dict[str, Any] | None:
+    """The measured points and the calibrated model's error at each (predicted - measured),
+    device frame, mm, rows as in ``data`` (the page's 3D view); None without data."""
+    if data is None or data.position is None:
+        return None
+    predicted = result.predict(data.q)[:, :3, 3]
+    return {
+        "measured_mm": (data.position * 1e3).round(4).tolist(),
+        "error_mm": ((predicted - data.position) * 1e3).round(5).tolist(),
+    }
 
 
 @dataclass
