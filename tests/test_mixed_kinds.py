@@ -239,3 +239,38 @@ def test_cli_poses_rows_tilt_feeds_the_inclinometer_simulation(tmp_path):
     small = runner.invoke(app, ["poses", "katana450", "--rows", "tilt", "--n", "50", "--pool", "20",
                                 "-o", str(tmp_path / "x.csv")])  # fmt: skip
     assert small.exit_code != 0 and "--pool" in small.output and not (tmp_path / "x.csv").exists()
+
+
+# ---------------------------------------------------------------------- held-out placements
+def test_simulate_placements_share_the_true_robot_and_validate_held_out(tmp_path):
+    import re
+
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    runner = CliRunner()
+    data = tmp_path / "sockets.csv"
+    args = ["simulate", "ur10", "--kind", "point", "--n", "40", "--seed", "4", "--noise", "0.02mm"]
+    run = runner.invoke(app, [*args, "--placements", "2", "-o", str(data)])
+    assert run.exit_code == 0, run.output
+    held_out = tmp_path / "sockets.placement2.csv"
+    truth = json.loads((tmp_path / "sockets.csv.truth.json").read_text())
+    first, second = truth["placements"]
+    assert second["file"] == held_out.name and read_constraints(held_out, 6).n == second["rows"]
+    np.testing.assert_allclose(first["point_distances_m"], second["point_distances_m"])  # one tool, moved
+    assert np.linalg.norm(np.subtract(first["points_m"], second["points_m"])) > 0.1  # elsewhere
+    a, b, d = truth["point_distances_m"][0]
+    out = tmp_path / "cal"
+    cal = runner.invoke(app, ["calibrate", "ur10", "--data", str(data), "--distance", f"{a},{b}={d * 1e3}mm",
+                              "-o", str(out)])  # fmt: skip
+    assert cal.exit_code == 0, cal.output
+    check = runner.invoke(app, ["validate", str(out), "--data", str(held_out)])
+    assert check.exit_code == 0, check.output
+    after, before = check.output.split("before calibration")
+    spread = [float(x) for x in re.findall(r"RMS spread (\d+\.\d+) mm", after)]
+    nominal = [float(x) for x in re.findall(r"RMS spread (\d+\.\d+) mm", before)]
+    assert len(spread) == 2 and max(spread) < 0.1 < min(nominal)  # the calibration holds elsewhere
+    again = runner.invoke(app, [*args, "--placements", "3", "-o", str(data)])
+    assert again.exit_code != 0 and "--force" in again.output
+    assert not (tmp_path / "sockets.placement3.csv").exists()  # nothing half-written

@@ -25,9 +25,11 @@ __all__ = [
     "calibrate_constraint_command",
     "calibrate_constraint_file",
     "is_constraint_file",
+    "placement_files",
     "plan_constraint_poses",
     "print_each_kind",
     "read_mixed",
+    "simulate_constraint_command",
     "simulate_constraint_file",
     "validate_constraint_file",
 ]
@@ -280,14 +282,52 @@ def validate_constraint_file(
                 console.print("  " + line, highlight=False)
 
 
+def simulate_constraint_command(model_of, kind: str, poses, out, force: bool, options: tuple) -> None:
+    """``robocal simulate ROBOT --kind KIND``: ``model_of()`` the robot; ``options``: ``--n``,
+    ``--count``, ``--length``, ``--noise``, ``--seed``, ``--length-tol``, ``--angle-tol``,
+    ``--placements``."""
+    from robocal.console import refuse_overwrite
+    from robocal.model.complete import calibration_model
+
+    n, count, length, noise, seed, length_tol, angle_tol, placements = options
+    if out is None or poses is not None:
+        raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
+    for path in placement_files(out, placements):
+        refuse_overwrite(path, force, "measurement file")
+    model = calibration_model(model_of(), "position")
+    simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise, seed=seed,
+                             length_tol=length_tol, angle_tol=angle_tol, placements=placements)  # fmt: skip
+
+
+def placement_files(out: Path, placements: int) -> list[Path]:
+    """``OUT`` and, for each further placement ``k``, ``OUT``'s stem + ``.placement<k>`` + suffix."""
+    return [out] + [out.with_name(f"{out.stem}.placement{k}{out.suffix}") for k in range(2, placements + 1)]
+
+
+def _scene_doc(scene, path: Path, n: int) -> dict:
+    return {
+        "file": path.name,
+        "rows": n,
+        "points_m": scene.points.tolist(),
+        "planes": scene.planes.tolist(),
+        "point_distances_m": [
+            [a, b, float(np.linalg.norm(scene.points[a] - scene.points[b]))]
+            for a in range(len(scene.points))
+            for b in range(a + 1, len(scene.points))
+        ],
+    }
+
+
 def simulate_constraint_file(
     model, kind: str, out: Path, *, n: int, count: int, length: str, noise: str | None, seed: int | None,
-    length_tol: str, angle_tol: str,
+    length_tol: str, angle_tol: str, placements: int = 1,
 ) -> None:  # fmt: skip
     """Simulate ``kind`` on a true robot drawn around ``model``; write ``out`` and
-    ``out``.truth.json (the true parameters and scene)."""
+    ``out``.truth.json (the true parameters and scene); ``placements`` > 1: the same true
+    robot at the scene moved rigidly (:func:`~robocal.measure.constraints.sim.moved_scene`),
+    one file each (:func:`placement_files`), all in the one truth file: held-out data."""
     from robocal.measure.constraints.data import write_constraints
-    from robocal.measure.constraints.sim import simulate_constraints
+    from robocal.measure.constraints.sim import moved_scene, simulate_constraints
     from robocal.measure.true_model import draw_true_model, parse_quantity_option
 
     if kind not in CONSTRAINT_MEASURES:
@@ -296,34 +336,34 @@ def simulate_constraint_file(
         raise fail("--n must be >= 4 and --count >= 1")
     length_m = parse_quantity_option(length, "length", "--length")
     sigma = 1e-5 if noise is None else parse_quantity_option(noise, "length", "--noise")
+    files, runs = placement_files(out, placements), []
     try:
         true = draw_true_model(model, length=length_tol, angle=angle_tol, seed=seed)
         data, scene = simulate_constraints(
             true, kind, n, sigma=sigma, count=count, length=length_m, seed=seed
         )
+        runs.append((data, scene))
+        rng = np.random.default_rng(None if seed is None else [seed, 33])  # placements: their own draws
+        for _ in files[1:]:
+            moved = moved_scene(scene, rng)
+            runs.append(
+                simulate_constraints(true, kind, n, sigma=sigma, length=length_m, seed=rng, scene=moved)
+            )
     except ValueError as err:
         raise fail(str(err)) from None
-    truth = {
-        "kind": kind,
-        "sigma_m": sigma,
-        "true_parameters": dict(zip(true.names, true.values.tolist(), strict=True)),
-        "points_m": scene.points.tolist(),
-        "planes": scene.planes.tolist(),
-        "length_m": scene.length,
-        "point_distances_m": [
-            [a, b, float(np.linalg.norm(scene.points[a] - scene.points[b]))]
-            for a in range(len(scene.points))
-            for b in range(a + 1, len(scene.points))
-        ],
-    }
+    truth = {"kind": kind, "sigma_m": sigma,
+             "true_parameters": dict(zip(true.names, true.values.tolist(), strict=True)),
+             "length_m": scene.length} | _scene_doc(scene, out, data.n)  # fmt: skip
+    if placements > 1:
+        truth["placements"] = [_scene_doc(s, f, d.n) for (d, s), f in zip(runs, files, strict=True)]
     from robocal.outdir import write_together
 
     truth_path = out.with_name(out.name + ".truth.json")
-    write_together(
-        {out: write_constraints(data).encode(), truth_path: (json.dumps(truth, indent=1) + "\n").encode()}
-    )
-    console.print(f"wrote {safe(str(out))} ({data.n} rows, {kind}) and the truth {safe(str(truth_path))}",
-                  highlight=False, soft_wrap=True)  # fmt: skip
+    texts = {f: write_constraints(d).encode() for (d, _), f in zip(runs, files, strict=True)}
+    write_together(texts | {truth_path: (json.dumps(truth, indent=1) + "\n").encode()})
+    written = [f"{safe(str(f))} ({d.n} rows, {kind})" for (d, _), f in zip(runs, files, strict=True)]
+    console.print(f"wrote {', '.join(written)} and the truth {safe(str(truth_path))}", highlight=False,
+                  soft_wrap=True)  # fmt: skip
 
 
 def plan_constraint_poses(model, kind: str, out: Path, *, n: int, pool: int, index: str, seed: int) -> None:

@@ -283,6 +283,10 @@ PoseCountOption = Annotated[int, typer.Option("--n", min=4, metavar="N", help="-
 LengthOption = Annotated[
     str, typer.Option("--length", metavar="LENGTH", help="--kind distance: the pairs' length")
 ]
+PLACEMENTS_HELP = "--kind: K placements of the scene, one true robot (OUT, OUT.placement2.csv ...: held-out)"
+PlacementsOption = Annotated[
+    int, typer.Option("--placements", min=1, max=20, metavar="K", help=PLACEMENTS_HELP)
+]
 
 
 def simulate_command(
@@ -305,10 +309,11 @@ def simulate_command(
     n: PoseCountOption = 60,
     count: CountOption = 2,
     length: LengthOption = "300mm",
+    placements: PlacementsOption = 1,
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
     if kind is not None:  # fixed points, planes, distances (robocal.cli.constraints)
-        options = (n, count, length, noise, seed, length_tol, angle_tol)
+        options = (n, count, length, noise, seed, length_tol, angle_tol, placements)
         return _simulate_constraints(robot, kind, poses, out, force, options)
     if log:
         if poses is not None or out is None:
@@ -374,19 +379,10 @@ def _simulate_inclinometer(
 
 
 def _simulate_constraints(robot, kind: str, poses, out, force: bool, options: tuple) -> None:
-    """``simulate --kind``: constraint measurements (:mod:`robocal.cli.constraints`);
-    ``options``: ``--n``, ``--count``, ``--length``, ``--noise``, ``--seed``, ``--length-tol``,
-    ``--angle-tol``."""
-    n, count, length, noise, seed, length_tol, angle_tol = options
-    if out is None or poses is not None:
-        raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
-    from robocal.cli.constraints import simulate_constraint_file
-    from robocal.model.complete import calibration_model
+    """``simulate --kind``: :func:`robocal.cli.constraints.simulate_constraint_command`."""
+    from robocal.cli.constraints import simulate_constraint_command
 
-    refuse_overwrite(out, force, "measurement file")
-    model = calibration_model(_model(robot), "position")
-    simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise, seed=seed,
-                             length_tol=length_tol, angle_tol=angle_tol)  # fmt: skip
+    simulate_constraint_command(lambda: _model(robot), kind, poses, out, force, options)
 
 
 def _tolerances(items: list[str]) -> dict[str, str]:

@@ -19,7 +19,7 @@ from robocal.measure.ik import solve_ik
 from robocal.measure.ik_starts import random_configurations
 from robocal.model.chain import Model
 
-__all__ = ["SceneTruth", "simulate_constraints", "simulate_tracker_rows"]
+__all__ = ["SceneTruth", "moved_scene", "simulate_constraints", "simulate_tracker_rows"]
 
 Array = NDArray[np.float64]
 
@@ -45,19 +45,24 @@ def _workspace(true: Model, rng: np.random.Generator, count: int) -> Array:
     return true.fk(random_configurations(true, count, rng=rng))[:, :3, 3]
 
 
-def _points(true, n, n_points, sigma, rng) -> tuple[ConstraintSet, SceneTruth]:
-    centres = _workspace(true, rng, n_points)
+def _points(true, n, n_points, sigma, rng, scene=None) -> tuple[ConstraintSet, SceneTruth]:
+    centres = _workspace(true, rng, n_points) if scene is None else scene.points
+    n_points = len(centres)
     label = np.arange(n) % n_points
     q, ok = _reach(true, centres[label] + sigma * rng.standard_normal((n, 3)), rng)
     data = ConstraintSet(q[ok], label[ok], -np.ones(ok.sum(), dtype=np.intp), sigma=sigma)
     return data, SceneTruth(centres, np.zeros((0, 4)), 0.0)
 
 
-def _planes(true, n, n_planes, sigma, rng) -> tuple[ConstraintSet, SceneTruth]:
-    normals = rng.standard_normal((n_planes, 3))
-    normals /= np.linalg.norm(normals, axis=1)[:, None]
-    through = _workspace(true, rng, n_planes)
-    planes = np.column_stack([normals, np.einsum("ij,ij->i", normals, through)])
+def _planes(true, n, n_planes, sigma, rng, scene=None) -> tuple[ConstraintSet, SceneTruth]:
+    if scene is None:
+        normals = rng.standard_normal((n_planes, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        through = _workspace(true, rng, n_planes)
+        planes = np.column_stack([normals, np.einsum("ij,ij->i", normals, through)])
+    else:
+        planes = scene.planes
+        n_planes = len(planes)
     label = np.arange(n) % n_planes
     p = _workspace(true, rng, n)  # projected onto their plane: reachable near the workspace
     n_k = planes[label, :3]
@@ -94,6 +99,7 @@ def simulate_constraints(
     count: int = 2,
     length: float = 0.3,
     seed: int | np.random.Generator | None = 0,
+    scene: SceneTruth | None = None,
 ) -> tuple[ConstraintSet, SceneTruth]:
     """Constraint data of ``kind`` recorded on the ``true`` robot (module docstring).
 
@@ -105,6 +111,7 @@ def simulate_constraints(
         count: fixed points or planes.
         length: the distance pairs' length (m).
         seed: the random draw.
+        scene: the points or planes to touch (e.g. :func:`moved_scene`); None: drawn.
     """
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
@@ -112,9 +119,9 @@ def simulate_constraints(
         raise ValueError("n must be >= 2 and count >= 1")
     rng = np.random.default_rng(seed)
     if kind == "point":
-        return _points(true, n, count, sigma, rng)
+        return _points(true, n, count, sigma, rng, scene)
     if kind == "plane":
-        return _planes(true, n, count, sigma, rng)
+        return _planes(true, n, count, sigma, rng, scene)
     return _distances(true, n, length, sigma, rng)
 
 
@@ -135,3 +142,20 @@ def simulate_tracker_rows(
     p = true.fk(q)[:, :3, 3] @ T[:3, :3].T + T[:3, 3] + sigma * rng.standard_normal((n, 3))
     none = -np.ones(n, dtype=np.intp)
     return ConstraintSet(q, none, none, position=p, sigma=sigma, tracker_sigma=sigma)
+
+
+def moved_scene(scene: SceneTruth, seed: int | np.random.Generator | None = 0) -> SceneTruth:
+    """The same sockets or plates placed elsewhere (a held-out placement): the whole scene
+    turned about the base's z axis by 60-300° and lifted by up to ±50 mm, a rigid motion,
+    so the distances between its points are kept.  Turning about the first joint's axis
+    keeps the points within reach of an arm whose first joint is vertical and unlimited
+    enough; a target out of reach is left out by :func:`simulate_constraints`."""
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(np.pi / 3, 5 * np.pi / 3)
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    t = np.array([0.0, 0.0, rng.uniform(-0.05, 0.05)])
+    points = scene.points @ R.T + t
+    normals = scene.planes[:, :3] @ R.T
+    planes = np.column_stack([normals, scene.planes[:, 3] + normals @ t]) if len(normals) else scene.planes
+    return SceneTruth(points, planes, scene.length)
