@@ -304,7 +304,7 @@ def test_model_build_takes_a_catalog_name_or_a_model_file(tmp_path):
         app, ["model", "build", "ur10", "--measure", "position", "-o", str(tmp_path / "a.yaml")]
     )
     assert result.exit_code == 0, result.output
-    assert "R∥R (seed 000 eq. 17, Hayati)" in result.output
+    assert "R∥R (Motta 2005 eq. 17, Hayati)" in result.output
     assert rc.load_model(tmp_path / "a.yaml") == rc.calibration_model("ur10", "position")
     path = rc.save_model(rc.robot("puma560"), tmp_path / "puma.yaml")
     result = runner.invoke(app, ["model", "build", str(path), "-o", str(tmp_path / "b.yaml")])

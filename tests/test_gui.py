@@ -102,7 +102,7 @@ def test_builder_refusal_is_placed_at_the_joint():
 def test_link_rows_give_equation_checks_and_the_count():
     _, result = build_form(form_from_catalog("ur10"))
     rows, count = link_rows(result)
-    assert len(rows) == 7 and rows[2].label.startswith("R∥R (seed 000 eq. 17, Hayati)")
+    assert len(rows) == 7 and rows[2].label.startswith("R∥R (Motta 2005 eq. 17, Hayati)")
     assert rows[1].equation == "Rz(theta1) · Tz(d1) · Tx(a1) · Rx(alpha1) · Tz(p2)"
     assert all(r.verdict == "ok" for r in rows) and rows[0].continuity == "continuous"
     assert "4·6 + 2·0 + 6 = 30" in count and "rank 30" in count
@@ -277,7 +277,7 @@ def test_builder_types_the_ur10_and_saves_the_cli_model_file(page, shots, tmp_pa
     assert "rank 30" in count.inner_text()
     links = pg.locator("#builder-links")
     assert links.locator("tr").count() == 8  # header + base, 5 joint links, tool
-    assert "seed 000 eq. 17, Hayati" in links.inner_text()
+    assert "Motta 2005 eq. 17, Hayati" in links.inner_text()
     pg.locator("#builder-view .main-svg").first.wait_for()
     pg.screenshot(path=str(shots / "builder_ur10.png"), full_page=True)
 

@@ -57,7 +57,7 @@ def test_quick_run_tables(quick):
             assert s["ci95_mm"] > 0 and s["mean_mm"] < s["max_mm"]
     assert any("where the seed" in d or "seed's" in d for d in numbers["differences"])
     json.dumps(numbers)  # plain data
-    assert (out / "report.md").read_text().startswith("# Seed 001 reproduced")
+    assert (out / "report.md").read_text().startswith("# Li et al. 2016 (seed 001) reproduced")
     assert json.loads((out / "results.json").read_text())["arm_seed"] == numbers["arm_seed"]
     assert (out / "trajectory_errors.png").stat().st_size > 1000
 

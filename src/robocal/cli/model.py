@@ -76,7 +76,7 @@ def build_command(
     tip: TipOption = None,
     force: Force = False,
 ) -> None:
-    """Build a complete, minimal, singularity-free model from joint geometry (Motta et al., seed 000)."""
+    """Build a complete, minimal, singularity-free model from joint geometry (Motta 2005, seed 000)."""
     refuse_overwrite(out, force, "model file")
     from robocal.model.builder import load_geometry
     from robocal.model.files import save_model

@@ -84,7 +84,7 @@ def _eq522(
     """Seed 003 eq. 5.22, batched over samples, ``iterations`` times."""
     if kind not in ("position", "pose"):
         raise ValueError(
-            "method='jacobian' (seed 003 eq. 5.22) corrects position or pose targets, not 'axis'"
+            "method='jacobian' (the Katana thesis' eq. 5.22) corrects position or pose targets, not 'axis'"
         )
     rows = 3 if kind == "position" else 6
     q = q_nominal.copy()

@@ -490,7 +490,7 @@ def _section_pen(pen: dict[str, Any]) -> Section:
 
 #: experiment -> (title, sections function)
 SECTIONS: dict[str, tuple[str, Callable[[dict[str, Any]], list[Section]]]] = {
-    "seed000": ("Seed 000 (models from joint geometry) reproduced by robocal", sections_seed000),
-    "seed001": ("Seed 001 (calibration table, bounded L1) reproduced by robocal", sections_seed001),
-    "seed003": ("Seed 003 (Katana 450, influence and joint tilting) reproduced by robocal", sections_seed003),
+    "seed000": ("Motta 2005 (seed 000) reproduced: models from joint geometry", sections_seed000),
+    "seed001": ("Li et al. 2016 (seed 001) reproduced: calibration table, bounded L1", sections_seed001),
+    "seed003": ("The Katana thesis (seed 003) reproduced: Katana 450, joint tilting", sections_seed003),
 }

@@ -185,7 +185,7 @@ def print_numbers(numbers: dict[str, Any]) -> None:
         table = Table(
             title=f"{title}: mean error ± 95 % CI (mm), improvement; play = backlash", title_justify="left"
         )
-        for col in ("board", "seed 001", "play", "before", "after", "better"):
+        for col in ("board", "Li et al. 2016", "play", "before", "after", "better"):
             table.add_column(col, justify="left" if col in ("board", "play") else "right", no_wrap=True)
         for name in BOARDS:
             if key == "points":
@@ -232,7 +232,7 @@ def print_numbers(numbers: dict[str, Any]) -> None:
 
 def report(numbers: dict[str, Any]) -> str:
     lines = [
-        "# Seed 001 reproduced: calibration table, bounded L1 calibration, compensation",
+        "# Li et al. 2016 (seed 001) reproduced: calibration table, bounded L1 calibration, compensation",
         "",
         f"Table arm: seed {numbers['arm_seed']}; initial mean error at points 1-6 "
         f"{numbers['initial_error_mm']:.3f} mm "

@@ -239,7 +239,7 @@ def print_numbers(numbers: dict[str, Any], first: dict[str, Any]) -> None:
 
 
 def _markdown(numbers: dict[str, Any]) -> str:
-    lines = ["# Seed 003 (Katana 450) reproduced by robocal", ""]
+    lines = ["# The Katana thesis (seed 003, Katana 450) reproduced by robocal", ""]
     for title, key in (("Calibration poses", "calibration_poses"), ("Held-out poses", "held_out_poses")):
         rows = numbers["tables"][key]
         lines += [

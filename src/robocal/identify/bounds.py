@@ -118,7 +118,7 @@ def bounded_method_bounds(
             if h != h0
         ]
         note = (
-            "bounds='widened': seed 001's ±5 mm / ±2° widened for the parameters that absorb redundant "
+            "bounds='widened': Li et al. 2016's ±5 mm / ±2° widened for the parameters that absorb redundant "
             f"ones: {', '.join(changed) or 'none absorbs any'}"
         )
         return wide_lo, wide_hi, note

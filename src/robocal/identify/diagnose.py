@@ -101,9 +101,10 @@ def _rms_rose(result: CalibrationResult, pose_errors: Array) -> str | None:
     return (
         f"the RMS error rose from {result.rms_before * 1e3:.4g} to {result.rms_after * 1e3:.4g} mm while the "
         f"mean distance fell from {mean['mean_distance_before'] * 1e3:.4g} to "
-        f"{mean['mean_distance_after'] * 1e3:.4g} mm: the sum of distances (seed 001) fits most poses and "
-        f"leaves {large} of {len(pose_errors)} with errors over 3x the median, an error the model does not "
-        "describe (backlash? a second robot configuration?); method='lm' minimises the RMS error instead"
+        f"{mean['mean_distance_after'] * 1e3:.4g} mm: the sum of distances (Li et al. 2016) fits most "
+        f"poses and leaves {large} of {len(pose_errors)} with errors over 3x the median, an error the model "
+        "does not describe (backlash? a second robot configuration?); method='lm' minimises the RMS "
+        "error instead"
     )
 
 

@@ -89,7 +89,7 @@ class LinkInfo:
     def label(self) -> str:
         names = {16: "Denavit-Hartenberg", 17: "Hayati"}
         extra = f", {names[self.equation]}" if self.equation in names else ""
-        return f"{self.kind} (seed 000 eq. {self.equation}{extra})"
+        return f"{self.kind} (Motta 2005 eq. {self.equation}{extra})"
 
 
 @dataclass(frozen=True)

@@ -121,7 +121,7 @@ def build_complete(model: Model, measure: Measure = "pose", origin: str | None =
     the builder reports them (:func:`calibration_model` returns its ``model``)."""
     origin = origin or f"the model {model.name!r}"
     joints, tcp = geometry_from_model(model)
-    note = f"built by seed 000's rules from the joint geometry of {origin}"
+    note = f"built by the rules of Motta 2005 (seed 000) from the joint geometry of {origin}"
     title = f"{model.title or model.name} — complete model ({measure})"
     source = f"{note}; {model.source}".strip().rstrip(";") if model.source else note
     built = build(joints, tcp, measure, name=f"{model.name}_complete", title=title, source=source)

@@ -276,7 +276,9 @@ def schroer(
     eqs. (11)-(15) describe the constant base-to-first-joint transform.
     """
     if equation not in SCHROER_SETS:
-        raise ValueError(f"seed 000 defines link parameterisations in eqs. 11-27, not {equation}")
+        raise ValueError(
+            f"Motta 2005 (seed 000) defines link parameterisations in eqs. 11-27, not {equation}"
+        )
     return sequence(
         SCHROER_SETS[equation],
         values,

@@ -123,7 +123,7 @@ def robot_model(r: ReportData, figs: m.Figures) -> Section:
     ]
     info_table = m.table(["", ""], info)
     if links:
-        link_table = m.table(["link parameterisation (Motta et al., seed 000)"], [[n] for n in links])
+        link_table = m.table(["link parameterisation (Motta 2005, seed 000)"], [[n] for n in links])
         body += f"<div class='grid2'><div>{info_table}</div><div>{link_table}</div></div>"
     else:
         body += info_table
