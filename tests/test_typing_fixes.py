@@ -147,3 +147,39 @@ def test_a_choice_outside_the_table_is_refused_by_the_option(tmp_path):
     result = CliRunner().invoke(app, ["poses", "ur5", "--n", "6", "--kind", "elbow", "-o", str(out)])
     assert result.exit_code == 2 and "--kind" in result.output, result.output
     assert not out.exists()
+
+
+def test_start_frames_of_data_without_measurements_are_refused_by_name():
+    """mypy: ``data.position[None]`` with ``position: Array | None``.  A poses file (joint
+    columns only) given to ``initial_frame_and_tool`` failed deep inside with
+    ``'NoneType' object is not subscriptable``; it is a ValueError saying what is missing,
+    and so are pose start values from position-only data."""
+    import pytest
+
+    from robocal.identify.calibrate import initial_frame_and_tool
+    from robocal.measure.measurements import Measurements
+    from robocal.model.catalog import robot
+
+    ur5 = robot("ur5")
+    q = np.random.default_rng(1).uniform(-1.0, 1.0, (12, 6))
+    positions = Measurements(q=q, position=ur5.fk(q)[:, :3, 3])
+    frame, _ = initial_frame_and_tool(ur5, positions, "position", None, True, False)
+    assert frame.shape == (4, 4) and np.allclose(frame, np.eye(4), atol=1e-9)  # the data is in the base
+    with pytest.raises(ValueError, match="position"):
+        initial_frame_and_tool(ur5, Measurements(q=q), "position", None, True, False)
+    with pytest.raises(ValueError, match="pose"):
+        initial_frame_and_tool(ur5, positions, "pose", None, True, False)
+
+
+def test_iso_poses_carry_their_cube_and_constraint():
+    """mypy: ``IsoPoses.cube`` and ``.orientation`` were optional although
+    :func:`iso9283_poses` always sets them (callers ignored the type or checked None); they
+    are required now, with the constraint's ``kind`` as a field (was read from ``info``)."""
+    import pytest
+
+    from robocal.measure.poses import IsoPoses
+
+    with pytest.raises(TypeError):  # a set without its cube cannot be built
+        IsoPoses(
+            q=np.zeros((5, 6)), positions=np.zeros((5, 3)), labels=("P1",) * 5, reachable=np.ones(5, bool)
+        )

@@ -11,7 +11,7 @@ loads, and that the summaries here are the commands' own.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterator, MutableMapping
+from collections.abc import Iterator, Mapping, MutableMapping
 from typing import Annotated, Any
 
 import typer
@@ -106,7 +106,7 @@ class _Commands(MutableMapping[str, Any]):
     commands is first looked up (``click.Group.get_command`` is ``commands.get``); iterating
     the names imports nothing."""
 
-    def __init__(self, loaded: dict[str, Any]) -> None:
+    def __init__(self, loaded: Mapping[str, Any]) -> None:
         self._loaded = dict(loaded)
 
     def __getitem__(self, name: str) -> Any:

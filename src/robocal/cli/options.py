@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, overload
 
 import typer
 
@@ -248,6 +248,10 @@ def length_vector(text: str, count: int, option: str) -> np.ndarray:
         raise fail(str(err)) from None
 
 
+@overload
+def frame_option(text: str, option: str, position_only: bool = False) -> np.ndarray: ...
+@overload
+def frame_option(text: None, option: str, position_only: bool = False) -> None: ...
 def frame_option(text: str | None, option: str, position_only: bool = False) -> np.ndarray | None:
     """A frame given as ``"x,y,z,rx,ry,rz"`` with units (``"0,0,109mm,0,0,90deg"``; the
     rotation a rotation vector) as a 4x4 transform (m), None for None.  ``position_only``:

@@ -16,6 +16,7 @@ ordered so that all joints move between consecutive poses.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -165,14 +166,14 @@ def _optimal(m, count: int, pool: int, index: str, rows: str, seed: int, meta: d
     return sel.q
 
 
-def _iso9283(m, n: int | None, kind: str | None, box, seed: int, meta: dict) -> np.ndarray:
+def _iso9283(m, n: int | None, kind: TargetKind | None, box, seed: int, meta: dict) -> np.ndarray:
     """``--method iso9283``: P1..P5 on the largest cube's diagonal plane."""
     from robocal.measure.poses import iso9283_poses
 
     if n not in (None, 5):
         err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True)
     with console.status("searching the largest ISO 9283 cube..."):
-        iso = iso9283_poses(m, kind=kind, seed=seed, region=box)  # type: ignore[arg-type]
+        iso = iso9283_poses(m, kind=kind, seed=seed, region=box)
     c = iso.cube
     console.print(
         f"cube centre [{', '.join(f'{v * 1e3:.1f}' for v in c.center)}] mm, side {c.side * 1e3:.1f} mm, "
@@ -188,17 +189,19 @@ def _iso9283(m, n: int | None, kind: str | None, box, seed: int, meta: dict) -> 
     return iso.q
 
 
-def _diagonal(m, n: int, kind: str | None, box, seed: int) -> np.ndarray:
+def _diagonal(m, n: int, kind: TargetKind | None, box, seed: int) -> np.ndarray:
     """``--method diagonal``: the thesis' poses on the cube's diagonal planes (seed 003)."""
     from robocal.measure.diagonal_poses import diagonal_plane_poses
 
     with console.status("building the diagonal-plane poses..."):
-        ps = diagonal_plane_poses(m, n=n, kind=kind or "position", region=box, seed=seed)  # type: ignore[arg-type]
+        ps = diagonal_plane_poses(m, n=n, kind=kind or "position", region=box, seed=seed)
     if not ps.reachable.all():
         raise fail(f"{int((~ps.reachable).sum())} of the diagonal-plane poses are not reachable")
+    min_change_rad = ps.info["min_joint_change_rad"]
+    assert isinstance(min_change_rad, float)  # diagonal_plane_poses' record
     console.print(
         f"{len(ps.q)} poses ({ps.info['boundary_poses']} near the boundary), smallest joint change "
-        f"between consecutive poses {np.degrees(ps.info['min_joint_change_rad']):.1f} deg",
+        f"between consecutive poses {math.degrees(min_change_rad):.1f} deg",
         highlight=False,
     )
     return ps.q

@@ -29,7 +29,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,6 +37,9 @@ from numpy.typing import ArrayLike, NDArray
 from robocal import spatial
 from robocal.model.chain import Model
 from robocal.model.steps import Body
+
+if TYPE_CHECKING:
+    from robocal.measure.poses import IsoPoses
 
 __all__ = [
     "DEFAULT_ROBOT",
@@ -184,6 +187,7 @@ def _measure_cycles(robot, q: Array, cycles: int, seed: int, T_base_device: Arra
     from robocal.measure.simulate import simulate
 
     data = simulate(robot, np.tile(q, (cycles, 1)), seed=seed)  # one batched call
+    assert data.position is not None  # a simulated tracker measures positions
     p = data.position @ T_base_device[:3, :3].T + T_base_device[:3, 3]
     return p.reshape(cycles, len(q), 3)
 
@@ -308,10 +312,13 @@ class _Demo:
 
     def virtual(self, noise_seed: int) -> Any:
         """The real robot measured by the tracker, its encoders' noise seeded with ``noise_seed``."""
-        from robocal.measure.joint_effects import EncoderNoise
+        from robocal.measure.joint_effects import EncoderNoise, JointEffect
         from robocal.measure.simulate import VirtualRobot
 
-        effects = [GravityCompliance(self.compliance), EncoderNoise(self.encoder, noise_seed)]
+        effects: list[JointEffect] = [
+            GravityCompliance(self.compliance),
+            EncoderNoise(self.encoder, noise_seed),
+        ]
         return VirtualRobot(self.nominal, self.true, self.tracker, effects)
 
     def _flange_cube(self):
@@ -319,7 +326,7 @@ class _Demo:
         the fixed tool orientation times the tool offset: a flange pose of that cube is a
         tool pose of the tool's cube in the same configuration, so the bare robot reaches
         it as well (only for a fixed full orientation; None otherwise: a search)."""
-        if self.iso is None or self.iso.cube is None or self.iso.info.get("kind") != "pose":
+        if self.iso is None or self.iso.kind != "pose":
             return None
         from robocal.measure.cube import Cube
 
@@ -333,7 +340,8 @@ class _Demo:
         selection = select_poses(self.nominal, self.pool, n_calibration)
         self.q_train = selection.q
         self.q_test = random_poses(self.nominal, n_validation, seed=self.rng, margin=0.05)
-        search = {"samples": 1000, "candidates": 2} if self.quick else {}
+        # largest_cube's search options (its defaults unless quick)
+        search: dict[str, Any] = {"samples": 1000, "candidates": 2} if self.quick else {}
         self.iso = None
         try:
             self.iso = iso9283_poses(self.nominal_tool, seed=self.seed, **search)
@@ -407,19 +415,19 @@ class _Demo:
                 for k, (name, q) in enumerate(cases.items())
             },
         }
-        paths, method = self._paths(T_base_device, method)
+        paths, method = self._paths(iso, T_base_device, method)
         self.ev["paths"] = paths
         self.ev["compensation"] = {
             "method": method,
             "max_joint_change_deg": float(np.degrees(np.abs(q_comp - iso.q).max())),
         }
 
-    def _paths(self, T_base_device: Array, method: str) -> tuple[list[dict[str, Any]], str]:
+    def _paths(self, iso: IsoPoses, T_base_device: Array, method: str) -> tuple[list[dict[str, Any]], str]:
         """ISO 9283 AT/RT: a line P2-P4 and a circle about P1 in the cube's diagonal plane,
         with nominal and compensated commands; and the last compensation method used."""
         from robocal.measure.paths import Circle, circle_path, joint_path, line_path
 
-        iso, seed, path_cycles = self.iso, self.seed, self.path_cycles
+        seed, path_cycles = self.seed, self.path_cycles
         commanded = iso.positions
         paths: list[dict[str, Any]] = []
         centre, side = iso.cube.center, iso.cube.side
@@ -435,7 +443,7 @@ class _Demo:
         )
         for name, pts in (("line P2–P4", line), ("circle r = 0.3 × side about P1", circle)):
             frames = spatial.homogeneous(np.broadcast_to(iso.orientation, (len(pts), 3, 3)), pts)
-            jp = joint_path(self.nominal_tool, frames, kind=str(iso.info["kind"]), q0=iso.q[0])
+            jp = joint_path(self.nominal_tool, frames, kind=iso.kind, q0=iso.q[0])
             if not jp.reachable.all():
                 continue
             q_c, method = compensate_positions(self.result, pts, jp.q)

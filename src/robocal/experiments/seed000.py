@@ -58,9 +58,11 @@ SEED_SETS: dict[int, str] = {
     27: "RZ, TX, TY, TZ, [RZ, RY, RX]",
 }
 
+#: the seed's own figures: parameters of a 6-dof pose calibration, points measured, errors (mm)
+MEASUREMENT_POINTS = 15
 SEED_NUMBERS = {
     "parameters_6dof_pose": 30,
-    "measurement_points": 15,
+    "measurement_points": MEASUREMENT_POINTS,
     "error_before_mm": (5.0, 15.0),
     "error_after_mm": 0.5,
 }
@@ -156,7 +158,7 @@ def _fifteen_points(name: str, built_model, seed: int, quick: bool) -> dict[str,
     device = OpticalCMM(p_tool_target=np.array([0.0, 0.0, 0.1]))
     virtual = VirtualRobot(built_model, true, device)
     pool = random_poses(built_model, 200 if quick else 600, seed=rng, margin=0.05)
-    chosen = select_poses(built_model, pool, SEED_NUMBERS["measurement_points"], rows="pose")
+    chosen = select_poses(built_model, pool, MEASUREMENT_POINTS, rows="pose")
     train = simulate(virtual, chosen.q, seed=int(rng.integers(1 << 31)))
     test = simulate(
         virtual, random_poses(built_model, 200, seed=rng, margin=0.05), seed=int(rng.integers(1 << 31))

@@ -107,6 +107,7 @@ def calibration_data(
         raise RuntimeError(f"the table arm cannot reach the board: {ik.message}")
     q_link = ik.q
     data = simulate(VirtualRobot(nominal, true, board), q_link, seed=seed)
+    assert data.position is not None  # the board's cavities are positions
     q_encoder = q_link if backlash is None else q_link - backlash(true, q_link)[:, :, 2]
     return Measurements(q=q_encoder, position=data.position, sigma=data.sigma, metadata=dict(data.metadata))
 
@@ -115,6 +116,7 @@ def _run_commands(robot_: VirtualRobot, q: Array, targets: Array, seed: int) -> 
     """Execute ``q`` in order on the virtual arm, measured by its camera: the position
     errors (m) against ``targets`` (base frame)."""
     measured = simulate(robot_, q, seed=seed).position
+    assert measured is not None  # a camera measures positions
     T = robot_.device.T_device_base
     return np.linalg.norm(measured - (targets @ T[:3, :3].T + T[:3, 3]), axis=1)
 

@@ -249,10 +249,10 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
 
     kgfm = STIFFNESS_SCALE["kgf*m/deg"]
     true = {e.joint: e for e in true_model.joint_effects}
-    out = {}
+    out: dict[str, dict[str, dict[str, Any]]] = {}  # {joint: {quantity: {estimate, sigma, true...}}}
     for joint, row in result.effect_estimates().items():
         t = true.get(joint)
-        entry = {}
+        entry: dict[str, dict[str, Any]] = {}
         for attr, (v, s) in row.items():
             tv = getattr(t, attr) if t is not None else 0.0
             if attr in ("clearance_tilt", "backlash"):
@@ -283,14 +283,14 @@ def _joint_parameters(result, true_model) -> dict[str, Any]:
         if effect is None or effect[0] not in keys:
             continue
         kind, joint = effect
-        entry = out.setdefault(joint, {}).setdefault(keys[kind][0], {"estimate": None, "sigma": None})
+        cell = out.setdefault(joint, {}).setdefault(keys[kind][0], {"estimate": None, "sigma": None})
         t = true.get(joint)
         tv = getattr(t, keys[kind][1], 0.0)
         if t is None or kind != "compliance":
-            entry["true"] = math.degrees(tv) if t is not None else 0.0
+            cell["true"] = math.degrees(tv) if t is not None else 0.0
         else:
-            entry["true"] = (1.0 / tv / kgfm) if tv > 0 else math.inf
-        entry["not_identified"] = str(d).split(": ", 1)[1]
+            cell["true"] = (1.0 / tv / kgfm) if tv > 0 else math.inf
+        cell["not_identified"] = str(d).split(": ", 1)[1]
     return out
 
 

@@ -114,7 +114,7 @@ THESIS: dict[str, Any] = {
 }
 
 
-STATIC_METHODS = {
+STATIC_METHODS: dict[str, tuple[str, str, dict[str, Any]]] = {
     # key: (label, model, calibrate options)
     "level_1": ("level 1: joint offsets only", "geometric", {"level": 1}),
     "conventional": ("conventional (level 2, geometric)", "geometric", {"level": 2}),

@@ -73,7 +73,7 @@ def _line_rates(q: Array, dt: float) -> tuple[Array, Array]:
     return np.gradient(q, dt, axis=0), np.gradient(np.gradient(q, dt, axis=0), dt, axis=0)
 
 
-TRAJECTORY_METHODS = {
+TRAJECTORY_METHODS: dict[str, tuple[str, str, dict[str, Any]]] = {
     "geometric": ("geometric only", "geometric", {"level": 2}),
     "stiffness": ("stiffness predicted first", "stiffness", {"effects": "predict", "load_passes": 1}),
     "tilting": ("full tilting predicted first (thesis)", "nominal", {"effects": "predict", "load_passes": 1}),

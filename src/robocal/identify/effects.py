@@ -172,7 +172,7 @@ def effects_to_hold(
                 verdicts[k] = verdict
         if not verdicts:
             break
-        k = min(verdicts, key=lambda i: x[i] / max(sigma[i], 1e-300))
+        k = min(verdicts, key=lambda i: float(x[i]) / max(float(sigma[i]), 1e-300))
         held.append(verdicts[k])
         active.remove(k)
         if C[k, k] > 0:

@@ -33,6 +33,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal.choices import Measure
 from robocal.identify.noise_check import FitToNoise, fit_to_noise  # re-exported: the guards
 from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
@@ -61,7 +62,7 @@ def _rows_text(rows: Sequence[int], limit: int = 6) -> str:
 
 
 def _measurement_chain(
-    model: Model, measure: str, frame: Any, tool: Any, tool_guess: ArrayLike | None
+    model: Model, measure: Measure, frame: Any, tool: Any, tool_guess: ArrayLike | None
 ) -> Model:
     from robocal import spatial
     from robocal.identify.problem import measurement_chain
@@ -82,7 +83,7 @@ def _measurement_chain(
 
 
 def _identifiable(
-    chain: Model, q: Array, measure: str, length: float, explain: bool = False
+    chain: Model, q: Array, measure: Measure, length: float, explain: bool = False
 ) -> tuple[set[str], Any]:
     """Identifiable free parameters of ``chain`` at poses ``q`` (the calibration's rank test)."""
     from robocal.identify.stages import identifiable_set
@@ -123,7 +124,7 @@ _GENERIC: dict[Any, tuple[frozenset[str], float]] = {}  # the last few _generic 
 
 
 def _generic(
-    model: Model, measure: str, frame: Any, tool: Any, tool_guess: Any, n: int, seed: int
+    model: Model, measure: Measure, frame: Any, tool: Any, tool_guess: Any, n: int, seed: int
 ) -> tuple[frozenset[str], float]:
     """Parameters identifiable from ``n`` random poses (seeded), and the robot's size (m).
 
@@ -261,16 +262,13 @@ def check_rank(  # noqa: PLR0913 - keyword-only options, as check_problem passes
             f"included): measure at least {math.ceil(len(generic) / rows)} distinct poses, better "
             f"{3 * math.ceil(len(generic) / rows)} or more"
         )
-    chain = (
-        None
-        if kept is not None and candidates is not None
-        else _measurement_chain(model, measure, frame, tool, tool_guess)
-    )
-    if kept is None:
-        kept_set, _ = _identifiable(chain, distinct, measure, length)
+    chain: Model | None = None
+    if kept is None or candidates is None:  # the caller's rank test is not at hand: this one's
+        chain = _measurement_chain(model, measure, frame, tool, tool_guess)
+        kept_set = set(kept) if kept is not None else _identifiable(chain, distinct, measure, length)[0]
+        pool = chain.free_names if candidates is None else tuple(candidates)
     else:
-        kept_set = set(kept)
-    pool = chain.free_names if candidates is None else tuple(candidates)
+        kept_set, pool = set(kept), tuple(candidates)
     lost = [n for n in pool if n in generic and n not in kept_set]
     if not lost:
         return []

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal import spatial
+from robocal.choices import Measure
 from robocal.model.chain import Model
 from robocal.model.chain_plan import derived_copy
 from robocal.model.conventions import frame6, sequence
@@ -200,12 +201,25 @@ class Problem:
         return 3 if self.orientation is None else 6
 
     @property
-    def measure(self) -> str:
+    def measure(self) -> Measure:
         return "position" if self.orientation is None else "pose"
 
     @property
     def n_effects(self) -> int:
         return 0 if self.effect_basis is None else len(self.effect_basis)
+
+    @property
+    def patterns(self) -> Array:
+        """``(m, n, dof, 3)`` :attr:`effect_basis`, for a problem with joint effects
+        (:attr:`n_effects` > 0, which callers check first)."""
+        assert self.effect_basis is not None, "a problem without joint effects has no patterns"
+        return self.effect_basis
+
+    @property
+    def start_values(self) -> Array:
+        """``(m,)`` :attr:`effect_start` (``__post_init__`` fills None with zeros)."""
+        assert self.effect_start is not None
+        return self.effect_start
 
     @property
     def free_names(self) -> tuple[str, ...]:
@@ -219,7 +233,7 @@ class Problem:
         rot = np.array([s.is_rotation for s in self.chain.steps if s.free], dtype=bool)
         scale = np.where(rot, self.length_scale, 1.0)
         if self.n_effects:
-            peak = np.abs(self.effect_basis).reshape(self.n_effects, -1).max(axis=1)
+            peak = np.abs(self.patterns).reshape(self.n_effects, -1).max(axis=1)
             scale = np.concatenate([scale, self.length_scale * np.maximum(peak, 1e-300)])
         return scale
 
@@ -267,7 +281,7 @@ class Problem:
         coefficients in ``x`` times their patterns (None when there are neither)."""
         if not self.n_effects:
             return self.known_perturbations
-        pert = np.tensordot(x[len(x) - self.n_effects :], self.effect_basis, axes=1)
+        pert = np.tensordot(x[len(x) - self.n_effects :], self.patterns, axes=1)
         if self.known_perturbations is not None:
             pert = pert + self.known_perturbations
         return pert
@@ -293,10 +307,10 @@ class Problem:
                 n, dof = self.q.shape
                 if tilts:  # derivatives wrt (δα, δβ, δθ) of every joint
                     P = out[2].reshape(n, self.rows, dof, 3)
-                    Jc = np.einsum("nrjc,knjc->nrk", P, self.effect_basis)
+                    Jc = np.einsum("nrjc,knjc->nrk", P, self.patterns)
                 else:
                     Jq = out[2].reshape(n, self.rows, dof)
-                    Jc = np.einsum("nrj,knj->nrk", Jq, self.effect_basis[..., 2])
+                    Jc = np.einsum("nrj,knj->nrk", Jq, self.patterns[..., 2])
                 J = np.concatenate([J, Jc.reshape(n * self.rows, -1)], axis=1)
             self._cache[key] = (T, J)
         return self._cache[key]
@@ -343,17 +357,18 @@ class Problem:
         effect_drop = [k for k, n in enumerate(self.effect_names) if n in named]
         chain = self.chain.fixed(named & set(self.chain.names))
         known = self.known_perturbations
-        if effect_drop and np.any(self.effect_start[effect_drop]):
-            fixed = np.tensordot(self.effect_start[effect_drop], self.effect_basis[effect_drop], axes=1)
-            known = fixed if known is None else known + fixed
-        basis = None if not effect_keep else self.effect_basis[effect_keep]
+        start = self.start_values
+        if effect_drop and np.any(start[effect_drop]):
+            held = np.tensordot(start[effect_drop], self.patterns[effect_drop], axes=1)
+            known = held if known is None else known + held
+        basis = None if not effect_keep else self.patterns[effect_keep]
         fixed = dataclasses.replace(
             self,
             chain=chain,
             effect_basis=basis,
             effect_names=tuple(self.effect_names[k] for k in effect_keep),
             known_perturbations=known,
-            effect_start=self.effect_start[effect_keep],
+            effect_start=start[effect_keep],
             _cache={},
         )
         return self._keep_start(fixed, named)

@@ -1,5 +1,7 @@
 """Step 2 of a calibration — what was observed: datasets, devices, simulation, poses."""
 
+from typing import TYPE_CHECKING
+
 from robocal.lazy_imports import lazy_package
 
 lazy_package(
@@ -58,6 +60,59 @@ lazy_package(
         ),
     },
 )
+
+if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_typing.py keeps them equal)
+    from robocal.measure.dataset.read import (
+        MeasurementFileError,
+        Measurements,
+        MeasurementWarning,
+        Problem,
+        check_measurements,
+        read_measurements,
+        write_measurements,
+    )
+    from robocal.measure.devices import (
+        CalibrationPlate,
+        Camera,
+        Device,
+        LaserTracker,
+        Observations,
+        OpticalCMM,
+        PenOnPaper,
+        make_device,
+        plate_points,
+    )
+    from robocal.measure.ik import IKResult, solve_ik
+    from robocal.measure.paths import (
+        Circle,
+        CubicSpline,
+        JointPath,
+        circle_path,
+        circle_through,
+        cubic_spline,
+        joint_path,
+        line_path,
+    )
+    from robocal.measure.poses import (
+        Cube,
+        PoseSet,
+        diagonal_plane_poses,
+        iso9283_poses,
+        largest_cube,
+        random_poses,
+        read_poses,
+        write_poses,
+    )
+    from robocal.measure.simulate import (
+        EncoderNoise,
+        PayloadCompliance,
+        Truth,
+        VirtualRobot,
+        draw_true_model,
+        load_truth,
+        save_simulation,
+        simulate,
+    )
 
 __all__ = [
     "CalibrationPlate",

@@ -67,13 +67,15 @@ __all__ = [
 Array = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class IsoPoses(PoseSet):
-    """ISO 9283 poses P1..P5 plus their cube, plane and tool orientation."""
+    """ISO 9283 poses P1..P5 plus their cube, plane, tool orientation (3x3, base frame) and
+    what the targets fix of the tool (``kind``)."""
 
-    cube: Cube | None = None
+    cube: Cube
     plane: int = 1
-    orientation: Array | None = None
+    orientation: Array
+    kind: TargetKind
 
 
 def iso9283_poses(
@@ -131,6 +133,7 @@ def iso9283_poses(
         cube=cube,
         plane=plane,
         orientation=con.R,
+        kind=con.kind,
     )
 
 

@@ -1,5 +1,7 @@
 """Step 1 of a calibration — what the robot is: chains, conventions, files and the catalog."""
 
+from typing import TYPE_CHECKING
+
 from robocal.lazy_imports import lazy_package
 
 lazy_package(
@@ -11,6 +13,12 @@ lazy_package(
         "robocal.model.files": ("ModelFileError", "load_model", "save_model"),
     },
 )
+
+if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_typing.py keeps them equal)
+    from robocal.model.catalog import robot, robots
+    from robocal.model.chain import Body, Joint, JointEffects, Model, Role, Step
+    from robocal.model.complete import calibration_model
+    from robocal.model.files import ModelFileError, load_model, save_model
 
 __all__ = [
     "Body",

@@ -339,7 +339,7 @@ def _robot_geometry(model: Model, true_model: Model, seed: int, cube: Any) -> tu
     bias = T_true[:, :3, 3] - T_nom[:, :3, 3]
     abc_nom = euler(T_nom[:, :3, :3])
     bias_abc = np.pi - np.mod(np.pi - (euler(T_true[:, :3, :3]) - abc_nom), 2 * np.pi)
-    corners = iso.cube.plane_corners(iso.plane)  # type: ignore[union-attr]
+    corners = iso.cube.plane_corners(iso.plane)
     u = corners[1] - corners[0]
     v = corners[3] - corners[0]
     robot = Robot(
