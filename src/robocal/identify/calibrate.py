@@ -131,12 +131,15 @@ def initial_frame_and_tool(
 
     ``T_flange``: the robot's end frames ``(n, 4, 4)`` at the data's joint values, when
     the caller has them (default: computed)."""
+    position, orientation = data.position, data.orientation
+    if position is None or (measure == "pose" and orientation is None):
+        raise ValueError(f"initial_frame_and_tool: the data holds no measured {measure}s")
     if T_flange is None:
         T_flange = robot.fk(data.q)
     T_frame, T_tool = initial_frames_and_tools(
         T_flange[None],
-        data.position[None],
-        orientation=data.orientation[None] if measure == "pose" else None,
+        position[None],
+        orientation=orientation[None] if orientation is not None and measure == "pose" else None,
         T_tool=None if tool is None else np.asarray(tool, dtype=float),
         T_frame=None if T_device_base is None else np.asarray(T_device_base, dtype=float),
         fit_frame=fit_frame,
