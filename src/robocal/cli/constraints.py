@@ -114,8 +114,8 @@ def read_mixed(paths: list[Path], model, angle_unit: str, length_unit: str, stat
     if stated and len(constraint) > 1:  # the merged numbering: the first file's points first
         if max(max(a, b) for a, b, _ in stated) >= data.n_points:
             raise fail(f"--distance: the files have points 0..{data.n_points - 1} only")
-        data = dataclasses.replace(data, point_pairs=[(a, b) for a, b, _ in stated],
-                                   point_length=[d for *_, d in stated])  # fmt: skip
+        pairs = np.array([(a, b) for a, b, _ in stated], dtype=np.intp)
+        data = dataclasses.replace(data, point_pairs=pairs, point_length=np.array([d for *_, d in stated]))
     return constraint[0], trackers, data
 
 
@@ -181,13 +181,13 @@ def calibrate_constraint_file(
 
     stated = _distances(distances)
     paths = data_path if isinstance(data_path, list) else [data_path]
-    data_path, trackers, data = read_mixed(paths, model, angle_unit, length_unit, stated, _sigma(noise))
+    first, trackers, data = read_mixed(paths, model, angle_unit, length_unit, stated, _sigma(noise))
     try:
         result = calibrate_constraints(model, data, level=level or 2, pruning=Pruning(), known_noise=False,
                                        prior=NominalPrior())  # fmt: skip
     except ValueError as err:
         raise fail(f"{', '.join(str(p) for p in paths)}: {err}") from None
-    _save(result, out, data_path, stated, angle_unit, trackers)
+    _save(result, out, first, stated, angle_unit, trackers)
     for line in result.summary_lines():
         console.print(safe(line), highlight=False, soft_wrap=True)
     if "tracker" in data.kinds and data.constrained.any():

@@ -66,7 +66,7 @@ def tilt_candidates(model, q: Array, sensors: Sequence[Inclinometer]) -> NDArray
     tilt = readings(model, q_rows, link, axis, mounts)
     limit = {s.link: s.max_tilt for s in sensors}
     inside = np.abs(tilt) <= np.array([limit[name] for name in link])
-    return inside.reshape(len(q), -1).all(axis=1)
+    return np.asarray(inside.reshape(len(q), -1).all(axis=1), dtype=bool)
 
 
 def select_tilt_poses(
