@@ -1,15 +1,20 @@
-"""Calibration at scale: streaming normal equations (robocal.identify.streaming) from 1,000 to
-1,000,000 poses, time per pose and peak memory, against the dense calibration in the same run.
+"""Calibration at scale through the default API: ``rc.calibrate(model, data)`` at 10,000,
+100,000 and 1,000,000 poses (above 50,000 it streams by itself: decisions on a subsample,
+the final fit on all poses from normal equations accumulated by chunks,
+:mod:`robocal.identify.streaming_calibrate`), time and peak memory beyond the data, as ratios
+against the dense physics-only fit of 10,000 poses measured in the same run.
 
 Each size runs in its own process under ``/usr/bin/time -v`` (peak resident set size of the
-whole process: Python, numpy, numba, the data and the fit).  The problem: the UR10's complete
-calibration model, errors of ±1 mm / ±0.05°, a laser tracker frame and a probe offset to
-identify, 20 µm noise; poses uniform in the joint limits.  Streaming: ``rc.calibrate`` on a
-2,000-pose subsample (the identifiable set, the device frame, the tool and the start values),
-then :func:`robocal.identify.streaming.refit` on all poses in chunks of 20,000.  Dense: one
-``rc.calibrate`` on all poses (the reference, up to ``--dense-max`` poses).
+whole process: Python, numpy, numba, the data and the fit); "beyond the data" subtracts the
+RSS after the data was generated and the kernels loaded (measured in the child just before
+the calibration).  The problem: the UR10's complete calibration model, errors of ±1 mm /
+±0.05°, a laser tracker frame and a probe offset to identify, 20 µm noise; poses uniform in
+the joint limits.  Variants: ``physics`` (the API's default), ``compliance`` (joint
+compliance identified with the geometry) and ``residual`` (``residual="auto"``: the learned
+residual's cross-validated choice, ``robocal calibrate``'s default).
 
-Run: ``python benchmarks/bench_streaming.py [--sizes 1000,10000,100000,1000000] [--dense-max 100000]``.
+Run: ``python benchmarks/bench_streaming.py [--sizes 10000,100000,1000000]
+[--variants physics,compliance,residual]``.  The machine's load average is printed with each row.
 """
 
 from __future__ import annotations
@@ -25,7 +30,6 @@ import time
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-SUBSAMPLE = 2000
 PROBE = (0.0, 0.0, 0.1)
 
 
@@ -50,92 +54,89 @@ def make_data(n: int, seed: int = 1):
     return model, q, position
 
 
-def run(n: int, mode: str) -> dict:
-    """One size in this process: data, then the streaming or the dense calibration."""
+def _rss_mb() -> float:
+    """The current resident set size of this process (MB)."""
+    with open("/proc/self/status") as f:
+        line = next(x for x in f if x.startswith("VmRSS:"))
+    return int(line.split()[1]) / 1024
+
+
+VARIANTS = {"physics": {}, "compliance": {"compliance": True}, "residual": {"residual": "auto"}}
+
+
+def run(n: int, variant: str) -> dict:
+    """One size in this process: data, then ``rc.calibrate`` (default API, ``variant``'s options)."""
+    import numpy as np
+
     import robocal as rc
-    from robocal.identify.streaming import refit
     from robocal.measure.measurements import Measurements
 
     model, q, position = make_data(n)
+    data = Measurements(q=q, position=position)
+    warm = data.subset(np.arange(300))  # numba kernels loaded from the cache before the clock starts
+    rc.calibrate(model, warm, tool_guess=list(PROBE), **VARIANTS[variant])
+    rss_data = _rss_mb()
     t0 = time.perf_counter()
-    if mode == "dense":
-        result = rc.calibrate(model, Measurements(q=q, position=position), tool_guess=list(PROBE))
-        seconds = time.perf_counter() - t0
-        return {
-            "n": n,
-            "mode": mode,
-            "seconds": seconds,
-            "rms_um": result.rms_after * 1e6,
-            "p": len(result.names),
-        }
-    k = min(n, SUBSAMPLE)
-    sub = Measurements(q=q[:k], position=position[:k])
-    start = rc.calibrate(model, sub, tool_guess=list(PROBE))
-    t1 = time.perf_counter()
-    fit = refit(start, q, position)
-    t2 = time.perf_counter()
+    result = rc.calibrate(model, data, tool_guess=list(PROBE), **VARIANTS[variant])
+    seconds = time.perf_counter() - t0
+    streaming = result.diagnostics.streaming or {}
     return {
         "n": n,
-        "mode": mode,
-        "seconds": t2 - t0,
-        "subsample_seconds": t1 - t0,
-        "refit_seconds": t2 - t1,
-        "rms_um": fit.rms_after * 1e6,
-        "p": len(fit.names),
-        "evaluations": fit.evaluations,
-        "success": fit.success,
+        "variant": variant,
+        "seconds": seconds,
+        "rss_before_fit_mb": rss_data,
+        "data_mb": (q.nbytes + position.nbytes) / 2**20,
+        "rms_um": result.rms_after * 1e6,
+        "p": len(result.names),
+        "streamed": bool(streaming),
+        "subsample_seconds": streaming.get("subsample_seconds", float("nan")),
+        "passes": streaming.get("passes", 0),
+        "residual": result.model.residual is not None,
     }
 
 
-def measure(n: int, mode: str) -> dict:
+def measure(n: int, variant: str) -> dict:
     """:func:`run` in a child process under ``/usr/bin/time -v``."""
-    cmd = ["/usr/bin/time", "-v", sys.executable, __file__, "--child", str(n), "--mode", mode]
+    cmd = ["/usr/bin/time", "-v", sys.executable, __file__, "--child", str(n), "--variant", variant]
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     row = json.loads(out.stdout.strip().splitlines()[-1])
     rss = re.search(r"Maximum resident set size \(kbytes\): (\d+)", out.stderr)
     row["peak_rss_mb"] = int(rss.group(1)) / 1024 if rss else float("nan")
-    cpu = [float(m) for m in re.findall(r"(?:User|System) time \(seconds\): ([\d.]+)", out.stderr)]
-    row["process_cpu_seconds"] = sum(cpu)  # the whole child: imports, data generation and the fit
+    # beyond the data: the peak minus what the process held with its data, before the fit
+    row["beyond_data_mb"] = row["peak_rss_mb"] - row["rss_before_fit_mb"] + row["data_mb"]
+    row["load"] = os.getloadavg()[0]
     return row
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", default="1000,10000,100000,1000000")
-    parser.add_argument("--dense-max", type=int, default=100_000)
+    parser.add_argument("--sizes", default="10000,100000,1000000")
+    parser.add_argument("--variants", default="physics,compliance,residual")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
-    parser.add_argument("--mode", default="streaming", help=argparse.SUPPRESS)
+    parser.add_argument("--variant", default="physics", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        print(json.dumps(run(args.child, args.mode)))
+        print(json.dumps(run(args.child, args.variant)))
         return
-    measure(1000, "streaming")  # compile or load the kernels once (numba's cache) before timing
-    rows = []
-    for n in (int(s) for s in args.sizes.split(",")):
-        modes = ["streaming"] + (["dense"] if n <= args.dense_max else [])
-        for mode in modes:
-            row = measure(n, mode)
-            rows.append(row)
-            per_pose = row["seconds"] / n * 1e6
-            extra = (
-                f"  (subsample {row['subsample_seconds']:.2f} s + refit {row['refit_seconds']:.2f} s, "
-                f"{row['evaluations']} passes)"
-                if mode == "streaming"
-                else ""
-            )
+    measure(1000, "residual")  # compile or load the kernels once (numba's cache) before timing
+    reference = measure(10_000, "physics")  # the dense physics-only fit of 10,000 poses
+    print(
+        f"reference: dense physics-only, 10,000 poses: {reference['seconds']:.2f} s, "
+        f"{reference['beyond_data_mb']:.0f} MB beyond the data (load {reference['load']:.1f})",
+        flush=True,
+    )
+    for variant in args.variants.split(","):
+        for n in (int(s) for s in args.sizes.split(",")):
+            row = reference if (n, variant) == (10_000, "physics") else measure(n, variant)
             print(
-                f"{n:>9,} poses  {mode:<9}  {row['seconds']:7.2f} s  {per_pose:7.2f} µs/pose  "
-                f"peak RSS {row['peak_rss_mb']:7.0f} MB  process CPU {row['process_cpu_seconds']:6.2f} s  "
-                f"RMS {row['rms_um']:.1f} µm  p={row['p']}{extra}",
+                f"{variant:<10} {n:>9,} poses  {'streamed' if row['streamed'] else 'dense   '}  "
+                f"{row['seconds']:6.2f} s ({row['seconds'] / reference['seconds']:5.2f}x)  "
+                f"beyond data {row['beyond_data_mb']:6.0f} MB "
+                f"({row['beyond_data_mb'] / reference['beyond_data_mb']:5.2f}x)  peak RSS "
+                f"{row['peak_rss_mb']:6.0f} MB  RMS {row['rms_um']:.1f} µm  p={row['p']}  "
+                f"residual={row['residual']}  subsample {row['subsample_seconds']:.2f} s  "
+                f"passes {row['passes']}  load {row['load']:.1f}",
                 flush=True,
-            )
-    dense = {r["n"]: r for r in rows if r["mode"] == "dense"}
-    for r in rows:
-        if r["mode"] == "streaming" and r["n"] in dense:
-            d = dense[r["n"]]
-            print(
-                f"{r['n']:>9,} poses: streaming / dense time {r['seconds'] / d['seconds']:.2f}, "
-                f"peak RSS {r['peak_rss_mb'] / d['peak_rss_mb']:.2f}"
             )
 
 

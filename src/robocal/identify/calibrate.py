@@ -299,7 +299,10 @@ def calibrate(
 
     streaming = Streaming() if streaming is None else streaming
     if streams(data, method, physics, streaming):  # large inputs: decisions on a subsample, fit streamed
-        return _with_tool_facts(calibrate_streamed(dense, data, physics, streaming), physics.setup, data)
+        def facts(result: CalibrationResult, some: Measurements) -> CalibrationResult:
+            return _with_tool_facts(result, physics.setup, some)
+
+        return calibrate_streamed(dense, data, physics, streaming, facts=facts)
     return _with_tool_facts(dense(data, physics), physics.setup, data)
 
 

@@ -349,16 +349,6 @@ class ChunkedProblem:
         self._last = (key, ne)
         return ne
 
-    def mean_square_position(self, x: Array) -> float:
-        """The mean squared position error (m², unweighted) over all poses at ``x``."""
-        x = np.asarray(x, dtype=float)
-        total = 0.0
-        for s in self.chunks():
-            problem = self.problem_of(s)
-            r = problem.residual(x, weighted=False).reshape(-1, problem.rows)[:, :3]
-            total += float(np.einsum("ij,ij->", r, r))
-        return total / max(self.n, 1)
-
 
 def streamed_covariance(ne: NormalEquations, known_noise: bool, significance: float) -> Covariance:
     """The :class:`~robocal.identify.stages.Covariance` of a fit from its accumulated normal

@@ -18,8 +18,13 @@ runs in two parts:
    equations (:func:`~robocal.identify.residual.stream.fit_residual_streamed`).
 
 The result is an ordinary :class:`~robocal.identify.result.CalibrationResult` over all
-poses (estimates, covariance, residuals per pose, RMS), whose ``diagnostics.streaming``
-says that it streamed, the subsample's size, the chunk and the passes over the data.
+poses (estimates, covariance, residuals per pose, RMS after, outlier poses), whose
+``diagnostics.streaming`` says that it streamed, the subsample's size, the chunk and the
+passes over the data.  What describes the start and the data rather than the fit comes
+from the subsample (well spread, each joint's extremes included): ``rms_before`` (the
+start model's RMS), the start values ``nominal``, the fit-to-noise check, the measured
+tool's and the joints' coverage records (each a further pass over all poses for a
+statistic the subsample gives).
 Units: SI (m, rad).
 """
 
@@ -72,6 +77,9 @@ STREAM_THRESHOLD = 50_000
 #: poses of the subsample that makes the decisions (start values, identifiable set,
 #: pruning, joint-effect holds, the residual's choice)
 STREAM_SUBSAMPLE = 5_000
+#: the learned residual's final fit: floating-point operations of its normal matrix (about 2 s
+#: on one core): all of 1,000,000 poses at 8 harmonics (6 joints), 100,000 at 24, 25,000 at 48
+RESIDUAL_FLOPS = 2e10
 
 
 @dataclass(frozen=True)
@@ -83,11 +91,16 @@ class Streaming:
         subsample: poses of the decisions' subsample.
         chunk: poses per chunk of the streamed passes (memory: one chunk's Jacobian,
             ``rows · chunk · p`` doubles).
+        residual_flops: the learned residual's final fit accumulates its ``(m, m)`` normal
+            matrix over all poses when that costs at most this many floating-point
+            operations (``joints (joints + 1) (2H)²`` a pose), else over as many well-spread
+            poses as it allows (``diagnostics.streaming["residual_poses"]``).
     """
 
     threshold: int | None = STREAM_THRESHOLD
     subsample: int = STREAM_SUBSAMPLE
     chunk: int = DEFAULT_CHUNK
+    residual_flops: float = RESIDUAL_FLOPS
 
     def __post_init__(self) -> None:
         if self.threshold is not None and int(self.threshold) < 1:
@@ -246,6 +259,7 @@ def calibrate_streamed(
     data: Measurements,
     options: CalibrationOptions,
     streaming: Streaming,
+    facts: Callable[[CalibrationResult, Measurements], CalibrationResult] | None = None,
 ) -> CalibrationResult:
     """The calibration of a large data set (see the module docstring).
 
@@ -254,6 +268,8 @@ def calibrate_streamed(
             :func:`robocal.calibrate`'s dense path, residual choice included).
         data: all poses; options: the physical calibration's settings.
         streaming: the subsample's size and the chunk.
+        facts: adds the records that describe the data (coverage, the measured tool), given
+            the result and the subsample.
     """
     t0 = time.perf_counter()
     index = well_spread_subsample(data.q, int(streaming.subsample))
@@ -262,10 +278,34 @@ def calibrate_streamed(
         velocities=None if e.velocities is None else np.asarray(e.velocities)[index],
         accelerations=None if e.accelerations is None else np.asarray(e.accelerations)[index],
     )
-    sub = decide(data.subset(index), subsample_options)
+    subsample = data.subset(index)
+    sub = decide(subsample, subsample_options)
     t_sub = time.perf_counter()
     with one_blas_thread():  # (p, p) products of thin chunks: idle BLAS threads only cost (2-core load)
-        return _fit_all_poses(sub, data, options, streaming, index, t0, t_sub)
+        result = _fit_all_poses(sub, data, options, streaming, index, t0, t_sub)
+    return result if facts is None else facts(result, subsample)
+
+
+def _refit_residual(
+    result: CalibrationResult, sub: CalibrationResult, data: Measurements, streaming: Streaming, x: Array
+) -> tuple[CalibrationResult, int]:
+    """``result`` (the physics fitted on all poses at ``x``, the subsample's residual known) with
+    the learned residual and the physics refitted jointly (:mod:`robocal.identify.residual.stream`),
+    and the number of poses that fit used (0: no residual)."""
+    learned = sub.model.residual
+    if learned is None or data.position is None:
+        return result, 0
+    from robocal.identify.residual.stream import fit_residual_streamed
+
+    k = len(learned.joints)
+    per_pose = k * (k + 1) * (2 * learned.harmonics) ** 2  # flops of the normal matrix's blocks
+    fitted = well_spread_subsample(data.q, int(streaming.residual_flops / per_pose))
+    whole = len(fitted) == data.n
+    q, position = (data.q, data.position) if whole else (data.q[fitted], data.position[fitted])
+    refit = fit_residual_streamed(result, q, position, chunk=int(streaming.chunk))
+    result = with_estimates(result, x + refit.step)
+    result = result.replace(model=dataclasses.replace(result.model, residual=refit.residual))
+    return _with_covariance(result, refit.covariance, refit.cross_covariance), len(q)
 
 
 def _fit_all_poses(
@@ -284,21 +324,12 @@ def _fit_all_poses(
     known_noise = options.weights.by == "sigma" and data.sigma is not None
     covariance: Covariance = streamed_covariance(ne, known_noise, Rules.of(options.pruning).significance)
     result = _with_covariance(with_estimates(sub, solved.x), covariance.covariance)
-    residual_passes = 0
-    if sub.model.residual is not None and data.position is not None:
-        from robocal.identify.residual.stream import fit_residual_streamed
-
-        refit = fit_residual_streamed(result, data.q, data.position, chunk=int(streaming.chunk))
-        result = with_estimates(result, solved.x + refit.step)
-        result = result.replace(model=dataclasses.replace(result.model, residual=refit.residual))
-        result = _with_covariance(result, refit.covariance, refit.cross_covariance)
-        residual_passes = 1
-    rms_before = math.sqrt(chunked.mean_square_position(np.asarray(sub.nominal, dtype=float)))
+    result, residual_poses = _refit_residual(result, sub, data, streaming, solved.x)
     residuals = _residual_pass(result, data, int(streaming.chunk))
     after = float(np.einsum("ij,ij->", residuals[:, :3], residuals[:, :3])) / data.n
     p = len(result.names)
     result = result.replace(
-        residuals=residuals, rms_before=rms_before, rms_after=math.sqrt(after), n=data.n,
+        residuals=residuals, rms_after=math.sqrt(after), n=data.n,
         residual_std=math.sqrt(after * data.n / max(3 * data.n - p, 1)),
         condition_number=covariance.condition,
         success=solved.success, message=solved.message, iterations=solved.iterations,
@@ -308,8 +339,8 @@ def _fit_all_poses(
     if result.model.residual is not None:
         result = result.with_diagnostics(residual_rms_after_mm=math.sqrt(after) * 1e3)
     record = {"poses": data.n, "subsample": len(index), "chunk": int(streaming.chunk),
-              "passes": chunked.passes + residual_passes + 2, "subsample_seconds": t_sub - t0,
-              "streamed_seconds": time.perf_counter() - t_sub}  # fmt: skip
+              "passes": chunked.passes + (residual_poses > 0) + 1, "residual_poses": residual_poses,
+              "subsample_seconds": t_sub - t0, "streamed_seconds": time.perf_counter() - t_sub}  # fmt: skip
     return result.with_diagnostics(
         outlier_poses=outliers, evaluations=sub.diagnostics.evaluations + solved.evaluations,
         solve_seconds=sub.diagnostics.solve_seconds + time.perf_counter() - t_sub, streaming=record,
