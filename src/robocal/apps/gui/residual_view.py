@@ -12,7 +12,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["arrow_scale", "residual_figure"]
+__all__ = ["MAX_HELD_OUT_SHOWN", "arrow_scale", "residual_figure"]
+
+#: at most this many held-out points are drawn (every k-th row; the statistics use them all)
+MAX_HELD_OUT_SHOWN = 2000
 
 
 def arrow_scale(points_mm: np.ndarray, errors_mm: np.ndarray) -> float:
@@ -42,9 +45,9 @@ def residual_figure(sets: dict[str, Any]) -> Any:
         return None
     held = points.get("held_out")
     p_train, e_train = np.asarray(train["measured_mm"]), np.asarray(train["error_mm"])
-    every_p = np.vstack([p_train, np.asarray(held["measured_mm"])]) if held else p_train
-    every_e = np.vstack([e_train, np.asarray(held["error_mm"])]) if held else e_train
-    scale = arrow_scale(every_p, every_e)
+    all_p = np.vstack([p_train, np.asarray(held["measured_mm"])]) if held else p_train
+    all_e = np.vstack([e_train, np.asarray(held["error_mm"])]) if held else e_train
+    scale = arrow_scale(all_p, all_e)
     after = np.linalg.norm(e_train, axis=1)
     before = np.asarray((sets.get("before") or {}).get("errors_mm", after))
     top = float(max(before.max(), after.max(), 1e-9))
@@ -58,6 +61,10 @@ def residual_figure(sets: dict[str, Any]) -> Any:
     ]  # fmt: skip
     if held:
         p_held, e_held = np.asarray(held["measured_mm"]), np.asarray(held["error_mm"])
+        every = slice(
+            None, None, -(-len(p_held) // MAX_HELD_OUT_SHOWN)
+        )  # evenly thinned: the browser stays quick
+        p_held, e_held = p_held[every], e_held[every]
         err = np.linalg.norm(e_held, axis=1)
         traces.append(go.Scatter3d(
             x=p_held[:, 0], y=p_held[:, 1], z=p_held[:, 2], mode="markers", name="held-out poses",
