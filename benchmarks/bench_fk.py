@@ -4,9 +4,11 @@ For each robot (UR10 by default; ``--robots`` for others of the catalog), on the
 random configurations within the joint limits:
 
 * one configuration per call: robocal's direct entry points
-  (:func:`robocal.model.chain_compiled.direct`: ``fk(q, data)``, ``fk_jacobian(q, data)``,
-  the outputs preallocated), ``Model.fk(q)`` and ``Model.joint_jacobian(q)`` (a new array
-  per call), against Pinocchio's ``forwardKinematics`` + ``updateFramePlacement`` and
+  (``d = model.data()``, :class:`robocal.model.chain_compiled.ChainData`: ``d.fk(q, d.data)``,
+  ``d.fk_jacobian(q, d.data)``, the outputs preallocated), ``Model.fk(q, data=d)`` and
+  ``Model.joint_jacobian(q, data=d)`` (checked, into the caller's ``d``), ``Model.fk(q)`` and
+  ``Model.joint_jacobian(q)`` (a new array per call), against Pinocchio's
+  ``forwardKinematics`` + ``updateFramePlacement`` and
   ``computeFrameJacobian`` (LOCAL_WORLD_ALIGNED: the same ``[v; ω]`` in the base frame; it
   places the frame too);
 * many configurations: ``Model.fk(Q)``, ``Model.joint_jacobian(Q)`` and the direct
@@ -40,7 +42,6 @@ import pinocchio as pin
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import readme_table
 import robocal as rc
-from robocal.model.chain_compiled import direct
 from robocal.model.dynamics import TOOL_FRAME, to_pinocchio
 
 N_MANY = 1000
@@ -70,7 +71,7 @@ def cases(name: str):
     """``(label, configurations per call, robocal call, Pinocchio call)`` for one robot, after
     checking every robocal result against Pinocchio's."""
     model = rc.robot(name)
-    d = direct(model)
+    d = model.data()
     pm = to_pinocchio(model)
     pd = pm.createData()
     tool = pm.getFrameId(TOOL_FRAME)
@@ -102,6 +103,8 @@ def cases(name: str):
     assert fkj(q, data) and np.abs(d.J - J_pin[0]).max() < 1e-11
     assert np.abs(model.fk(q) - T_pin[0]).max() < 1e-12
     assert np.abs(model.joint_jacobian(q) - J_pin[0]).max() < 1e-11
+    assert model.fk(q, data=d) is d.T and np.abs(d.T - T_pin[0]).max() < 1e-12
+    assert model.joint_jacobian(q, data=d) is d.J and np.abs(d.J - J_pin[0]).max() < 1e-11
     assert fk_many(Q, data, Ts, Js, True)
     assert np.abs(Ts - T_pin).max() < 1e-12 and np.abs(Js - J_pin).max() < 1e-11
     assert np.abs(model.fk(Q) - T_pin).max() < 1e-12
@@ -109,9 +112,13 @@ def cases(name: str):
     label = f"{name}:"
     return [
         (f"{label} FK, one configuration, direct `fk(q, data)`", 1, lambda: fk(q, data), pin_fk),
+        (f"{label} FK, one configuration, `Model.fk(q, data=d)` (into d)", 1,
+         lambda: model.fk(q, data=d), pin_fk),
         (f"{label} FK, one configuration, `Model.fk(q)` (new array)", 1, lambda: model.fk(q), pin_fk),
         (f"{label} FK + joint Jacobian, one configuration, direct `fk_jacobian(q, data)`", 1,
          lambda: fkj(q, data), pin_jacobian),
+        (f"{label} joint Jacobian, one configuration, `Model.joint_jacobian(q, data=d)` (into d)", 1,
+         lambda: model.joint_jacobian(q, data=d), pin_jacobian),
         (f"{label} joint Jacobian, one configuration, `Model.joint_jacobian(q)` (new array)", 1,
          lambda: model.joint_jacobian(q), pin_jacobian),
         (f"{label} FK, {N_MANY:,} configurations, `Model.fk(Q)`", N_MANY, lambda: model.fk(Q), pin_fk_many),

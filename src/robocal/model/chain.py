@@ -45,13 +45,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.model import chain_batch, chain_plan
-from robocal.model.chain_batch import perturbation_layout, to_homogeneous
+from robocal.model.chain_batch import to_homogeneous
 from robocal.model.chain_compiled import (
     FK_ONE,
     FLOAT64,
+    ChainData,
     Evaluation,
+    chain_data,
     evaluate_compiled,
     fk_one_entry,
+    into_data,
     joint_jacobian_one,
     kernel_data,
     kernel_evaluate,
@@ -217,17 +220,10 @@ class Model:
     def _plan(self) -> Plan:
         return plan_of(self.steps)
 
-    def _check_perturbations(self, perturbations: ArrayLike | None, n: int) -> Array | None:
-        return check_perturbations(perturbations, n, self.dof)
-
     @cached_property
     def _segments(self) -> tuple[Array, Array]:
-        """:meth:`_segment_data` for this model's own values (models are immutable)."""
-        return self._segment_data(self.values)
-
-    def _segment_data(self, values: Array) -> tuple[Array, Array]:
-        """:func:`robocal.model.chain_plan.segment_data` of this chain for parameter ``values``."""
-        return segment_data(self._plan, values)
+        """:func:`~robocal.model.chain_plan.segment_data` of this model's own values."""
+        return segment_data(self._plan, self.values)
 
     def _forward(
         self,
@@ -238,31 +234,44 @@ class Model:
         segments: tuple[Array, Array] | None = None,
     ) -> tuple[Array, Array | None]:
         """:func:`robocal.model.chain_batch.forward` for parameter ``values`` (default: the
-        model's); ``segments``: :meth:`_segment_data` of ``values`` when the caller has it."""
+        model's); ``segments``: :func:`segment_data` of ``values`` when the caller has it."""
         plan = self._plan
         if values is None:
             seg_T, _ = self._segments
             offsets = np.array([self.steps[i].value for i in plan.joint_steps])
         else:
-            seg_T, _ = self._segment_data(values) if segments is None else segments
+            seg_T, _ = segment_data(self._plan, values) if segments is None else segments
             offsets = values[plan.joint_steps]
         return chain_batch.forward(plan, seg_T, offsets, q, perturbations, keep_anchors)
 
-    def fk(self, q: ArrayLike, perturbations: ArrayLike | None = None, compiled: bool | None = None) -> Array:
+    def fk(
+        self,
+        q: ArrayLike,
+        perturbations: ArrayLike | None = None,
+        compiled: bool | None = None,
+        data: ChainData | None = None,
+    ) -> Array:
         """Tool frames ``T_base_tool`` shaped ``(n, 4, 4)`` for joint values ``q`` ``(n, dof)``.
 
         ``perturbations`` ``(n, dof, 3)`` are per-pose joint perturbations (δα, δβ, δθ).
         ``compiled``: use the compiled kernels (:mod:`robocal.model.kernels`; default: when
-        numba is installed) or, with False, the numpy code (no numba import).
+        numba is installed) or, with False, the numpy code (no numba import).  ``data``: this
+        model's :meth:`data`; the frame of one configuration is then written into ``data.T``,
+        which is returned (no allocation; overwritten by the next call).
         """
         if type(q) is np.ndarray and q.ndim == 1 and q.dtype is FLOAT64 and perturbations is None:
-            # one configuration (the interactive case): ~0.6 µs, kernel called without dispatch
+            # one configuration (the interactive case): the kernel called without dispatch
             one = FK_ONE[0] if FK_ONE else fk_one_entry(compiled)
-            T = np.empty((4, 4))
-            if compiled is not False and one is not None and one[0](q, self._fk_one_data, T):
-                return T  # else the general path says what is wrong
+            if compiled is not False and one is not None:
+                if data is None:
+                    T = np.empty((4, 4))
+                    if one[0](q, self._fk_one_data, T):
+                        return T
+                elif data.model is self and one[2](q, data.data):
+                    return data.T
+            # else the general path says what is wrong
         q, single = check_q(q, self)
-        d = self._check_perturbations(perturbations, len(q))
+        d = check_perturbations(perturbations, len(q), self.dof)
         kernels = kernels_loader(compiled)
         if kernels is not None and d is None:
             plan = self._plan
@@ -274,7 +283,12 @@ class Model:
         else:
             F, _ = self._forward(q, d, keep_anchors=False)
             T = to_homogeneous(F)
-        return T[0] if single else T
+        return into_data(data, self, "T", T[0] if single else T, single)
+
+    def data(self) -> ChainData:
+        """A new :class:`~robocal.model.chain_compiled.ChainData` of this model: the compiled
+        work arrays and outputs, owned by the caller (numba required)."""
+        return chain_data(self, self._kernel_segments)
 
     def joint_frames(
         self, q: ArrayLike, perturbations: ArrayLike | None = None, compiled: bool | None = None
@@ -282,7 +296,7 @@ class Model:
         """Frames after each joint step, ``(n, dof, 4, 4)`` in the base frame (``compiled``: as
         for :meth:`fk`)."""
         q, single = check_q(q, self)
-        d = self._check_perturbations(perturbations, len(q))
+        d = check_perturbations(perturbations, len(q), self.dof)
         kernels = kernels_loader(compiled)
         if kernels is not None:
             T = self._kernel_forward(kernels, q, d, keep_anchors=True)[1]
@@ -352,7 +366,7 @@ class Model:
         """:func:`robocal.model.chain_batch.columns`: the tool frame and the derivative columns
         wrt the values of ``steps`` for parameter ``values`` (default: the model's)."""
         if segments is None:
-            segments = self._segments if values is None else self._segment_data(values)
+            segments = self._segments if values is None else segment_data(self._plan, values)
         F, anchors = self._forward(q, perturbations, keep_anchors=True, values=values, segments=segments)
         assert anchors is not None  # keep_anchors
         return chain_batch.columns(
@@ -373,7 +387,7 @@ class Model:
         if rows not in ("position", "pose"):
             raise ValueError(f"rows must be 'position' or 'pose', got {rows!r}")
         q, single = check_q(q, self)
-        d = self._check_perturbations(perturbations, len(q))
+        d = check_perturbations(perturbations, len(q), self.dof)
         free = np.flatnonzero(self.free_mask)
         kernels = kernels_loader(compiled)
         if kernels is not None:
@@ -416,7 +430,7 @@ class Model:
             columns when asked, and the perturbation columns when asked.
         """
         q, _ = check_q(q, self)
-        d = self._check_perturbations(perturbations, len(q))
+        d = check_perturbations(perturbations, len(q), self.dof)
         v = None if values is None else np.asarray(values, dtype=float)
         if v is not None and v.shape != (len(self.steps),):
             raise ValueError(f"values shaped {v.shape}; model {self.name!r} has {len(self.steps)} parameters")
@@ -427,25 +441,7 @@ class Model:
             return evaluate_compiled(
                 kernels, self._plan, data, q, d, free, rows, jacobian, joint_columns, perturbation_columns
             )
-        if not jacobian and not joint_columns and not perturbation_columns:
-            F, _ = self._forward(q, d, keep_anchors=False, values=v)
-            return to_homogeneous(F), None
-        free = np.flatnonzero(self.free_mask) if jacobian else np.zeros(0, dtype=np.intp)
-        need_joints = joint_columns or perturbation_columns
-        joints = self._plan.joint_steps if need_joints else np.zeros(0, dtype=np.intp)
-        steps = np.union1d(free, joints)
-        F, J, *tilt = self._columns(
-            q, d, steps, orientation=rows == "pose", values=v, tilt=perturbation_columns
-        )
-        J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(J.shape[2] * J.shape[1], len(steps))
-        J_free = J[:, np.searchsorted(steps, free)] if jacobian else None
-        out: Evaluation = (to_homogeneous(F), J_free)
-        J_joints = J[:, np.searchsorted(steps, joints)]  # (rows, dof); empty without need_joints
-        if joint_columns:
-            out += (J_joints,)
-        if perturbation_columns:
-            out += (perturbation_layout(tilt[0], J_joints),)
-        return out
+        return chain_batch.evaluate(self, q, d, v, rows, jacobian, joint_columns, perturbation_columns)
 
     def jacobian(
         self,
@@ -480,20 +476,22 @@ class Model:
         P = out[2].reshape(len(q), 3 if rows == "position" else 6, self.dof, 3)
         return P[0] if single else P
 
-    def joint_jacobian(self, q: ArrayLike, perturbations: ArrayLike | None = None) -> Array:
+    def joint_jacobian(
+        self, q: ArrayLike, perturbations: ArrayLike | None = None, data: ChainData | None = None
+    ) -> Array:
         """Geometric Jacobian of the tool frame origin, ``(n, 6, dof)``, rows ``[v; ω]``
-        in the base frame (the 6-vector of linear and angular velocity per unit joint rate)."""
+        in the base frame (the 6-vector of linear and angular velocity per unit joint rate);
+        ``data``: as for :meth:`fk` (one configuration's Jacobian into ``data.J``)."""
         if type(q) is np.ndarray and q.ndim == 1 and q.dtype is FLOAT64 and perturbations is None:  # noqa: SIM102
-            if (J := joint_jacobian_one(self, q)) is not None:  # one configuration: ~0.7 µs
+            if (J := joint_jacobian_one(self, q, data)) is not None:  # one configuration: ~0.7 µs
                 return J
         q, single = check_q(q, self)
-        d = self._check_perturbations(perturbations, len(q))
+        d = check_perturbations(perturbations, len(q), self.dof)
         kernels = kernels_loader(None)
         if kernels is not None:
             J = self._kernel_evaluate(kernels, q, d, self._plan.joint_steps, 6)[1].reshape(
                 len(q), 6, self.dof
             )
-            return J[0] if single else J
-        _, J = self._columns(q, d, self._plan.joint_steps)
-        J = np.ascontiguousarray(J.transpose(2, 1, 0))
-        return J[0] if single else J
+        else:
+            J = np.ascontiguousarray(self._columns(q, d, self._plan.joint_steps)[1].transpose(2, 1, 0))
+        return into_data(data, self, "J", J[0] if single else J, single)

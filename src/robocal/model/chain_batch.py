@@ -8,6 +8,7 @@ the rows of ``[R | p]`` with the poses last.  Lengths m, angles rad.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +18,7 @@ from robocal.model.chain_plan import EYE4, Plan
 __all__ = [
     "columns",
     "cross_rows",
+    "evaluate",
     "forward",
     "perturbation_layout",
     "rotate_rows",
@@ -228,3 +230,36 @@ def to_homogeneous(F: Array) -> Array:
     T[:, :3, :] = F.transpose(2, 0, 1)
     T[:, 3, 3] = 1.0
     return T
+
+
+def evaluate(
+    model: Any,
+    q: Array,
+    d: Array | None,
+    values: Array | None,
+    rows: str,
+    jacobian: bool,
+    joint_columns: bool,
+    perturbation_columns: bool,
+) -> tuple[Any, ...]:
+    """:meth:`robocal.model.chain.Model.evaluate` of ``model`` with numpy (same arguments,
+    checked by it; same returns)."""
+    if not jacobian and not joint_columns and not perturbation_columns:
+        F, _ = model._forward(q, d, keep_anchors=False, values=values)
+        return to_homogeneous(F), None
+    free = np.flatnonzero(model.free_mask) if jacobian else np.zeros(0, dtype=np.intp)
+    need_joints = joint_columns or perturbation_columns
+    joints = model._plan.joint_steps if need_joints else np.zeros(0, dtype=np.intp)
+    steps = np.union1d(free, joints)
+    F, J, *tilt = model._columns(
+        q, d, steps, orientation=rows == "pose", values=values, tilt=perturbation_columns
+    )
+    J = np.ascontiguousarray(J.transpose(2, 1, 0)).reshape(J.shape[2] * J.shape[1], len(steps))
+    J_free = J[:, np.searchsorted(steps, free)] if jacobian else None
+    out: tuple[Any, ...] = (to_homogeneous(F), J_free)
+    J_joints = J[:, np.searchsorted(steps, joints)]  # (rows, dof); empty without need_joints
+    if joint_columns:
+        out += (J_joints,)
+    if perturbation_columns:
+        out += (perturbation_layout(tilt[0], J_joints),)
+    return out

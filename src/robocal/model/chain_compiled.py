@@ -17,8 +17,9 @@ from robocal.model.chain_plan import Plan
 
 __all__ = [
     "FK_ONE",
-    "Direct",
+    "ChainData",
     "Evaluation",
+    "chain_data",
     "direct",
     "evaluate_compiled",
     "fk_one_entry",
@@ -65,12 +66,14 @@ def load_kernels(compiled: bool | None):
     return kernels
 
 
-def fk_one_entry(compiled: bool | None) -> tuple[Any, Any] | None:
-    """:func:`robocal.model.kernels.fk_one` ``(q, packed, T) -> bool`` and
-    :func:`~robocal.model.kernels.fk_jacobian_one` ``(q, packed, T, J) -> bool`` for a float64
-    ``q`` of one dimension (any strides or alignment), a packed model and C-ordered ``T``
-    ``(4, 4)`` and ``J`` ``(6, dof)``, called without numba's dispatch (kept in
-    :data:`FK_ONE`); None without the kernels (``compiled``: as for :func:`load_kernels`).
+def fk_one_entry(compiled: bool | None) -> tuple[Any, Any, Any, Any] | None:
+    """The one-configuration kernels called without numba's dispatch (kept in :data:`FK_ONE`):
+    :func:`robocal.model.kernels.fk_one` ``(q, packed, T) -> bool``,
+    :func:`~robocal.model.kernels.fk_jacobian_one` ``(q, packed, T, J) -> bool``,
+    :func:`~robocal.model.kernels.fk_into` and :func:`~robocal.model.kernels.fk_jacobian_into`
+    ``(q, data) -> bool`` (a :class:`ChainData`'s ``data``), for a float64 ``q`` of one
+    dimension (any strides or alignment), a packed model and C-ordered ``T`` ``(4, 4)`` and
+    ``J`` ``(6, dof)``; None without the kernels (``compiled``: as for :func:`load_kernels`).
 
     Why: numba's dispatcher types every argument on every call (about 0.07 µs of the 0.4 µs
     of a one-configuration FK); the compiled wrapper of one explicit signature skips that.
@@ -95,25 +98,48 @@ def fk_one_entry(compiled: bool | None) -> tuple[Any, Any] | None:
     for kernel, signature in (
         (kernels.fk_one, (q, packed, out)),
         (kernels.fk_jacobian_one, (q, packed, out, out)),
+        (kernels.fk_into, (q, packed)),
+        (kernels.fk_jacobian_into, (q, packed)),
     ):
         kernel.compile(signature)  # from numba's cache after the first time
         try:
             entries.append(kernel.overloads[signature].entry_point)
         except (AttributeError, KeyError):  # another numba's internals: its dispatcher then
             entries.append(kernel)
-    FK_ONE.append((entries[0], entries[1]))
+    FK_ONE.append(tuple(entries))
     return FK_ONE[-1]
 
 
-def joint_jacobian_one(model: Any, q: Array) -> Array | None:
+def joint_jacobian_one(model: Any, q: Array, data: ChainData | None) -> Array | None:
     """``Model.joint_jacobian`` ``(6, dof)`` of one configuration ``q`` (let through as for
-    :func:`fk_one_entry`) by the compiled kernel; None without numba or when ``q`` does not
-    fit (the general path then says why)."""
+    :func:`fk_one_entry`) by the compiled kernel, into ``data.J`` when given (this model's);
+    None without numba or when ``q`` or ``data`` does not fit (the general path then says
+    why)."""
     one = FK_ONE[0] if FK_ONE else fk_one_entry(None)
+    if one is None:
+        return None
+    if data is not None:
+        return data.J if data.model is model and one[3](q, data.data) else None
     J = np.empty((6, model.dof))
-    if one is not None and one[1](q, model._fk_one_data, np.empty((4, 4)), J):
-        return J
-    return None
+    return J if one[1](q, model._fk_one_data, np.empty((4, 4)), J) else None
+
+
+def into_data(data: ChainData | None, model: Any, name: str, value: Array, single: bool) -> Array:
+    """``value`` (the general path's result), or with ``data`` and one configuration
+    (``single``) ``value`` copied into ``data``'s output ``name`` (``"T"`` or ``"J"``), which is
+    returned; ValueError when ``data`` was made for another model (its frame would be
+    another robot's)."""
+    if data is None:
+        return value
+    if data.model is not model and data.model != model:
+        raise ValueError(
+            f"data was made for model {data.model.name!r}, not for {model.name!r}: use model.data()"
+        )
+    if not single:
+        return value
+    out: Array = getattr(data, name)
+    out[...] = value
+    return out
 
 
 def kernel_data(kernels, plan: Plan, dof: int, values: Array) -> tuple[Array, Array, Array]:
@@ -211,11 +237,17 @@ def evaluate_compiled(
     return out
 
 
-@dataclass(frozen=True)
-class Direct:
-    """The compiled one-configuration entry points of a model, with its data and outputs in
-    one preallocated array (as Pinocchio's ``model`` / ``data`` pair): no Python between the
-    caller and the kernel, and two arguments (numba's dispatch costs per argument).
+@dataclass(frozen=True, eq=False)
+class ChainData:
+    """A model's compiled work arrays, owned by the caller (Pinocchio's ``data`` to the
+    model's ``model``): what :meth:`robocal.model.chain.Model.data` makes, a new one per call.
+
+    The model stays an immutable value; what the kernels write (the outputs ``T`` and ``J`` and
+    the joints' sines and cosines) lives here, so a hot loop allocates nothing and two threads
+    with two of these never share a buffer.  ``Model.fk(q, data=d)`` and
+    ``Model.joint_jacobian(q, data=d)`` of one configuration write into ``d.T`` / ``d.J`` and
+    return them (checked arguments, no allocation); the direct entry points below skip even
+    the checks.
 
     ``fk(q, data)`` writes the tool frame ``T_base_tool`` of ``q`` ``(dof,)`` (float64; rad for
     revolute joints, m for prismatic) into ``T`` ``(4, 4)`` (m), a view into ``data``;
@@ -228,32 +260,38 @@ class Direct:
     general ``Model.fk`` says what is wrong).  ``T`` and ``J`` are overwritten by the next
     call: copy what is kept.
 
-    >>> d = direct(rc.robot("ur10"))
+    >>> d = rc.robot("ur10").data()
     >>> fk, data, T = d.fk, d.data, d.T       # bind once, outside the loop
     >>> fk(q, data)                            # T now holds the tool frame of q
     True
 
     The model's values are copied when this is made: a model with other values needs its
-    own :func:`direct`; two threads need two.
+    own; two threads need two.
     """
 
+    model: Any  # the robocal.model.chain.Model this was made for (Model.fk checks it)
+    plan: Plan  # the chain's structure (shared by the models of the same structure)
+    segments: tuple[Array, Array, Array]  # kernel_data: segments, local frames, joint offsets
     fk: Any  # numba dispatcher: (q, data) -> bool
     fk_jacobian: Any  # (q, data) -> bool
     fk_many: Any  # (Q, data, Ts, Js, jacobian) -> bool
-    data: Array  # the model (robocal.model.kernels.pack_one), then T and J
+    data: Array  # the model packed (robocal.model.kernels.pack_one), then T, J and the scratch
     T: Array  # (4, 4) view into data: the output of fk / fk_jacobian
     J: Array  # (6, dof) view into data: the output of fk_jacobian
 
 
-def direct(model: Any) -> Direct:
-    """:class:`Direct` entry points of ``model`` (a :class:`robocal.model.chain.Model`; numba
-    required: imports the kernels)."""
+def chain_data(model: Any, segments: tuple[Array, Array, Array]) -> ChainData:
+    """A new :class:`ChainData` of ``model`` (a :class:`robocal.model.chain.Model`) whose
+    :func:`kernel_data` is ``segments`` (numba required: imports the kernels)."""
     kernels = load_kernels(True)
     plan = model._plan
-    seg, _, offsets = model._kernel_segments
+    seg, _, offsets = segments
     data = kernels.pack_one(seg, offsets, plan.joint_axis_array, plan.joint_rot_array, outputs=True)
     out = int(data[1])
-    return Direct(
+    return ChainData(
+        model=model,
+        plan=plan,
+        segments=segments,
         fk=kernels.fk_into,
         fk_jacobian=kernels.fk_jacobian_into,
         fk_many=kernels.fk_jacobian_many,
@@ -261,3 +299,8 @@ def direct(model: Any) -> Direct:
         T=data[out : out + 16].reshape(4, 4),
         J=data[out + 16 : out + 16 + 6 * model.dof].reshape(6, model.dof),
     )
+
+
+def direct(model: Any) -> ChainData:
+    """``model.data()``: the :class:`ChainData` of ``model`` (numba required)."""
+    return model.data()

@@ -73,7 +73,7 @@ def _times_segment(F, S):
 @jit
 def segment_data(values, step_axis, step_rot, step_joint, dof):
     """Constant segment transforms ``(dof + 1, 4, 4)`` and each step's local frame
-    ``(P, 4, 4)`` (as :meth:`~robocal.model.chain.Model._segment_data`)."""
+    ``(P, 4, 4)`` (as :func:`robocal.model.chain_plan.segment_data`)."""
     P = values.shape[0]
     seg = np.zeros((dof + 1, 4, 4))
     local = np.zeros((P, 4, 4))

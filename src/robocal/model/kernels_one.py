@@ -4,7 +4,7 @@ interactive case, a robot controller's loop), with few arguments and no allocati
 
 Entry points: :func:`fk_one` (``Model.fk`` of one configuration), :func:`fk_jacobian_one`,
 :func:`fk_into` / :func:`fk_jacobian_into` (the model and the outputs in one array, as
-Pinocchio's model / data: :class:`robocal.model.chain_compiled.Direct`) and
+Pinocchio's model / data: :class:`robocal.model.chain_compiled.ChainData`) and
 :func:`fk_jacobian_many`.  The numpy code of :class:`robocal.model.chain.Model` is the
 reference (``tests/test_kernels.py``, to 1e-12) and Pinocchio an independent one
 (``tests/test_pinocchio.py``).
@@ -155,7 +155,7 @@ def fk_jacobian_one(q, packed, T, J):
 def fk_into(q, data):
     """:func:`fk_one` with the output in ``data`` (:func:`pack_one` with ``outputs``): two
     arguments, as Pinocchio's ``forwardKinematics(model, data, q)``; the frame is
-    ``data[data[1]:][:16]``, a row-major 4 x 4 (:class:`robocal.model.chain_compiled.Direct`
+    ``data[data[1]:][:16]``, a row-major 4 x 4 (:class:`robocal.model.chain_compiled.ChainData`
     keeps a view of it)."""
     out = np.int64(data[1])
     dof = np.int64(data[0])
