@@ -295,15 +295,18 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     x0 = np.empty(len(live))
     for a in range(len(live)):
         x0[a] = values0[free_steps[live[a]]]
-    # the fit, then pruning (after a converged fit)
-    x, success, evaluations, history, last, cov, ok = _fit_once(data, values0, free_steps, live, x0, first,
-                                                                normal, settings, chi2_bounds)  # fmt: skip
-    total = evaluations
+    # the fit, then pruning (after a converged fit: at most one unknown fewer than it had)
+    # with one call site of the inlined fit: each one is compiled on first use (4 s each)
     pruned, pruned_sigma = np.empty(len(live), dtype=np.intp), np.empty(len(live))
-    n_pruned = 0
-    for _ in range(len(x) - 1 if success else 0):
+    n_pruned, total, max_pruned = 0, 0, -1
+    while True:
+        fitted = _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2_bounds)
+        x, success, evaluations, history, last, cov, ok = fitted
+        total += evaluations
+        if max_pruned < 0:  # the first fit
+            max_pruned = len(x) - 1 if success else 0
         std = cov[2]
-        if not ok or len(std) < 2:
+        if n_pruned >= max_pruned or not ok or len(std) < 2:
             break
         move = std * _displacement_scale(last[2])
         worst = prune_candidate(move, max_std, max_std_ratio, 1.0)  # the rule after a fit: margin 1
@@ -312,9 +315,6 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         pruned[n_pruned], pruned_sigma[n_pruned] = live[worst], move[worst]
         n_pruned += 1
         live, x0 = _without(live, worst), _without(x0, worst)
-        fitted = _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2_bounds)
-        x, success, evaluations, history, last, cov, ok = fitted
-        total += evaluations
     status = OK if ok else SINGULAR
     return (status, screened, sigmas[:count].copy(), pruned[:n_pruned].copy(), pruned_sigma[:n_pruned].copy(),
             live, x0, x, success, evaluations, total, history, last, cov, _columns_of(J0, live))  # fmt: skip
