@@ -134,3 +134,27 @@ def test_derived_copy_is_the_checked_construction(same):
 def _fields(model: Model) -> dict:
     names = ("name", "steps", "bodies", "title", "source", "notes", "joint_effects", "residual")
     return {k: getattr(model, k) for k in names}
+
+
+def test_measurement_chain_follows_the_robot_by_value():
+    """The measurement-chain templates are cached by the robot's value, not its ``id()``: a
+    robot with other link values (even one made after another was freed, which may reuse
+    its id) gets its own values; an equal robot the same chain."""
+    import gc
+
+    from robocal.identify.problem import measurement_chain
+
+    base = rc.robot("ur10")
+    eye, tool = np.eye(4), np.eye(4)
+    for k in range(5):  # new robots, each freed before the next: ids get reused
+        name = base.free_names[k]
+        robot = base.with_values({name: base.step(name).value + 0.01 * (k + 1)})
+        chain = measurement_chain(robot, eye, tool, "position", False)
+        assert chain.step(name).value == robot.step(name).value
+        np.testing.assert_array_equal(chain.values[: len(robot.values)], robot.values)
+        del robot, chain
+        gc.collect()
+    twin = Model(**_fields(base))
+    a = measurement_chain(base, eye, tool, "position", False)
+    b = measurement_chain(twin, eye, tool, "position", False)
+    assert a == b

@@ -98,7 +98,7 @@ class BatchFit:
 
 
 # ---------------------------------------------------------------------- the augmented chain
-_AUG_CACHE: dict[tuple, tuple[Model, NDArray[np.intp], NDArray[np.intp], Model]] = {}
+_AUG_CACHE: dict[tuple, tuple[Model, NDArray[np.intp], NDArray[np.intp]]] = {}
 
 
 def augmented_chain(
@@ -125,10 +125,10 @@ def augmented_chain(
     joint = np.array([s.joint is not None for s in chain.steps])
     mask = np.ones(P, dtype=bool) if varying is None else (np.asarray(varying, dtype=bool) | joint)
     values = chain.values if values is None else np.asarray(values, dtype=float)
-    key = (id(chain), mask.tobytes(), values[~mask].tobytes())
+    key = (chain, mask.tobytes(), values[~mask].tobytes())  # by value: an id can be reused
     hit = _AUG_CACHE.get(key)
-    if hit is not None and hit[3] is chain:
-        return hit[0], hit[1], hit[2]
+    if hit is not None:
+        return hit
     steps = tuple(
         Step(s.motion, s.name, 0.0, True, None, Joint("u:" + s.name), s.role)
         if mask[i]
@@ -140,7 +140,7 @@ def augmented_chain(
     joint_pos = np.flatnonzero(joint[ucols])
     if len(_AUG_CACHE) > 64:
         _AUG_CACHE.clear()
-    _AUG_CACHE[key] = (aug, ucols, joint_pos, chain)
+    _AUG_CACHE[key] = (aug, ucols, joint_pos)
     return aug, ucols, joint_pos
 
 

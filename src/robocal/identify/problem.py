@@ -91,9 +91,10 @@ def measurement_chain(
     return template._derived(tuple(steps), "free")
 
 
-# measurement chains at zero frame and tool values, by (id(robot), layout): the robot is
-# kept with its chain so that its id stays its own; a few robots are calibrated in turn
-_TEMPLATES: dict[tuple, tuple[Model, Model]] = {}
+# measurement chains at zero frame and tool values, by (robot, layout): keyed by the robot's
+# value (its hash is cached; an id could be reused by another robot once this one is
+# freed), equal robots share one; a few robots are calibrated in turn
+_TEMPLATES: dict[tuple, Model] = {}
 
 
 def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> Model:
@@ -102,10 +103,10 @@ def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> Mode
     all at zero: every calibration of that robot sets the values of a copy, which shares
     the template's structure (plan, names, free flags) instead of working it out again."""
     fixed_frame, fit_frame, has_tool, pose_tool = layout
-    key = (id(robot), *layout)
+    key = (robot, *layout)
     cached = _TEMPLATES.get(key)
     if cached is not None:
-        return cached[1]
+        return cached
     before: list[Step] = []
     if fixed_frame:
         before += _frame_template("frame0", False, Role.DEVICE)
@@ -130,7 +131,7 @@ def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> Mode
         getattr(template, name)  # worked out once, shared by every copy
     if len(_TEMPLATES) >= 16:
         _TEMPLATES.clear()
-    _TEMPLATES[key] = (robot, template)
+    _TEMPLATES[key] = template
     return template
 
 
