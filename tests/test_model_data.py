@@ -51,9 +51,9 @@ def test_data_of_another_model_is_refused():
     ur10, ur5 = rc.robot("ur10"), rc.robot("ur5")
     d = ur10.data()
     q = _q(ur5, 1, 2)[0]
-    with pytest.raises(ValueError, match="ur5|ur10"):
+    with pytest.raises(ValueError, match=r"ur5|ur10"):
         ur5.fk(q, data=d)
-    with pytest.raises(ValueError, match="ur5|ur10"):
+    with pytest.raises(ValueError, match=r"ur5|ur10"):
         ur5.joint_jacobian(q, data=d)
     twin = Model(**_fields(ur10))  # equal values, another object
     assert twin is not ur10 and twin == ur10
