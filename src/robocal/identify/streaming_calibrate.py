@@ -62,7 +62,7 @@ from robocal.model.joints import (
     joint_perturbations,
     load_moments,
 )
-from robocal.model.residual import one_blas_thread
+from robocal.model.residual import JointAngleResidual, one_blas_thread
 from robocal.model.steps import Role
 
 __all__ = ["STREAM_SUBSAMPLE", "STREAM_THRESHOLD", "Streaming", "calibrate_streamed", "streams",
@@ -151,6 +151,15 @@ def _row_weights(data: Measurements, options: CalibrationOptions, s: slice, rows
     return np.c_[position, np.repeat(orientation, 3, axis=1)]
 
 
+def _angle_errors(residual: JointAngleResidual, q: Array) -> Array:
+    """``(n, dof)`` the learned residual's joint angle errors (rad) at every pose, computed once
+    by chunks (its Fourier basis is ``(chunk, joints, 2H)``; every pass reuses them)."""
+    out = np.zeros(q.shape)
+    for lo in range(0, len(q), 4096):
+        out[lo : lo + 4096] = residual.perturbations(q[lo : lo + 4096], q.shape[1])[:, :, 2]
+    return out
+
+
 def chunk_problems(
     reference: CalibrationResult, data: Measurements, options: CalibrationOptions
 ) -> Callable[[slice], Problem]:
@@ -170,6 +179,7 @@ def chunk_problems(
     robot, e = _load_robot(reference.model), options.joint_effects
     gravity, residual = np.asarray(reference.gravity), reference.model.residual
     rows = 6 if reference.measure == "pose" else 3
+    learned = None if residual is None else _angle_errors(residual, data.q)
 
     def problem_of(s: slice) -> Problem:
         q = data.q[s]
@@ -184,9 +194,9 @@ def chunk_problems(
                 basis = B[[names.index(n) for n in effects]]
                 taken = np.tensordot(start, basis, axes=1)  # the estimated part: from x
                 known = -taken if known is None else known - taken
-        if residual is not None:
-            learned = residual.perturbations(q, robot.dof)
-            known = learned if known is None else known + learned
+        if learned is not None:  # the learned residual, known: δθ of its joints
+            known = np.zeros((len(q), robot.dof, 3)) if known is None else known
+            known[:, :, 2] += learned[s]
         orientation = None if rows == 3 or data.orientation is None else data.orientation[s]
         position = data.position[s] if data.position is not None else np.empty((0, 3))
         weights = _row_weights(data, options, s, rows).reshape(-1)
