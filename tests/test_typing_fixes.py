@@ -133,6 +133,13 @@ def test_every_choice_of_the_command_line_is_a_table_of_the_api():
         ("simulate", "--distribution", choices.DISTRIBUTIONS),
         ("poses", "--index", choices.INDEX_NAMES),
         ("poses", "--method", choices.POSE_METHODS),
+        ("calibrate", "--residual", choices.RESIDUAL_CHOICES),
+        ("calibrate", "--method", choices.SOLVER_METHODS),
+        ("calibrate", "--length-unit", choices.LENGTH_UNIT_NAMES),
+        ("calibrate", "--angle-unit", choices.ANGLE_UNIT_NAMES),
+        ("data check", "--length-unit", choices.LENGTH_UNIT_NAMES),
+        ("compensate", "--length-unit", choices.LENGTH_UNIT_NAMES),
+        ("compensate", "--angle-unit", choices.ANGLE_UNIT_NAMES),
     ]:
         assert found.get((path, option)) == table, (path, option, sorted(found))
 
@@ -183,3 +190,66 @@ def test_iso_poses_carry_their_cube_and_constraint():
         IsoPoses(
             q=np.zeros((5, 6)), positions=np.zeros((5, 3)), labels=("P1",) * 5, reachable=np.ones(5, bool)
         )
+
+
+def test_unit_and_solver_tables_are_the_apis():
+    """The unit names offered are the units robocal converts; the solver and residual
+    choices are the ones :func:`robocal.calibrate` takes."""
+    from typing import get_args
+
+    from robocal import choices, units
+    from robocal.identify.calibrate import RESIDUAL_CHOICES, Method, ResidualChoice
+    from robocal.identify.solvers import METHODS
+
+    assert set(choices.LENGTH_UNIT_NAMES) == set(units.LENGTH_UNITS)
+    assert set(choices.ANGLE_UNIT_NAMES) <= set(units.ANGLE_UNITS)
+    assert get_args(Method) == choices.SOLVER_METHODS and set(METHODS) == set(choices.SOLVER_METHODS)
+    assert get_args(ResidualChoice) == RESIDUAL_CHOICES == choices.RESIDUAL_CHOICES
+
+
+def test_a_unit_outside_the_table_is_refused_before_reading(tmp_path):
+    from typer.testing import CliRunner
+
+    from robocal.cli import app
+
+    data = tmp_path / "d.csv"
+    data.write_text("q1,q2,q3,q4,q5,q6,x,y,z\n" + "0,0,0,0,0,0,0.1,0.2,0.3\n" * 3)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(
+        app, ["calibrate", "ur5", "--data", str(data), "--length-unit", "cm", "-o", str(out)]
+    )
+    assert result.exit_code == 2 and "--length-unit" in result.output, result.output
+    assert not out.exists()
+
+
+def _reader_file(tmp_path):
+    path = tmp_path / "m.csv"
+    rows = ["q1;q2;q3;q4;q5;q6;x;y;z"]
+    rows += [f"{k};10;20;30;40;50;{100 + k},5;200;300" for k in range(6)]
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_reader_options_as_one_value_read_as_the_keywords(tmp_path):
+    """``read_measurements(path, options=ReaderOptions(...))`` (what the CLI and the workflow
+    pass) reads as the same keywords do; both at once is refused rather than one ignored."""
+    import pytest
+
+    import robocal as rc
+    from robocal.measure.dataset.options import ReaderOptions
+    from robocal.workflow import ReaderOptions as WorkflowReaderOptions
+
+    assert WorkflowReaderOptions is ReaderOptions  # one type for the CLI, GUI and workflow
+    path = _reader_file(tmp_path)
+    keywords = {"length_unit": "mm", "angle_unit": "deg", "sep": ";", "decimal": ","}
+    by_keywords = rc.read_measurements(path, **keywords)
+    by_value = rc.read_measurements(path, options=ReaderOptions(**keywords))
+    np.testing.assert_array_equal(by_value.q, by_keywords.q)
+    np.testing.assert_array_equal(by_value.position, by_keywords.position)
+    assert by_value.position[0, 0] == pytest.approx(0.1005)  # mm and the decimal comma applied
+    with pytest.raises(TypeError, match="length_unit"):
+        rc.read_measurements(path, options=ReaderOptions(**keywords), length_unit="um")
+    with pytest.raises(TypeError):
+        rc.read_measurements(path, options={"length_unit": "mm"})  # a dict is not the options
+    options = ReaderOptions(extra=["x"])  # a list from a GUI or JSON
+    assert options.extra == ("x",) and hash(options)

@@ -16,21 +16,29 @@ from __future__ import annotations
 from typing import Literal, get_args
 
 __all__ = [
+    "ANGLE_UNIT_NAMES",
     "DISTRIBUTIONS",
     "FRAMES",
     "INCOMPLETE_MODES",
     "INDEX_NAMES",
+    "LENGTH_UNIT_NAMES",
     "LIMITS_MODES",
     "MEASURES",
     "POSE_METHODS",
+    "RESIDUAL_CHOICES",
+    "SOLVER_METHODS",
     "TARGET_KINDS",
+    "AngleUnit",
     "Distribution",
     "Frame",
     "IncompleteMode",
     "IndexName",
+    "LengthUnit",
     "LimitsMode",
     "Measure",
     "PoseMethod",
+    "ResidualChoice",
+    "SolverMethod",
     "TargetKind",
 ]
 
@@ -66,3 +74,20 @@ INDEX_NAMES: tuple[IndexName, ...] = get_args(IndexName)
 #: the thesis' diagonal planes
 PoseMethod = Literal["random", "optimal", "iso9283", "diagonal"]
 POSE_METHODS: tuple[PoseMethod, ...] = get_args(PoseMethod)
+
+#: the unit of lengths in a file or an option's values (robocal.units.LENGTH_UNITS' names)
+LengthUnit = Literal["m", "mm", "um"]
+LENGTH_UNIT_NAMES: tuple[LengthUnit, ...] = get_args(LengthUnit)
+
+#: the unit of angles in a file or an option's values
+AngleUnit = Literal["rad", "deg"]
+ANGLE_UNIT_NAMES: tuple[AngleUnit, ...] = get_args(AngleUnit)
+
+#: the calibration's solver: Levenberg-Marquardt, the pseudo-inverse, bounded least squares,
+#: or the influence-coefficient method
+SolverMethod = Literal["lm", "pinv", "bounded", "influence"]
+SOLVER_METHODS: tuple[SolverMethod, ...] = get_args(SolverMethod)
+
+#: the learned residual: none, chosen by cross-validation, or always the joint-angle Fourier one
+ResidualChoice = Literal["none", "auto", "joint_fourier"]
+RESIDUAL_CHOICES: tuple[ResidualChoice, ...] = get_args(ResidualChoice)

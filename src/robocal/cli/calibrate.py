@@ -10,6 +10,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from robocal.choices import ResidualChoice, SolverMethod
 from robocal.cli import options
 from robocal.cli.options import (
     AngleUnit,
@@ -48,7 +49,9 @@ NOISE_HELP = (
     "columns: tests whether the model explains the data down to it"
 )
 Chain = Annotated[str | None, typer.Option("--chain", metavar="complete|catalog", help=CHAIN_HELP)]
-Residual = Annotated[str, typer.Option("--residual", metavar="auto|joint_fourier|none", help=RESIDUAL_HELP)]
+Residual = Annotated[
+    ResidualChoice, typer.Option("--residual", metavar="auto|joint_fourier|none", help=RESIDUAL_HELP)
+]
 Tool = Annotated[
     str | None,
     typer.Option(
@@ -69,7 +72,9 @@ Data = Annotated[
 ]
 
 
-Method = Annotated[str, typer.Option("--method", metavar="lm|pinv|bounded|influence", help="the solver")]
+Method = Annotated[
+    SolverMethod, typer.Option("--method", metavar="lm|pinv|bounded|influence", help="the solver")
+]
 PerPose = Annotated[
     bool,
     typer.Option(
@@ -302,16 +307,12 @@ def _check_out(out: Path, force: bool) -> None:
 def _check_choices(measure, residual, loss, method, bounds, per_pose) -> None:
     """One line naming the option for a value it does not take, or a combination that does not go."""
     from robocal.identify.options import BOUNDS_CHOICES
-    from robocal.identify.solvers import METHODS
 
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
-    if residual not in ("auto", "none", "joint_fourier"):
-        raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
+    # --residual and --method are choices of robocal.choices: Typer refuses the rest
     if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
         raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
-    if method not in METHODS:
-        raise fail(f"--method {method!r}: {', '.join(METHODS)}")
     if loss != "linear" and method != "lm":
         raise fail(f"--loss {loss} needs --method lm")
     if bounds is not None and bounds not in BOUNDS_CHOICES:

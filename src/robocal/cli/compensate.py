@@ -34,7 +34,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from robocal.choices import Frame, TargetKind
+from robocal.choices import AngleUnit, Frame, LengthUnit, TargetKind
 from robocal.cli.options import Decimal, Force, Json, Sep, joint_values, out_option, resolve_model
 from robocal.console import console, err_console, fail, input_problem, refuse_overwrite, safe
 from robocal.safe_output import strict_json
@@ -96,11 +96,11 @@ FrameOption = Annotated[
     typer.Option("--frame", metavar="base|measurement", help="base | measurement: the frame of the targets"),
 ]
 LengthUnitOption = Annotated[
-    str,
+    LengthUnit,
     typer.Option("--length-unit", metavar="m|mm|um", help="m | mm | um: target positions, prismatic joints"),
 ]
 AngleUnitOption = Annotated[
-    str,
+    AngleUnit,
     typer.Option(
         "--angle-unit",
         metavar="rad|deg",
@@ -169,10 +169,6 @@ def compensate_command(
 
     if (targets is None) == (program is None):
         raise fail("give exactly one of --targets FILE (Cartesian) or --program FILE (joint program)")
-    if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
-        raise fail(
-            f"units: --length-unit m|mm|um and --angle-unit rad|deg, got {length_unit!r}, {angle_unit!r}"
-        )
     if out is not None and out.suffix.lower() not in (".csv", ".json", ".txt"):
         raise fail(f"-o {out}: the output must be a .csv or .json file")
     calibrated = load(source)

@@ -26,6 +26,7 @@ from typing import Annotated
 
 import typer
 
+from robocal.choices import AngleUnit, LengthUnit
 from robocal.cli.compensate import CALIBRATION, PartialOption
 from robocal.cli.options import CONTEXT, Force, frame_option, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe, warn
@@ -266,10 +267,10 @@ NominalOption = Annotated[
     typer.Option("--nominal", metavar="ROBOT", help="the controller's model: catalog name or .yaml"),
 ]
 LengthUnitOption = Annotated[
-    str, typer.Option("--length-unit", metavar="m|mm|um", help="CSV programs: m | mm | um")
+    LengthUnit, typer.Option("--length-unit", metavar="m|mm|um", help="CSV programs: m | mm | um")
 ]
 AngleUnitOption = Annotated[
-    str, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
+    AngleUnit, typer.Option("--angle-unit", metavar="rad|deg", help="CSV programs: rad | deg")
 ]
 StrictOption = Annotated[
     bool, typer.Option("--strict", help="exit 1 on any warning too (statements untouched, other frames)")
@@ -315,10 +316,6 @@ def filter_command(
     from robocal.compensate.programs.filter_file import filter_program_file, language_of
     from robocal.compensate.programs.syntax import ProgramError
 
-    if length_unit not in ("m", "mm", "um") or angle_unit not in ("rad", "deg"):
-        raise fail(
-            f"units: --length-unit m|mm|um and --angle-unit rad|deg, got {length_unit!r}, {angle_unit!r}"
-        )
     try:
         language = language_of(program)
     except ProgramError as err:

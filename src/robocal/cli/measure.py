@@ -19,7 +19,7 @@ import re
 import warnings
 from collections import defaultdict
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -161,10 +161,11 @@ def data_check(
     incomplete: Incomplete = "error",
 ) -> None:
     """List every problem of a measurement file, or summarise it if it is clean."""
+    from robocal.measure.dataset.options import ReaderOptions
     from robocal.measure.dataset.read import check_measurements, read_measurements
 
     model = _model(robot)
-    options: dict[str, Any] = dict(  # the reader's keyword options, as the CLI gives them
+    options = ReaderOptions(
         length_unit=length_unit,
         angle_unit=angle_unit,
         sep=sep,
@@ -175,7 +176,7 @@ def data_check(
         incomplete=incomplete,
     )
     try:
-        problems = check_measurements(file, model, **options)
+        problems = check_measurements(file, model, options=options)
     except (ValueError, KeyError) as err:
         raise fail(as_cli_text(str(err.args[0] if isinstance(err, KeyError) else err))) from None
     errors = [p for p in problems if p.severity == "error"]
@@ -193,7 +194,7 @@ def data_check(
         raise typer.Exit(code=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        data = read_measurements(file, model=model, **options)
+        data = read_measurements(file, model=model, options=options)
     for fact in _summary(data, file, model, length_unit, angle_unit):
         console.print(fact, highlight=False)
 

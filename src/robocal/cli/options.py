@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Annotated, Any, overload
 
 import typer
 
+from robocal import choices
 from robocal.choices import IncompleteMode, LimitsMode
 from robocal.console import fail
 
@@ -111,7 +112,7 @@ NoProgress = Annotated[bool, typer.Option("--no-progress", help="no progress bar
 
 # The measurement reader's options, on every command that reads a CSV of measurements.
 LengthUnit = Annotated[
-    str,
+    choices.LengthUnit,
     typer.Option(
         "--length-unit",
         metavar="m|mm|um",
@@ -119,7 +120,7 @@ LengthUnit = Annotated[
     ),
 ]
 AngleUnit = Annotated[
-    str,
+    choices.AngleUnit,
     typer.Option(
         "--angle-unit", metavar="rad|deg", help="unit of revolute joints and orientation angles in the file"
     ),

@@ -27,6 +27,7 @@ def read_data(
     limits="error",
     incomplete="error",
 ):
+    from robocal.measure.dataset.options import ReaderOptions
     from robocal.measure.dataset.read import read_measurements
     from robocal.measure.measurements import MeasurementFileError, MeasurementWarning
 
@@ -36,18 +37,17 @@ def read_data(
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", MeasurementWarning)
-            data = read_measurements(
-                path,
+            options = ReaderOptions(
                 length_unit=length_unit,
                 angle_unit=angle_unit,
                 columns=columns,
                 sep=sep,
                 decimal=decimal,
-                model=model,
                 orientation=orientation,
                 limits=limits,
                 incomplete=incomplete,
             )
+            data = read_measurements(path, model=model, options=options)
     except (MeasurementFileError, ValueError) as err:
         raise fail(as_cli_text(str(err))) from None
     for w in caught:

@@ -29,11 +29,12 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.choices import RESIDUAL_CHOICES, ResidualChoice, SolverMethod
 from robocal.identify.bounds import (
     AT_BOUND_TOLERANCE,
     SEED001_ANGLE_BOUND,
@@ -110,9 +111,7 @@ __all__ = [
 _KEEP = (_outlier_poses, _without_measured_tool)  # older private names some callers import
 
 Array = NDArray[np.float64]
-Method = Literal["lm", "pinv", "bounded", "influence"]
-ResidualChoice = Literal["none", "auto", "joint_fourier"]
-RESIDUAL_CHOICES: tuple[str, ...] = ("none", "auto", "joint_fourier")
+Method = SolverMethod  # robocal.choices: the table the command line offers too
 
 
 def initial_frame_and_tool(

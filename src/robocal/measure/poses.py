@@ -28,6 +28,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal.choices import AngleUnit
 from robocal.measure.cube import (
     CUBE_CORNERS,
     DIAGONAL_PLANES,
@@ -324,7 +325,7 @@ def write_poses(
     return write_measurements(Measurements(q=q, metadata=meta), path)
 
 
-def read_poses(path: str | Path, model: Model | None = None, *, angle_unit: str = "rad") -> Array:
+def read_poses(path: str | Path, model: Model | None = None, *, angle_unit: AngleUnit = "rad") -> Array:
     """``(n, dof)`` joint values from a poses (or measurement) CSV, checked against ``model``."""
     data = read_measurements(path, angle_unit=angle_unit, dof=None if model is None else model.dof)
     if model is not None:

@@ -4,6 +4,7 @@
 model, calibrate, provenance, validate, save, report) from a frozen :class:`CalibrateRequest`
 and answers a frozen :class:`SavedRun`."""
 
+from robocal.measure.dataset.options import ReaderOptions
 from robocal.workflow.calibrate_file import calibrate_file, check_noise, check_out, split
 from robocal.workflow.request import (
     STAGES,
@@ -12,7 +13,6 @@ from robocal.workflow.request import (
     FitOptions,
     Notify,
     Progress,
-    ReaderOptions,
     SavedRun,
 )
 

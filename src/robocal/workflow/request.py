@@ -10,6 +10,8 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
+from robocal.measure.dataset.options import ReaderOptions
+
 if TYPE_CHECKING:
     from robocal.identify.provenance import Provenance
     from robocal.identify.result import CalibrationResult
@@ -24,7 +26,6 @@ __all__ = [
     "FitOptions",
     "Notify",
     "Progress",
-    "ReaderOptions",
     "SavedRun",
 ]
 
@@ -60,28 +61,6 @@ class CalibrateFileError(ValueError):
         self.field = field
         self.problem = problem
         super().__init__(problem if subject is None else f"{subject}: {problem}")
-
-
-@dataclass(frozen=True)
-class ReaderOptions:
-    """The measurement reader's options (those of :func:`robocal.read_measurements`;
-    lengths and angles in the file's units as named here)."""
-
-    length_unit: str = "m"
-    angle_unit: str = "rad"
-    columns: Any = None  # "q1=j1,x=mx..." or a mapping of robocal's names to the file's
-    sep: str | None = None  # None: detected
-    decimal: str = "."
-    orientation: str = "auto"
-    limits: str = "error"
-    incomplete: str = "error"
-    extra: tuple[str, ...] = ()  # further columns kept in the measurements
-
-    def as_kwargs(self) -> dict[str, Any]:
-        """The options as keyword arguments of :func:`robocal.read_measurements`."""
-        kwargs = dataclasses.asdict(self)
-        kwargs["extra"] = tuple(self.extra)
-        return kwargs
 
 
 @dataclass(frozen=True)
@@ -160,7 +139,7 @@ class CalibrateRequest:
     data: Path
     model: Model
     out: Path | None
-    reader: ReaderOptions = ReaderOptions()
+    reader: ReaderOptions = field(default_factory=ReaderOptions)
     fit: FitOptions = FitOptions()
     chain: str | None = None
     from_catalog: bool = False

@@ -47,13 +47,17 @@ column.  :func:`check_measurements` lists all problems of a file at once.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
+from robocal.choices import AngleUnit, LengthUnit
 from robocal.measure.dataset.columns import (
     IncompleteMode,
 )
+from robocal.measure.dataset.options import ReaderOptions
 from robocal.measure.dataset.reader import Reader
 from robocal.measure.dataset.writer import write_measurements
 from robocal.measure.measurements import (
@@ -85,8 +89,8 @@ def _collect(path: str | Path, options: dict) -> tuple[Measurements | None, list
 
 
 def _options(  # noqa: PLR0913 - the reader options, each a keyword with its default
-    length_unit: str = "m",
-    angle_unit: str = "rad",
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
     columns: Mapping[str, str] | Sequence[str] | str | None = None,
     sep: str | None = None,
     decimal: str = ".",
@@ -115,8 +119,9 @@ def _options(  # noqa: PLR0913 - the reader options, each a keyword with its def
 def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchanged
     path: str | Path,
     *,
-    length_unit: str = "m",
-    angle_unit: str = "rad",
+    options: ReaderOptions | None = None,
+    length_unit: LengthUnit = "m",
+    angle_unit: AngleUnit = "rad",
     columns: Mapping[str, str] | Sequence[str] | str | None = None,
     sep: str | None = None,
     decimal: str = ".",
@@ -131,6 +136,10 @@ def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchan
 
     Args:
         path: the file.
+        options: all the options below but ``dof`` and ``model`` as one
+            :class:`~robocal.measure.dataset.options.ReaderOptions` (what the command line
+            and :func:`robocal.workflow.calibrate_file` pass); those keywords are then
+            left at their defaults (a TypeError otherwise: two sources for one option).
         length_unit: ``"m"``, ``"mm"`` or ``"um"`` for positions, standard deviations
             and prismatic joint values.
         angle_unit: ``"rad"`` or ``"deg"`` for revolute joint values and orientation
@@ -174,9 +183,9 @@ def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchan
             pose is how repeatability is measured.
         ValueError: on invalid options.
     """
-    opts = _options(
-        length_unit, angle_unit, columns, sep, decimal, dof, model, limits, orientation, extra, incomplete
-    )
+    given = ReaderOptions(length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete,
+                          tuple(extra))  # fmt: skip
+    opts = _options(dof=dof, model=model, **_one_source(options, given).as_kwargs())
     data, problems = _collect(path, opts)
     errors = [p for p in problems if p.severity == "error"]
     if errors or data is None:
@@ -192,12 +201,31 @@ def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchan
     return data
 
 
-def check_measurements(path: str | Path, model: Model | None = None, **read_options) -> list[Problem]:
+def _one_source(options: ReaderOptions | None, keywords: ReaderOptions) -> ReaderOptions:
+    """``options`` when given (the keywords must then be at their defaults), else the keywords'."""
+    if options is None:
+        return keywords
+    if not isinstance(options, ReaderOptions):
+        raise TypeError(f"options must be a ReaderOptions, got {type(options).__name__}")
+    mixed = [f.name for f in dataclasses.fields(keywords) if getattr(keywords, f.name) != f.default]
+    if mixed:
+        raise TypeError(
+            f"reader option(s) {', '.join(mixed)} given both as keywords and in options=ReaderOptions"
+        )
+    return options
+
+
+def check_measurements(
+    path: str | Path, model: Model | None = None, *, options: ReaderOptions | None = None, **read_options: Any
+) -> list[Problem]:
     """Every problem of a measurement file (errors and warnings), in file order.
 
-    Takes the options of :func:`read_measurements`; an empty list means the file reads
-    cleanly.  ``limits`` defaults to ``"error"`` as in :func:`read_measurements`.
+    Takes the options of :func:`read_measurements` (as keywords or ``options``); an empty
+    list means the file reads cleanly.  ``limits`` defaults to ``"error"`` as in
+    :func:`read_measurements`.
     """
-    opts = _options(model=model, **read_options)
+    dof = read_options.pop("dof", None)
+    keywords = ReaderOptions(**read_options)
+    opts = _options(model=model, dof=dof, **_one_source(options, keywords).as_kwargs())
     _, problems = _collect(path, opts)
     return sorted(problems, key=lambda p: (p.row is not None, p.row or 0))
