@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from rich.table import Table
 
+from robocal.choices import AngleUnit, LengthUnit
 from robocal.console import console, fail, safe
 
 __all__ = [
@@ -73,7 +74,7 @@ def _sigma(noise: str | None) -> float:
     return 1e-4 if noise is None else parse_quantity_option(noise, "length", "--noise")
 
 
-def _read_tracker(path: Path, model, angle_unit: str, length_unit: str, sigma: float):
+def _read_tracker(path: Path, model, angle_unit: AngleUnit, length_unit: LengthUnit, sigma: float):
     """A tracker file's rows (joint values, x y z in the device frame) as constraint-set rows."""
     from robocal.measure.constraints.data_set import ConstraintSet
     from robocal.measure.dataset.read import read_measurements
@@ -89,7 +90,9 @@ def _read_tracker(path: Path, model, angle_unit: str, length_unit: str, sigma: f
     return ConstraintSet(m.q, none, none, position=m.position, sigma=sigma)
 
 
-def read_mixed(paths: list[Path], model, angle_unit: str, length_unit: str, stated, sigma: float):
+def read_mixed(
+    paths: list[Path], model, angle_unit: AngleUnit, length_unit: LengthUnit, stated, sigma: float
+):
     """The files of one fit: ``(first constraint file, tracker files, merged set)``.  The
     constraint files' points and planes are numbered in the order given (``--distance``
     names them so); the tracker files' rows have their own noise (estimated in the fit)."""
@@ -137,9 +140,9 @@ def print_each_kind(model, data) -> None:
 
 
 def calibrate_constraint_command(
-    model, from_catalog: bool, chain: str | None, data_path: Path | list[Path], out: Path, *, angle_unit: str,
-    distances: list[str] | None, level: str | None, noise: str | None, force: bool = False,
-    length_unit: str = "m",
+    model, from_catalog: bool, chain: str | None, data_path: Path | list[Path], out: Path, *,
+    angle_unit: AngleUnit, distances: list[str] | None, level: str | None, noise: str | None,
+    force: bool = False, length_unit: LengthUnit = "m",
 ) -> None:  # fmt: skip
     """``robocal calibrate`` of a constraint file (or several files: constraint files and
     tracker files, one fit): a catalog robot's complete position model (``--chain
@@ -163,8 +166,8 @@ def calibrate_constraint_command(
 
 
 def calibrate_constraint_file(
-    model, data_path: Path | list[Path], out: Path, *, angle_unit: str, distances: list[str] | None,
-    level: int | None, noise: str | None, length_unit: str = "m",
+    model, data_path: Path | list[Path], out: Path, *, angle_unit: AngleUnit, distances: list[str] | None,
+    level: int | None, noise: str | None, length_unit: LengthUnit = "m",
 ) -> None:  # fmt: skip
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
     file's chain) from a constraint file; write ``out``/model.yaml and constraints.json.
