@@ -149,11 +149,11 @@ def test_bad_input_is_refused_once_by_name_and_nothing_is_written(inputs, tmp_pa
     cases = {  # what is wrong: (CLI arguments, GUI job changes, a word each front end names it by)
         "train_n": (["--train-n", "60"], {"train_n": 60}, ("--train-n", "calibration poses")),
         "noise": (["--noise", "2000mm"], {"noise_mm": 2000.0}, ("--noise", "device noise")),
-        "file": (["--data", str(broken)], {"data": broken}, ("broken.csv", "broken.csv")),
+        "file": ([], {"data": broken}, ("broken.csv", "broken.csv")),  # the CLI reads broken.csv instead
     }
     for what, (args, changes, (cli_word, gui_word)) in cases.items():
         out = tmp_path / f"cli_{what}"
-        result = _cli(data, model_file, out, *args)
+        result = _cli(broken if what == "file" else data, model_file, out, *args)
         assert result.exit_code == 2, (what, result.output)
         errors = _error_lines(result.output)
         assert len(errors) == 1 and cli_word in errors[0], (what, result.output)
