@@ -12,7 +12,9 @@ so a loaded machine inflates it less than wall time; wall time beside it).
 
 Nothing is written into the repository: every output goes to a temporary directory.
 
-Run: ``python benchmarks/bench_startup.py [--rounds 7] [--first-run] [--reference ../main/src]``.
+Run: ``python benchmarks/bench_startup.py [--rounds 7] [--first-run] [--reference ../main/src]
+[--md docs/performance.md]`` (``--md`` with ``--first-run``: the first and second runs into the
+performance page's ``<!-- bench:first_run -->`` block).
 """
 
 from __future__ import annotations
@@ -25,6 +27,9 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import readme_table
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 CLI = "import sys; from robocal.cli import main; sys.argv[0] = 'robocal'; main()"
@@ -92,7 +97,11 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--first-run", action="store_true", help="also time the demo's first and second runs")
     parser.add_argument("--reference", type=Path, help="another robocal source tree to compare with")
+    parser.add_argument("--md", metavar="PAGE", help="with --first-run: its bench:first_run block")
     args = parser.parse_args()
+    if args.md and (why := readme_table.check(args.md, "first_run")):
+        raise SystemExit(why)
+    load_start = readme_table.load()
     trees = {"this tree": SRC} | ({"reference": args.reference.resolve()} if args.reference else {})
     with tempfile.TemporaryDirectory(prefix="robocal-bench-startup-") as tmp:
         work = Path(tmp)
@@ -114,6 +123,24 @@ def main() -> None:
             table(runs, numpy_cpu)
             (w1, c1), (w2, c2) = runs.values()
             print(f"first run / second run: {c1 / c2:.2f}x CPU, {w1 / w2:.2f}x wall (issue 35: <= 2x)")
+            if args.md:
+                _write_first_run(args.md, runs, load_start)
+
+
+def _write_first_run(page: str, runs: dict[str, tuple[float, float]], load_start: str) -> None:
+    """The first and second runs of ``robocal demo`` and their ratio, into ``page``."""
+    (w1, c1), (w2, c2) = runs.values()
+    rows = [[name, f"{wall:.1f}", f"{cpu:.1f}"] for name, (wall, cpu) in runs.items()]
+    rows.append(["first / second", f"{w1 / w2:.2f}x", f"{c1 / c2:.2f}x (issue 35: <= 2x)"])
+    body = [
+        "`python benchmarks/bench_startup.py --first-run --md docs/performance.md` (`robocal demo` "
+        "with numba's cache empty, `NUMBA_CACHE_DIR` a new directory, then again with it warm):",
+        "",
+        *readme_table.markdown_table(["command", "wall s", "CPU s"], rows),
+        "",
+        readme_table.machine(load_start),
+    ]
+    readme_table.write_block(page, "first_run", "\n".join(body))
 
 
 if __name__ == "__main__":
