@@ -16,9 +16,8 @@ ordered so that all joints move between consecutive poses.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated, Literal, cast
 
 import numpy as np
 import typer
@@ -28,6 +27,9 @@ from robocal.choices import IndexName, PoseMethod, TargetKind
 from robocal.cli import options
 from robocal.cli.options import Force, Robot, length_vector, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
+
+if TYPE_CHECKING:
+    from robocal.identify.pose_plan import PosePlan
 
 __all__ = ["MAX_POOL", "MAX_POSES", "register"]
 
@@ -122,89 +124,38 @@ def poses_command(
     if rows not in ("position", "pose"):
         raise fail(f"--rows {rows!r}: expected 'position' or 'pose'")
     box = _region(region)
-    meta = {"robot": m.name, "method": method, "seed": str(seed)}
-    try:
-        if method == "random":
-            from robocal.measure.poses import random_poses
+    if method == "iso9283" and n not in (None, 5):
+        err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True)
+    if method == "optimal" and pool < (n or 30):
+        raise fail(f"--pool {pool} is smaller than --n {n or 30}")
+    from robocal.identify.pose_plan import plan_poses
 
-            q = random_poses(m, n or 30, seed=seed)
-        elif method == "optimal":
-            q = _optimal(m, n or 30, pool, index, rows, seed, meta)
-        elif method == "iso9283":
-            q = _iso9283(m, n, kind, box, seed, meta)
-        else:
-            q = _diagonal(m, n or 118, kind, box, seed)
+    try:
+        with console.status(f"planning {method} poses..."):
+            measured = cast(Literal["position", "pose"], rows)
+            plan = plan_poses(m, method, n, seed=seed, index=index, pool=pool, rows=measured, kind=kind,
+                              region=box)  # fmt: skip
     except ValueError as err:
         raise fail(str(err)) from None
-    path = write_poses(out, q, model=m, metadata=meta)
-    console.print(f"wrote {len(q)} poses of {m.name} to {path}", highlight=False)
+    _print_plan(plan)
+    path = write_poses(out, plan.q, model=m, metadata=plan.metadata)
+    console.print(f"wrote {len(plan.q)} poses of {m.name} to {path}", highlight=False)
 
 
-def _optimal(m, count: int, pool: int, index: str, rows: str, seed: int, meta: dict) -> np.ndarray:
-    """``--method optimal``: ``count`` poses of a random pool maximising ``index``; the
-    observability table printed."""
-    from robocal.identify.observability_indices import identifiable_parameters, observability
-    from robocal.identify.pose_selection import select_poses
-    from robocal.measure.poses import random_poses
-
-    if pool < count:
-        raise fail(f"--pool {pool} is smaller than --n {count}")
-    candidates = random_poses(m, pool, seed=seed)
-    sub = identifiable_parameters(m, candidates, rows=rows)  # type: ignore[arg-type]
-    with console.status(f"selecting {count} of {pool} poses by {index}..."):
-        sel = select_poses(m, candidates, count, index=index, rows=rows, params=sub.kept)  # type: ignore[arg-type]
-    baseline = observability(m, candidates[:count], rows=rows, params=sel.params)  # type: ignore[arg-type]
-    table = Table(title=f"observability of {count} poses ({len(sel.params)} identifiable parameters)")
-    for col in ("index", "optimal", f"first {count} of the pool"):
-        table.add_column(col, justify="right")
-    for name in ("O1", "O2", "O3", "O4", "O5"):
-        table.add_row(name, f"{sel.indices_all[name]:.4g}", f"{baseline[name]:.4g}")
-    console.print(table)
-    meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
-    for d in sub.dropped:
+def _print_plan(plan: PosePlan) -> None:
+    """The plan's lines: ``optimal``'s observability table and what it cannot identify."""
+    if plan.indices:
+        count = len(plan.q)
+        table = Table(title=f"observability of {count} poses ({plan.n_params} identifiable parameters)")
+        for col in ("index", "optimal", f"first {count} of the pool"):
+            table.add_column(col, justify="right")
+        for name in ("O1", "O2", "O3", "O4", "O5"):
+            table.add_row(name, f"{plan.indices[name]:.4g}", f"{plan.reference[name]:.4g}")
+        console.print(table)
+    for line in plan.notes:
+        console.print(safe(line), highlight=False)
+    for d in plan.not_identifiable:
         console.print(f"[dim]not identifiable: {safe(d)}[/]", highlight=False, markup=True)
-    return sel.q
-
-
-def _iso9283(m, n: int | None, kind: TargetKind | None, box, seed: int, meta: dict) -> np.ndarray:
-    """``--method iso9283``: P1..P5 on the largest cube's diagonal plane."""
-    from robocal.measure.poses import iso9283_poses
-
-    if n not in (None, 5):
-        err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True)
-    with console.status("searching the largest ISO 9283 cube..."):
-        iso = iso9283_poses(m, kind=kind, seed=seed, region=box)
-    c = iso.cube
-    console.print(
-        f"cube centre [{', '.join(f'{v * 1e3:.1f}' for v in c.center)}] mm, side {c.side * 1e3:.1f} mm, "
-        f"plane C1-C2-C7-C8, constraint {iso.info['kind']}",
-        highlight=False,
-    )
-    meta.update(
-        {
-            "cube_center_mm": " ".join(f"{v * 1e3:.3f}" for v in c.center),
-            "cube_side_mm": f"{c.side * 1e3:.3f}",
-        }
-    )
-    return iso.q
-
-
-def _diagonal(m, n: int, kind: TargetKind | None, box, seed: int) -> np.ndarray:
-    """``--method diagonal``: the thesis' poses on the cube's diagonal planes (seed 003)."""
-    from robocal.measure.diagonal_poses import diagonal_plane_poses
-
-    with console.status("building the diagonal-plane poses..."):
-        ps = diagonal_plane_poses(m, n=n, kind=kind or "position", region=box, seed=seed)
-    if not ps.reachable.all():
-        raise fail(f"{int((~ps.reachable).sum())} of the diagonal-plane poses are not reachable")
-    min_change_rad = ps.info["min_joint_change_rad"]
-    assert isinstance(min_change_rad, float)  # diagonal_plane_poses' record
-    console.print(
-        f"{len(ps.q)} poses ({ps.info['boundary_poses']} near the boundary), smallest joint change "
-        f"between consecutive poses {math.degrees(min_change_rad):.1f} deg",
-        highlight=False,
-    )
-    return ps.q
 
 
 def register(app: typer.Typer) -> None:

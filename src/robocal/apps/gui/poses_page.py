@@ -5,16 +5,15 @@ pool, the ISO 9283 poses P1-P5, the thesis' diagonal planes), N and the seed; th
 the observability indices of the set (and of the pool's first N for ``optimal``), the planned
 tool points in 3D in the order they are measured, and hands out the poses CSV that
 ``robocal poses`` writes (:func:`robocal.measure.poses.write_poses`, rad/m).  The selection
-calls the functions ``robocal poses`` calls (:mod:`robocal.measure.poses`,
-:mod:`robocal.identify.pose_selection`, :mod:`robocal.identify.observability_indices`)."""
+is ``robocal poses``' planner (:func:`robocal.identify.pose_plan.plan_poses`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from dash import Dash, Input, Output, State, dcc, html, no_update
@@ -22,7 +21,10 @@ from dash import Dash, Input, Output, State, dcc, html, no_update
 from robocal.apps.gui.calibrate_views import parse_float, radio, row, text_input
 from robocal.choices import INDEX_NAMES, POSE_METHODS, IndexName
 
-__all__ = ["MAX_GUI_POOL", "MAX_GUI_POSES", "Plan", "layout", "plan_poses", "poses_csv", "register"]
+if TYPE_CHECKING:
+    from robocal.identify.pose_plan import PosePlan
+
+__all__ = ["MAX_GUI_POOL", "MAX_GUI_POSES", "layout", "plan_poses", "poses_csv", "register"]
 
 #: the page plans at most this many poses from a pool of at most this many (the command line
 #: goes further); a larger request is refused by its control's name
@@ -30,19 +32,6 @@ MAX_GUI_POSES = 5000
 MAX_GUI_POOL = 20000
 
 _INDICES: tuple[IndexName, ...] = INDEX_NAMES
-
-
-@dataclass(frozen=True)
-class Plan:
-    """A planned pose set: joint values ``q`` (n, dof; rad/m), the file's metadata, the
-    observability indices of the set and of a reference (``optimal``: the pool's first n)
-    and lines for the user."""
-
-    q: np.ndarray
-    metadata: dict[str, str]
-    indices: dict[str, float] = field(default_factory=dict)
-    reference: dict[str, float] = field(default_factory=dict)
-    notes: tuple[str, ...] = ()
 
 
 def layout(catalog: Sequence[str]) -> html.Div:
@@ -86,49 +75,24 @@ def _whole(text: str | None, what: str, default: int, largest: int) -> int:
     return int(value)
 
 
-def plan_poses(robot: str, method: str, n: int, index: IndexName, pool: int, seed: int) -> Plan:
+def plan_poses(robot: str, method: str, n: int, index: IndexName, pool: int, seed: int) -> PosePlan:
     """The poses ``robocal poses ROBOT --method METHOD --n N --index INDEX --pool POOL --seed
-    SEED`` writes (position rows); ValueError naming the page's control when one is wrong."""
-    from robocal.identify.observability_indices import identifiable_parameters, observability
-    from robocal.measure import poses
+    SEED`` writes (position rows; :func:`robocal.identify.pose_plan.plan_poses`, the command's
+    planner) with the set's observability indices; ValueError naming the page's control."""
+    from robocal.identify.pose_plan import plan_indices
+    from robocal.identify.pose_plan import plan_poses as plan
     from robocal.model.catalog import find_model
 
+    if method == "optimal" and pool < n:
+        raise ValueError(f"pool: {pool} candidates cannot give {n} poses; raise the pool")
     model = find_model(robot)
-    meta = {"robot": model.name, "method": method, "seed": str(seed)}
-    if method == "random":
-        q = poses.random_poses(model, n, seed=seed)
-    elif method == "optimal":
-        from robocal.identify.pose_selection import select_poses
-
-        if pool < n:
-            raise ValueError(f"pool: {pool} candidates cannot give {n} poses; raise the pool")
-        candidates = poses.random_poses(model, pool, seed=seed)
-        sub = identifiable_parameters(model, candidates, rows="position")
-        sel = select_poses(model, candidates, n, index=index, rows="position", params=sub.kept)
-        reference = observability(model, candidates[:n], rows="position", params=sel.params)
-        meta.update({"index": index, "pool": str(pool), "value": repr(sel.value)})
-        notes = tuple(f"not identifiable: {d}" for d in sub.dropped)
-        indices: dict[str, float] = {k: sel.indices_all[k] for k in _INDICES}
-        return Plan(sel.q, meta, indices, {k: reference[k] for k in _INDICES}, notes)
-    elif method == "iso9283":
-        iso = poses.iso9283_poses(model, seed=seed)
-        c = iso.cube
-        meta.update({"cube_center_mm": " ".join(f"{v * 1e3:.3f}" for v in c.center),
-                     "cube_side_mm": f"{c.side * 1e3:.3f}"})  # fmt: skip
-        q = iso.q
-    else:
-        from robocal.measure.diagonal_poses import diagonal_plane_poses
-
-        ps = diagonal_plane_poses(model, n=n, kind="position", seed=seed)
-        if not ps.reachable.all():
-            raise ValueError(f"{int((~ps.reachable).sum())} of the diagonal-plane poses are not reachable")
-        q = ps.q
-    sub = identifiable_parameters(model, q, rows="position")
-    found = observability(model, q, rows="position", params=sub.kept)
-    return Plan(q, meta, {k: found[k] for k in _INDICES})
+    found = plan(model, method, n, seed=seed, index=index, pool=pool)
+    if found.indices:
+        return found
+    return dataclasses.replace(found, indices=plan_indices(model, found.q))
 
 
-def _indices_table(plan: Plan) -> html.Table:
+def _indices_table(plan: PosePlan) -> html.Table:
     heads = ["index", "this set"] + (["the pool's first N"] if plan.reference else [])
     body = [
         html.Tr(
@@ -142,7 +106,7 @@ def _indices_table(plan: Plan) -> html.Table:
     )
 
 
-def _figure(plan: Plan, robot: str) -> Any:
+def _figure(plan: PosePlan, robot: str) -> Any:
     """The tool points (mm, robot base) in the order they are measured."""
     import plotly.graph_objects as go
 
@@ -203,7 +167,8 @@ def register(app: Dash) -> None:
         except ValueError as err:
             return html.Span(str(err), className="error", id="plan-error"), "", "", None
         summary = f"{len(result.q)} poses of {result.metadata['robot']} ({method})"
-        notes = [html.Div(line, className="hint") for line in result.notes]
+        lines = [*result.notes, *(f"not identifiable: {d}" for d in result.not_identifiable)]
+        notes = [html.Div(line, className="hint") for line in lines]
         graph = dcc.Graph(figure=_figure(result, robot), id="plan-3d", config={"displaylogo": False})
         stored = {"robot": robot, "q": result.q.tolist(), "metadata": result.metadata}
         return (
