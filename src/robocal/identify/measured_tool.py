@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.model.chain import Model
-from robocal.model.steps import Role
+from robocal.model.flange_tool import split_tool
 
 __all__ = [
     "AGREE_SIGMAS",
@@ -155,12 +155,7 @@ def _triple(values: Any) -> tuple[float, float, float]:
 
 def _tool_steps(model: Model) -> list:
     """The measured tool's steps (``tcp_*``) at the end of ``model``."""
-    steps: list = []
-    for s in reversed(model.steps):
-        if s.role is not Role.TOOL or s.joint is not None:
-            break
-        steps.insert(0, s)
-    return steps
+    return list(split_tool(model).steps)
 
 
 def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Array, Array]:

@@ -22,6 +22,7 @@ from robocal.identify.solve_result import SolveResult
 from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_sizes
 from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
+from robocal.model.flange_tool import split_tool
 from robocal.model.rank import Dropped
 from robocal.model.steps import Role
 
@@ -51,15 +52,10 @@ def parse_level(level: int | str | None) -> int | None:
 
 def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
-    its end, and their transform (4x4; None when there are none)."""
-    k = len(model.steps)
-    while k and model.steps[k - 1].role is Role.TOOL and model.steps[k - 1].joint is None:
-        k -= 1
-    if k == len(model.steps):
-        return model, None
-    tool = model.steps[k:]
-    T = spatial.chain_product([s.motion for s in tool], [s.value for s in tool])
-    return dataclasses.replace(model, steps=model.steps[:k]), T
+    its end, and their transform (4x4; None when there are none): a calibrated model's
+    tool is the start value of the next calibration's (:func:`robocal.model.flange_tool.split_tool`)."""
+    parts = split_tool(model)
+    return parts.robot, parts.T_flange_tool
 
 
 def _positions(data: Measurements) -> Array:

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.identify.result import CalibrationResult
 from robocal.measure.measurements import Measurements
-from robocal.model.steps import Role
+from robocal.model.flange_tool import split_tool
 
 __all__ = [
     "FRAME_NAMES",
@@ -96,7 +96,7 @@ class FrozenRobot:
 def _tool_point(result: CalibrationResult) -> Array | None:
     """The tool point (tcp_x, tcp_y, tcp_z translations at the model's end), None when the
     model ends otherwise (no measured tool, or a tool frame of a pose calibration)."""
-    tail = [s for s in result.model.steps if s.role is Role.TOOL and s.joint is None]
+    tail = split_tool(result.model).steps
     if [s.name for s in tail] != list(TOOL_NAMES) or any(s.motion[0] != "T" for s in tail):
         return None
     return np.array([s.value for s in tail])

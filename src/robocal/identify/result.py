@@ -25,6 +25,7 @@ from robocal.identify.effects import display_unit, effect_lines
 from robocal.identify.noise_check import FitToNoise
 from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
+from robocal.model.flange_tool import split_tool
 from robocal.model.joints import effect_of
 from robocal.model.rank import Dropped
 from robocal.model.steps import Role
@@ -94,8 +95,10 @@ class CalibrationResult:
     """A calibrated model with its uncertainty and the record of how it was obtained.
 
     Attributes:
-        model: the calibrated robot model with the measured tool appended (base frame:
-            the robot's base).
+        model: the calibrated robot with the measured tool appended (base frame: the
+            robot's base), as saved in ``model.yaml``; :attr:`robot` and
+            :attr:`T_flange_tool` are its two parts, :meth:`compose_measurement_chain`
+            adds the device frame.
         T_device_base: (4, 4) the measuring device's frame identified (also ``frame``).
         names: estimated parameters (robot, ``frame_*`` corrections, ``tcp_*``).
         estimates, nominal, std: their values (SI), start values and standard deviations.
@@ -192,6 +195,33 @@ class CalibrationResult:
         """``T_device_base`` (4, 4) (the older name)."""
         return self.T_device_base
 
+    # the calibrated robot = robot chain, T_flange_tool, T_device_base, residual (issue 32
+    # item 5): ``model`` holds the first two joined; these split it (robocal.model.flange_tool)
+    @property
+    def robot(self) -> Model:
+        """The calibrated robot to its flange: :attr:`model` without the measured tool's
+        steps (its joint effects and learned residual kept)."""
+        return split_tool(self.model).robot
+
+    @property
+    def T_flange_tool(self) -> Array | None:
+        """``(4, 4)`` the measured tool in the flange frame (m); None when the calibration
+        measured the flange itself (no tool steps)."""
+        return split_tool(self.model).T_flange_tool
+
+    def compose_measurement_chain(self) -> Model:
+        """The chain predicting the device's measurements, composed from the parts: the
+        device frame (:attr:`T_device_base`, fixed steps ``frame0_*``), :attr:`robot` and the
+        measured tool's steps.  Its forward kinematics equal :attr:`measurement_chain`'s
+        (the fit's own parameterisation, kept for the covariance's names); no joint effects
+        or residual (pass their perturbations to ``fk``)."""
+        from robocal.identify.problem import measurement_chain
+
+        parts = split_tool(self.model)
+        T_device_base = np.asarray(self.T_device_base, dtype=float)
+        chain = measurement_chain(parts.robot, T_device_base, None, self.measure, fit_frame=False)
+        return parts.on(chain)
+
     @property
     def warning_texts(self) -> list[str]:
         """The warnings' messages."""
@@ -237,7 +267,7 @@ class CalibrationResult:
             from robocal.model.joints import joint_perturbations
 
             return joint_perturbations(
-                self._load_robot(), q, qd, qdd, gravity=np.asarray(self.gravity), payload=self.payload
+                self.robot, q, qd, qdd, gravity=np.asarray(self.gravity), payload=self.payload
             )
         if not self.compliance:
             return None
@@ -249,14 +279,6 @@ class CalibrationResult:
             j = self.model.joint_names.index(name)
             pert[:, j, 2] = -c * tau[:, j]
         return pert
-
-    def _load_robot(self) -> Model:
-        """The calibrated robot without the measured tool steps: the geometry whose joint
-        loads drive the joint effects (a payload sits at the robot's end)."""
-        steps = tuple(s for s in self.model.steps if s.role is not Role.TOOL)
-        if len(steps) == len(self.model.steps):
-            return self.model
-        return dataclasses.replace(self.model, steps=steps)
 
     def predict(
         self,
@@ -335,7 +357,7 @@ class CalibrationResult:
         from robocal.model.joints import EFFECT_KINDS, effect_basis
 
         B, basis_names, _ = effect_basis(
-            self._load_robot(), q, kinds=EFFECT_KINDS, gravity=np.asarray(self.gravity), payload=self.payload
+            self.robot, q, kinds=EFFECT_KINDS, gravity=np.asarray(self.gravity), payload=self.payload
         )
         B = B[[basis_names.index(n) for n in names]]  # (m, n, dof, 3)
         P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
