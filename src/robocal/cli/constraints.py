@@ -10,7 +10,6 @@ A result folder holds ``model.yaml`` (the calibrated robot) and ``constraints.js
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -28,15 +27,13 @@ __all__ = [
     "is_constraint_file",
     "placement_files",
     "plan_constraint_poses",
-    "print_each_kind",
-    "read_mixed",
     "simulate_constraint_command",
     "simulate_constraint_file",
     "validate_constraint_file",
 ]
 
 CONSTRAINT_MEASURES = ("point", "plane", "distance")
-RESULT_FILE = "constraints.json"
+RESULT_FILE = "constraints.json"  # robocal.workflow.constraints.CONSTRAINT_RESULT_FILE
 
 
 def is_constraint_file(path: Path, measure: str | None) -> bool:
@@ -48,95 +45,10 @@ def is_constraint_file(path: Path, measure: str | None) -> bool:
     return measure is None and path.is_file() and constraint_kind(path) is not None
 
 
-def _distances(items: list[str] | None) -> list[tuple[int, int, float]]:
-    from robocal.measure.constraints.data import parse_distance
-
-    try:
-        return [parse_distance(item) for item in items or []]
-    except ValueError as err:
-        raise fail(str(err)) from None
-
-
-def _read(path: Path, dof: int, angle_unit: str, distances, sigma: float):
-    from robocal.measure.constraints.data import ConstraintFileError, read_constraints
-
-    if angle_unit not in ("rad", "deg"):
-        raise fail(f"--angle-unit {angle_unit!r}: rad or deg")
-    try:
-        return read_constraints(path, dof, angle_unit=angle_unit, distances=distances, sigma=sigma)
-    except ConstraintFileError as err:
-        raise fail(str(err)) from None
-
-
 def _sigma(noise: str | None) -> float:
     from robocal.measure.true_model import parse_quantity_option
 
     return 1e-4 if noise is None else parse_quantity_option(noise, "length", "--noise")
-
-
-def _read_tracker(path: Path, model, angle_unit: AngleUnit, length_unit: LengthUnit, sigma: float):
-    """A tracker file's rows (joint values, x y z in the device frame) as constraint-set rows."""
-    from robocal.measure.constraints.data_set import ConstraintSet
-    from robocal.measure.dataset.read import read_measurements
-    from robocal.measure.measurements import MeasurementFileError
-
-    try:
-        m = read_measurements(path, length_unit=length_unit, angle_unit=angle_unit, model=model)
-    except MeasurementFileError as err:
-        raise fail(str(err)) from None
-    if m.position is None:
-        raise fail(f"{path}: neither constraint columns (point, plane, pair) nor tracker positions (x, y, z)")
-    none = -np.ones(len(m.q), dtype=np.intp)
-    return ConstraintSet(m.q, none, none, position=m.position, sigma=sigma)
-
-
-def read_mixed(
-    paths: list[Path], model, angle_unit: AngleUnit, length_unit: LengthUnit, stated, sigma: float
-):
-    """The files of one fit: ``(first constraint file, tracker files, merged set)``.  The
-    constraint files' points and planes are numbered in the order given (``--distance``
-    names them so); the tracker files' rows have their own noise (estimated in the fit)."""
-    from robocal.measure.constraints.data import constraint_kind
-    from robocal.measure.constraints.data_set import merge_sets
-
-    for path in paths:
-        if not path.is_file():
-            raise fail(f"--data {path}: no such file")
-    constraint = [p for p in paths if constraint_kind(p) is not None]
-    trackers = [p for p in paths if p not in constraint]
-    if not constraint:
-        raise fail("--data: several files calibrate together when one is a constraint file "
-                   "(a point, plane or pair column)")  # fmt: skip
-    one = stated if len(constraint) == 1 else []
-    sets = [_read(p, model.dof, angle_unit, one, sigma) for p in constraint]
-    sets += [_read_tracker(p, model, angle_unit, length_unit, sigma) for p in trackers]
-    try:
-        data = merge_sets(*sets)
-    except ValueError as err:
-        raise fail(f"--data: {err}") from None
-    if stated and len(constraint) > 1:  # the merged numbering: the first file's points first
-        if max(max(a, b) for a, b, _ in stated) >= data.n_points:
-            raise fail(f"--distance: the files have points 0..{data.n_points - 1} only")
-        pairs = np.array([(a, b) for a, b, _ in stated], dtype=np.intp)
-        data = dataclasses.replace(data, point_pairs=pairs, point_length=np.array([d for *_, d in stated]))
-    return constraint[0], trackers, data
-
-
-def print_each_kind(model, data) -> None:
-    """What each kind alone could identify beside what the union does (mixed data)."""
-    from robocal.identify.constraints.fit import kind_identifiable
-
-    union = set(kind_identifiable(model, data)[0])
-    for kind, rows in (("constraint rows", data.constrained), ("tracker rows", data.tracked)):
-        try:
-            alone = set(kind_identifiable(model, data.select(rows))[0])
-        except ValueError as err:  # too few rows of the kind for its start values
-            console.print(f"{kind} alone: {safe(str(err))}", highlight=False, soft_wrap=True)
-            continue
-        missing = sorted(union - alone, key=list(model.names).index)
-        line = f"{kind} alone ({int(rows.sum())} poses) identify {len(alone)} of the union's {len(union)}"
-        line += f"; not {', '.join(missing)}" if missing else ""
-        console.print(line, highlight=False, soft_wrap=True)
 
 
 def calibrate_constraint_command(
@@ -165,87 +77,53 @@ def calibrate_constraint_command(
                               level=levels[level], noise=noise, length_unit=length_unit)  # fmt: skip
 
 
+def _distances(items: list[str] | None) -> tuple[tuple[int, int, float], ...]:
+    from robocal.workflow.constraints import parse_distances
+
+    try:
+        return parse_distances(items)
+    except ValueError as err:
+        raise fail(str(err)) from None
+
+
+def _read(path: Path, dof: int, angle_unit: str, distances, sigma: float):
+    from robocal.workflow.constraints import read_constraint_file
+
+    try:
+        return read_constraint_file(path, dof, angle_unit, distances, sigma)
+    except ValueError as err:
+        raise fail(_option_words(err)) from None
+
+
+def _option_words(err: ValueError) -> str:
+    """The use case's refusal with the command line's option named."""
+    options = {"out": "--out", "distances": "--distance", "angle_unit": "--angle-unit"}
+    option = options.get(getattr(err, "field", ""))
+    return f"{option} {err}" if option else str(err)
+
+
 def calibrate_constraint_file(
     model, data_path: Path | list[Path], out: Path, *, angle_unit: AngleUnit, distances: list[str] | None,
     level: int | None, noise: str | None, length_unit: LengthUnit = "m",
 ) -> None:  # fmt: skip
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
-    file's chain) from a constraint file; write ``out``/model.yaml and constraints.json.
+    file's chain) from a constraint file; write ``out``/model.yaml and constraints.json
+    (:func:`robocal.workflow.constraints.calibrate_constraint_files`, the GUI's too)."""
+    from robocal.workflow.constraints import ConstraintRequest, calibrate_constraint_files
 
-    The fit is the MAP estimate under :class:`~robocal.identify.constraints.model.NominalPrior`'s
-    default (lengths σ 0.3 mm, angles σ 5 mrad about the nominal geometry; the measurements
-    weighted by σ̂ of a least-squares fit): on the real
-    Panda's ball-in-socket recordings, leave-one-placement-out cross-validation put the
-    held-out spread at 0.94 mm with it against 1.04 mm by least squares
-    (benchmarks/bench_ball_in_socket.py)."""
-    from robocal.identify.constraints.fit import calibrate_constraints
-    from robocal.identify.constraints.model import NominalPrior
-    from robocal.identify.options import Pruning
-
-    stated = _distances(distances)
-    paths = data_path if isinstance(data_path, list) else [data_path]
-    first, trackers, data = read_mixed(paths, model, angle_unit, length_unit, stated, _sigma(noise))
+    paths = tuple(data_path) if isinstance(data_path, list) else (data_path,)
+    stated, sigma = _distances(distances), _sigma(noise)
+    request = ConstraintRequest(paths, model, out, angle_unit=angle_unit, length_unit=length_unit,
+                                distances=stated, level=level or 2, noise_m=sigma)  # fmt: skip
     try:
-        result = calibrate_constraints(model, data, level=level or 2, pruning=Pruning(), known_noise=False,
-                                       prior=NominalPrior())  # fmt: skip
+        run = calibrate_constraint_files(request)
     except ValueError as err:
-        raise fail(f"{', '.join(str(p) for p in paths)}: {err}") from None
-    _save(result, out, first, stated, angle_unit, trackers)
-    for line in result.summary_lines():
+        raise fail(_option_words(err)) from None
+    for line in run.summary_lines():
         console.print(safe(line), highlight=False, soft_wrap=True)
-    if "tracker" in data.kinds and data.constrained.any():
-        print_each_kind(model, data)
+    for line in run.each_kind:
+        console.print(safe(line), highlight=False, soft_wrap=True)
     console.print(f"wrote {out / 'model.yaml'} and {out / RESULT_FILE}", highlight=False)
-
-
-def _result_doc(result, data_path: Path, stated) -> dict:
-    from robocal.identify.result_io import file_hash
-
-    return {
-        "kind": "constraints",
-        "measurements": list(result.kinds),
-        "data": str(data_path),
-        "data_sha256": file_hash(data_path),
-        "distances_m": [[a, b, d] for a, b, d in stated],
-        "success": result.success,
-        "names": list(result.names),
-        "estimates": result.estimates.tolist(),
-        "start": result.start.tolist(),  # the nominal model: the report's and validate's "before"
-        "std": result.std.tolist(),
-        "not_identifiable": [{"name": d.name, "reason": d.reason} for d in result.dropped],
-        "points_m": result.points.tolist(),
-        "planes": result.planes.tolist(),
-        "T_device_base": result.T_device_base.tolist(),
-        "rms_before_m": result.rms_before,
-        "rms_after_m": result.rms_after,
-        "prior": None
-        if result.prior is None
-        else {"length_std_m": result.prior.length_std, "angle_std_rad": result.prior.angle_std},
-        "summary": result.summary_lines(),
-    }
-
-
-def _save(result, out: Path, data_path: Path, stated, angle_unit: str = "rad", trackers=()) -> None:
-    """model.yaml and constraints.json, all or nothing (``trackers``: the tracker files
-    fitted with ``data_path``, recorded by name and SHA-256)."""
-    from robocal.folder_lock import FolderBusyError
-    from robocal.model.files import save_model
-    from robocal.outdir import transaction
-
-    if out.exists() and not out.is_dir():
-        raise fail(f"--out {out} is a file; give a directory")
-    doc = _result_doc(result, data_path, stated) | {"angle_unit": angle_unit}  # how to read the file again
-    if trackers:
-        from robocal.identify.result_io import file_hash
-
-        doc["tracker_data"] = [{"path": str(p), "sha256": file_hash(p)} for p in trackers]
-        doc["noise_per_kind_m"] = dict(result.kind_sigma)
-    try:
-        with transaction(out, ("model.yaml", RESULT_FILE)) as stage:
-            save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)
-            (stage.path / RESULT_FILE).write_text(json.dumps(doc | {"run_id": stage.run_id}, indent=1) + "\n")
-    except FolderBusyError as err:
-        raise fail(str(err)) from None
 
 
 def validate_constraint_file(
@@ -266,7 +144,7 @@ def validate_constraint_file(
     if not stated and (directory / RESULT_FILE).is_file():  # the calibration's stated distances
         try:
             recorded = json.loads((directory / RESULT_FILE).read_text()).get("distances_m", [])
-            stated = [(int(a), int(b), float(d)) for a, b, d in recorded]
+            stated = tuple((int(a), int(b), float(d)) for a, b, d in recorded)
         except (OSError, ValueError, TypeError) as err:
             raise fail(f"{directory / RESULT_FILE}: {err}") from None
     data = _read(data_path, model.dof, angle_unit, [s for s in stated if max(s[:2]) < 10**6], 1e-4)
