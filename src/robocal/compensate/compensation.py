@@ -69,7 +69,7 @@ from robocal.measure.ik import IKResult, PerturbationFunction, solve_ik
 from robocal.measure.ik_regularized import solve_regularized
 from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
-from robocal.model.steps import Role
+from robocal.model.flange_tool import split_tool
 
 __all__ = ["compensate_targets", "filter_program", "nominal_model"]
 
@@ -84,7 +84,7 @@ def nominal_model(result: CalibrationResult) -> Model:
     estimated robot parameter at its start value (``result.nominal``) and no joint
     effects.  Its tool is the measured one the calibration identified (the controller's
     TCP set to it): the error "before" is the robot's, not a change of tool."""
-    names = set(result.model.names) - {s.name for s in result.model.steps if s.role is Role.TOOL}
+    names = set(result.robot.names)  # the tool's steps keep their calibrated values
     start = {n: float(v) for n, v in zip(result.names, result.nominal, strict=True) if n in names}
     model = result.model.with_values(start)
     changes: dict[str, Any] = {"notes": (model.notes.replace("calibrated", "").strip() + " nominal").strip()}
@@ -95,13 +95,13 @@ def nominal_model(result: CalibrationResult) -> Model:
 
 def _with_tool(nominal: Model, real: Model) -> Model:
     """``nominal`` with ``real``'s tool steps (``tcp_*``) appended when it has none."""
-    tool = [s for s in real.steps if s.role is Role.TOOL]
-    if not tool or any(s.role is Role.TOOL for s in nominal.steps):
+    tool = split_tool(real)
+    if not tool.steps or split_tool(nominal).steps:
         return nominal
-    clash = {s.name for s in tool} & set(nominal.names)
+    clash = {s.name for s in tool.steps} & set(nominal.names)
     if clash:  # pragma: no cover - names with the tool prefix are caught above
         raise ValueError(f"nominal model {nominal.name!r} already uses {sorted(clash)}")
-    return dataclasses.replace(nominal, steps=(*nominal.steps, *tool))
+    return tool.on(nominal)
 
 
 @dataclass(frozen=True)

@@ -48,8 +48,8 @@ from numpy.typing import ArrayLike, NDArray
 from robocal import spatial
 from robocal.model.builder import BuildResult, build
 from robocal.model.chain import Model
+from robocal.model.flange_tool import split_tool
 from robocal.model.geometry import GeometryError, JointGeometry, Measure, Tcp
-from robocal.model.steps import Role
 from robocal.model.urdf.source import urdf_origin
 from robocal.model.urdf.xml_text import rpy_from_matrix
 
@@ -145,7 +145,7 @@ def ur_kinematics(model: Model, T_base_urbase: ArrayLike | None = None, hash: st
     joints = [s for s in model.steps if s.joint is not None]
     if len(joints) != 6 or any(s.joint_type != "revolute" for s in joints):
         raise ValueError(f"model {model.name!r}: the UR format holds six revolute joints")
-    robot = Model(name=model.name, steps=tuple(s for s in model.steps if s.role is not Role.TOOL))
+    robot = Model(name=model.name, steps=split_tool(model).robot.steps)
     q0 = np.zeros(6)
     B = np.eye(4) if T_base_urbase is None else np.asarray(T_base_urbase, dtype=float)
     B_inv = spatial.inverse(B)

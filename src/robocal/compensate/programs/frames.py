@@ -25,7 +25,7 @@ from robocal.compensate.programs.syntax import (
 from robocal.identify.problem import frame_steps
 from robocal.identify.result import CalibrationResult
 from robocal.model.chain import Model
-from robocal.model.steps import Role
+from robocal.model.flange_tool import split_tool
 
 
 def robot_models(
@@ -41,22 +41,16 @@ def robot_models(
     else:
         real, nom, effects = calibrated, (calibrated if nominal is None else nominal), None
 
-    def measured_tool(m: Model) -> Array | None:
-        steps = [s for s in m.steps if s.role is Role.TOOL]
-        if not steps:
-            return None
-        return spatial.chain_product([s.motion for s in steps], [s.value for s in steps])
-
     # the measured tool as built (``probe``) is known: how far the identified tool is from it
     # is robot geometry the tool absorbed (e.g. d6 under position measurement), kept with the robot
-    tool_real = measured_tool(real)
+    tool_real = split_tool(real).T_flange_tool
     absorbed = np.eye(4)
     if tool_real is not None and probe is not None:
         P = np.asarray(probe, dtype=float)
         absorbed = tool_real @ spatial.inverse(P if P.shape == (4, 4) else spatial.homogeneous(p=P))
 
     def strip(m: Model, correction: Array) -> Model:
-        steps = tuple(s for s in m.steps if s.role is not Role.TOOL)
+        steps = split_tool(m).robot.steps
         T = correction @ (np.eye(4) if tool is None else np.asarray(tool, dtype=float))
         if np.abs(T - np.eye(4)).max() > 0:
             steps = (*steps, *frame_steps(T, "program_tool", free=False))
@@ -172,8 +166,7 @@ def check_nominal(calibrated: CalibrationResult | Model, nominal: Model) -> None
     q = np.random.default_rng(0).uniform(lo, hi, (64, ref.dof))
 
     def flange(m: Model) -> Array:
-        bare = dataclasses.replace(m, steps=tuple(s for s in m.steps if s.role is not Role.TOOL))
-        return bare.fk(q)[:, :3, 3]
+        return split_tool(m).robot.fk(q)[:, :3, 3]
 
     gap = float(np.max(np.linalg.norm(flange(ref) - flange(nominal), axis=1)))
     if not gap <= NOMINAL_AGREEMENT_M:  # NaN too

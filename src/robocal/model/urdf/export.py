@@ -53,7 +53,7 @@ from numpy.typing import NDArray
 
 from robocal import spatial
 from robocal.model.chain import Model
-from robocal.model.steps import Role
+from robocal.model.flange_tool import split_tool
 from robocal.model.urdf.mapping import base_note, map_joints, root_from_base
 from robocal.model.urdf.read import URDFError, read_checked
 from robocal.model.urdf.source import (
@@ -117,14 +117,10 @@ class _Chain:
 
 
 def _split(model: Model) -> _Chain:
-    robot_steps = tuple(s for s in model.steps if s.role is not Role.TOOL)
-    tool_steps = tuple(s for s in model.steps if s.role is Role.TOOL)
-    last_joint = max(i for i, s in enumerate(model.steps) if s.joint is not None)
-    if any(i < last_joint for i, s in enumerate(model.steps) if s.role is Role.TOOL):
-        raise ValueError(f"model {model.name!r}: tool steps ({TOOL_PREFIX}*) before the last joint")
-    robot = dataclasses.replace(model, steps=robot_steps, bodies=(), joint_effects=())
+    parts = split_tool(model)  # ValueError for tool steps before the robot's end
+    robot = dataclasses.replace(parts.robot, bodies=(), joint_effects=())
     q0 = np.zeros(model.dof)
-    T_flange_tool = spatial.chain_product([s.motion for s in tool_steps], [s.value for s in tool_steps])
+    T_flange_tool = np.eye(4) if parts.T_flange_tool is None else parts.T_flange_tool
     joints = [s for s in model.steps if s.joint is not None]
     return _Chain(
         F0=model.joint_frames(q0),
