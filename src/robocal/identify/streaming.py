@@ -300,14 +300,24 @@ class ChunkedProblem:
 
     A trial point's cost is the pass that also gives its normal equations (a pass with
     the Jacobian costs little more than forward kinematics, and an accepted trial needs
-    them): the last pass is kept for the solver's next question."""
+    them): the last pass is kept for the solver's next question.  With ``keep_residuals``
+    the last pass's unweighted residuals ``(n, rows)`` are kept too (:meth:`residuals_at`:
+    the fit's residuals per pose without another pass over the poses)."""
 
-    def __init__(self, problem_of: Callable[[slice], Problem], n: int, chunk: int = DEFAULT_CHUNK) -> None:
+    def __init__(
+        self,
+        problem_of: Callable[[slice], Problem],
+        n: int,
+        chunk: int = DEFAULT_CHUNK,
+        keep_residuals: bool = False,
+    ) -> None:
         if chunk < 1:
             raise ValueError(f"chunk must be a positive number of poses, got {chunk}")
         self.problem_of, self.n, self.chunk = problem_of, int(n), int(chunk)
         self.passes = 0
         self._last: tuple[bytes, NormalEquations] | None = None
+        self._keep_residuals = keep_residuals
+        self._residuals: Array | None = None  # the last pass's, (n, rows), at self._last's x
 
     def chunks(self) -> Iterator[slice]:
         """The slices of poses, in order."""
@@ -318,6 +328,14 @@ class ChunkedProblem:
         """``rᵀ r`` of the weighted residuals at ``x``."""
         return self.normal_equations(x).cost
 
+    def residuals_at(self, x: Array) -> Array | None:
+        """``(n, rows)`` predicted minus measured (m, rad; unweighted) at ``x`` when the last
+        pass was at ``x`` and kept them (``keep_residuals``), else None."""
+        last = self._last
+        if self._residuals is None or last is None or last[0] != np.asarray(x, dtype=float).tobytes():
+            return None
+        return self._residuals
+
     def normal_equations(self, x: Array) -> NormalEquations:
         """:class:`NormalEquations` at ``x`` (the position rows' sums too)."""
         x = np.asarray(x, dtype=float)
@@ -325,6 +343,7 @@ class ChunkedProblem:
         if self._last is not None and self._last[0] == key:
             return self._last[1]
         self.passes += 1
+        self._last = None  # until this pass is complete
         p = len(x)
         JtJ, Jtr, normal_p = np.zeros((p, p)), np.zeros(p), np.zeros((p, p))
         cost = cost_p = 0.0
@@ -332,6 +351,8 @@ class ChunkedProblem:
         for s in self.chunks():
             problem = self.problem_of(s)
             r, J = problem.residual(x), problem.jacobian(x)
+            if self._keep_residuals:
+                self._keep(s, problem.residual(x, weighted=False).reshape(s.stop - s.start, -1))
             JtJ += J.T @ J
             Jtr += J.T @ r
             cost += float(r @ r)
@@ -348,6 +369,11 @@ class ChunkedProblem:
             ne = NormalEquations(JtJ, Jtr, cost, rows, normal_p, cost_p, rows_p)
         self._last = (key, ne)
         return ne
+
+    def _keep(self, s: slice, residuals: Array) -> None:
+        if self._residuals is None or self._residuals.shape[1] != residuals.shape[1]:
+            self._residuals = np.empty((self.n, residuals.shape[1]))
+        self._residuals[s] = residuals
 
 
 def streamed_covariance(ne: NormalEquations, known_noise: bool, significance: float) -> Covariance:
