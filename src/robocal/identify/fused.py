@@ -30,6 +30,7 @@ from robocal.identify.problem_setup import Fit, Run, Selection
 from robocal.identify.rules import Rules
 from robocal.identify.solve_result import SolveResult, lm_message
 from robocal.identify.stages import Covariance, preference_columns
+from robocal.model.kernel_mode import compiled_wanted
 from robocal.model.rank import Dropped, IdentifiableSubset, preference_subset
 
 __all__ = ["FirstPass", "applies", "fit", "rank_test"]
@@ -51,10 +52,12 @@ class FirstPass:
 
 
 def applies(run: Run) -> bool:
-    """Whether the compiled stages cover this calibration."""
+    """Whether the compiled stages cover this calibration (and the process computes with
+    the compiled kernels: :func:`robocal.model.kernel_mode.compiled_wanted`)."""
     problem = run.problem
     return (
-        run.method == "lm"
+        compiled_wanted()
+        and run.method == "lm"
         and run.options.loss.loss == "linear"
         and run.measure == "position"
         and problem.n_effects == 0

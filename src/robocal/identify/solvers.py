@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.solve_result import BatchSolveResult, SolveResult
+from robocal.model.kernel_mode import compiled_wanted
 
 __all__ = [
     "METHODS",
@@ -143,6 +144,8 @@ def levenberg_marquardt_batch(
             it must not write into them afterwards.
         x0: ``(K, p)`` start values.
     """
+    if not compiled_wanted():  # numba's cache cold: the same iteration in numpy
+        return _numpy_batch(evaluate, x0, max_evaluations, tolerance)
     import robocal.identify.kernels.lm as kernels  # numba: imported on first use
 
     x = np.array(x0, dtype=float)
@@ -175,6 +178,19 @@ def levenberg_marquardt_batch(
     r, J = _gathered(last, r, J)
     iterations = np.array([len(h) for h in histories], dtype=np.intp)
     return BatchSolveResult(x, r, J, success, iterations, evaluations, max_evaluations, histories)
+
+
+def _numpy_batch(
+    evaluate: Callable[[Array, NDArray[np.intp]], tuple[Array, Array]],
+    x0: Array,
+    max_evaluations: int,
+    tolerance: float,
+) -> BatchSolveResult:
+    """:func:`levenberg_marquardt_batch` by its numpy path (the process computes with numpy:
+    :mod:`robocal.model.kernel_mode`)."""
+    from robocal.identify.kernels.numpy_lm import levenberg_marquardt_batch_numpy
+
+    return levenberg_marquardt_batch_numpy(evaluate, x0, max_evaluations=max_evaluations, tolerance=tolerance)
 
 
 def _packed(r, J) -> tuple[Array, Array, Array, bool]:

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.model.chain_plan import Plan
+from robocal.model.kernel_mode import compiled_wanted
 
 __all__ = [
     "FK_ONE",
@@ -50,9 +51,11 @@ def load_kernels(compiled: bool | None):
     """The compiled kernels module when they are to be used, else None (numpy).
 
     ``compiled``: True requires them, False never uses them, None uses them when numba is
-    installed.  The module (and numba) is imported on first use only.
+    installed and the process has not chosen the numpy path
+    (:func:`robocal.model.kernel_mode.compiled_wanted`).  The module (and numba) is imported
+    on first use only.
     """
-    if compiled is False:
+    if compiled is False or (compiled is None and not compiled_wanted()):
         return None
     if KERNELS:
         return KERNELS[0]
@@ -83,7 +86,7 @@ def fk_one_entry(compiled: bool | None) -> tuple[Any, Any, Any, Any] | None:
     """
     kernels = load_kernels(compiled)
     if kernels is None:
-        if compiled is None:  # no numba (compiled=False: not looked up, nothing learnt)
+        if compiled is None and compiled_wanted():  # no numba (else: nothing learnt)
             FK_ONE.append(None)
         return None
     from numba import types

@@ -17,7 +17,15 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Dropped", "IdentifiableSubset", "identifiable_subset", "preference_subset"]
+from robocal.model.kernel_mode import compiled_wanted
+
+__all__ = [
+    "Dropped",
+    "IdentifiableSubset",
+    "identifiable_subset",
+    "preference_subset",
+    "sequential_test_numpy",
+]
 
 Array = NDArray[np.float64]
 
@@ -303,6 +311,30 @@ def _absorbers(
     return out
 
 
+def sequential_test_numpy(qr: Array, tolerance: float) -> tuple[Array, NDArray[np.bool_], Array, Array, bool]:
+    """:func:`robocal.model.rank_kernels.sequential_test` in numpy (same arguments and
+    returns: ``|R_kk|``, the kept mask, the dropped columns' coefficients in the kept ones,
+    what they leave, whether the verdicts stand)."""
+    m, p = qr.shape
+    d = min(m, p)
+    diag = np.zeros(p)
+    diag[:d] = np.abs(np.diagonal(qr)[:d])
+    keep = diag > tolerance
+    kept, dropped = np.flatnonzero(keep), np.flatnonzero(~keep)
+    coefs, left = np.zeros((len(kept), len(dropped))), np.zeros(len(dropped))
+    if len(dropped) == 0 or len(kept) == 0:
+        return diag, keep, coefs, left, len(dropped) == 0
+    R = np.triu(qr[:d])
+    RK, RD = R[:, kept], R[:, dropped]
+    try:
+        factor = scipy.linalg.cho_factor(RK.T @ RK, lower=True)
+    except np.linalg.LinAlgError:
+        return diag, keep, coefs, left, False
+    coefs = scipy.linalg.cho_solve(factor, RK.T @ RD)
+    left = np.linalg.norm(RD - RK @ coefs, axis=0)
+    return diag, keep, coefs, left, bool(np.all(left <= tolerance))
+
+
 def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_], Array, Array, Array]:
     """Keep each unit-norm column of ``A`` (in order) unless it lies within ``tolerance``
     of the span of the kept ones before it.
@@ -320,12 +352,15 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     they fail), and if the check disagrees (possible only with about as many rows as
     columns) the exact sequential Gram-Schmidt (:func:`_gram_schmidt`) decides.
     """
-    from robocal.model import rank_kernels  # numba: imported on first use
-
     # LAPACK's QR directly: numpy's and scipy's wrappers cost more than the factorisation
     # itself at 300 x 36
     qr = scipy.linalg.lapack.dgeqrf(A)[0] if A.size else np.zeros(A.shape)
-    diag, keep, coefs, left, explained = rank_kernels.sequential_test(qr, tolerance)
+    if compiled_wanted():
+        from robocal.model import rank_kernels  # numba: imported on first use
+
+        diag, keep, coefs, left, explained = rank_kernels.sequential_test(qr, tolerance)
+    else:  # the process computes with numpy (numba's cache cold)
+        diag, keep, coefs, left, explained = sequential_test_numpy(qr, tolerance)
     if explained:
         return keep, coefs, diag, left
     fit = _absorbing(A, keep, tolerance)
