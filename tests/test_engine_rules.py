@@ -16,7 +16,13 @@ from robocal.identify import fused, rules
 from robocal.identify.batch import calibrate_batch
 from robocal.identify.options import Pruning
 from robocal.identify.rules import NO_CANDIDATE, Rules
-from robocal.identify.stages import Covariance, poorly_identifiable, residual_variance, uncertainty
+from robocal.identify.stages import (
+    Covariance,
+    poorly_identifiable,
+    residual_variance,
+    screen_unidentifiable,
+    uncertainty,
+)
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
 from robocal.measure.poses import random_poses
 
@@ -159,3 +165,37 @@ def test_uncertainty_is_a_named_record():
     np.testing.assert_allclose(cov.covariance, cov.variance * np.linalg.inv(J.T @ J), rtol=1e-10)
     np.testing.assert_allclose(cov.std, np.sqrt(np.diag(cov.covariance)), rtol=1e-12)
     assert cov.condition == pytest.approx(np.linalg.cond(J / np.linalg.norm(J, axis=0)), rel=1e-8)
+
+
+def test_singular_thresholds_are_rules_fields():
+    """The thresholds of a numerically singular normal matrix are Rules values handed to the
+    kernels: a covariance threshold above every eigenvalue ratio sends a regular problem to
+    the SVD path (same covariance and condition number), and a screening threshold that
+    calls every block singular leaves every unknown to the fit."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(90, 5)) * np.array([1.0, 1e-3, 2.0, 1e-2, 1.0])
+    r = rng.normal(size=90)
+    regular = uncertainty(r, J, 3)
+    svd = uncertainty(r, J, 3, rules=Rules(covariance_singular=1.0))
+    np.testing.assert_allclose(svd.covariance, regular.covariance, rtol=1e-8, atol=1e-12)
+    assert svd.condition == pytest.approx(regular.condition, rel=1e-10)
+    # the screening: hopeless columns (σ far beyond the thresholds) screened by default ...
+    scale = np.ones(5)
+    strict = Rules(max_std=1e-9, max_std_ratio=1.0, screen_margin=1.0)
+    assert screen_unidentifiable(r, J, scale, rules=strict)
+    # ... and none when every block counts as singular
+    assert screen_unidentifiable(r, J, scale, rules=dataclasses.replace(strict, screen_singular=1.0)) == []
+
+
+def test_condition_number_is_one_function():
+    """The compiled covariance reports rules.condition_number of its normal matrix, which is
+    cond(J) of the unit-norm columns."""
+    rng = np.random.default_rng(4)
+    J = rng.normal(size=(60, 6)) * np.logspace(0, 3, 6)
+    Jn = J / np.linalg.norm(J, axis=0)
+    lam = np.linalg.eigvalsh(Jn.T @ Jn)
+    assert rules.condition_number(lam) == pytest.approx(np.linalg.cond(Jn), rel=1e-9)
+    *_, cond, ok = stage_kernels.normal_covariance(J.T @ J, 1.0, Rules().covariance_singular)
+    assert ok and cond == pytest.approx(rules.condition_number(lam), rel=1e-9)
+    assert rules.condition_number(np.array([0.0, 1.0])) == np.inf
+    assert rules.condition_number(np.array([])) == np.inf

@@ -8,7 +8,12 @@ A calibration decides three things besides the fit itself:
   (:func:`prune_candidate`: σ as tool displacement beyond ``max(max_std,
   max_std_ratio × median σ)``);
 * **the variance factor of the covariance** — ``χ²/dof``, or 1 when a stated noise
-  passes the two-sided χ² test at :attr:`Rules.significance` (:func:`variance_factor`).
+  passes the two-sided χ² test at :attr:`Rules.significance` (:func:`variance_factor`);
+
+and when a normal matrix is too nearly singular for them: the screening leaves such a
+problem to the fit (:attr:`Rules.screen_singular`), the covariance takes the SVD path
+(:attr:`Rules.covariance_singular`).  The condition number reported with a covariance is
+:func:`condition_number` of the unit-norm normal matrix's eigenvalues.
 
 The staged pipeline (:mod:`robocal.identify.pipeline`), the compiled fused stages
 (:mod:`robocal.identify.kernels.fused`) and the batched engine
@@ -21,13 +26,14 @@ Units: SI (m); σ are tool displacements (m).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["NO_CANDIDATE", "Rules", "prune_candidate", "variance_factor"]
+__all__ = ["NO_CANDIDATE", "Rules", "condition_number", "prune_candidate", "variance_factor"]
 
 if TYPE_CHECKING:
     from robocal.identify.options import Pruning
@@ -49,12 +55,20 @@ class Rules:
         screen_margin: screening before the fit fixes an unknown only beyond this times
             the pruning threshold (borderline ones are left to the pruning after the fit).
         significance: each tail of the χ² test of a stated noise (:func:`variance_factor`).
+        screen_singular: the screening stops (leaves the rest to the fit and its checks)
+            once the unit-norm normal matrix's condition (eigenvalue ratio, or its 1-norm
+            estimate) is at or below this.
+        covariance_singular: a covariance whose unit-norm normal matrix has an eigenvalue
+            ratio at or below this is computed by the SVD and pseudo-inverse instead of a
+            Cholesky factorisation (cond(J) ≥ 10⁶: the normal matrix has lost the digits).
     """
 
     max_std: float = 5e-4
     max_std_ratio: float = 3.0
     screen_margin: float = 3.0
     significance: float = 1e-3
+    screen_singular: float = 1e-14
+    covariance_singular: float = 1e-12
 
     @classmethod
     def of(cls, pruning: Pruning) -> Rules:
@@ -66,10 +80,12 @@ class Rules:
             float(pruning.significance),
         )
 
-    def screening(self, known_noise: bool) -> tuple[float, float, float, bool]:
-        """The screening kernel's settings ``(max_std, max_std_ratio, margin, known_noise)``
-        (:func:`robocal.identify.kernels.stage.screen`)."""
-        return (float(self.max_std), float(self.max_std_ratio), float(self.screen_margin), bool(known_noise))
+    def screening(self, known_noise: bool) -> tuple[float, float, float, bool, float, float]:
+        """The rules as the kernels take them (numba: a plain tuple), ``(max_std,
+        max_std_ratio, margin, known_noise, screen_singular, covariance_singular)``
+        (:func:`robocal.identify.kernels.stage.screen`, :func:`robocal.identify.kernels.fused.fit`)."""
+        return (float(self.max_std), float(self.max_std_ratio), float(self.screen_margin), bool(known_noise),
+                float(self.screen_singular), float(self.covariance_singular))  # fmt: skip
 
     def chi2_bounds(self, dof: Array) -> tuple[Array, Array]:
         """The χ² values ``(k,)`` below and above which a stated noise is rejected for
@@ -123,3 +139,13 @@ def variance_factor(chi2: float, dof: float, known: bool, low: float, high: floa
     if known and low <= chi2 <= high:
         return 1.0
     return chi2 / max(dof, 1.0)
+
+
+def condition_number(lam: Array) -> float:
+    """The condition number of a matrix ``J`` from the ascending eigenvalues ``lam`` ``(p,)``
+    of its normal matrix ``JᵀJ`` (of the unit-norm columns, for a calibration's):
+    ``√(λ_max / λ_min)``, infinite when the smallest is not positive (and for no column)."""
+    p = len(lam)
+    if p == 0 or not lam[0] > 0.0:
+        return math.inf
+    return math.sqrt(lam[p - 1] / lam[0])

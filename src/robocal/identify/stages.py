@@ -28,7 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from robocal.identify.rules import NO_CANDIDATE, Rules
+from robocal.identify.rules import NO_CANDIDATE, Rules, condition_number
 from robocal.model.rank import IdentifiableSubset, identifiable_subset
 from robocal.model.steps import Role
 
@@ -180,18 +180,18 @@ def tool_displacement_scale(J_position: Array) -> Array:
 
 
 # ---------------------------------------------------------------------- screening
-def normal_inverse(J: Array) -> tuple[Array, Array, Array, Array]:
+def normal_inverse(J: Array, singular: float = Rules.screen_singular) -> tuple[Array, Array, Array, Array]:
     """``J`` with unit-norm columns, the column norms, and the eigenvalues and inverse of
     the normalised normal matrix ``JnᵀJn`` (the inverse is meaningful only when the
     smallest eigenvalue is well above round-off).
 
     Compiled (:func:`robocal.identify.kernels.stage.normal_inverse`: eigenvalues without
     vectors, the inverse from a Cholesky factorisation); a numerically singular matrix
-    (smallest eigenvalue at most 1e-14 of the largest, or a failed factorisation) gets
-    the inverse from the eigendecomposition instead."""
+    (smallest eigenvalue at most ``singular`` of the largest, or a failed factorisation)
+    gets the inverse from the eigendecomposition instead."""
     import robocal.identify.kernels.stage as sk  # numba: imported on first use
 
-    Jn, norms, lam, inverse, ok = sk.normal_inverse(np.ascontiguousarray(J, dtype=float))
+    Jn, norms, lam, inverse, ok = sk.normal_inverse(np.ascontiguousarray(J, dtype=float), float(singular))
     if not ok:
         lam, V = np.linalg.eigh(Jn.T @ Jn)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -278,22 +278,23 @@ def uncertainty(
     which is σ̂²(JᵀJ)⁻¹ when the two agree (one pooled σ̂² overstated the σ of the
     UR10 with an optical CMM twice).  Compiled
     (:func:`robocal.identify.kernels.stage.covariance`) unless the normal matrix is nearly
-    singular (eigenvalue ratio ≤ 1e-12): then the condition number comes from the singular
-    values and the inverse is the pseudo-inverse."""
+    singular (eigenvalue ratio ≤ :attr:`Rules.covariance_singular`): then the condition
+    number (:func:`robocal.identify.rules.condition_number`) comes from the singular values
+    and the inverse is the pseudo-inverse."""
     import robocal.identify.kernels.stage as sk
 
     m, p = J.shape
-    significance = (rules or _DEFAULT_RULES).significance
-    row_s2 = _row_variances(r, m, p, rows, known_noise, significance)
+    rules = rules or _DEFAULT_RULES
+    row_s2 = _row_variances(r, m, p, rows, known_noise, rules.significance)
     s2 = float(row_s2[0]) if m else 1.0
     uniform = rows == 3 or bool(np.all(row_s2 == s2))
     J = np.ascontiguousarray(J, dtype=float)
-    cov, std, corr, lam, ok = sk.covariance(J, row_s2, uniform)
+    cov, std, corr, cond, ok = sk.covariance(J, row_s2, uniform, float(rules.covariance_singular))
     if ok:  # cond(Jn) < 1e6: the normal matrix keeps enough digits, and gives the condition number
-        return Covariance(s2, cov, std, corr, math.sqrt(lam[-1] / lam[0]))
+        return Covariance(s2, cov, std, corr, float(cond))
     Jn, norms, _, _ = normal_inverse(J)
-    sv = np.linalg.svd(Jn, compute_uv=False)
-    cond = float(sv[0] / sv[-1]) if len(sv) and sv[-1] > 0 else float("inf")
+    sv = np.linalg.svd(Jn, compute_uv=False)  # descending: λ of JnᵀJn are their squares, ascending
+    cond = condition_number(np.asarray(sv[::-1] ** 2, dtype=np.float64))
     inverse = np.linalg.pinv(Jn.T @ Jn)
     if not uniform:
         inverse = inverse @ (Jn.T @ (Jn * row_s2[:, None])) @ inverse

@@ -172,16 +172,16 @@ def _values(values0, free_steps, live, x):
 
 
 @_jit
-def _uncertainty(chi2, G, m, chi2_low, chi2_high, known_noise):
+def _uncertainty(chi2, G, m, chi2_low, chi2_high, known_noise, singular):
     """:func:`robocal.identify.stages.uncertainty` of ``m`` position rows from their weighted
     ``Σr²`` (``chi2``) and normal matrix ``G`` ``(p, p)``: σ̂², covariance, standard
     deviations, correlations, condition number and whether the normal matrix is regular
     enough (else the staged pipeline's SVD path).  ``chi2_low``/``chi2_high`` ``[p]``: the χ²
-    test's bounds for ``p`` unknowns (the rule: :func:`robocal.identify.rules.variance_factor`)."""
+    test's bounds for ``p`` unknowns (the rule: :func:`robocal.identify.rules.variance_factor`);
+    ``singular``: :attr:`robocal.identify.rules.Rules.covariance_singular`."""
     p = G.shape[0]
     s2 = variance_factor(chi2, float(m - p), known_noise, chi2_low[p], chi2_high[p])
-    cov, std, corr, lam, ok = normal_covariance(G, s2)
-    cond = math.sqrt(lam[p - 1] / lam[0]) if ok else math.inf
+    cov, std, corr, cond, ok = normal_covariance(G, s2, singular)
     return s2, cov, std, corr, cond, ok
 
 
@@ -198,7 +198,8 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
     """One fit from ``x0`` over ``live`` (``first``: the evaluation at the start values, all
     free columns; ``normal``: the weighted normal equations there, ``(JᵀJ, Jᵀr, rᵀr, at)``,
     over the columns ``at`` indexes (``at[c]``: the row of free column ``c``); ``settings``:
-    ``(budget, tolerance, known_noise)``) and its covariance from the last normal matrix:
+    ``(budget, tolerance, known_noise, covariance_singular)``) and its covariance from the last
+    normal matrix:
     :func:`robocal.identify.solvers.levenberg_marquardt_batch` for one problem, the
     evaluations inside, then :func:`_uncertainty`.  Returns the solution, success,
     evaluations, the RMS history, the last accepted evaluation (frames, unweighted and
@@ -207,7 +208,7 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
     Inlined (as :func:`_evaluate`): numba links the code of every compiled function a
     kernel calls into it and optimises the whole again, so each level of functions above
     the chain evaluation costs 1-2 s of first-use compilation."""
-    budget, tolerance, known_noise = settings
+    budget, tolerance, known_noise, singular = settings
     G0, g0, rr0, at = normal
     weights = data[2]
     m, p = len(weights), len(live)
@@ -249,7 +250,7 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
         rw, Jw = _weighted(first[1], J, weights)
         last = (first[0], first[1], J, rw, Jw)
     low, high = chi2_bounds
-    s2, cov, std, corr, cond, ok = _uncertainty(cost[0], G[0], m, low, high, known_noise)
+    s2, cov, std, corr, cond, ok = _uncertainty(cost[0], G[0], m, low, high, known_noise, singular)
     return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), last, (s2, cov, std, corr, cond),
             ok)  # fmt: skip
 
@@ -261,7 +262,7 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     order) the rank test kept.
 
     ``first``: :func:`first_pass`'s frames, residuals and Jacobian (all free columns);
-    ``screening``: ``(max_std, max_std_ratio, margin, known_noise)``; ``chi2_bounds``:
+    ``screening``: the rules (:meth:`robocal.identify.rules.Rules.screening`); ``chi2_bounds``:
     the χ² test's bounds by number of unknowns (:func:`_uncertainty`); ``budget``:
     evaluations per unknown plus one (each fit may use ``budget × (p + 1)``).
 
@@ -270,9 +271,9 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     all fits, its RMS history, the last evaluation (frames, unweighted residuals and
     Jacobian, weighted ones), the covariance (σ̂², covariance, σ, correlations, condition
     number) and the first Jacobian's columns of the final unknowns."""
-    max_std, max_std_ratio, _, known_noise = screening
+    max_std, max_std_ratio, _, known_noise, _, covariance_singular = screening
     _, r0, J0 = first
-    settings = (budget, tolerance, known_noise)
+    settings = (budget, tolerance, known_noise, covariance_singular)
     # the weighted normal equations at the start values over the rank test's columns: the
     # screening's, and every fit's start (their blocks)
     J_live = _columns_of(J0, live)

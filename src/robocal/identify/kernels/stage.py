@@ -30,6 +30,7 @@ from robocal.identify import rules
 from robocal.model.rank_kernels import cholesky
 
 __all__ = [
+    "condition_number",
     "covariance",
     "normal_covariance",
     "normal_inverse",
@@ -45,9 +46,9 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 # staged pipeline (from Python), the fused kernels and the screening below all call
 prune_candidate = _jit(rules.prune_candidate)
 variance_factor = _jit(rules.variance_factor)
-
-# an eigenvalue ratio at or below this: the normal matrix is numerically singular
-SINGULAR = 1e-14
+condition_number = _jit(rules.condition_number)
+# the thresholds of a numerically singular normal matrix are Rules fields too
+# (screen_singular, covariance_singular), passed in by the callers
 
 
 @_jit
@@ -93,10 +94,10 @@ def normalised(G):
 
 
 @_jit
-def normal_inverse(J):
+def normal_inverse(J, singular):
     """``J`` ``(m, p)`` with unit-norm columns, the column norms (a zero column's is 1),
     the ascending eigenvalues of ``A = JnᵀJn`` and its inverse; the last value is False
-    when ``A`` is numerically singular (eigenvalue ratio ≤ :data:`SINGULAR`) or its
+    when ``A`` is numerically singular (eigenvalue ratio ≤ ``singular``) or its
     factorisation failed: then the inverse is not computed."""
     m, p = J.shape
     norms = np.empty(p)
@@ -112,7 +113,7 @@ def normal_inverse(J):
     A = np.dot(Jn.T, Jn)  # BLAS: the one product here large enough to need it
     lam = np.linalg.eigvalsh(A)
     inverse = np.empty((p, p))
-    ok = p > 0 and lam[0] > SINGULAR * lam[p - 1] and _spd_inverse(A, inverse)
+    ok = p > 0 and lam[0] > singular * lam[p - 1] and _spd_inverse(A, inverse)
     return Jn, norms, lam, inverse, ok
 
 
@@ -149,7 +150,8 @@ def screen(G, g, rr, m, scale, screening, columns, sigmas):
     """The screening of :func:`robocal.identify.stages.screen_unidentifiable` from the
     normal equations of the weighted problem — ``G = JᵀJ`` ``(p, p)``, ``g = Jᵀr`` ``(p,)``,
     ``rr = rᵀr`` over ``m`` rows — the tool displacement per unit ``scale`` ``(p,)`` and its
-    ``screening`` settings ``(max_std, max_std_ratio, margin, known_noise)``.
+    ``screening`` settings ``(max_std, max_std_ratio, margin, known_noise, singular, _)``
+    (:meth:`robocal.identify.rules.Rules.screening`).
     The dropped columns and their σ (m) go to ``columns[:count]`` and ``sigmas[:count]``,
     worst first.  Returns ``count``.
 
@@ -158,9 +160,9 @@ def screen(G, g, rr, m, scale, screening, columns, sigmas):
     unit-norm columns; at the start values the residuals are well above what one step
     leaves, so the difference keeps its digits).  A numerically singular block — its
     Cholesky factorisation fails, or the 1-norm condition number ``‖A‖₁‖A⁻¹‖₁`` (at most
-    ``p`` times the eigenvalue ratio's inverse) reaches ``1 / SINGULAR`` — is left to the
+    ``p`` times the eigenvalue ratio's inverse) reaches ``1 / singular`` — is left to the
     fit and its checks."""
-    max_std, max_std_ratio, margin, known_noise = screening
+    max_std, max_std_ratio, margin, known_noise, singular, _ = screening
     p = G.shape[0]
     keep = np.ones(p, dtype=np.bool_)
     count = 0
@@ -178,7 +180,7 @@ def screen(G, g, rr, m, scale, screening, columns, sigmas):
                 Gk[a, b] = G[live[a], live[b]]
         norms, A = normalised(Gk)
         inverse = np.empty((k, k))
-        if not _spd_inverse(A, inverse) or _norm1(A) * _norm1(inverse) >= 1.0 / SINGULAR:
+        if not _spd_inverse(A, inverse) or _norm1(A) * _norm1(inverse) >= 1.0 / singular:
             break
         # with a stated noise (weights 1/σ) the variance is 1: far from the solution the
         # one-step residual still holds nonlinear error (2° errors inflated σ 10-50x)
@@ -228,24 +230,25 @@ def _sandwich(Jn, row_s2, inverse):
 
 
 @_jit
-def covariance(J, row_s2, uniform):
-    """Covariance, standard deviations, correlations and the normal matrix's eigenvalues of
-    a fit with weighted Jacobian ``J`` ``(m, p)`` and variance factors ``row_s2`` ``(m,)``
-    per row (``uniform``: all equal, σ̂²(JᵀJ)⁻¹ by :func:`normal_covariance`; otherwise
-    the sandwich ``(JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹``).  The last value is False when the
-    normal matrix's eigenvalue ratio is ≤ 1e-12 or it is not positive definite (the caller
-    uses the SVD)."""
+def covariance(J, row_s2, uniform, singular):
+    """Covariance, standard deviations, correlations and the condition number
+    (:func:`condition_number` of the unit-norm normal matrix) of a fit with weighted
+    Jacobian ``J`` ``(m, p)`` and variance factors ``row_s2`` ``(m,)`` per row (``uniform``:
+    all equal, σ̂²(JᵀJ)⁻¹ by :func:`normal_covariance`; otherwise the sandwich
+    ``(JᵀJ)⁻¹ Jᵀ diag(σ̂²) J (JᵀJ)⁻¹``).  The last value is False when the normal matrix's
+    eigenvalue ratio is ≤ ``singular`` (:attr:`robocal.identify.rules.Rules.covariance_singular`)
+    or it is not positive definite (the caller uses the SVD; the condition number is then inf)."""
     if uniform:
-        return normal_covariance(np.dot(J.T, J), row_s2[0])
+        return normal_covariance(np.dot(J.T, J), row_s2[0], singular)
     p = J.shape[1]
-    Jn, norms, lam, inverse, ok = normal_inverse(J)
-    if not ok or not lam[0] > 1e-12 * lam[p - 1]:
-        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), lam, False
+    Jn, norms, lam, inverse, ok = normal_inverse(J, singular)
+    if not ok:
+        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), np.inf, False
     return _in_units(_sandwich(Jn, row_s2, inverse), norms, lam)
 
 
 @_jit
-def normal_covariance(G, s2):
+def normal_covariance(G, s2, singular):
     """:func:`covariance` with one variance ``s2`` for all rows, from the normal matrix
     ``G = JᵀJ`` ``(p, p)`` of the weighted Jacobian (a solver's last one: no product over
     the rows again)."""
@@ -253,15 +256,15 @@ def normal_covariance(G, s2):
     norms, A = normalised(G)
     lam = np.linalg.eigvalsh(A)
     inverse = np.empty((p, p))
-    if not (p > 0 and lam[0] > 1e-12 * lam[p - 1] and _spd_inverse(A, inverse)):
-        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), lam, False
+    if not (p > 0 and lam[0] > singular * lam[p - 1] and _spd_inverse(A, inverse)):
+        return np.empty((p, p)), np.empty(p), np.zeros((p, p)), np.inf, False
     return _in_units(s2 * inverse, norms, lam)
 
 
 @_jit
 def _in_units(cov, norms, lam):
     """The covariance ``cov`` of the unit-norm columns in the columns' own units, its
-    standard deviations and correlations (and ``lam``, passed through)."""
+    standard deviations, correlations and the condition number from ``lam``."""
     p = len(norms)
     for a in range(p):
         for b in range(p):
@@ -275,4 +278,4 @@ def _in_units(cov, norms, lam):
             outer = std[a] * std[b]
             if outer > 0.0:
                 corr[a, b] = cov[a, b] / outer
-    return cov, std, corr, lam, True
+    return cov, std, corr, condition_number(lam), True
