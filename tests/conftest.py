@@ -14,6 +14,10 @@ settings.register_profile("default", derandomize=True)
 settings.register_profile("explore", derandomize=False, max_examples=500)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
+# the compiled kernels throughout, even when numba's cache is cold (a command would then take
+# the numpy path and start a warm-up process: tests/test_cold_path.py tests that on purpose)
+os.environ.setdefault("ROBOCAL_KERNELS", "compiled")
+
 
 @pytest.fixture(scope="session")
 def compliant_ur10():
