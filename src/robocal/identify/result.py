@@ -1,3 +1,4 @@
+# long: one frozen result and its views (robot, tool, frame, uncertainty, summary), one concept
 """The result of a calibration: :class:`CalibrationResult`, frozen and typed.
 
 A result is built once, by the calibration pipeline (:mod:`robocal.identify.pipeline`)
