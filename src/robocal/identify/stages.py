@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal.identify.kernel_cache import stage_kernels, start_kernels
 from robocal.identify.rules import NO_CANDIDATE, Rules, condition_number
 from robocal.model.rank import IdentifiableSubset, identifiable_subset
 from robocal.model.steps import Role
@@ -88,7 +89,7 @@ def initial_frames_and_tools(
             (nearly) collinear.
         numpy.linalg.LinAlgError: the flange frames, start tool or orientations are not finite.
     """
-    import robocal.identify.kernels.start as sk  # numba: imported on first use
+    sk = start_kernels()  # compiled (numba, imported on first use) or numpy while the cache is cold
 
     K, n = T_flange.shape[:2]
     if T_flange.shape[2:] != (4, 4):
@@ -189,7 +190,7 @@ def normal_inverse(J: Array, singular: float = Rules.screen_singular) -> tuple[A
     vectors, the inverse from a Cholesky factorisation); a numerically singular matrix
     (smallest eigenvalue at most ``singular`` of the largest, or a failed factorisation)
     gets the inverse from the eigendecomposition instead."""
-    import robocal.identify.kernels.stage as sk  # numba: imported on first use
+    sk = stage_kernels()  # compiled (numba, imported on first use) or numpy while the cache is cold
 
     Jn, norms, lam, inverse, ok = sk.normal_inverse(np.ascontiguousarray(J, dtype=float), float(singular))
     if not ok:
@@ -236,7 +237,7 @@ def screen_unidentifiable(
     normal equations).  ``rules``: the thresholds as one value (:class:`Rules`; in place
     of ``max_std``, ``max_std_ratio`` and ``margin``).
     """
-    import robocal.identify.kernels.stage as sk
+    sk = stage_kernels()
 
     r, J = np.asarray(r, dtype=float), np.asarray(J, dtype=float)
     p = J.shape[1]
@@ -281,7 +282,7 @@ def uncertainty(
     singular (eigenvalue ratio ≤ :attr:`Rules.covariance_singular`): then the condition
     number (:func:`robocal.identify.rules.condition_number`) comes from the singular values
     and the inverse is the pseudo-inverse."""
-    import robocal.identify.kernels.stage as sk
+    sk = stage_kernels()
 
     m, p = J.shape
     rules = rules or _DEFAULT_RULES
@@ -334,7 +335,7 @@ def poorly_identifiable(
     (noisy data makes every σ large; that is not a reason): the worst such one.  The rule
     is :func:`robocal.identify.rules.prune_candidate`, compiled (the fused kernels call
     the same)."""
-    import robocal.identify.kernels.stage as sk
+    sk = stage_kernels()
 
     move = np.ascontiguousarray(std * scale, dtype=float)
     worst = int(sk.prune_candidate(move, float(max_std), float(max_std_ratio), 1.0))
@@ -354,7 +355,7 @@ def residual_variance(
     data leaves χ²/dof ≈ 1 anyway.  Without a stated noise it is estimated, ``χ²/dof``
     (``dof`` at least 1).
     """
-    import robocal.identify.kernels.stage as sk
+    sk = stage_kernels()
 
     dof = max(float(dof), 1.0)
     low = high = math.nan  # no test without a stated noise (and no scipy.special)
