@@ -24,6 +24,7 @@ import robocal as rc
 from robocal.cli.app import app
 from robocal.demo import GravityCompliance, complete_model
 from robocal.identify.result_io import RESIDUAL_COVARIANCE_FILE
+from robocal.identify.validate import mean_position_variance
 from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, random_poses, simulate
 from robocal.measure.dataset.writer import write_measurements
 from robocal.outdir import MANIFEST
@@ -137,3 +138,23 @@ def test_cli_reads_the_new_layout_and_a_physics_result_drops_the_sidecar(hybrid,
     physics.save(folder)
     assert not (folder / RESIDUAL_COVARIANCE_FILE).exists()
     assert rc.CalibrationResult.load(folder).model.residual is None
+
+
+def test_held_out_expected_error_equals_the_full_computation(hybrid):
+    """The mean trace of the predicted position covariances — parameters (joint effects
+    among them), learned residual, their cross-covariance, the faded-out angle errors —
+    computed without forming them equals the per-pose computation."""
+    result, test = hybrid
+    learned = result.model.residual
+    q = np.vstack([test.q, test.q[:100] * 1.4])  # some beyond the calibrated angles
+    assert learned.fade(q).min() < 0.5  # the faded-out term takes part
+    full = float(np.mean(np.trace(result.position_covariance(q), axis1=1, axis2=2)))
+    assert mean_position_variance(result, q) == pytest.approx(full, rel=1e-10)
+    stats = rc.validate(result, test)
+    held_out = float(np.mean(np.trace(result.position_covariance(test.q), axis1=1, axis2=2)))
+    assert stats.parameter_rms**2 == pytest.approx(held_out, rel=1e-10)
+    # without the learned residual: the parameters' part alone
+    physics_model = dataclasses.replace(result.model, residual=None)
+    physics = result.replace(model=physics_model, residual_cross_covariance=None)
+    full = float(np.mean(np.trace(physics.position_covariance(q), axis1=1, axis2=2)))
+    assert mean_position_variance(physics, q) == pytest.approx(full, rel=1e-10)

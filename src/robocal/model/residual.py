@@ -329,6 +329,45 @@ class JointAngleResidual:
             V = np.stack([B[:, a, :] @ Xk[:, a, :].T for a in range(k)], axis=1)  # (n, k, p)
         return cols @ V
 
+    def mean_position_variance(
+        self, q: ArrayLike, P: Array, J: Array | None = None, X: Array | None = None
+    ) -> float:
+        """The mean over the poses ``q`` of ``trace`` :meth:`position_covariance` (m²) and,
+        given other parameters' position columns ``J`` ``(n, 3, p)`` and their
+        cross-covariance ``X`` ``(p, m)`` with the coefficients, of ``trace(J X Aᵀ + A Xᵀ Jᵀ)``
+        (``A`` the position rows of :meth:`design`): the residual's share of the expected
+        squared error at ``q``, without the ``(n, 3, 3)`` covariances.
+
+        ``Σ_n tr(A_n C A_nᵀ) = Σ_ab ⟨C_ab, Σ_n W_n[a, b] B_naᵀ B_nb⟩`` with ``W_n = colsᵀ cols``
+        (``k x k``) and ``B_na`` the pose's basis row of joint ``a``: one product over all
+        poses per pair of joints (``b >= a``, the matrix is symmetric)."""
+        with one_blas_thread():
+            return self._mean_position_variance(np.atleast_2d(np.asarray(q, dtype=float)), P, J, X)
+
+    def _mean_position_variance(self, q: Array, P: Array, J: Array | None, X: Array | None) -> float:
+        B = self.basis(q)  # (n, k, 2H), faded
+        n, k, h2 = B.shape
+        cols = P[:, :3, list(self.joint_index), 2]  # (n, 3, k)
+        W = np.swapaxes(cols, 1, 2) @ cols  # (n, k, k)
+        rows = [np.ascontiguousarray(B[:, a, :]) for a in range(k)]  # BLAS wants contiguous
+        C = self.covariance
+        total = 0.0
+        for a in range(k):
+            S = rows[a] * np.sqrt(W[:, a, a, None])  # W_aa >= 0: Sᵀ S is one symmetric product
+            total += float(np.vdot(C[a * h2 : (a + 1) * h2, a * h2 : (a + 1) * h2], S.T @ S))
+            for b in range(a + 1, k):
+                G = (rows[a] * W[:, a, b, None]).T @ rows[b]  # (2H, 2H)
+                total += 2.0 * float(np.vdot(C[a * h2 : (a + 1) * h2, b * h2 : (b + 1) * h2], G))
+        if self.coverage is not None:  # the faded-out angle errors (position_covariance's term)
+            rms = np.asarray(self.amplitudes if self.angle_rms is None else self.angle_rms)
+            missing = (1.0 - self.fade(q) ** 2) * rms**2  # (n, k) rad²
+            total += float(np.vdot(np.diagonal(W, axis1=1, axis2=2), missing))
+        if J is not None and X is not None:  # 2 Σ_n tr(J_n X A_nᵀ) = 2 ⟨X, Σ_n J_nᵀ A_n⟩
+            V = np.swapaxes(cols, 1, 2) @ J  # (n, k, p)
+            Xk = np.asarray(X, dtype=float).reshape(len(X), k, h2)
+            total += 2.0 * sum(float(np.vdot(Xk[:, a, :], V[:, a, :].T @ rows[a])) for a in range(k))
+        return total / n
+
     def fade(self, q: ArrayLike) -> Array:
         """``(n, k)`` weight of each joint's learned angle error at ``q``: 1 on the covered
         angles, 0 from ``fade_width`` rad away (all ones without coverage)."""
