@@ -145,11 +145,10 @@ def _row_weights(data: Measurements, options: CalibrationOptions, s: slice, rows
 
 
 def _angle_errors(residual: JointAngleResidual, q: Array) -> Array:
-    """``(n, dof)`` the learned residual's joint angle errors (rad) at every pose, computed once
-    by chunks (its Fourier basis is ``(chunk, joints, 2H)``; every pass reuses them)."""
+    """``(n, dof)`` the learned residual's joint angle errors (rad) at every pose (0 for the
+    joints it does not model), computed once (every pass reuses them)."""
     out = np.zeros(q.shape)
-    for lo in range(0, len(q), 4096):
-        out[lo : lo + 4096] = residual.perturbations(q[lo : lo + 4096], q.shape[1])[:, :, 2]
+    out[:, list(residual.joint_index)] = residual.angle_errors(q)
     return out
 
 
@@ -321,14 +320,18 @@ def _fit_all_poses(
     t_sub: float,
 ) -> CalibrationResult:
     """The streamed final fit of :func:`calibrate_streamed` from the subsample's ``sub``."""
-    chunked = ChunkedProblem(chunk_problems(sub, data, options), data.n, int(streaming.chunk))
+    refits = sub.model.residual is not None  # then the final residuals are the refit's, by a pass
+    chunked = ChunkedProblem(chunk_problems(sub, data, options), data.n, int(streaming.chunk), not refits)
     x0 = np.asarray(sub.estimates, dtype=float)
     solved, ne = levenberg_marquardt_streaming(chunked, x0, max_iterations=options.setup.max_iterations)
     known_noise = options.weights.by == "sigma" and data.sigma is not None
     covariance: Covariance = streamed_covariance(ne, known_noise, Rules.of(options.pruning).significance)
     result = _with_covariance(with_estimates(sub, solved.x), covariance.covariance)
     result, residual_poses = _refit_residual(result, sub, data, streaming, solved.x)
-    residuals = _residual_pass(result, data, int(streaming.chunk))
+    residuals = None if refits else chunked.residuals_at(solved.x)  # the last pass's, at the solution
+    passes = chunked.passes + (residual_poses > 0) + (residuals is None)
+    if residuals is None:
+        residuals = _residual_pass(result, data, int(streaming.chunk))
     after = float(np.einsum("ij,ij->", residuals[:, :3], residuals[:, :3])) / data.n
     p = len(result.names)
     result = result.replace(
@@ -342,7 +345,7 @@ def _fit_all_poses(
     if result.model.residual is not None:
         result = result.with_diagnostics(residual_rms_after_mm=math.sqrt(after) * 1e3)
     record = {"poses": data.n, "subsample": len(index), "chunk": int(streaming.chunk),
-              "passes": chunked.passes + (residual_poses > 0) + 1, "residual_poses": residual_poses,
+              "passes": passes, "residual_poses": residual_poses,
               "subsample_seconds": t_sub - t0, "streamed_seconds": time.perf_counter() - t_sub}  # fmt: skip
     return result.with_diagnostics(
         outlier_poses=outliers, evaluations=sub.diagnostics.evaluations + solved.evaluations,
