@@ -298,6 +298,7 @@ def calibrate(
 
     streaming = Streaming() if streaming is None else streaming
     if streams(data, method, physics, streaming):  # large inputs: decisions on a subsample, fit streamed
+
         def facts(result: CalibrationResult, some: Measurements) -> CalibrationResult:
             return _with_tool_facts(result, physics.setup, some)
 
@@ -309,7 +310,9 @@ def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements
     """The result with its measured tool recorded (``records["measured_tool"]``, with the
     stated start value) and warned about: a start value the fit moved far, and the
     parameters and tool components these poses could not determine
-    (:mod:`robocal.identify.measured_tool`)."""
+    (:mod:`robocal.identify.measured_tool`); and the joint coverage of its poses
+    (``records["coverage"]``).  One new result (every calibration passes here)."""
+    from robocal.identify.coverage import joint_coverage
     from robocal.identify.measured_tool import (
         measured_tool,
         tool_axis_coverage,
@@ -319,15 +322,13 @@ def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements
 
     fitted = isinstance(setup.tool, str) and setup.tool == "fit"
     tool = measured_tool(result, setup.tool_guess if fitted and setup.tool_guess is not None else None)
-    found = [
+    known = {w.message for w in result.warnings}
+    found = tuple(
         CalibrationWarning(c, m)
         for c, m in (*tool_start_warnings(tool), *undetermined_warnings(result, tool))
-    ]
-    known = {w.message for w in result.warnings}
-    result = result.with_warnings(*[w for w in found if w.message not in known])
-    from robocal.identify.coverage import joint_coverage
-
-    result = result.with_records(coverage=joint_coverage(result.model, data.q).to_dict())
-    if tool is None:
-        return result
-    return result.with_records(measured_tool=tool.to_dict() | tool_axis_coverage(result.model, data.q))
+        if m not in known
+    )
+    records = {**result.records, "coverage": joint_coverage(result.model, data.q).to_dict()}
+    if tool is not None:
+        records["measured_tool"] = tool.to_dict() | tool_axis_coverage(result.model, data.q)
+    return result.replace(warnings=result.warnings + found, records=records)

@@ -101,15 +101,27 @@ class JointCoverage:
         )
 
 
-def _merged(v: np.ndarray, half: float) -> tuple[tuple[float, float], ...]:
-    """The union of ``[v - half, v + half]`` over the sorted finite ``v``, as sorted disjoint
-    intervals (one ends where the next value's ``v - half`` passes its ``v + half``)."""
-    if not len(v):
-        return ()
-    lo, hi = v - half, v + half
-    gaps = np.flatnonzero(lo[1:] > hi[:-1])  # numpy, not a loop: every calibration records it
-    starts, ends = [lo[0], *lo[1:][gaps].tolist()], [*hi[:-1][gaps].tolist(), hi[-1]]
-    return tuple(zip(map(float, starts), map(float, ends), strict=True))
+_Intervals = tuple[tuple[float, float], ...]
+
+
+def _intervals(values: np.ndarray, finite: list[int], half: np.ndarray) -> tuple[_Intervals, ...]:
+    """Per column of ``values`` ``(n, dof)`` (each column sorted, its ``finite[j]`` finite
+    values first): the union of ``[v - half[j], v + half[j]]`` over the finite ``v``, as
+    sorted disjoint intervals (one ends where the next value's ``v - half`` passes its
+    ``v + half``).  One set of numpy operations for all joints: every calibration records it."""
+    if not len(values):
+        return ((),) * len(finite)
+    lo, hi = (values - half).T, (values + half).T  # (dof, n); NaN compares False: no gap
+    joint, k = np.nonzero(lo[:, 1:] > hi[:, :-1])  # joint-major, in order along each joint
+    starts, ends = lo[joint, k + 1].tolist(), hi[joint, k].tolist()
+    first = np.searchsorted(joint, np.arange(len(finite) + 1)).tolist()
+    lows = lo[:, 0].tolist()
+    highs = hi[np.arange(len(finite)), np.maximum(np.array(finite) - 1, 0)].tolist()
+    out = []
+    for j, m in enumerate(finite):
+        a, b = first[j], first[j + 1]
+        out.append(tuple(zip([lows[j], *starts[a:b]], [*ends[a:b], highs[j]], strict=True)) if m else ())
+    return tuple(out)
 
 
 def joint_coverage(model: Model, q: ArrayLike) -> JointCoverage:
@@ -117,14 +129,15 @@ def joint_coverage(model: Model, q: ArrayLike) -> JointCoverage:
     q = np.asarray(q, dtype=float).reshape(-1, model.dof)
     revolute = tuple(t == "revolute" for t in model.joint_types)
     turns = np.array(revolute, dtype=bool)
-    values = q.copy()
-    values[:, turns] = np.remainder(q[:, turns] + math.pi, _TWO_PI) - math.pi
+    if turns.all():  # the common case: no column to pick
+        values = np.remainder(q + math.pi, _TWO_PI) - math.pi
+    else:
+        values = q.copy()
+        values[:, turns] = np.remainder(q[:, turns] + math.pi, _TWO_PI) - math.pi
     finite = np.isfinite(values).sum(axis=0).tolist()
     values = np.sort(values, axis=0)  # NaN last in each column
-    intervals = tuple(
-        _merged(values[: finite[j], j], COVER_RAD if r else COVER_M) for j, r in enumerate(revolute)
-    )
-    return JointCoverage(tuple(model.joint_names), revolute, intervals)
+    intervals = _intervals(values, finite, np.where(turns, COVER_RAD, COVER_M))
+    return JointCoverage(model.joint_names, revolute, intervals)
 
 
 def coverage_warnings(calibrated: Any, q: ArrayLike, names: Sequence[str]) -> list[str]:

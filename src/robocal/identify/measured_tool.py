@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
 from robocal.model.chain import Model
-from robocal.model.flange_tool import split_tool
+from robocal.model.flange_tool import tool_steps
 
 __all__ = [
     "AGREE_SIGMAS",
@@ -155,7 +155,7 @@ def _triple(values: Any) -> tuple[float, float, float]:
 
 def _tool_steps(model: Model) -> list:
     """The measured tool's steps (``tcp_*``) at the end of ``model``."""
-    return list(split_tool(model).steps)
+    return list(tool_steps(model))
 
 
 def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Array, Array]:
@@ -189,14 +189,12 @@ def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool
     if not steps:
         return None
     p, J = _point_and_derivative([s.motion for s in steps], [s.value for s in steps])
-    index = {n: i for i, n in enumerate(result.names)}
-    cols = [index.get(s.name) for s in steps]
+    names = result.names
+    cols = [names.index(s.name) if s.name in names else None for s in steps]
+    estimated = np.array([a for a, c in enumerate(cols) if c is not None], dtype=np.intp)
+    at = np.array([c for c in cols if c is not None], dtype=np.intp)
     Sigma = np.zeros((len(steps), len(steps)))
-    cov = np.asarray(result.covariance)
-    for a, ia in enumerate(cols):
-        for b, ib in enumerate(cols):
-            if ia is not None and ib is not None:
-                Sigma[a, b] = cov[ia, ib]
+    Sigma[np.ix_(estimated, estimated)] = np.asarray(result.covariance)[np.ix_(at, at)]
     C = J @ Sigma @ J.T
     if given_m is None:
         recorded = (getattr(result, "records", None) or {}).get("measured_tool") or {}
@@ -281,8 +279,9 @@ def undetermined_warnings(result: Any, tool: MeasuredTool | None) -> list[tuple[
             )
         )
     if tool is not None:
-        loose = [f"tcp_{a} (σ {s * 1e3:.3g} mm)" for a, s in zip("xyz", tool.std_m, strict=True)]
-        loose = [t for t, s in zip(loose, tool.std_m, strict=True) if s > UNDETERMINED_STD_M]
+        std = tool.std_m.tolist()
+        loose = [f"tcp_{a} (σ {s * 1e3:.3g} mm)" for a, s in zip("xyz", std, strict=True)
+                 if s > UNDETERMINED_STD_M]  # fmt: skip
         if loose:
             out.append(
                 (

@@ -20,7 +20,7 @@ from robocal import spatial
 from robocal.model.chain import Model
 from robocal.model.steps import Role, Step
 
-__all__ = ["FlangeTool", "split_tool"]
+__all__ = ["FlangeTool", "split_tool", "tool_steps"]
 
 Array = NDArray[np.float64]
 
@@ -53,14 +53,19 @@ class FlangeTool:
         return dataclasses.replace(robot, steps=(*robot.steps, *self.steps))
 
 
-def split_tool(model: Model) -> FlangeTool:
-    """``model`` split into the robot and the measured tool at its end: the trailing steps
-    of role :attr:`~robocal.model.steps.Role.TOOL` without a joint.
+def tool_steps(model: Model) -> tuple[Step, ...]:
+    """The measured tool's steps at the end of ``model`` (as :func:`split_tool`, without
+    building the robot's model: every calibration reads its tool's steps).
 
     Raises:
-        ValueError: a tool step elsewhere in the chain (before a robot step or a joint):
-            it is neither the robot's geometry nor the tool at the flange.
+        ValueError: as :func:`split_tool`.
     """
+    return model.steps[_flange_index(model) :]
+
+
+def _flange_index(model: Model) -> int:
+    """The index of the first tool step (``len(model.steps)`` without one); ValueError for a
+    tool step elsewhere in the chain."""
     k = len(model.steps)
     while k and model.steps[k - 1].role is Role.TOOL and model.steps[k - 1].joint is None:
         k -= 1
@@ -70,6 +75,18 @@ def split_tool(model: Model) -> FlangeTool:
             f"model {model.name!r}: tool step(s) {', '.join(misplaced)} before the robot's last step; "
             "the measured tool must be the chain's last steps"
         )
+    return k
+
+
+def split_tool(model: Model) -> FlangeTool:
+    """``model`` split into the robot and the measured tool at its end: the trailing steps
+    of role :attr:`~robocal.model.steps.Role.TOOL` without a joint.
+
+    Raises:
+        ValueError: a tool step elsewhere in the chain (before a robot step or a joint):
+            it is neither the robot's geometry nor the tool at the flange.
+    """
+    k = _flange_index(model)
     if k == len(model.steps):
         return FlangeTool(model, ())
     return FlangeTool(dataclasses.replace(model, steps=model.steps[:k]), tuple(model.steps[k:]))
