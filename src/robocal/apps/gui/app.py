@@ -141,7 +141,7 @@ def create_app(workdir: Path):
 
     @app.server.route("/runs/<run_id>/<name>")
     def run_file(run_id: str, name: str):
-        allowed = {"report.html", "model.yaml", "result.json", "train.csv", "test.csv"}
+        allowed = {"report.html", "model.yaml", "result.json", "constraints.json", "train.csv", "test.csv"}
         if name not in allowed or not run_id.isalnum() or not (runs / run_id / name).is_file():
             abort(404)
         return send_from_directory(runs / run_id, name)

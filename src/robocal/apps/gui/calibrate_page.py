@@ -18,7 +18,7 @@ from typing import Any
 
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
-from robocal.apps.gui import columns_view, export_page, program_view, runs_page
+from robocal.apps.gui import columns_view, constraint_view, export_page, program_view, runs_page
 from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.calibrate_views import (
     decode_bytes,
@@ -32,6 +32,7 @@ from robocal.apps.gui.calibrate_views import (
     text_input,
 )
 from robocal.apps.gui.columns_view import gui_words
+from robocal.apps.gui.constraint_job import ConstraintOptions
 from robocal.apps.gui.jobs import MAX_UPLOAD_BYTES, CalibrationJob, JobRunner, public_text, read_options
 from robocal.outdir import atomic_write_bytes, atomic_write_text
 
@@ -44,7 +45,16 @@ def layout(catalog: Sequence[str]) -> html.Div:
     return html.Div(
         [
             html.Div([reader, html.Div(id="csv-preview")], className="left"),
-            html.Div([model, html.Div(id="cal-results"), after, program_view.fieldset()], className="right"),
+            html.Div(
+                [
+                    constraint_view.fieldset(),
+                    model,
+                    html.Div(id="cal-results"),
+                    after,
+                    program_view.fieldset(),
+                ],
+                className="right",
+            ),
             # fires once per arming (max_intervals = n_intervals + 1): polls never overlap
             dcc.Interval(id="cal-poll", interval=400, max_intervals=0),
             dcc.Interval(id="runs-refresh", interval=3000),
@@ -194,6 +204,8 @@ RUN_STATES = (
     State("cal-noise", "value"),
     State("cal-compliance", "value"),
     State("csv-file", "data"),
+    State("con-distances", "data"),
+    State("con-level", "value"),
 )
 
 # the upload's size is checked in the browser: a file over the limit never reaches the server
@@ -236,6 +248,13 @@ def _register_data(app: Dash, page: _Page) -> None:
         return file["label"]
 
     columns_view.register(app, page.data_file)
+
+    @app.callback(Output("con-fieldset", "style"), Output("con-kind", "children"), Input("csv-file", "data"))
+    def constraint_options(file):
+        kind = constraint_view.constraint_file_kind(page.data_file((file or {}).get("token")))
+        if kind is None:
+            return {"display": "none"}, ""
+        return {}, f"the file holds {kind} constraints (its columns): calibrated without a tracker"
 
     @app.callback(
         Output("csv-preview", "children"),
@@ -296,6 +315,17 @@ def _preview(page: _Page, token, *args):
     path = page.data_file(token)
     if path is None:
         return html.Div("open a measurement CSV", className="hint")
+    if constraint_view.constraint_file_kind(path) is not None:
+        try:
+            model = page.model_for(choice, built, "position")
+        except ValueError as err:
+            return html.Div(str(err), className="error")
+        dof = None if model is None else model.dof
+        return [
+            *constraint_view.preview(path, dof, options[1]),
+            html.H4("the file's first lines"),
+            raw_head(path),
+        ]
     try:
         opts = _reader_options(options)
         model = page.model_for(choice, built, "position")
@@ -332,8 +362,11 @@ def _reader_options(values: Sequence[Any]) -> dict[str, Any]:
 def _start_run(page: _Page, session: str, *args: Any) -> tuple:
     """Check the page's values and queue the run: ``(run_id, status)``, or ``(no_update, the
     error)`` when a value is wrong."""
-    choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, file = args[8:]
+    choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, file = args[8:19]
     path = page.data_file((file or {}).get("token"))
+    if constraint_view.constraint_file_kind(path) is not None:
+        assert path is not None  # a constraint file is a file
+        return _start_constraint_run(page, session, path, args)
     try:
         options = _reader_options(args[:8])
         if path is None:
@@ -384,3 +417,29 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
     )
     page.runner.start(job, run_id, session, model.name)
     return run_id, f"calibrating {model.name} on {path.name} ..."
+
+
+def _start_constraint_run(page: _Page, session: str, path: Path, args: Sequence[Any]) -> tuple:
+    """Queue a constraint file's run (the robot's complete position model for a catalog
+    robot, the built model's chain as it is): ``(run_id, status)`` or ``(no_update, error)``."""
+    from robocal.model.files import save_model
+
+    choice, built, *_ = args[8:]
+    rows, level = args[19], args[20]
+    try:
+        options = _reader_options(args[:8])
+        if choice is None:
+            raise ValueError("choose the robot (its model)")
+        model = page.model_for(choice, built, "position")
+        distances = constraint_view.distances_of(rows)
+    except ValueError as err:
+        message = gui_words(public_text(str(err), page.workdir))
+        return no_update, html.Span(message, className="error", id="cal-error")
+    run_id = uuid.uuid4().hex[:12]
+    (page.workdir / "runs").mkdir(exist_ok=True)
+    model_file = save_model(model, page.workdir / "runs" / f"{run_id}.model.yaml")
+    kind = ConstraintOptions(distances, int(level or 2))
+    job = CalibrationJob(data=path, reader=options, model_file=model_file, out=page.workdir / "runs" / run_id,
+                         constraints=kind)  # fmt: skip
+    page.runner.start(job, run_id, session, model.name)
+    return run_id, f"calibrating {model.name} on {path.name} (constraints) ..."

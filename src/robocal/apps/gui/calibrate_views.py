@@ -248,10 +248,11 @@ def _points_3d(sets: dict) -> Any:
     return dcc.Graph(figure=figure, id="residual-3d", config={"displaylogo": False})
 
 
-def report_links(run_id: str, ready: bool) -> list[Any]:
-    files = [
-        html.A(f" · {n}", href=f"/runs/{run_id}/{n}", target="_blank") for n in ("model.yaml", "result.json")
-    ]
+def report_links(run_id: str, ready: bool, constraint: bool = False) -> list[Any]:
+    """The report's link (once written) and the result's files (``constraint``: a constraint
+    calibration's ``constraints.json`` in place of ``result.json``)."""
+    names = ("model.yaml", "constraints.json" if constraint else "result.json")
+    files = [html.A(f" · {n}", href=f"/runs/{run_id}/{n}", target="_blank") for n in names]
     if not ready:
         return [html.Span("writing the HTML report ...", className="hint"), *files]
     return [

@@ -96,6 +96,9 @@ def _compensate_or_export(
     from robocal.identify.result import CalibrationResult
 
     trigger = callback_context.triggered_id
+    if run_id is not None and (workdir / "runs" / run_id / "constraints.json").is_file():
+        text = "a constraint calibration: compensate and export it with robocal compensate / export"
+        return no_update, html.Span(text, className="error")
     if run_id is None or not (workdir / "runs" / run_id / "result.json").is_file():
         return no_update, html.Span("calibrate first", className="error")
     result = CalibrationResult.load(workdir / "runs" / run_id)

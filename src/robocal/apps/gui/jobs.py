@@ -22,9 +22,12 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robocal.workflow.request import STAGES as WORKFLOW_STAGES
+
+if TYPE_CHECKING:
+    from robocal.apps.gui.constraint_job import ConstraintOptions
 
 __all__ = [
     "MAX_UPLOAD_BYTES",
@@ -64,6 +67,8 @@ class CalibrationJob:
         compliance: also identify joint compliance.
         measure: ``position``, ``pose`` or None (pose when the data has orientations).
         out: the directory for the result.
+        constraints: a constraint file's options (``data`` holds fixed points, planes or
+            distances: :func:`robocal.workflow.constraints.calibrate_constraint_files`), or None.
     """
 
     data: Path
@@ -78,6 +83,7 @@ class CalibrationJob:
     noise_mm: float | None = None
     compliance: bool = False
     measure: str | None = None
+    constraints: ConstraintOptions | None = None
 
 
 def read_options(
@@ -146,6 +152,13 @@ def _run(job: CalibrationJob, queue) -> None:
 
     try:
         _stage(queue, "read")
+        if job.constraints is not None:  # fixed points, planes, distances: the CLI's use case
+            from robocal.apps.gui.constraint_job import run_constraint_job
+
+            run_constraint_job(job, lambda stage, fraction: _stage(queue, stage, fraction))
+            _send(queue, "saved", str(job.out))
+            _send(queue, "done", str(job.out))
+            return
         run = workflow.calibrate_file(request_of(job, queue))
         rc.write_measurements(run.train, job.out / "train.csv")
         if run.test is not None:
@@ -455,7 +468,9 @@ def _read_records(runs: Path) -> list[RunInfo]:
             continue  # a record this version cannot read is left out of the list
         if info.status in ("queued", "running"):
             info = dataclasses.replace(info, status="interrupted")
-        elif info.status == "done" and not (runs / info.run_id / "result.json").is_file():
+        elif info.status == "done" and not any(
+            (runs / info.run_id / name).is_file() for name in ("result.json", "constraints.json")
+        ):
             continue
         infos.append(info)
     return infos

@@ -20,6 +20,7 @@ from typing import Any
 
 from dash import ALL, Dash, Input, Output, State, callback_context, html, no_update
 
+from robocal.apps.gui import constraint_view
 from robocal.apps.gui.calibrate_views import report_links, results_view
 from robocal.apps.gui.jobs import JobRunner, JobState, RunInfo, public_text
 
@@ -38,13 +39,20 @@ class ResultsCache:
         with self._lock:  # one build per run even when two tabs ask at once
             if run_id not in self._views:
                 try:
-                    self._views[run_id] = results_view(self.runs / run_id)
+                    self._views[run_id] = _results_view(self.runs / run_id)
                 except (OSError, ValueError, KeyError) as err:
                     message = public_text(f"cannot show the result: {err}", self.workdir)
                     return html.Span(message, className="error")
                 while len(self._views) > self.keep:  # the oldest first (dicts keep order)
                     self._views.pop(next(iter(self._views)))
             return self._views[run_id]
+
+
+def _results_view(out: Path) -> Any:
+    """A tracker calibration's view, or a constraint calibration's (its kind's figures)."""
+    if (out / "constraints.json").is_file():
+        return constraint_view.results_view(out)
+    return results_view(out)
 
 
 def register(app: Dash, runner: JobRunner, workdir: Path, run_states: tuple, start_run) -> None:
@@ -132,7 +140,8 @@ def _poll(runner: JobRunner, workdir: Path, n: int, run_id: str | None, phase: s
     changed = now != phase
     report: Any = no_update
     if changed and run_id is not None:
-        report = report_links(run_id, state.status == "done") if state.saved else ""
+        constraint = (runner.runs / run_id / "constraints.json").is_file()
+        report = report_links(run_id, state.status == "done", constraint) if state.saved else ""
     finished = run_id if changed and state.saved else no_update
     return _bar(state), _status(state, workdir), report, finished, now, n + 1 if state.active else n
 

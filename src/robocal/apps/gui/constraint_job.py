@@ -1,0 +1,68 @@
+"""A constraint file's run in the GUI's child process (no Dash here: the run's process and the
+job runner import it): its options (:class:`ConstraintOptions`) and
+:func:`run_constraint_job`, which calls the command line's use case
+:func:`robocal.workflow.constraints.calibrate_constraint_files` and writes the figures the
+page shows (:data:`FIGURES_FILE`, mm)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["FIGURES_FILE", "ConstraintOptions", "figures_doc", "run_constraint_job"]
+
+#: the figures the page shows, written beside the run's constraints.json
+FIGURES_FILE = "constraint_figures.json"
+
+
+@dataclass(frozen=True)
+class ConstraintOptions:
+    """A constraint file's options: known distances ``(a, b, metres)`` between its fixed
+    points and the level (1 joint offsets, 2 kinematic)."""
+
+    distances: tuple[tuple[int, int, float], ...] = ()
+    level: int = 2
+
+
+def run_constraint_job(job: Any, progress: Callable[[str, float], None]) -> None:
+    """The run's process: ``job`` (a :class:`~robocal.apps.gui.jobs.CalibrationJob` with
+    ``constraints``) through :func:`robocal.workflow.constraints.calibrate_constraint_files`
+    (model.yaml, constraints.json, report.html), then the figures the page shows."""
+    import robocal as rc
+    from robocal.outdir import atomic_write_text
+    from robocal.workflow.constraints import ConstraintRequest, calibrate_constraint_files
+
+    options: ConstraintOptions = job.constraints
+    request = ConstraintRequest(
+        (job.data,), rc.load_model(job.model_file), job.out, angle_unit=job.reader["angle_unit"],
+        length_unit=job.reader["length_unit"], distances=options.distances, level=options.level,
+        report=True, progress=progress,
+    )  # fmt: skip
+    run = calibrate_constraint_files(request)
+    atomic_write_text(job.out / FIGURES_FILE, json.dumps(figures_doc(run)))
+
+
+def figures_doc(run: Any) -> dict[str, Any]:
+    """What the results view shows of a :class:`~robocal.workflow.constraints.ConstraintRun`
+    (figures in mm), written to :data:`FIGURES_FILE` by the run's process."""
+    after = run.result.figures
+    return {
+        "summary": run.summary_lines(),
+        "each_kind": list(run.each_kind),
+        "before": _figures_mm(run.before),
+        "after": None if after is None else _figures_mm(after),
+        "dropped": [{"name": d.name, "reason": d.reason} for d in run.result.dropped],
+        "kinds": list(run.data.kinds),
+        "n": run.data.n,
+    }
+
+
+def _figures_mm(f: Any) -> dict[str, list[float]]:
+    return {
+        "point_spread": (f.point_spread * 1e3).tolist(),
+        "point_distance_error": (f.point_distance_error * 1e3).tolist(),
+        "plane_rms": (f.plane_rms * 1e3).tolist(),
+        "pair_error": (f.pair_error * 1e3).tolist(),
+    }
