@@ -28,7 +28,7 @@ start value and reported as not identified, with the reason (:func:`effect_verdi
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -159,6 +159,7 @@ def calibrate(
     residual_harmonics: int | Sequence[int] | None = None,
     cv_folds: int = 5,
     streaming: Streaming | None = None,
+    progress: Callable[[float], None] | None = None,
     **settings: Any,
 ) -> CalibrationResult:
     """Identify the robot's parameters from measurements: the physical model and,
@@ -267,6 +268,9 @@ def calibrate(
             residual's choice) on a well-spread subsample, then the chosen parameters and the
             learned residual fitted on all poses from normal equations accumulated by chunks
             (:mod:`robocal.identify.streaming_calibrate`; ``diagnostics.streaming`` says so).
+        progress: called with the share of the calibration done (0 to 1, non-decreasing,
+            1 at the end): after the physical fit and, with a learned residual, after each
+            physical variant's cross-validation; None: not called.
 
     Joint effects are physical: an identified clearance tilt, backlash or compliance is at
     least :data:`EFFECT_SIGNIFICANCE` σ above zero.  One that the fit puts below zero, or
@@ -283,6 +287,7 @@ def calibrate(
     if residual not in RESIDUAL_CHOICES:
         raise ValueError(f"residual must be one of {', '.join(RESIDUAL_CHOICES)}, got {residual!r}")
     physics = CalibrationOptions.from_keywords(options, **settings)
+    progress = None if progress is None else _non_decreasing(progress)
     if model.residual is not None:  # a calibrated model calibrated again: its residual is refitted
         model = dataclasses.replace(model, residual=None)
 
@@ -293,7 +298,7 @@ def calibrate(
 
         return calibrate_with_residual(
             calibrate_physics, model, some, method, settings.keywords(),
-            kind=residual, harmonics=residual_harmonics, folds=cv_folds,
+            kind=residual, harmonics=residual_harmonics, folds=cv_folds, progress=progress,
         )  # fmt: skip
 
     streaming = Streaming() if streaming is None else streaming
@@ -302,8 +307,24 @@ def calibrate(
         def facts(result: CalibrationResult, some: Measurements) -> CalibrationResult:
             return _with_tool_facts(result, physics.setup, some)
 
-        return calibrate_streamed(dense, data, physics, streaming, facts=facts)
-    return _with_tool_facts(dense(data, physics), physics.setup, data)
+        result = calibrate_streamed(dense, data, physics, streaming, facts=facts)
+    else:
+        result = _with_tool_facts(dense(data, physics), physics.setup, data)
+    if progress is not None:
+        progress(1.0)
+    return result
+
+
+def _non_decreasing(progress: Callable[[float], None]) -> Callable[[float], None]:
+    """``progress`` called with the largest share reported so far (a subsample's decisions
+    and the streamed fit each report from their start)."""
+    most = [0.0]
+
+    def report(fraction: float) -> None:
+        most[0] = max(most[0], min(1.0, fraction))
+        progress(most[0])
+
+    return report
 
 
 def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements) -> CalibrationResult:

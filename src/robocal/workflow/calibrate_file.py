@@ -174,8 +174,13 @@ def _calibrate(model: Model, train: Measurements, request: CalibrateRequest) -> 
     """The fit; the data's problem as one line naming the file."""
     from robocal.identify.calibrate import calibrate
 
+    start, end = (start for key, _, start in STAGES if key in ("calibrate", "validate"))
+    report = request.progress
+    # the engine's share of the fit done, as the run's share between the calibrate stage's
+    # start and the next stage's
+    engine = None if report is None else (lambda f: report("calibrate", start + (end - start) * f))
     try:
-        return calibrate(model, train, **request.fit.as_kwargs())
+        return calibrate(model, train, **request.fit.as_kwargs(), progress=engine)
     except ValueError as err:
         message = str(err)  # the data's problem: name the file unless the message does
         raise CalibrateFileError(

@@ -30,7 +30,8 @@ __all__ = [
 ]
 
 #: ``progress(stage, fraction)``: the stage a run enters (a key of :data:`STAGES`) and the share
-#: of the whole run done when it starts (0 to 1)
+#: of the whole run done when it starts (0 to 1); inside ``calibrate`` again with the engine's
+#: share of the fit (:func:`robocal.calibrate`'s ``progress``), up to the next stage's start
 Progress = Callable[[str, float], None]
 
 #: ``notify(kind, text)``: a line for the user as it arises. ``kind``: ``model`` (the model

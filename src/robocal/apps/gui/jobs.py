@@ -14,7 +14,6 @@ kept.  The GUI holds no calibration logic.
 from __future__ import annotations
 
 import dataclasses
-import math
 import multiprocessing as mp
 import shutil
 import threading
@@ -239,16 +238,10 @@ class JobState:
     stages: list[tuple[str, str, float]] = field(default_factory=list)
 
     def shown_fraction(self, now: float) -> float:
-        """The bar's share: the stage's start, moving toward the next stage's start while the
-        stage lasts (time constant 8 s; it never gets there before the stage ends: the engine
-        reports stages, no finer progress)."""
-        if not self.active or not self.stages:
-            return self.fraction
-        starts = [start for _, _, start in STAGES]
-        later = [f for f in starts if f > self.fraction]
-        end = later[0] if later else 1.0
-        in_stage = max(0.0, now - self.started - self.stages[-1][2])
-        return self.fraction + (end - self.fraction) * (1.0 - math.exp(-in_stage / 8.0))
+        """The bar's share: the stage's start, and inside the calibrate stage the engine's own
+        progress (its physical fit, each variant's cross-validation: :func:`robocal.calibrate`'s
+        ``progress``, forwarded by the use case); ``now`` is kept for the callers."""
+        return self.fraction
 
     @property
     def active(self) -> bool:

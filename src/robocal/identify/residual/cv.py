@@ -157,7 +157,7 @@ class PhysicalFit:
         return position[held] - p, P, J
 
 
-def cross_validate_residual(
+def cross_validate_residual(  # noqa: PLR0913 - optional keywords of a public function
     q: Array,
     position: Array,
     physics: dict[str, Callable[[Index], PhysicalFit]],
@@ -168,6 +168,7 @@ def cross_validate_residual(
     seed: int = 0,
     include_none: bool = True,
     normals: dict[str, Any] | None = None,
+    progress: Callable[[float], None] | None = None,
 ) -> tuple[CVTable, dict[str, Hyper]]:
     """k-fold CV over physical variants × (no residual, Fourier residual with H harmonics).
 
@@ -179,10 +180,12 @@ def cross_validate_residual(
     that calibrates the physics again on every fold is
     :func:`cross_validate_residual_refitted`.  Returns the table and the hyperparameters
     found for each residual candidate on all poses; ``normals``, when given, receives each
-    residual candidate's normal equations on all poses by name (the final fit's).
+    residual candidate's normal equations on all poses by name (the final fit's);
+    ``progress``, when given, is called with the share of the variants' cross-validation done
+    (after each variant's fit on all poses and after its folds; 1 at the end).
     """
     problem = _Problem(q, position, tuple(joint_names), tuple(joint_index), tuple(harmonics))
-    return _cross_validate(problem, physics, folds, seed, include_none, False, normals)
+    return _cross_validate(problem, physics, folds, seed, include_none, False, normals, progress)
 
 
 def cross_validate_residual_refitted(
@@ -211,14 +214,17 @@ def _cross_validate(
     include_none: bool,
     refit_folds: bool,
     normals: dict[str, Any] | None,
+    progress: Callable[[float], None] | None = None,
 ) -> tuple[CVTable, dict[str, Hyper]]:
     n = len(problem.q)
     parts = np.array_split(np.random.default_rng(seed).permutation(n), folds)
     rows: list[CVCandidate] = []
     hypers: dict[str, Hyper] = {}
     per_pose: dict[str, Array] = {}
-    for pname, physics_fit in physics.items():
+    for k, (pname, physics_fit) in enumerate(physics.items()):
         full = physics_fit(np.arange(n))
+        if progress is not None:  # a variant: its fit on all poses about half, its folds the rest
+            progress((k + 0.5) / len(physics))
         t1 = time.perf_counter()
         raws = None if refit_folds else _fold_raws(problem, full, parts)
         specs, fit_time = _fit_candidates(
@@ -236,6 +242,8 @@ def _cross_validate(
             per_pose[name] = e
             rms, p95, worst = float(np.sqrt(np.mean(e**2))), float(np.percentile(e, 95)), float(e.max())
             rows.append(CVCandidate(name, pname, H, float(e.mean()), rms, fit_time[name], p95, worst))
+        if progress is not None:
+            progress((k + 1) / len(physics))
     if not rows:
         raise ValueError("no candidate model could be calibrated on every cross-validation fold")
     return CVTable(folds, tuple(rows), _one_standard_error(rows, per_pose, list(physics)).name), hypers

@@ -137,14 +137,16 @@ def calibrate_with_residual(
     kind: str = "auto",
     harmonics: int | Sequence[int] | None = None,
     folds: int = 5,
+    progress: Callable[[float], None] | None = None,
 ) -> Any:
     """The physical calibration plus the learned residual chosen by cross-validation on
-    ``data`` (see the module docstring); returns a
+    ``data`` (see the module docstring; ``progress``: the share done, after the physical fit
+    and after each variant's cross-validation, or None); returns a
     :class:`~robocal.identify.calibrate.CalibrationResult` whose ``model.residual`` is the
     residual (None when CV chose the physics alone) and whose ``diagnostics.cv`` is the table."""
     with one_blas_thread_limit():  # the whole stage: BLAS threads idling between small products cost CPU
         return _calibrate_with_residual(
-            calibrate_physics, model, data, method, options, kind, harmonics, folds
+            calibrate_physics, model, data, method, options, kind, harmonics, folds, progress
         )
 
 
@@ -157,10 +159,14 @@ def _calibrate_with_residual(
     kind: str,
     harmonics: int | Sequence[int] | None,
     folds: int,
+    progress: Callable[[float], None] | None = None,
 ) -> Any:
     t0 = time.perf_counter()
     grid = _harmonics_grid(harmonics, folds)
     base = calibrate_physics(model, data, method, **options)
+    cv_progress = None if progress is None else (lambda f: progress(0.2 + 0.7 * f))  # the CV: 20-90 %
+    if progress is not None:
+        progress(0.2)
     # revolute joints only: the angle errors of a joint as a function of its own angle
     revolute = [s.is_rotation for s in model.steps if s.joint is not None]
     joints = [j for j, rot in enumerate(revolute) if rot]
@@ -178,7 +184,7 @@ def _calibrate_with_residual(
         normals: dict[str, Any] = {}  # each candidate's normal equations on all poses: the final fit's
         table, hypers = cross_validate_residual(
             data.q, data.position, usable, names, joints, grid, folds, include_none=kind == "auto",
-            normals=normals,
+            normals=normals, progress=cv_progress,
         )  # fmt: skip
     except ValueError as err:
         return base.with_warnings(f"{err}: the physical model alone", code="residual")
