@@ -63,7 +63,7 @@ def test_a_cold_cache_chooses_the_numpy_path_and_starts_the_warm_up(monkeypatch)
         model, data = _data("ur10", 30, 5)
         run_applies = []
         original = fused.applies
-        monkeypatch.setattr(fused, "applies", lambda run: run_applies.append(original(run)) or False)
+        monkeypatch.setattr(fused, "applies", lambda *args: run_applies.append(original(*args)) or False)
         rc.calibrate(model, data, residual="none")
         assert run_applies == [False]  # the compiled stages are not chosen
     finally:

@@ -48,7 +48,7 @@ def _fused_and_staged(model, data, **options):
         compiled = rc.calibrate(model, data, tool_guess=TOOL, **options)
     assert calls, "the fused stages did not run"
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(fused, "applies", lambda run: False)
+        m.setattr(fused, "applies", lambda *args: False)
         staged = rc.calibrate(model, data, tool_guess=TOOL, **options)
     return compiled, staged
 
@@ -199,3 +199,29 @@ def test_condition_number_is_one_function():
     assert ok and cond == pytest.approx(rules.condition_number(lam), rel=1e-9)
     assert rules.condition_number(np.array([0.0, 1.0])) == np.inf
     assert rules.condition_number(np.array([])) == np.inf
+
+
+def test_build_problem_answers_a_frozen_start_and_leaves_the_run_unchanged():
+    """Stage 3 is a function of the pass's inputs: it answers a frozen Start (problem,
+    stated noise, size, joint effects) and writes nothing into Run but its warnings log."""
+    from robocal.identify.options import CalibrationOptions
+    from robocal.identify.pipeline import _check_inputs
+    from robocal.identify.problem_setup import Run, Start, build_problem
+
+    model, data = _data("ur10", 30, 6)
+    sigma = np.full((data.n, 3), 20e-6)
+    data = dataclasses.replace(data, sigma=sigma)
+    run = _check_inputs(
+        model, data, "lm", CalibrationOptions.from_keywords(None, tool_guess=TOOL, level=3), None
+    )
+    before = {f.name: getattr(run, f.name) for f in dataclasses.fields(Run) if f.name != "warnings"}
+    start = build_problem(run, None)
+    assert isinstance(start, Start) and start.known_noise and start.length > 0.1
+    assert start.problem.n_effects == len(start.effect_names) == len(start.effect_kinds) > 0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        start.known_noise = False
+    assert {f.name: getattr(run, f.name) for f in dataclasses.fields(Run) if f.name != "warnings"} == before
+    assert {f.name for f in dataclasses.fields(Run)} >= {"data", "options"}
+    assert not {"problem", "known_noise", "length", "effect_names"} & {
+        f.name for f in dataclasses.fields(Run)
+    }

@@ -28,7 +28,7 @@ def _data(name: str, n: int, seed: int, sigma: float = 20e-6):
 
 def _staged(monkeypatch, model, data, **options):
     with monkeypatch.context() as m:
-        m.setattr(fused, "applies", lambda run: False)
+        m.setattr(fused, "applies", lambda *args: False)
         return rc.calibrate(model, data, **options)
 
 
@@ -88,8 +88,8 @@ def test_fused_stages_apply_only_to_position_lm_without_joint_effects():
     seen = []
     original = fused.applies
 
-    def spy(run):
-        seen.append(original(run))
+    def spy(*args):
+        seen.append(original(*args))
         return seen[-1]
 
     with pytest.MonkeyPatch.context() as m:

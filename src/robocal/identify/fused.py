@@ -26,7 +26,8 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.problem_setup import Fit, Run, Selection
+from robocal.identify.problem import Problem
+from robocal.identify.problem_setup import Fit, Run, Selection, Start
 from robocal.identify.rules import Rules
 from robocal.identify.solve_result import SolveResult, lm_message
 from robocal.identify.stages import Covariance, preference_columns
@@ -51,10 +52,10 @@ class FirstPass:
     free_steps: NDArray[np.intp]  # the unknowns' step indices in the chain
 
 
-def applies(run: Run) -> bool:
-    """Whether the compiled stages cover this calibration (and the process computes with
-    the compiled kernels: :func:`robocal.model.kernel_mode.compiled_wanted`)."""
-    problem = run.problem
+def applies(run: Run, problem: Problem) -> bool:
+    """Whether the compiled stages cover this calibration (its inputs, and its ``problem``
+    at the start values), and the process computes with the compiled kernels
+    (:func:`robocal.model.kernel_mode.compiled_wanted`)."""
     return (
         compiled_wanted()
         and run.method == "lm"
@@ -65,9 +66,8 @@ def applies(run: Run) -> bool:
     )
 
 
-def _chain_data(run: Run) -> tuple:
+def _chain_data(problem: Problem) -> tuple:
     """The ``data`` tuple of :mod:`robocal.identify.kernels.fused`."""
-    problem = run.problem
     plan = problem.chain._plan
     return (np.ascontiguousarray(problem.q, dtype=float), np.ascontiguousarray(problem.position, dtype=float),
             problem.weights, plan.step_axis, plan.step_rot, plan.step_joint, plan.joint_axis_array,
@@ -107,17 +107,16 @@ class _Fused(NamedTuple):
     J0: Array  # the first Jacobian's columns of the final unknowns
 
 
-def rank_test(run: Run) -> FirstPass | None:
+def rank_test(problem: Problem) -> FirstPass | None:
     """The first evaluation and the identifiable set (as
     :func:`robocal.identify.stages.identifiable_set` on the scaled Jacobian); None when the
     Jacobian is not finite or has no non-zero column (the staged rank test explains)."""
     import robocal.identify.kernels.fused as kernels  # numba: imported on first use
 
-    problem = run.problem
     chain = problem.chain
     names = problem.free_names
     free_steps = np.flatnonzero(chain.free_mask)
-    data = _chain_data(run)
+    data = _chain_data(problem)
     out = _FirstPass(*kernels.first_pass(
         data, chain.values, free_steps, float(problem.length_scale), preference_columns(names, chain.roles)
     ))  # fmt: skip
@@ -138,23 +137,23 @@ def _chi2_table(m: int, p: int, rules: Rules) -> tuple[Array, Array]:
     return tables
 
 
-def fit(run: Run, first: FirstPass, solver: Mapping[str, Any], rules: Rules) -> Fit | None:
+def fit(start: Start, first: FirstPass, solver: Mapping[str, Any], rules: Rules) -> Fit | None:
     """Screening, the fit, its covariance and pruning over the identifiable set, as the
     staged functions fit it (``solver``: the settings of the LM fit, ``rules``: the
     decisions').  None when a covariance's normal matrix is nearly singular: the staged
     functions then take the SVD path."""
     import robocal.identify.kernels.fused as kernels
 
-    problem = run.problem
+    problem = start.problem
     names = problem.free_names
     dropped = {d.name for d in first.selection.dropped}
     live = np.array([k for k, name in enumerate(names) if name not in dropped], dtype=np.intp)
     m, p = len(problem.weights), len(names)
-    bounds = _chi2_table(m, p, rules) if run.known_noise else (np.zeros(p + 1),) * 2
+    bounds = _chi2_table(m, p, rules) if start.known_noise else (np.zeros(p + 1),) * 2
     budget = int(solver["max_iterations"])
     t = time.perf_counter()
     out = _Fused(*kernels.fit(first.data, problem.chain.values, first.free_steps, live, first.evaluation,
-                              rules.screening(run.known_noise), bounds, budget, TOLERANCE))  # fmt: skip
+                              rules.screening(start.known_noise), bounds, budget, TOLERANCE))  # fmt: skip
     if out.status != kernels.OK:
         return None
     seconds = time.perf_counter() - t

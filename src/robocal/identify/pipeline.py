@@ -45,6 +45,7 @@ from robocal.identify.problem_setup import (
     Fit,
     Run,
     Selection,
+    Start,
     build_problem,
     parse_level,
     without_measured_tool,
@@ -114,24 +115,26 @@ def _check_inputs(
 
 
 # ---------------------------------------------------------------------- 4. identifiable set
-def _identifiable(run: Run, hold: dict | None) -> Selection:
+def _identifiable(run: Run, start: Start, hold: dict | None) -> Selection:
     """The identifiable set, preferring the frame, then the tool, then the robot in chain
     order (one factorisation of the scaled Jacobian at the start values); the rank guard;
     joint effects the caller holds."""
-    problem = run.problem
+    problem = start.problem
     subset = identifiable_set(problem.scaled_jacobian(problem.x0), problem.free_names,
                               roles=problem.chain.roles)  # fmt: skip
-    _rank_guard(run, subset)
+    _rank_guard(run, subset, problem.free_names)
     selection = _fix_unidentifiable(problem, subset, hold)
-    return dataclasses.replace(selection, solver=_solver_options(run, selection.problem, subset.dropped))
+    return dataclasses.replace(
+        selection, solver=_solver_options(run, start, selection.problem, subset.dropped)
+    )
 
 
-def _rank_guard(run: Run, subset: IdentifiableSubset) -> None:
-    """The rank guard's warnings (or its refusal) for the identifiable set."""
+def _rank_guard(run: Run, subset: IdentifiableSubset, candidates: Sequence[str]) -> None:
+    """The rank guard's warnings (or its refusal) for the identifiable set among ``candidates``."""
     setup = run.options.setup
     for text in check_rank(run.given_model, run.data, measure=run.measure, frame=setup.frame, tool=setup.tool,
                            tool_guess=setup.tool_guess, kept=subset.kept,
-                           candidates=run.problem.free_names):  # fmt: skip
+                           candidates=candidates):  # fmt: skip
         run.warn("rank", text)
 
 
@@ -149,7 +152,9 @@ def _fix_unidentifiable(problem: Problem, subset: IdentifiableSubset, hold: dict
     return Selection(problem, problem.x0, (*subset.dropped, *held))
 
 
-def _solver_options(run: Run, problem: Problem, rank_dropped: Sequence[Dropped]) -> dict[str, Any]:
+def _solver_options(
+    run: Run, start: Start, problem: Problem, rank_dropped: Sequence[Dropped]
+) -> dict[str, Any]:
     """The chosen method's settings for ``problem``'s unknowns (each method takes only its own)."""
     o, method = run.options, run.method
     solver: dict[str, Any] = {"max_iterations": o.setup.max_iterations}
@@ -169,7 +174,7 @@ def _solver_options(run: Run, problem: Problem, rank_dropped: Sequence[Dropped])
     elif method == "bounded":
         robot = set(run.model.names)
         lo, hi, widened = bounded_method_bounds(
-            o.bounds.value, problem, list(rank_dropped), run.length, robot
+            o.bounds.value, problem, list(rank_dropped), start.length, robot
         )
         if widened is not None:
             run.warn("bounds-widened", widened)
@@ -183,14 +188,14 @@ def _rules(run: Run) -> Rules:
     return Rules.of(run.options.pruning)
 
 
-def _screen(run: Run, selection: Selection) -> Selection:
+def _screen(run: Run, start: Start, selection: Selection) -> Selection:
     """The hopeless unknowns, fixed before the first fit (they would be pruned anyway);
     not for ``bounded`` (its bounds keep a poorly determined unknown from running away)."""
     if run.method == "bounded":
         return selection
     problem, x0 = selection.problem, selection.x0
     r, J = problem.residual(x0), problem.jacobian(x0)
-    found = screen_unidentifiable(r, J, problem.effect_scale(x0), known_noise=run.known_noise,
+    found = screen_unidentifiable(r, J, problem.effect_scale(x0), known_noise=start.known_noise,
                                   rules=_rules(run))  # fmt: skip
     if not found:
         return selection
@@ -201,7 +206,7 @@ def _screen(run: Run, selection: Selection) -> Selection:
 
 
 # ---------------------------------------------------------------------- 6. solve, prune, hold
-def _solve(run: Run, selection: Selection, x_start: Array, before: Fit | None = None) -> Fit:
+def _solve(run: Run, start: Start, selection: Selection, x_start: Array, before: Fit | None = None) -> Fit:
     """One fit of ``selection`` from ``x_start`` and the uncertainty at its solution (from
     the solver's last Jacobian when it has it: no second evaluation); ``before``: the
     pass's previous fit (its evaluations and seconds are counted on)."""
@@ -211,14 +216,14 @@ def _solve(run: Run, selection: Selection, x_start: Array, before: Fit | None = 
     r, J = solved.r, solved.J
     if r is None or J is None:
         r, J = selection.problem.residual(solved.x), selection.problem.jacobian(solved.x)
-    covariance = uncertainty(r, J, selection.problem.rows, run.known_noise, _rules(run))
+    covariance = uncertainty(r, J, selection.problem.rows, start.known_noise, _rules(run))
     evaluations, solve_seconds = (0, 0.0) if before is None else (before.evaluations, before.solve_seconds)
     return Fit(
         selection, solved.x, solved, covariance, evaluations + solved.evaluations, solve_seconds + seconds
     )
 
 
-def _prune(run: Run, fit: Fit) -> Fit:
+def _prune(run: Run, start: Start, fit: Fit) -> Fit:
     """Drop what these measurements cannot determine, worst first, and refit from the
     start values (the dropped unknown may have dragged others along a nearly flat valley
     of the first fit: real UR10 data, plain DH, a5 +143 mm).  Not after an unconverged
@@ -240,11 +245,11 @@ def _prune(run: Run, fit: Fit) -> Fit:
             x0=selection.x0[np.arange(len(fit.x)) != worst],
             dropped=(*selection.dropped, Dropped(names[worst], "poorly identifiable", sigma=sigma)),
         )
-        fit = _solve(run, pruned, pruned.x0, fit)
+        fit = _solve(run, start, pruned, pruned.x0, fit)
     return fit
 
 
-def _hold_effects(run: Run, fit: Fit) -> Fit:
+def _hold_effects(run: Run, start: Start, fit: Fit) -> Fit:
     """Joint effects are physical (≥ 0) and identified only when the data tells them from
     zero: the others are held at their start values and the fit repeated from the
     linearised solution with them held (:func:`effects_to_hold`)."""
@@ -268,12 +273,12 @@ def _hold_effects(run: Run, fit: Fit) -> Fit:
             x_start = np.clip(x_start, *solver["bounds"])
         kept = Selection(problem.fix([v.name for v in verdicts]), selection.x0[keep],
                          (*selection.dropped, *verdicts), solver)  # fmt: skip
-        fit = _solve(run, kept, x_start, fit)
+        fit = _solve(run, start, kept, x_start, fit)
     return fit
 
 
 # ---------------------------------------------------------------------- 7. the result
-def _calibrated_models(run: Run, fit: Fit) -> tuple[Model, Model, Array]:
+def _calibrated_models(run: Run, start: Start, fit: Fit) -> tuple[Model, Model, Array]:
     """The calibrated measurement chain, the calibrated robot (tool appended, the given
     model's free flags) and ``T_device_base`` (4x4)."""
     from robocal.model import kernels  # numba: imported on first use
@@ -293,11 +298,11 @@ def _calibrated_models(run: Run, fit: Fit) -> tuple[Model, Model, Array]:
     effects = () if run.plan.mode == "none" else given.joint_effects
     notes = (given.notes + " calibrated").strip()
     calibrated = derived_copy(given, robot_steps, (), notes=notes, joint_effects=effects)
-    if run.plan.mode != "none" and run.plan.kinds and run.effect_start is not None:
+    if run.plan.mode != "none" and run.plan.kinds and start.effect_start is not None:
         from robocal.model.joints import effects_from_values
 
         estimated = dict(zip(problem.free_names, x, strict=True))
-        pairs = zip(run.effect_names, run.effect_kinds, run.effect_start, strict=True)
+        pairs = zip(start.effect_names, start.effect_kinds, start.effect_start, strict=True)
         effect_values = {pair: estimated.get(c, s0) for c, pair, s0 in pairs}
         calibrated = dataclasses.replace(
             calibrated, joint_effects=effects_from_values(run.model, effect_values)
@@ -311,7 +316,7 @@ def _mean_square(r: Array) -> float:
     return float(p @ p) / len(r)
 
 
-def _assemble(run: Run, fit: Fit, t_start: float) -> CalibrationResult:
+def _assemble(run: Run, start: Start, fit: Fit, t_start: float) -> CalibrationResult:
     """The frozen result of this pass (warnings and diagnostics added by :func:`diagnose`)."""
     selection, x, n = fit.selection, fit.x, run.data.n
     problem = selection.problem
@@ -320,7 +325,7 @@ def _assemble(run: Run, fit: Fit, t_start: float) -> CalibrationResult:
     r_start = problem.residual(selection.x0, weighted=False).reshape(n, problem.rows)
     cov = fit.covariance
     after = _mean_square(r_plain)
-    chain, calibrated, T_device_base = _calibrated_models(run, fit)
+    chain, calibrated, T_device_base = _calibrated_models(run, start, fit)
     effects = run.options.joint_effects
     level = run.level if run.level is not None else (3 if run.plan.mode != "none" else 2)
     return CalibrationResult(
@@ -347,40 +352,40 @@ def _calibrate_once(
     run: Run, load_model: Model | None, hold: dict | None, t_start: float
 ) -> CalibrationResult:
     """Stages 2-8 for the joint loads of ``load_model``'s geometry."""
-    build_problem(run, load_model)
-    fit = _fused(run, hold)
+    start = build_problem(run, load_model)
+    fit = _fused(run, start, hold)
     if fit is None:
-        fit = _fit_staged(run, _identifiable(run, hold))
-    fit = _hold_effects(run, fit)
-    result = _assemble(run, fit, t_start)
+        fit = _fit_staged(run, start, _identifiable(run, start, hold))
+    fit = _hold_effects(run, start, fit)
+    result = _assemble(run, start, fit, t_start)
     selection = fit.selection
     bounds = selection.solver.get("bounds") if run.method == "bounded" else None
     at_bounds = None if bounds is None else parameters_at_bounds(result.names, fit.x, *bounds)
-    return diagnose(result, selection.problem, run.data, run.warnings, run.known_noise, run.options.loss.loss,
-                    selection.x0, at_bounds, run.orientation_hint)  # fmt: skip
+    return diagnose(result, selection.problem, run.data, run.warnings, start.known_noise,
+                    run.options.loss.loss, selection.x0, at_bounds, start.orientation_hint)  # fmt: skip
 
 
-def _fused(run: Run, hold: dict | None) -> Fit | None:
+def _fused(run: Run, start: Start, hold: dict | None) -> Fit | None:
     """Stages 4-6 as compiled calls (:mod:`robocal.identify.fused`) where they apply; None
     where they do not (the staged functions run them)."""
-    first = fused.rank_test(run) if fused.applies(run) else None
+    problem = start.problem
+    first = fused.rank_test(problem) if fused.applies(run, problem) else None
     if first is None:
         return None
-    _rank_guard(run, first.selection)
-    solver = _solver_options(run, run.problem, first.selection.dropped)  # lm's: the problem does not matter
-    fit = fused.fit(run, first, solver, _rules(run))
+    _rank_guard(run, first.selection, problem.free_names)
+    # lm's settings: the problem does not matter
+    solver = _solver_options(run, start, problem, first.selection.dropped)
+    fit = fused.fit(start, first, solver, _rules(run))
     if fit is None:  # a nearly singular covariance: the staged SVD path
-        selection = dataclasses.replace(
-            _fix_unidentifiable(run.problem, first.selection, hold), solver=solver
-        )
-        fit = _fit_staged(run, selection)
+        selection = dataclasses.replace(_fix_unidentifiable(problem, first.selection, hold), solver=solver)
+        fit = _fit_staged(run, start, selection)
     return fit
 
 
-def _fit_staged(run: Run, selection: Selection) -> Fit:
+def _fit_staged(run: Run, start: Start, selection: Selection) -> Fit:
     """Stages 5-6 by the staged functions: screening, the fit, pruning."""
-    screened = _screen(run, selection)
-    return _prune(run, _solve(run, screened, screened.x0))
+    screened = _screen(run, start, selection)
+    return _prune(run, start, _solve(run, start, screened, screened.x0))
 
 
 def calibrate_physics(

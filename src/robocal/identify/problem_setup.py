@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,7 +26,16 @@ from robocal.model.flange_tool import split_tool
 from robocal.model.rank import Dropped
 from robocal.model.steps import Role
 
-__all__ = ["LEVELS", "Fit", "Run", "Selection", "build_problem", "parse_level", "without_measured_tool"]
+__all__ = [
+    "LEVELS",
+    "Fit",
+    "Run",
+    "Selection",
+    "Start",
+    "build_problem",
+    "parse_level",
+    "without_measured_tool",
+]
 
 Array = NDArray[np.float64]
 
@@ -79,8 +88,9 @@ def _as_frame(value: Any) -> Array:
 # ---------------------------------------------------------------------- the working state
 @dataclass
 class Run:
-    """What one pass of the pipeline knows; internal and short-lived (the result it
-    produces is frozen)."""
+    """The inputs of one pass of the pipeline, as checked (internal and short-lived; the
+    stages' values are frozen: :class:`Start`, :class:`Selection`, :class:`Fit`), and the
+    log of its warnings, which the stages append to."""
 
     given_model: Model  # the model as given (tool steps of an earlier calibration removed)
     model: Model  # its candidates (level 1: the joint offsets only)
@@ -91,16 +101,27 @@ class Run:
     plan: EffectPlan
     level: int | None
     warnings: list[CalibrationWarning] = field(default_factory=list)
-    orientation_hint: str = ""
-    known_noise: bool = False
-    length: float = 1.0
-    problem: Problem = field(default=None, repr=False)  # type: ignore[assignment]  # set by build_problem
-    effect_names: tuple[str, ...] = ()
-    effect_kinds: tuple[tuple[str, str], ...] = ()
-    effect_start: Array | None = None
 
     def warn(self, code: str, message: str) -> None:
         self.warnings.append(CalibrationWarning(code, message))
+
+
+@dataclass(frozen=True)
+class Start:
+    """The calibration problem at the start values (:func:`build_problem`): ``problem``
+    (measurement chain, weights, joint-effect patterns), whether the weights come from a
+    stated noise (``known_noise``), the robot's size ``length`` (m, weighs rotations
+    against lengths), the identified joint effects' coefficient names, ``(kind, joint)``
+    pairs and start values ``(k,)``, and the orientation convention's hint (pose data whose
+    rotations disagree with the model; empty otherwise)."""
+
+    problem: Problem
+    known_noise: bool
+    length: float
+    effect_names: tuple[str, ...] = ()
+    effect_kinds: tuple[tuple[str, str], ...] = ()
+    effect_start: Array | None = None
+    orientation_hint: str = ""
 
 
 @dataclass(frozen=True)
@@ -159,23 +180,34 @@ def _start_values(run: Run) -> tuple[Array, Array, Array, bool]:
 
 
 # ---------------------------------------------------------------------- 3. the problem
-def _row_weights(run: Run, rows: int) -> Array:
-    """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``."""
+def _row_weights(run: Run, rows: int) -> tuple[Array, bool]:
+    """``(n, rows)`` weights: 1/σ of a stated noise, orientation rows by ``orientation``;
+    and whether they come from a stated noise."""
     data, weights = run.data, run.options.weights
     sigma = data.sigma if weights.by == "sigma" else None
-    run.known_noise = sigma is not None
     position = np.ones((data.n, 3)) if sigma is None else 1.0 / np.maximum(sigma, 1e-12)
     if rows == 3:
-        return position
+        return position, sigma is not None
     w = np.empty((data.n, 6))
     w[:, :3] = position
     w[:, 3:] = weights.orientation * position.mean(axis=1, keepdims=True)
-    return w
+    return w, sigma is not None
 
 
-def _effect_terms(run: Run, load_model: Model | None) -> tuple[Array | None, Array | None]:
-    """The identified joint effects' patterns ``(k, n, dof, 3)`` and the perturbations
-    of the model's other joint effects, known and predicted at every pose."""
+class _EffectTerms(NamedTuple):
+    """The joint effects of a problem (:func:`_effect_terms`)."""
+
+    basis: Array | None  # (k, n, dof, 3) the identified effects' patterns
+    known: Array | None  # (n, dof, 3) the other effects' perturbations, known in advance
+    names: tuple[str, ...]  # the identified coefficients
+    kinds: tuple[tuple[str, str], ...]  # their (kind, joint)
+    start: Array  # (k,) their start values (the model's)
+
+
+def _effect_terms(run: Run, load_model: Model | None) -> _EffectTerms:
+    """The identified joint effects' patterns ``(k, n, dof, 3)``, names and start values,
+    and the perturbations of the model's other joint effects, known and predicted at every
+    pose."""
     from robocal.model.joints import EFFECT_KINDS, EFFECT_PREFIXES, effect_basis, load_moments
     from robocal.model.joints import joint_perturbations as predict_effects
 
@@ -183,20 +215,21 @@ def _effect_terms(run: Run, load_model: Model | None) -> tuple[Array | None, Arr
     geometry = model if load_model is None else check_load_model(load_model, model)
     loads = load_moments(geometry, q, e.velocities, e.accelerations, gravity=np.asarray(e.gravity),
                          payload=e.payload)  # fmt: skip
-    basis = None
+    basis: Array | None = None
+    names: tuple[str, ...] = ()
+    kinds: tuple[tuple[str, str], ...] = ()
     if plan.kinds:
         joints = plan.joints if plan.joints is not None else e.joints
-        basis, run.effect_names, run.effect_kinds = effect_basis(model, q, kinds=plan.kinds, joints=joints,
-                                                                 loads=loads)  # fmt: skip
-        run.effect_names, run.effect_kinds = tuple(run.effect_names), tuple(run.effect_kinds)
+        basis, found, pairs = effect_basis(model, q, kinds=plan.kinds, joints=joints, loads=loads)
+        names, kinds = tuple(found), tuple(pairs)
     by_joint = {x.joint: x for x in model.joint_effects}
-    run.effect_start = np.array(
-        [getattr(by_joint[j], EFFECT_PREFIXES[k][1]) if j in by_joint else 0.0 for k, j in run.effect_kinds]
+    start = np.array(
+        [getattr(by_joint[j], EFFECT_PREFIXES[k][1]) if j in by_joint else 0.0 for k, j in kinds]
     )
     if not model.joint_effects:
-        return basis, None
+        return _EffectTerms(basis, None, names, kinds, start)
     # the model's joint effects that are not identified are known: predicted at every pose
-    identified = set(run.effect_kinds)
+    identified = set(kinds)
     rest = [
         dataclasses.replace(
             x, **_zeros(EFFECT_PREFIXES[k][1] for k in EFFECT_KINDS if (k, x.joint) in identified)
@@ -205,7 +238,7 @@ def _effect_terms(run: Run, load_model: Model | None) -> tuple[Array | None, Arr
     ]
     known = predict_effects(model, q, effects=rest, loads=loads)
     if not np.any(known):
-        return basis, None
+        return _EffectTerms(basis, None, names, kinds, start)
     predicted = {k: [x.joint for x in rest if getattr(x, EFFECT_PREFIXES[k][1])] for k in EFFECT_KINDS}
     listed = "; ".join(f"{k} ({', '.join(j)})" for k, j in predicted.items() if j)
     run.warn(  # a robot whose joints differ from its model's would be mis-corrected
@@ -213,41 +246,47 @@ def _effect_terms(run: Run, load_model: Model | None) -> tuple[Array | None, Arr
         f"joint effects of model {model.name!r} predicted as known, not identified: {listed}; if this "
         "robot's differ, identify them too (level=3 / --level 3) or calibrate a model without them",
     )
-    return basis, known
+    return _EffectTerms(basis, known, names, kinds, start)
 
 
-def build_problem(run: Run, load_model: Model | None) -> None:
-    """The measurement chain at the start values, weights and joint-effect patterns."""
+def build_problem(run: Run, load_model: Model | None) -> Start:
+    """The measurement chain at the start values, weights and joint-effect patterns
+    (warnings to ``run``'s log)."""
     setup, data, measure = run.options.setup, run.data, run.measure
     T_frame, T_tool, T_flange, fit_frame = _start_values(run)
     chain = measurement_chain(run.model, T_frame, None if setup.tool is None else T_tool, measure, fit_frame)
     if setup.tool is not None and not (isinstance(setup.tool, str) and setup.tool == "fit"):
         chain = chain.fixed(chain.names_with_role(Role.TOOL))
-    run.length = float(robot_sizes(T_flange[None])[0])
+    length = float(robot_sizes(T_flange[None])[0])
     rows = 3 if measure == "position" else 6
-    w = _row_weights(run, rows)
-    basis, known = _effect_terms(run, load_model) if run.plan.mode != "none" else (None, None)
+    w, known_noise = _row_weights(run, rows)
+    effects = _effect_terms(run, load_model) if run.plan.mode != "none" else None
+    known = None if effects is None else effects.known
     if run.model.residual is not None:  # a learned residual given with the model is known: applied
         learned = run.model.residual.perturbations(data.q, run.model.dof)
         known = learned if known is None else known + learned
-    start = run.effect_start if run.plan.mode != "none" else None
-    run.problem = Problem(chain, data.q, _positions(data), data.orientation if rows == 6 else None,
-                          w.reshape(-1), run.length, basis, run.effect_names, known, start)  # fmt: skip
-    if rows == 6:
-        _check_orientations(run)
+    names, kinds = (effects.names, effects.kinds) if effects is not None else ((), ())
+    start = None if effects is None else effects.start  # a pass without joint effects: none
+    basis = None if effects is None else effects.basis
+    problem = Problem(chain, data.q, _positions(data), data.orientation if rows == 6 else None, w.reshape(-1),
+                      length, basis, names, known, start)  # fmt: skip
+    hint = _check_orientations(run, problem) if rows == 6 else ""
+    return Start(problem, known_noise, length, names, kinds, start, hint)
 
 
-def _check_orientations(run: Run) -> None:
+def _check_orientations(run: Run, problem: Problem) -> str:
     """With the device frame and the tool fitted, a real robot's orientations agree with
-    its model to a degree or so; far more means the file's rotations are read wrongly."""
-    problem = run.problem
+    its model to a degree or so; far more means the file's rotations are read wrongly: the
+    hint (also a warning in ``run``'s log), or empty."""
     r = problem.residual(problem.x0, weighted=False).reshape(run.data.n, 6)
     angle = np.degrees(np.median(np.linalg.norm(r[:, 3:], axis=1)))
-    if angle > 5.0:
-        run.orientation_hint = (
-            f"the measured orientations differ from the model's by {angle:.3g}° (median) after the "
-            "device frame and the tool were fitted: check the orientation convention of the data "
-            "(orientation='euler:XYZ:deg' / --orientation: intrinsic XYZ is upper case, extrinsic "
-            "xyz lower case), or calibrate positions only (measure='position')"
-        )
-        run.warn("orientation", run.orientation_hint)
+    if angle <= 5.0:
+        return ""
+    hint = (
+        f"the measured orientations differ from the model's by {angle:.3g}° (median) after the "
+        "device frame and the tool were fitted: check the orientation convention of the data "
+        "(orientation='euler:XYZ:deg' / --orientation: intrinsic XYZ is upper case, extrinsic "
+        "xyz lower case), or calibrate positions only (measure='position')"
+    )
+    run.warn("orientation", hint)
+    return hint
