@@ -13,7 +13,8 @@ harmonics on 6 joints, 3.8 MB of JSON that took 0.26 s to write) are kept beside
 gave), named in ``result.json``'s ``residual_covariance_file`` with its SHA-256: a sidecar
 that is missing, altered or from another run is refused by name.  Files written before it
 (the covariances inline, ``residual_covariance_upper`` and ``residual_cross_covariance``
-to 9 digits) load as they did.
+to 9 digits) load as they did.  Above :data:`RESIDUALS_INLINE_POSES` poses the per-pose
+residuals go beside it too (:data:`RESIDUALS_FILE`: 1,000,000 poses were 61 MB of JSON).
 
 This module does not import :mod:`robocal.identify.result` (which calls it): it reads and
 writes a result's fields, and the result class builds itself from them.
@@ -47,6 +48,8 @@ if TYPE_CHECKING:
     from robocal.model.chain import Model
 
 __all__ = [
+    "RESIDUALS_FILE",
+    "RESIDUALS_INLINE_POSES",
     "RESIDUAL_COVARIANCE_FILE",
     "RESULT_FILES",
     "ResultFileError",
@@ -54,6 +57,7 @@ __all__ = [
     "load_result_fields",
     "metadata_dict",
     "read_residual_covariance",
+    "read_residuals",
     "result_dict",
     "save_result",
 ]
@@ -63,6 +67,12 @@ Array = NDArray[np.float64]
 #: the learned residual's covariances beside ``result.json`` (arrays ``covariance`` (m, m)
 #: and ``cross_covariance`` (p, m), float64, ``numpy.savez``)
 RESIDUAL_COVARIANCE_FILE = "residual_covariance.npz"
+#: the per-pose residuals beside ``result.json`` (array ``residuals`` (n, rows), m and rad,
+#: float64) when there are more than :data:`RESIDUALS_INLINE_POSES` poses
+RESIDUALS_FILE = "residuals.npz"
+#: up to this many poses the residuals are written inline (``residuals_mm``: about 35 bytes
+#: of JSON a pose)
+RESIDUALS_INLINE_POSES = 10_000
 
 #: the files of a calibration result folder (written and replaced together)
 RESULT_FILES = (
@@ -70,6 +80,7 @@ RESULT_FILES = (
     "measurement_model.yaml",
     "result.json",
     RESIDUAL_COVARIANCE_FILE,
+    RESIDUALS_FILE,
     "report.html",
     "train.csv",
     "test.csv",
@@ -86,7 +97,7 @@ _FIELDS = {
     # the metadata keys of the typed fields
     "solve_seconds", "evaluations", "residuals_mm", "level", "outlier_poses", "effects", "at_bounds",
     "objective", "fit_to_noise", "warnings", "warning_codes", "cv", "residual_rms_after_mm",
-    "load_passes", "provenance", "validation", "saved_run_id", "residual_covariance_file",
+    "load_passes", "provenance", "validation", "saved_run_id", "residual_covariance_file", "residuals_file",
 }  # fmt: skip
 
 
@@ -110,12 +121,13 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def metadata_dict(result: Any) -> dict[str, Any]:
+def metadata_dict(result: Any, inline_residuals: bool = True) -> dict[str, Any]:
     """The result's diagnostics, warnings, provenance and records under their
-    ``result.json`` keys (the older ``metadata`` dict)."""
+    ``result.json`` keys (the older ``metadata`` dict; ``inline_residuals``: with the
+    per-pose residuals, ``residuals_mm``)."""
     d = result.diagnostics
     out: dict[str, Any] = {"solve_seconds": d.solve_seconds, "evaluations": d.evaluations}
-    if result.residuals is not None:  # per pose, predicted minus measured (device frame)
+    if result.residuals is not None and inline_residuals:  # per pose, predicted minus measured (device frame)
         out["residuals_mm"] = np.round(np.asarray(result.residuals) * 1e3, 6).tolist()
     out |= {"level": d.level, "outlier_poses": list(d.outlier_poses), "effects": d.effects}
     if d.at_bounds is not None:
@@ -151,15 +163,20 @@ def _payload_dict(payload: Payload) -> dict[str, Any]:
     return out
 
 
-def result_dict(result: Any, residual_file: dict[str, Any] | None = None) -> dict[str, Any]:
+def result_dict(
+    result: Any, residual_file: dict[str, Any] | None = None, residuals_file: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """The content of ``result.json`` (JSON types; lengths in mm where a key says so).
 
     ``residual_file``: the reference to the learned residual's covariances written beside it
     (:func:`save_result`); None: those covariances inline (to 9 digits), as earlier files
-    have them, so that the dict stands alone."""
+    have them, so that the dict stands alone.  ``residuals_file``: the reference to the
+    per-pose residuals written beside it; None: inline (``residuals_mm``)."""
     r = result
     rot = {s.name: s.is_rotation for s in (r.measurement_chain or r.model).steps}
-    meta = metadata_dict(r)
+    meta = metadata_dict(r, inline_residuals=residuals_file is None)
+    if residuals_file is not None:
+        meta["residuals_file"] = residuals_file
     meta.pop("saved_run_id", None)  # the file's run id is written by save_result
     return {
         "robocal_version": _version(),
@@ -248,6 +265,24 @@ def _write_residual_covariance(result: Any, folder: Path) -> dict[str, Any] | No
     }
 
 
+def _write_residuals(result: Any, folder: Path) -> dict[str, Any] | None:
+    """Write the per-pose residuals to ``folder``/:data:`RESIDUALS_FILE` (float64, exact)
+    when there are more than :data:`RESIDUALS_INLINE_POSES` poses, and return
+    ``result.json``'s reference to it (name, SHA-256, shape); None (and no file) otherwise."""
+    if result.residuals is None or len(result.residuals) <= RESIDUALS_INLINE_POSES:
+        return None
+    residuals = np.ascontiguousarray(result.residuals, dtype=np.float64)
+    buffer = io.BytesIO()
+    np.savez(buffer, residuals=residuals)  # uncompressed, never pickled (as the covariances')
+    data = buffer.getvalue()
+    atomic_write_bytes(folder / RESIDUALS_FILE, data)
+    return {
+        "name": RESIDUALS_FILE,
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "shape": list(residuals.shape),
+    }
+
+
 def save_result(result: Any, directory: str | Path, also: Callable[[Path], object] | None = None) -> str:
     """:meth:`CalibrationResult.save`: the files as one transaction; returns their run id."""
     from robocal.outdir import transaction
@@ -259,7 +294,8 @@ def save_result(result: Any, directory: str | Path, also: Callable[[Path], objec
         # the model file's digest: an export refuses a model.yaml edited after the calibration
         digest = {"model_sha256": file_hash(stage.path / "model.yaml")}
         residual_file = _write_residual_covariance(result, stage.path)
-        content = result_dict(result, residual_file) | {"run_id": stage.run_id} | digest
+        residuals_file = _write_residuals(result, stage.path)
+        content = result_dict(result, residual_file, residuals_file) | {"run_id": stage.run_id} | digest
         text = strict_json(content, indent=2) + "\n"
         atomic_write_text(stage.path / "result.json", text)
         if also is not None:
@@ -341,7 +377,10 @@ def _from_dict(directory: Path, data: dict[str, Any]) -> dict[str, Any]:
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
     model, cross = _residual_covariances(directory, data, model, len(params))
-    residuals = data.get("residuals_mm")
+    residuals = data.get("residuals_mm")  # mm inline, or (m, exact) beside result.json
+    residuals = None if residuals is None else np.array(residuals, dtype=float) / 1e3
+    if "residuals_file" in data:
+        residuals = read_residuals(directory, data["residuals_file"], int(data["n"]))
     return dict(
         model=model,
         T_device_base=np.array(data["frame"]["T_device_base"], dtype=float).reshape(4, 4),
@@ -377,7 +416,7 @@ def _from_dict(directory: Path, data: dict[str, Any]) -> dict[str, Any]:
         gravity=tuple(data.get("gravity", (0.0, 0.0, -9.81))),
         payload=Payload(**data["payload"]) if data.get("payload") else None,
         residual_cross_covariance=cross,
-        residuals=None if residuals is None else np.array(residuals, dtype=float) / 1e3,
+        residuals=residuals,
         warnings=_warnings(data),
         diagnostics=_diagnostics(data),
         provenance=Provenance.from_metadata(data),
@@ -410,11 +449,26 @@ def read_residual_covariance(directory: Path, entry: dict[str, Any], m: int, p: 
     """The ``(m, m)`` covariance and ``(p, m)`` cross-covariance in the sidecar that
     ``result.json``'s ``residual_covariance_file`` ``entry`` names, checked against its
     SHA-256 and shapes; :class:`ResultFileError` naming the file otherwise."""
-    if not isinstance(entry, dict) or entry.get("name") != RESIDUAL_COVARIANCE_FILE:
-        raise ResultFileError(
-            f"{directory / 'result.json'}: residual_covariance_file must name {RESIDUAL_COVARIANCE_FILE}"
-        )
+    raw = _sidecar_bytes(directory, entry, RESIDUAL_COVARIANCE_FILE, "residual_covariance_file")
     path = directory / RESIDUAL_COVARIANCE_FILE
+    try:
+        with np.load(io.BytesIO(raw), allow_pickle=False) as arrays:
+            covariance, cross = arrays["covariance"], arrays["cross_covariance"]
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
+        raise ResultFileError(f"{path}: not robocal's residual covariances ({err})") from None
+    for name, a, shape in (("covariance", covariance, (m, m)), ("cross_covariance", cross, (p, m))):
+        if a.dtype != np.float64 or a.shape != shape:
+            raise ResultFileError(f"{path}: {name} is {a.dtype} {a.shape}, the result needs float64 {shape}")
+    return covariance, cross
+
+
+def _sidecar_bytes(directory: Path, entry: Any, name: str, key: str) -> bytes:
+    """The bytes of the file ``name`` beside ``result.json`` that its ``key`` ``entry``
+    names, checked against the SHA-256 it records; :class:`ResultFileError` naming the file
+    otherwise."""
+    if not isinstance(entry, dict) or entry.get("name") != name:
+        raise ResultFileError(f"{directory / 'result.json'}: {key} must name {name}")
+    path = directory / name
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -425,12 +479,22 @@ def read_residual_covariance(directory: Path, entry: dict[str, Any], m: int, p: 
         raise ResultFileError(
             f"{path}: not the file result.json was saved with (its SHA-256 differs); calibrate again"
         )
+    return raw
+
+
+def read_residuals(directory: Path, entry: dict[str, Any], n: int) -> Array:
+    """The ``(n, rows)`` per-pose residuals (m, rad) in the sidecar that ``result.json``'s
+    ``residuals_file`` ``entry`` names, checked against its SHA-256 and ``n`` poses;
+    :class:`ResultFileError` naming the file otherwise."""
+    raw = _sidecar_bytes(directory, entry, RESIDUALS_FILE, "residuals_file")
+    path = directory / RESIDUALS_FILE
     try:
         with np.load(io.BytesIO(raw), allow_pickle=False) as arrays:
-            covariance, cross = arrays["covariance"], arrays["cross_covariance"]
+            r = arrays["residuals"]
     except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-        raise ResultFileError(f"{path}: not robocal's residual covariances ({err})") from None
-    for name, a, shape in (("covariance", covariance, (m, m)), ("cross_covariance", cross, (p, m))):
-        if a.dtype != np.float64 or a.shape != shape:
-            raise ResultFileError(f"{path}: {name} is {a.dtype} {a.shape}, the result needs float64 {shape}")
-    return covariance, cross
+        raise ResultFileError(f"{path}: not robocal's per-pose residuals ({err})") from None
+    if r.dtype != np.float64 or r.ndim != 2 or r.shape[0] != n or r.shape[1] not in (3, 6):
+        raise ResultFileError(
+            f"{path}: residuals are {r.dtype} {r.shape}, the result needs float64 ({n}, 3|6)"
+        )
+    return r
