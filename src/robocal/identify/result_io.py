@@ -255,7 +255,7 @@ def _write_residual_covariance(result: Any, folder: Path) -> dict[str, Any] | No
     buffer = io.BytesIO()
     # uncompressed (random digits do not shrink); float arrays are never pickled (and numpy
     # 1.26 would store an allow_pickle keyword as an array)
-    np.savez(buffer, **arrays)
+    np.savez(buffer, covariance=arrays["covariance"], cross_covariance=arrays["cross_covariance"])
     data = buffer.getvalue()
     atomic_write_bytes(folder / RESIDUAL_COVARIANCE_FILE, data)
     return {
