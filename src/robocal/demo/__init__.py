@@ -1,3 +1,4 @@
+# long: the demo reads top to bottom as the steps it prints (model, robot, poses, fit, ISO 9283)
 """``robocal demo``: the whole of robocal on a virtual robot, in well under a minute.
 
 The default: a UR10 whose "real" twin has millimetre geometric errors and joints that

@@ -187,6 +187,12 @@ def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchan
                           tuple(extra))  # fmt: skip
     opts = _options(dof=dof, model=model, **_one_source(options, given).as_kwargs())
     data, problems = _collect(path, opts)
+    return _checked(path, data, problems)
+
+
+def _checked(path: str | Path, data: Measurements | None, problems: list[Problem]) -> Measurements:
+    """``data`` when no problem is an error (the warnings issued, in one MeasurementWarning),
+    else a MeasurementFileError naming the first error."""
     errors = [p for p in problems if p.severity == "error"]
     if errors or data is None:
         more = f" (and {len(errors) - 1} more problem(s); `robocal data check` lists them all)"
@@ -196,7 +202,7 @@ def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchan
         shown = "\n".join(f"  {p}" for p in found[:10])
         rest = f"\n  ... and {len(found) - 10} more" if len(found) > 10 else ""
         warnings.warn(
-            MeasurementWarning(f"{len(found)} warning(s) reading {path}:\n{shown}{rest}"), stacklevel=2
+            MeasurementWarning(f"{len(found)} warning(s) reading {path}:\n{shown}{rest}"), stacklevel=3
         )
     return data
 
