@@ -57,3 +57,21 @@ def test_the_use_case_forwards_it_inside_the_calibrate_stage(sim_csv, tmp_path):
     assert inside[0] == starts["calibrate"] and inside[-1] == pytest.approx(starts["validate"])
     assert len(set(inside)) >= 4  # finer than the stage names alone
     assert [s for s, _ in events][-1] == "save"
+
+
+@pytest.mark.parametrize("folds", [3, 6])
+def test_the_cross_validation_reports_each_fold(sim_csv, folds):
+    """Each physical variant reports its fit on all poses and then each of its ``folds`` folds
+    (identify/residual/cv.py): the number of distinct shares inside the fit grows by one per
+    fold and variant, so the page's bar moves per fold."""
+    data = rc.read_measurements(sim_csv)
+    model = rc.calibration_model("ur10", "position")
+    seen: list[float] = []
+    result = rc.calibrate(model, data, residual="auto", cv_folds=folds, progress=seen.append)
+    table = result.diagnostics.cv_table()
+    assert table is not None and table.folds == folds
+    variants = len({c.physics for c in table.candidates})
+    inside = sorted({f for f in seen if 0.0 < f < 1.0})
+    # 0.2 after the physical fit, then per variant: its fit on all poses and its folds
+    assert len(inside) >= 1 + variants * (1 + folds)
+    assert all(b >= a for a, b in itertools.pairwise(seen))

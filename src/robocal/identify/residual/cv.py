@@ -182,7 +182,7 @@ def cross_validate_residual(  # noqa: PLR0913 - optional keywords of a public fu
     found for each residual candidate on all poses; ``normals``, when given, receives each
     residual candidate's normal equations on all poses by name (the final fit's);
     ``progress``, when given, is called with the share of the variants' cross-validation done
-    (after each variant's fit on all poses and after its folds; 1 at the end).
+    (after each variant's fit on all poses and after each of its folds; 1 at the end).
     """
     problem = _Problem(q, position, tuple(joint_names), tuple(joint_index), tuple(harmonics))
     return _cross_validate(problem, physics, folds, seed, include_none, False, normals, progress)
@@ -230,11 +230,12 @@ def _cross_validate(
         specs, fit_time = _fit_candidates(
             problem, pname, full, include_none, hypers, raws, time.perf_counter() - t1, normals
         )
+        tick = _fold_ticks(progress, k, len(physics), folds)
         if raws is not None:
-            errors = _fold_errors_of_raws(problem, full, parts, raws, specs, hypers)
+            errors = _fold_errors_of_raws(problem, full, parts, raws, specs, hypers, tick)
         else:
             fold_fit = physics_fit if refit_folds else functools.partial(_linearised, full)
-            errors = _fold_errors(problem, fold_fit, parts, specs, hypers)
+            errors = _fold_errors(problem, fold_fit, parts, specs, hypers, tick)
         for name, H in specs:
             e = errors[name]
             if not np.all(np.isfinite(e)):
@@ -247,6 +248,18 @@ def _cross_validate(
     if not rows:
         raise ValueError("no candidate model could be calibrated on every cross-validation fold")
     return CVTable(folds, tuple(rows), _one_standard_error(rows, per_pose, list(physics)).name), hypers
+
+
+def _fold_ticks(
+    progress: Callable[[float], None] | None, variant: int, variants: int, folds: int
+) -> Callable[[int], None] | None:
+    """The per-fold report of variant ``variant`` (0-based) of ``variants``: called with the
+    number of its folds done, it reports the share of the whole cross-validation (the variant's
+    fit on all poses its first half, its ``folds`` folds the second).  None without
+    ``progress``: the fold loops then skip the call (no cost)."""
+    if progress is None:
+        return None
+    return lambda done: progress((variant + 0.5 + 0.5 * done / folds) / variants)
 
 
 @dataclass(frozen=True, eq=False)
@@ -326,15 +339,17 @@ def _fold_errors_of_raws(
     raws: list[Raw],
     specs: Sequence[_Spec],
     hypers: dict[str, Hyper],
+    tick: Callable[[int], None] | None = None,
 ) -> dict[str, Array]:
     """:func:`_fold_errors` of the linearised folds (:func:`_linearised`) from the folds'
     normal equations (:func:`_fold_raws`): a fold's are all poses' minus its own; the
     physical parameters' step is solved from them too, so only the held-out poses are
-    evaluated.  All ``inf`` when a fold's physical columns are rank deficient."""
+    evaluated.  All ``inf`` when a fold's physical columns are rank deficient.  ``tick``, when
+    given, is called with the number of folds done after each one (:func:`_fold_ticks`)."""
     q, names, index, top = problem.q, problem.joint_names, problem.joint_index, max(problem.harmonics)
     total = functools.reduce(operator.add, raws)
     errors = {name: np.empty(len(q)) for name, _ in specs}
-    for held, raw in zip(parts, raws, strict=True):
+    for done, (held, raw) in enumerate(zip(parts, raws, strict=True), start=1):
         train = total - raw
         r_held, P_held, J_held = full.residuals[held], full.P[held], full.J[held]
         try:
@@ -354,6 +369,8 @@ def _fold_errors_of_raws(
                 learned = learned.covering(train_q)  # the fade of the final fit (fit_joint_fourier)
                 e = r_held - J_held @ solver.step(keep, c) - apply(learned, q[held], P_held)
             errors[name][held] = np.linalg.norm(e, axis=1)
+        if tick is not None:
+            tick(done)
     return errors
 
 
@@ -363,12 +380,14 @@ def _fold_errors(
     parts: Sequence[Index],
     specs: Sequence[_Spec],
     hypers: dict[str, Hyper],
+    tick: Callable[[int], None] | None = None,
 ) -> dict[str, Array]:
     """Each candidate's held-out position error per pose ``(n,)`` (m) over the folds; all
-    ``inf`` when the physical variant cannot be calibrated on a fold (not a candidate)."""
+    ``inf`` when the physical variant cannot be calibrated on a fold (not a candidate).
+    ``tick``: as :func:`_fold_errors_of_raws`."""
     everything = np.arange(len(problem.q))
     errors = {name: np.empty(len(problem.q)) for name, _ in specs}
-    for held in parts:
+    for done, held in enumerate(parts, start=1):
         train = np.setdiff1d(everything, held)
         try:
             fold = physics_fit(train)
@@ -378,6 +397,8 @@ def _fold_errors(
             break
         for name, e in _held_out_errors(problem, fold, train, held, specs, hypers).items():
             errors[name][held] = e
+        if tick is not None:
+            tick(done)
     return errors
 
 
