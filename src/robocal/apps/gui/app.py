@@ -67,6 +67,10 @@ td.params .param { display: inline-block; margin-right: 0.7rem; white-space: now
 .error { color: #b00020; font-weight: 600; } .warning { color: #8a5a00; } .ok { color: #1a7f37; }
 .bad { color: #b00020; }
 .count { font-weight: 600; margin: 0.3rem 0; }
+/* the builder's joint sliders: two or more per line, each name beside its track */
+.sliders { display: grid; grid-template-columns: repeat(auto-fill, minmax(280px, 1fr)); gap: 0 1rem; }
+.sliders > .dim { grid-column: 1 / -1; } .slider-row { display: flex; align-items: center; }
+.slider-label { flex: 0 0 7.5em; font-size: 0.85rem; } .slider-track { flex: 1 1 auto; min-width: 0; }
 table { border-collapse: collapse; font-size: 0.85rem; margin: 0.3rem 0; }
 td, th { border-bottom: 1px solid #ddd; padding: 0.15rem 0.45rem; text-align: left; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }

@@ -18,7 +18,8 @@ from typing import Any
 
 from dash import ALL, Dash, Input, Output, State, callback_context, dcc, html, no_update
 
-from robocal.apps.gui.builder_views import builder_figure, built_view
+from robocal.apps.gui import pose_sliders
+from robocal.apps.gui.builder_views import builder_figure, built_result, built_view
 from robocal.apps.gui.form import (
     TCP_FIELDS,
     BuilderForm,
@@ -244,6 +245,9 @@ def layout(catalog: Sequence[str]) -> html.Div:
             html.Div(
                 [
                     dcc.Graph(id="builder-view", style={"height": "560px"}, config={"displaylogo": False}),
+                    html.Div(id="builder-sliders", className="sliders"),
+                    dcc.Store(id="builder-geometry"),
+                    dcc.Store(id="builder-pose"),
                     html.Div(id="builder-count", className="count"),
                     html.Div(id="builder-links"),
                 ],
@@ -297,6 +301,7 @@ def register(app: Dash) -> None:
     """The builder's callbacks."""
     _register_form(app)
     _register_files(app)
+    pose_sliders.register(app)
 
 
 def _register_form(app: Dash) -> None:
@@ -325,6 +330,8 @@ def _register_form(app: Dash) -> None:
         Output("builder-links", "children"),
         Output("builder-count", "children"),
         Output("builder-message", "children"),
+        Output("builder-sliders", "children"),
+        Output("builder-geometry", "data"),
         Input({"kind": "field", "row": ALL, "key": ALL}, "value"),
         State({"kind": "rowmsg", "row": ALL}, "id"),
     )
@@ -387,9 +394,10 @@ def _live(items: Sequence[Mapping[str, Any]], message_ids: Sequence[Mapping[str,
     geometry, :func:`_built_view`)."""
     form = form_from_fields(items)
     check = check_form(form)
-    view = None
+    view, text = None, None
     if check.ok and check.geometry is not None:
-        check, view = built_view(form, geometry_yaml(check.geometry))
+        text = geometry_yaml(check.geometry)
+        check, view = built_view(form, text)
     classes = [
         "field invalid" if (i["id"]["row"], i["id"]["key"]) in check.errors else "field" for i in items
     ]
@@ -403,8 +411,11 @@ def _live(items: Sequence[Mapping[str, Any]], message_ids: Sequence[Mapping[str,
             no_update,
             "the model is not built: fix the marked fields",
             general,
+            no_update,
+            no_update,
         )
-    return classes, messages, *view, general
+    sliders = pose_sliders.joint_sliders(built_result(text)) if text else []
+    return classes, messages, *view, general, sliders, text
 
 
 def _save_geometry(_n, _values):

@@ -13,27 +13,29 @@ from dash import html
 from robocal.apps.gui.form import BuilderForm, FormCheck, build_form, check_form, link_rows
 from robocal.model.builder import BuildResult
 
-__all__ = ["builder_figure", "built_view"]
+__all__ = ["builder_figure", "built_result", "built_view"]
 
 
 # ----------------------------------------------------------------------- the view
-def builder_figure(result) -> Any:
-    """The model's 3D view (:func:`robocal.model.view.model_figure`) with every joint axis
-    drawn as a dashed line through its joint, and room around the labels."""
+def builder_figure(result, q: np.ndarray | None = None) -> Any:
+    """The model's 3D view (:func:`robocal.model.view.model_figure`) at joint values ``q``
+    ``(dof,)`` (rad / m; None: zero) with every joint axis drawn as a dashed line through
+    its joint, and room around the labels."""
     import plotly.graph_objects as go
 
     from robocal.model.view import model_figure, padded_scene
 
     model = result.model
-    fig = model_figure(model, title=f"{model.name}: {model.dof} joints, zero position")
+    posed = q is not None and bool(np.any(q))
+    q = np.zeros(model.dof) if q is None else np.asarray(q, dtype=float)
+    where = "posed by the sliders" if posed else "zero position"
+    fig = model_figure(model, q, title=f"{model.name}: {model.dof} joints, {where}")
     fig.update_layout(
         scene_camera={"eye": {"x": 1.1, "y": -1.25, "z": 0.7}, "center": {"x": 0, "y": 0, "z": -0.1}}
     )
-    frames = model.joint_frames(np.zeros(model.dof))
+    frames = model.joint_frames(q)
     axes = [s.axis for s in model.steps if s.joint is not None]
-    pts = (
-        np.concatenate([frames[:, :3, 3], model.fk(np.zeros(model.dof))[None, :3, 3], np.zeros((1, 3))]) * 1e3
-    )
+    pts = np.concatenate([frames[:, :3, 3], model.fk(q)[None, :3, 3], np.zeros((1, 3))]) * 1e3
     size = max(float(np.ptp(pts, axis=0).max()), 100.0)
     xs, ys, zs = [], [], []
     for F, k in zip(frames, axes, strict=True):
@@ -87,8 +89,8 @@ def _links_table(result: BuildResult) -> tuple[html.Table, str]:
     return html.Table([html.Thead(head), html.Tbody(body)], className="links"), count
 
 
-#: the views of the last few geometries built (YAML text -> view), most recent last
-_VIEWS: collections.OrderedDict[str, tuple[Any, Any, Any]] = collections.OrderedDict()
+#: the views of the last few geometries built (YAML text -> (view, build)), most recent last
+_VIEWS: collections.OrderedDict[str, tuple[tuple[Any, Any, Any], BuildResult]] = collections.OrderedDict()
 _VIEWS_LOCK = threading.Lock()
 
 
@@ -97,11 +99,11 @@ def built_view(form: BuilderForm, geometry_text: str) -> tuple[FormCheck, tuple[
     builder's refusal in the check.  A geometry built once is not built again: an edit that
     leaves it as it was (``100`` -> ``100.0``, or back to the last valid value) costs nothing."""
     with _VIEWS_LOCK:
-        view = _VIEWS.get(geometry_text)
-        if view is not None:
+        cached = _VIEWS.get(geometry_text)
+        if cached is not None:
             _VIEWS.move_to_end(geometry_text)
-    if view is not None:
-        return check_form(form), view
+    if cached is not None:
+        return check_form(form), cached[0]
     check, result = build_form(form)
     if result is None:
         return check, None
@@ -109,7 +111,15 @@ def built_view(form: BuilderForm, geometry_text: str) -> tuple[FormCheck, tuple[
     warn = [html.Div(w, className="warning") for w in result.warnings]
     view = (builder_figure(result), table, [count, *warn])
     with _VIEWS_LOCK:
-        _VIEWS[geometry_text] = view
+        _VIEWS[geometry_text] = (view, result)
         while len(_VIEWS) > 16:
             _VIEWS.popitem(last=False)
     return check, view
+
+
+def built_result(geometry_text: str) -> BuildResult | None:
+    """The model built for ``geometry_text`` by :func:`built_view` while it is among the last
+    few built (None after that: the caller builds it again)."""
+    with _VIEWS_LOCK:
+        cached = _VIEWS.get(geometry_text)
+    return None if cached is None else cached[1]
