@@ -32,7 +32,11 @@ def socket_csv(tmp_path_factory):
 
 
 def test_the_distance_table_reads_filled_rows_and_names_a_bad_one():
-    rows = [{"a": 0, "b": 1, "mm": 250}, {"a": None, "b": None, "mm": None}, {"a": "2", "b": "0", "mm": "50.5"}]
+    rows = [
+        {"a": 0, "b": 1, "mm": 250},
+        {"a": None, "b": None, "mm": None},
+        {"a": "2", "b": "0", "mm": "50.5"},
+    ]
     assert distances_of(rows) == ((0, 1, 0.25), (2, 0, 0.0505))
     for bad in ({"a": 0, "b": 0, "mm": 10}, {"a": 0, "b": 1, "mm": -1}, {"a": 0, "b": None, "mm": 5}):
         with pytest.raises(ValueError, match="row 2"):

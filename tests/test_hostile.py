@@ -495,9 +495,17 @@ OPTION_CASES = [
     Case("calibrate-tool-short", _cal("--tool", "1,2"), {"d.csv": _csv_text}, says=("--tool",)),
     Case("calibrate-train-n-zero", _cal("--train-n", "0"), {"d.csv": _csv_text}, says=("--train-n",)),
     Case("calibrate-train-n-huge", _cal("--train-n", "99999999"), {"d.csv": _csv_text}, says=("--train-n",)),
-    Case("calibrate-method-markup", _cal("--method", "[/x]"), {"d.csv": _csv_text}, says=("[/x]",)),
+    Case(
+        "calibrate-method-markup", _cal("--method", "[/x]"), {"d.csv": _csv_text}, usage=True, says=("[/x]",)
+    ),
     Case("calibrate-loss-markup", _cal("--loss", "[bold]x"), {"d.csv": _csv_text}, says=("[bold]x",)),
-    Case("calibrate-length-unit-markup", _cal("--length-unit", "[/x]"), {"d.csv": _csv_text}, says=("[/x]",)),
+    Case(
+        "calibrate-length-unit-markup",
+        _cal("--length-unit", "[/x]"),
+        {"d.csv": _csv_text},
+        usage=True,  # a choice of robocal.choices: Typer's usage error names the option and the value
+        says=("--length-unit", "[/x]"),
+    ),
     Case("calibrate-sep-markup", _cal("--sep", "[/x]"), {"d.csv": _csv_text}, says=("[/x]",)),
     Case(
         "calibrate-out-is-file",
