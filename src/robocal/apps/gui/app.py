@@ -68,7 +68,8 @@ td.params .param { display: inline-block; margin-right: 0.7rem; white-space: now
 .bad { color: #b00020; }
 .count { font-weight: 600; margin: 0.3rem 0; }
 /* the builder's joint sliders: two or more per line, each name beside its track */
-.sliders { display: grid; grid-template-columns: repeat(auto-fill, minmax(280px, 1fr)); gap: 0 1rem; }
+.sliders { display: grid; grid-template-columns: repeat(auto-fill, minmax(280px, 1fr)); gap: 0 1.5rem;
+  padding-right: 1.25rem; }
 .sliders > .dim { grid-column: 1 / -1; } .slider-row { display: flex; align-items: center; }
 .slider-label { flex: 0 0 7.5em; font-size: 0.85rem; } .slider-track { flex: 1 1 auto; min-width: 0; }
 table { border-collapse: collapse; font-size: 0.85rem; margin: 0.3rem 0; }
