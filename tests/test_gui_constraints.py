@@ -54,7 +54,7 @@ def test_a_socket_file_is_calibrated_in_the_page(browser, gui_url, socket_csv): 
         pg.locator("#upload-csv input[type=file]").set_input_files(str(socket_csv))
         _radio(pg, "cal-model", "ur10")
         pg.locator("#con-fieldset").wait_for(state="visible", timeout=60_000)
-        assert "point 1: 30 poses" in pg.locator("#csv-preview").inner_text(timeout=60_000)
+        pg.locator("#csv-preview", has_text="point 1: 30 poses").wait_for(timeout=60_000)
         cell = pg.locator("#con-distances td[data-dash-column='a']").first
         cell.click()
         pg.keyboard.type(str(a))

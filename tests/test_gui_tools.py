@@ -41,7 +41,7 @@ def test_plan_calibrate_3d_and_filter_a_program(browser, gui_url, sim_csv, tmp_p
         _radio(pg, "plan-method", "random")
         pg.fill("#plan-n", "0")
         pg.click("#plan-run")
-        assert "poses" in pg.locator("#plan-error").inner_text(timeout=30_000)  # the control named
+        pg.locator("#plan-error", has_text="poses").wait_for(timeout=30_000)  # names the control
         pg.fill("#plan-n", "20")
         pg.click("#plan-run")
         pg.locator("#plan-ok").wait_for(timeout=60_000)
