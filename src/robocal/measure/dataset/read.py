@@ -88,32 +88,9 @@ def _collect(path: str | Path, options: dict) -> tuple[Measurements | None, list
     return data, reader.problems
 
 
-def _options(  # noqa: PLR0913 - the reader options, each a keyword with its default
-    length_unit: LengthUnit = "m",
-    angle_unit: AngleUnit = "rad",
-    columns: Mapping[str, str] | Sequence[str] | str | None = None,
-    sep: str | None = None,
-    decimal: str = ".",
-    dof: int | None = None,
-    model: Model | None = None,
-    limits: LimitsMode = "error",
-    orientation: str = "auto",
-    extra: Sequence[str] = (),
-    incomplete: IncompleteMode = "error",
-) -> dict:
-    return dict(
-        incomplete=incomplete,
-        length_unit=length_unit,
-        angle_unit=angle_unit,
-        columns=columns,
-        sep=sep,
-        decimal=decimal,
-        dof=dof,
-        model=model,
-        limits=limits,
-        orientation=orientation,
-        extra=extra,
-    )
+def _options(options: ReaderOptions, dof: int | None, model: Model | None) -> dict[str, Any]:
+    """The reader's keyword arguments: the options' fields, the expected joint count and the robot."""
+    return {**options.as_kwargs(), "dof": dof, "model": model}
 
 
 def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchanged
@@ -185,7 +162,7 @@ def read_measurements(  # noqa: PLR0913 - public API: the reader options, unchan
     """
     given = ReaderOptions(length_unit, angle_unit, columns, sep, decimal, orientation, limits, incomplete,
                           tuple(extra))  # fmt: skip
-    opts = _options(dof=dof, model=model, **_one_source(options, given).as_kwargs())
+    opts = _options(_one_source(options, given), dof, model)
     data, problems = _collect(path, opts)
     return _checked(path, data, problems)
 
@@ -232,6 +209,6 @@ def check_measurements(
     """
     dof = read_options.pop("dof", None)
     keywords = ReaderOptions(**read_options)
-    opts = _options(model=model, dof=dof, **_one_source(options, keywords).as_kwargs())
+    opts = _options(_one_source(options, keywords), dof, model)
     _, problems = _collect(path, opts)
     return sorted(problems, key=lambda p: (p.row is not None, p.row or 0))
