@@ -251,3 +251,16 @@ def test_real_ur10_calibrated_on_the_first_days_registered_on_the_last(tmp_path)
             )
             assert e.mean() < 0.2e-3
             assert 0.8 < expected / rms < 1.3 and 0.7 < score.ratio < 1.5
+
+
+def test_written_files_names_only_the_files_in_the_folder(tmp_path):
+    """The "wrote" line lists what is there, sidecars included, and nothing that is not."""
+    from robocal.identify.result_io import written_files
+
+    (tmp_path / "model.yaml").write_text("x")
+    (tmp_path / "result.json").write_text("{}")
+    (tmp_path / "residuals.npz").write_bytes(b"")
+    line = written_files(tmp_path)
+    assert line.startswith(str(tmp_path))
+    assert "residuals.npz" in line and "model.yaml" in line
+    assert "report.html" not in line and "measurement_model.yaml" not in line

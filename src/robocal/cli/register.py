@@ -238,9 +238,9 @@ def _print(source, data_path: Path, n: int, fit, score, summary: dict[str, Any])
             "its poses; calibrate again",
             highlight=False,
         )
-    console.print(
-        f"wrote {summary['out']} (model.yaml, measurement_model.yaml, result.json)", highlight=False
-    )
+    from robocal.identify.result_io import written_files  # lazy: keeps `--help` fast
+
+    console.print(f"wrote {written_files(summary['out'])}", highlight=False)
 
 
 def register(app: typer.Typer) -> None:
