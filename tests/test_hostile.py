@@ -498,7 +498,13 @@ OPTION_CASES = [
     Case(
         "calibrate-method-markup", _cal("--method", "[/x]"), {"d.csv": _csv_text}, usage=True, says=("[/x]",)
     ),
-    Case("calibrate-loss-markup", _cal("--loss", "[bold]x"), {"d.csv": _csv_text}, says=("[bold]x",)),
+    Case(
+        "calibrate-loss-markup",
+        _cal("--loss", "[bold]x"),
+        {"d.csv": _csv_text},
+        usage=True,  # a choice of robocal.choices: Typer's usage error names the option and the value
+        says=("--loss", "[bold]x"),
+    ),
     Case(
         "calibrate-length-unit-markup",
         _cal("--length-unit", "[/x]"),

@@ -96,15 +96,17 @@ def _choices(param) -> tuple[str, ...] | None:
 def test_every_choice_of_the_command_line_is_a_table_of_the_api():
     """One table of allowed choices (issue 32 item 6): an option with fixed choices offers
     exactly one of :mod:`robocal.choices`' tuples, the values of the ``Literal`` the API takes."""
-    from typing import get_args
+    from typing import get_args, get_type_hints
 
     from robocal import choices
     from robocal.compensate.compensation import Frame
     from robocal.identify.observability_indices import IndexName
+    from robocal.identify.options import RobustLoss
     from robocal.measure.dataset.columns import IncompleteMode
     from robocal.measure.ik_starts import TargetKind
     from robocal.measure.measurements import LimitsMode
     from robocal.model.geometry import Measure
+    from robocal.study.config import StudyConfig
 
     tables = {getattr(choices, name) for name in choices.__all__ if name.isupper()}
     for alias, table in [
@@ -114,6 +116,9 @@ def test_every_choice_of_the_command_line_is_a_table_of_the_api():
         (Frame, choices.FRAMES),
         (IndexName, choices.INDEX_NAMES),
         (Measure, choices.MEASURES),
+        (get_type_hints(RobustLoss)["loss"], choices.LOSSES),
+        (StudyConfig.model_fields["method"].annotation, choices.SOLVER_METHODS),
+        (StudyConfig.model_fields["residual"].annotation, choices.RESIDUAL_CHOICES),
     ]:
         assert get_args(alias) == table  # the API's Literal is the table's
     found = {}
@@ -140,6 +145,13 @@ def test_every_choice_of_the_command_line_is_a_table_of_the_api():
         ("data check", "--length-unit", choices.LENGTH_UNIT_NAMES),
         ("compensate", "--length-unit", choices.LENGTH_UNIT_NAMES),
         ("compensate", "--angle-unit", choices.ANGLE_UNIT_NAMES),
+        ("calibrate", "--loss", choices.LOSSES),
+        ("calibrate", "--bounds", choices.BOUNDS_NAMES),
+        ("calibrate", "--chain", choices.CHAIN_CHOICES),
+        ("fleet", "--chain", choices.CHAIN_CHOICES),
+        ("fleet", "--residual", choices.RESIDUAL_CHOICES),
+        ("fleet", "--method", choices.SOLVER_METHODS),
+        ("poses", "--rows", choices.POSE_ROWS),
     ]:
         assert found.get((path, option)) == table, (path, option, sorted(found))
 

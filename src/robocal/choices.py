@@ -17,26 +17,34 @@ from typing import Literal, get_args
 
 __all__ = [
     "ANGLE_UNIT_NAMES",
+    "BOUNDS_NAMES",
+    "CHAIN_CHOICES",
     "DISTRIBUTIONS",
     "FRAMES",
     "INCOMPLETE_MODES",
     "INDEX_NAMES",
     "LENGTH_UNIT_NAMES",
     "LIMITS_MODES",
+    "LOSSES",
     "MEASURES",
     "POSE_METHODS",
+    "POSE_ROWS",
     "RESIDUAL_CHOICES",
     "SOLVER_METHODS",
     "TARGET_KINDS",
     "AngleUnit",
+    "BoundsName",
+    "ChainChoice",
     "Distribution",
     "Frame",
     "IncompleteMode",
     "IndexName",
     "LengthUnit",
     "LimitsMode",
+    "Loss",
     "Measure",
     "PoseMethod",
+    "PoseRows",
     "ResidualChoice",
     "SolverMethod",
     "TargetKind",
@@ -91,3 +99,23 @@ SOLVER_METHODS: tuple[SolverMethod, ...] = get_args(SolverMethod)
 #: the learned residual: none, chosen by cross-validation, or always the joint-angle Fourier one
 ResidualChoice = Literal["none", "auto", "joint_fourier"]
 RESIDUAL_CHOICES: tuple[ResidualChoice, ...] = get_args(ResidualChoice)
+
+#: ``method="lm"``'s loss: least squares, or one of scipy's robust losses that down-weight
+#: residuals beyond ``f_scale``
+Loss = Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
+LOSSES: tuple[Loss, ...] = get_args(Loss)
+
+#: ``method="bounded"``'s bounds by name: seed 001's ±5 mm / ±2° on every robot parameter, or
+#: those bounds widened for the parameters that absorb redundant ones
+BoundsName = Literal["default", "widened"]
+BOUNDS_NAMES: tuple[BoundsName, ...] = get_args(BoundsName)
+
+#: the chain calibrated for a catalog robot: the complete model from its joint geometry, or
+#: the catalog's chain as published
+ChainChoice = Literal["complete", "catalog"]
+CHAIN_CHOICES: tuple[ChainChoice, ...] = get_args(ChainChoice)
+
+#: the quantities a pose plan is for: tool positions or poses, constraint configurations at a
+#: socket (point), on a plate (plane), ball-bar pairs (distance), or inclinometer readings (tilt)
+PoseRows = Literal["position", "pose", "point", "plane", "distance", "tilt"]
+POSE_ROWS: tuple[PoseRows, ...] = get_args(PoseRows)

@@ -10,7 +10,8 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from robocal.choices import ResidualChoice, SolverMethod
+from robocal.choices import BoundsName, ChainChoice, ResidualChoice, SolverMethod
+from robocal.choices import Loss as LossChoice
 from robocal.cli import options
 from robocal.cli.options import (
     AngleUnit,
@@ -48,7 +49,7 @@ NOISE_HELP = (
     "the device's position noise, 1σ per axis with a unit (e.g. 0.03mm), for a file without sigma "
     "columns: tests whether the model explains the data down to it"
 )
-Chain = Annotated[str | None, typer.Option("--chain", metavar="complete|catalog", help=CHAIN_HELP)]
+Chain = Annotated[ChainChoice | None, typer.Option("--chain", metavar="complete|catalog", help=CHAIN_HELP)]
 Residual = Annotated[
     ResidualChoice, typer.Option("--residual", metavar="auto|joint_fourier|none", help=RESIDUAL_HELP)
 ]
@@ -85,7 +86,7 @@ PerPose = Annotated[
     ),
 ]
 Bounds = Annotated[
-    str | None,
+    BoundsName | None,
     typer.Option(
         "--bounds",
         metavar="default|widened",
@@ -117,7 +118,7 @@ Effects = Annotated[
     ),
 ]
 Loss = Annotated[
-    str,
+    LossChoice,
     typer.Option(
         "--loss",
         metavar="linear|soft_l1|huber|cauchy|arctan",
@@ -308,17 +309,11 @@ def _check_out(out: Path, force: bool) -> None:
 
 def _check_choices(measure, residual, loss, method, bounds, per_pose) -> None:
     """One line naming the option for a value it does not take, or a combination that does not go."""
-    from robocal.identify.options import BOUNDS_CHOICES
-
     if measure not in (None, "position", "pose"):
         raise fail(f"--measure {measure!r}: position or pose")
-    # --residual and --method are choices of robocal.choices: Typer refuses the rest
-    if loss not in ("linear", "soft_l1", "huber", "cauchy", "arctan"):
-        raise fail(f"--loss {loss!r}: linear, soft_l1, huber, cauchy or arctan")
+    # --residual, --method, --loss and --bounds are choices of robocal.choices: Typer refuses the rest
     if loss != "linear" and method != "lm":
         raise fail(f"--loss {loss} needs --method lm")
-    if bounds is not None and bounds not in BOUNDS_CHOICES:
-        raise fail(f"--bounds {bounds!r}: {' or '.join(BOUNDS_CHOICES)}")
     if bounds is not None and method != "bounded":
         raise fail(f"--bounds {bounds} needs --method bounded")
     if per_pose and method != "pinv":

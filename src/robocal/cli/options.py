@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Annotated, Any, overload
 import typer
 
 from robocal import choices
-from robocal.choices import IncompleteMode, LimitsMode
+from robocal.choices import CHAIN_CHOICES, IncompleteMode, LimitsMode
 from robocal.console import fail
 
 if TYPE_CHECKING:
@@ -196,8 +196,8 @@ def robot_and_chain(robot: str, chain: str | None) -> tuple[Model, bool]:
     from robocal.model.catalog import is_model_path
 
     from_catalog = not is_model_path(robot)
-    if chain not in (None, "complete", "catalog"):
-        raise fail(f"--chain {chain!r}: complete or catalog")
+    if chain is not None and chain not in CHAIN_CHOICES:  # the API's callers; the option is a choice
+        raise fail(f"--chain {chain!r}: {' or '.join(CHAIN_CHOICES)}")
     if not from_catalog and chain == "catalog":
         raise fail("--chain catalog is for a catalog ROBOT; a model file's chain is calibrated as it is")
     return resolve_model(robot), from_catalog

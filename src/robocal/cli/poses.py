@@ -23,7 +23,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from robocal.choices import IndexName, PoseMethod, TargetKind
+from robocal.choices import IndexName, PoseMethod, PoseRows, TargetKind
 from robocal.cli import options
 from robocal.cli.options import Force, Robot, length_vector, out_option, resolve_model
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
@@ -73,7 +73,7 @@ PoolOption = Annotated[
     typer.Option("--pool", min=1, max=MAX_POOL, metavar="N", help="candidate pool size for --method optimal"),
 ]
 RowsOption = Annotated[
-    str,
+    PoseRows,
     typer.Option(
         "--rows",
         metavar="position|pose|point|plane|distance|tilt",
@@ -121,8 +121,6 @@ def poses_command(
         from robocal.cli.constraints import plan_constraint_poses
 
         return plan_constraint_poses(m, rows, out, n=n or 30, pool=pool, index=index, seed=seed)
-    if rows not in ("position", "pose"):
-        raise fail(f"--rows {rows!r}: expected 'position' or 'pose'")
     box = _region(region)
     if method == "iso9283" and n not in (None, 5):
         err_console.print("[yellow]note:[/] --method iso9283 always gives the 5 poses P1..P5", markup=True)

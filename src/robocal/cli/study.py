@@ -195,8 +195,7 @@ def fleet_command(
             "--chain catalog: the catalog's chain)",
             highlight=False,
         )
-    if residual not in ("auto", "none", "joint_fourier"):
-        raise fail(f"--residual {residual!r}: auto, none or joint_fourier")
+    # --residual and --method: choices of robocal.choices (Typer refuses the rest)
     calibrate_options: dict = {"method": method, "compliance": compliance, "residual": residual}
     if tool is not None:
         calibrate_options["tool_guess"] = length_vector(tool, 3, "--tool")

@@ -17,6 +17,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from robocal.choices import BOUNDS_NAMES, LOSSES, Loss
 from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
 
@@ -32,9 +33,8 @@ __all__ = [
     "Weights",
 ]
 
-#: ``bounds=`` of ``method="bounded"`` by name: seed 001's ±5 mm / ±2° on every robot
-#: parameter, or those bounds widened for the parameters that absorb redundant ones
-BOUNDS_CHOICES: tuple[str, ...] = ("default", "widened")
+#: ``bounds=`` of ``method="bounded"`` by name (:data:`robocal.choices.BOUNDS_NAMES`)
+BOUNDS_CHOICES: tuple[str, ...] = BOUNDS_NAMES
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,12 @@ class RobustLoss:
     """``method="lm"``'s loss: ``"linear"`` or a robust loss of scipy (``"soft_l1"``,
     ``"huber"``...) that down-weights residuals beyond ``f_scale`` (m)."""
 
-    loss: str = "linear"
+    loss: Loss = "linear"
     f_scale: float = 1e-4
+
+    def __post_init__(self) -> None:
+        if self.loss not in LOSSES:  # the one table of robocal.choices, as the command line's
+            raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from robocal.choices import Distribution, IndexName, ResidualChoice, SolverMethod
 from robocal.model.files import Count, Number, format_validation_error
 
 
@@ -30,7 +31,7 @@ class _Errors(BaseModel):
     model_config = _Config
     length: Quantity = "0.5mm"
     angle: Quantity = "0.05deg"
-    distribution: Literal["uniform", "normal"] = "uniform"
+    distribution: Distribution = "uniform"
     tolerances: dict[str, Quantity] = {}
 
 
@@ -45,7 +46,7 @@ class PoseSetSpec(BaseModel):
     n: Count | None = Field(default=None, ge=1, le=100_000)
     seed: Count | None = None
     pool: Count = Field(default=1000, ge=1, le=1_000_000)
-    index: Literal["O1", "O2", "O3", "O4", "O5"] = "O1"
+    index: IndexName = "O1"
     path: str | None = None
     per_robot: bool = False  # random: a new draw for every robot
 
@@ -129,10 +130,10 @@ class StudyConfig(BaseModel):
         default_factory=lambda: [DeviceSpec(name="laser-tracker")], min_length=1
     )
     validation: _Validation = _Validation()
-    method: Literal["lm", "pinv", "bounded", "influence"] = "lm"
+    method: SolverMethod = "lm"
     max_std: Quantity = "0.5mm"
     engine: Literal["auto", "batched", "calibrate"] = "auto"
-    residual: Literal["none", "auto", "joint_fourier"] = "none"
+    residual: ResidualChoice = "none"
     chunk: Count = Field(default=50, ge=1, le=100_000)
     dask: _Dask = _Dask()
 
