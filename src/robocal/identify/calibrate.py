@@ -160,6 +160,7 @@ def calibrate(
     cv_folds: int = 5,
     streaming: Streaming | None = None,
     progress: Callable[[float], None] | None = None,
+    iteration: Callable[[int, float], None] | None = None,
     **settings: Any,
 ) -> CalibrationResult:
     """Identify the robot's parameters from measurements: the physical model and,
@@ -271,6 +272,10 @@ def calibrate(
         progress: called with the share of the calibration done (0 to 1, non-decreasing,
             1 at the end): after the physical fit and, with a learned residual, after each
             physical variant's cross-validation; None: not called.
+        iteration: a streamed input's LM, after each pass over all poses:
+            ``iteration(evaluations, rms)`` (rms of the weighted residuals, m for unit
+            weights; see :func:`~robocal.identify.streaming.levenberg_marquardt_streaming`);
+            the dense fits (≤ 50,000 poses) take milliseconds to a second and do not call it.
 
     Joint effects are physical: an identified clearance tilt, backlash or compliance is at
     least :data:`EFFECT_SIGNIFICANCE` σ above zero.  One that the fit puts below zero, or
@@ -307,7 +312,7 @@ def calibrate(
         def facts(result: CalibrationResult, some: Measurements) -> CalibrationResult:
             return _with_tool_facts(result, physics.setup, some)
 
-        result = calibrate_streamed(dense, data, physics, streaming, facts=facts)
+        result = calibrate_streamed(dense, data, physics, streaming, facts=facts, iteration=iteration)
     else:
         result = _with_tool_facts(dense(data, physics), physics.setup, data)
     if progress is not None:

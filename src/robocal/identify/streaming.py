@@ -125,7 +125,12 @@ class _PositionData:
 
 
 def levenberg_marquardt_streaming(
-    data: StreamedSums, x0: Array, *, max_iterations: int = 200, tolerance: float = 1e-10
+    data: StreamedSums,
+    x0: Array,
+    *,
+    max_iterations: int = 200,
+    tolerance: float = 1e-10,
+    progress: Callable[[int, float], None] | None = None,
 ) -> tuple[SolveResult, NormalEquations]:
     """:func:`~robocal.identify.solvers.levenberg_marquardt` on accumulated normal equations.
 
@@ -133,6 +138,9 @@ def levenberg_marquardt_streaming(
     system of the dense solver is ``A = N / (D Dᵀ)``, ``g = Jᵀr / D``; the step, the
     predicted decrease, Nielsen's damping update and the stopping rules are the dense
     solver's.  Returns the solver's result and the normal equations at the solution.
+    ``progress(evaluations, rms)``, when given, is called after each pass over the data
+    (each costs seconds at a million poses) with the passes so far and the RMS of the
+    weighted residuals at the best point so far (m for unit weights); it changes nothing.
     """
     x = np.array(x0, dtype=float)
     ne = data.normal_equations(x)
@@ -176,6 +184,8 @@ def levenberg_marquardt_streaming(
         else:
             mu *= nu
             nu *= 2.0
+        if progress is not None:
+            progress(evaluations, history[-1])
 
 
 @dataclass(frozen=True)

@@ -262,6 +262,7 @@ def calibrate_streamed(
     options: CalibrationOptions,
     streaming: Streaming,
     facts: Callable[[CalibrationResult, Measurements], CalibrationResult] | None = None,
+    iteration: Callable[[int, float], None] | None = None,
 ) -> CalibrationResult:
     """The calibration of a large data set (see the module docstring).
 
@@ -272,6 +273,8 @@ def calibrate_streamed(
         streaming: the subsample's size and the chunk.
         facts: adds the records that describe the data (coverage, the measured tool), given
             the result and the subsample.
+        iteration: the streamed LM's ``progress(evaluations, rms)`` (see
+            :func:`~robocal.identify.streaming.levenberg_marquardt_streaming`), or None.
     """
     t0 = time.perf_counter()
     index = well_spread_subsample(data.q, int(streaming.subsample))
@@ -284,7 +287,7 @@ def calibrate_streamed(
     sub = decide(subsample, subsample_options)
     t_sub = time.perf_counter()
     with one_blas_thread():  # (p, p) products of thin chunks: idle BLAS threads only cost (2-core load)
-        result = _fit_all_poses(sub, data, options, streaming, index, t0, t_sub)
+        result = _fit_all_poses(sub, data, options, streaming, index, (t0, t_sub), iteration)
     return result if facts is None else facts(result, subsample)
 
 
@@ -316,14 +319,18 @@ def _fit_all_poses(
     options: CalibrationOptions,
     streaming: Streaming,
     index: NDArray[np.intp],
-    t0: float,
-    t_sub: float,
+    times: tuple[float, float],
+    iteration: Callable[[int, float], None] | None = None,
 ) -> CalibrationResult:
-    """The streamed final fit of :func:`calibrate_streamed` from the subsample's ``sub``."""
+    """The streamed final fit of :func:`calibrate_streamed` from the subsample's ``sub``
+    (``times``: ``perf_counter`` at the start and after the subsample's calibration)."""
+    t0, t_sub = times
     refits = sub.model.residual is not None  # then the final residuals are the refit's, by a pass
     chunked = ChunkedProblem(chunk_problems(sub, data, options), data.n, int(streaming.chunk), not refits)
     x0 = np.asarray(sub.estimates, dtype=float)
-    solved, ne = levenberg_marquardt_streaming(chunked, x0, max_iterations=options.setup.max_iterations)
+    solved, ne = levenberg_marquardt_streaming(
+        chunked, x0, max_iterations=options.setup.max_iterations, progress=iteration
+    )
     known_noise = options.weights.by == "sigma" and data.sigma is not None
     covariance: Covariance = streamed_covariance(ne, known_noise, Rules.of(options.pruning).significance)
     result = _with_covariance(with_estimates(sub, solved.x), covariance.covariance)

@@ -180,7 +180,9 @@ def _calibrate(model: Model, train: Measurements, request: CalibrateRequest) -> 
     # start and the next stage's
     engine = None if report is None else (lambda f: report("calibrate", start + (end - start) * f))
     try:
-        return calibrate(model, train, **request.fit.as_kwargs(), progress=engine)
+        return calibrate(
+            model, train, **request.fit.as_kwargs(), progress=engine, iteration=request.iteration
+        )
     except ValueError as err:
         message = str(err)  # the data's problem: name the file unless the message does
         raise CalibrateFileError(

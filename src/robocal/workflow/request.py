@@ -24,6 +24,7 @@ __all__ = [
     "CalibrateFileError",
     "CalibrateRequest",
     "FitOptions",
+    "Iteration",
     "Notify",
     "Progress",
     "SavedRun",
@@ -33,6 +34,11 @@ __all__ = [
 #: of the whole run done when it starts (0 to 1); inside ``calibrate`` again with the engine's
 #: share of the fit (:func:`robocal.calibrate`'s ``progress``), up to the next stage's start
 Progress = Callable[[str, float], None]
+
+#: ``iteration(evaluations, rms_m)``: a streamed fit's LM (above 50,000 poses, where each pass
+#: over the poses takes seconds) after each pass: the passes so far and the RMS of the weighted
+#: residuals at the best point (m for unit weights); :func:`robocal.calibrate`'s ``iteration``
+Iteration = Callable[[int, float], None]
 
 #: ``notify(kind, text)``: a line for the user as it arises. ``kind``: ``model`` (the model
 #: calibrated, before the fit), ``warning`` (a reader's warning), ``dropped`` (rows the reader
@@ -135,6 +141,7 @@ class CalibrateRequest:
         force: replace a result already in ``out``.
         progress: called as each stage starts (:data:`Progress`), or None.
         notify: lines for the user as they arise (:data:`Notify`), or None.
+        iteration: the engine's LM passes as they end (:data:`Iteration`), or None.
     """
 
     data: Path
@@ -151,6 +158,7 @@ class CalibrateRequest:
     force: bool = False
     progress: Progress | None = field(default=None, compare=False)
     notify: Notify | None = field(default=None, compare=False)
+    iteration: Iteration | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)

@@ -139,6 +139,7 @@ def request_of(job: CalibrationJob, queue) -> Any:
         job.data, rc.load_model(job.model_file), job.out, ReaderOptions(**job.reader), fit,
         noise_m=noise_m, train_n=job.train_n, seed=job.seed, report=True, force=True,
         progress=lambda stage, fraction: _stage(queue, stage, fraction), notify=notify,
+        iteration=lambda evaluations, rms: _send(queue, "iteration", evaluations, rms),
     )  # fmt: skip
 
 
@@ -251,7 +252,8 @@ class JobState:
 
 @dataclass(frozen=True)
 class RunInfo:
-    """A run as the run list shows it (``created``: seconds since the epoch)."""
+    """A run as the run list shows it (``created``: seconds since the epoch; ``error``: a
+    failed run's message, without the server's paths, kept in its record across restarts)."""
 
     run_id: str
     session: str
@@ -260,6 +262,7 @@ class RunInfo:
     created: float
     status: str
     seconds: float
+    error: str = ""
 
 
 @dataclass
@@ -308,6 +311,7 @@ class JobRunner:
                 return JobState(
                     stage=run.status, text=run.status, status=run.status, saved=run.status == "done",
                     fraction=1.0 if run.status == "done" else 0.0, seconds=run.seconds,
+                    error=run.error or None,
                 )  # fmt: skip
             if run is None:
                 return None
@@ -380,7 +384,11 @@ class JobRunner:
     def _finish(self, run: _Run) -> None:
         state = run.state
         state.seconds = time.monotonic() - state.started
-        run.info = dataclasses.replace(run.info, status=state.status, seconds=round(state.seconds, 1))
+        # the work dir is the runs folder's parent: the record never holds the server's paths
+        error = public_text(state.error or "", self.runs.parent) if state.status == "error" else ""
+        run.info = dataclasses.replace(
+            run.info, status=state.status, seconds=round(state.seconds, 1), error=error
+        )
         _write_record(self.runs, run.info)
 
     def _collect(self, run: _Run) -> None:
@@ -418,6 +426,8 @@ def _apply(state: JobState, kind: str, payload: list[Any]) -> None:
         state.stage, state.text, state.fraction = payload
         if not state.stages or state.stages[-1][0] != state.stage:
             state.stages.append((state.stage, state.text, time.monotonic() - state.started))
+    elif kind == "iteration":  # the streamed LM's pass: the stage's text says which and where
+        state.text = f"calibrating: LM pass {payload[0]}, RMS {payload[1] * 1e3:.4f} mm"
     elif kind == "saved":
         state.saved = True
     elif kind == "warning":

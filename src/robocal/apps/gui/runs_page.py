@@ -196,7 +196,10 @@ def _run_table(infos: list[RunInfo], session_id: str | None, current: str | None
                 html.Td(time.strftime("%H:%M:%S", time.localtime(i.created))),
                 html.Td(i.data_name),
                 html.Td(i.robot),
-                html.Td(i.status + (" (this tab)" if i.session == session_id else "")),
+                html.Td(
+                    _status_cell(i) + (" (this tab)" if i.session == session_id else ""),
+                    className="run-status",
+                ),
                 html.Td(f"{i.seconds:.1f}" if i.seconds else "", className="num"),
                 html.Td(
                     "shown"
@@ -209,3 +212,8 @@ def _run_table(infos: list[RunInfo], session_id: str | None, current: str | None
         for i in infos[:20]
     ]
     return html.Table([html.Thead(head), html.Tbody(rows)], id="run-table")
+
+
+def _status_cell(info: RunInfo) -> str:
+    """The run's status; a failed run's with its message (text: React escapes it)."""
+    return f"failed: {info.error}" if info.status == "error" and info.error else info.status
