@@ -317,6 +317,7 @@ def _checked_nominal(calibrated, nominal: str | None):
 def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: str, q_start, reader: dict):
     """``--targets``: joint commands for Cartesian targets; the result and the file read."""
     from robocal.compensate.compensation import compensate_targets
+    from robocal.compensate.ik_options import IKOptions
     from robocal.compensate.target_files import TargetFileError, read_targets
 
     try:
@@ -338,6 +339,7 @@ def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: s
                 frame=frame,
                 q0=q_start,
                 names=tgt.names,
+                ik=IKOptions(),  # the command line's IK settings: the defaults, one value
             )
     except TargetFileError as err:
         raise fail(str(err)) from None
@@ -349,12 +351,13 @@ def _compensate_targets(calibrated, targets: Path, nominal_model, kind, frame: s
 def _filter_program(calibrated, model, program: Path, nominal_model, kind, reader: dict):
     """``--program``: a nominal joint program corrected; the result and the file read."""
     from robocal.compensate.compensation import filter_program
+    from robocal.compensate.ik_options import IKOptions
     from robocal.compensate.target_files import TargetFileError, read_program
 
     try:
         names, q = read_program(program, model.dof, joint_types=model.joint_types, **reader)
         with console.status(f"filtering {len(names)} program points ..."):
-            result = filter_program(calibrated, q, nominal_model, kind=kind, names=names)
+            result = filter_program(calibrated, q, nominal_model, kind=kind, names=names, ik=IKOptions())
     except TargetFileError as err:
         raise fail(str(err)) from None
     except ValueError as err:

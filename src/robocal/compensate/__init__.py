@@ -10,6 +10,7 @@ lazy_package(
     __name__,
     {
         "robocal.compensate.compensation": ("compensate_targets", "filter_program", "nominal_model"),
+        "robocal.compensate.ik_options": ("IKOptions",),
         "robocal.compensate.result": ("Compensation",),
         "robocal.compensate.paths": ("PathCompensation", "compensate_cartesian_path", "compensate_path"),
         "robocal.compensate.target_files": ("TargetFileError", "Targets", "read_program", "read_targets"),
@@ -18,12 +19,14 @@ lazy_package(
 
 if TYPE_CHECKING:  # what the lazy map provides, for type checkers (tests/test_typing.py keeps them equal)
     from robocal.compensate.compensation import compensate_targets, filter_program, nominal_model
+    from robocal.compensate.ik_options import IKOptions
     from robocal.compensate.paths import PathCompensation, compensate_cartesian_path, compensate_path
     from robocal.compensate.result import Compensation
     from robocal.compensate.target_files import TargetFileError, Targets, read_program, read_targets
 
 __all__ = [
     "Compensation",
+    "IKOptions",
     "PathCompensation",
     "TargetFileError",
     "Targets",

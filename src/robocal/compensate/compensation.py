@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import choices, spatial
 from robocal.compensate import safety
+from robocal.compensate.ik_options import IKOptions
 from robocal.compensate.nominal_ik import nominal_solutions
 from robocal.compensate.result import Compensation
 from robocal.identify.result import CalibrationResult
@@ -228,7 +229,7 @@ def joint_names(names: Sequence[str] | None, n: int) -> tuple[str, ...]:
     return out
 
 
-def correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed through
+def correct(
     setup: Setup,
     T: Array,
     kind: TargetKind,
@@ -236,11 +237,7 @@ def correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed th
     nominal_reachable: NDArray[np.bool_],
     names: tuple[str, ...],
     *,
-    tol: float,
-    tol_angle: float,
-    max_iter: int,
-    orientation_weight: float,
-    tool_axis: int,
+    ik: IKOptions,
     max_joint_change: float,
     solved: IKResult | None = None,
     nominal_reasons: tuple[str, ...] = (),
@@ -248,9 +245,11 @@ def correct(  # noqa: PLR0913 - the IK settings of compensate_targets, passed th
     """The calibrated-model IK from the nominal solution (damped near singularities), the
     invariants of :mod:`robocal.compensate.safety` (a refused target keeps its nominal
     command), and the bookkeeping.  ``solved``: commands found otherwise (seed 003 eq. 5.22
-    for paths), put through the same invariants instead of the IK."""
+    for paths), put through the same invariants instead of the IK; ``ik``: the IK's settings
+    (its restarts and seed are the nominal IK's: the correction starts from the nominal solution)."""
+    tool_axis, orientation_weight = ik.tool_axis, ik.orientation_weight
     res = solved or solve_ik(
-        setup.real, T, q0=q_nominal, restarts=0, tol=tol, tol_angle=tol_angle, max_iter=max_iter,
+        setup.real, T, q0=q_nominal, restarts=0, tol=ik.tol, tol_angle=ik.tol_angle, max_iter=ik.max_iter,
         joint_effects=setup.effects, kind=kind, tool_axis=tool_axis, orientation_weight=orientation_weight,
     )  # fmt: skip
     q, reached = res.q.copy(), res.reachable.copy()
@@ -315,13 +314,14 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
     q0: ArrayLike | None = None,
     names: Sequence[str] | None = None,
     joint_effects: PerturbationFunction | None = None,
-    tol: float = 1e-6,
-    tol_angle: float = 1e-6,
-    max_iter: int = 100,
-    restarts: int = 20,
-    seed: int = 0,
-    orientation_weight: float = 1.0,
-    tool_axis: int = 2,
+    ik: IKOptions | None = None,
+    tol: float | None = None,
+    tol_angle: float | None = None,
+    max_iter: int | None = None,
+    restarts: int | None = None,
+    seed: int | None = None,
+    orientation_weight: float | None = None,
+    tool_axis: int | None = None,
     max_joint_change: float = 0.2,
 ) -> Compensation:
     """Joint commands that bring the calibrated (real) robot onto ``targets``.
@@ -343,12 +343,14 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
         names: target names (default ``"1"``, ``"2"``, ...).
         joint_effects: override the joint effects ``q (m, dof) -> (m, dof, 3)`` (default:
             ``result.joint_perturbations`` for a result, none for a model).
-        tol, tol_angle: reachability tolerances (m, rad).
-        max_iter: IK iterations per start.
-        restarts: random restarts of the nominal IK only (the correction never restarts).
-        seed: seed of those restarts.
-        orientation_weight: m per rad of orientation rows in the IK objective.
-        tool_axis: tool axis (0, 1, 2) imposed by ``kind="axis"``.
+        ik: the inverse kinematics' settings (:class:`~robocal.compensate.ik_options.IKOptions`:
+            tolerances, iterations, restarts and seed of the nominal IK, orientation weight,
+            tool axis); default ``IKOptions()``.
+        tol, tol_angle, max_iter, restarts, seed, orientation_weight, tool_axis: one field
+            of ``ik`` each (None: ``ik``'s): reachability tolerances (m, rad), IK iterations
+            per start, random restarts of the nominal IK only (the correction never
+            restarts) and their seed, m per rad of orientation rows in the IK objective, the
+            tool axis (0, 1, 2) imposed by ``kind="axis"``.
         max_joint_change: a correction moving any joint by more than this (rad or m)
             is reported as a change of configuration (``branch_kept`` false); the
             calibration's own per-target bound (:func:`robocal.compensate.safety.joint_bound`:
@@ -361,24 +363,13 @@ def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in
     T, kind_ = as_frames(targets, kind)
     T = to_base(T, frame, setup)
     labels = joint_names(names, len(T))
-    ik = {"kind": kind_, "seed": seed, "tol": tol, "tol_angle": tol_angle, "max_iter": max_iter}
-    ik |= {"tool_axis": tool_axis, "orientation_weight": orientation_weight}
-    nom, held = nominal_solutions(setup.nominal, T, q0, restarts, ik)
+    options = IKOptions.of(ik, tol=tol, tol_angle=tol_angle, max_iter=max_iter, restarts=restarts, seed=seed,
+                           orientation_weight=orientation_weight, tool_axis=tool_axis)  # fmt: skip
+    nom, held = nominal_solutions(setup.nominal, T, q0, options, kind_)
     return correct(
-        setup,
-        T,
-        kind_,
-        nom.q,
-        nom.reachable,
-        labels,
-        tol=tol,
-        tol_angle=tol_angle,
-        max_iter=max_iter,
-        orientation_weight=orientation_weight,
-        tool_axis=tool_axis,
-        max_joint_change=max_joint_change,
+        setup, T, kind_, nom.q, nom.reachable, labels, ik=options, max_joint_change=max_joint_change,
         nominal_reasons=held,
-    )
+    )  # fmt: skip
 
 
 def program(q: ArrayLike, dof: int, what: str) -> Array:
@@ -401,11 +392,12 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
     kind: TargetKind | None = None,
     names: Sequence[str] | None = None,
     joint_effects: PerturbationFunction | None = None,
-    tol: float = 1e-6,
-    tol_angle: float = 1e-6,
-    max_iter: int = 100,
-    orientation_weight: float = 1.0,
-    tool_axis: int = 2,
+    ik: IKOptions | None = None,
+    tol: float | None = None,
+    tol_angle: float | None = None,
+    max_iter: int | None = None,
+    orientation_weight: float | None = None,
+    tool_axis: int | None = None,
     max_joint_change: float = 0.2,
 ) -> Compensation:
     """Corrected joint targets for a program computed with the nominal model.
@@ -422,8 +414,11 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
         kind: what to keep of the nominal tool frame: ``"pose"`` (default for 6 or more
             joints), ``"axis"`` (position and tool axis; default for 5 joints) or
             ``"position"`` (default for fewer).
-        Other arguments: as for :func:`compensate_targets`.
+        Other arguments: as for :func:`compensate_targets` (no nominal IK: its restarts and
+            seed are unused).
     """
+    options = IKOptions.of(ik, tol=tol, tol_angle=tol_angle, max_iter=max_iter,
+                           orientation_weight=orientation_weight, tool_axis=tool_axis)  # fmt: skip
     setup = compensation_setup(calibrated, nominal_model, joint_effects)
     q = program(q_program, setup.real.dof, "q_program")
     kind_ = kind or _default_kind(setup.real.dof)
@@ -437,10 +432,6 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
         q,
         np.ones(len(q), dtype=bool),
         joint_names(names, len(q)),
-        tol=tol,
-        tol_angle=tol_angle,
-        max_iter=max_iter,
-        orientation_weight=orientation_weight,
-        tool_axis=tool_axis,
+        ik=options,
         max_joint_change=max_joint_change,
     )

@@ -18,7 +18,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from robocal.choices import TargetKind
 from robocal.compensate import safety
+from robocal.compensate.ik_options import IKOptions
 from robocal.measure.ik import IKResult, solve_ik
 from robocal.model.chain import Model
 
@@ -28,11 +30,13 @@ Array = NDArray[np.float64]
 
 
 def nominal_solutions(
-    model: Model, T: Array, q0: ArrayLike | None, restarts: int, ik: dict[str, Any]
+    model: Model, T: Array, q0: ArrayLike | None, options: IKOptions, kind: TargetKind
 ) -> tuple[IKResult, tuple[str, ...]]:
-    """The nominal IK of targets ``T`` ``(n, 4, 4)`` in one configuration, and per target
-    why its nominal command is refused (empty: it is not); ``q0``: ``(dof,)`` the chosen
-    configuration, ``(n, dof)`` one start per target, or None; ``ik``: solve_ik options."""
+    """The nominal IK of targets ``T`` ``(n, 4, 4)`` of ``kind`` in one configuration, and
+    per target why its nominal command is refused (empty: it is not); ``q0``: ``(dof,)`` the
+    chosen configuration, ``(n, dof)`` one start per target, or None; ``options``: the IK's
+    settings (its ``restarts`` here only)."""
+    ik, restarts = options.solve_ik_keywords(kind), options.restarts
     asked = q0 is not None and np.asarray(q0).ndim == 1  # the user chose the configuration
     if q0 is None and len(T) > 1:
         q0, nom = _reference(model, T, restarts, ik)

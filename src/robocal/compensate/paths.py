@@ -24,6 +24,7 @@ from robocal.compensate.compensation import (
     program,
     to_base,
 )
+from robocal.compensate.ik_options import IKOptions
 from robocal.compensate.result import Compensation
 from robocal.identify.result import CalibrationResult
 from robocal.measure.ik import IKResult, PerturbationFunction
@@ -147,11 +148,12 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
     joint_effects: PerturbationFunction | None = None,
     iterations: int = 1,
     damping: float = 1e-12,
-    tol: float = 1e-6,
-    tol_angle: float = 1e-6,
-    max_iter: int = 100,
-    orientation_weight: float = 1.0,
-    tool_axis: int = 2,
+    ik: IKOptions | None = None,
+    tol: float | None = None,
+    tol_angle: float | None = None,
+    max_iter: int | None = None,
+    orientation_weight: float | None = None,
+    tool_axis: int | None = None,
     max_joint_change: float = 0.2,
     max_correction_step: float = 0.02,
 ) -> PathCompensation:
@@ -175,14 +177,15 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
             larger than this (rad or m) is reported as a jump.
         Other arguments: as for :func:`compensate_targets`.
     """
+    options = IKOptions.of(ik, tol=tol, tol_angle=tol_angle, max_iter=max_iter,
+                           orientation_weight=orientation_weight, tool_axis=tool_axis)  # fmt: skip
     setup = compensation_setup(calibrated, nominal_model, joint_effects)
     q_nom = program(q_path, setup.real.dof, "q_path")
     T, kind_ = _path_targets(setup, q_nom, targets, kind, frame)
     labels = joint_names(names, len(q_nom))
     if method == "ik":
         base = correct(
-            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, tol=tol, tol_angle=tol_angle,
-            max_iter=max_iter, orientation_weight=orientation_weight, tool_axis=tool_axis,
+            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, ik=options,
             max_joint_change=max_joint_change,
         )  # fmt: skip
     elif method == "jacobian":
@@ -191,12 +194,11 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
         q = _eq522(setup, q_nom, T, kind_, int(iterations), float(damping))
         solved = _jacobian_solved(setup, q, q_nom, T, kind_, int(iterations))
         base = correct(
-            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, tol=tol, tol_angle=tol_angle,
-            max_iter=max_iter, orientation_weight=orientation_weight, tool_axis=tool_axis,
+            setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, ik=options,
             max_joint_change=max_joint_change, solved=solved,
         )  # fmt: skip
         after, angle_after = base.error_after, base.angle_after  # reachable: within tol, as for "ik"
-        base = dataclasses.replace(base, reachable=(after < tol) & (angle_after < tol_angle))
+        base = dataclasses.replace(base, reachable=(after < options.tol) & (angle_after < options.tol_angle))
     else:
         raise ValueError(f"method must be 'ik' or 'jacobian', got {method!r}")
     correction = base.q - q_nom
@@ -240,7 +242,8 @@ def compensate_cartesian_path(
     setup = compensation_setup(calibrated, nominal_model, options.get("joint_effects"))
     T, kind_ = as_frames(targets, "auto" if kind is None else kind)
     T = to_base(T, frame, setup)
-    nominal = joint_path(setup.nominal, T, kind=kind_, q0=q0, tool_axis=options.get("tool_axis", 2))
+    tool_axis = IKOptions.of(options.get("ik"), tool_axis=options.get("tool_axis")).tool_axis
+    nominal = joint_path(setup.nominal, T, kind=kind_, q0=q0, tool_axis=tool_axis)
     targets_base = T[:, :3, 3] if kind_ == "position" else T
     return compensate_path(
         calibrated,
