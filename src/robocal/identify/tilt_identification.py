@@ -57,8 +57,10 @@ from robocal.model.joints import (
 __all__ = [
     "TiltFit",
     "identify_tilt",
+    "jacobian_at_loads",
     "orientation_parameters",
     "parameter_names",
+    "predict_at_loads",
     "predict_readings",
     "tilt_jacobian",
 ]
@@ -181,6 +183,19 @@ def predict_readings(
     """The readings ``(m,)`` (rad) the parameters ``x`` (named ``names``) predict."""
     eta = load_moments(model, data.q, gravity=np.asarray(gravity, dtype=float))
     return _predict(model, data, _mounts(data, sensors), names, x, eta, gravity)
+
+
+def predict_at_loads(model, data: TiltReadings, sensors: Sequence[Inclinometer], names, x: Array,
+                     eta: Array, gravity=GRAVITY) -> Array:  # fmt: skip
+    """:func:`predict_readings` under given load moments ``eta`` ``(m, dof, 3)`` (held
+    fixed while the geometry changes, as :func:`identify_tilt` does)."""
+    return _predict(model, data, _mounts(data, sensors), names, x, eta, gravity)
+
+
+def jacobian_at_loads(model, data: TiltReadings, sensors: Sequence[Inclinometer], names, x: Array,
+                      eta: Array, gravity=GRAVITY) -> Array:  # fmt: skip
+    """:func:`tilt_jacobian` under given load moments ``eta`` ``(m, dof, 3)``."""
+    return _jacobian(model, data, _mounts(data, sensors), names, x, eta, gravity)
 
 
 def _predict(model, data, mounts, names, x, eta, gravity) -> Array:

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
 from robocal.identify.constraints.noise import weigh_by_kind
+from robocal.identify.constraints.tilt_rows import tilt_figures, tilt_rows, tilt_terms
 from robocal.identify.options import Pruning
 from robocal.identify.problem import measurement_chain
 from robocal.identify.solvers import solve
@@ -57,12 +58,16 @@ class ConstraintFigures:
         plane_rms: ``(P,)`` RMS distance of the tool points from their plane (the stated
             one when known, else the best-fit plane).
         pair_error: ``(m,)`` distance between the pair's tool points minus the stated length.
+        tilt_channels, tilt_rms: each inclinometer channel (``<joint>_<axis>``) and the RMS
+            of its readings' residual about their mean (rad; the geometry's, no joint effects).
     """
 
     point_spread: Array
     point_distance_error: Array
     plane_rms: Array
     pair_error: Array
+    tilt_channels: tuple[str, ...] = ()
+    tilt_rms: Array = field(default_factory=lambda: np.zeros(0))
 
     def lines(self) -> list[str]:
         """One line per figure (mm)."""
@@ -78,6 +83,10 @@ class ConstraintFigures:
                 f"distances: RMS error {rms * mm:.3f} mm, "
                 f"max |error| {np.abs(self.pair_error).max() * mm:.3f} mm"
             )
+        out += [
+            f"tilt {name}: RMS residual {math.degrees(r):.5f} deg"
+            for name, r in zip(self.tilt_channels, self.tilt_rms, strict=True)
+        ]
         return out
 
 
@@ -138,7 +147,10 @@ class ConstraintResult:
         if self.prior is not None:
             lines.append(self.prior.line())
         if self.kind_sigma:
-            each = ", ".join(f"{kind} {sigma * 1e3:.4f} mm" for kind, sigma in self.kind_sigma)
+            each = ", ".join(
+                f"{kind} {math.degrees(sigma):.5f} deg" if kind == "tilt" else f"{kind} {sigma * 1e3:.4f} mm"
+                for kind, sigma in self.kind_sigma
+            )
             lines.append(f"noise per kind (the rows' weights): {each}")
         scene = {"redundant", "no effect"}
         seen = [d.name for d in self.dropped if d.reason in scene]
@@ -215,7 +227,15 @@ def build_constraint_problem(
     full0 = np.concatenate([chain.free_values, points.reshape(-1), plane_start])
     size = float(np.median(robot_sizes(robot.fk(data.q)[None])))
     weights = None if prior is None else prior.weights(chain, robot.names)
-    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
+    if not data.tilted.any():
+        return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
+    terms = tilt_terms(robot, chain, data)
+    empty = np.zeros(len(terms.zeros))
+    values = dict(zip(chain.free_names, chain.free_values.tolist(), strict=True))
+    r = tilt_rows(terms, data, values, empty, np.zeros(len(terms.effects)))[0]
+    zeros = np.array([-r[terms.channel == k].mean() for k in range(len(empty))])  # each channel's mean
+    full0 = np.concatenate([full0, zeros, np.zeros(len(terms.effects))])
+    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, terms)
 
 
 # ---------------------------------------------------------------------- the fit
@@ -304,7 +324,7 @@ def calibrate_constraints(
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
-    mixed = "tracker" in data.kinds and bool(data.constrained.any())
+    mixed = sum((bool(data.constrained.any()), "tracker" in data.kinds, "tilt" in data.kinds)) > 1
     if not known_noise and (prior is not None or mixed):  # each kind weighted by its own σ̂
         problem = problem.with_data(weigh_by_kind(problem))
     if pruning is not None:
@@ -345,10 +365,12 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
 
 
 def _kind_sigma(data: ConstraintSet) -> tuple[tuple[str, float], ...]:
-    if "tracker" not in data.kinds or not data.constrained.any():
-        return ()
-    constraint = "+".join(k for k in data.kinds if k != "tracker")
-    return ((constraint, float(data.sigma)), ("tracker", data.position_sigma))
+    """Each noise group's σ (m; rad for tilt) when the data mixes groups, else empty."""
+    constraint = "+".join(k for k in data.kinds if k not in ("tracker", "tilt"))
+    groups = [(constraint, float(data.sigma))] if data.constrained.any() else []
+    groups += [("tracker", data.position_sigma)] if "tracker" in data.kinds else []
+    groups += [("tilt", float(data.tilt_sigma))] if "tilt" in data.kinds else []
+    return tuple(groups) if len(groups) > 1 else ()
 
 
 def _robot_and_tool(robot: Model, tool: Array | None) -> Model:
@@ -397,7 +419,8 @@ def constraint_figures(
     pair_error = np.zeros(0)
     if len(data.pairs):
         pair_error = np.linalg.norm(p[data.pairs[:, 0]] - p[data.pairs[:, 1]], axis=1) - data.pair_length
-    return ConstraintFigures(spread, point_error, plane_rms, pair_error)
+    channels, tilt_rms = tilt_figures(robot, data)
+    return ConstraintFigures(spread, point_error, plane_rms, pair_error, channels, tilt_rms)
 
 
 def kind_identifiable(

@@ -13,7 +13,10 @@ base frame when no device measures) is, not what it reads:
   known length apart (ball-bar, a table of known points);
 * **tracker point**: ``p_i - y_i = 0`` (3 rows), mixed with the others, weighted by the
   tracker's own σ (``ConstraintSet.tracker_sigma``); the device frame is then estimated
-  too (its start by Kabsch on these rows).
+  too (its start by Kabsch on these rows);
+* **inclinometer reading**: the tilt of a link's joint-frame axis against the horizontal
+  (1 row, rad, weighted by ``tilt_sigma``), with a zero per channel and the joint effects
+  as unknowns (:mod:`robocal.identify.constraints.tilt_rows`).
 
 Residuals are weighted by 1/σ (the tool point's noise σ, isotropic; σ√2 for a distance
 between two tool points; ``distance_sigma`` for a stated distance between fixed points).
@@ -41,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.identify.constraints.tilt_rows import TiltTerms, tilt_rows
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.chain import Model
 from robocal.model.steps import Role
@@ -114,10 +118,25 @@ class _Layout:
     n_chain: int
     n_points: int
     planes: tuple[int, ...]  # the unknown planes' indices
+    n_zeros: int = 0  # the inclinometer channels' zeros, then the joint effects
+    n_effects: int = 0
+
+    @property
+    def n_scene(self) -> int:
+        return 3 * self.n_points + 3 * len(self.planes) + self.n_zeros
 
     @property
     def size(self) -> int:
-        return self.n_chain + 3 * self.n_points + 3 * len(self.planes)
+        return self.n_chain + self.n_scene + self.n_effects
+
+    @property
+    def zeros(self) -> slice:
+        at = self.n_chain + 3 * self.n_points + 3 * len(self.planes)
+        return slice(at, at + self.n_zeros)
+
+    @property
+    def effects(self) -> slice:
+        return slice(self.size - self.n_effects, self.size)
 
     def point(self, k: int) -> int:
         return self.n_chain + 3 * k
@@ -139,12 +158,14 @@ class ConstraintProblem:
     n_effects = 0
 
     def __init__(self, chain: Model, data: ConstraintSet, full0: Array, planes0: Array, length_scale: float,
-                 prior_weight: Array | None = None):  # fmt: skip
+                 prior_weight: Array | None = None, tilt: TiltTerms | None = None):  # fmt: skip
         self.chain, self.data, self.length_scale = chain, data, float(length_scale)
+        self.tilt = tilt  # the inclinometer rows' unknowns, None without tilt rows
         # (p_chain,) 1/σ of a prior about full0's chain values (NominalPrior.weights), or None
         self.prior_weight = None if prior_weight is None else np.asarray(prior_weight, dtype=float)
         planes = tuple(k for k in range(data.n_planes) if data.unknown_plane(k))
-        self.layout = _Layout(len(chain.free_names), data.n_points, planes)
+        n_zeros, n_effects = (0, 0) if tilt is None else (len(tilt.zeros), len(tilt.effects))
+        self.layout = _Layout(len(chain.free_names), data.n_points, planes, n_zeros, n_effects)
         self.full0 = np.asarray(full0, dtype=float)
         self.planes0 = np.asarray(planes0, dtype=float)  # (P, 4): start / known normal, offset
         self.tangents = (
@@ -159,6 +180,8 @@ class ConstraintProblem:
         names = list(self.chain.free_names)
         names += [f"point{k}_{c}" for k in range(self.data.n_points) for c in "xyz"]
         names += [f"plane{k}_{c}" for k in self.layout.planes for c in ("a", "b", "d")]
+        if self.tilt is not None:
+            names += [*self.tilt.zeros, *self.tilt.effects]
         return tuple(names)
 
     @property
@@ -167,12 +190,15 @@ class ConstraintProblem:
 
     @property
     def scene_names(self) -> tuple[str, ...]:
-        return self.all_names[self.layout.n_chain :]
+        """The points', planes' and inclinometer zeros' unknowns (never pruned)."""
+        return self.all_names[self.layout.n_chain : self.layout.n_chain + self.layout.n_scene]
 
     @property
     def roles(self) -> dict[str, Role]:
-        """The chain's roles, the scene's unknowns as the device's (kept first by the rank test)."""
-        return {**self.chain.roles, **{n: Role.DEVICE for n in self.scene_names}}
+        """The chain's roles, the scene's unknowns as the device's (kept first by the rank
+        test), the joint effects as the robot's (last)."""
+        effects = {} if self.tilt is None else dict.fromkeys(self.tilt.effects, Role.KINEMATIC)
+        return {**self.chain.roles, **{n: Role.DEVICE for n in self.scene_names}, **effects}
 
     @property
     def x0(self) -> Array:
@@ -194,10 +220,12 @@ class ConstraintProblem:
     @functools.cached_property
     def _full_scale(self) -> Array:
         rot = [s.is_rotation for s in self.chain.steps if s.free]
-        scene = [
-            self.length_scale if n[-1] in "ab" and n.startswith("plane") else 1.0 for n in self.scene_names
+        scene = [  # angles (plane tilts, inclinometer zeros) as the displacement they make
+            self.length_scale if (n[-1] in "ab" and n.startswith("plane")) or n.startswith("tilt") else 1.0
+            for n in self.scene_names
         ]
-        return np.concatenate([np.where(rot, self.length_scale, 1.0), scene])
+        effects = [] if self.tilt is None else self.length_scale * self.tilt.effect_scale
+        return np.concatenate([np.where(rot, self.length_scale, 1.0), scene, effects])
 
     @property
     def free_scale(self) -> Array:
@@ -325,6 +353,10 @@ class ConstraintProblem:
             r, J = self._point_distance_rows(full)
             r_parts.append(r / d.distance_sigma)
             J_parts.append(J / d.distance_sigma)
+        if d.tilted.any():
+            r, J = self._tilt_rows(full)
+            r_parts.append(r / d.tilt_sigma)
+            J_parts.append(J / d.tilt_sigma)
         if self.n_prior_rows:
             r, J = self._prior_rows(full)
             r_parts.append(r)
@@ -390,6 +422,19 @@ class ConstraintProblem:
         J = np.einsum("mr,mrp->mp", u, Jp[a] - Jp[b])
         return length - self.data.pair_length, J
 
+    def _tilt_rows(self, full: Array) -> tuple[Array, Array]:
+        """The inclinometer rows (rad) and their Jacobian over every unknown."""
+        assert self.tilt is not None  # tilt rows are built with their terms
+        lay, terms = self.layout, self.tilt
+        values = dict(zip(self.chain.free_names, full[: lay.n_chain].tolist(), strict=True))
+        r, J_geom, J_effects = tilt_rows(terms, self.data, values, full[lay.zeros], full[lay.effects])
+        J = np.zeros((len(r), lay.size))
+        column = {n: k for k, n in enumerate(self.chain.free_names)}
+        J[:, [column[g] for g in terms.geometry]] = J_geom
+        J[np.arange(len(r)), lay.zeros.start + terms.channel] = 1.0
+        J[:, lay.effects] = J_effects
+        return r, J
+
     def _point_distance_rows(self, full: Array) -> tuple[Array, Array]:
         d, lay = self.data, self.layout
         c = full[lay.point(0) : lay.point(0) + 3 * d.n_points].reshape(-1, 3)
@@ -405,13 +450,15 @@ class ConstraintProblem:
 
     def row_groups(self) -> tuple[tuple[str, slice], ...]:
         """The measurement rows of each noise group in the residual's order: ``constraint``
-        (points, planes; σ), ``tracker`` (its own σ), ``pair`` (σ√2), ``known distance``."""
+        (points, planes; σ), ``tracker`` (its own σ), ``pair`` (σ√2), ``known distance``,
+        ``tilt`` (inclinometer readings, rad)."""
         d = self.data
         sizes = [
             ("constraint", 3 * int(np.sum(d.point >= 0)) + int(np.sum(d.plane >= 0))),
             ("tracker", 3 * int(d.tracked.sum())),
             ("pair", len(d.pairs)),
             ("known distance", len(d.point_pairs)),
+            ("tilt", int(d.tilted.sum())),
         ]
         out, at = [], 0
         for name, size in sizes:
@@ -421,10 +468,10 @@ class ConstraintProblem:
         return tuple(out)
 
     def row_sigma(self) -> Array:
-        """``(m,)`` each measurement row's noise (m): the weights' inverse."""
+        """``(m,)`` each measurement row's noise (m; rad for tilt rows): the weights' inverse."""
         d = self.data
         sigma = {"constraint": d.sigma, "pair": d.sigma * np.sqrt(2), "tracker": d.position_sigma,
-                 "known distance": d.distance_sigma}  # fmt: skip
+                 "known distance": d.distance_sigma, "tilt": d.tilt_sigma}  # fmt: skip
         out = np.empty(sum(s.stop - s.start for _, s in self.row_groups()))
         for name, rows in self.row_groups():
             out[rows] = sigma[name]

@@ -9,8 +9,9 @@ matrix of the weighted least-squares fit; the weights are updated and the fit re
 With one group this is σ̂ of the fit (the prior's weighting needs it: a stated σ ten times
 the real one would make the prior ten times too strong).
 
-Groups: the constraint rows (points, planes and pose pairs: the tool point's σ) and the
-tracker rows (``tracker_sigma``); a stated distance between fixed points keeps its σ.
+Groups: the constraint rows (points, planes and pose pairs: the tool point's σ), the
+tracker rows (``tracker_sigma``) and the inclinometer rows (``tilt_sigma``, rad); a stated
+distance between fixed points keeps its σ.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from robocal.measure.constraints.data_set import ConstraintSet
 
 __all__ = ["kind_noise", "weigh_by_kind"]
 
-GROUPS = {"constraint": "sigma", "pair": "sigma", "tracker": "tracker"}
+GROUPS = {"constraint": "sigma", "pair": "sigma", "tracker": "tracker", "tilt": "tilt"}
 SMALLEST = 1e-9  # m: a σ̂ of noise-free data, kept positive
 
 
@@ -43,7 +44,8 @@ def kind_noise(problem: ConstraintProblem, x: np.ndarray) -> dict[str, float]:
             key = GROUPS[name]
             squares[key] = squares.get(key, 0.0) + float(r[rows] @ r[rows])
             redundancy[key] = redundancy.get(key, 0.0) + float(len(r[rows]) - h[rows].sum())
-    stated = {"sigma": problem.data.sigma, "tracker": problem.data.position_sigma}
+    stated = {"sigma": problem.data.sigma, "tracker": problem.data.position_sigma,
+              "tilt": problem.data.tilt_sigma}  # fmt: skip
     return {
         key: max(stated[key] * math.sqrt(squares[key] / max(redundancy[key], 1.0)), SMALLEST)
         for key in squares
@@ -60,8 +62,10 @@ def weigh_by_kind(problem: ConstraintProblem, iterations: int = 4) -> Constraint
         data = dataclasses.replace(
             plain.data, sigma=sigma.get("sigma", plain.data.sigma),
             tracker_sigma=sigma.get("tracker", plain.data.tracker_sigma),
+            tilt_sigma=sigma.get("tilt", plain.data.tilt_sigma),
         )  # fmt: skip
-        pairs = ((data.sigma, plain.data.sigma), (data.position_sigma, plain.data.position_sigma))
+        pairs = ((data.sigma, plain.data.sigma), (data.position_sigma, plain.data.position_sigma),
+                 (data.tilt_sigma, plain.data.tilt_sigma))  # fmt: skip
         done = all(math.isclose(v, w, rel_tol=1e-3) for v, w in pairs)
         plain = plain.with_data(data, prior=False)
         if done:

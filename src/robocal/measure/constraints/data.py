@@ -8,7 +8,11 @@ One CSV, one header line, one row per recorded configuration; ``#`` lines are co
 * ``pair`` and ``distance_mm``: the two rows with the same ``pair`` id had their tool
   points ``distance_mm`` apart (ball-bar, a table of known points); both rows state it;
 * ``x, y, z`` (m, optional): a tracker's position of the tool point, blank where none
-  (mixed data: tracker points and socket poses calibrate together).
+  (mixed data: tracker points and socket poses calibrate together);
+* ``link``, ``axis`` and ``tilt_deg``: an inclinometer reading (degrees) of the sensor on
+  the link moved by joint ``link`` (1..N, as the joint columns ``qK``), channel ``axis``
+  (``x`` or ``y``: the link's joint-frame axes), blank where none
+  (:mod:`robocal.identify.constraints.tilt_rows`).
 
 A blank ``point``/``plane`` cell means the row has no such constraint.  Known distances
 between fixed points are not rows: ``--distance 0,1=50mm`` (points 0 and 1 are 50 mm apart).
@@ -23,6 +27,7 @@ The file's kind (``point``, ``plane``, ``distance``) is told from its columns
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 from collections.abc import Sequence
@@ -31,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.csvfile import short
-from robocal.measure.constraints.data_set import KINDS, ConstraintSet
+from robocal.measure.constraints.data_set import KINDS, TILT_AXES, ConstraintSet
 from robocal.units import unit_factor
 
 __all__ = [
@@ -43,7 +48,8 @@ __all__ = [
     "write_constraints",
 ]
 
-KIND_COLUMNS = {"point": ("point",), "plane": ("plane",), "distance": ("pair", "distance_mm")}
+KIND_COLUMNS = {"point": ("point",), "plane": ("plane",), "distance": ("pair", "distance_mm"),
+                "tilt": ("link", "axis", "tilt_deg")}  # fmt: skip
 MAX_BYTES = 50_000_000  # a constraint file holds thousands of rows, not gigabytes
 MAX_INDEX = 1000  # points, planes: a handful; an index beyond this is a wrong column
 
@@ -158,10 +164,12 @@ def read_constraints(
     if f"q{dof + 1}" in header:  # another robot's file: its last joints would be dropped unseen
         raise ConstraintFileError(f"{path}: a joint column q{dof + 1}, but the robot has {dof} joints")
     if not any(set(cols) <= set(header) for cols in KIND_COLUMNS.values()):
-        raise ConstraintFileError(f"{path}: no constraint column (point, plane, or pair and distance_mm)")
+        raise ConstraintFileError(
+            f"{path}: no constraint column (point, plane, pair and distance_mm, or link, axis and tilt_deg)"
+        )
     col = {name: header.index(name) for name in header}
     scale = unit_factor(angle_unit, "angle", "angle_unit")
-    q, point, plane, xyz, pair, length = [], [], [], [], [], []
+    q, point, plane, xyz, pair, length, tilt = [], [], [], [], [], [], []
     for number, cells in rows:
         if len(cells) != len(header):
             raise ConstraintFileError(
@@ -181,7 +189,27 @@ def read_constraints(
             else math.nan
         )
         xyz.append(_tracker(get, number, path))
-    return _assemble(path, np.array(q).reshape(-1, dof), point, plane, xyz, pair, length, distances, sigma)
+        tilt.append(_tilt(get, number, path, dof))
+    data = _assemble(path, np.array(q).reshape(-1, dof), point, plane, xyz, pair, length, distances, sigma)
+    if not any(t[0] >= 0 for t in tilt):
+        return data
+    link, axis, reading = (np.array(c) for c in zip(*tilt, strict=True))
+    return dataclasses.replace(data, tilt_link=link, tilt_axis=axis, tilt=reading)
+
+
+def _tilt(get, number: int, path: Path, dof: int) -> tuple[int, int, float]:
+    """``(joint index, axis index, reading in rad)`` of a row, ``(-1, 0, nan)`` where none."""
+    cells = [c for name in ("link", "axis", "tilt_deg") for c in get(name)]
+    if len(cells) < 3 or not any(c.strip() for c in cells):
+        return -1, 0, math.nan
+    where = f"{path}, row {number}, column"
+    link = int(_cell(cells[0], f"{where} link", integer=True))
+    if not 1 <= link <= dof:
+        raise ConstraintFileError(f"{where} link: {link} is not a joint 1..{dof}")
+    axis = cells[1].strip()
+    if axis not in TILT_AXES:
+        raise ConstraintFileError(f"{where} axis: {short(axis)} is not one of {', '.join(TILT_AXES)}")
+    return link - 1, TILT_AXES.index(axis), math.radians(_cell(cells[2], f"{where} tilt_deg"))
 
 
 def _tracker(get, number: int, path: Path) -> list[float]:
@@ -236,6 +264,16 @@ def _assemble(path, q, point, plane, xyz, pair, length, distances, sigma) -> Con
         raise ConstraintFileError(f"{path}: {err}") from None
 
 
+def _tilt_cells(data: ConstraintSet, i: int) -> list[str]:
+    if data.tilt_link[i] < 0:
+        return ["", "", ""]
+    return [
+        str(int(data.tilt_link[i]) + 1),
+        TILT_AXES[int(data.tilt_axis[i])],
+        repr(math.degrees(data.tilt[i])),
+    ]
+
+
 def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> str:
     """The CSV text of ``data`` (module docstring); written to ``path`` when given (atomically)."""
     dof = data.q.shape[1]
@@ -257,6 +295,8 @@ def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> st
         if "distance" in kinds:
             pair = pair_of.get(i)
             row += ["", ""] if pair is None else [str(pair[0]), repr(float(pair[1]) * 1e3)]
+        if "tilt" in kinds:
+            row += _tilt_cells(data, i)
         if "tracker" in kinds:
             row += ["", "", ""] if not data.tracked[i] else [repr(float(v)) for v in data.positions[i]]
         writer.writerow(row)

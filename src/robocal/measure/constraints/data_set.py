@@ -10,11 +10,19 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["KINDS", "ConstraintSet", "merge_sets"]
+__all__ = ["KINDS", "TILT_AXES", "TILT_SIGMA", "ConstraintSet", "merge_sets"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-KINDS = ("point", "plane", "distance")
+KINDS = ("point", "plane", "distance", "tilt")
+TILT_AXES = ("x", "y")  # an inclinometer's channels: its x axis, its y axis
+TILT_SIGMA = 1.75e-5  # rad: 0.001°, seed 003's inclinometer resolution
+
+
+def _per_row(v, n: int, fill, dtype):
+    """``v`` as ``(n,)``; an empty ``v`` (the default): ``n`` times ``fill``."""
+    a = np.asarray(v, dtype=dtype).reshape(-1)
+    return np.full(n, fill, dtype=dtype) if a.size == 0 else a
 
 
 def _ints(v, shape) -> IntArray:
@@ -41,6 +49,13 @@ class ConstraintSet:
         tracker_sigma: the tracker positions' noise (m, per axis); None: ``sigma``.  Mixed
             data weights each kind by its own noise.
         distance_sigma: the uncertainty of a stated distance between fixed points (m).
+        tilt_link: ``(n,)`` the joint index (0-based) whose child link carries the
+            inclinometer read at pose ``i``, ``-1`` none (empty: no tilt rows).
+        tilt_axis: ``(n,)`` the channel read: 0 the sensor's x axis, 1 its y axis; the
+            sensor's axes are the link's joint-frame axes
+            (:mod:`robocal.identify.constraints.tilt_rows`).
+        tilt: ``(n,)`` the reading (rad), NaN where none.
+        tilt_sigma: a reading's noise (rad).
     """
 
     q: Array
@@ -55,11 +70,25 @@ class ConstraintSet:
     sigma: float = 1e-5
     distance_sigma: float = 1e-6
     tracker_sigma: float | None = None
+    tilt_link: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    tilt_axis: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    tilt: Array = field(default_factory=lambda: np.zeros(0))
+    tilt_sigma: float = TILT_SIGMA
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)
         n = len(q)
         object.__setattr__(self, "q", q)
+        object.__setattr__(self, "tilt_link", _per_row(self.tilt_link, n, -1, np.intp))
+        object.__setattr__(self, "tilt_axis", _per_row(self.tilt_axis, n, 0, np.intp))
+        object.__setattr__(self, "tilt", _per_row(self.tilt, n, np.nan, float))
+        if not (len(self.tilt_link) == len(self.tilt_axis) == len(self.tilt) == n):
+            raise ValueError(f"tilt_link, tilt_axis and tilt need one entry per pose ({n})")
+        on = self.tilt_link >= 0
+        if not (np.isfinite(self.tilt[on]).all() and np.isin(self.tilt_axis[on], (0, 1)).all()):
+            raise ValueError("a tilt row needs a finite reading and axis 0 (x) or 1 (y)")
+        if not self.tilt_sigma > 0:
+            raise ValueError("tilt_sigma must be > 0 (rad)")
         object.__setattr__(self, "point", _ints(self.point, (n,)))
         object.__setattr__(self, "plane", _ints(self.plane, (n,)))
         object.__setattr__(self, "pairs", _ints(self.pairs, (-1, 2)))
@@ -109,6 +138,11 @@ class ConstraintSet:
         return self.sigma if self.tracker_sigma is None else float(self.tracker_sigma)
 
     @property
+    def tilted(self) -> NDArray[np.bool_]:
+        """``(n,)`` whether pose ``i`` is an inclinometer reading."""
+        return self.tilt_link >= 0
+
+    @property
     def constrained(self) -> NDArray[np.bool_]:
         """``(n,)`` whether pose ``i`` is in a constraint row (a point, a plane or a pair)."""
         out = (self.point >= 0) | (self.plane >= 0)
@@ -127,6 +161,8 @@ class ConstraintSet:
             pairs=new[self.pairs[both]], pair_length=self.pair_length[both],
             point_pairs=self.point_pairs, point_length=self.point_length, known_planes=self.known_planes,
             sigma=self.sigma, distance_sigma=self.distance_sigma, tracker_sigma=self.tracker_sigma,
+            tilt_link=self.tilt_link[rows], tilt_axis=self.tilt_axis[rows], tilt=self.tilt[rows],
+            tilt_sigma=self.tilt_sigma,
         )  # fmt: skip
 
     @property
@@ -140,12 +176,13 @@ class ConstraintSet:
 
     @property
     def kinds(self) -> tuple[str, ...]:
-        """The kinds present: ``point``, ``plane``, ``distance``, ``tracker``."""
+        """The kinds present: ``point``, ``plane``, ``distance``, ``tracker``, ``tilt``."""
         found = [
             ("point", self.n_points > 0),
             ("plane", self.n_planes > 0),
             ("distance", len(self.pairs) > 0),
             ("tracker", bool(self.tracked.any())),
+            ("tilt", bool(self.tilted.any())),
         ]
         return tuple(k for k, present in found if present)
 
@@ -160,7 +197,8 @@ class ConstraintSet:
 def merge_sets(first: ConstraintSet, *others: ConstraintSet) -> ConstraintSet:
     """One set of the poses of all: ``others``' points and planes numbered after the ones
     before them (two files' socket 0 are two sockets), their pairs re-indexed; the noise
-    (``sigma``, ``tracker_sigma``, ``distance_sigma``) and the known planes of ``first``.
+    (``sigma``, ``tracker_sigma``, ``distance_sigma``, ``tilt_sigma``) and the known planes
+    of ``first``.
 
     Raises:
         ValueError: the sets have different numbers of joints.
@@ -184,4 +222,7 @@ def merge_sets(first: ConstraintSet, *others: ConstraintSet) -> ConstraintSet:
         point_pairs=np.vstack(point_pairs), point_length=np.concatenate([s.point_length for s in sets]),
         known_planes=first.known_planes,  # its planes keep their numbers
         sigma=first.sigma, distance_sigma=first.distance_sigma, tracker_sigma=first.tracker_sigma,
+        tilt_link=np.concatenate([s.tilt_link for s in sets]),
+        tilt_axis=np.concatenate([s.tilt_axis for s in sets]),
+        tilt=np.concatenate([s.tilt for s in sets]), tilt_sigma=first.tilt_sigma,
     )  # fmt: skip

@@ -14,12 +14,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.measure.constraints.data_set import KINDS, ConstraintSet
+from robocal.measure.constraints.data_set import KINDS, TILT_SIGMA, ConstraintSet
 from robocal.measure.ik import solve_ik
 from robocal.measure.ik_starts import random_configurations
 from robocal.model.chain import Model
 
-__all__ = ["SceneTruth", "moved_scene", "simulate_constraints", "simulate_tracker_rows"]
+__all__ = ["SceneTruth", "moved_scene", "simulate_constraints", "simulate_tilt_rows", "simulate_tracker_rows"]
 
 Array = NDArray[np.float64]
 
@@ -105,8 +105,10 @@ def simulate_constraints(
 
     Args:
         true: the real robot (its end is the tool point).
-        kind: ``"point"``, ``"plane"`` or ``"distance"``.
-        n: poses (distance: ``n // 2`` pairs); targets the robot cannot reach are left out.
+        kind: ``"point"``, ``"plane"``, ``"distance"`` or ``"tilt"`` (:func:`simulate_tilt_rows`
+            with its defaults: every link's inclinometer, zero channel zeros).
+        n: poses (distance: ``n // 2`` pairs; tilt: configurations); targets the robot
+            cannot reach are left out.
         sigma: the tool point's noise (m).
         count: fixed points or planes.
         length: the distance pairs' length (m).
@@ -122,6 +124,9 @@ def simulate_constraints(
         return _points(true, n, count, sigma, rng, scene)
     if kind == "plane":
         return _planes(true, n, count, sigma, rng, scene)
+    if kind == "tilt":
+        data = simulate_tilt_rows(true, n, seed=rng)
+        return data, SceneTruth(np.zeros((0, 3)), np.zeros((0, 4)), 0.0)
     return _distances(true, n, length, sigma, rng)
 
 
@@ -159,3 +164,40 @@ def moved_scene(scene: SceneTruth, seed: int | np.random.Generator | None = 0) -
     normals = scene.planes[:, :3] @ R.T
     planes = np.column_stack([normals, scene.planes[:, 3] + normals @ t]) if len(normals) else scene.planes
     return SceneTruth(points, planes, scene.length)
+
+
+def simulate_tilt_rows(
+    true: Model,
+    n: int,
+    *,
+    links: tuple[int, ...] | None = None,
+    sigma: float = TILT_SIGMA,
+    zeros: dict[tuple[int, int], float] | None = None,
+    max_tilt: float = np.radians(60.0),
+    seed: int | np.random.Generator | None = 0,
+) -> ConstraintSet:
+    """Inclinometer readings of the ``true`` robot (its geometry and ``joint_effects`` under
+    gravity, :func:`robocal.measure.inclinometer.readings`) at ``n`` random configurations:
+    both channels of a sensor on each link of ``links`` (joint indices, 0-based; None:
+    every joint's link), plus each channel's zero ``zeros[(link, axis)]`` (rad, default 0)
+    and normal noise ``sigma`` (rad).  Readings beyond ``max_tilt`` (a sensor's range;
+    near the vertical a reading is insensitive) are left out."""
+    from robocal.measure.inclinometer import readings
+    from robocal.model.joints import joint_perturbations
+
+    rng = np.random.default_rng(seed)
+    links = tuple(range(true.dof)) if links is None else tuple(links)
+    q = random_configurations(true, n, rng=rng)
+    link = np.tile(np.repeat(np.array(links, dtype=np.intp), 2), n)
+    axis = np.tile(np.array([0, 1] * len(links), dtype=np.intp), n)
+    q_rows = np.repeat(q, 2 * len(links), axis=0)
+    names = tuple(true.joint_names[k] for k in link)
+    mounts = np.broadcast_to(np.eye(3), (len(link), 3, 3))  # the sensor's axes: the joint frame's
+    axes = tuple("xy"[a] for a in axis)
+    tilt = readings(true, q_rows, names, axes, mounts, joint_perturbations(true, q_rows))
+    zero = np.array([(zeros or {}).get((int(k), int(a)), 0.0) for k, a in zip(link, axis, strict=True)])
+    ok = np.abs(tilt) <= max_tilt
+    read = tilt + zero + sigma * rng.standard_normal(len(tilt))
+    none = -np.ones(int(ok.sum()), dtype=np.intp)
+    return ConstraintSet(q_rows[ok], none, none, sigma=1e-5, tilt_link=link[ok], tilt_axis=axis[ok],
+                         tilt=read[ok], tilt_sigma=sigma)  # fmt: skip

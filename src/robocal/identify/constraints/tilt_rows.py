@@ -1,0 +1,141 @@
+"""Inclinometer readings as rows of the constraint fit (seed 003 §4.4.1, §5.3; issue 33).
+
+A tilt row is a configuration ``q``, the link carrying an inclinometer (the child link of
+joint ``K``) and the channel read (its ``x`` or ``y`` axis).  The sensor's axes are the
+link's joint-frame axes (:meth:`robocal.model.chain.Model.joint_frames`, the mount of
+:class:`robocal.measure.inclinometer.Inclinometer` the identity), so a reading is a
+property of the robot and not of a nominal model.  With ``up`` the vertical in the base
+frame (gravity along −z of the base), channel ``x`` reads ``asin(up · R e_y)`` and
+channel ``y`` reads ``−asin(up · R e_x)``
+(:func:`robocal.measure.inclinometer.readings`), plus the channel's zero
+(``tilt_zero_<joint>_<axis>``, rad, an unknown per channel) and normal noise
+``ConstraintSet.tilt_sigma``.
+
+What a reading sees: the orientation of the sensed link only.  The chain's angle steps
+up to that link enter (the analytic columns of
+:func:`robocal.identify.tilt_identification.tilt_jacobian`: a step turns every later
+link about its axis ``ω``, the reading moves by ``±(up · ω × v)/cos(reading)``); a
+length moves no link's orientation and has a zero column, so the rank test reports it as
+not identifiable.  A rotation about the vertical (the base's yaw, joint 1 of a vertical
+arm) is invisible too.
+
+Joint effects (seed 003's backlash and compliance, ``backlash_<joint>``, ``compliance_<joint>``,
+:mod:`robocal.model.joints`, eqs. 5.15-5.19 under the static gravity loads of eq. 4.21
+from the model's mass properties) turn the links as the thesis identifies them from
+tilts; they are unknowns of the tilt rows only: the position rows of the same fit (a
+tracker, sockets) are predicted without them.  The loads are those of the start
+geometry, held fixed in the fit (as :func:`robocal.identify.tilt_identification.identify_tilt`:
+a change of 0.1° changes them by about 0.2 %), so the Jacobian is exact for this model.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.measure.constraints.data_set import TILT_AXES, ConstraintSet
+from robocal.model.chain import Model
+
+__all__ = ["EFFECT_KINDS", "ZERO_PREFIX", "TiltTerms", "tilt_figures", "tilt_rows", "tilt_terms"]
+
+Array = NDArray[np.float64]
+# clearance is left out: its tilt is ±C by the sign of a moment, a kink at C = 0 where the
+# estimate is not Gaussian (8 simulated runs: 3σ errors); `robocal data tilt` fits it
+EFFECT_KINDS = ("backlash", "compliance")
+ZERO_PREFIX = "tilt_zero_"
+MOMENT_FLOOR = 1.0  # N·m: the compliance column's scale when the loads are smaller
+
+
+@dataclass(frozen=True)
+class TiltTerms:
+    """The tilt rows' unknowns beyond the chain's.
+
+    Attributes:
+        robot: the robot whose links carry the sensors (its step names are the chain's).
+        geometry: the chain's free rotation steps of the robot (their columns are analytic).
+        zeros: ``tilt_zero_<joint>_<axis>``, one per channel read.
+        channel: ``(m,)`` each tilt row's channel (index into ``zeros``).
+        effects: the joint effects' names (``clearance_<joint>`` …): every kind at every
+            joint up to the deepest sensed link.
+        effect_scale: ``(len(effects),)`` a reading's change (rad) per unit of each effect
+            at a typical load: 1 for an angle, the largest load (N·m) for a compliance.
+        loads: ``(m, dof, 3)`` the tilt rows' load moments (eq. 4.21) at the start geometry.
+    """
+
+    robot: Model
+    geometry: tuple[str, ...]
+    zeros: tuple[str, ...]
+    channel: NDArray[np.intp]
+    effects: tuple[str, ...]
+    effect_scale: Array
+    loads: Array
+
+
+def _sensors(robot: Model, data: ConstraintSet):
+    from robocal.measure.inclinometer import Inclinometer, TiltReadings
+
+    on = data.tilted
+    names = robot.joint_names
+    links = tuple(names[k] for k in data.tilt_link[on])
+    readings = TiltReadings(data.q[on], links, tuple(TILT_AXES[a] for a in data.tilt_axis[on]),
+                            data.tilt[on], data.tilt_sigma)  # fmt: skip
+    sensors = tuple(Inclinometer(link=name) for name in dict.fromkeys(links))  # mount: the joint frame
+    return readings, sensors
+
+
+def tilt_terms(robot: Model, chain: Model, data: ConstraintSet) -> TiltTerms:
+    """The tilt rows' unknowns for ``robot`` (measured through ``chain``) and ``data``."""
+    from robocal.model.joints import EFFECT_PREFIXES, load_moments
+
+    on = data.tilted
+    names = robot.joint_names
+    keys = list(zip(data.tilt_link[on].tolist(), data.tilt_axis[on].tolist(), strict=True))
+    order = list(dict.fromkeys(keys))
+    zeros = tuple(f"{ZERO_PREFIX}{names[k]}_{TILT_AXES[a]}" for k, a in order)
+    channel = np.array([order.index(key) for key in keys], dtype=np.intp)
+    robot_names = set(robot.names)
+    geometry = tuple(s.name for s in chain.steps if s.free and s.is_rotation and s.name in robot_names)
+    deepest = int(data.tilt_link[on].max())
+    joints = names[: deepest + 1]
+    effects = tuple(EFFECT_PREFIXES[kind][0] + j for kind in EFFECT_KINDS for j in joints)
+    eta = load_moments(robot, data.q[on])
+    moment = max(float(np.abs(eta[:, :, 2]).max()) if eta.size else 0.0, MOMENT_FLOOR)
+    scale = np.array([moment if e.startswith(EFFECT_PREFIXES["compliance"][0]) else 1.0 for e in effects])
+    return TiltTerms(robot, geometry, zeros, channel, effects, scale, eta)
+
+
+def tilt_rows(terms: TiltTerms, data: ConstraintSet, values: dict[str, float], zeros: Array,
+              effects: Array) -> tuple[Array, Array, Array]:  # fmt: skip
+    """The tilt rows at the chain's ``values`` (by step name), the channel ``zeros`` (rad)
+    and the ``effects`` (SI): residuals ``(m,)`` (rad, predicted − read), their Jacobian
+    over ``terms.geometry`` ``(m, g)`` and over ``terms.effects`` ``(m, e)`` (analytic;
+    the zeros' columns are the rows' channel indicators)."""
+    from robocal.identify.tilt_identification import GEOM, jacobian_at_loads, predict_at_loads
+
+    robot = terms.robot.with_values({n: values[n] for n in terms.robot.names if n in values})
+    readings, sensors = _sensors(robot, data)
+    names = terms.effects + tuple(GEOM + g for g in terms.geometry)
+    x = np.concatenate([effects, np.zeros(len(terms.geometry))])
+    predicted = predict_at_loads(robot, readings, sensors, names, x, terms.loads)
+    J = jacobian_at_loads(robot, readings, sensors, names, x, terms.loads)
+    r = predicted + zeros[terms.channel] - readings.tilt
+    return r, J[:, len(terms.effects) :], J[:, : len(terms.effects)]
+
+
+def tilt_figures(robot: Model, data: ConstraintSet) -> tuple[tuple[str, ...], Array]:
+    """What ``robot`` (its geometry, no joint effects) makes of ``data``'s tilt rows: each
+    channel's name and its RMS residual (rad) about the channel's mean (the best zero)."""
+    if not data.tilted.any():
+        return (), np.zeros(0)
+    terms = tilt_terms(robot, robot, data)
+    values = dict(zip(robot.names, robot.values.tolist(), strict=True))
+    r = tilt_rows(terms, data, values, np.zeros(len(terms.zeros)), np.zeros(len(terms.effects)))[0]
+    rms = []
+    for k in range(len(terms.zeros)):
+        rk = r[terms.channel == k]
+        rms.append(math.sqrt(float(np.mean((rk - rk.mean()) ** 2))))
+    names = tuple(z[len(ZERO_PREFIX) :] for z in terms.zeros)
+    return names, np.array(rms)
