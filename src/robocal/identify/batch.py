@@ -29,8 +29,10 @@ from robocal import spatial
 from robocal.identify.guards import CalibrationGuardError, check_data, check_rank, check_solution
 from robocal.identify.problem import TOOL_PREFIX, frame_steps, measurement_chain
 from robocal.identify.rules import Rules
+from robocal.identify.solve_result import BatchSolveResult
 from robocal.identify.solvers import levenberg_marquardt_batch
 from robocal.identify.stages import (
+    Covariance,
     identifiable_set,
     initial_frames_and_tools,
     poorly_identifiable,
@@ -341,109 +343,153 @@ class _Batch:
         self.rotation = np.array([s.is_rotation for s in chain.steps])[self.free]
         self.free_names = [chain.names[i] for i in self.free]
 
+    # ------------------------------------------------------------------ the stage sequence
     def run(self) -> list[BatchFit | CalibrationGuardError]:
-        K, n = self.K, self.n
-        out: list[BatchFit | CalibrationGuardError | None] = [None] * K
-        full = _Group(self.chain, self.V, self.qs, self.ys, self.w, self.free)
-        x_start = self.V[:, self.free]
-        r0_plain, J0_plain = full.evaluate(x_start)
-        r0, J0 = full.weighted(x_start, np.arange(K))
-        masks = np.zeros((K, len(self.free)), dtype=bool)
-        dropped: list[list[Dropped]] = [[] for _ in range(K)]
-        for k in range(K):
+        """:func:`robocal.identify.pipeline.calibrate_physics`'s stages 4-8 for the ``K``
+        robots, in its order and with its stage functions (:mod:`robocal.identify.stages`),
+        each stage called for all robots still in the sequence: the identifiable set and
+        the rank guard, the screening, the fit with its uncertainty, the pruning (refit from
+        the start values), the result and the solution guard.  A robot refused by a guard
+        leaves the sequence with its error."""
+        out: dict[int, BatchFit | CalibrationGuardError] = {}
+        start = _BatchStart(self)
+        selections = self._identifiable(start, out)
+        selections = {k: self._screen(start, k, sel) for k, sel in selections.items()}
+        fits = self._prune(start, self._solve(start, selections))
+        for k, fit in fits.items():
+            out[k] = self._assemble(start, k, fit)
+        return [out[k] for k in range(self.K)]
+
+    def _identifiable(
+        self, start: _BatchStart, out: dict[int, BatchFit | CalibrationGuardError]
+    ) -> dict[int, _Selection]:
+        """Stage 4 per robot: the identifiable set at the start values
+        (:func:`~robocal.identify.stages.identifiable_set`, the device frame, then the tool,
+        then the robot in chain order) and the rank guard; refused robots go to ``out``."""
+        names, selections = self.free_names, {}
+        for k in range(self.K):
+            scale = np.where(self.rotation, self.length[k], 1.0)  # Problem.free_scale
+            subset = identifiable_set(start.J[k] * scale, names, roles=self.chain.roles)
             try:
-                masks[k], dropped[k] = self._unknowns(k, r0[k], J0[k], J0_plain[k])
+                check_rank(self.model, self.data[k], measure="position", tool_guess=self.tool_guess,
+                           kept=subset.kept, candidates=names)  # fmt: skip
             except CalibrationGuardError as err:
                 out[k] = err
-        pending = [k for k in range(K) if out[k] is None]
-        while pending:  # robots with the same unknowns are solved together
-            groups: dict[bytes, list[int]] = {}
-            for k in pending:
-                groups.setdefault(masks[k].tobytes(), []).append(k)
-            pending = []
-            for members in groups.values():
-                idx = np.array(members, dtype=np.intp)
-                mask = masks[idx[0]].copy()  # a copy: the loop below prunes members' rows of masks
-                cols = self.free[mask]
-                group = _Group(
-                    self.chain, self.V[idx], [self.qs[k] for k in idx], self.ys[idx], self.w[idx], cols
-                )
-                fit = levenberg_marquardt_batch(
-                    group.weighted,
-                    x_start[idx][:, mask],
-                    max_evaluations=self.max_iterations * (len(cols) + 1),
-                    tolerance=1e-10,
-                )
-                for i, k in enumerate(idx):
-                    _, cov, std, _, cond = uncertainty(fit.r[i], fit.J[i], 3, bool(self.known[k]), self.rules)
-                    J_plain = (fit.J[i] / group.w[i][:, None]).reshape(n, 3, -1)
-                    rules = self.rules
-                    found = (
-                        poorly_identifiable(
-                            std, tool_displacement_scale(J_plain), rules.max_std, rules.max_std_ratio
-                        )
-                        if fit.success[i]
-                        else None
-                    )
-                    if found is not None:  # refitted from the start values, as rc.calibrate
-                        c = int(np.flatnonzero(mask)[found[0]])
-                        masks[k, c] = False
-                        dropped[k].append(Dropped(self.free_names[c], "poorly identifiable", sigma=found[1]))
-                        pending.append(int(k))
-                        continue
-                    r_plain = (fit.r[i] / group.w[i]).reshape(n, 3)
-                    values = self.V[k].copy()
-                    values[cols] = fit.x[i]
-                    result = BatchFit(
-                        names=tuple(self.chain.names[c] for c in cols),
-                        estimates=fit.x[i].copy(),
-                        start=x_start[k, mask].copy(),
-                        std=std,
-                        covariance=cov,
-                        dropped=tuple(dropped[k]),
-                        values=values,
-                        chain=self.chain,
-                        rms_before=float(np.sqrt(np.mean(np.sum(r0_plain[k].reshape(n, 3) ** 2, axis=1)))),
-                        rms_after=float(np.sqrt(np.mean(np.sum(r_plain**2, axis=1)))),
-                        residual_std=float(np.sqrt(np.sum(r_plain**2) / max(3 * n - len(cols), 1))),
-                        condition_number=cond,
-                        iterations=int(fit.iterations[i]),
-                        evaluations=int(fit.evaluations[i]),
-                        success=bool(fit.success[i]),
-                        message=fit.message(i),
-                    )
-                    try:
-                        check_solution(result)
-                        out[k] = result
-                    except CalibrationGuardError as err:
-                        out[k] = err
-        return [o for o in out if o is not None]
+                continue
+            kept = set(subset.kept)
+            selections[k] = _Selection(np.array([name in kept for name in names]), tuple(subset.dropped))
+        return selections
 
-    def _unknowns(
-        self, k: int, r0: Array, J0: Array, J0_plain: Array
-    ) -> tuple[NDArray[np.bool_], list[Dropped]]:
-        """Robot ``k``'s unknowns among the free parameters (mask) and those left out:
-        the identifiable set at the start values, the rank guard, then the screening."""
-        names = self.free_names
-        scale = np.where(self.rotation, self.length[k], 1.0)  # Problem.free_scale
-        selection = identifiable_set(J0 * scale, names, roles=self.chain.roles)
-        check_rank(
-            self.model,
-            self.data[k],
-            measure="position",
-            tool_guess=self.tool_guess,
-            kept=selection.kept,
-            candidates=names,
-        )
-        kept = set(selection.kept)
-        mask = np.array([name in kept for name in names])
-        dropped = list(selection.dropped)
-        cols = np.flatnonzero(mask)
-        effect = tool_displacement_scale(J0_plain[:, cols].reshape(self.n, 3, -1))
-        found = screen_unidentifiable(
-            r0, J0[:, cols], effect, known_noise=bool(self.known[k]), rules=self.rules
-        )
+    def _screen(self, start: _BatchStart, k: int, selection: _Selection) -> _Selection:
+        """Stage 5: the hopeless unknowns fixed before the first fit
+        (:func:`~robocal.identify.stages.screen_unidentifiable`)."""
+        cols = np.flatnonzero(selection.mask)
+        effect = tool_displacement_scale(start.J_plain[k][:, cols].reshape(self.n, 3, -1))
+        found = screen_unidentifiable(start.r[k], start.J[k][:, cols], effect,
+                                      known_noise=bool(self.known[k]), rules=self.rules)  # fmt: skip
+        mask, dropped = selection.mask.copy(), list(selection.dropped)
         for c, sigma in found:
             mask[cols[c]] = False
-            dropped.append(Dropped(names[cols[c]], "poorly identifiable", sigma=sigma))
-        return mask, dropped
+            dropped.append(Dropped(self.free_names[cols[c]], "poorly identifiable", sigma=sigma))
+        return _Selection(mask, tuple(dropped))
+
+    def _solve(self, start: _BatchStart, selections: dict[int, _Selection]) -> dict[int, _Fit]:
+        """Stage 6: the fit of each robot's selection from its start values and the
+        :func:`~robocal.identify.stages.uncertainty` at its solution; robots with the same
+        unknowns are one batched solve (:func:`levenberg_marquardt_batch`)."""
+        groups: dict[bytes, list[int]] = {}
+        for k, selection in selections.items():
+            groups.setdefault(selection.mask.tobytes(), []).append(k)
+        fits: dict[int, _Fit] = {}
+        for members in groups.values():
+            idx = np.array(members, dtype=np.intp)
+            mask = selections[members[0]].mask
+            cols = self.free[mask]
+            group = _Group(
+                self.chain, self.V[idx], [self.qs[k] for k in idx], self.ys[idx], self.w[idx], cols
+            )
+            solved = levenberg_marquardt_batch(group.weighted, start.x[idx][:, mask],
+                                               max_evaluations=self.max_iterations * (len(cols) + 1),
+                                               tolerance=1e-10)  # fmt: skip
+            for i, k in enumerate(members):
+                covariance = uncertainty(solved.r[i], solved.J[i], 3, bool(self.known[k]), self.rules)
+                fits[k] = _Fit(selections[k], solved, i, group.w[i], covariance)
+        return fits
+
+    def _prune(self, start: _BatchStart, fits: dict[int, _Fit]) -> dict[int, _Fit]:
+        """Stage 6, pruning: after a converged fit the worst poorly identifiable unknown
+        (:func:`~robocal.identify.stages.poorly_identifiable`) is fixed and the robot
+        refitted from its start values, until none is left."""
+        todo = dict(fits)
+        while todo:
+            pruned: dict[int, _Selection] = {}
+            for k, fit in todo.items():
+                if not fit.solved.success[fit.i]:
+                    continue
+                J_plain = (fit.solved.J[fit.i] / fit.w[:, None]).reshape(self.n, 3, -1)
+                found = poorly_identifiable(fit.covariance.std, tool_displacement_scale(J_plain),
+                                            self.rules.max_std, self.rules.max_std_ratio)  # fmt: skip
+                if found is not None:
+                    mask, c = fit.selection.mask.copy(), int(np.flatnonzero(fit.selection.mask)[found[0]])
+                    mask[c] = False
+                    why = Dropped(self.free_names[c], "poorly identifiable", sigma=found[1])
+                    pruned[k] = _Selection(mask, (*fit.selection.dropped, why))
+            todo = self._solve(start, pruned) if pruned else {}
+            fits.update(todo)
+        return fits
+
+    def _assemble(self, start: _BatchStart, k: int, fit: _Fit) -> BatchFit | CalibrationGuardError:
+        """Stages 7-8: robot ``k``'s result, or the solution guard's refusal."""
+        n, solved, i, mask = self.n, fit.solved, fit.i, fit.selection.mask
+        cols = self.free[mask]
+        r_plain = (solved.r[i] / fit.w).reshape(n, 3)
+        values = self.V[k].copy()
+        values[cols] = solved.x[i]
+        cov = fit.covariance
+        result = BatchFit(
+            names=tuple(self.chain.names[c] for c in cols), estimates=solved.x[i].copy(),
+            start=start.x[k, mask].copy(), std=cov.std, covariance=cov.covariance,
+            dropped=fit.selection.dropped, values=values, chain=self.chain,
+            rms_before=float(np.sqrt(np.mean(np.sum(start.r_plain[k].reshape(n, 3) ** 2, axis=1)))),
+            rms_after=float(np.sqrt(np.mean(np.sum(r_plain**2, axis=1)))),
+            residual_std=float(np.sqrt(np.sum(r_plain**2) / max(3 * n - len(cols), 1))),
+            condition_number=cov.condition, iterations=int(solved.iterations[i]),
+            evaluations=int(solved.evaluations[i]), success=bool(solved.success[i]),
+            message=solved.message(i),
+        )  # fmt: skip
+        try:
+            check_solution(result)
+        except CalibrationGuardError as err:
+            return err
+        return result
+
+
+class _BatchStart:
+    """The ``K`` robots at their start values (stages 2-3 of the sequence): unknowns ``x``
+    ``(K, p)``, weighted and plain residuals ``(K, 3n)`` and Jacobians ``(K, 3n, p)``."""
+
+    def __init__(self, batch: _Batch) -> None:
+        full = _Group(batch.chain, batch.V, batch.qs, batch.ys, batch.w, batch.free)
+        self.x = batch.V[:, batch.free]
+        self.r_plain, self.J_plain = full.evaluate(self.x)
+        self.r, self.J = full.weighted(self.x, np.arange(batch.K))
+
+
+@dataclass(frozen=True)
+class _Selection:
+    """A robot's unknowns among the free parameters (``mask`` ``(p,)``) and those left out."""
+
+    mask: NDArray[np.bool_]
+    dropped: tuple[Dropped, ...]
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """A robot's fit: row ``i`` of a batched solve of its ``selection``, its row weights
+    ``w`` ``(3n,)`` and the covariance there."""
+
+    selection: _Selection
+    solved: BatchSolveResult
+    i: int
+    w: Array
+    covariance: Covariance
