@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from robocal.choices import BOUNDS_NAMES, LOSSES, Loss
+from robocal.identify.rules import Rules
 from robocal.model.chain import Model
 from robocal.model.dynamics import Payload
 
@@ -114,10 +115,11 @@ class Pruning:
     ``screen_margin`` times that threshold are fixed at once; ``significance``: each tail of
     the χ² test of a stated noise (the decision rules: :class:`robocal.identify.rules.Rules`)."""
 
-    max_std: float = 5e-4
-    max_std_ratio: float = 3.0
-    screen_margin: float = 3.0
-    significance: float = 1e-3
+    # the defaults are the rules' (defined once, in robocal.identify.rules)
+    max_std: float = Rules.max_std
+    max_std_ratio: float = Rules.max_std_ratio
+    screen_margin: float = Rules.screen_margin
+    significance: float = Rules.significance
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from robocal.identify.problem import Problem
+from robocal.identify.rules import Rules, condition_number
 from robocal.identify.solve_result import SolveResult
 from robocal.identify.stages import Covariance, residual_variance
 from robocal.model.chain import Model
@@ -386,18 +387,21 @@ class ChunkedProblem:
         self._residuals[s] = residuals
 
 
-def streamed_covariance(ne: NormalEquations, known_noise: bool, significance: float) -> Covariance:
+def streamed_covariance(ne: NormalEquations, known_noise: bool, rules: Rules) -> Covariance:
     """The :class:`~robocal.identify.stages.Covariance` of a fit from its accumulated normal
     equations: the rule of :func:`robocal.identify.stages.uncertainty` (σ̂² per row group
-    by :func:`~robocal.identify.stages.residual_variance`; pose measurements: the sandwich
-    of the two groups), on ``JᵀJ`` instead of ``J``.  Columns scaled to unit norm before
-    the (pseudo-)inverse; the condition number is the scaled ``J``'s (√ of ``JᵀJ``'s)."""
+    by :func:`~robocal.identify.stages.residual_variance` at ``rules.significance``; pose
+    measurements: the sandwich of the two groups), on ``JᵀJ`` instead of ``J``.  Columns
+    scaled to unit norm before the (pseudo-)inverse; the condition number is
+    :func:`robocal.identify.rules.condition_number` of the scaled ``JᵀJ``'s eigenvalues (the
+    one definition every engine reports)."""
+    significance = rules.significance
     p = len(ne.Jtr)
     norms = np.sqrt(np.maximum(np.diag(ne.JtJ), 1e-300))
     outer = np.outer(norms, norms)
     N = ne.JtJ / outer
     lam = np.linalg.eigvalsh(N)
-    cond = math.sqrt(lam[-1] / lam[0]) if lam[0] > 0 else float("inf")
+    cond = condition_number(lam)
     inverse = np.linalg.pinv(N, hermitian=True)
     if ne.position_normal is None or ne.position_cost is None or ne.position_rows is None:
         s2 = residual_variance(ne.cost, ne.rows - p, known_noise, significance)

@@ -332,7 +332,7 @@ def _fit_all_poses(
         chunked, x0, max_iterations=options.setup.max_iterations, progress=iteration
     )
     known_noise = options.weights.by == "sigma" and data.sigma is not None
-    covariance: Covariance = streamed_covariance(ne, known_noise, Rules.of(options.pruning).significance)
+    covariance: Covariance = streamed_covariance(ne, known_noise, Rules.of(options.pruning))
     result = _with_covariance(with_estimates(sub, solved.x), covariance.covariance)
     result, residual_poses = _refit_residual(result, sub, data, streaming, solved.x)
     residuals = None if refits else chunked.residuals_at(solved.x)  # the last pass's, at the solution
