@@ -224,7 +224,7 @@ class ConstraintProblem:
             self.length_scale if (n[-1] in "ab" and n.startswith("plane")) or n.startswith("tilt") else 1.0
             for n in self.scene_names
         ]
-        effects = [] if self.tilt is None else self.length_scale * self.tilt.effect_scale
+        effects = np.zeros(0) if self.tilt is None else self.length_scale * self.tilt.effect_scale
         return np.concatenate([np.where(rot, self.length_scale, 1.0), scene, effects])
 
     @property

@@ -81,7 +81,7 @@ def _sensors(robot: Model, data: ConstraintSet):
     names = robot.joint_names
     links = tuple(names[k] for k in data.tilt_link[on])
     readings = TiltReadings(data.q[on], links, tuple(TILT_AXES[a] for a in data.tilt_axis[on]),
-                            data.tilt[on], data.tilt_sigma)  # fmt: skip
+                            data.tilt[on], np.full(int(on.sum()), data.tilt_sigma))  # fmt: skip
     sensors = tuple(Inclinometer(link=name) for name in dict.fromkeys(links))  # mount: the joint frame
     return readings, sensors
 
