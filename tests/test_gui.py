@@ -216,7 +216,8 @@ def shots(tmp_path):
 
 @pytest.fixture
 def page(browser, gui_url):
-    context = browser.new_context(viewport={"width": 1600, "height": 1000}, accept_downloads=True)
+    width = int(os.environ.get("ROBOCAL_GUI_WIDTH", "1600"))  # docs/gui_screenshots.py: 1024 too
+    context = browser.new_context(viewport={"width": width, "height": 1000}, accept_downloads=True)
     pg = context.new_page()
     foreign: list[str] = []
     errors: list[str] = []

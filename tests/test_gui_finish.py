@@ -12,15 +12,29 @@ from __future__ import annotations
 import itertools
 import json
 import queue as queue_module
+import subprocess
+import sys
 import time
+import urllib.request
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 import robocal as rc
-from robocal.apps.gui.jobs import CalibrationJob, JobRunner, JobState, _apply, read_options, request_of
+from robocal.apps.gui.jobs import (
+    CalibrationJob,
+    JobRunner,
+    JobState,
+    RunInfo,
+    _apply,
+    read_options,
+    request_of,
+)
 from robocal.identify.streaming_calibrate import Streaming
 from robocal.measure.measurements import Measurements
 from robocal.workflow import CalibrateRequest, FitOptions, calibrate_file
+from tests.test_gui import _radio, browser, gui_url  # noqa: F401 (fixtures)
 
 STREAM = Streaming(threshold=1000, subsample=900, chunk=700)  # several chunks, a real subsample
 PROBE = np.array([0.0, 0.0, 0.1])
@@ -106,3 +120,54 @@ def test_a_failed_runs_message_outlives_the_runner(tmp_path):
     assert info.status == "error" and info.error == record["error"]
     reopened = again.state("r1")
     assert reopened is not None and reopened.error == record["error"]
+
+
+def test_the_run_list_shows_a_failed_runs_message_as_text():
+    from robocal.apps.gui.runs_page import _run_table
+
+    info = RunInfo("r1", "s", "bad.csv", "ur10", 0.0, "error", 1.0, "bad.csv: row 2 <b>&amp;</b>")
+    table = _run_table([info], "other", None)
+    cell = table.children[1].children[0].children[3]
+    # a plain string child: React writes it as text (escaped), never as markup
+    assert cell.children == "failed: bad.csv: row 2 <b>&amp;</b>"
+
+
+@pytest.fixture(scope="module")
+def two_files(tmp_path_factory):
+    """A two-socket file and a tracker file of the UR10 (simulated; m and rad)."""
+    where = tmp_path_factory.mktemp("mixed")
+    q = np.random.default_rng(0).uniform(-2.0, 2.0, (60, 6))
+    np.savetxt(where / "poses.csv", q, delimiter=",", header="q1,q2,q3,q4,q5,q6", comments="")
+    cli = [sys.executable, "-m", "robocal.cli", "simulate", "ur10"]
+    track, sock = where / "track.csv", where / "sock.csv"
+    subprocess.run([*cli, "--poses", str(where / "poses.csv"), "-o", str(track), "--seed", "1"], check=True)
+    subprocess.run(
+        [*cli, "--kind", "point", "--n", "60", "--count", "2", "--seed", "1", "-o", str(sock)], check=True
+    )
+    return sock, track
+
+
+def test_a_socket_file_and_a_tracker_file_calibrate_together(browser, gui_url, two_files):  # noqa: F811
+    """The page's second file joins the first in one fit, as ``--data a --data b``: the saved
+    constraints.json names the tracker file and each kind's noise."""
+    sock, track = two_files
+    context = browser.new_context(viewport={"width": 1024, "height": 900})
+    pg = context.new_page()
+    try:
+        pg.goto(gui_url)
+        pg.get_by_text("Calibration", exact=True).click()
+        pg.locator("#upload-csv input[type=file]").set_input_files(str(sock))
+        pg.locator("#upload-more input[type=file]").set_input_files(str(track))
+        pg.locator("#more-list", has_text="track.csv").wait_for(timeout=30_000)
+        _radio(pg, "cal-model", "ur10")
+        pg.locator("#con-fieldset").wait_for(state="visible", timeout=60_000)
+        pg.click("#cal-run")
+        pg.locator("#constraint-figures").wait_for(timeout=240_000)
+        recorded = pg.locator("#cal-report a", has_text="constraints.json").get_attribute("href")
+        with urllib.request.urlopen(gui_url.rstrip("/") + recorded, timeout=30) as r:
+            doc = json.loads(r.read())
+        assert [Path(t["path"]).name for t in doc["tracker_data"]] == ["track.csv"]
+        assert set(doc["noise_per_kind_m"]) >= {"tracker"}
+        assert "tracker rows alone" in pg.locator("#cal-results").inner_text()
+    finally:
+        context.close()

@@ -18,7 +18,7 @@ from typing import Any
 
 from dash import Dash, Input, Output, State, dcc, html, no_update
 
-from robocal.apps.gui import columns_view, constraint_view, export_page, program_view, runs_page
+from robocal.apps.gui import columns_view, constraint_view, export_page, mixed_files, program_view, runs_page
 from robocal.apps.gui.calibrate_views import PREVIEW_ROWS as PREVIEW_ROWS
 from robocal.apps.gui.calibrate_views import (
     decode_bytes,
@@ -79,6 +79,7 @@ def _reader_fieldset() -> html.Fieldset:
             html.Legend("measurement file and reader options"),
             dcc.Upload(html.Button("open measurement CSV"), id="upload-csv"),
             html.Span(id="csv-name", className="hint"),
+            mixed_files.controls(),
             row("lengths", radio("opt-length", ("m", "mm", "um"), "m")),
             row("angles", radio("opt-angle", ("rad", "deg"), "rad")),
             row("separator", radio("opt-sep", ("auto", ";", ",", "tab", "space"), "auto")),
@@ -206,6 +207,7 @@ RUN_STATES = (
     State("csv-file", "data"),
     State("con-distances", "data"),
     State("con-level", "value"),
+    State("more-files", "data"),
 )
 
 # the upload's size is checked in the browser: a file over the limit never reaches the server
@@ -248,6 +250,7 @@ def _register_data(app: Dash, page: _Page) -> None:
         return file["label"]
 
     columns_view.register(app, page.data_file)
+    mixed_files.register(app, lambda contents, name: _upload(page, contents, name))
 
     @app.callback(Output("con-fieldset", "style"), Output("con-kind", "children"), Input("csv-file", "data"))
     def constraint_options(file):
@@ -364,9 +367,9 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
     error)`` when a value is wrong."""
     choice, built, measure, method, residual, train_n, seed, tool, noise, compliance, file = args[8:19]
     path = page.data_file((file or {}).get("token"))
-    if constraint_view.constraint_file_kind(path) is not None:
+    if constraint_view.constraint_file_kind(path) is not None or (path is not None and args[21]):
         assert path is not None  # a constraint file is a file
-        return _start_constraint_run(page, session, path, args)
+        return _start_constraint_run(page, session, path, args)  # several files: one fit, as the CLI
     try:
         options = _reader_options(args[:8])
         if path is None:
@@ -425,21 +428,23 @@ def _start_constraint_run(page: _Page, session: str, path: Path, args: Sequence[
     from robocal.model.files import save_model
 
     choice, built, *_ = args[8:]
-    rows, level = args[19], args[20]
+    rows, level, added = args[19], args[20], args[21]
     try:
         options = _reader_options(args[:8])
         if choice is None:
             raise ValueError("choose the robot (its model)")
         model = page.model_for(choice, built, "position")
         distances = constraint_view.distances_of(rows)
+        more = mixed_files.more_paths(added, page.data_file)
     except ValueError as err:
         message = gui_words(public_text(str(err), page.workdir))
         return no_update, html.Span(message, className="error", id="cal-error")
     run_id = uuid.uuid4().hex[:12]
     (page.workdir / "runs").mkdir(exist_ok=True)
     model_file = save_model(model, page.workdir / "runs" / f"{run_id}.model.yaml")
-    kind = ConstraintOptions(distances, int(level or 2))
+    kind = ConstraintOptions(distances, int(level or 2), more)
     job = CalibrationJob(data=path, reader=options, model_file=model_file, out=page.workdir / "runs" / run_id,
                          constraints=kind)  # fmt: skip
     page.runner.start(job, run_id, session, model.name)
-    return run_id, f"calibrating {model.name} on {path.name} (constraints) ..."
+    names = ", ".join(p.name for p in (path, *more))
+    return run_id, f"calibrating {model.name} on {names} (constraints) ..."

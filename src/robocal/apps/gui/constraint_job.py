@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 __all__ = ["FIGURES_FILE", "ConstraintOptions", "figures_doc", "run_constraint_job"]
@@ -20,10 +21,12 @@ FIGURES_FILE = "constraint_figures.json"
 @dataclass(frozen=True)
 class ConstraintOptions:
     """A constraint file's options: known distances ``(a, b, metres)`` between its fixed
-    points and the level (1 joint offsets, 2 kinematic)."""
+    points, the level (1 joint offsets, 2 kinematic) and the further files of the same fit
+    (tracker or constraint files, after the job's own: ``robocal calibrate --data a --data b``)."""
 
     distances: tuple[tuple[int, int, float], ...] = ()
     level: int = 2
+    more_data: tuple[Path, ...] = ()
 
 
 def run_constraint_job(job: Any, progress: Callable[[str, float], None]) -> None:
@@ -36,8 +39,9 @@ def run_constraint_job(job: Any, progress: Callable[[str, float], None]) -> None
 
     options: ConstraintOptions = job.constraints
     request = ConstraintRequest(
-        (job.data,), rc.load_model(job.model_file), job.out, angle_unit=job.reader["angle_unit"],
-        length_unit=job.reader["length_unit"], distances=options.distances, level=options.level,
+        (job.data, *options.more_data), rc.load_model(job.model_file), job.out,
+        angle_unit=job.reader["angle_unit"], length_unit=job.reader["length_unit"],
+        distances=options.distances, level=options.level,
         report=True, progress=progress,
     )  # fmt: skip
     run = calibrate_constraint_files(request)

@@ -134,7 +134,13 @@ def _figure(plan: PosePlan, robot: str) -> Any:
         title=f"{len(points)} planned tool points (mm, robot base), in measuring order",
         height=560,
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
-        scene={"aspectmode": "data", "xaxis_title": "x mm", "yaxis_title": "y mm", "zaxis_title": "z mm"},
+        # few ticks and the camera a little farther out: at 1024 px the corner's tick labels
+        # ran into each other and the z axis was cut at the bottom
+        scene={
+            "aspectmode": "data",
+            **{f"{a}axis": {"title": f"{a} mm", "nticks": 5} for a in "xyz"},
+            "camera": {"eye": {"x": 1.6, "y": 1.6, "z": 1.1}},
+        },
     )
     return fig
 
