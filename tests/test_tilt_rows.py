@@ -136,3 +136,40 @@ def test_csv_round_trip_and_kind(tmp_path, ur10, true):
     bad.write_text("\n".join([text[0], ",".join(["0"] * ur10.dof) + ",9,x,1.0"]) + "\n")
     with pytest.raises(ConstraintFileError, match="column link"):
         read_constraints(bad, ur10.dof)
+
+
+def _tilt_lines(output: str) -> dict[str, list[float]]:
+    """The validate output's tilt figures (deg): after the calibration, then before."""
+    out: dict[str, list[float]] = {}
+    for line in output.splitlines():
+        if line.strip().startswith("tilt ") and "RMS residual" in line:
+            name = line.split()[1].rstrip(":")
+            out.setdefault(name, []).append(float(line.split("RMS residual")[1].split()[0]))
+    return out
+
+
+def test_cli_simulate_calibrate_validate_tilt(tmp_path):
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    runner = CliRunner()
+    data, out = tmp_path / "tilt.csv", tmp_path / "out"
+    sim = runner.invoke(
+        app, ["simulate", "ur10", "--kind", "tilt", "--n", "20", "-o", str(data), "--seed", "3"]
+    )
+    assert sim.exit_code == 0, sim.output
+    cal = runner.invoke(app, ["calibrate", "ur10", "--data", str(data), "-o", str(out)])
+    assert cal.exit_code == 0, cal.output
+    assert "a2" in cal.output.split("not identifiable")[1]  # lengths: not seen
+    val = runner.invoke(app, ["validate", str(out), "--data", str(data)])
+    assert val.exit_code == 0, val.output
+    figures = _tilt_lines(val.output)
+    assert len(figures) >= 10  # both channels of the links' sensors
+    for after, before in figures.values():
+        assert after < 0.003 and after < before  # the noise is 0.001°: after near it, before above
+    bad = tmp_path / "bad.csv"
+    bad.write_text(data.read_text().replace(",x,", ",q,", 1))
+    refused = runner.invoke(app, ["calibrate", "ur10", "--data", str(bad), "-o", str(tmp_path / "o2")])
+    assert refused.exit_code != 0 and "column axis" in refused.output and "Traceback" not in refused.output
+    assert not (tmp_path / "o2" / "model.yaml").exists()

@@ -32,7 +32,7 @@ __all__ = [
     "validate_constraint_file",
 ]
 
-CONSTRAINT_MEASURES = ("point", "plane", "distance")
+CONSTRAINT_MEASURES = ("point", "plane", "distance", "tilt")
 RESULT_FILE = "constraints.json"  # robocal.workflow.constraints.CONSTRAINT_RESULT_FILE
 
 
@@ -199,6 +199,17 @@ def _scene_doc(scene, path: Path, n: int) -> dict:
     }
 
 
+def _simulated_noise(kind: str, noise: str | None) -> float:
+    """``--noise``: the tool point's σ (m; 10 µm by default), an inclinometer's (rad, an
+    angle such as 0.001deg; seed 003's resolution by default) for ``--kind tilt``."""
+    from robocal.measure.constraints.data_set import TILT_SIGMA
+    from robocal.measure.true_model import parse_quantity_option
+
+    if kind == "tilt":
+        return TILT_SIGMA if noise is None else parse_quantity_option(noise, "angle", "--noise")
+    return 1e-5 if noise is None else parse_quantity_option(noise, "length", "--noise")
+
+
 def simulate_constraint_file(
     model, kind: str, out: Path, *, n: int, count: int, length: str, noise: str | None, seed: int | None,
     length_tol: str, angle_tol: str, placements: int = 1,
@@ -216,7 +227,7 @@ def simulate_constraint_file(
     if n < 4 or count < 1:
         raise fail("--n must be >= 4 and --count >= 1")
     length_m = parse_quantity_option(length, "length", "--length")
-    sigma = 1e-5 if noise is None else parse_quantity_option(noise, "length", "--noise")
+    sigma = _simulated_noise(kind, noise)
     files, runs = placement_files(out, placements), []
     try:
         true = draw_true_model(model, length=length_tol, angle=angle_tol, seed=seed)

@@ -103,8 +103,9 @@ class ConstraintResult:
         dropped: what was not identified, and why (never invented: held at the start).
         identifiable: the names the rank test kept before pruning.
         points: ``(K, 3)`` the fixed points (m). planes: ``(P, 4)`` normal and offset (m).
-        rms_before, rms_after: RMS weighted residual times σ (m) at the start and after.
-        residual_std: σ̂ of the tool point (m) from the residuals.
+        rms_before, rms_after: RMS weighted residual times σ (m) at the start and after
+            (rad for inclinometer readings alone).
+        residual_std: σ̂ of the tool point (m; a reading's, rad, for readings alone).
         kinds: the measurement kinds used.
         prior: the prior toward the nominal geometry the fit used (None: a least-squares fit).
         kind_sigma: mixed data: the noise (m) each kind was weighted by, ``(("point", σ),
@@ -137,12 +138,13 @@ class ConstraintResult:
     def summary_lines(self) -> list[str]:
         """A short human summary (mm, deg)."""
         robot = [n for n in self.names if not n.startswith(("point", "plane"))]
+        scale, unit, digits = (180 / math.pi, "deg", 5) if self.kinds == ("tilt",) else (1e3, "mm", 3)
         lines = [
             f"measurements: {', '.join(self.kinds)}; "
             f"fit {'converged' if self.success else 'FAILED: ' + self.message}",
             f"identified ({len(robot)}): {', '.join(robot) or '-'}",
-            f"residual: {self.rms_before * 1e3:.3f} mm -> {self.rms_after * 1e3:.3f} mm RMS "
-            f"(sigma-hat {self.residual_std * 1e3:.3f} mm)",
+            f"residual: {self.rms_before * scale:.{digits}f} {unit} -> {self.rms_after * scale:.{digits}f} "
+            f"{unit} RMS (sigma-hat {self.residual_std * scale:.{digits}f} {unit})",
         ]
         if self.prior is not None:
             lines.append(self.prior.line())
@@ -349,7 +351,8 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
     T_frame = chain.with_free_values(full[: problem.layout.n_chain]).fk(np.zeros((1, model.dof)))[0]
     T_frame = T_frame @ np.linalg.inv(_robot_and_tool(robot, tool).fk(np.zeros((1, model.dof)))[0])
     r0, r = problem.measurement_residual(problem.x0), problem.measurement_residual(x)
-    sigma = problem.data.sigma
+    tilt_only = problem.data.kinds == ("tilt",)  # the figures in rad, not m
+    sigma = problem.data.tilt_sigma if tilt_only else problem.data.sigma
     dof = max(len(r) - len(x), 1)
     figures = constraint_figures(robot, problem.data, tool, T_frame)
     return ConstraintResult(

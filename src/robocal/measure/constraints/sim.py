@@ -109,7 +109,7 @@ def simulate_constraints(
             with its defaults: every link's inclinometer, zero channel zeros).
         n: poses (distance: ``n // 2`` pairs; tilt: configurations); targets the robot
             cannot reach are left out.
-        sigma: the tool point's noise (m).
+        sigma: the tool point's noise (m); tilt: a reading's (rad).
         count: fixed points or planes.
         length: the distance pairs' length (m).
         seed: the random draw.
@@ -125,7 +125,7 @@ def simulate_constraints(
     if kind == "plane":
         return _planes(true, n, count, sigma, rng, scene)
     if kind == "tilt":
-        data = simulate_tilt_rows(true, n, seed=rng)
+        data = simulate_tilt_rows(true, n, sigma=sigma, seed=rng)
         return data, SceneTruth(np.zeros((0, 3)), np.zeros((0, 4)), 0.0)
     return _distances(true, n, length, sigma, rng)
 
