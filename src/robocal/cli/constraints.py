@@ -29,6 +29,7 @@ __all__ = [
     "plan_constraint_poses",
     "simulate_constraint_command",
     "simulate_constraint_file",
+    "tracker_file",
     "validate_constraint_file",
 ]
 
@@ -166,18 +167,24 @@ def validate_constraint_file(
 def simulate_constraint_command(model_of, kind: str, poses, out, force: bool, options: tuple) -> None:
     """``robocal simulate ROBOT --kind KIND``: ``model_of()`` the robot; ``options``: ``--n``,
     ``--count``, ``--length``, ``--noise``, ``--seed``, ``--length-tol``, ``--angle-tol``,
-    ``--placements``."""
+    ``--placements``, ``--also-tracker``."""
     from robocal.console import refuse_overwrite
     from robocal.model.complete import calibration_model
 
-    n, count, length, noise, seed, length_tol, angle_tol, placements = options
+    n, count, length, noise, seed, length_tol, angle_tol, placements, tracker = options
     if out is None or poses is not None:
         raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
-    for path in placement_files(out, placements):
+    for path in placement_files(out, placements) + ([tracker_file(out)] if tracker else []):
         refuse_overwrite(path, force, "measurement file")
     model = calibration_model(model_of(), "position")
     simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise, seed=seed,
-                             length_tol=length_tol, angle_tol=angle_tol, placements=placements)  # fmt: skip
+                             length_tol=length_tol, angle_tol=angle_tol, placements=placements,
+                             tracker=tracker)  # fmt: skip
+
+
+def tracker_file(out: Path) -> Path:
+    """``OUT``'s stem + ``.tracker`` + suffix: the tracker file of ``--also-tracker``."""
+    return out.with_name(f"{out.stem}.tracker{out.suffix}")
 
 
 def placement_files(out: Path, placements: int) -> list[Path]:
@@ -212,14 +219,17 @@ def _simulated_noise(kind: str, noise: str | None) -> float:
 
 def simulate_constraint_file(
     model, kind: str, out: Path, *, n: int, count: int, length: str, noise: str | None, seed: int | None,
-    length_tol: str, angle_tol: str, placements: int = 1,
+    length_tol: str, angle_tol: str, placements: int = 1, tracker: int = 0,
 ) -> None:  # fmt: skip
     """Simulate ``kind`` on a true robot drawn around ``model``; write ``out`` and
     ``out``.truth.json (the true parameters and scene); ``placements`` > 1: the same true
     robot at the scene moved rigidly (:func:`~robocal.measure.constraints.sim.moved_scene`),
-    one file each (:func:`placement_files`), all in the one truth file: held-out data."""
+    one file each (:func:`placement_files`), all in the one truth file: held-out data;
+    ``tracker`` > 0: also that many tracker rows of the same true robot (random
+    configurations, the tool point in the robot's base frame, 10 µm per axis) in
+    :func:`tracker_file`, a plain tracker file (``q1..qN, x, y, z`` in m)."""
     from robocal.measure.constraints.data import write_constraints
-    from robocal.measure.constraints.sim import moved_scene, simulate_constraints
+    from robocal.measure.constraints.sim import moved_scene, simulate_constraints, simulate_tracker_rows
     from robocal.measure.true_model import draw_true_model, parse_quantity_option
 
     if kind not in CONSTRAINT_MEASURES:
@@ -241,6 +251,7 @@ def simulate_constraint_file(
             runs.append(
                 simulate_constraints(true, kind, n, sigma=sigma, length=length_m, seed=rng, scene=moved)
             )
+        tracked = simulate_tracker_rows(true, tracker, sigma=1e-5, seed=rng) if tracker else None
     except ValueError as err:
         raise fail(str(err)) from None
     truth = {"kind": kind, "sigma_m": sigma,
@@ -252,8 +263,13 @@ def simulate_constraint_file(
 
     truth_path = out.with_name(out.name + ".truth.json")
     texts = {f: write_constraints(d).encode() for (d, _), f in zip(runs, files, strict=True)}
+    if tracked is not None:  # the same true robot: a tracker calibration to compare with
+        texts[tracker_file(out)] = write_constraints(tracked).encode()
+        truth["tracker_file"] = {"file": tracker_file(out).name, "rows": tracked.n, "sigma_m": 1e-5,
+                                 "T_device_base": np.eye(4).tolist()}  # fmt: skip
     write_together(texts | {truth_path: (json.dumps(truth, indent=1) + "\n").encode()})
     written = [f"{safe(str(f))} ({d.n} rows, {kind})" for (d, _), f in zip(runs, files, strict=True)]
+    written += [f"{safe(str(tracker_file(out)))} ({tracker} rows, tracker)"] if tracker else []
     console.print(f"wrote {', '.join(written)} and the truth {safe(str(truth_path))}", highlight=False,
                   soft_wrap=True)  # fmt: skip
 

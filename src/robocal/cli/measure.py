@@ -272,9 +272,9 @@ KindOption = Annotated[
     str | None,
     typer.Option(
         "--kind",
-        metavar="point|plane|distance",
+        metavar="point|plane|distance|tilt",
         help="instead: constraint measurements (no tracker: ball in socket, plane touches, ball-bar "
-        "pairs) at N configurations of the true robot, to -o; the truth beside them",
+        "pairs, inclinometer readings) at N configurations of the true robot, to -o; the truth beside them",
     ),
 ]
 CountOption = Annotated[
@@ -287,6 +287,10 @@ LengthOption = Annotated[
 PLACEMENTS_HELP = "--kind: K placements of the scene, one true robot (OUT, OUT.placement2.csv ...: held-out)"
 PlacementsOption = Annotated[
     int, typer.Option("--placements", min=1, max=20, metavar="K", help=PLACEMENTS_HELP)
+]
+ALSO_TRACKER_HELP = "--kind: also N tracker rows of the same true robot in OUT.tracker.csv (truth shared)"
+AlsoTrackerOption = Annotated[
+    int, typer.Option("--also-tracker", min=0, max=100_000, metavar="N", help=ALSO_TRACKER_HELP)
 ]
 
 
@@ -311,10 +315,11 @@ def simulate_command(
     count: CountOption = 2,
     length: LengthOption = "300mm",
     placements: PlacementsOption = 1,
+    also_tracker: AlsoTrackerOption = 0,
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
     if kind is not None:  # fixed points, planes, distances (robocal.cli.constraints)
-        options = (n, count, length, noise, seed, length_tol, angle_tol, placements)
+        options = (n, count, length, noise, seed, length_tol, angle_tol, placements, also_tracker)
         return _simulate_constraints(robot, kind, poses, out, force, options)
     if log:
         if poses is not None or out is None:
