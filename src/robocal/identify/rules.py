@@ -28,15 +28,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 __all__ = ["NO_CANDIDATE", "Rules", "condition_number", "prune_candidate", "variance_factor"]
 
-if TYPE_CHECKING:
-    from robocal.identify.options import Pruning
+
+class Pruning(Protocol):
+    """What :meth:`Rules.of` reads of the pruning options
+    (:class:`robocal.identify.options.Pruning`, whose defaults are the fields of
+    :class:`Rules`: this module does not import it, to keep the options importing the rules)."""
+
+    @property
+    def max_std(self) -> float: ...
+    @property
+    def max_std_ratio(self) -> float: ...
+    @property
+    def screen_margin(self) -> float: ...
+    @property
+    def significance(self) -> float: ...
+
 
 Array = NDArray[np.float64]
 
