@@ -61,6 +61,12 @@ td.params .param { display: inline-block; margin-right: 0.7rem; white-space: now
   .page.builder { flex-wrap: wrap; }
   .page.builder > .left, .page.builder > .right { flex: 1 1 100%; }
 }
+/* the other pages below 1200 px (1024 px screenshots: hints and selects were cut at each
+   column's right edge): their two columns one above the other */
+@media (max-width: 1200px) {
+  .page:not(.builder) { flex-wrap: wrap; }
+  .page:not(.builder) > .left, .page:not(.builder) > .right { flex: 1 1 100%; min-width: 0; }
+}
 .meta label { margin-right: 1rem; }
 .note, .hint { color: #666; font-size: 0.85rem; margin-left: 0.5rem; }
 .message { margin: 0.3rem 0; min-height: 1.2em; }
