@@ -34,6 +34,7 @@ __all__ = [
 ]
 
 CONSTRAINT_MEASURES = ("point", "plane", "distance", "tilt")
+MAX_TRACKER_ROWS = 100_000  # --also-tracker: a comparison file, not a benchmark
 RESULT_FILE = "constraints.json"  # robocal.workflow.constraints.CONSTRAINT_RESULT_FILE
 
 
@@ -236,6 +237,8 @@ def simulate_constraint_file(
         raise fail(f"--kind {kind!r}: one of {', '.join(CONSTRAINT_MEASURES)}")
     if n < 4 or count < 1:
         raise fail("--n must be >= 4 and --count >= 1")
+    if tracker > MAX_TRACKER_ROWS:
+        raise fail(f"--also-tracker {tracker}: at most {MAX_TRACKER_ROWS:,} rows")
     length_m = parse_quantity_option(length, "length", "--length")
     sigma = _simulated_noise(kind, noise)
     files, runs = placement_files(out, placements), []

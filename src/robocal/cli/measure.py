@@ -289,9 +289,7 @@ PlacementsOption = Annotated[
     int, typer.Option("--placements", min=1, max=20, metavar="K", help=PLACEMENTS_HELP)
 ]
 ALSO_TRACKER_HELP = "--kind: also N tracker rows of the same true robot in OUT.tracker.csv (truth shared)"
-AlsoTrackerOption = Annotated[
-    int, typer.Option("--also-tracker", min=0, max=100_000, metavar="N", help=ALSO_TRACKER_HELP)
-]
+AlsoTrackerOption = Annotated[int, typer.Option("--also-tracker", min=0, metavar="N", help=ALSO_TRACKER_HELP)]
 
 
 def simulate_command(
