@@ -255,7 +255,7 @@ def test_real_ur10_calibrated_on_the_first_days_registered_on_the_last(tmp_path)
 
 def test_written_files_names_only_the_files_in_the_folder(tmp_path):
     """The "wrote" line lists what is there, sidecars included, and nothing that is not."""
-    from robocal.identify.result_io import written_files
+    from robocal.cli.reading import written_files
 
     (tmp_path / "model.yaml").write_text("x")
     (tmp_path / "result.json").write_text("{}")

@@ -30,6 +30,7 @@ from robocal.cli.options import (
     out_option,
     robot_and_chain,
 )
+from robocal.cli.reading import written_files
 from robocal.cli.validate import stats_table, validation_notes
 from robocal.console import console, fail, safe
 
@@ -202,8 +203,6 @@ def calibrate_command(
         console.print(stats_table(f"held-out validation ({validation.n} poses)", validation))
         for note in validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
             console.print(note, highlight=False, markup=True)
-    from robocal.identify.result_io import written_files  # lazy: keeps `--help` fast
-
     console.print(f"wrote {written_files(out)}", highlight=False)
     if report:
         console.print(f"report: {out / 'report.html'}", highlight=False)

@@ -12,7 +12,7 @@ import typer
 from robocal.cli.options import as_cli_text
 from robocal.console import check_input, err_console, fail, warn
 
-__all__ = ["load_result", "own_data", "read_data"]
+__all__ = ["load_result", "own_data", "read_data", "written_files"]
 
 
 def read_data(
@@ -118,3 +118,14 @@ def own_data(ctx: typer.Context, directory: Path, result, data_path: Path | None
         return path, split_rows(data, provenance)
     except ValueError as err:
         raise fail(f"{path}: {err}") from None
+
+
+def written_files(directory: str | Path) -> str:
+    """``"DIR (model.yaml, result.json, …)"``: the result folder and the files of
+    :data:`RESULT_FILES` that are in it, for a command's "wrote" line (the ``.npz`` sidecars
+    and the report included when they were written)."""
+    folder = Path(directory)
+    from robocal.identify.result_io import RESULT_FILES  # lazy: keeps `--help` fast
+
+    names = [name for name in RESULT_FILES if (folder / name).is_file()]
+    return f"{folder} ({', '.join(names)})"

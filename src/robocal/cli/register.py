@@ -33,7 +33,7 @@ from robocal.cli.options import (
     as_cli_text,
     out_option,
 )
-from robocal.cli.reading import load_result, read_data
+from robocal.cli.reading import load_result, read_data, written_files
 from robocal.console import console, fail, safe
 from robocal.safe_output import strict_json
 
@@ -238,8 +238,6 @@ def _print(source, data_path: Path, n: int, fit, score, summary: dict[str, Any])
             "its poses; calibrate again",
             highlight=False,
         )
-    from robocal.identify.result_io import written_files  # lazy: keeps `--help` fast
-
     console.print(f"wrote {written_files(summary['out'])}", highlight=False)
 
 

@@ -60,7 +60,6 @@ __all__ = [
     "read_residuals",
     "result_dict",
     "save_result",
-    "written_files",
 ]
 
 Array = NDArray[np.float64]
@@ -105,15 +104,6 @@ _FIELDS = {
 class ResultFileError(ValueError):
     """A file of a result folder beside ``result.json`` is missing, altered or unreadable
     (the message names it)."""
-
-
-def written_files(directory: str | Path) -> str:
-    """``"DIR (model.yaml, result.json, …)"``: the result folder and the files of
-    :data:`RESULT_FILES` that are in it, for a command's "wrote" line (the ``.npz`` sidecars
-    and the report included when they were written)."""
-    folder = Path(directory)
-    names = [name for name in RESULT_FILES if (folder / name).is_file()]
-    return f"{folder} ({', '.join(names)})"
 
 
 def _version() -> str:
