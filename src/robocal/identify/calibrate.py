@@ -310,11 +310,11 @@ def calibrate(
     if streams(data, method, physics, streaming):  # large inputs: decisions on a subsample, fit streamed
 
         def facts(result: CalibrationResult, some: Measurements) -> CalibrationResult:
-            return _with_tool_facts(result, physics.setup, some)
+            return _with_tool_facts(result, physics.setup, some, model)
 
         result = calibrate_streamed(dense, data, physics, streaming, facts=facts, iteration=iteration)
     else:
-        result = _with_tool_facts(dense(data, physics), physics.setup, data)
+        result = _with_tool_facts(dense(data, physics), physics.setup, data, model)
     if progress is not None:
         progress(1.0)
     return result
@@ -332,16 +332,20 @@ def _non_decreasing(progress: Callable[[float], None]) -> Callable[[float], None
     return report
 
 
-def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements) -> CalibrationResult:
+def _with_tool_facts(
+    result: CalibrationResult, setup: Setup, data: Measurements, robot: Model | None = None
+) -> CalibrationResult:
     """The result with its measured tool recorded (``records["measured_tool"]``, with the
     stated start value) and warned about: a start value the fit moved far, and the
     parameters and tool components these poses could not determine
     (:mod:`robocal.identify.measured_tool`); and the joint coverage of its poses
-    (``records["coverage"]``).  One new result (every calibration passes here)."""
-    from robocal.identify.coverage import joint_coverage
+    (``records["coverage"]``; ``robot``: the model as given, whose joints the calibrated
+    one keeps: its plan is worked out already); the records worked out when first read
+    (:func:`~robocal.identify.measured_tool.pose_facts`).  One new result (every
+    calibration passes here)."""
     from robocal.identify.measured_tool import (
         measured_tool,
-        tool_axis_coverage,
+        pose_facts,
         tool_start_warnings,
         undetermined_warnings,
     )
@@ -354,7 +358,5 @@ def _with_tool_facts(result: CalibrationResult, setup: Setup, data: Measurements
         for c, m in (*tool_start_warnings(tool), *undetermined_warnings(result, tool))
         if m not in known
     )
-    records = {**result.records, "coverage": joint_coverage(result.model, data.q).to_dict()}
-    if tool is not None:
-        records["measured_tool"] = tool.to_dict() | tool_axis_coverage(result.model, data.q)
+    records = pose_facts(result, tool, result.model if robot is None else robot, data.q)
     return result.replace(warnings=result.warnings + found, records=records)
