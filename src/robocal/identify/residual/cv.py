@@ -95,13 +95,19 @@ class CVTable:
     folds: int
     candidates: tuple[CVCandidate, ...]
     chosen: str
+    #: the joints left out of the learned residual, each with the largest position change (m)
+    #: its angle error could make (``stage.observable_joints``)
+    left_out: tuple[tuple[str, float], ...] = ()
 
     def to_dict(self) -> dict[str, object]:
-        return {
+        out: dict[str, object] = {
             "folds": self.folds,
             "chosen": self.chosen,
             "candidates": [c.to_dict() for c in self.candidates],
         }
+        if self.left_out:  # older tables: none left out
+            out["joints_left_out"] = [{"joint": j, "largest_effect_mm": e * 1e3} for j, e in self.left_out]
+        return out
 
     @classmethod
     def from_dict(cls, data: dict) -> CVTable:
@@ -118,7 +124,10 @@ class CVTable:
             )
             for c in data["candidates"]
         )
-        return cls(int(data["folds"]), rows, str(data["chosen"]))
+        left_out = tuple(
+            (str(j["joint"]), float(j["largest_effect_mm"]) / 1e3) for j in data.get("joints_left_out", ())
+        )
+        return cls(int(data["folds"]), rows, str(data["chosen"]), left_out)
 
     def lines(self) -> list[str]:
         """The table as text lines (mm, ms)."""
@@ -132,6 +141,9 @@ class CVTable:
             cv = f"{c.cv_mean * 1e3:6.4f} {c.cv_rms * 1e3:6.4f}"
             tail = "" if np.isnan(c.cv_p95) else f" {c.cv_p95 * 1e3:6.4f} {c.cv_max * 1e3:6.3f}"
             out.append(f"  {c.name:<42} {cv} {c.fit_seconds * 1e3:6.0f}{tail}{mark}")
+        for joint, effect in self.left_out:
+            moves = f"it moves the measured point {effect * 1e6:.2f} µm at most"
+            out.append(f"  {joint}: no learned angle error ({moves})")
         return out
 
 
