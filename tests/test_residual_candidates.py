@@ -12,7 +12,14 @@ import robocal as rc
 import robocal.identify.residual.stage as stage
 from robocal.identify.pipeline import calibrate_physics
 from robocal.identify.residual.cv import CVCandidate, CVTable, PhysicalFit, cross_validate_residual
-from robocal.identify.residual.fit import MAX_AMPLITUDE, one_blas_thread_limit
+from robocal.identify.residual.fit import (
+    MAX_AMPLITUDE,
+    fourier_gram,
+    one_blas_thread_limit,
+    raw_blocks,
+    residual_template,
+)
+from robocal.model.residual import fourier_basis
 from tests.test_residual import PROBE, _case, _ur10
 
 
@@ -96,3 +103,31 @@ def test_the_calibration_models_the_seen_joints_only(on_axis):
     # what it predicts and its uncertainty stay finite at new poses
     q = data.q[:5] + 0.01
     assert np.all(np.isfinite(result.predict(q))) and np.all(np.isfinite(result.position_uncertainty(q)))
+
+
+@pytest.mark.parametrize("harmonics", [1, 7, 48])
+def test_the_gram_of_a_fourier_basis_from_its_sums_of_harmonics(harmonics):
+    rng = np.random.default_rng(harmonics)
+    angles, weights = rng.uniform(-np.pi, np.pi, 400), rng.uniform(0.0, 2.0, 400)
+    B = fourier_basis(angles[:, None], harmonics)[:, 0, :]
+    expected = B.T @ (weights[:, None] * B)
+    assert fourier_gram(angles, weights, harmonics) == pytest.approx(
+        expected, abs=1e-12 * np.abs(expected).max()
+    )
+
+
+@pytest.mark.parametrize("covered", [700, 300])  # every pose covered (no fade) / some poses faded
+def test_the_normal_equations_by_blocks_are_the_design_products(covered):
+    rng = np.random.default_rng(covered)
+    n, k, p = 700, 5, 7
+    q = rng.uniform(-3.0, 3.0, (n, 6))
+    r, P, J = rng.normal(size=(n, 3)), rng.normal(size=(n, 3, 6, 3)), rng.normal(size=(n, 3, p))
+    template = residual_template([f"j{i}" for i in range(k)], list(range(k)), 12, q[:covered]).covering(
+        q[:covered]
+    )
+    assert (covered == n) == bool(np.all(template.fade(q) == 1.0))
+    A = template.design(q, P).reshape(-1, template.size)
+    J2 = J.reshape(-1, p)
+    raw = raw_blocks(q, r, P, template, J)
+    for got, expected in ((raw.AA, A.T @ A), (raw.Ar, A.T @ r.reshape(-1)), (raw.JA, J2.T @ A)):
+        assert got == pytest.approx(expected, abs=1e-12 * np.abs(expected).max())
