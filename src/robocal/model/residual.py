@@ -345,22 +345,27 @@ class JointAngleResidual:
             return self._mean_position_variance(np.atleast_2d(np.asarray(q, dtype=float)), P, J, X)
 
     def _mean_position_variance(self, q: Array, P: Array, J: Array | None, X: Array | None) -> float:
-        B = self.basis(q)  # (n, k, 2H), faded
-        n, k, h2 = B.shape
+        # the basis joint by joint, each joint's (n, 2H) rows contiguous (BLAS wants them so;
+        # copying them out of basis()'s (n, k, 2H) took as long as the products: 11,611 poses)
+        rows = fourier_basis(q[:, list(self.joint_index)].T, self.harmonics)  # (k, n, 2H)
+        k, n, h2 = rows.shape
+        fade = None if self.coverage is None else self.fade(q)  # (n, k), once for both uses
+        if fade is not None:
+            rows[:, :, 2 * self.global_harmonics :] *= fade.T[:, :, None]
         cols = P[:, :3, list(self.joint_index), 2]  # (n, 3, k)
         W = np.swapaxes(cols, 1, 2) @ cols  # (n, k, k)
-        rows = [np.ascontiguousarray(B[:, a, :]) for a in range(k)]  # BLAS wants contiguous
+        Wt = np.ascontiguousarray(W.transpose(1, 2, 0))  # (k, k, n)
         C = self.covariance
         total = 0.0
         for a in range(k):
-            S = rows[a] * np.sqrt(W[:, a, a, None])  # W_aa >= 0: Sᵀ S is one symmetric product
+            S = rows[a] * np.sqrt(Wt[a, a])[:, None]  # W_aa >= 0: Sᵀ S is one symmetric product
             total += float(np.vdot(C[a * h2 : (a + 1) * h2, a * h2 : (a + 1) * h2], S.T @ S))
             for b in range(a + 1, k):
-                G = (rows[a] * W[:, a, b, None]).T @ rows[b]  # (2H, 2H)
+                G = (rows[a] * Wt[a, b][:, None]).T @ rows[b]  # (2H, 2H)
                 total += 2.0 * float(np.vdot(C[a * h2 : (a + 1) * h2, b * h2 : (b + 1) * h2], G))
-        if self.coverage is not None:  # the faded-out angle errors (position_covariance's term)
+        if fade is not None:  # the faded-out angle errors (position_covariance's term)
             rms = np.asarray(self.amplitudes if self.angle_rms is None else self.angle_rms)
-            missing = (1.0 - self.fade(q) ** 2) * rms**2  # (n, k) rad²
+            missing = (1.0 - fade**2) * rms**2  # (n, k) rad²
             total += float(np.vdot(np.diagonal(W, axis1=1, axis2=2), missing))
         if J is not None and X is not None:  # 2 Σ_n tr(J_n X A_nᵀ) = 2 ⟨X, Σ_n J_nᵀ A_n⟩
             V = np.swapaxes(cols, 1, 2) @ J  # (n, k, p)
