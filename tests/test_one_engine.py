@@ -88,6 +88,26 @@ def test_a_changed_stage_changes_both_engines_alike(monkeypatch):
     np.testing.assert_allclose(batched.estimates, single.estimates, rtol=1e-10, atol=1e-13)
 
 
+def test_both_engines_order_their_stages_through_fit_selection(monkeypatch):
+    """One place orders screening, the fit and pruning: both engines call
+    ``stages.fit_selection``, and a changed order there reaches both."""
+    from robocal.identify import batch, pipeline
+
+    seen: list[str] = []
+
+    def spy(stages_, selection):
+        seen.append(type(stages_).__name__)
+        return stages.fit_selection(stages_, selection)
+
+    monkeypatch.setattr(pipeline, "fit_selection", spy)
+    monkeypatch.setattr(batch, "fit_selection", spy)
+    monkeypatch.setattr(fused, "applies", lambda *args: False)
+    model, data = _data(3)
+    rc.calibrate(model, data, tool_guess=TOOL, pruning=TIGHT)
+    calibrate_batch(model, [data], tool_guess=TOOL, rules=Rules.of(TIGHT))
+    assert seen == ["_Staged", "_BatchStages"]
+
+
 _CONDITION = re.compile(r"np\.linalg\.cond\(|sqrt\(\s*\w+\[(-1|\w+ - 1)\]\s*/\s*\w+\[0\]\s*\)")
 _THRESHOLD = re.compile(r"\b(max_std|max_std_ratio|screen_margin)\s*(:\s*float)?\s*=\s*[-+]?\.?\d")
 

@@ -33,6 +33,7 @@ from robocal.identify.solve_result import BatchSolveResult
 from robocal.identify.solvers import levenberg_marquardt_batch
 from robocal.identify.stages import (
     Covariance,
+    fit_selection,
     identifiable_set,
     initial_frames_and_tools,
     poorly_identifiable,
@@ -354,8 +355,7 @@ class _Batch:
         out: dict[int, BatchFit | CalibrationGuardError] = {}
         start = _BatchStart(self)
         selections = self._identifiable(start, out)
-        selections = {k: self._screen(start, k, sel) for k, sel in selections.items()}
-        fits = self._prune(start, self._solve(start, selections))
+        fits = fit_selection(_BatchStages(self, start), selections)
         for k, fit in fits.items():
             out[k] = self._assemble(start, k, fit)
         return [out[k] for k in range(self.K)]
@@ -462,6 +462,24 @@ class _Batch:
         except CalibrationGuardError as err:
             return err
         return result
+
+
+@dataclass(frozen=True)
+class _BatchStages:
+    """Stages 5-6 for the robots still in the sequence
+    (:class:`~robocal.identify.stages.FitStages` over ``{robot: selection}``)."""
+
+    batch: _Batch
+    start: _BatchStart
+
+    def screen(self, selections: dict[int, _Selection]) -> dict[int, _Selection]:
+        return {k: self.batch._screen(self.start, k, sel) for k, sel in selections.items()}
+
+    def solve(self, selections: dict[int, _Selection]) -> dict[int, _Fit]:
+        return self.batch._solve(self.start, selections)
+
+    def prune(self, fits: dict[int, _Fit]) -> dict[int, _Fit]:
+        return self.batch._prune(self.start, fits)
 
 
 class _BatchStart:

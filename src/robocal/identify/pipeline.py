@@ -54,6 +54,7 @@ from robocal.identify.result import CalibrationResult, Diagnostics
 from robocal.identify.rules import Rules
 from robocal.identify.solvers import METHODS, solve
 from robocal.identify.stages import (
+    fit_selection,
     identifiable_set,
     poorly_identifiable,
     screen_unidentifiable,
@@ -382,10 +383,27 @@ def _fused(run: Run, start: Start, hold: dict | None) -> Fit | None:
     return fit
 
 
+@dataclasses.dataclass(frozen=True)
+class _Staged:
+    """Stages 5-6 of one calibration (:class:`~robocal.identify.stages.FitStages`)."""
+
+    run: Run
+    start: Start
+
+    def screen(self, selection: Selection) -> Selection:
+        return _screen(self.run, self.start, selection)
+
+    def solve(self, selection: Selection) -> Fit:
+        return _solve(self.run, self.start, selection, selection.x0)
+
+    def prune(self, fit: Fit) -> Fit:
+        return _prune(self.run, self.start, fit)
+
+
 def _fit_staged(run: Run, start: Start, selection: Selection) -> Fit:
-    """Stages 5-6 by the staged functions: screening, the fit, pruning."""
-    screened = _screen(run, start, selection)
-    return _prune(run, start, _solve(run, start, screened, screened.x0))
+    """Stages 5-6 by the staged functions, in :func:`~robocal.identify.stages.fit_selection`'s
+    order: screening, the fit, pruning."""
+    return fit_selection(_Staged(run, start), selection)
 
 
 def calibrate_physics(

@@ -12,7 +12,9 @@ study's calibration is ``rc.calibrate``'s to round-off:
 * screening before the first fit: :func:`screen_unidentifiable`;
 * the solver: :func:`robocal.identify.solvers.levenberg_marquardt_batch`;
 * uncertainty: :func:`uncertainty` (σ̂²(JᵀWJ)⁻¹, condition number);
-* pruning after the fit: :func:`tool_displacement_scale`, :func:`poorly_identifiable`.
+* pruning after the fit: :func:`tool_displacement_scale`, :func:`poorly_identifiable`;
+* their one order: :func:`fit_selection` (screening, the fit, pruning), over an engine's
+  :class:`FitStages`.
 
 Functions with a leading batch axis ``K`` work on many robots at once; the others on one
 (the batched engine calls them per robot: they are cheap next to the fits).
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import NamedTuple
+from typing import NamedTuple, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -35,7 +37,9 @@ from robocal.model.steps import Role
 
 __all__ = [
     "Covariance",
+    "FitStages",
     "chi2_bounds",
+    "fit_selection",
     "identifiable_set",
     "initial_frames_and_tools",
     "median",
@@ -51,6 +55,35 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+S = TypeVar("S")
+F = TypeVar("F")
+
+
+# ---------------------------------------------------------------------- the one order
+class FitStages(Protocol[S, F]):
+    """Stages 5-6 as an engine provides them, on its own selection (``S``: the unknowns
+    chosen, for one robot or ``K``) and fit (``F``) values: the staged single calibration
+    (:mod:`robocal.identify.pipeline`) and the batched engine (:mod:`robocal.identify.batch`).
+    The compiled fused path runs the same order inside one kernel with the same rules."""
+
+    def screen(self, selection: S) -> S:
+        """Fix the hopeless unknowns before the first fit (:func:`screen_unidentifiable`)."""
+        ...
+
+    def solve(self, selection: S) -> F:
+        """Fit the selection from its start values, with the :func:`uncertainty` there."""
+        ...
+
+    def prune(self, fit: F) -> F:
+        """Fix the worst poorly identifiable unknown (:func:`poorly_identifiable`) and refit
+        from the start values, until none is left."""
+        ...
+
+
+def fit_selection(stages: FitStages[S, F], selection: S) -> F:
+    """Stages 5-6 in their one order: screening, the fit from the screened start values,
+    pruning.  Every engine that fits in Python calls this; a new stage goes here once."""
+    return stages.prune(stages.solve(stages.screen(selection)))
 
 
 # ---------------------------------------------------------------------- start values
