@@ -257,7 +257,9 @@ def _register_data(app: Dash, page: _Page) -> None:
         kind = constraint_view.constraint_file_kind(page.data_file((file or {}).get("token")))
         if kind is None:
             return {"display": "none"}, ""
-        return {}, f"the file holds {kind} constraints (its columns): calibrated without a tracker"
+        words = {"point": "fixed points (ball in socket)", "plane": "plane touches",
+                 "distance": "known distances", "tilt": "inclinometer readings (tilt)"}  # fmt: skip
+        return {}, f"the file holds {words.get(kind, kind)} (its columns): calibrated without a tracker"
 
     @app.callback(
         Output("csv-preview", "children"),

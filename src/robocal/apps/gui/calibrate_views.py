@@ -288,10 +288,14 @@ def compensate(
     frame: str,
     sep: str | None = None,
     decimal: str = ".",
+    nominal: Any = None,
 ) -> tuple[dict[str, str], str]:
     """Compensate the uploaded targets CSV (``unit``: m/mm; ``sep``: None to sniff; ``decimal``
-    ``.`` or ``,``): the compensated commands' file and the page's line."""
+    ``.`` or ``,``) through ``result`` (a calibration result or a calibrated model; ``nominal``:
+    the controller's model, None for the result's own): the compensated commands' file (each
+    target's status in it) and the page's line, which names every refused target."""
     import robocal as rc
+    from robocal.compensate.ik_options import IKOptions
     from robocal.compensate.target_files import read_targets
 
     name = Path(filename or "targets.csv").name
@@ -302,11 +306,16 @@ def compensate(
             targets = read_targets(path, length_unit=unit, sep=sep, decimal=decimal)
         except ValueError as err:
             raise ValueError(str(err).replace(str(path), name)) from None
-    comp = rc.compensate_targets(result, targets.values, names=targets.names, frame=frame)
+    comp = rc.compensate_targets(
+        result, targets.values, nominal, names=targets.names, frame=frame, ik=IKOptions()
+    )
     s = comp.summary()
+    refused = [f"{r['name']} ({r['reason']})" for r in comp.table() if r["status"] == "refused"]
     before, after = s["error_before_mm"], s["error_after_mm"]
     message = (
         f"{comp.message}; predicted error mean {before['mean'] or float('nan'):.4f} → "
         f"{after['mean'] or float('nan'):.4f} mm (compensated commands downloaded)"
     )
+    if refused:  # left as written in the file (its status column says so), named here
+        message += f"; {len(refused)} refused, left as written: {', '.join(refused[:10])}"
     return {"content": comp.to_csv(), "filename": f"{Path(name).stem}_compensated.csv"}, message

@@ -2,7 +2,7 @@
 job runner import it): its options (:class:`ConstraintOptions`) and
 :func:`run_constraint_job`, which calls the command line's use case
 :func:`robocal.workflow.constraints.calibrate_constraint_files` and writes the figures the
-page shows (:data:`FIGURES_FILE`, mm)."""
+page shows (:data:`FIGURES_FILE`: mm, an inclinometer's in degrees)."""
 
 from __future__ import annotations
 
@@ -63,10 +63,16 @@ def figures_doc(run: Any) -> dict[str, Any]:
     }
 
 
-def _figures_mm(f: Any) -> dict[str, list[float]]:
+def _figures_mm(f: Any) -> dict[str, Any]:
+    """The figures in mm; an inclinometer channel's RMS residual in degrees (``tilt_deg``, one
+    per channel named in ``tilt_channels``, ``<joint>_<axis>``)."""
+    import numpy as np
+
     return {
         "point_spread": (f.point_spread * 1e3).tolist(),
         "point_distance_error": (f.point_distance_error * 1e3).tolist(),
         "plane_rms": (f.plane_rms * 1e3).tolist(),
         "pair_error": (f.pair_error * 1e3).tolist(),
+        "tilt_channels": list(f.tilt_channels),
+        "tilt_deg": np.degrees(f.tilt_rms).tolist(),
     }

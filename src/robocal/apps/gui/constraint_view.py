@@ -1,11 +1,14 @@
-"""Constraint files in the calibration page: fixed points, planes, distances (no tracker).
+"""Constraint files in the calibration page: fixed points, planes, distances, inclinometers
+(no tracker needed).
 
-A file with a ``point``, ``plane`` or ``pair``/``distance_mm`` column
+A file with a ``point``, ``plane`` or ``pair``/``distance_mm`` column, or ``link``, ``axis`` and
+``tilt_deg`` (an inclinometer's readings)
 (:func:`robocal.measure.constraints.data.constraint_kind`) is recognised on upload; the page
 then shows the kind's options (known distances between points as a small table, the level)
 and a run calibrates it with :func:`robocal.workflow.constraints.calibrate_constraint_files`,
 the command line's use case.  The results view shows the kind's figures before and after
-(spread around each point, known-distance errors, plane residuals, pair errors), what the
+(spread around each point, known-distance errors, plane residuals, pair errors, each
+inclinometer channel's RMS residual in degrees), what the
 data cannot identify and why, and the identified parameters.
 """
 
@@ -25,7 +28,7 @@ __all__ = ["constraint_file_kind", "distances_of", "fieldset", "preview", "resul
 
 
 def constraint_file_kind(path: Path | None) -> str | None:
-    """``point``, ``plane`` or ``distance`` for a constraint file, else None."""
+    """``point``, ``plane``, ``distance`` or ``tilt`` for a constraint file, else None."""
     from robocal.measure.constraints.data import constraint_kind
 
     if path is None:
@@ -54,7 +57,7 @@ def fieldset() -> html.Fieldset:
     )
     return html.Fieldset(
         [
-            html.Legend("constraint file (fixed points, planes, distances)"),
+            html.Legend("constraint file (fixed points, planes, distances, inclinometers)"),
             html.Div(id="con-kind", className="hint"),
             row(
                 "level",
@@ -109,17 +112,32 @@ def preview(path: Path, dof: int | None, angle_unit: str) -> list[Any]:
     counts += [f"plane {k}: {int((data.plane == k).sum())} poses" for k in range(data.n_planes)]
     if len(data.pairs):
         counts.append(f"{len(data.pairs)} pairs of known distance")
+    counts += _tilt_counts(data)
     summary = (
         f"{path.name}: {data.n} rows, {data.q.shape[1]} joints, constraint file ({', '.join(data.kinds)})"
     )
     return [html.Div(summary, className="ok", id="csv-summary"), html.Ul([html.Li(c) for c in counts])]
 
 
+def _tilt_counts(data: Any) -> list[str]:
+    """Readings per inclinometer (link, joint number from 1 as in the file) and its axes."""
+    from robocal.measure.constraints.data import TILT_AXES
+
+    link = getattr(data, "tilt_link", None)
+    if link is None or not (link >= 0).any():
+        return []
+    out = []
+    for k in sorted({int(v) for v in link if v >= 0}):
+        axes = sorted({TILT_AXES[int(a)] for a in data.tilt_axis[link == k]})
+        out.append(f"inclinometer on link {k + 1} ({', '.join(axes)}): {int((link == k).sum())} readings")
+    return out
+
+
 _FIGURE_ROWS = (
-    ("point_spread", "point {k}: RMS spread around its centroid"),
-    ("point_distance_error", "known distance {k}: error"),
-    ("plane_rms", "plane {k}: RMS residual"),
-    ("pair_error", "pair {k}: distance error"),
+    ("point_spread", "point {k}: RMS spread around its centroid, mm"),
+    ("point_distance_error", "known distance {k}: error, mm"),
+    ("plane_rms", "plane {k}: RMS residual, mm"),
+    ("pair_error", "pair {k}: distance error, mm"),
 )
 
 
@@ -130,17 +148,29 @@ def _figures_table(before: dict | None, after: dict | None) -> html.Table:
         if key == "pair_error" and len(values) > 12:  # many pairs: their RMS, one row
             rms = lambda v: (sum(x * x for x in v) / len(v)) ** 0.5  # noqa: E731
             cells = [rms((before or {}).get(key) or [float("nan")]), rms(values)]
-            rows.append(_figure_row(f"{len(values)} pairs: RMS distance error", *cells))
+            rows.append(_figure_row(f"{len(values)} pairs: RMS distance error, mm", *cells))
             continue
         for k, v in enumerate(values):
             b = (before or {}).get(key, [])
             rows.append(_figure_row(label.format(k=k), b[k] if k < len(b) else None, v))
-    head = html.Tr([html.Th(h) for h in ("figure", "nominal mm", "calibrated mm")])
+    rows += _tilt_rows(before or {}, after or {})
+    head = html.Tr([html.Th(h) for h in ("figure", "nominal", "calibrated")])
     return html.Table([html.Thead(head), html.Tbody(rows)], id="constraint-figures", className="stats")
 
 
-def _figure_row(label: str, before: float | None, after: float) -> html.Tr:
-    cell = lambda v: html.Td("" if v is None else f"{v:.3f}", className="num")  # noqa: E731
+def _tilt_rows(before: dict, after: dict) -> list[html.Tr]:
+    """One row per inclinometer channel: its readings' RMS residual in degrees (a folder
+    written before the inclinometer had none)."""
+    was = dict(zip(before.get("tilt_channels", []), before.get("tilt_deg", []), strict=True))
+    channels = zip(after.get("tilt_channels", []), after.get("tilt_deg", []), strict=True)
+    return [
+        _figure_row(f"inclinometer {name}: RMS residual, deg", was.get(name), v, digits=5)
+        for name, v in channels
+    ]
+
+
+def _figure_row(label: str, before: float | None, after: float, digits: int = 3) -> html.Tr:
+    cell = lambda v: html.Td("" if v is None else f"{v:.{digits}f}", className="num")  # noqa: E731
     return html.Tr([html.Td(label), cell(before), cell(after)])
 
 

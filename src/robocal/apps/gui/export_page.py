@@ -1,6 +1,13 @@
 """The calibration page's last part: compensate an uploaded targets CSV with the run's saved
-result (``rc.compensate_targets``) and export the calibrated URDF or UR kinematics
-(``robocal.compensate.export``)."""
+calibration (``rc.compensate_targets``) and export the calibrated URDF or UR kinematics
+(``robocal.compensate.export``), for a tracker run and for a constraint run (fixed points,
+planes, distances, inclinometers, mixed with tracker files) alike.
+
+The same functions and checks as ``robocal compensate`` / ``robocal export`` on the run's
+folder (:func:`saved_calibration`): a folder whose files disagree or whose numbers cannot be a
+robot's is refused by name on the page and nothing is handed out; a constraint calibration
+compensates targets in the robot base only (it has no device frame), from the robot it
+started from, and every export and compensation states its nominal base."""
 
 from __future__ import annotations
 
@@ -12,9 +19,9 @@ from dash import Dash, Input, Output, State, dcc, html, no_update
 
 from robocal.apps.gui.calibrate_views import compensate, radio, row
 from robocal.apps.gui.columns_view import gui_words
-from robocal.apps.gui.jobs import read_options
+from robocal.apps.gui.jobs import public_text, read_options
 
-__all__ = ["fieldset", "register"]
+__all__ = ["Saved", "fieldset", "register", "saved_calibration"]
 
 
 def fieldset() -> html.Fieldset:
@@ -88,38 +95,105 @@ class _TargetsReading:
     decimal: str
 
 
+@dataclass(frozen=True)
+class Saved:
+    """A run's saved calibration as the exports and the compensation use it.
+
+    Attributes:
+        calibrated: the tracker run's :class:`~robocal.identify.result.CalibrationResult`, or a
+            constraint run's calibrated :class:`~robocal.model.chain.Model` (its end: the point
+            the constraints held; no device frame).
+        nominal: the constraint run's robot before calibration (the controller's model of its
+            compensation and the URDF's comparison), None for a tracker run (the result's own).
+        base_note: for a constraint run, what stays nominal and why (its base frame); "" else.
+    """
+
+    calibrated: Any
+    nominal: Any = None
+    base_note: str = ""
+
+    @property
+    def name(self) -> str:
+        return str(getattr(self.calibrated, "model", self.calibrated).name)
+
+
+def saved_calibration(run: Path | None) -> Saved:
+    """The run folder's calibration with the command line's checks (``robocal export``'s
+    ``_load_checked``): a ``model.yaml`` edited after the calibration, a value that cannot be a
+    robot's, a constraint folder whose files disagree: ValueError naming the file."""
+    from robocal.compensate.export import check_exportable, check_result_files
+    from robocal.identify.constraints.result import is_constraint_folder, load_constraint_calibration
+    from robocal.identify.result import CalibrationResult
+    from robocal.model.yaml_files import ModelFileError
+
+    if run is not None and is_constraint_folder(run):
+        cal = load_constraint_calibration(run)  # model.yaml and constraints.json checked together
+        check_exportable(cal.model)
+        return Saved(cal.model, cal.nominal, cal.base_note())
+    if run is None or not (run / "result.json").is_file():
+        raise ValueError("calibrate first")
+    try:
+        result = CalibrationResult.load(run)
+    except (OSError, KeyError, ModelFileError) as err:
+        raise ValueError(f"cannot read the calibration result: {err}") from None
+    check_result_files(run, result)
+    check_exportable(result)
+    return Saved(result)
+
+
 def _compensate_or_export(
     workdir: Path, targets: str | None, reading: _TargetsReading, run_id: str | None
 ) -> tuple[Any, Any]:
     from dash import callback_context
 
-    from robocal.identify.result import CalibrationResult
-
     trigger = callback_context.triggered_id
-    if run_id is not None and (workdir / "runs" / run_id / "constraints.json").is_file():
-        text = "a constraint calibration: compensate and export it with robocal compensate / export"
-        return no_update, html.Span(text, className="error")
-    if run_id is None or not (workdir / "runs" / run_id / "result.json").is_file():
-        return no_update, html.Span("calibrate first", className="error")
-    result = CalibrationResult.load(workdir / "runs" / run_id)
     try:
+        saved = saved_calibration(None if run_id is None else workdir / "runs" / run_id)
         if trigger == "upload-targets" and targets is not None:
-            sep = read_options(sep=reading.sep)["sep"]
-            r = reading
-            return compensate(result, targets, r.filename, r.unit, r.frame, sep, r.decimal)
+            return _compensate(saved, targets, reading)
         if trigger == "export-urdf":
-            from robocal.compensate.export import export_urdf
-
-            ex, _ = export_urdf(result)  # its notes: the physics-only fit used, what it leaves out
-            notes = "; ".join(ex.notes) or "everything calibrated is carried"
-            return {"content": ex.text, "filename": f"{result.model.name}_calibrated.urdf"}, notes
-        from robocal.compensate.export import export_ur_kinematics, kinematic_part, left_out
-
-        part = kinematic_part(result)
-        kin = export_ur_kinematics(part.calibrated)
-        notes = "; ".join((*part.notes, *(m.note for m in left_out(part.calibrated))))
-        return {"content": kin.to_yaml(), "filename": "default_kinematics.yaml"}, (
-            f"UR kinematics written; {notes}" if notes else "UR kinematics written"
-        )
+            return _urdf(saved)
+        return _ur_kinematics(saved)
     except ValueError as err:
-        return no_update, html.Span(gui_words(str(err)), className="error", id="export-error")
+        message = gui_words(public_text(str(err), workdir))  # no server path on the page
+        return no_update, html.Span(message, className="error", id="export-error")
+
+
+def _compensate(saved: Saved, targets: str, reading: _TargetsReading) -> tuple[Any, Any]:
+    """The targets' compensated commands, as ``robocal compensate --targets`` makes them (a
+    constraint run: its start robot the controller's model, targets in the robot base only)."""
+    if saved.nominal is not None and reading.frame != "base":
+        raise ValueError(
+            "targets frame device: a constraint calibration has no measuring device's frame; "
+            "give the targets in the robot base"
+        )
+    sep = read_options(sep=reading.sep)["sep"]
+    r = reading
+    download, message = compensate(saved.calibrated, targets, r.filename, r.unit, r.frame, sep, r.decimal,
+                                    nominal=saved.nominal)  # fmt: skip
+    return download, "; ".join(m for m in (message, saved.base_note and f"note: {saved.base_note}") if m)
+
+
+def _urdf(saved: Saved) -> tuple[Any, Any]:
+    from robocal.compensate.export import export_urdf
+
+    notes = (saved.base_note,) if saved.base_note else ()
+    ex, _ = export_urdf(saved.calibrated, nominal=saved.nominal, notes=notes)  # notes: what it leaves out
+    text = "; ".join(ex.notes) or "everything calibrated is carried"
+    return {"content": ex.text, "filename": f"{saved.name}_calibrated.urdf"}, f"URDF written; {text}"
+
+
+def _ur_kinematics(saved: Saved) -> tuple[Any, Any]:
+    from robocal.compensate.export import export_ur_kinematics, kinematic_part, left_out
+
+    part = kinematic_part(saved.calibrated)
+    kin = export_ur_kinematics(part.calibrated)
+    notes = [*part.notes, *(m.note for m in left_out(part.calibrated))]
+    mm, deg = kin.flange_rest_mm_deg
+    if mm > 1e-6 or deg > 1e-6:  # as robocal export ur-kinematics says it
+        notes.append(f"the calibrated flange is {mm:.4f} mm / {deg:.5f} deg from the format's wrist_3 frame, "
+                     "which the format cannot hold: add it to the controller's TCP")  # fmt: skip
+    if saved.base_note:
+        notes.append(saved.base_note)
+    text = "UR kinematics written" + (f"; {'; '.join(notes)}" if notes else "")
+    return {"content": kin.to_yaml(), "filename": "default_kinematics.yaml"}, text
