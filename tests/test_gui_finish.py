@@ -12,8 +12,6 @@ from __future__ import annotations
 import itertools
 import json
 import queue as queue_module
-import subprocess
-import sys
 import time
 import urllib.request
 from pathlib import Path
@@ -134,16 +132,19 @@ def test_the_run_list_shows_a_failed_runs_message_as_text():
 
 @pytest.fixture(scope="module")
 def two_files(tmp_path_factory):
-    """A two-socket file and a tracker file of the UR10 (simulated; m and rad)."""
+    """A two-socket file and a tracker file of one true UR10 (m and rad), written in this
+    process as ``robocal simulate --kind point --also-tracker`` writes them (two CLI processes
+    cost ~5 s of start-up on a loaded machine)."""
+    from robocal.measure.constraints.data import write_constraints
+    from robocal.measure.constraints.sim import simulate_constraints, simulate_tracker_rows
+    from robocal.measure.true_model import draw_true_model
+
     where = tmp_path_factory.mktemp("mixed")
-    q = np.random.default_rng(0).uniform(-2.0, 2.0, (60, 6))
-    np.savetxt(where / "poses.csv", q, delimiter=",", header="q1,q2,q3,q4,q5,q6", comments="")
-    cli = [sys.executable, "-m", "robocal.cli", "simulate", "ur10"]
+    true = draw_true_model(rc.calibration_model("ur10"), length=5e-4, angle=np.radians(0.05), seed=1)
+    sockets, _ = simulate_constraints(true, "point", 60, count=2, seed=1)
     track, sock = where / "track.csv", where / "sock.csv"
-    subprocess.run([*cli, "--poses", str(where / "poses.csv"), "-o", str(track), "--seed", "1"], check=True)
-    subprocess.run(
-        [*cli, "--kind", "point", "--n", "60", "--count", "2", "--seed", "1", "-o", str(sock)], check=True
-    )
+    write_constraints(sockets, sock)
+    write_constraints(simulate_tracker_rows(true, 60, sigma=1e-5, seed=2), track)
     return sock, track
 
 
