@@ -85,6 +85,7 @@ def main(argv: list[str] | None = None) -> None:
             rows.append(_row(n, args.repeats, out))
             n_, none, auto, ratio, _, held_none, held_auto = rows[-1]
             print(f"{n_} {none} {auto} {ratio[:-1]:>6} {held_none:>8} {held_auto:>8}", flush=True)
+    print(f"load average (1 / 5 / 15 min): {load_start} at the start, {readme_table.load()} at the end")
     if args.md:
         header = ["training poses", "`--residual none` CPU s", "default CPU s", "ratio", "target",
                   "held-out mean, none (mm)", "held-out mean, default (mm)"]  # fmt: skip
