@@ -3,8 +3,10 @@ UR10 typed in, the calibration page with its results, the pose-planning page.
 
 The builder and calibration pictures come from the browser tests of ``tests/test_gui.py``, run
 with ``ROBOCAL_GUI_SCREENSHOTS`` (where they go) and ``ROBOCAL_GUI_WIDTH`` (the window's width);
-the planning page is driven here on a server of its own.  Each picture is cropped to the
-window's first 1100 px of height.  Needs Chromium (``apt-get install -y chromium``),
+the planning page is driven here on a server of its own.  The builder and planning pictures
+are cropped to the window's first 1100 px of height; the calibration picture is the whole
+page (at 1024 px its two columns stack, and the result — held-out error, the CV table, the
+3D residuals — sits below the reader options).  Needs Chromium (``apt-get install -y chromium``),
 Playwright and ``../shared``.
 
     python docs/gui_screenshots.py
@@ -38,9 +40,15 @@ def _suffix(width: int) -> str:
     return "" if width == 1600 else f"_{width}"
 
 
+#: the pictures kept whole (not cropped to :data:`CROP_PX`): the result is far down the page
+WHOLE = ("calibration_result.png",)
+CROP_PX = 1100
+
+
 def _save(source: Path, target: Path) -> None:
     with Image.open(source) as image:
-        image.crop((0, 0, image.width, min(image.height, 1100))).save(target, optimize=True)
+        height = image.height if source.name in WHOLE else min(image.height, CROP_PX)
+        image.crop((0, 0, image.width, height)).save(target, optimize=True)
     print(f"wrote {target}")
 
 

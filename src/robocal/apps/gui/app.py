@@ -91,7 +91,8 @@ fieldset { border: 1px solid #ccc; margin: 0.4rem 0; }
 .stage::before { content: "✓ "; color: #1a7f37; } .stage.current::before { content: "▸ "; color: #1f77b4; }
 .bar { height: 100%; width: 0%; background: #1f77b4; transition: width 0.3s; }
 @keyframes pulse { 0% { opacity: 1; } 50% { opacity: 0.55; } 100% { opacity: 1; } }
-pre.cv { font-size: 0.78rem; background: #f6f6f6; padding: 0.3rem; }
+pre.cv { font-size: 0.78rem; background: #f6f6f6; padding: 0.3rem; white-space: pre-wrap; }
+#columns-cli { overflow-wrap: anywhere; }
 pre.raw { background: #f6f6f6; padding: 0.4rem; font-size: 0.75rem; overflow-x: auto; }
 .big { font-size: 1.05rem; font-weight: 600; margin: 0.3rem 0; }
 """
