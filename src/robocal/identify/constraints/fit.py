@@ -26,7 +26,14 @@ from numpy.typing import NDArray
 
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
 from robocal.identify.constraints.noise import weigh_by_kind
-from robocal.identify.constraints.tilt_rows import tilt_figures, tilt_rows, tilt_terms
+from robocal.identify.constraints.tilt_rows import (
+    EFFECT_KINDS,
+    mixed_effects_note,
+    tilt_figures,
+    tilt_rows,
+    tilt_terms,
+    unclear_contact,
+)
 from robocal.identify.options import Pruning
 from robocal.identify.problem import measurement_chain
 from robocal.identify.solvers import solve
@@ -40,6 +47,7 @@ from robocal.identify.stages import (
 )
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.chain import Model
+from robocal.model.joints import effect_of
 from robocal.model.rank import Dropped
 from robocal.model.steps import Role
 
@@ -110,6 +118,8 @@ class ConstraintResult:
         prior: the prior toward the nominal geometry the fit used (None: a least-squares fit).
         kind_sigma: mixed data: the noise (m) each kind was weighted by, ``(("point", σ),
             ("tracker", σ_t))`` (estimated unless ``known_noise``); empty for one kind.
+        notes: sentences on what the fit left out or could not model (tilt rows whose
+            contact side is unknown, joint effects seen by the tilt rows only).
     """
 
     model: Model
@@ -134,6 +144,7 @@ class ConstraintResult:
     figures: ConstraintFigures | None = field(default=None)
     prior: NominalPrior | None = field(default=None)
     kind_sigma: tuple[tuple[str, float], ...] = ()
+    notes: tuple[str, ...] = ()
 
     def summary_lines(self) -> list[str]:
         """A short human summary (mm, deg)."""
@@ -169,7 +180,7 @@ class ConstraintResult:
             )
         if self.figures is not None:
             lines += self.figures.lines()
-        return lines
+        return lines + [f"note: {note}" for note in self.notes]
 
 
 # ---------------------------------------------------------------------- start values
@@ -206,7 +217,11 @@ def _start_planes(p: Array, data: ConstraintSet) -> Array:
 
 
 def build_constraint_problem(
-    robot: Model, data: ConstraintSet, tool: Array | None = None, prior: NominalPrior | None = None
+    robot: Model,
+    data: ConstraintSet,
+    tool: Array | None = None,
+    prior: NominalPrior | None = None,
+    tilt_kinds: tuple[str, ...] = EFFECT_KINDS,
 ) -> ConstraintProblem:
     """The problem at its start values; ``tool``: a tool point (m) on the robot's end to
     fit with it, or None (the robot's end is the tool point); ``prior``: a prior of the
@@ -231,7 +246,7 @@ def build_constraint_problem(
     weights = None if prior is None else prior.weights(chain, robot.names)
     if not data.tilted.any():
         return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
-    terms = tilt_terms(robot, chain, data)
+    terms = tilt_terms(robot, chain, data, tilt_kinds)
     empty = np.zeros(len(terms.zeros))
     values = dict(zip(chain.free_names, chain.free_values.tolist(), strict=True))
     r = tilt_rows(terms, data, values, empty, np.zeros(len(terms.effects)))[0]
@@ -297,6 +312,7 @@ def calibrate_constraints(
     pruning: Pruning | None = None,
     known_noise: bool = False,
     prior: NominalPrior | None = None,
+    tilt_kinds: tuple[str, ...] = EFFECT_KINDS,
 ) -> ConstraintResult:
     """Identify the robot (and the points, planes, device frame) from constraint data.
 
@@ -317,12 +333,14 @@ def calibrate_constraints(
             with ``known_noise``, else σ̂ of a least-squares fit first (a stated σ ten
             times the real one would make the prior ten times too strong).  None: least
             squares.
+        tilt_kinds: the joint effects the tilt rows identify (``ALL_KINDS`` adds clearance).
     """
     if level == 1:
         model = model.fixed([s.name for s in model.steps if s.joint is None])
     if fixed:
         model = model.fixed(fixed)
-    problem = build_constraint_problem(model, data, tool, prior)
+    data, notes = _clear_rows(model, data)
+    problem = build_constraint_problem(model, data, tool, prior, tilt_kinds)
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
@@ -338,7 +356,28 @@ def calibrate_constraints(
         problem, x, cov, refit = _prune(problem, x, cov, pruning, dropped, known_noise)
         fit = refit or fit
     result = _result(problem, model, x, cov, fit, dropped, selection.kept, tool is not None)
-    return dataclasses.replace(result, prior=prior)
+    effects = tuple(n for n in result.names if effect_of(n) is not None)
+    notes += [note] if (note := mixed_effects_note(data, effects)) else []
+    return dataclasses.replace(result, prior=prior, notes=tuple(notes))
+
+
+def _clear_rows(model: Model, data: ConstraintSet) -> tuple[ConstraintSet, list[str]]:
+    """``data`` without the tilt rows whose contact side is unknown
+    (:func:`~robocal.identify.constraints.tilt_rows.unclear_contact`), and a note saying
+    how many were left out.  Refuses when no tilt row is left."""
+    unclear = unclear_contact(model, data)
+    if not unclear.any():
+        return data, []
+    if unclear.sum() == data.tilted.sum():
+        raise ValueError(
+            "every tilt row has a joint whose load moment is near zero (its clearance or backlash "
+            "could act either way); read at configurations whose moments are clearly on one side"
+        )
+    note = (
+        f"{int(unclear.sum())} of {int(data.tilted.sum())} tilt rows left out: a joint's load moment "
+        "is near zero there, so the side its clearance or backlash acts on is not known"
+    )
+    return data.select(~unclear), [note]
 
 
 def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintResult:
@@ -431,7 +470,7 @@ def kind_identifiable(
 ) -> tuple[tuple[str, ...], tuple[Dropped, ...]]:
     """The identifiable set of ``robot``'s parameters from ``data`` (rank test at the start
     values): the kept robot parameters and what was dropped."""
-    problem = build_constraint_problem(robot, data, tool)
+    problem = build_constraint_problem(robot, _clear_rows(robot, data)[0], tool)
     selection = identifiable(problem)
     roles = problem.chain.roles
     kept = tuple(n for n in selection.kept if roles.get(n) not in (Role.DEVICE,) and n in roles)

@@ -29,7 +29,12 @@ from robocal.identify.observability_indices import (
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.chain import Model
 
-__all__ = ["ConstraintPoseSelection", "greedy_blocks", "select_constraint_poses"]
+__all__ = [
+    "ConstraintPoseSelection",
+    "greedy_blocks",
+    "select_constraint_poses",
+    "select_tilt_configurations",
+]
 
 Array = NDArray[np.float64]
 
@@ -102,6 +107,34 @@ def select_constraint_poses(
     chosen, indices, baseline = greedy_blocks(blocks, n, index, shortlist, base=J[extra])
     plan = _subset(pool, units, chosen)
     return ConstraintPoseSelection(plan, index, float(indices[index]), indices, baseline, problem.free_names)
+
+
+def select_tilt_configurations(
+    model: Model,
+    pool: ConstraintSet,
+    n: int,
+    tilt_kinds: tuple[str, ...] = ("clearance", "backlash", "compliance"),
+) -> ConstraintSet:
+    """The tilt rows of ``n`` configurations of ``pool`` (inclinometer rows only) chosen
+    greedily for the largest ``log det`` of the information (D-optimal, :func:`greedy_blocks`)
+    on ``model``'s identifiable unknowns: the thesis' choice of configurations that flip
+    one joint's moments at a time, made by the readings' own Jacobian.  Rows whose contact
+    side is unknown (:func:`~robocal.identify.constraints.tilt_rows.unclear_contact`) are
+    no candidates."""
+    from robocal.identify.constraints.tilt_rows import unclear_contact
+
+    if pool.kinds != ("tilt",):
+        raise ValueError("select_tilt_configurations takes inclinometer rows only")
+    pool = pool.select(~unclear_contact(model, pool))
+    problem = build_constraint_problem(model, pool, tilt_kinds=tilt_kinds)
+    problem = problem.fix(identifiable(problem).dropped_names)
+    J = problem.jacobian(problem.x0) * problem.free_scale  # tilt rows only: the data's order
+    config = np.unique(pool.q, axis=0, return_inverse=True)[1].reshape(-1)
+    units = [np.flatnonzero(config == k) for k in range(int(config.max()) + 1)]
+    if not 1 <= n <= len(units):
+        raise ValueError(f"cannot choose {n} of {len(units)} configurations")
+    chosen = greedy_blocks([J[u] for u in units], n)[0]
+    return pool.select(np.isin(config, chosen))
 
 
 def greedy_blocks(

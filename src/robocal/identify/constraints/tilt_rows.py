@@ -19,13 +19,27 @@ length moves no link's orientation and has a zero column, so the rank test repor
 not identifiable.  A rotation about the vertical (the base's yaw, joint 1 of a vertical
 arm) is invisible too.
 
-Joint effects (seed 003's backlash and compliance, ``backlash_<joint>``, ``compliance_<joint>``,
-:mod:`robocal.model.joints`, eqs. 5.15-5.19 under the static gravity loads of eq. 4.21
-from the model's mass properties) turn the links as the thesis identifies them from
-tilts; they are unknowns of the tilt rows only: the position rows of the same fit (a
-tracker, sockets) are predicted without them.  The loads are those of the start
-geometry, held fixed in the fit (as :func:`robocal.identify.tilt_identification.identify_tilt`:
-a change of 0.1° changes them by about 0.2 %), so the Jacobian is exact for this model.
+Joint effects (seed 003's clearance tilt, backlash and compliance, ``clearance_<joint>``,
+``backlash_<joint>``, ``compliance_<joint>``, :mod:`robocal.model.joints`, eqs. 5.15-5.19
+under the static gravity loads of eq. 4.21 from the model's mass properties) turn the
+links as the thesis identifies them from tilts; they are unknowns of the tilt rows only:
+the position rows of the same fit (a tracker, sockets) are predicted without them (the
+fit says so, :func:`mixed_effects_note`).
+
+Clearance and backlash turn a link by ``±C``, ``±δθ_bkl`` with the *sign* of a load moment
+(the bending moment ``(ηx, ηy)`` picks the side the shaft leans on, ``ηz`` the flank of
+the gear), so a reading is smooth in the parameters but jumps where that moment crosses
+zero.  The thesis avoids that by choosing configurations whose moments are clearly on
+one side (§4.4.1: the last link inclined 5° either side of the vertical; Fig. 4.6).  The
+tilt rows do the same with any configurations: a row where a sensed joint's moment of
+either kind is within :data:`CONTACT_FRACTION` of zero (relative to that joint's largest
+over the rows) is left out of the fit (:func:`unclear_contact`), since an error of the
+model's loads (its geometry, its masses) could put the contact on the other side and
+the row would be off by ``2C``; the sign of every row kept is that of the held loads.
+
+The loads are those of the start geometry, held fixed in the fit (as
+:func:`robocal.identify.tilt_identification.identify_tilt`: a change of 0.1° changes them
+by about 0.2 %), so the Jacobian is exact for this model.
 """
 
 from __future__ import annotations
@@ -39,12 +53,27 @@ from numpy.typing import NDArray
 from robocal.measure.constraints.data_set import TILT_AXES, ConstraintSet
 from robocal.model.chain import Model
 
-__all__ = ["EFFECT_KINDS", "ZERO_PREFIX", "TiltTerms", "tilt_figures", "tilt_rows", "tilt_terms"]
+__all__ = [
+    "ALL_KINDS",
+    "CONTACT_FRACTION",
+    "EFFECT_KINDS",
+    "ZERO_PREFIX",
+    "TiltTerms",
+    "mixed_effects_note",
+    "tilt_figures",
+    "tilt_rows",
+    "tilt_terms",
+    "unclear_contact",
+]
 
 Array = NDArray[np.float64]
-# clearance is left out: its tilt is ±C by the sign of a moment, a kink at C = 0 where the
-# estimate is not Gaussian (8 simulated runs: 3σ errors); `robocal data tilt` fits it
+# clearance is opt-in (``ALL_KINDS``): on random configurations of a UR10 (no effects in the
+# truth) it took 0.03° of the wrists' tilt the geometry alone then lacks (tests/test_tilt_rows)
 EFFECT_KINDS = ("backlash", "compliance")
+ALL_KINDS = ("clearance", "backlash", "compliance")
+#: a load within this fraction of its joint's largest over the rows has no reliable sign:
+#: 2 % is a 1.1° error of the moment's direction; the thesis' ±5° about the vertical is 8.7 %
+CONTACT_FRACTION = 0.02
 ZERO_PREFIX = "tilt_zero_"
 MOMENT_FLOOR = 1.0  # N·m: the compliance column's scale when the loads are smaller
 
@@ -86,8 +115,11 @@ def _sensors(robot: Model, data: ConstraintSet):
     return readings, sensors
 
 
-def tilt_terms(robot: Model, chain: Model, data: ConstraintSet) -> TiltTerms:
-    """The tilt rows' unknowns for ``robot`` (measured through ``chain``) and ``data``."""
+def tilt_terms(
+    robot: Model, chain: Model, data: ConstraintSet, kinds: tuple[str, ...] = EFFECT_KINDS
+) -> TiltTerms:
+    """The tilt rows' unknowns for ``robot`` (measured through ``chain``) and ``data``,
+    the joint effects of ``kinds``."""
     from robocal.model.joints import EFFECT_PREFIXES, load_moments
 
     on = data.tilted
@@ -100,7 +132,7 @@ def tilt_terms(robot: Model, chain: Model, data: ConstraintSet) -> TiltTerms:
     geometry = tuple(s.name for s in chain.steps if s.free and s.is_rotation and s.name in robot_names)
     deepest = int(data.tilt_link[on].max())
     joints = names[: deepest + 1]
-    effects = tuple(EFFECT_PREFIXES[kind][0] + j for kind in EFFECT_KINDS for j in joints)
+    effects = tuple(EFFECT_PREFIXES[kind][0] + j for kind in kinds for j in joints)
     eta = load_moments(robot, data.q[on])
     moment = max(float(np.abs(eta[:, :, 2]).max()) if eta.size else 0.0, MOMENT_FLOOR)
     scale = np.array([moment if e.startswith(EFFECT_PREFIXES["compliance"][0]) else 1.0 for e in effects])
@@ -139,3 +171,38 @@ def tilt_figures(robot: Model, data: ConstraintSet) -> tuple[tuple[str, ...], Ar
         rms.append(math.sqrt(float(np.mean((rk - rk.mean()) ** 2))))
     names = tuple(z[len(ZERO_PREFIX) :] for z in terms.zeros)
     return names, np.array(rms)
+
+
+def unclear_contact(robot: Model, data: ConstraintSet) -> NDArray[np.bool_]:
+    """``(n,)`` the tilt rows whose contact side is not known: at some joint up to the
+    sensed link, the bending moment ``|ηx| + |ηy|`` (clearance, the total of eq. 5.16) or
+    the axial moment ``|ηz|`` (backlash) of ``robot``'s loads is below
+    :data:`CONTACT_FRACTION` of that joint's largest over the tilt rows (a joint whose
+    moment of that kind is zero at every row has no such effect and counts as clear)."""
+    from robocal.model.joints import DEADBAND, load_moments
+
+    out = np.zeros(data.n, dtype=bool)
+    on = np.flatnonzero(data.tilted)
+    if not len(on):
+        return out
+    eta = load_moments(robot, data.q[on])  # (m, dof, 3)
+    unclear = np.zeros((len(on), robot.dof), dtype=bool)
+    for load in (np.abs(eta[:, :, 0]) + np.abs(eta[:, :, 1]), np.abs(eta[:, :, 2])):
+        largest = load.max(axis=0)
+        unclear |= (load < CONTACT_FRACTION * largest) & (largest > DEADBAND)
+    sensed = np.arange(robot.dof)[None, :] <= data.tilt_link[on][:, None]
+    out[on] = np.any(unclear & sensed, axis=1)
+    return out
+
+
+def mixed_effects_note(data: ConstraintSet, effects: tuple[str, ...]) -> str | None:
+    """One sentence when a fit identifies joint ``effects`` from its tilt rows while other
+    rows of the same fit (tracker, points, planes, pairs) are predicted without them; else None."""
+    others = [k for k in data.kinds if k != "tilt"]
+    if not effects or "tilt" not in data.kinds or not others:
+        return None
+    return (
+        f"joint effects ({', '.join(effects)}) are identified from the tilt rows only: the "
+        f"{', '.join(others)} rows are predicted without the joints' deflections, so under load "
+        "they carry them as error (calibrate those rows alone to compare)"
+    )

@@ -175,19 +175,26 @@ def simulate_tilt_rows(
     zeros: dict[tuple[int, int], float] | None = None,
     max_tilt: float = np.radians(60.0),
     seed: int | np.random.Generator | None = 0,
+    configurations: Array | None = None,
 ) -> ConstraintSet:
     """Inclinometer readings of the ``true`` robot (its geometry and ``joint_effects`` under
     gravity, :func:`robocal.measure.inclinometer.readings`) at ``n`` random configurations:
     both channels of a sensor on each link of ``links`` (joint indices, 0-based; None:
     every joint's link), plus each channel's zero ``zeros[(link, axis)]`` (rad, default 0)
     and normal noise ``sigma`` (rad).  Readings beyond ``max_tilt`` (a sensor's range;
-    near the vertical a reading is insensitive) are left out."""
+    near the vertical a reading is insensitive) are left out.  ``configurations``
+    ``(n, dof)``: read at these (a plan) instead of random ones."""
     from robocal.measure.inclinometer import readings
     from robocal.model.joints import joint_perturbations
 
     rng = np.random.default_rng(seed)
     links = tuple(range(true.dof)) if links is None else tuple(links)
-    q = random_configurations(true, n, rng=rng)
+    q = (
+        random_configurations(true, n, rng=rng)
+        if configurations is None
+        else np.asarray(configurations, float)
+    )
+    n = len(q)
     link = np.tile(np.repeat(np.array(links, dtype=np.intp), 2), n)
     axis = np.tile(np.array([0, 1] * len(links), dtype=np.intp), n)
     q_rows = np.repeat(q, 2 * len(links), axis=0)
