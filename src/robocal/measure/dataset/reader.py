@@ -242,7 +242,16 @@ class Reader(ColumnResolver, RowChecks):
             if counts[k] <= MAX_LISTED:
                 found[k].append((code, message, line))
 
-        for chunk in csvfile.iter_chunks(self.head):
+        # the fast path needs every cell a number: not with the text column ``set``
+        for chunk in csvfile.iter_chunks(self.head, decimal=None if set_k is not None else self.decimal):
+            if chunk.numbers is not None:  # plain numbers, read at once: no problems
+                for k in numeric:
+                    parts[k].append(chunk.numbers[:, k].copy())
+                line_no.append(chunk.line)
+                offsets.append(chunk.offset)
+                good.append(np.ones(len(chunk), dtype=bool))
+                incomplete.append(np.zeros(len(chunk), dtype=bool))
+                continue
             ok = np.ones(len(chunk), dtype=bool)
             for i, code, message in chunk.problems:
                 ok[i] = False
