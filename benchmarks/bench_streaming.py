@@ -15,9 +15,17 @@ residual's cross-validated choice, ``robocal calibrate``'s default, on a robot w
 and 3 have smooth angle errors, so that the residual is chosen and refitted on all poses).
 
 Run: ``python benchmarks/bench_streaming.py [--sizes 10000,100000,1000000]
-[--variants physics,compliance,residual]``.  The machine's load average is printed with each row,
-and the calibration's CPU time beside its wall time (one BLAS thread: on a busy machine the wall
-time is the CPU time plus the waits for a core).
+[--variants physics,compliance,residual]``.  The machine's load average is printed with
+each row, and the calibration's CPU time beside its wall time (one BLAS thread: on a busy
+machine the wall time is the CPU time plus the waits for a core).
+
+``python benchmarks/bench_streaming.py --cli N [--csv FILE]`` instead times the command
+line on a CSV file of ``N`` such poses (written once to ``FILE``, default
+``/tmp/robocal_bench_N.csv``, by :func:`write_measurements`): ``robocal calibrate ur10
+--data FILE --out DIR`` with its default options (the learned residual's cross-validation
+included) against reading the same file with ``numpy.loadtxt`` and ``pandas.read_csv`` and
+with :func:`read_measurements` alone, each in its own process under ``/usr/bin/time -v``
+(wall time, CPU time, peak RSS of the whole process).
 """
 
 from __future__ import annotations
@@ -120,15 +128,77 @@ def measure(n: int, variant: str) -> dict:
     return row
 
 
+#: The reading references of ``--cli``: Python run in a child process on the CSV file.
+READERS = {
+    "numpy.loadtxt": "import numpy as np; np.loadtxt(PATH, delimiter=',', comments='#', skiprows=2)",
+    "pandas.read_csv": "import pandas as pd; pd.read_csv(PATH, comment='#').to_numpy()",
+    "read_measurements": "from robocal.measure.dataset.read import read_measurements as r; r(PATH)",
+}
+
+
+def _timed(cmd: list[str]) -> dict:
+    """``cmd`` under ``/usr/bin/time -v``: wall and CPU seconds, peak RSS (MB), the load."""
+    out = subprocess.run(["/usr/bin/time", "-v", *cmd], capture_output=True, text=True, check=True)
+
+    def field(name: str) -> float:
+        found = re.search(name + r": ([\d.:]+)", out.stderr)
+        return float(found.group(1)) if found else float("nan")
+
+    wall = re.search(r"Elapsed \(wall clock\) time \(h:mm:ss or m:ss\): (\d+):([\d.]+)", out.stderr)
+    return {
+        "wall_seconds": int(wall.group(1)) * 60 + float(wall.group(2)) if wall else float("nan"),
+        "cpu_seconds": field(r"User time \(seconds\)") + field(r"System time \(seconds\)"),
+        "peak_rss_mb": field(r"Maximum resident set size \(kbytes\)") / 1024,
+        "load": os.getloadavg()[0],
+    }
+
+
+def cli_case(n: int, csv_path: str | None) -> None:
+    """``robocal calibrate`` on a CSV file of ``n`` poses against reading it (``--cli``)."""
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    path = Path(csv_path or f"{tempfile.gettempdir()}/robocal_bench_{n}.csv")
+    if not path.exists():
+        from robocal.measure.dataset.read import write_measurements
+        from robocal.measure.measurements import Measurements
+
+        _, q, position = make_data(n)
+        write_measurements(Measurements(q=q, position=position), path)
+        del q, position
+    robocal = shutil.which("robocal") or "robocal"
+    print(f"{path}: {path.stat().st_size / 2**20:.0f} MB, {n:,} poses", flush=True)
+    out = Path(tempfile.mkdtemp(prefix="robocal_bench_cli_"))
+    calibrate = [robocal, "calibrate", "ur10", "--data", str(path), "--out"]
+    _timed([*calibrate, str(out / "warm")])  # the numba kernels compiled or loaded once
+    rows = {name: _timed([sys.executable, "-c", code.replace("PATH", repr(str(path)))])
+            for name, code in READERS.items()}  # fmt: skip
+    rows["robocal calibrate"] = _timed([*calibrate, str(out / "run")])
+    shutil.rmtree(out, ignore_errors=True)
+    data_mb = n * 9 * 8 / 2**20
+    for name, row in rows.items():
+        print(
+            f"{name:<18} wall {row['wall_seconds']:6.2f} s  CPU {row['cpu_seconds']:6.2f} s  "
+            f"peak RSS {row['peak_rss_mb']:6.0f} MB (the arrays {data_mb:.0f} MB)  load {row['load']:.1f}",
+            flush=True,
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", default="10000,100000,1000000")
     parser.add_argument("--variants", default="physics,compliance,residual")
+    parser.add_argument("--cli", type=int, help="time robocal calibrate on a CSV file of this many poses")
+    parser.add_argument("--csv", help="the CSV file of --cli (written when missing)")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--variant", default="physics", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(run(args.child, args.variant)))
+        return
+    if args.cli:
+        cli_case(args.cli, args.csv)
         return
     measure(1000, "residual")  # compile or load the kernels once (numba's cache) before timing
     reference = measure(10_000, "physics")  # the dense physics-only fit of 10,000 poses
