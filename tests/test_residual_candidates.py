@@ -5,6 +5,8 @@ choice and costs a sixth less per evidence evaluation (issue 35 item 1); the tab
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -14,12 +16,11 @@ from robocal.identify.pipeline import calibrate_physics
 from robocal.identify.residual.cv import CVCandidate, CVTable, PhysicalFit, cross_validate_residual
 from robocal.identify.residual.fit import (
     MAX_AMPLITUDE,
-    fourier_gram,
     one_blas_thread_limit,
     raw_blocks,
     residual_template,
 )
-from robocal.model.residual import fourier_basis
+from robocal.model.residual import fourier_basis, fourier_gram
 from tests.test_residual import PROBE, _case, _ur10
 
 
@@ -131,3 +132,17 @@ def test_the_normal_equations_by_blocks_are_the_design_products(covered):
     raw = raw_blocks(q, r, P, template, J)
     for got, expected in ((raw.AA, A.T @ A), (raw.Ar, A.T @ r.reshape(-1)), (raw.JA, J2.T @ A)):
         assert got == pytest.approx(expected, abs=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("covered", [400, 150])  # no pose faded / many poses faded
+def test_the_mean_position_variance_from_sums_of_harmonics_is_the_covariances_trace(covered):
+    rng = np.random.default_rng(covered)
+    n, k = 400, 5
+    q, P = rng.uniform(-3.0, 3.0, (n, 6)), rng.normal(size=(n, 3, 6, 3))
+    names, seen = [f"j{i}" for i in range(k)], q[:covered]
+    learned = residual_template(names, list(range(k)), 10, seen)
+    root = rng.normal(size=(learned.size, learned.size)) * 1e-4
+    learned = dataclasses.replace(learned, covariance=root @ root.T, length_scale=0.3).covering(seen)
+    assert learned.global_harmonics > 0 and (covered < n) == bool(np.any(learned.fade(q) < 1.0))
+    expected = np.mean(np.trace(learned.position_covariance(q, P), axis1=1, axis2=2))
+    assert learned.mean_position_variance(q, P) == pytest.approx(expected, rel=1e-10)

@@ -17,7 +17,7 @@ from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.linalg.lapack import dpotrf, dtrtri
 from scipy.optimize import minimize
 
-from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, fourier_basis, one_blas_thread
+from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, fourier_gram, one_blas_thread
 
 __all__ = ["Hyper", "fit_joint_fourier"]
 
@@ -188,7 +188,7 @@ def raw_blocks(q: Array, r: Array, P: Array, template: JointAngleResidual, J: Ar
     (the matrix is symmetric) from the basis laid out joint by joint, harmonic by pose
     (``(k, 2H, c)``, contiguous: the scaled copies and products of the ``(c, k, 2H)`` layout's
     strided slices took twice the time); on poses where nothing fades the diagonal blocks come
-    from their sums of harmonics (:func:`fourier_gram`)."""
+    from their sums of harmonics (:func:`~robocal.model.residual.fourier_gram`)."""
     k, h2 = len(template.joints), 2 * template.harmonics
     m, p = template.size, 0 if J is None else J.shape[-1]
     AA, Ar, rr = np.zeros((m, m)), np.zeros(m), 0.0
@@ -219,28 +219,6 @@ def raw_blocks(q: Array, r: Array, P: Array, template: JointAngleResidual, J: Ar
             JJ += J2.T @ J2
             Jr += J2.T @ y.reshape(-1)
     return Raw(np.triu(AA) + np.triu(AA, 1).T, JA, Ar, JJ, Jr, rr, r.size)
-
-
-def fourier_gram(angles: Array, weights: Array, harmonics: int) -> Array:
-    """``Bᵀ diag(w) B`` ``(2H, 2H)`` for the Fourier basis ``B`` ``(n, 2H)`` of ``angles``
-    ``(n,)`` (rad; :func:`~robocal.model.residual.fourier_basis`'s column order) and weights
-    ``w`` ``(n,)``, from the weighted sums ``Σ w cos(d q)``, ``Σ w sin(d q)`` for ``d = 0..2H``
-    (``cos a cos b = ½(cos(a − b) + cos(a + b))`` and its kin): ``8 H n`` operations instead
-    of the product's ``8 H² n`` (the diagonal blocks of :func:`raw_blocks`: a third of its
-    products at five joints)."""
-    F = fourier_basis(angles[:, None], 2 * harmonics)[:, 0, :]  # (n, 4H): cos d q, sin d q, d = 1..2H
-    sums = weights @ F
-    C = np.r_[weights.sum(), sums[0::2]]  # (2H + 1,) Σ w cos(d q), d = 0..2H
-    S = np.r_[0.0, sums[1::2]]  # Σ w sin(d q)
-    h = np.arange(1, harmonics + 1)
-    diff, total = h[:, None] - h[None, :], h[:, None] + h[None, :]  # h - h', h + h'
-    out = np.empty((2 * harmonics, 2 * harmonics))
-    out[0::2, 0::2] = 0.5 * (C[np.abs(diff)] + C[total])  # Σ w cos(h q) cos(h' q)
-    out[1::2, 1::2] = 0.5 * (C[np.abs(diff)] - C[total])  # Σ w sin(h q) sin(h' q)
-    cos_sin = 0.5 * (S[total] - np.sign(diff) * S[np.abs(diff)])  # Σ w cos(h q) sin(h' q)
-    out[0::2, 1::2] = cos_sin
-    out[1::2, 0::2] = cos_sin.T
-    return out
 
 
 def kept_columns(template: JointAngleResidual, top: int, H: int) -> Index:
