@@ -1,3 +1,4 @@
+# long: the batched engine is one concept (K robots through the one stage sequence, its stages and values)
 """The batched calibration engine: many robots of one model calibrated at once.
 
 :func:`calibrate_batch` computes what ``rc.calibrate(model, d, tool_guess=...,
@@ -380,64 +381,6 @@ class _Batch:
             selections[k] = _Selection(np.array([name in kept for name in names]), tuple(subset.dropped))
         return selections
 
-    def _screen(self, start: _BatchStart, k: int, selection: _Selection) -> _Selection:
-        """Stage 5: the hopeless unknowns fixed before the first fit
-        (:func:`~robocal.identify.stages.screen_unidentifiable`)."""
-        cols = np.flatnonzero(selection.mask)
-        effect = tool_displacement_scale(start.J_plain[k][:, cols].reshape(self.n, 3, -1))
-        found = screen_unidentifiable(start.r[k], start.J[k][:, cols], effect,
-                                      known_noise=bool(self.known[k]), rules=self.rules)  # fmt: skip
-        mask, dropped = selection.mask.copy(), list(selection.dropped)
-        for c, sigma in found:
-            mask[cols[c]] = False
-            dropped.append(Dropped(self.free_names[cols[c]], "poorly identifiable", sigma=sigma))
-        return _Selection(mask, tuple(dropped))
-
-    def _solve(self, start: _BatchStart, selections: dict[int, _Selection]) -> dict[int, _Fit]:
-        """Stage 6: the fit of each robot's selection from its start values and the
-        :func:`~robocal.identify.stages.uncertainty` at its solution; robots with the same
-        unknowns are one batched solve (:func:`levenberg_marquardt_batch`)."""
-        groups: dict[bytes, list[int]] = {}
-        for k, selection in selections.items():
-            groups.setdefault(selection.mask.tobytes(), []).append(k)
-        fits: dict[int, _Fit] = {}
-        for members in groups.values():
-            idx = np.array(members, dtype=np.intp)
-            mask = selections[members[0]].mask
-            cols = self.free[mask]
-            group = _Group(
-                self.chain, self.V[idx], [self.qs[k] for k in idx], self.ys[idx], self.w[idx], cols
-            )
-            solved = levenberg_marquardt_batch(group.weighted, start.x[idx][:, mask],
-                                               max_evaluations=self.max_iterations * (len(cols) + 1),
-                                               tolerance=1e-10)  # fmt: skip
-            for i, k in enumerate(members):
-                covariance = uncertainty(solved.r[i], solved.J[i], 3, bool(self.known[k]), self.rules)
-                fits[k] = _Fit(selections[k], solved, i, group.w[i], covariance)
-        return fits
-
-    def _prune(self, start: _BatchStart, fits: dict[int, _Fit]) -> dict[int, _Fit]:
-        """Stage 6, pruning: after a converged fit the worst poorly identifiable unknown
-        (:func:`~robocal.identify.stages.poorly_identifiable`) is fixed and the robot
-        refitted from its start values, until none is left."""
-        todo = dict(fits)
-        while todo:
-            pruned: dict[int, _Selection] = {}
-            for k, fit in todo.items():
-                if not fit.solved.success[fit.i]:
-                    continue
-                J_plain = (fit.solved.J[fit.i] / fit.w[:, None]).reshape(self.n, 3, -1)
-                found = poorly_identifiable(fit.covariance.std, tool_displacement_scale(J_plain),
-                                            self.rules.max_std, self.rules.max_std_ratio)  # fmt: skip
-                if found is not None:
-                    mask, c = fit.selection.mask.copy(), int(np.flatnonzero(fit.selection.mask)[found[0]])
-                    mask[c] = False
-                    why = Dropped(self.free_names[c], "poorly identifiable", sigma=found[1])
-                    pruned[k] = _Selection(mask, (*fit.selection.dropped, why))
-            todo = self._solve(start, pruned) if pruned else {}
-            fits.update(todo)
-        return fits
-
     def _assemble(self, start: _BatchStart, k: int, fit: _Fit) -> BatchFit | CalibrationGuardError:
         """Stages 7-8: robot ``k``'s result, or the solution guard's refusal."""
         n, solved, i, mask = self.n, fit.solved, fit.i, fit.selection.mask
@@ -473,13 +416,66 @@ class _BatchStages:
     start: _BatchStart
 
     def screen(self, selections: dict[int, _Selection]) -> dict[int, _Selection]:
-        return {k: self.batch._screen(self.start, k, sel) for k, sel in selections.items()}
+        return {k: self._screen_one(k, selection) for k, selection in selections.items()}
+
+    def _screen_one(self, k: int, selection: _Selection) -> _Selection:
+        """Stage 5: the hopeless unknowns fixed before the first fit
+        (:func:`~robocal.identify.stages.screen_unidentifiable`)."""
+        b, start = self.batch, self.start
+        cols = np.flatnonzero(selection.mask)
+        effect = tool_displacement_scale(start.J_plain[k][:, cols].reshape(b.n, 3, -1))
+        found = screen_unidentifiable(start.r[k], start.J[k][:, cols], effect,
+                                      known_noise=bool(b.known[k]), rules=b.rules)  # fmt: skip
+        mask, dropped = selection.mask.copy(), list(selection.dropped)
+        for c, sigma in found:
+            mask[cols[c]] = False
+            dropped.append(Dropped(b.free_names[cols[c]], "poorly identifiable", sigma=sigma))
+        return _Selection(mask, tuple(dropped))
 
     def solve(self, selections: dict[int, _Selection]) -> dict[int, _Fit]:
-        return self.batch._solve(self.start, selections)
+        """Stage 6: the fit of each robot's selection from its start values and the
+        :func:`~robocal.identify.stages.uncertainty` at its solution; robots with the same
+        unknowns are one batched solve (:func:`levenberg_marquardt_batch`)."""
+        b, start = self.batch, self.start
+        groups: dict[bytes, list[int]] = {}
+        for k, selection in selections.items():
+            groups.setdefault(selection.mask.tobytes(), []).append(k)
+        fits: dict[int, _Fit] = {}
+        for members in groups.values():
+            idx = np.array(members, dtype=np.intp)
+            mask = selections[members[0]].mask
+            cols = b.free[mask]
+            group = _Group(b.chain, b.V[idx], [b.qs[k] for k in idx], b.ys[idx], b.w[idx], cols)
+            solved = levenberg_marquardt_batch(group.weighted, start.x[idx][:, mask],
+                                               max_evaluations=b.max_iterations * (len(cols) + 1),
+                                               tolerance=1e-10)  # fmt: skip
+            for i, k in enumerate(members):
+                covariance = uncertainty(solved.r[i], solved.J[i], 3, bool(b.known[k]), b.rules)
+                fits[k] = _Fit(selections[k], solved, i, group.w[i], covariance)
+        return fits
 
     def prune(self, fits: dict[int, _Fit]) -> dict[int, _Fit]:
-        return self.batch._prune(self.start, fits)
+        """Stage 6, pruning: after a converged fit the worst poorly identifiable unknown
+        (:func:`~robocal.identify.stages.poorly_identifiable`) is fixed and the robot
+        refitted from its start values, until none is left."""
+        b = self.batch
+        todo = dict(fits)
+        while todo:
+            pruned: dict[int, _Selection] = {}
+            for k, fit in todo.items():
+                if not fit.solved.success[fit.i]:
+                    continue
+                J_plain = (fit.solved.J[fit.i] / fit.w[:, None]).reshape(b.n, 3, -1)
+                found = poorly_identifiable(fit.covariance.std, tool_displacement_scale(J_plain),
+                                            b.rules.max_std, b.rules.max_std_ratio)  # fmt: skip
+                if found is not None:
+                    mask, c = fit.selection.mask.copy(), int(np.flatnonzero(fit.selection.mask)[found[0]])
+                    mask[c] = False
+                    why = Dropped(b.free_names[c], "poorly identifiable", sigma=found[1])
+                    pruned[k] = _Selection(mask, (*fit.selection.dropped, why))
+            todo = self.solve(pruned) if pruned else {}
+            fits.update(todo)
+        return fits
 
 
 class _BatchStart:
