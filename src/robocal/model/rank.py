@@ -198,8 +198,9 @@ def preference_subset(
     column norms are ``norm`` ``(p,)`` and zero ones ``zero``): the sequential rank test
     (:func:`_sequential_rank_test`) and the absorbers of the dropped columns."""
     keep, coef, rel, unexplained = _sequential_rank_test(A, 1e-7 if rtol is None else rtol)
-    kept_cols = [c for c, k in zip(ordered, keep.tolist(), strict=True) if k]
-    red_cols = [c for c, k in zip(ordered, keep.tolist(), strict=True) if not k]
+    verdicts = list(zip(ordered, keep.tolist(), strict=True))
+    kept_cols = [c for c, k in verdicts if k]
+    red_cols = [c for c, k in verdicts if not k]
     return _subset(names, norm, zero, list(ordered), kept_cols, red_cols, rel,
                    (coef, unexplained) if explain else None, threshold)  # fmt: skip
 
@@ -300,15 +301,19 @@ def _absorbers(
     first, converted back to the Jacobian's units; ``unexplained``: the norm of what the
     fit leaves of each (unit-norm) redundant column."""
     k, j = np.nonzero(np.abs(coef) > threshold)  # the listed (kept, redundant) pairs: a few of them
-    listed: list[list[tuple[float, int, int, float]]] = [[] for _ in red_cols]
-    for kk, jj, c in zip(k.tolist(), j.tolist(), coef[k, j].tolist(), strict=True):
-        listed[jj].append((-abs(c), kk, kept_cols[kk], c))  # sorted: largest first, ties in test order
+    values = coef[k, j]
+    # by redundant column, then largest |coefficient| first, ties in test order
+    order = np.lexsort((k, -np.abs(values), j)).tolist()
+    k_list, j_list, v_list = k.tolist(), j.tolist(), values.tolist()
     scale, residuals = norm.tolist(), unexplained.tolist()
-    out = {}
-    for i, (c, pairs) in enumerate(zip(red_cols, listed, strict=True)):
-        absorbed = tuple((names[a], v * scale[c] / scale[a]) for _, _, a, v in sorted(pairs))
-        out[c] = Dropped(names[c], "redundant", absorbed, residuals[i])
-    return out
+    listed: list[list[tuple[str, float]]] = [[] for _ in red_cols]
+    for n in order:
+        a, c = kept_cols[k_list[n]], red_cols[j_list[n]]
+        listed[j_list[n]].append((names[a], v_list[n] * scale[c] / scale[a]))
+    return {
+        c: Dropped(names[c], "redundant", tuple(pairs), residuals[i])
+        for i, (c, pairs) in enumerate(zip(red_cols, listed, strict=True))
+    }
 
 
 def sequential_test_numpy(qr: Array, tolerance: float) -> tuple[Array, NDArray[np.bool_], Array, Array, bool]:

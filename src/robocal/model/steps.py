@@ -18,6 +18,8 @@ from robocal.spatial import MOTIONS
 __all__ = ["Body", "Joint", "JointEffects", "JointType", "Role", "Step", "check_chain"]
 
 JointType = Literal["revolute", "prismatic"]
+# bound once: a calibration derives some fifty steps (Step._copy_with)
+_new, _set = object.__new__, object.__setattr__
 
 
 def _check_name(kind: str, name: str) -> None:
@@ -134,9 +136,10 @@ class Step:
         return self._copy_with("free", bool(free))
 
     def _copy_with(self, field_name: str, value: object) -> Step:
-        step = object.__new__(Step)
-        step.__dict__.update(self.__dict__)
-        step.__dict__[field_name] = value
+        fields = self.__dict__.copy()
+        fields[field_name] = value
+        step = _new(Step)
+        _set(step, "__dict__", fields)  # the copied fields as its own (a frozen dataclass)
         return step
 
     @property

@@ -112,12 +112,19 @@ def first_pass(data, values, free_steps, length_scale, preference):
     free_scale = np.empty(p)
     for a in range(p):
         free_scale[a] = length_scale if step_rot[free_steps[a]] else 1.0
-    norm = np.zeros(p)
+    # the scaled weighted columns, each contiguous: the sums and the unit-norm copies below
+    # run along them (the same operations in the same order as along J's rows)
+    St = np.empty((p, m))
     for i in range(m):
         w = weights[i]
         for a in range(p):
-            v = J[i, a] * w * free_scale[a]
-            norm[a] += v * v
+            St[a, i] = J[i, a] * w * free_scale[a]
+    norm = np.zeros(p)
+    for a in range(p):
+        s = 0.0
+        for i in range(m):
+            s += St[a, i] * St[a, i]
+        norm[a] = s
     largest = total = 0.0
     for a in range(p):
         total += norm[a]
@@ -137,7 +144,7 @@ def first_pass(data, values, free_steps, length_scale, preference):
     for b in range(k):
         a = ordered[b]
         for i in range(m):
-            At[b, i] = J[i, a] * weights[i] * free_scale[a] / norm[a]
+            At[b, i] = St[a, i] / norm[a]
     return T, r, J, norm, zero, ordered[:k], At, finite
 
 

@@ -77,24 +77,54 @@ def damped_step(A, g, mu, M, L, step):
 def _normal_equations(J, r, i, transposed, G, Jr):
     """``G = JᵢᵀJᵢ`` ``(p, p)`` and ``Jr = Jᵢᵀrᵢ`` ``(p,)`` of problem row ``i`` of a stack of
     Jacobians ``J``: ``(n, m, p)``, or ``(n, p, m)`` (each one transposed) with
-    ``transposed`` (both C-ordered: a BLAS product without a copy)."""
-    # the products are copied into G and Jr by loops: numba's slice assignment compiles
-    # its shape checks and error messages (a second per kernel module)
+    ``transposed`` (both C-ordered)."""
     if transposed:
-        Jt = J[i]
-        _copy2(np.dot(Jt, Jt.T), G)
-        _copy1(np.dot(Jt, r[i]), Jr)
-    else:
+        _gram(J[i], r[i], G, Jr)
+    else:  # one pass to the transposed layout: the products then run along contiguous rows
         Ji = J[i]
-        _copy2(np.dot(Ji.T, Ji), G)
-        _copy1(np.dot(Ji.T, r[i]), Jr)
+        m, p = Ji.shape
+        Jt = np.empty((p, m))
+        for k in range(m):
+            for a in range(p):
+                Jt[a, k] = Ji[k, a]
+        _gram(Jt, r[i], G, Jr)
 
 
-@_jit
-def _copy2(src, dst):
-    for a in range(dst.shape[0]):
-        for b in range(dst.shape[1]):
-            dst[a, b] = src[a, b]
+# Reassociation lets LLVM vectorise the sums over the rows (round-off differs from BLAS's
+# order in the last bits); NaN and inf still propagate (no "nnan"/"ninf"): a Jacobian with
+# them must fail the damped Cholesky factorisation as before.
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc", "contract"})
+def _gram(Jt, r, G, Jr):
+    """``G = Jt Jtᵀ`` ``(p, p)`` and ``Jr = Jt r`` ``(p,)`` of a transposed Jacobian ``Jt``
+    ``(p, m)``: the lower triangle only, mirrored (half of a general product's work;
+    BLAS's ``syrk`` is not reachable from a cached numba kernel), two rows of ``G`` per
+    pass over the rows of ``Jt``."""
+    p, m = Jt.shape
+    for a in range(p):
+        s = 0.0
+        for k in range(m):
+            s += Jt[a, k] * r[k]
+        Jr[a] = s
+    for a in range(0, p - 1, 2):  # rows a and a + 1 of the lower triangle
+        for b in range(a + 1):
+            s0 = s1 = 0.0
+            for k in range(m):
+                v = Jt[b, k]
+                s0 += Jt[a, k] * v
+                s1 += Jt[a + 1, k] * v
+            G[a, b] = G[b, a] = s0
+            G[a + 1, b] = G[b, a + 1] = s1
+        s1 = 0.0
+        for k in range(m):
+            s1 += Jt[a + 1, k] * Jt[a + 1, k]
+        G[a + 1, a + 1] = s1
+    if p % 2:  # the last row of an odd size
+        a = p - 1
+        for b in range(a + 1):
+            s0 = 0.0
+            for k in range(m):
+                s0 += Jt[a, k] * Jt[b, k]
+            G[a, b] = G[b, a] = s0
 
 
 @_jit

@@ -1,0 +1,119 @@
+"""The calibration's overhead cut in the compiled kernels and the model layer (issue 35):
+the symmetric normal equations of the Levenberg-Marquardt kernels, the first pass's
+contiguous columns, the rank test's absorbers and the steps' copies give what the
+general code gave."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import robocal as rc
+from robocal.identify.kernels import lm
+from robocal.model import rank
+from robocal.model.steps import Joint, Role, Step
+
+
+def _reference_absorbers(norm, names, kept_cols, red_cols, coef, unexplained, threshold):
+    """The absorbers as listed before (one Python sort per redundant column)."""
+    listed = {c: [] for c in red_cols}
+    for j, c in enumerate(red_cols):
+        for kk, a in enumerate(kept_cols):
+            if abs(coef[kk, j]) > threshold:
+                listed[c].append((-abs(coef[kk, j]), kk, a, coef[kk, j]))
+    return {
+        c: rank.Dropped(
+            names[c],
+            "redundant",
+            tuple((names[a], v * norm[c] / norm[a]) for _, _, a, v in sorted(pairs)),
+            float(unexplained[j]),
+        )
+        for j, (c, pairs) in enumerate(listed.items())
+    }
+
+
+@pytest.mark.parametrize("p", [1, 2, 7, 8])
+@pytest.mark.parametrize("transposed", [False, True])
+def test_normal_equations_equal_the_general_product(p, transposed):
+    rng = np.random.default_rng(p)
+    J = rng.normal(size=(2, 41, p)) * np.logspace(0, 3, p)
+    r = rng.normal(size=(2, 41))
+    stack = np.ascontiguousarray(J.transpose(0, 2, 1)) if transposed else J
+    cost, G, Jr = np.empty(2), np.empty((2, p, p)), np.empty((2, p))
+    lm.start(r, stack, transposed, cost, G, Jr)
+    for k in range(2):
+        np.testing.assert_allclose(G[k], J[k].T @ J[k], rtol=1e-13, atol=1e-9)
+        np.testing.assert_allclose(Jr[k], J[k].T @ r[k], rtol=1e-13, atol=1e-12)
+        assert np.array_equal(G[k], G[k].T)  # mirrored, not computed twice
+    np.testing.assert_allclose(cost, np.sum(r**2, axis=1), rtol=1e-14)
+
+
+def test_a_nan_in_the_jacobian_still_stops_the_problem_unconverged():
+    # NaN must reach the normal matrix (no "nnan" in the sums' fast-math flags): the damped
+    # Cholesky factorisation then fails for every μ and the problem stops unconverged
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(1, 30, 4))
+    J[0, 7, 2] = np.nan
+    r = rng.normal(size=(1, 30))
+    cost, G, Jr = np.empty(1), np.empty((1, 4, 4)), np.empty((1, 4))
+    lm.start(r, J, False, cost, G, Jr)
+    assert np.isnan(G[0, 2]).all() and np.isnan(G[0, :, 2]).all() and np.isnan(Jr[0, 2])
+    step = np.empty(4)
+    mu = lm.damped_step(G[0], Jr[0], 1e-3, np.empty((4, 4)), np.zeros((4, 4)), step)
+    assert np.isnan(mu) and np.isnan(step).all()
+
+
+def test_absorbers_listed_largest_first_ties_in_test_order():
+    names = ("a", "b", "c", "d", "e", "f")
+    norm = np.array([1.0, 2.0, 0.5, 4.0, 1.5, 3.0])
+    kept_cols, red_cols = [0, 2, 3, 5], [4, 1]
+    coef = np.array([[0.5, -0.02], [-0.5, 0.9], [0.04, -0.9], [0.7, 0.3]])  # ties: ±0.5, ±0.9
+    unexplained = np.array([1e-9, 2e-9])
+    got = rank._absorbers(norm, names, kept_cols, red_cols, coef, unexplained, 0.05)
+    assert got == _reference_absorbers(norm, names, kept_cols, red_cols, coef, unexplained, 0.05)
+    assert [a for a, _ in got[4].absorbed_by] == ["f", "a", "c"]  # 0.7, then the tie 0.5/-0.5 in test order
+    assert [a for a, _ in got[1].absorbed_by] == ["c", "d", "f"]
+    assert got[4].absorbed_by[0][1] == pytest.approx(0.7 * 1.5 / 3.0)
+
+
+def test_absorbers_on_random_rank_tests_equal_the_reference():
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        k, d = rng.integers(1, 9), rng.integers(1, 5)
+        coef = np.round(rng.normal(size=(k, d)), 1)  # rounded: ties happen
+        norm = rng.uniform(0.1, 3.0, k + d)
+        cols = rng.permutation(k + d).tolist()
+        names = tuple(f"p{i}" for i in range(k + d))
+        args = (norm, names, cols[:k], cols[k:], coef, rng.uniform(0, 1e-8, d), 0.05)
+        assert rank._absorbers(*args) == _reference_absorbers(*args)
+
+
+def test_the_rank_test_of_a_calibration_names_the_same_absorbers():
+    # two columns exact combinations of earlier ones: each dropped, absorbed by those it is made of
+    model = rc.calibration_model("ur10")
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(90, 4))
+    A = np.column_stack([J, J[:, 0] + 2 * J[:, 1], J[:, 2] - J[:, 3] * 0.3])
+    A = A / np.linalg.norm(A, axis=0)
+    names = model.names[:6]
+    subset = rank.preference_subset(A, list(range(6)), np.ones(6), np.zeros(6, dtype=bool), names)
+    assert subset.kept == names[:4]
+    assert [d.name for d in subset.dropped] == list(names[4:])
+    for d in subset.dropped:
+        assert d.reason == "redundant" and d.residual < 1e-10
+    assert {a for a, _ in subset.dropped[0].absorbed_by} == {names[0], names[1]}
+    assert {a for a, _ in subset.dropped[1].absorbed_by} == {names[2], names[3]}
+
+
+def test_a_step_copy_is_a_checked_step_with_the_new_value():
+    step = Step("Rz", "theta2", 0.1, free=True, bounds=(-1.0, 1.0), joint=Joint("q2", (-3.0, 3.0)))
+    moved = step._with_value(0.25)
+    assert moved == Step("Rz", "theta2", 0.25, free=True, bounds=(-1.0, 1.0), joint=Joint("q2", (-3.0, 3.0)))
+    assert hash(moved) == hash(Step("Rz", "theta2", 0.25, bounds=(-1.0, 1.0), joint=Joint("q2", (-3.0, 3.0))))
+    assert step.value == 0.1 and moved.role is Role.KINEMATIC
+    fixed = moved._with_free(False)
+    assert (fixed.free, fixed.value, moved.free) == (False, 0.25, True)
+    with pytest.raises(AttributeError):
+        fixed.value = 1.0  # still frozen
+    with pytest.raises(ValueError, match="theta2"):
+        step._with_value(float("nan"))
