@@ -328,3 +328,21 @@ def test_real_panda_report_and_urdf_of_its_description(tmp_path):
     np.testing.assert_allclose(
         _pin_frames(tmp_path / "p.urdf", "ball_link", q_pin), cal.model.fk(q), atol=1e-9
     )
+
+
+def test_an_edit_of_a_parameter_the_fit_did_not_estimate_is_refused(folder, tmp_path):
+    """The recorded SHA-256 of model.yaml catches what the estimates' check cannot: a socket
+    calibration keeps the base nominal, and an edited base must not reach an export."""
+    from robocal.identify.constraints.result import load_constraint_calibration
+
+    out = _copy(folder, tmp_path)
+    load_constraint_calibration(out)  # as written: accepted
+    text = (out / "model.yaml").read_text()
+    line = next(s for s in text.splitlines() if "param: base_z," in s or "param: base_x," in s)
+    edited = line.split("value:")[0] + "value: 0.5}"
+    (out / "model.yaml").write_text(text.replace(line, edited))
+    with pytest.raises(ValueError, match=r"model\.yaml.*changed since the calibration"):
+        load_constraint_calibration(out)
+    res = runner.invoke(app, ["export", "urdf", str(out), "-o", str(tmp_path / "x.urdf")])
+    assert res.exit_code == 2 and "changed since the calibration" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "x.urdf").exists()

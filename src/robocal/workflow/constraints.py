@@ -272,7 +272,9 @@ def _save(result: ConstraintResult, request: ConstraintRequest, first: Path, tra
     try:
         with transaction(out, ("model.yaml", CONSTRAINT_RESULT_FILE)) as stage:
             save_model(result.model, stage.path / "model.yaml", run_id=stage.run_id)
-            text = json.dumps(doc | {"run_id": stage.run_id}, indent=1) + "\n"
+            # the digest lets every reader refuse a model.yaml edited after the calibration
+            doc |= {"run_id": stage.run_id, "model_sha256": file_hash(stage.path / "model.yaml")}
+            text = json.dumps(doc, indent=1) + "\n"
             (stage.path / CONSTRAINT_RESULT_FILE).write_text(text)
     except FolderBusyError as err:
         raise CalibrateFileError("out", str(err)) from None

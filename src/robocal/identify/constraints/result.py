@@ -211,13 +211,15 @@ def load_constraint_calibration(directory: str | Path) -> ConstraintCalibration:
         names = tuple(str(n) for n in doc["names"])
         estimates = np.asarray(doc["estimates"], dtype=float).reshape(len(names))
         _check_model(model, names, estimates, directory)
-        return ConstraintCalibration(
+        calibration = ConstraintCalibration(
             directory=directory, model=model, nominal=_nominal(model, doc, names), names=names,
             estimates=estimates, run_id=run_id if isinstance(run_id, str) else None,
             **_fields(doc, len(names)),
         )  # fmt: skip
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{path}: not a robocal constraint calibration ({err})") from None
+    _check_digest(directory / "model.yaml", doc.get("model_sha256"))  # after the estimates' named check
+    return calibration
 
 
 def _fields(doc: dict, n: int) -> dict:
@@ -239,3 +241,16 @@ def _fields(doc: dict, n: int) -> dict:
         distances=tuple((int(a), int(b), float(d)) for a, b, d in doc.get("distances_m", [])),
         prior=doc.get("prior") if isinstance(doc.get("prior"), dict) else None,
     )
+
+
+def _check_digest(model_path: Path, digest: object) -> None:
+    """Refuse a ``model.yaml`` whose SHA-256 is not the one the calibration recorded: an
+    edit of any parameter (estimated or not) would otherwise reach exports and commands.
+    Folders written before the digest carry none; the estimates' check still applies."""
+    from robocal.identify.result_io import file_hash
+
+    if digest is not None and file_hash(model_path) != digest:
+        raise ValueError(
+            f"{model_path}: changed since the calibration wrote it (its SHA-256 is not the one in "
+            f"{CONSTRAINT_FILE}); calibrate again, or export a model file of your own"
+        )
