@@ -726,12 +726,12 @@ def test_a_file_name_with_markup_is_printed_as_written(base, tmp_path):
     folder = tmp_path / "a[" / "x]"  # the path holds "[/x]"
     folder.mkdir(parents=True)
     shutil.copy(base / "meas.csv", folder / "[red].csv")
-    out = tmp_path / "c[/y]"
+    out = tmp_path / "c[/y][red]"
     result = CliRunner().invoke(
         app, [*CAL[:3], str(folder / "[red].csv"), "--out", str(out), "--residual", "none"]
     )
     assert result.exit_code == 0, result.output
-    assert str(out / "model.yaml") in result.output.replace("\n", ""), result.output
+    assert f"wrote {out} (model.yaml" in result.output.replace("\n", ""), result.output
     args = ["validate", str(out), "--data", str(folder / "[red].csv"), "--all-rows"]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0 and "[red].csv" in result.output, result.output

@@ -238,7 +238,7 @@ def _print(source, data_path: Path, n: int, fit, score, summary: dict[str, Any])
             "its poses; calibrate again",
             highlight=False,
         )
-    console.print(f"wrote {written_files(summary['out'])}", highlight=False)
+    console.print(f"wrote {written_files(summary['out'])}", highlight=False, soft_wrap=True)
 
 
 def register(app: typer.Typer) -> None:
