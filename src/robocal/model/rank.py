@@ -9,8 +9,11 @@ model builder (:mod:`robocal.model.builder`) picks a minimal parameter set with 
 
 from __future__ import annotations
 
+import functools
+import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Literal
 
 import numpy as np
@@ -227,10 +230,11 @@ def _subset(
             dropped.update({c: Dropped(names[c], "redundant") for c in red_cols})
         else:
             dropped.update(_absorbers(norm, names, kept_cols, red_cols, fit[0], fit[1], threshold))
-    kept = tuple(names[k] for k in sorted(kept_cols))
-    pivots = tuple(names[k] for k in (*cols, *zero_cols))
+    # list comprehensions: a calibration's hot path, where a generator into tuple() costs twice
+    kept = tuple([names[k] for k in sorted(kept_cols)])
+    pivots = tuple([names[k] for k in cols + zero_cols])
     r_diag = np.concatenate([rel, np.zeros(len(zero_cols))]) if zero_cols else rel
-    dropped_in_order = tuple(dropped[k] for k in sorted(dropped))
+    dropped_in_order = tuple([dropped[k] for k in sorted(dropped)])
     return IdentifiableSubset(kept, dropped_in_order, len(kept_cols), pivots, r_diag)
 
 
@@ -361,9 +365,7 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
     # itself at 300 x 36
     qr = scipy.linalg.lapack.dgeqrf(A)[0] if A.size else np.zeros(A.shape)
     if compiled_wanted():
-        from robocal.model import rank_kernels  # numba: imported on first use
-
-        diag, keep, coefs, left, explained = rank_kernels.sequential_test(qr, tolerance)
+        diag, keep, coefs, left, explained = _kernels().sequential_test(qr, tolerance)
     else:  # the process computes with numpy (numba's cache cold)
         diag, keep, coefs, left, explained = sequential_test_numpy(qr, tolerance)
     if explained:
@@ -376,6 +378,12 @@ def _sequential_rank_test(A: Array, tolerance: float) -> tuple[NDArray[np.bool_]
             coefs = _lstsq(A[:, keep], A[:, ~keep])
             fit = coefs, np.linalg.norm(A[:, ~keep] - A[:, keep] @ coefs, axis=0)
     return keep, fit[0], diag, fit[1]
+
+
+@functools.cache
+def _kernels() -> ModuleType:
+    """:mod:`robocal.model.rank_kernels`, imported on first use (numba), then at hand."""
+    return importlib.import_module("robocal.model.rank_kernels")
 
 
 def _lstsq(K: Array, D: Array) -> Array:

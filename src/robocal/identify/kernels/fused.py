@@ -94,6 +94,21 @@ def _weighted(r, J, weights):
 
 
 @_jit
+def _weighted_transposed(r, J, weights):
+    """``(1, m)`` weighted residuals and ``(1, p, m)`` weighted Jacobian, transposed: the
+    layout the LM kernels' normal equations take without a copy (``transposed``)."""
+    m, p = J.shape
+    rw = np.empty((1, m))
+    Jwt = np.empty((1, p, m))
+    for i in range(m):
+        w = weights[i]
+        rw[0, i] = r[i] * w
+        for a in range(p):
+            Jwt[0, a, i] = J[i, a] * w
+    return rw, Jwt
+
+
+@_jit
 def first_pass(data, values, free_steps, length_scale, preference):
     """The evaluation at the start values and the rank test's columns.
 
@@ -162,10 +177,11 @@ def _displacement_scale(J):
     """:func:`robocal.identify.stages.tool_displacement_scale` of position rows ``(3n, p)``."""
     m, p = J.shape
     scale = np.zeros(p)
-    for a in range(p):
-        for i in range(0, m, 3):
+    for i in range(0, m, 3):  # along J's rows (the same values as column by column)
+        for a in range(p):
             s = J[i, a] * J[i, a] + J[i + 1, a] * J[i + 1, a] + J[i + 2, a] * J[i + 2, a]
             scale[a] = max(scale[a], s)
+    for a in range(p):
         scale[a] = math.sqrt(scale[a])
     return scale
 
@@ -237,29 +253,27 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
     D, mu, nu, x_new = np.zeros((1, p)), np.full(1, np.nan), np.full(1, 2.0), np.empty((1, p))
     evaluations, success = np.ones(1, dtype=np.intp), np.zeros(1, dtype=np.bool_)
     predicted, rms, accepted = np.empty(1), np.empty(1), np.empty((2, 1), dtype=np.intp)
-    no = _flag(False)
-    last = (first[0], first[1], np.empty((m, 0)), np.empty((1, m)), np.empty((1, m, 0)))
+    last = (first[0], first[1], np.empty((m, 0)))
     while True:
         n = propose(ids, _count(1), x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
                     x_new, predicted)  # fmt: skip
         if n == 0:
             break
         T2, r2, J2 = _evaluate(data, _values(values0, free_steps, live, x_new[0]), columns)
-        rw2, Jw2 = _weighted(r2, J2, weights)
-        count = accept(ids, n, x_new, rw2, Jw2, no, x, cost, G, Jr, mu, nu, predicted, evaluations,
+        rw2, Jwt2 = _weighted_transposed(r2, J2, weights)
+        count = accept(ids, n, x_new, rw2, Jwt2, _flag(True), x, cost, G, Jr, mu, nu, predicted, evaluations,
                        accepted, rms)  # fmt: skip
         if count:
             history[h] = rms[0]
             h += 1
-            last = (T2, r2, J2, rw2, Jw2)
+            last = (T2, r2, J2)
     if h == 1:  # no step taken: the evaluation at the start
-        J = _columns_of(first[2], live)
-        rw, Jw = _weighted(first[1], J, weights)
-        last = (first[0], first[1], J, rw, Jw)
+        last = (first[0], first[1], _columns_of(first[2], live))
+    rw, Jw = _weighted(last[1], last[2], weights)  # the result's, once
     low, high = chi2_bounds
     s2, cov, std, corr, cond, ok = _uncertainty(cost[0], G[0], m, low, high, known_noise, singular)
-    return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), last, (s2, cov, std, corr, cond),
-            ok)  # fmt: skip
+    return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), (last[0], last[1], last[2], rw, Jw),
+            (s2, cov, std, corr, cond), ok)  # fmt: skip
 
 
 @_jit
@@ -284,10 +298,10 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
     # the weighted normal equations at the start values over the rank test's columns: the
     # screening's, and every fit's start (their blocks)
     J_live = _columns_of(J0, live)
-    rw0, Jw0 = _weighted(r0, J_live, data[2])
+    rw0, Jwt0 = _weighted_transposed(r0, J_live, data[2])
     p = len(live)
     rr0, G0, g0 = np.empty(1), np.empty((1, p, p)), np.empty((1, p))
-    start(rw0, Jw0, _flag(False), rr0, G0, g0)  # the solver's state at the start values
+    start(rw0, Jwt0, _flag(True), rr0, G0, g0)  # the solver's state at the start values
     at = np.full(J0.shape[1], -1, dtype=np.intp)
     for a in range(p):
         at[live[a]] = a
