@@ -5,11 +5,16 @@ general code gave."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 import robocal as rc
+import robocal.identify.kernels.fused as fused_kernels
 from robocal.identify.kernels import lm
+from robocal.measure import LaserTracker, VirtualRobot, draw_true_model, simulate
+from robocal.measure.poses import random_poses
 from robocal.model import rank
 from robocal.model.steps import Joint, Role, Step
 
@@ -117,3 +122,35 @@ def test_a_step_copy_is_a_checked_step_with_the_new_value():
         fixed.value = 1.0  # still frozen
     with pytest.raises(ValueError, match="theta2"):
         step._with_value(float("nan"))
+
+
+@pytest.mark.parametrize("sigma", [20e-6, None])
+def test_the_fused_fit_returns_its_last_evaluation_weighted_and_its_covariance(monkeypatch, sigma):
+    # the fit weights each evaluation straight into the transposed layout of the LM kernels
+    # and forms the result's weighted residuals and Jacobian once at the end: they must be
+    # the last accepted evaluation's, and the covariance σ̂²(JᵀJ)⁻¹ of that Jacobian
+    model = rc.robot("ur10")
+    device = LaserTracker(p_tool_target=np.array([0.05, 0.0, 0.109]), sigma=sigma or 20e-6)
+    robot = VirtualRobot(model, draw_true_model(model, seed=3), device)
+    data = simulate(robot, random_poses(model, 40, seed=4), seed=5)
+    if sigma is None:
+        data = dataclasses.replace(data, sigma=None)  # no stated noise: the variance estimated
+    seen = []
+    original = fused_kernels.fit
+
+    def spy(*args):
+        seen.append((args, original(*args)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(fused_kernels, "fit", spy)
+    result = rc.calibrate(model, data)
+    assert len(seen) == 1
+    (data_tuple, *_), out = seen[0]
+    weights = data_tuple[2]
+    T, r, J, rw, Jw = out[12]
+    np.testing.assert_array_equal(rw[0], r * weights)
+    np.testing.assert_array_equal(Jw[0], J * weights[:, None])
+    s2, cov = out[13][0], out[13][1]
+    np.testing.assert_allclose(cov, s2 * np.linalg.inv(Jw[0].T @ Jw[0]), rtol=1e-7, atol=0)
+    np.testing.assert_allclose(result.residuals.ravel(), r, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(T[:, :3, 3] - data.position, r.reshape(-1, 3), rtol=0, atol=1e-15)
