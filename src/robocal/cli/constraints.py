@@ -150,15 +150,18 @@ def validate_constraint_file(
         except (OSError, ValueError, TypeError) as err:
             raise fail(f"{directory / RESULT_FILE}: {err}") from None
     data = _read(data_path, model.dof, angle_unit, [s for s in stated if max(s[:2]) < 10**6], 1e-4)
-    figures = constraint_figures(model, data)
+    cal = None
+    if (directory / RESULT_FILE).is_file():  # a constraint calibration: its joint effects, its start
+        from robocal.cli.report_constraints import load_constraint_folder
+
+        cal = load_constraint_folder(directory)
+    figures = constraint_figures(model, data, tilt=None if cal is None else cal.tilt)
     console.print(f"{safe(model.name)} on {safe(data_path.name)} ({data.n} poses, {', '.join(data.kinds)}):",
                   highlight=False)  # fmt: skip
     for line in figures.lines():
-        console.print("  " + line, highlight=False)
-    if (directory / RESULT_FILE).is_file():  # a constraint calibration: the robot it started from too
-        from robocal.cli.report_constraints import load_constraint_folder
-
-        nominal = load_constraint_folder(directory).nominal
+        console.print("  " + safe(line), highlight=False)
+    if cal is not None:  # the robot it started from too
+        nominal = cal.nominal
         if nominal is not None:
             console.print("before calibration (the nominal robot):", highlight=False)
             for line in constraint_figures(nominal, data).lines():

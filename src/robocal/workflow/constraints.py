@@ -59,6 +59,8 @@ class ConstraintRequest:
         noise_m: the constraint rows' stated noise (1σ, m; a start: σ̂ weighs the fit).
         report: also write ``report.html`` (the kind's figures on the calibration file).
         progress: ``progress(stage, fraction)`` as each stage starts, or None.
+        names: what ``constraints.json`` records as each of ``data``'s path (empty: the
+            paths as given; the GUI gives the uploads' own file names, never its server paths).
     """
 
     data: tuple[Path, ...]
@@ -71,6 +73,17 @@ class ConstraintRequest:
     noise_m: float = 1e-4
     report: bool = False
     progress: Progress | None = field(default=None, compare=False)
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.names and len(self.names) != len(self.data):
+            raise CalibrateFileError("names", f"{len(self.names)} names for {len(self.data)} files")
+
+    def recorded(self, path: Path) -> str:
+        """The name ``constraints.json`` records for ``path`` (one of :attr:`data`)."""
+        if not self.names:
+            return str(path)
+        return self.names[self.data.index(path)]
 
 
 @dataclass(frozen=True)
@@ -178,7 +191,12 @@ def each_kind_lines(model: Model, data: ConstraintSet) -> list[str]:
 
     union = set(kind_identifiable(model, data)[0])
     lines = []
-    for kind, rows in (("constraint rows", data.constrained), ("tracker rows", data.tracked)):
+    groups = (
+        ("constraint rows", data.constrained),
+        ("tilt rows", data.tilted),
+        ("tracker rows", data.tracked),
+    )
+    for kind, rows in ((kind, rows) for kind, rows in groups if rows.any()):
         try:
             alone = set(kind_identifiable(model, data.select(rows))[0])
         except ValueError as err:  # too few rows of the kind for its start values
@@ -186,8 +204,16 @@ def each_kind_lines(model: Model, data: ConstraintSet) -> list[str]:
             continue
         missing = sorted(union - alone, key=list(model.names).index)
         line = f"{kind} alone ({int(rows.sum())} poses) identify {len(alone)} of the union's {len(union)}"
-        lines.append(line + (f"; not {', '.join(missing)}" if missing else ""))
+        line += f"; not {', '.join(missing)}" if missing else ""
+        lines.append(
+            line + ("; and the joint effects (only these rows see them)" if kind == "tilt rows" else "")
+        )
     return lines
+
+
+def _groups(data: ConstraintSet) -> int:
+    """How many row groups (constraint, tilt, tracker rows) ``data`` mixes."""
+    return sum(bool(rows.any()) for rows in (data.constrained, data.tilted, data.tracked))
 
 
 def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
@@ -217,7 +243,7 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
         raise CalibrateFileError("data", str(err), ", ".join(str(p) for p in paths)) from None
     _stage(request, "save")
     _save(result, request, first, trackers)
-    each = each_kind_lines(model, data) if "tracker" in data.kinds and data.constrained.any() else []
+    each = each_kind_lines(model, data) if _groups(data) > 1 else []
     if request.report:
         _stage(request, "report")
         _write_report(request.out, first, request.angle_unit)
@@ -229,13 +255,15 @@ def _stage(request: ConstraintRequest, key: str) -> None:
         request.progress(key, _STAGE_STARTS[key])
 
 
-def _result_doc(result: ConstraintResult, data_path: Path, stated: Any) -> dict:
+def _result_doc(result: ConstraintResult, data_path: Path, stated: Any, recorded: str) -> dict:
+    """constraints.json's content (``recorded``: the name of ``data_path`` to record)."""
     from robocal.identify.result_io import file_hash
 
-    return {
+    tilt = {} if result.tilt is None else result.tilt.to_doc()  # the joint effects, the channels' zeros
+    return tilt | {
         "kind": "constraints",
         "measurements": list(result.kinds),
-        "data": str(data_path),
+        "data": recorded,
         "data_sha256": file_hash(data_path),
         "distances_m": [[a, b, d] for a, b, d in stated],
         "success": result.success,
@@ -264,9 +292,10 @@ def _save(result: ConstraintResult, request: ConstraintRequest, first: Path, tra
     from robocal.model.files import save_model
     from robocal.outdir import transaction
 
-    doc = _result_doc(result, first, request.distances) | {"angle_unit": request.angle_unit}
+    doc = _result_doc(result, first, request.distances, request.recorded(first))
+    doc["angle_unit"] = request.angle_unit
     if trackers:
-        doc["tracker_data"] = [{"path": str(p), "sha256": file_hash(p)} for p in trackers]
+        doc["tracker_data"] = [{"path": request.recorded(p), "sha256": file_hash(p)} for p in trackers]
         doc["noise_per_kind_m"] = dict(result.kind_sigma)
     out = request.out
     try:

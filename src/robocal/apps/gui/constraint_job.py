@@ -38,11 +38,13 @@ def run_constraint_job(job: Any, progress: Callable[[str, float], None]) -> None
     from robocal.workflow.constraints import ConstraintRequest, calibrate_constraint_files
 
     options: ConstraintOptions = job.constraints
+    paths = (job.data, *options.more_data)
     request = ConstraintRequest(
-        (job.data, *options.more_data), rc.load_model(job.model_file), job.out,
+        paths, rc.load_model(job.model_file), job.out,
         angle_unit=job.reader["angle_unit"], length_unit=job.reader["length_unit"],
         distances=options.distances, level=options.level,
         report=True, progress=progress,
+        names=tuple(p.name for p in paths),  # the uploads' own names: no server path
     )  # fmt: skip
     run = calibrate_constraint_files(request)
     atomic_write_text(job.out / FIGURES_FILE, json.dumps(figures_doc(run)))
@@ -75,4 +77,5 @@ def _figures_mm(f: Any) -> dict[str, Any]:
         "pair_error": (f.pair_error * 1e3).tolist(),
         "tilt_channels": list(f.tilt_channels),
         "tilt_deg": np.degrees(f.tilt_rms).tolist(),
+        "tilt_basis": getattr(f, "tilt_basis", ""),
     }

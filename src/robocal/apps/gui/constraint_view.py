@@ -155,7 +155,13 @@ def _figures_table(before: dict | None, after: dict | None) -> html.Table:
             rows.append(_figure_row(label.format(k=k), b[k] if k < len(b) else None, v))
     rows += _tilt_rows(before or {}, after or {})
     head = html.Tr([html.Th(h) for h in ("figure", "nominal", "calibrated")])
-    return html.Table([html.Thead(head), html.Tbody(rows)], id="constraint-figures", className="stats")
+    basis = (after or {}).get("tilt_basis")  # what predicted the inclinometer readings after
+    caption = (
+        [html.Caption(f"inclinometer readings after calibration: {basis}", id="tilt-basis")] if basis else []
+    )
+    return html.Table(
+        [*caption, html.Thead(head), html.Tbody(rows)], id="constraint-figures", className="stats"
+    )
 
 
 def _tilt_rows(before: dict, after: dict) -> list[html.Tr]:

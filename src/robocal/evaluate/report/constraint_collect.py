@@ -92,7 +92,7 @@ def data_set_figures(
         n=data.n,
         kinds=data.kinds,
         before=None if nominal is None else constraint_figures(nominal, data),
-        after=constraint_figures(cal.model, data),
+        after=constraint_figures(cal.model, data, tilt=cal.tilt),  # with the joint effects identified
         radial_before=None if nominal is None else _radial(nominal, data),
         radial_after=_radial(cal.model, data),
     )

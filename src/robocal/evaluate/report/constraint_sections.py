@@ -130,9 +130,11 @@ def kind_figures(r: ConstraintReport, figs: m.Figures) -> Section:
     for i, s in enumerate(r.sets):
         rows = _rows(s.before, s.after)
         body += f"<h3>{m.e(s.label)}: {m.e(s.source)} ({s.n} poses, {m.e(', '.join(s.kinds))})</h3>"
-        cells = [[what, _mm(b), _mm(a)] for what, b, a in rows]
-        body += m.table(["figure", "before (nominal) mm", "after (calibrated) mm"], cells)
-        body += figs.html(_bar_figure(rows, f"{s.label}: before and after"), f"constraint-bars-{i}", 380)
+        if rows:
+            cells = [[what, _mm(b), _mm(a)] for what, b, a in rows]
+            body += m.table(["figure", "before (nominal) mm", "after (calibrated) mm"], cells)
+            body += figs.html(_bar_figure(rows, f"{s.label}: before and after"), f"constraint-bars-{i}", 380)
+        body += _tilt_table(s)
         if len(s.radial_after):
             body += figs.html(_radial_figure(s), f"constraint-radial-{i}", 340)
     intro = (
@@ -141,6 +143,25 @@ def kind_figures(r: ConstraintReport, figs: m.Figures) -> Section:
         "a plane's residual is the RMS distance from the plane (the stated one, else the best fit)."
     )
     return "figures", "Constraint figures", m.section("figures", "Constraint figures", body, intro)
+
+
+def _tilt_table(s: DataSetFigures) -> str:
+    """Each inclinometer channel's RMS residual (deg) before and after, and what predicted
+    the readings after (the calibration's joint effects and channel zeros)."""
+    after = s.after
+    if not len(after.tilt_channels):
+        return ""
+    was = {} if s.before is None else dict(zip(s.before.tilt_channels, s.before.tilt_rms, strict=True))
+    cells = [
+        [f"inclinometer {name}: RMS residual", m.f(_deg(was.get(name)), 5), m.f(_deg(v), 5)]
+        for name, v in zip(after.tilt_channels, after.tilt_rms, strict=True)
+    ]
+    table = m.table(["figure", "before (nominal) deg", "after (calibrated) deg"], cells)
+    return table + m.note(m.e(f"After: {after.tilt_basis}.")) if after.tilt_basis else table
+
+
+def _deg(value: float | None) -> float | None:
+    return None if value is None else float(np.degrees(value))
 
 
 def _clean(value: float | None) -> float | None:

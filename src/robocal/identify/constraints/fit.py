@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
 from robocal.identify.constraints.noise import weigh_by_kind
+from robocal.identify.constraints.tilt_record import TiltCalibration, effect_summary_lines, tilt_estimates
 from robocal.identify.constraints.tilt_rows import (
     EFFECT_KINDS,
     mixed_effects_note,
@@ -67,7 +68,10 @@ class ConstraintFigures:
             one when known, else the best-fit plane).
         pair_error: ``(m,)`` distance between the pair's tool points minus the stated length.
         tilt_channels, tilt_rms: each inclinometer channel (``<joint>_<axis>``) and the RMS
-            of its readings' residual about their mean (rad; the geometry's, no joint effects).
+            of its readings' residual (rad).
+        tilt_basis: what predicted the readings (:func:`~robocal.identify.constraints.
+            tilt_rows.tilt_figures`: a calibration's joint effects and zeros, or the geometry
+            alone with each channel about its mean).
     """
 
     point_spread: Array
@@ -76,6 +80,7 @@ class ConstraintFigures:
     pair_error: Array
     tilt_channels: tuple[str, ...] = ()
     tilt_rms: Array = field(default_factory=lambda: np.zeros(0))
+    tilt_basis: str = ""
 
     def lines(self) -> list[str]:
         """One line per figure (mm)."""
@@ -91,6 +96,7 @@ class ConstraintFigures:
                 f"distances: RMS error {rms * mm:.3f} mm, "
                 f"max |error| {np.abs(self.pair_error).max() * mm:.3f} mm"
             )
+        out += [f"tilt figures: {self.tilt_basis}"] if len(self.tilt_channels) and self.tilt_basis else []
         out += [
             f"tilt {name}: RMS residual {math.degrees(r):.5f} deg"
             for name, r in zip(self.tilt_channels, self.tilt_rms, strict=True)
@@ -120,6 +126,7 @@ class ConstraintResult:
             ("tracker", σ_t))`` (estimated unless ``known_noise``); empty for one kind.
         notes: sentences on what the fit left out or could not model (tilt rows whose
             contact side is unknown, joint effects seen by the tilt rows only).
+        tilt: the joint effects and channel zeros identified from tilt rows (None without).
     """
 
     model: Model
@@ -145,6 +152,7 @@ class ConstraintResult:
     prior: NominalPrior | None = field(default=None)
     kind_sigma: tuple[tuple[str, float], ...] = ()
     notes: tuple[str, ...] = ()
+    tilt: TiltCalibration | None = None
 
     def summary_lines(self) -> list[str]:
         """A short human summary (mm, deg)."""
@@ -178,6 +186,8 @@ class ConstraintResult:
             lines.append(
                 f"plane {k}: normal ({p[0]:.5f}, {p[1]:.5f}, {p[2]:.5f}), offset {p[3] * 1e3:.3f} mm"
             )
+        if self.tilt is not None:
+            lines += effect_summary_lines(self.tilt, [(d.name, d.reason) for d in self.dropped])
         if self.figures is not None:
             lines += self.figures.lines()
         return lines + [f"note: {note}" for note in self.notes]
@@ -393,7 +403,12 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
     tilt_only = problem.data.kinds == ("tilt",)  # the figures in rad, not m
     sigma = problem.data.tilt_sigma if tilt_only else problem.data.sigma
     dof = max(len(r) - len(x), 1)
-    figures = constraint_figures(robot, problem.data, tool, T_frame)
+    tilt = None
+    if problem.tilt is not None:  # the effects and zeros, as saved and as the figures use them
+        tilt = tilt_estimates(
+            problem.all_names, problem.full(x), dict(zip(problem.free_names, cov[2], strict=True))
+        )
+    figures = constraint_figures(robot, problem.data, tool, T_frame, tilt)
     return ConstraintResult(
         model=robot, tool=tool, T_device_base=T_frame, names=problem.free_names, estimates=x,
         start=problem.x0, std=cov[2], covariance=cov[1], correlation=cov[3], dropped=tuple(dropped),
@@ -402,7 +417,7 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
         rms_after=sigma * math.sqrt(float(r @ r) / len(r)),
         residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success),
         message=str(fit.message),
-        kinds=problem.data.kinds, figures=figures, kind_sigma=_kind_sigma(problem.data),
+        kinds=problem.data.kinds, figures=figures, kind_sigma=_kind_sigma(problem.data), tilt=tilt,
     )  # fmt: skip
 
 
@@ -434,11 +449,12 @@ def tool_points(
     return p
 
 
-def constraint_figures(
-    robot: Model, data: ConstraintSet, tool: Array | None = None, T_device_base: Array | None = None
-) -> ConstraintFigures:
+def constraint_figures(robot: Model, data: ConstraintSet, tool: Array | None = None,
+                       T_device_base: Array | None = None, tilt: TiltCalibration | None = None,
+                       ) -> ConstraintFigures:  # fmt: skip
     """What ``robot`` makes of ``data`` (:class:`ConstraintFigures`): needs no fit, so it
-    judges held-out data, a nominal model and a calibrated one alike."""
+    judges held-out data, a nominal model and a calibrated one alike; ``tilt``: the joint
+    effects and channel zeros a calibration identified, which predict the tilt rows."""
     p = tool_points(robot, data.q, tool, T_device_base)
     centroids = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
     spread = np.array(
@@ -461,8 +477,8 @@ def constraint_figures(
     pair_error = np.zeros(0)
     if len(data.pairs):
         pair_error = np.linalg.norm(p[data.pairs[:, 0]] - p[data.pairs[:, 1]], axis=1) - data.pair_length
-    channels, tilt_rms = tilt_figures(robot, data)
-    return ConstraintFigures(spread, point_error, plane_rms, pair_error, channels, tilt_rms)
+    channels, tilt_rms, basis = tilt_figures(robot, data, tilt)
+    return ConstraintFigures(spread, point_error, plane_rms, pair_error, channels, tilt_rms, basis)
 
 
 def kind_identifiable(

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.identify.constraints.tilt_record import TiltCalibration, TiltEstimate, tilt_calibration_of
 from robocal.model.chain import Model
 
 __all__ = [
@@ -62,6 +63,11 @@ class ConstraintCalibration:
         prior: ``{"length_std_m", "angle_std_rad"}`` of the prior toward the nominal
             geometry, or None (a least-squares fit).
         run_id: the transaction that wrote the folder.
+        joint_effects: the joint effects identified from tilt rows (``backlash_<joint>``,
+            ``clearance_<joint>`` in rad, ``compliance_<joint>`` in rad/(N·m)), value and
+            1σ; empty without tilt rows (those not identified are in ``dropped``).
+        tilt_zeros: each inclinometer channel's zero (``<joint>_<axis>``, rad) and 1σ
+            (NaN: held at the channel's mean, not estimated).
     """
 
     directory: Path
@@ -83,6 +89,26 @@ class ConstraintCalibration:
     distances: tuple[tuple[int, int, float], ...]
     prior: dict | None
     run_id: str | None
+    joint_effects: tuple[TiltEstimate, ...] = ()
+    tilt_zeros: tuple[TiltEstimate, ...] = ()
+
+    @property
+    def tilt(self) -> TiltCalibration | None:
+        """The joint effects and channel zeros as the tilt figures use them (None without)."""
+        if not self.joint_effects and not self.tilt_zeros:
+            return None
+        return TiltCalibration(self.joint_effects, self.tilt_zeros)
+
+    def model_with_effects(self) -> Model:
+        """The calibrated robot with the identified joint effects (``model.joint_effects``,
+        :func:`robocal.model.joints.effects_from_values`): its predictions under the loads
+        the effects were identified with (:data:`~robocal.identify.constraints.tilt_record.LOADS`)."""
+        import dataclasses
+
+        from robocal.model.joints import effect_of, effects_from_values
+
+        values = {effect_of(e.name) or ("", ""): e.value for e in self.joint_effects}
+        return dataclasses.replace(self.model, joint_effects=effects_from_values(self.model, values))
 
     @property
     def robot_names(self) -> tuple[str, ...]:
@@ -211,10 +237,12 @@ def load_constraint_calibration(directory: str | Path) -> ConstraintCalibration:
         names = tuple(str(n) for n in doc["names"])
         estimates = np.asarray(doc["estimates"], dtype=float).reshape(len(names))
         _check_model(model, names, estimates, directory)
+        fields = _fields(doc, len(names))
+        tilt = tilt_calibration_of(doc, names, estimates, fields["std"])
         calibration = ConstraintCalibration(
             directory=directory, model=model, nominal=_nominal(model, doc, names), names=names,
             estimates=estimates, run_id=run_id if isinstance(run_id, str) else None,
-            **_fields(doc, len(names)),
+            joint_effects=tilt.effects, tilt_zeros=tilt.zeros, **fields,
         )  # fmt: skip
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{path}: not a robocal constraint calibration ({err})") from None

@@ -46,12 +46,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal.measure.constraints.data_set import TILT_AXES, ConstraintSet
 from robocal.model.chain import Model
+
+if TYPE_CHECKING:
+    from robocal.identify.constraints.tilt_record import TiltCalibration
 
 __all__ = [
     "ALL_KINDS",
@@ -157,20 +161,57 @@ def tilt_rows(terms: TiltTerms, data: ConstraintSet, values: dict[str, float], z
     return r, J[:, len(terms.effects) :], J[:, : len(terms.effects)]
 
 
-def tilt_figures(robot: Model, data: ConstraintSet) -> tuple[tuple[str, ...], Array]:
-    """What ``robot`` (its geometry, no joint effects) makes of ``data``'s tilt rows: each
-    channel's name and its RMS residual (rad) about the channel's mean (the best zero)."""
+def tilt_figures(
+    robot: Model, data: ConstraintSet, learned: TiltCalibration | None = None
+) -> tuple[tuple[str, ...], Array, str]:
+    """What ``robot`` makes of ``data``'s tilt rows: each channel's name, its RMS residual
+    (rad) and a sentence saying what predicted the readings.
+
+    ``learned``: the joint effects and channel zeros a calibration identified
+    (:class:`~robocal.identify.constraints.tilt_record.TiltCalibration`): the readings are
+    predicted with those effects (the rows whose contact side is unclear left out, as in
+    the fit) and each channel with a saved zero is judged against it; else (a nominal
+    robot) the geometry alone, each channel about its mean (the best zero)."""
+    from robocal.identify.constraints.tilt_record import channel_zero_array
+
     if not data.tilted.any():
-        return (), np.zeros(0)
-    terms = tilt_terms(robot, robot, data)
-    values = dict(zip(robot.names, robot.values.tolist(), strict=True))
-    r = tilt_rows(terms, data, values, np.zeros(len(terms.zeros)), np.zeros(len(terms.effects)))[0]
-    rms = []
-    for k in range(len(terms.zeros)):
-        rk = r[terms.channel == k]
-        rms.append(math.sqrt(float(np.mean((rk - rk.mean()) ** 2))))
+        return (), np.zeros(0), ""
+    effects = {} if learned is None else learned.effect_values
+    left_out = 0
+    if effects:  # backlash and clearance act with the load's sign: the fit's rows only
+        unclear = unclear_contact(robot, data)
+        if unclear.any() and not unclear[data.tilted].all():
+            data, left_out = data.select(~unclear), int(unclear.sum())
+    kinds = tuple(k for k in ALL_KINDS if any(n.startswith(k + "_") for n in effects)) or EFFECT_KINDS
+    terms = tilt_terms(robot, robot, data, kinds)
     names = tuple(z[len(ZERO_PREFIX) :] for z in terms.zeros)
-    return names, np.array(rms)
+    zeros, known = channel_zero_array(learned, names)
+    values = dict(zip(robot.names, robot.values.tolist(), strict=True))
+    x = np.array([effects.get(n, 0.0) for n in terms.effects])
+    r = tilt_rows(terms, data, values, zeros, x)[0]
+    rms = []
+    for k in range(len(names)):
+        rk = r[terms.channel == k]
+        rk = rk if known[k] else rk - rk.mean()
+        rms.append(math.sqrt(float(np.mean(rk**2))))
+    return names, np.array(rms), _figures_basis(tuple(n for n in terms.effects if n in effects), known,
+                                                left_out)  # fmt: skip
+
+
+def _figures_basis(effects: tuple[str, ...], known: NDArray[np.bool_], left_out: int) -> str:
+    """The sentence saying what :func:`tilt_figures` predicted the readings with."""
+    if not effects and not known.any():
+        return "the geometry alone (no joint effects), each channel about its mean (the best zero)"
+    text = "the calibrated geometry" + (f" with its joint effects ({', '.join(effects)})" if effects else "")
+    if known.all():
+        text += " and each channel's calibrated zero"
+    elif known.any():
+        text += f"; the calibrated zeros of {int(known.sum())} channels, the others about their mean"
+    else:
+        text += ", each channel about its mean"
+    if left_out:
+        text += f"; {left_out} rows whose contact side is unclear left out (the fit leaves such rows out)"
+    return text
 
 
 def unclear_contact(robot: Model, data: ConstraintSet) -> NDArray[np.bool_]:
