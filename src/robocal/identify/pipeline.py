@@ -413,6 +413,7 @@ def calibrate_physics(
     options: CalibrationOptions | None = None,
     *,
     hold_effects: dict[str, str | Dropped] | None = None,
+    load_geometry: Model | None = None,
     **keywords: Any,
 ) -> CalibrationResult:
     """Identify the physical robot's parameters (geometry and joint effects) from
@@ -427,13 +428,17 @@ def calibrate_physics(
         hold_effects: joint-effect coefficients kept at their start values and not
             identified, with the reason reported in ``dropped`` (the learned residual's
             stage holds those it confounds).
+        load_geometry: the geometry of the first load pass's joint loads (``model`` with
+            other values of its parameters; default ``model``): the learned residual's stage
+            passes a calibrated one (:func:`_with_load_passes`).
     """
     t_start = work_clock()  # stopped while numba compiles: the seconds are the calibration's
     options = CalibrationOptions.from_keywords(options, **keywords)
     run = _check_inputs(model, data, method, options, hold_effects)
+    loads = None if run.plan.mode == "none" else load_geometry  # no joint effects: no loads
     if run.plan.mode != "none" and options.joint_effects.load_passes > 1:
-        return _with_load_passes(run, model, hold_effects, t_start)
-    return _calibrate_once(run, None, hold_effects, t_start)
+        return _with_load_passes(run, model if loads is None else loads, hold_effects, t_start)
+    return _calibrate_once(run, loads, hold_effects, t_start)
 
 
 # ---------------------------------------------------------------------- joint-effect load passes
