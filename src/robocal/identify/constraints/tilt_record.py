@@ -32,6 +32,7 @@ __all__ = [
     "effect_summary_lines",
     "tilt_calibration_of",
     "tilt_estimates",
+    "zero_channel",
 ]
 
 #: the loads the joint effects were identified under (and are predicted with)
@@ -94,6 +95,13 @@ def _finite_or_none(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
+def zero_channel(name: str) -> str | None:
+    """The channel (``<joint>_<axis>``) whose zero the unknown ``name`` is, None for any other
+    unknown: the one reader of the channel zeros' name prefix (they are no step of a chain,
+    so they have no role)."""
+    return name[len(_ZERO_PREFIX) :] if name.startswith(_ZERO_PREFIX) else None
+
+
 def tilt_estimates(
     names: Sequence[str], values: Iterable[float], std: Mapping[str, float]
 ) -> TiltCalibration:
@@ -103,8 +111,8 @@ def tilt_estimates(
     effects, zeros = [], []
     for name, value in zip(names, values, strict=True):
         sigma = float(std.get(name, math.nan))
-        if name.startswith(_ZERO_PREFIX):
-            zeros.append(TiltEstimate(name[len(_ZERO_PREFIX) :], float(value), sigma))
+        if (channel := zero_channel(name)) is not None:
+            zeros.append(TiltEstimate(channel, float(value), sigma))
         elif effect_of(name) is not None and name in std:
             effects.append(TiltEstimate(name, float(value), sigma))
     return TiltCalibration(tuple(effects), tuple(zeros))

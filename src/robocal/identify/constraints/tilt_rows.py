@@ -124,7 +124,7 @@ def tilt_terms(
 ) -> TiltTerms:
     """The tilt rows' unknowns for ``robot`` (measured through ``chain``) and ``data``,
     the joint effects of ``kinds``."""
-    from robocal.model.joints import EFFECT_PREFIXES, load_moments
+    from robocal.model.joints import EFFECT_PREFIXES, effect_of, load_moments
 
     on = data.tilted
     names = robot.joint_names
@@ -139,7 +139,7 @@ def tilt_terms(
     effects = tuple(EFFECT_PREFIXES[kind][0] + j for kind in kinds for j in joints)
     eta = load_moments(robot, data.q[on])
     moment = max(float(np.abs(eta[:, :, 2]).max()) if eta.size else 0.0, MOMENT_FLOOR)
-    scale = np.array([moment if e.startswith(EFFECT_PREFIXES["compliance"][0]) else 1.0 for e in effects])
+    scale = np.array([moment if (effect_of(e) or ("",))[0] == "compliance" else 1.0 for e in effects])
     return TiltTerms(robot, geometry, zeros, channel, effects, scale, eta)
 
 
