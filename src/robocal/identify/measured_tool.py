@@ -167,6 +167,8 @@ def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Arra
     as :func:`robocal.spatial.chain_product`) and its derivative ``(3, k)`` by each value:
     a translation moves it along the step's axis, a rotation turns it about that axis
     through the step's origin (both in the chain's first frame)."""
+    if all(motion[0] == "T" for motion in motions):  # a probe point (every calibration): no turns
+        return _translations(motions, values)
     R = np.eye(3)
     t = np.zeros(3)
     J = np.empty((3, len(motions)))
@@ -184,6 +186,18 @@ def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Arra
     return t, J
 
 
+def _translations(motions: list[str], values: list[float]) -> tuple[Array, Array]:
+    """:func:`_point_and_derivative` of translations only: the values summed along their axes
+    (in chain order, the same sums) and the axes as the derivative's columns."""
+    point = [0.0, 0.0, 0.0]
+    J = np.zeros((3, len(motions)))
+    for k, (motion, value) in enumerate(zip(motions, values, strict=True)):
+        axis = "xyz".index(motion[1])
+        point[axis] += value
+        J[axis, k] = 1.0
+    return np.array(point), J
+
+
 def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool | None:
     """The measured tool of a :class:`~robocal.identify.result.CalibrationResult` (None
     when the calibration measured the model's end without a tool).  ``given_m``: the
@@ -192,8 +206,8 @@ def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool
     if not steps:
         return None
     p, J = _point_and_derivative([s.motion for s in steps], [s.value for s in steps])
-    column = {name: c for c, name in enumerate(result.names)}
-    cols = [column.get(s.name) for s in steps]
+    names = result.names  # the tool's few steps looked up among them (no table of all)
+    cols = [names.index(s.name) if s.name in names else None for s in steps]
     estimated = [a for a, c in enumerate(cols) if c is not None]
     at = np.array([c for c in cols if c is not None], dtype=np.intp)
     # the covariance of the point from the estimated steps' block (the others add nothing)
@@ -282,7 +296,8 @@ def undetermined_warnings(result: Any, tool: MeasuredTool | None) -> list[tuple[
             )
         )
     if tool is not None:
-        std = tool.std_m.tolist()
+        # tool.std_m's values, from the diagonal as floats (no arrays for three numbers)
+        std = [math.sqrt(max(row[i], 0.0)) for i, row in enumerate(tool.covariance_m2)]
         loose = [f"tcp_{a} (σ {s * 1e3:.3g} mm)" for a, s in zip("xyz", std, strict=True)
                  if s > UNDETERMINED_STD_M]  # fmt: skip
         if loose:

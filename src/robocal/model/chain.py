@@ -181,9 +181,8 @@ class Model:
             raise ValueError(f"model {self.name!r} has {p} free parameters, got values shaped {x.shape}")
         if not np.isfinite(x).all():  # the checked copies name the first parameter that is not finite
             self.with_values(dict(zip(self.free_names, x.tolist(), strict=True)))
-        v = iter(x.tolist())  # checked above: the copies need no checks of their own
-        steps = tuple(s._copy_with("value", next(v)) if s.free else s for s in self.steps)
-        return self._derived(steps, "free")
+        # checked above: the copies need no checks of their own
+        return chain_plan.with_free_values_copy(self, x, _STRUCTURE + ("free_mask", "free_names"))
 
     def with_values(self, values: Mapping[str, float]) -> Model:
         """A new model with the named parameters set to new values (SI)."""

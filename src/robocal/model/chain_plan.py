@@ -209,3 +209,18 @@ def derived_copy(model: Any, steps: tuple, shared: tuple[str, ...], **changes: A
     derived.__dict__.update(fields, steps=steps, **changes)
     derived.__dict__.update({k: model.__dict__[k] for k in shared if k in model.__dict__})
     return derived
+
+
+def with_free_values_copy(model: Any, x: Array, shared: tuple[str, ...]) -> Any:
+    """:func:`derived_copy` of ``model`` whose free steps take the (checked, finite) values
+    ``x`` ``(p,)``: only the free steps are copied, and the copy's ``values`` are ``model``'s
+    with ``x`` written in (the floats its steps hold: no second pass over the steps)."""
+    steps = list(model.steps)
+    mask = model.free_mask
+    for i, v in zip(np.flatnonzero(mask).tolist(), x.tolist(), strict=True):
+        steps[i] = steps[i]._copy_with("value", v)
+    derived = derived_copy(model, tuple(steps), shared)
+    values = model.values.copy()
+    values[mask] = x
+    derived.__dict__["values"] = read_only(values)
+    return derived
