@@ -9,6 +9,7 @@ their bounds, an RMS error that rose under seed 001's objective) and diagnostics
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Sequence
@@ -195,9 +196,11 @@ def diagnose(
         changes["fit_to_noise"] = fit
         if (text := fit.warning()) is not None:
             out.append(CalibrationWarning("fit-to-noise", text))
-    result = result.with_diagnostics(**changes)
+    # the guard reads the estimates, the errors and a bounded fit's objective (set above), not
+    # the outliers or the fit to noise: one new result with all of them
     try:
         out += [CalibrationWarning("solution", w) for w in check_solution(result)]
     except CalibrationGuardError as err:
         raise CalibrationGuardError(f"{err}; {orientation_hint}" if orientation_hint else str(err)) from None
-    return result.replace(warnings=tuple(out))
+    diagnostics = dataclasses.replace(result.diagnostics, **changes)
+    return result.replace(diagnostics=diagnostics, warnings=tuple(out))

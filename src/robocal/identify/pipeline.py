@@ -65,7 +65,7 @@ from robocal.model.chain import Model
 from robocal.model.chain_plan import derived_copy
 from robocal.model.joints import effect_of
 from robocal.model.rank import Dropped, IdentifiableSubset
-from robocal.model.steps import Role
+from robocal.model.steps import Role, Step
 
 __all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
 
@@ -290,11 +290,7 @@ def _calibrated_models(run: Run, start: Start, fit: Fit) -> tuple[Model, Model, 
     n_frame = len(chain.names_with_role(Role.DEVICE))  # the frame steps come first
     plan = chain._plan
     T_device_base = kernels.leading_frame(calibrated_chain.values, plan.step_axis, plan.step_rot, n_frame)
-    free_before = {s.name: s.free for s in given.steps}  # the tool's steps: free
-    robot_steps = tuple(
-        s if s.free == free_before.get(s.name, True) else s._with_free(not s.free)
-        for s in calibrated_chain.steps[n_frame:]
-    )
+    robot_steps = _with_given_free_flags(calibrated_chain.steps[n_frame:], given.steps)
     # the given robot's checked steps with checked values, and the measured tool's
     effects = () if run.plan.mode == "none" else given.joint_effects
     notes = (given.notes + " calibrated").strip()
@@ -309,6 +305,18 @@ def _calibrated_models(run: Run, start: Start, fit: Fit) -> tuple[Model, Model, 
             calibrated, joint_effects=effects_from_values(run.model, effect_values)
         )
     return calibrated_chain, calibrated, T_device_base
+
+
+def _with_given_free_flags(chain_steps: tuple[Step, ...], given: tuple[Step, ...]) -> tuple[Step, ...]:
+    """The calibrated chain's robot and tool steps (``given``'s steps, in order, then the
+    tool's) with ``given``'s free flags and the tool's steps free: a step the fit kept at
+    its start value is ``given``'s own (no copy), a fitted one whose flag differs a copy."""
+    robot = [
+        c if c.free == g.free else g if c.value == g.value else c._with_free(g.free)
+        for c, g in zip(chain_steps, given, strict=False)
+    ]
+    tool = [c if c.free else c._with_free(True) for c in chain_steps[len(given) :]]
+    return tuple(robot + tool)
 
 
 def _mean_square(r: Array) -> float:
