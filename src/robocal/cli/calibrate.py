@@ -185,7 +185,8 @@ def calibrate_command(
     if len(data_paths) > 1 or is_constraint_file(data_path, measure):  # mixed kinds: one fit
         return calibrate_constraint_command(model, from_catalog, chain, data_paths, out,
                                             angle_unit=angle_unit, distances=distance, level=level,
-                                            noise=noise, force=force, length_unit=length_unit)  # fmt: skip
+                                            noise=noise, force=force, length_unit=length_unit,
+                                            effects=effects)  # fmt: skip
     _check_choices(measure, residual, loss, method, bounds, per_pose)
     tool_guess = None if tool is None else length_vector(tool, 3, "--tool")  # before the data is read
     from robocal.workflow import CalibrateRequest, FitOptions, ReaderOptions

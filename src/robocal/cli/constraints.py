@@ -22,6 +22,7 @@ from robocal.console import console, fail, safe
 __all__ = [
     "CONSTRAINT_MEASURES",
     "RESULT_FILE",
+    "TILT_MOUNT_HELP",
     "calibrate_constraint_command",
     "calibrate_constraint_file",
     "is_constraint_file",
@@ -29,6 +30,7 @@ __all__ = [
     "plan_constraint_poses",
     "simulate_constraint_command",
     "simulate_constraint_file",
+    "tilt_effect_kinds",
     "tracker_file",
     "validate_constraint_file",
 ]
@@ -36,6 +38,11 @@ __all__ = [
 CONSTRAINT_MEASURES = ("point", "plane", "distance", "tilt")
 MAX_TRACKER_ROWS = 100_000  # --also-tracker: a comparison file, not a benchmark
 RESULT_FILE = "constraints.json"  # robocal.workflow.constraints.CONSTRAINT_RESULT_FILE
+TILT_MOUNT_HELP = (
+    "--kind tilt: the sensors' mount on their links: joint (axes along the joint frame) or level "
+    "(level at the home configuration, as the Katana thesis' sensors; written as mount_r*_deg columns)"
+)
+TILT_MOUNTS = ("joint", "level")
 
 
 def is_constraint_file(path: Path, measure: str | None) -> bool:
@@ -56,11 +63,13 @@ def _sigma(noise: str | None) -> float:
 def calibrate_constraint_command(
     model, from_catalog: bool, chain: str | None, data_path: Path | list[Path], out: Path, *,
     angle_unit: AngleUnit, distances: list[str] | None, level: str | None, noise: str | None,
-    force: bool = False, length_unit: LengthUnit = "m",
+    force: bool = False, length_unit: LengthUnit = "m", effects: str | None = None,
 ) -> None:  # fmt: skip
     """``robocal calibrate`` of a constraint file (or several files: constraint files and
     tracker files, one fit): a catalog robot's complete position model (``--chain
-    catalog``: its published chain), a model file's chain as it is."""
+    catalog``: its published chain), a model file's chain as it is.  ``effects``
+    (``--effects``): the joint effects the tilt rows identify (:func:`tilt_effect_kinds`)."""
+    kinds = tilt_effect_kinds(effects)
     if (out / RESULT_FILE).exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     from robocal.model.complete import calibration_model
@@ -76,7 +85,31 @@ def calibrate_constraint_command(
             f"--level {level}: constraint measurements identify level 1 (joint offsets) or 2 (kinematic)"
         )
     calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
-                              level=levels[level], noise=noise, length_unit=length_unit)  # fmt: skip
+                              level=levels[level], noise=noise, length_unit=length_unit,
+                              tilt_kinds=kinds)  # fmt: skip
+
+
+def tilt_effect_kinds(effects: str | None) -> tuple[str, ...] | None:
+    """``--effects`` for constraint files: the joint effects the tilt rows identify.  None
+    (not given): backlash and compliance; ``none``: no joint effect; ``identify``: clearance,
+    backlash and compliance; or a list of those kinds (``clearance,backlash,compliance``).
+    ``predict`` (the model's effects held) is the tracker calibration's only: refused."""
+    from robocal.identify.constraints.tilt_rows import ALL_KINDS
+
+    if effects is None:
+        return None
+    if effects.strip() == "none":
+        return ()
+    if effects.strip() == "identify":
+        return ALL_KINDS
+    kinds = tuple(k.strip() for k in effects.split(",") if k.strip())
+    wrong = [k for k in kinds if k not in ALL_KINDS]
+    if not kinds or wrong:
+        raise fail(
+            f"--effects {safe(effects)}: a constraint file's tilt rows identify none, identify or some of "
+            f"{', '.join(ALL_KINDS)}"
+        )
+    return tuple(k for k in ALL_KINDS if k in kinds)
 
 
 def _distances(items: list[str] | None) -> tuple[tuple[int, int, float], ...]:
@@ -107,6 +140,7 @@ def _option_words(err: ValueError) -> str:
 def calibrate_constraint_file(
     model, data_path: Path | list[Path], out: Path, *, angle_unit: AngleUnit, distances: list[str] | None,
     level: int | None, noise: str | None, length_unit: LengthUnit = "m",
+    tilt_kinds: tuple[str, ...] | None = None,
 ) -> None:  # fmt: skip
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
     file's chain) from a constraint file; write ``out``/model.yaml and constraints.json
@@ -116,7 +150,8 @@ def calibrate_constraint_file(
     paths = tuple(data_path) if isinstance(data_path, list) else (data_path,)
     stated, sigma = _distances(distances), _sigma(noise)
     request = ConstraintRequest(paths, model, out, angle_unit=angle_unit, length_unit=length_unit,
-                                distances=stated, level=level or 2, noise_m=sigma)  # fmt: skip
+                                distances=stated, level=level or 2, noise_m=sigma,
+                                **({} if tilt_kinds is None else {"tilt_kinds": tilt_kinds}))  # fmt: skip
     try:
         run = calibrate_constraint_files(request)
     except ValueError as err:
@@ -175,15 +210,17 @@ def simulate_constraint_command(model_of, kind: str, poses, out, force: bool, op
     from robocal.console import refuse_overwrite
     from robocal.model.complete import calibration_model
 
-    n, count, length, noise, seed, length_tol, angle_tol, placements, tracker = options
+    n, count, length, noise, seed, length_tol, angle_tol, placements, tracker, mount = options
     if out is None or poses is not None:
         raise fail("--kind makes its own configurations: give -o OUT.csv and no --poses")
+    if mount not in TILT_MOUNTS or (mount != "joint" and kind != "tilt"):
+        raise fail(f"--mount {safe(mount)}: joint or level, with --kind tilt")
     for path in placement_files(out, placements) + ([tracker_file(out)] if tracker else []):
         refuse_overwrite(path, force, "measurement file")
     model = calibration_model(model_of(), "position")
     simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise, seed=seed,
                              length_tol=length_tol, angle_tol=angle_tol, placements=placements,
-                             tracker=tracker)  # fmt: skip
+                             tracker=tracker, level=mount == "level")  # fmt: skip
 
 
 def tracker_file(out: Path) -> Path:
@@ -221,9 +258,18 @@ def _simulated_noise(kind: str, noise: str | None) -> float:
     return 1e-5 if noise is None else parse_quantity_option(noise, "length", "--noise")
 
 
+def simulate_level_tilt(model, true, n: int, sigma: float, seed: int | None):
+    """``--kind tilt --mount level``: every link's sensor level at the nominal ``model``'s home
+    configuration, read on the ``true`` robot at ``n`` random configurations."""
+    from robocal.measure.constraints.sim import SceneTruth, level_mounts, simulate_tilt_rows
+
+    data = simulate_tilt_rows(true, n, sigma=sigma, seed=seed, mounts=level_mounts(model))
+    return data, SceneTruth(np.zeros((0, 3)), np.zeros((0, 4)), 0.0)
+
+
 def simulate_constraint_file(
     model, kind: str, out: Path, *, n: int, count: int, length: str, noise: str | None, seed: int | None,
-    length_tol: str, angle_tol: str, placements: int = 1, tracker: int = 0,
+    length_tol: str, angle_tol: str, placements: int = 1, tracker: int = 0, level: bool = False,
 ) -> None:  # fmt: skip
     """Simulate ``kind`` on a true robot drawn around ``model``; write ``out`` and
     ``out``.truth.json (the true parameters and scene); ``placements`` > 1: the same true
@@ -247,9 +293,12 @@ def simulate_constraint_file(
     files, runs = placement_files(out, placements), []
     try:
         true = draw_true_model(model, length=length_tol, angle=angle_tol, seed=seed)
-        data, scene = simulate_constraints(
-            true, kind, n, sigma=sigma, count=count, length=length_m, seed=seed
-        )
+        if level:  # the sensors level at home of the nominal robot (the mount a user states)
+            data, scene = simulate_level_tilt(model, true, n, sigma, seed)
+        else:
+            data, scene = simulate_constraints(
+                true, kind, n, sigma=sigma, count=count, length=length_m, seed=seed
+            )
         runs.append((data, scene))
         rng = np.random.default_rng(None if seed is None else [seed, 33])  # placements: their own draws
         for _ in files[1:]:

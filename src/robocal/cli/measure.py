@@ -28,6 +28,7 @@ from rich.text import Text
 
 from robocal import spatial
 from robocal.choices import Distribution
+from robocal.cli.constraints import TILT_MOUNT_HELP
 from robocal.cli.options import (
     CONTEXT,
     AngleUnit,
@@ -290,6 +291,7 @@ PlacementsOption = Annotated[
 ]
 ALSO_TRACKER_HELP = "--kind: also N tracker rows of the same true robot in OUT.tracker.csv (truth shared)"
 AlsoTrackerOption = Annotated[int, typer.Option("--also-tracker", min=0, metavar="N", help=ALSO_TRACKER_HELP)]
+TiltMountOption = Annotated[str, typer.Option("--mount", metavar="joint|level", help=TILT_MOUNT_HELP)]
 
 
 def simulate_command(
@@ -314,10 +316,11 @@ def simulate_command(
     length: LengthOption = "300mm",
     placements: PlacementsOption = 1,
     also_tracker: AlsoTrackerOption = 0,
+    mount: TiltMountOption = "joint",
 ) -> None:
     """Simulate measurements of ROBOT with randomly drawn errors; write the truth beside them."""
     if kind is not None:  # fixed points, planes, distances (robocal.cli.constraints)
-        options = (n, count, length, noise, seed, length_tol, angle_tol, placements, also_tracker)
+        options = (n, count, length, noise, seed, length_tol, angle_tol, placements, also_tracker, mount)
         return _simulate_constraints(robot, kind, poses, out, force, options)
     if log:
         if poses is not None or out is None:
@@ -358,11 +361,8 @@ def simulate_command(
     except (ValueError, KeyError) as err:
         raise fail(str(err.args[0] if isinstance(err, KeyError) else err)) from None
     dev_all = np.abs(np.array(list(_deviations(model, true))))
-    console.print(
-        f"wrote {data_path} ({data.n} rows, {dev.kind}: {', '.join(dev.columns)}) and the truth {truth}",
-        highlight=False,
-        soft_wrap=True,
-    )
+    rows = f"{data.n} rows, {dev.kind}: {', '.join(dev.columns)}"
+    console.print(f"wrote {data_path} ({rows}) and the truth {truth}", highlight=False, soft_wrap=True)
     console.print(
         f"true robot: {len(dev_all)} parameters drawn ({distribution}, ±{length_tol}, ±{angle_tol}); "
         f"device noise {_noise_text(dev)}",

@@ -74,6 +74,7 @@ class ConstraintRequest:
     report: bool = False
     progress: Progress | None = field(default=None, compare=False)
     names: tuple[str, ...] = ()
+    tilt_kinds: tuple[str, ...] = ("backlash", "compliance")  # tilt rows' joint effects (+ "clearance")
 
     def __post_init__(self) -> None:
         if self.names and len(self.names) != len(self.data):
@@ -238,7 +239,7 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
     _stage(request, "calibrate")
     try:
         result = calibrate_constraints(model, data, level=request.level, pruning=Pruning(), known_noise=False,
-                                       prior=NominalPrior())  # fmt: skip
+                                       prior=NominalPrior(), tilt_kinds=request.tilt_kinds)  # fmt: skip
     except ValueError as err:
         raise CalibrateFileError("data", str(err), ", ".join(str(p) for p in paths)) from None
     _stage(request, "save")

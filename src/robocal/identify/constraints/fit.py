@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.identify.constraints.effect_groups import group_dropped, held_groups, poorly_separated
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
 from robocal.identify.constraints.noise import weigh_by_kind
 from robocal.identify.constraints.tilt_record import TiltCalibration, effect_summary_lines, tilt_estimates
@@ -187,7 +188,8 @@ class ConstraintResult:
                 f"plane {k}: normal ({p[0]:.5f}, {p[1]:.5f}, {p[2]:.5f}), offset {p[3] * 1e3:.3f} mm"
             )
         if self.tilt is not None:
-            lines += effect_summary_lines(self.tilt, [(d.name, d.reason) for d in self.dropped])
+            held = [(d.name, f"{d.reason}: {d.detail}" if d.detail else d.reason) for d in self.dropped]
+            lines += effect_summary_lines(self.tilt, held)
         if self.figures is not None:
             lines += self.figures.lines()
         return lines + [f"note: {note}" for note in self.notes]
@@ -283,9 +285,10 @@ def _prune(problem: ConstraintProblem, x: Array, cov: tuple, pruning: Pruning, d
         found = poorly_identifiable(cov[2][robot], scale, pruning.max_std, pruning.max_std_ratio)
         if found is None:
             break
-        worst, sigma = int(robot[found[0]]), found[1]
-        dropped.append(Dropped(problem.free_names[worst], "poorly identifiable", sigma=sigma))
-        problem = problem.fix([problem.free_names[worst]])
+        worst, sigma, names = int(robot[found[0]]), found[1], list(problem.free_names)
+        held = poorly_separated(names, worst, cov[1], problem.effect_scale(x), pruning.max_std)
+        dropped += group_dropped(names, held, sigma)  # joint effects told apart by none: all held
+        problem = problem.fix([names[k] for k in held])
         fit = solve(problem, problem.x0, "lm")
         x = fit.x
         cov = uncertainty(problem.residual(x), problem.jacobian(x), 3, known_noise)
@@ -299,9 +302,11 @@ def _screen(problem: ConstraintProblem, pruning: Pruning, known_noise: bool, dro
                                   pruning.max_std, pruning.max_std_ratio,
                                   known_noise=known_noise)  # fmt: skip
     robot = _robot_columns(problem)
-    names = [problem.free_names[c] for c, _ in found if robot[c]]
-    dropped += [Dropped(problem.free_names[c], "poorly identifiable", sigma=s) for c, s in found if robot[c]]
-    return problem.fix(names)
+    found = [(c, s) for c, s in found if robot[c]]
+    cov = uncertainty(problem.residual(x0), problem.jacobian(x0), 3, known_noise)[1] if found else None
+    held = held_groups(list(problem.free_names), found, cov, problem.effect_scale(x0), pruning.max_std)
+    dropped += held
+    return problem.fix([d.name for d in held])
 
 
 def identifiable(problem: ConstraintProblem):

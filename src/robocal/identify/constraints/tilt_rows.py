@@ -2,9 +2,13 @@
 
 A tilt row is a configuration ``q``, the link carrying an inclinometer (the child link of
 joint ``K``) and the channel read (its ``x`` or ``y`` axis).  The sensor's axes are the
-link's joint-frame axes (:meth:`robocal.model.chain.Model.joint_frames`, the mount of
-:class:`robocal.measure.inclinometer.Inclinometer` the identity), so a reading is a
-property of the robot and not of a nominal model.  With ``up`` the vertical in the base
+link's joint-frame axes (:meth:`robocal.model.chain.Model.joint_frames`) turned by the
+row's mount (``ConstraintSet.tilt_mount``, the mount of
+:class:`robocal.measure.inclinometer.Inclinometer`; the identity by default).  The mount
+matters for what the rows can see: a sensor whose two axes are both perpendicular to a
+horizontal joint axis cannot see that axis lean sideways (the clearance of a parallel
+joint); mounted level at the home configuration, as the thesis' sensors are, one channel
+lies along it.  With ``up`` the vertical in the base
 frame (gravity along −z of the base), channel ``x`` reads ``asin(up · R e_y)`` and
 channel ``y`` reads ``−asin(up · R e_x)``
 (:func:`robocal.measure.inclinometer.readings`), plus the channel's zero
@@ -80,6 +84,7 @@ ALL_KINDS = ("clearance", "backlash", "compliance")
 CONTACT_FRACTION = 0.02
 ZERO_PREFIX = "tilt_zero_"
 MOMENT_FLOOR = 1.0  # N·m: the compliance column's scale when the loads are smaller
+MAX_EFFECT_ANGLE = 0.5  # rad: a clearance or backlash an LM trial step is capped at (real ones: < 1°)
 
 
 @dataclass(frozen=True)
@@ -115,7 +120,8 @@ def _sensors(robot: Model, data: ConstraintSet):
     links = tuple(names[k] for k in data.tilt_link[on])
     readings = TiltReadings(data.q[on], links, tuple(TILT_AXES[a] for a in data.tilt_axis[on]),
                             data.tilt[on], np.full(int(on.sum()), data.tilt_sigma))  # fmt: skip
-    sensors = tuple(Inclinometer(link=name) for name in dict.fromkeys(links))  # mount: the joint frame
+    sensed = dict.fromkeys(data.tilt_link[on].tolist())
+    sensors = tuple(Inclinometer(link=names[k], mount=data.mount_matrix(k)) for k in sensed)
     return readings, sensors
 
 
@@ -154,6 +160,10 @@ def tilt_rows(terms: TiltTerms, data: ConstraintSet, values: dict[str, float], z
     robot = terms.robot.with_values({n: values[n] for n in terms.robot.names if n in values})
     readings, sensors = _sensors(robot, data)
     names = terms.effects + tuple(GEOM + g for g in terms.geometry)
+    # an LM trial step may ask for an angle the joint model refuses (a clearance of 90°):
+    # such a step is only ever rejected, so the angles are capped far beyond any real one
+    angles = terms.effect_scale == 1.0
+    effects = np.where(angles, np.clip(effects, -MAX_EFFECT_ANGLE, MAX_EFFECT_ANGLE), effects)
     x = np.concatenate([effects, np.zeros(len(terms.geometry))])
     predicted = predict_at_loads(robot, readings, sensors, names, x, terms.loads)
     J = jacobian_at_loads(robot, readings, sensors, names, x, terms.loads)

@@ -11,8 +11,12 @@ One CSV, one header line, one row per recorded configuration; ``#`` lines are co
   (mixed data: tracker points and socket poses calibrate together);
 * ``link``, ``axis`` and ``tilt_deg``: an inclinometer reading (degrees) of the sensor on
   the link moved by joint ``link`` (1..N, as the joint columns ``qK``), channel ``axis``
-  (``x`` or ``y``: the link's joint-frame axes), blank where none
-  (:mod:`robocal.identify.constraints.tilt_rows`).
+  (``x`` or ``y``: the sensor's axes), blank where none
+  (:mod:`robocal.identify.constraints.tilt_rows`);
+* ``mount_rx_deg``, ``mount_ry_deg``, ``mount_rz_deg`` (optional, with the tilt columns):
+  the sensor's orientation on its link, degrees about the link's joint-frame x, y, z
+  axes (fixed axes, in that order: ``R_joint_sensor = Rz Ry Rx``); absent or blank: the
+  sensor's axes are the joint frame's.  Every row of a link states the same mount.
 
 A blank ``point``/``plane`` cell means the row has no such constraint.  Known distances
 between fixed points are not rows: ``--distance 0,1=50mm`` (points 0 and 1 are 50 mm apart).
@@ -50,6 +54,7 @@ __all__ = [
 
 KIND_COLUMNS = {"point": ("point",), "plane": ("plane",), "distance": ("pair", "distance_mm"),
                 "tilt": ("link", "axis", "tilt_deg")}  # fmt: skip
+MOUNT_COLUMNS = ("mount_rx_deg", "mount_ry_deg", "mount_rz_deg")
 MAX_BYTES = 50_000_000  # a constraint file holds thousands of rows, not gigabytes
 MAX_INDEX = 1000  # points, planes: a handful; an index beyond this is a wrong column
 
@@ -169,7 +174,8 @@ def read_constraints(
         )
     col = {name: header.index(name) for name in header}
     scale = unit_factor(angle_unit, "angle", "angle_unit")
-    q, point, plane, xyz, pair, length, tilt = [], [], [], [], [], [], []
+    _check_mount_columns(path, header)
+    q, point, plane, xyz, pair, length, tilt, mount = [], [], [], [], [], [], [], []
     for number, cells in rows:
         if len(cells) != len(header):
             raise ConstraintFileError(
@@ -190,11 +196,46 @@ def read_constraints(
         )
         xyz.append(_tracker(get, number, path))
         tilt.append(_tilt(get, number, path, dof))
+        mount.append(_mount(get, number, path, tilt[-1][0] >= 0))
     data = _assemble(path, np.array(q).reshape(-1, dof), point, plane, xyz, pair, length, distances, sigma)
     if not any(t[0] >= 0 for t in tilt):
         return data
     link, axis, reading = (np.array(c) for c in zip(*tilt, strict=True))
-    return dataclasses.replace(data, tilt_link=link, tilt_axis=axis, tilt=reading)
+    _check_one_mount(path, rows, link, mount)
+    return dataclasses.replace(data, tilt_link=link, tilt_axis=axis, tilt=reading, tilt_mount=np.array(mount))
+
+
+def _check_mount_columns(path: Path, header: list[str]) -> None:
+    """All three mount columns or none; only beside the tilt columns."""
+    present = [c for c in MOUNT_COLUMNS if c in header]
+    if present and len(present) < 3:
+        missing = [c for c in MOUNT_COLUMNS if c not in header]
+        raise ConstraintFileError(f"{path}: column {present[0]} without {', '.join(missing)}")
+    if present and not set(KIND_COLUMNS["tilt"]) <= set(header):
+        raise ConstraintFileError(f"{path}: mount columns without the tilt columns (link, axis, tilt_deg)")
+
+
+def _mount(get, number: int, path: Path, tilted: bool) -> list[float]:
+    """A tilt row's mount angles (rad); blank cells (or no columns): the joint frame."""
+    cells = [c for name in MOUNT_COLUMNS for c in get(name)]
+    if not tilted or not any(c.strip() for c in cells):
+        return [0.0, 0.0, 0.0]
+    where = f"{path}, row {number}, column"
+    return [math.radians(_cell(c, f"{where} {name}")) for c, name in zip(cells, MOUNT_COLUMNS, strict=True)]
+
+
+def _check_one_mount(path: Path, rows: list, link: np.ndarray, mount: list[list[float]]) -> None:
+    """Refuse a link whose rows state different mounts, naming the first such row."""
+    first: dict[int, list[float]] = {}
+    for (number, _), k, angles in zip(rows, link.tolist(), mount, strict=True):
+        if k < 0:
+            continue
+        seen = first.setdefault(k, angles)
+        if seen != angles:
+            raise ConstraintFileError(
+                f"{path}, row {number}, columns {', '.join(MOUNT_COLUMNS)}: link {k + 1}'s sensor was "
+                "stated with another mount on an earlier row; one sensor (one mount) per link"
+            )
 
 
 def _tilt(get, number: int, path: Path, dof: int) -> tuple[int, int, float]:
@@ -274,12 +315,19 @@ def _tilt_cells(data: ConstraintSet, i: int) -> list[str]:
     ]
 
 
+def _mount_cells(data: ConstraintSet, i: int) -> list[str]:
+    if data.tilt_link[i] < 0:
+        return ["", "", ""]
+    return [repr(math.degrees(float(v))) for v in data.tilt_mount[i]]
+
+
 def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> str:
     """The CSV text of ``data`` (module docstring); written to ``path`` when given (atomically)."""
     dof = data.q.shape[1]
     header = [f"q{k + 1}" for k in range(dof)]
     kinds = data.kinds
     header += [c for kind in KINDS if kind in kinds for c in KIND_COLUMNS[kind]]
+    header += list(MOUNT_COLUMNS) if "tilt" in kinds and data.mounted else []
     if "tracker" in kinds:
         header += ["x", "y", "z"]
     pair_of = {int(i): (k, data.pair_length[k]) for k, rows in enumerate(data.pairs) for i in rows}
@@ -297,6 +345,7 @@ def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> st
             row += ["", ""] if pair is None else [str(pair[0]), repr(float(pair[1]) * 1e3)]
         if "tilt" in kinds:
             row += _tilt_cells(data, i)
+            row += _mount_cells(data, i) if data.mounted else []
         if "tracker" in kinds:
             row += ["", "", ""] if not data.tracked[i] else [repr(float(v)) for v in data.positions[i]]
         writer.writerow(row)

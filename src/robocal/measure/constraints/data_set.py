@@ -25,6 +25,22 @@ def _per_row(v, n: int, fill, dtype):
     return np.full(n, fill, dtype=dtype) if a.size == 0 else a
 
 
+def _mounts(v, link: IntArray) -> Array:
+    """``v`` as ``(n, 3)`` mount angles (rad; empty: zeros), one mount per sensed link."""
+    n = len(link)
+    a = np.asarray(v, dtype=float)
+    a = np.zeros((n, 3)) if a.size == 0 else a.reshape(n, 3)
+    if not np.isfinite(a).all():
+        raise ValueError("a tilt row's mount angles must be finite")
+    for k in np.unique(link[link >= 0]):
+        rows = a[link == k]
+        if np.ptp(rows, axis=0).max() > 0:
+            raise ValueError(
+                f"the tilt rows of link {int(k) + 1} carry different mounts; one sensor per link"
+            )
+    return a
+
+
 def _ints(v, shape) -> IntArray:
     return np.asarray(v, dtype=np.intp).reshape(shape)
 
@@ -51,11 +67,14 @@ class ConstraintSet:
         distance_sigma: the uncertainty of a stated distance between fixed points (m).
         tilt_link: ``(n,)`` the joint index (0-based) whose child link carries the
             inclinometer read at pose ``i``, ``-1`` none (empty: no tilt rows).
-        tilt_axis: ``(n,)`` the channel read: 0 the sensor's x axis, 1 its y axis; the
-            sensor's axes are the link's joint-frame axes
+        tilt_axis: ``(n,)`` the channel read: 0 the sensor's x axis, 1 its y axis
             (:mod:`robocal.identify.constraints.tilt_rows`).
         tilt: ``(n,)`` the reading (rad), NaN where none.
         tilt_sigma: a reading's noise (rad).
+        tilt_mount: ``(n, 3)`` the sensor's orientation on its link, as angles (rad) about
+            the link's joint-frame x, y and z axes (fixed axes, in that order:
+            ``R_joint_sensor = Rz Ry Rx``); zeros (the default): the sensor's axes are the
+            joint frame's.  One mount per link (the rows of a link share it).
     """
 
     q: Array
@@ -74,6 +93,7 @@ class ConstraintSet:
     tilt_axis: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     tilt: Array = field(default_factory=lambda: np.zeros(0))
     tilt_sigma: float = TILT_SIGMA
+    tilt_mount: Array = field(default_factory=lambda: np.zeros((0, 3)))
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)
@@ -89,6 +109,7 @@ class ConstraintSet:
             raise ValueError("a tilt row needs a finite reading and axis 0 (x) or 1 (y)")
         if not self.tilt_sigma > 0:
             raise ValueError("tilt_sigma must be > 0 (rad)")
+        object.__setattr__(self, "tilt_mount", _mounts(self.tilt_mount, self.tilt_link))
         object.__setattr__(self, "point", _ints(self.point, (n,)))
         object.__setattr__(self, "plane", _ints(self.plane, (n,)))
         object.__setattr__(self, "pairs", _ints(self.pairs, (-1, 2)))
@@ -143,6 +164,19 @@ class ConstraintSet:
         return self.tilt_link >= 0
 
     @property
+    def mounted(self) -> bool:
+        """Whether any tilt row's sensor is mounted otherwise than along the joint frame."""
+        return bool(np.any(self.tilt_mount[self.tilted] != 0.0))
+
+    def mount_matrix(self, link: int) -> Array:
+        """``R_joint_sensor`` ``(3, 3)`` of the sensor on ``link``'s rows (joint index, 0-based)."""
+        from scipy.spatial.transform import Rotation
+
+        rows = np.flatnonzero(self.tilt_link == link)
+        angles = self.tilt_mount[rows[0]] if len(rows) else np.zeros(3)
+        return np.asarray(Rotation.from_euler("xyz", angles).as_matrix(), dtype=float)
+
+    @property
     def constrained(self) -> NDArray[np.bool_]:
         """``(n,)`` whether pose ``i`` is in a constraint row (a point, a plane or a pair)."""
         out = (self.point >= 0) | (self.plane >= 0)
@@ -162,7 +196,7 @@ class ConstraintSet:
             point_pairs=self.point_pairs, point_length=self.point_length, known_planes=self.known_planes,
             sigma=self.sigma, distance_sigma=self.distance_sigma, tracker_sigma=self.tracker_sigma,
             tilt_link=self.tilt_link[rows], tilt_axis=self.tilt_axis[rows], tilt=self.tilt[rows],
-            tilt_sigma=self.tilt_sigma,
+            tilt_sigma=self.tilt_sigma, tilt_mount=self.tilt_mount[rows],
         )  # fmt: skip
 
     @property
@@ -225,4 +259,5 @@ def merge_sets(first: ConstraintSet, *others: ConstraintSet) -> ConstraintSet:
         tilt_link=np.concatenate([s.tilt_link for s in sets]),
         tilt_axis=np.concatenate([s.tilt_axis for s in sets]),
         tilt=np.concatenate([s.tilt for s in sets]), tilt_sigma=first.tilt_sigma,
+        tilt_mount=np.concatenate([s.tilt_mount for s in sets]),
     )  # fmt: skip

@@ -13,13 +13,21 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from robocal.measure.constraints.data_set import KINDS, TILT_SIGMA, ConstraintSet
 from robocal.measure.ik import solve_ik
 from robocal.measure.ik_starts import random_configurations
 from robocal.model.chain import Model
 
-__all__ = ["SceneTruth", "moved_scene", "simulate_constraints", "simulate_tilt_rows", "simulate_tracker_rows"]
+__all__ = [
+    "SceneTruth",
+    "level_mounts",
+    "moved_scene",
+    "simulate_constraints",
+    "simulate_tilt_rows",
+    "simulate_tracker_rows",
+]
 
 Array = NDArray[np.float64]
 
@@ -176,6 +184,8 @@ def simulate_tilt_rows(
     max_tilt: float = np.radians(60.0),
     seed: int | np.random.Generator | None = 0,
     configurations: Array | None = None,
+    mounts: dict[int, Array] | None = None,
+    resolution: float = 0.0,
 ) -> ConstraintSet:
     """Inclinometer readings of the ``true`` robot (its geometry and ``joint_effects`` under
     gravity, :func:`robocal.measure.inclinometer.readings`) at ``n`` random configurations:
@@ -183,7 +193,10 @@ def simulate_tilt_rows(
     every joint's link), plus each channel's zero ``zeros[(link, axis)]`` (rad, default 0)
     and normal noise ``sigma`` (rad).  Readings beyond ``max_tilt`` (a sensor's range;
     near the vertical a reading is insensitive) are left out.  ``configurations``
-    ``(n, dof)``: read at these (a plan) instead of random ones."""
+    ``(n, dof)``: read at these (a plan) instead of random ones.  ``mounts``: each sensed
+    link's sensor orientation on it (joint index -> ``(3,)`` angles, rad, as
+    ``ConstraintSet.tilt_mount``; e.g. :func:`level_mounts`), None or a link not named: the
+    joint frame.  ``resolution``: a reading is rounded to it (rad; 0: not rounded)."""
     from robocal.measure.inclinometer import readings
     from robocal.model.joints import joint_perturbations
 
@@ -199,12 +212,27 @@ def simulate_tilt_rows(
     axis = np.tile(np.array([0, 1] * len(links), dtype=np.intp), n)
     q_rows = np.repeat(q, 2 * len(links), axis=0)
     names = tuple(true.joint_names[k] for k in link)
-    mounts = np.broadcast_to(np.eye(3), (len(link), 3, 3))  # the sensor's axes: the joint frame's
+    angles = np.array([(mounts or {}).get(int(k), np.zeros(3)) for k in link], dtype=float).reshape(-1, 3)
+    matrices = Rotation.from_euler("xyz", angles).as_matrix() if len(angles) else np.zeros((0, 3, 3))
     axes = tuple("xy"[a] for a in axis)
-    tilt = readings(true, q_rows, names, axes, mounts, joint_perturbations(true, q_rows))
+    tilt = readings(true, q_rows, names, axes, matrices, joint_perturbations(true, q_rows))
     zero = np.array([(zeros or {}).get((int(k), int(a)), 0.0) for k, a in zip(link, axis, strict=True)])
     ok = np.abs(tilt) <= max_tilt
     read = tilt + zero + sigma * rng.standard_normal(len(tilt))
+    if resolution > 0:  # the sensor's count (seed 003: 0.001°)
+        read = np.round(read / resolution) * resolution
     none = -np.ones(int(ok.sum()), dtype=np.intp)
     return ConstraintSet(q_rows[ok], none, none, sigma=1e-5, tilt_link=link[ok], tilt_axis=axis[ok],
-                         tilt=read[ok], tilt_sigma=sigma)  # fmt: skip
+                         tilt=read[ok], tilt_sigma=sigma, tilt_mount=angles[ok])  # fmt: skip
+
+
+def level_mounts(model: Model, links: tuple[int, ...] | None = None, q_home: Array | None = None
+                 ) -> dict[int, Array]:  # fmt: skip
+    """The mount (joint index -> ``(3,)`` angles, rad, as ``ConstraintSet.tilt_mount``) of a
+    sensor on each of ``links`` (None: every joint's) mounted level at ``q_home`` (default all
+    joints zero) of ``model``: its axes along the base's x and y there, as the thesis' sensors
+    (:meth:`robocal.measure.inclinometer.Inclinometer.level_at`)."""
+    links = tuple(range(model.dof)) if links is None else tuple(links)
+    q = np.zeros((1, model.dof)) if q_home is None else np.asarray(q_home, float).reshape(1, -1)
+    frames = model.joint_frames(q)[0]
+    return {k: Rotation.from_matrix(frames[k, :3, :3].T).as_euler("xyz") for k in links}
