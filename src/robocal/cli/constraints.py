@@ -10,6 +10,7 @@ A result folder holds ``model.yaml`` (the calibrated robot) and ``constraints.js
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -150,8 +151,9 @@ def calibrate_constraint_file(
     paths = tuple(data_path) if isinstance(data_path, list) else (data_path,)
     stated, sigma = _distances(distances), _sigma(noise)
     request = ConstraintRequest(paths, model, out, angle_unit=angle_unit, length_unit=length_unit,
-                                distances=stated, level=level or 2, noise_m=sigma,
-                                **({} if tilt_kinds is None else {"tilt_kinds": tilt_kinds}))  # fmt: skip
+                                distances=stated, level=level or 2, noise_m=sigma)  # fmt: skip
+    if tilt_kinds is not None:
+        request = dataclasses.replace(request, tilt_kinds=tilt_kinds)
     try:
         run = calibrate_constraint_files(request)
     except ValueError as err:
