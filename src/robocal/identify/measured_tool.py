@@ -167,8 +167,6 @@ def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Arra
     as :func:`robocal.spatial.chain_product`) and its derivative ``(3, k)`` by each value:
     a translation moves it along the step's axis, a rotation turns it about that axis
     through the step's origin (both in the chain's first frame)."""
-    if all(motion[0] == "T" for motion in motions):  # a probe point (every calibration): no turns
-        return _translations(motions, values)
     R = np.eye(3)
     t = np.zeros(3)
     J = np.empty((3, len(motions)))
@@ -186,18 +184,6 @@ def _point_and_derivative(motions: list[str], values: list[float]) -> tuple[Arra
     return t, J
 
 
-def _translations(motions: list[str], values: list[float]) -> tuple[Array, Array]:
-    """:func:`_point_and_derivative` of translations only: the values summed along their axes
-    (in chain order, the same sums) and the axes as the derivative's columns."""
-    point = [0.0, 0.0, 0.0]
-    J = np.zeros((3, len(motions)))
-    for k, (motion, value) in enumerate(zip(motions, values, strict=True)):
-        axis = "xyz".index(motion[1])
-        point[axis] += value
-        J[axis, k] = 1.0
-    return np.array(point), J
-
-
 def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool | None:
     """The measured tool of a :class:`~robocal.identify.result.CalibrationResult` (None
     when the calibration measured the model's end without a tool).  ``given_m``: the
@@ -205,24 +191,50 @@ def measured_tool(result: Any, given_m: ArrayLike | None = None) -> MeasuredTool
     steps = tool_steps(result.model)
     if not steps:
         return None
-    p, J = _point_and_derivative([s.motion for s in steps], [s.value for s in steps])
     names = result.names  # the tool's few steps looked up among them (no table of all)
     cols = [names.index(s.name) if s.name in names else None for s in steps]
-    estimated = [a for a, c in enumerate(cols) if c is not None]
-    at = np.array([c for c in cols if c is not None], dtype=np.intp)
-    # the covariance of the point from the estimated steps' block (the others add nothing)
-    J_estimated = J[:, estimated]
-    C = J_estimated @ np.asarray(result.covariance)[at[:, None], at] @ J_estimated.T
+    motions, values = [s.motion for s in steps], [s.value for s in steps]
+    if sorted(motions) == ["Tx", "Ty", "Tz"]:  # a probe point: every position calibration
+        position, covariance = _probe_point(motions, values, cols, np.asarray(result.covariance))
+    else:
+        p, J = _point_and_derivative(motions, values)
+        estimated = [a for a, c in enumerate(cols) if c is not None]
+        at = np.array([c for c in cols if c is not None], dtype=np.intp)
+        # the covariance of the point from the estimated steps' block (the others add nothing)
+        J_estimated = J[:, estimated]
+        C = J_estimated @ np.asarray(result.covariance)[at[:, None], at] @ J_estimated.T
+        position, covariance = _triple(p.tolist()), tuple(_triple(row) for row in C.tolist())
     if given_m is None:
         recorded = (getattr(result, "records", None) or {}).get("measured_tool") or {}
         given_m = None if recorded.get("given_mm") is None else np.asarray(recorded["given_mm"]) * 1e-3
     given = None if given_m is None else _given_point(given_m)
     return MeasuredTool(
-        position_m=_triple(p.tolist()),
-        covariance_m2=tuple(_triple(row) for row in C.tolist()),
+        position_m=position,
+        covariance_m2=covariance,
         estimated=tuple(c is not None for c in cols),
         given_m=None if given is None else _triple(given.tolist()),
     )
+
+
+def _probe_point(
+    motions: list[str], values: list[float], cols: list[int | None], covariance: Array
+) -> tuple[tuple[float, float, float], tuple[tuple[float, float, float], ...]]:
+    """:func:`measured_tool`'s point (m) and covariance (m²) for the translations Tx, Ty, Tz
+    (in any order), in floats: the point's coordinates are the steps' values and its
+    covariance the estimated steps' block of ``covariance`` (``cols``: each step's column
+    there, None: not estimated, no variance), the numbers :func:`_point_and_derivative`'s
+    unit columns give (``+ 0.0``: as their sums, a zero is +0)."""
+    step_on = {motion[1]: k for k, motion in enumerate(motions)}
+    order = [step_on[axis] for axis in "xyz"]
+    x, y, z = (0.0 + values[k] for k in order)
+    axes = [a for a, k in enumerate(order) if cols[k] is not None]  # the estimated components
+    at = [cols[order[a]] for a in axes]
+    block = covariance.take(at, axis=0).take(at, axis=1).tolist()
+    C = [[0.0, 0.0, 0.0] for _ in range(3)]
+    for i, a in enumerate(axes):
+        for j, b in enumerate(axes):
+            C[a][b] = 0.0 + block[i][j]
+    return (x, y, z), tuple(_triple(row) for row in C)
 
 
 def _given_point(value: ArrayLike) -> Array:

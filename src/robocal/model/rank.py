@@ -315,9 +315,18 @@ def _absorbers(
         a, c = kept_cols[k_list[n]], red_cols[j_list[n]]
         listed[j_list[n]].append((names[a], v_list[n] * scale[c] / scale[a]))
     return {
-        c: Dropped(names[c], "redundant", tuple(pairs), residuals[i])
+        c: _redundant(names[c], tuple(pairs), residuals[i])
         for i, (c, pairs) in enumerate(zip(red_cols, listed, strict=True))
     }
+
+
+def _redundant(name: str, absorbed_by: tuple[tuple[str, float], ...], residual: float) -> Dropped:
+    """``Dropped(name, "redundant", absorbed_by, residual)`` without the frozen dataclass's
+    ``__init__`` (one ``object.__setattr__`` per field: every calibration drops a few)."""
+    dropped = object.__new__(Dropped)
+    dropped.__dict__.update(name=name, reason="redundant", absorbed_by=absorbed_by, residual=residual,
+                            sigma=None, detail="")  # fmt: skip
+    return dropped
 
 
 def sequential_test_numpy(qr: Array, tolerance: float) -> tuple[Array, NDArray[np.bool_], Array, Array, bool]:

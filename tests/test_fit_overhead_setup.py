@@ -1,0 +1,130 @@
+"""The fixed Python cost around the compiled fit (issue 35, the 100-pose calibration in
+0.5 ms): the shortcuts taken where a calibration sets up and hands back its result give
+what the general code gives.
+
+* ``Model.with_free_values`` copies only the free steps and writes the copy's values from
+  the model's: the same values as its steps, the fixed steps shared;
+* a probe point's measured tool (Tx, Ty, Tz in any order, some not estimated) is taken in
+  floats: the same numbers as ``J Σ Jᵀ`` of the general tool code, to the bit;
+* the calibrated robot keeps the given model's free flags (level 1: every other parameter
+  fixed in the fit, free again in the result), the steps the fit kept equal to the given
+  model's;
+* the rank test's redundant parameters are the same :class:`Dropped` values as the
+  dataclass builds.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+import robocal as rc
+from robocal import spatial
+from robocal.identify import measured_tool as mt
+from robocal.measure.devices import LaserTracker
+from robocal.measure.simulate import VirtualRobot, simulate
+from robocal.measure.true_model import draw_true_model
+from robocal.model import rank
+from robocal.model.rank import Dropped
+
+
+@pytest.fixture(scope="module")
+def ur10():
+    """A UR10 and 60 simulated tracker poses of a perturbed one: (model, data)."""
+    model = rc.calibration_model("ur10")
+    true = draw_true_model(model, seed=11)
+    frame = spatial.homogeneous(spatial.rotvec_to_matrix([0.2, 0.1, -0.8]), [1.8, 0.6, 0.2])
+    device = LaserTracker(T_device_base=frame, p_tool_target=np.zeros(3), sigma=20e-6)
+    lim = np.clip(model.joint_limits, -np.pi, np.pi)
+    q = np.random.default_rng(12).uniform(lim[:, 0], lim[:, 1], (60, model.dof))
+    return model, simulate(VirtualRobot(model, true, device), q, seed=13)
+
+
+def test_with_free_values_copies_the_free_steps_only(ur10):
+    model, _ = ur10
+    x = np.random.default_rng(1).normal(scale=0.01, size=len(model.free_names))
+    moved = model.with_free_values(x)
+    assert np.array_equal(moved.values, [s.value for s in moved.steps])
+    assert np.array_equal(moved.free_values, x)
+    assert not moved.values.flags.writeable
+    for old, new in zip(model.steps, moved.steps, strict=True):
+        assert (new is old) == (not old.free)
+        assert (new.name, new.free, new.motion, new.role) == (old.name, old.free, old.motion, old.role)
+    # the copy computes as a model built from its steps
+    rebuilt = model.with_values(dict(zip(model.free_names, x.tolist(), strict=True)))
+    q = np.zeros((1, model.dof))
+    assert np.array_equal(moved.fk(q), rebuilt.fk(q))
+    bad = x.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match=model.free_names[3]):
+        model.with_free_values(bad)
+
+
+def _general_tool(motions, values, cols, covariance):
+    """The measured tool's point and covariance by the general code: ``J Σ Jᵀ`` over the
+    estimated steps (a step not estimated adds nothing)."""
+    p, J = mt._point_and_derivative(motions, values)
+    estimated = [k for k, c in enumerate(cols) if c is not None]
+    at = [c for c in cols if c is not None]
+    Je = J[:, estimated]
+    return p, Je @ covariance[np.ix_(at, at)] @ Je.T
+
+
+@pytest.mark.parametrize("motions", list(itertools.permutations(["Tx", "Ty", "Tz"])))
+def test_probe_point_equals_the_general_tool_code(motions):
+    rng = np.random.default_rng(len(motions[0]) + ord(motions[0][1]))
+    A = rng.normal(size=(8, 8))
+    covariance = A @ A.T * 1e-8
+    values = rng.normal(scale=0.1, size=3).tolist()
+    for estimated in itertools.product([True, False], repeat=3):
+        cols = [int(c) if e else None for e, c in zip(estimated, rng.permutation(8)[:3], strict=True)]
+        point, cov = mt._probe_point(list(motions), values, cols, covariance)
+        p, C = _general_tool(list(motions), values, cols, covariance)
+        assert point == tuple(p.tolist())
+        assert cov == tuple(tuple(row) for row in C.tolist())
+
+
+def test_measured_tool_of_a_calibration_equals_the_general_code(ur10):
+    model, data = ur10
+    result = rc.calibrate(model, data, tool_guess=np.array([0.0, 0.0, 0.1]))
+    tool = mt.measured_tool(result)
+    steps = [s for s in result.model.steps if s.name.startswith("tcp_")]
+    cols = [result.names.index(s.name) if s.name in result.names else None for s in steps]
+    p, C = _general_tool([s.motion for s in steps], [s.value for s in steps], cols, result.covariance)
+    assert tool.position_m == tuple(p.tolist())
+    assert tool.covariance_m2 == tuple(tuple(row) for row in C.tolist())
+    assert np.array_equal(tool.std_m, np.sqrt(np.diag(C)))
+
+
+@pytest.mark.parametrize("level", [1, 2])
+def test_calibrated_robot_keeps_the_given_free_flags(ur10, level):
+    model, data = ur10
+    result = rc.calibrate(model, data, level=level)
+    robot = result.model.steps[: len(model.steps)]
+    tool = result.model.steps[len(model.steps) :]
+    assert [s.name for s in robot] == list(model.names)
+    assert [s.free for s in robot] == [s.free for s in model.steps]
+    assert tool and all(s.free for s in tool)
+    # values: the calibrated measurement chain's, the device frame's steps left out
+    chain = {s.name: s.value for s in result.measurement_chain.steps}
+    assert [s.value for s in result.model.steps] == [chain[s.name] for s in result.model.steps]
+    estimated = set(result.names)
+    kept = [(s, g) for s, g in zip(robot, model.steps, strict=True) if s.name not in estimated]
+    assert kept and all(s == g for s, g in kept)  # not fitted: the given model's steps as they were
+    if level == 1:  # the fit held every non-joint parameter: all free in the result
+        assert all(s.free for s in robot if s.joint is None and model.step(s.name).free)
+
+
+def test_redundant_parameters_are_dataclass_values(ur10):
+    model, data = ur10
+    result = rc.calibrate(model, data)
+    redundant = [d for d in result.dropped if d.reason == "redundant"]
+    assert redundant
+    for d in redundant:
+        built = Dropped(d.name, "redundant", d.absorbed_by, d.residual)
+        assert d == built and hash(d) == hash(built) and repr(d) == repr(built)
+        assert list(vars(d)) == list(vars(built))
+    direct = rank._redundant("a", (("b", 0.5),), 0.25)
+    assert direct == Dropped("a", "redundant", (("b", 0.5),), 0.25)
