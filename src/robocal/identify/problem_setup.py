@@ -22,6 +22,7 @@ from robocal.identify.solve_result import SolveResult
 from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_sizes
 from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
+from robocal.model.chain_plan import read_only
 from robocal.model.flange_tool import split_tool
 from robocal.model.rank import Dropped
 from robocal.model.steps import Role
@@ -65,6 +66,9 @@ def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     tool is the start value of the next calibration's (:func:`robocal.model.flange_tool.split_tool`)."""
     parts = split_tool(model)
     return parts.robot, parts.T_flange_tool
+
+
+_EYE4 = read_only(np.eye(4))  # the tool's start without a guess (the fits copy it)
 
 
 def _positions(data: Measurements) -> Array:
@@ -161,7 +165,7 @@ def _start_values(run: Run) -> tuple[Array, Array, Array, bool]:
         T_known = np.asarray(setup.frame, dtype=float)
         if T_known.shape != (4, 4):
             raise ValueError(f"frame must be 'fit', 'fixed' or a 4x4 transform, got shape {T_known.shape}")
-    T_tool0 = np.eye(4) if setup.tool_guess is None else _as_frame(setup.tool_guess)
+    T_tool0 = _EYE4 if setup.tool_guess is None else _as_frame(setup.tool_guess)  # read, not written
     fit_tool = isinstance(setup.tool, str) and setup.tool == "fit"
     if setup.tool is not None and not isinstance(setup.tool, str):
         T_tool0 = _as_frame(setup.tool)

@@ -174,8 +174,7 @@ _EYE4 = np.eye(4)
 def robot_sizes(T_flange: Array) -> Array:
     """``(K,)`` the robots' sizes (m), to weigh rotations against lengths: the largest
     coordinate of their end frames ``(K, n, 4, 4)`` at the first 50 poses (at least 0.1)."""
-    head = T_flange[:, :50, :3, 3]
-    return np.maximum(np.abs(head).reshape(len(head), -1).max(axis=1), 0.1)
+    return np.maximum(np.abs(T_flange[:, :50, :3, 3]).max(axis=(1, 2)), 0.1)
 
 
 # ---------------------------------------------------------------------- identifiable set
