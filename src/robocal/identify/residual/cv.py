@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.identify.residual.curvature import with_curvature
 from robocal.identify.residual.fit import (
     Hyper,
     Index,
@@ -26,6 +27,7 @@ from robocal.identify.residual.fit import (
     evidence,
     gram_matrices,
     kept_columns,
+    layout,
     posterior_mean,
     raw_blocks,
     residual_template,
@@ -320,7 +322,10 @@ def _fit_candidates(
     for H in harmonics:
         t1 = time.perf_counter() - gram_time
         name = f"{pname} + angle errors H={H}"
-        hyper = evidence(residual_template(names, index, H), grams[H], None)
+        template = residual_template(names, index, H)
+        hyper = evidence(template, grams[H], None)
+        if grams[H].A is None:  # the folds' start with its curvature (not for the few poses' dual form)
+            hyper = with_curvature(hyper, grams[H], *layout(template))
         hypers[name] = hyper
         if normals is not None:
             normals[name] = grams[H]

@@ -30,11 +30,14 @@ MAX_AMPLITUDE = 2e-3  # rad, the largest prior RMS of a joint's angle error
 
 @dataclass(frozen=True)
 class Hyper:
-    """Prior amplitude per joint (rad), spectral length scale ℓ (rad) and noise σ (m)."""
+    """Prior amplitude per joint (rad), spectral length scale ℓ (rad) and noise σ (m); as an
+    evidence maximisation's start, optionally the curvature of ``−log E`` there along
+    ``[log a_j..., log ℓ, log σ]`` (:mod:`robocal.identify.residual.curvature`)."""
 
     amplitudes: tuple[float, ...]
     length_scale: float
     noise: float
+    curvature: tuple[float, ...] | None = dataclasses.field(default=None, compare=False, repr=False)
 
 
 def gram_matrix(
@@ -453,14 +456,31 @@ def evidence(
     data: tuple[Any, ...] = (G, b)
     if normal.A is not None and _dual_is_cheaper(*normal.A.shape):
         fun, data = nll_and_grad_dual, (normal.A, normal.r)
+    # the start's curvature known: the search in θ·√h, where its gradient step is near Newton's
+    w = (
+        np.ones(k + 2)
+        if start is None or start.curvature is None
+        else np.sqrt(np.maximum(start.curvature, 1.0))
+    )
     opt = minimize(
-        fun, theta0, args=(*data, rr, N, groups, freq), jac=True,
-        method="L-BFGS-B", bounds=bounds, options={"maxiter": maxiter, "ftol": ftol},
+        _scaled(fun, w), theta0 * w, args=(*data, rr, N, groups, freq), jac=True, method="L-BFGS-B",
+        bounds=[(lo * s, hi * s) for (lo, hi), s in zip(bounds, w, strict=True)],
+        options={"maxiter": maxiter, "ftol": ftol},
     )  # fmt: skip
-    theta = opt.x
+    theta = opt.x / w
     return Hyper(
         tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1]))
     )
+
+
+def _scaled(fun: Callable[..., tuple[float, Array]], w: Array) -> Callable[..., tuple[float, Array]]:
+    """``fun`` of ``θ`` as a function of ``φ = θ·w`` (its gradient in ``φ``)."""
+
+    def scaled(phi: Array, *args: Any) -> tuple[float, Array]:
+        f, g = fun(phi / w, *args)
+        return f, g / w
+
+    return scaled
 
 
 def posterior_mean(template: JointAngleResidual, normal: _Normal, hyper: Hyper) -> Array:

@@ -28,7 +28,9 @@ errors to 4 digits on series A and the tests' robots, at 4x the time on 10,000 p
 candidate — physics only, and the residual with each number of harmonics — predicts the
 held-out fold.  The residual is fitted jointly with the physical parameters (their columns
 are projected out of its design; in the folds their linear response is added to the
-prediction, and the final model is calibrated again with the residual known).  A fold's
+prediction, and the final model is calibrated again with the residual known; under
+compliance alone these fits take the joint loads of the geometry already calibrated on the
+same poses, in one pass: :func:`warm_loads`).  A fold's
 normal equations are all poses' minus its own (one pass over the poses for all folds and
 numbers of harmonics, :func:`~robocal.identify.residual.cv._fold_raws`).  Each fold
 maximises its own evidence from the hyperparameters found on all poses (fixing those
