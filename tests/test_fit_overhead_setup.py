@@ -3,7 +3,9 @@
 what the general code gives.
 
 * ``Model.with_free_values`` copies only the free steps and writes the copy's values from
-  the model's: the same values as its steps, the fixed steps shared;
+  the model's: the same values as its steps, the fixed steps shared; ``Model.with_free``
+  changes the model's free mask and names instead of working them out again: the same as
+  its steps';
 * a probe point's measured tool (Tx, Ty, Tz in any order, some not estimated) is taken in
   floats: the same numbers as ``J Σ Jᵀ`` of the general tool code, to the bit;
 * the calibrated robot keeps the given model's free flags (level 1: every other parameter
@@ -60,6 +62,22 @@ def test_with_free_values_copies_the_free_steps_only(ur10):
     bad[3] = np.nan
     with pytest.raises(ValueError, match=model.free_names[3]):
         model.with_free_values(bad)
+
+
+@pytest.mark.parametrize("free", [False, True])
+def test_with_free_keeps_mask_and_names_of_its_steps(ur10, free):
+    model, _ = ur10
+    rng = np.random.default_rng(2)
+    current = model
+    for _ in range(6):  # fix and free again, a few names at a time, in random order
+        names = rng.choice(model.names, size=int(rng.integers(0, 6)), replace=False).tolist()
+        current = current.with_free(names, free=free if rng.random() < 0.7 else not free)
+        assert current.free_mask.tolist() == [s.free for s in current.steps]
+        assert current.free_names == tuple(s.name for s in current.steps if s.free)
+        assert not current.free_mask.flags.writeable
+        assert np.array_equal(current.values, model.values)
+    with pytest.raises(KeyError, match="no_such"):
+        model.with_free(["no_such"])
 
 
 def _general_tool(motions, values, cols, covariance):

@@ -199,10 +199,8 @@ class Model:
         selected = set(self.names if names is None else names)
         if unknown := [n for n in selected if n not in self._index]:
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
-        steps = list(self.steps)
-        for i in (self._index[name] for name in selected):
-            steps[i] = steps[i]._with_free(free)
-        return self._derived(tuple(steps), "values")
+        at = [self._index[name] for name in selected]
+        return chain_plan.with_free_copy(self, at, free, _STRUCTURE + ("values",))
 
     def _derived(self, steps: tuple[Step, ...], same: Literal["free", "values"]) -> Model:
         """This model with checked ``steps`` whose free flags or values (``same``) are its own:

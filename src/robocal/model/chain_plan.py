@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -223,4 +224,19 @@ def with_free_values_copy(model: Any, x: Array, shared: tuple[str, ...]) -> Any:
     values = model.values.copy()
     values[mask] = x
     derived.__dict__["values"] = read_only(values)
+    return derived
+
+
+def with_free_copy(model: Any, at: list[int], free: bool, shared: tuple[str, ...]) -> Any:
+    """:func:`derived_copy` of ``model`` with the steps ``at`` (indices) freed or fixed
+    (``free``): only those copied; the copy's ``free_mask`` and ``free_names`` are
+    ``model``'s with those flags changed (not worked out again from the steps)."""
+    steps = list(model.steps)
+    for i in at:
+        steps[i] = steps[i]._with_free(free)
+    derived = derived_copy(model, tuple(steps), shared)
+    mask = model.free_mask.copy()
+    mask[at] = free
+    derived.__dict__["free_mask"] = read_only(mask)
+    derived.__dict__["free_names"] = tuple(itertools.compress(model.names, mask.tolist()))
     return derived
