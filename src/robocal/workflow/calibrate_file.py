@@ -219,7 +219,8 @@ def _validate(result: CalibrationResult, test: Measurements) -> tuple[Validation
     record: Any = result.records.get("physics_only")
     if not isinstance(record, dict) or result.model.residual is None:
         return validation, result
-    physics = validate(kinematic_part(result).calibrated, test)
+    kinematic = kinematic_part(result).calibrated  # its held-out mean only: no expected error (frame given)
+    physics = validate(kinematic, test, frame=kinematic.frame)
     held_out = {"held_out_mean_mm": physics.mean * 1e3, "held_out_n": physics.n}
     return validation, result.with_records(physics_only={**record, **held_out})
 
