@@ -32,6 +32,7 @@ __all__ = [
     "simulate_constraint_command",
     "simulate_constraint_file",
     "tilt_effect_kinds",
+    "tilt_rows_only",
     "tracker_file",
     "validate_constraint_file",
 ]
@@ -68,14 +69,19 @@ def calibrate_constraint_command(
 ) -> None:  # fmt: skip
     """``robocal calibrate`` of a constraint file (or several files: constraint files and
     tracker files, one fit): a catalog robot's complete position model (``--chain
-    catalog``: its published chain), a model file's chain as it is.  ``effects``
+    catalog``: its published chain, for inclinometer files alone with its base tilt free:
+    :func:`tilt_rows_only`), a model file's chain as it is.  ``effects``
     (``--effects``): the joint effects the tilt rows identify (:func:`tilt_effect_kinds`)."""
     kinds = tilt_effect_kinds(effects)
     if (out / RESULT_FILE).exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
+    from robocal.identify.constraints.tilt_rows import tilt_chain
     from robocal.model.complete import calibration_model
 
-    if chain == "complete" or (chain is None and from_catalog):
+    paths = data_path if isinstance(data_path, list) else [data_path]
+    if chain == "catalog" and tilt_rows_only(paths):
+        model = tilt_chain(model)  # the catalog chain, its base tilt free (tilt_rows_only)
+    elif chain == "complete" or (chain is None and from_catalog):
         try:
             model = calibration_model(model, "position")
         except ValueError as err:
@@ -88,6 +94,21 @@ def calibrate_constraint_command(
     calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
                               level=levels[level], noise=noise, length_unit=length_unit,
                               tilt_kinds=kinds)  # fmt: skip
+
+
+def tilt_rows_only(paths: list[Path]) -> bool:
+    """Whether every file of the fit holds inclinometer readings only: then ``--chain catalog``
+    calibrates the catalog chain with the base's tilt free
+    (:func:`robocal.identify.constraints.tilt_rows.tilt_chain`, which says why a tilt file
+    needs the robot's own chain when its joint effects are identified).
+
+    Not the default: a file's mount angles (none: the joint frame) are stated in the joint
+    frames of the chain calibrated, so the default stays the complete position model
+    whatever files join the fit; the same tilt file fitted alone or with a tracker file
+    then describes the same sensors."""
+    from robocal.measure.constraints.data import tilt_only
+
+    return bool(paths) and all(tilt_only(p) for p in paths)
 
 
 def tilt_effect_kinds(effects: str | None) -> tuple[str, ...] | None:

@@ -6,8 +6,11 @@ link, level at the home configuration: the file's ``mount_r*_deg`` columns), its
 :data:`~robocal.experiments.seed003_inclinometer.N_CONFIGURATIONS` designed configurations,
 zero offsets within ±0.05° and the 0.001° resolution (σ 0.001°, rounded to the count) are
 written as one tilt file and calibrated by the command line (``robocal calibrate katana450
---data FILE --effects clearance,backlash,compliance``: the one constraint fit, geometry
-and joint effects together).  :func:`tilt_rows_tables` sets the joint effects it saved in
+--chain catalog --data FILE --effects clearance,backlash,compliance``: the one constraint
+fit, geometry and joint effects together, in the chain whose joint frames Table 5.2's
+effects are stated in; the complete position model moves joint 5's frame 0.147 m along
+its axis, the effects' bending moments with it, and fits the same file to 0.025° RMS).
+:func:`tilt_rows_tables` sets the joint effects it saved in
 ``constraints.json`` beside the thesis' values and the old route's (``identify_tilt``,
 orientation fitted); ``python -m robocal.experiments.seed003_tilt_rows`` prints the
 markdown table docs/inclinometer.md holds.
@@ -23,8 +26,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["ROWS", "markdown_table", "thesis_tilt_file", "tilt_rows_tables"]
+__all__ = ["EFFECTS", "ROWS", "markdown_table", "thesis_tilt_file", "tilt_rows_tables"]
 
+#: the options of the one fit: clearance too (not identified by default)
+EFFECTS = ("--effects", "clearance,backlash,compliance")
 #: (table key, effect kind, the saved estimate's key) of the thesis' three tables
 ROWS = (
     ("clearance_tilt_deg", "clearance", "estimate_rad"),
@@ -33,9 +38,11 @@ ROWS = (
 )
 
 
-def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None) -> np.ndarray:
+def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None, frames: Any = None) -> np.ndarray:
     """Write the thesis' set-up's readings (module docstring) to ``path``; the configurations
-    ``(n, dof)`` (rad).  ``n``: fewer designed configurations (None: the thesis' 30)."""
+    ``(n, dof)`` (rad).  ``n``: fewer designed configurations (None: the thesis' 30);
+    ``frames``: the model whose joint frames the mount angles are stated in (None: the
+    catalog Katana's, the chain ``--chain catalog`` calibrates)."""
     from robocal.experiments.seed003_inclinometer import (
         N_CONFIGURATIONS,
         OFFSET_RANGE,
@@ -45,12 +52,12 @@ def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None) -> n
     )
     from robocal.measure.constraints.data import write_constraints
     from robocal.measure.constraints.sim import level_mounts, simulate_tilt_rows
-    from robocal.model.complete import calibration_model
 
     setup = katana_robots()
     # level at home is a physical mount; its angles are stated in the joint frames of the
-    # model `robocal calibrate katana450` calibrates (the complete position model's)
-    frames = calibration_model(setup.nominal, "position")
+    # model `robocal calibrate katana450 --chain catalog` calibrates: the catalog chain (base
+    # tilt free in front: the same frames), where Table 5.2's joint effects are stated
+    frames = setup.nominal if frames is None else frames
     q = design_configurations(setup.nominal, katana_sensors(setup.nominal), n or N_CONFIGURATIONS)
     rng = np.random.default_rng(noise_seed)
     zeros = {(k, a): float(rng.uniform(-OFFSET_RANGE, OFFSET_RANGE)) for k in range(5) for a in (0, 1)}
@@ -138,9 +145,9 @@ def main() -> None:  # pragma: no cover - the documentation's table
     with tempfile.TemporaryDirectory() as tmp:
         path, out = Path(tmp) / "thesis_tilt.csv", Path(tmp) / "out"
         thesis_tilt_file(path)
-        args = ["calibrate", "katana450", "--data", str(path), "--effects", "clearance,backlash,compliance"]
+        args = ["calibrate", "katana450", "--chain", "catalog", "--data", str(path), *EFFECTS]
         # the command as a user runs it (experiments sit below the CLI's layer: no import of it)
-        result = subprocess.run([sys.executable, "-m", "robocal", *args, "-o", str(out)],
+        result = subprocess.run([sys.executable, "-m", "robocal.cli", *args, "-o", str(out)],
                                 capture_output=True, text=True, check=False)  # fmt: skip
         if result.returncode:
             raise SystemExit(result.stdout + result.stderr)

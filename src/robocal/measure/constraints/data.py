@@ -49,6 +49,7 @@ __all__ = [
     "constraint_kind",
     "parse_distance",
     "read_constraints",
+    "tilt_only",
     "write_constraints",
 ]
 
@@ -82,6 +83,17 @@ def constraint_kind(path: str | Path) -> str | None:
         if set(KIND_COLUMNS[kind]) <= columns:
             return kind
     return None
+
+
+def tilt_only(path: str | Path) -> bool:
+    """Whether ``path`` holds inclinometer readings only: the tilt columns and no other
+    kind's (``point``, ``plane``, ``pair``/``distance_mm``) nor a tracker's ``x, y, z``."""
+    try:
+        columns = set(_header(Path(path)))
+    except (OSError, UnicodeDecodeError):
+        return False
+    others = {c for kind in KINDS if kind != "tilt" for c in KIND_COLUMNS[kind]} | {"x", "y", "z"}
+    return set(KIND_COLUMNS["tilt"]) <= columns and not columns & others
 
 
 def parse_distance(text: str) -> tuple[int, int, float]:
