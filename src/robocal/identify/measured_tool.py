@@ -234,7 +234,7 @@ def _probe_point(
     for i, a in enumerate(axes):
         for j, b in enumerate(axes):
             C[a][b] = 0.0 + block[i][j]
-    return (x, y, z), tuple(_triple(row) for row in C)
+    return (x, y, z), (tuple(C[0]), tuple(C[1]), tuple(C[2]))  # floats already
 
 
 def _given_point(value: ArrayLike) -> Array:

@@ -287,7 +287,8 @@ def _calibrated_models(run: Run, start: Start, fit: Fit) -> tuple[Model, Model, 
     problem, x = fit.selection.problem, fit.x
     chain, given = problem.chain, run.given_model
     calibrated_chain = chain.with_free_values(x[: len(x) - problem.n_effects])
-    n_frame = len(chain.names_with_role(Role.DEVICE))  # the frame steps come first
+    steps = chain.steps  # the device frame's steps come first (0, 6 or 12 of them)
+    n_frame = next((i for i, s in enumerate(steps) if s.role is not Role.DEVICE), len(steps))
     plan = chain._plan
     T_device_base = kernels.leading_frame(calibrated_chain.values, plan.step_axis, plan.step_rot, n_frame)
     robot_steps = _with_given_free_flags(calibrated_chain.steps[n_frame:], given.steps)
