@@ -11,12 +11,15 @@ what the general code gives.
 * the calibrated robot keeps the given model's free flags (level 1: every other parameter
   fixed in the fit, free again in the result), the steps the fit kept equal to the given
   model's;
+* the robot and tool of a calibrated model, split once per model, are what
+  :func:`~robocal.model.flange_tool.split_tool` gives, the tool read-only;
 * the rank test's redundant parameters are the same :class:`Dropped` values as the
   dataclass builds.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -25,10 +28,12 @@ import pytest
 import robocal as rc
 from robocal import spatial
 from robocal.identify import measured_tool as mt
+from robocal.identify.problem_setup import without_measured_tool
 from robocal.measure.devices import LaserTracker
 from robocal.measure.simulate import VirtualRobot, simulate
 from robocal.measure.true_model import draw_true_model
 from robocal.model import rank
+from robocal.model.flange_tool import split_tool
 from robocal.model.rank import Dropped
 
 
@@ -133,6 +138,20 @@ def test_calibrated_robot_keeps_the_given_free_flags(ur10, level):
     assert kept and all(s == g for s, g in kept)  # not fitted: the given model's steps as they were
     if level == 1:  # the fit held every non-joint parameter: all free in the result
         assert all(s.free for s in robot if s.joint is None and model.step(s.name).free)
+
+
+def test_without_measured_tool_is_the_split_once_per_model(ur10):
+    model, data = ur10
+    calibrated = rc.calibrate(model, data).model
+    for given in (model, calibrated, dataclasses.replace(calibrated, notes="a copy")):
+        parts = split_tool(given)
+        robot, tool = without_measured_tool(given)
+        assert robot == parts.robot
+        if parts.T_flange_tool is None:
+            assert tool is None
+        else:
+            assert np.array_equal(tool, parts.T_flange_tool) and not tool.flags.writeable
+        assert without_measured_tool(given)[0] is robot  # the same split, not worked out again
 
 
 def test_redundant_parameters_are_dataclass_values(ur10):

@@ -6,6 +6,7 @@ perturbations known in advance.  Units: SI (m, rad)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal, NamedTuple
@@ -64,8 +65,21 @@ def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
     its end, and their transform (4x4; None when there are none): a calibrated model's
     tool is the start value of the next calibration's (:func:`robocal.model.flange_tool.split_tool`)."""
+    try:
+        return _split_tool(model)
+    except TypeError:  # pragma: no cover - an unhashable model: split it every time
+        parts = split_tool(model)
+        return parts.robot, parts.T_flange_tool
+
+
+@functools.lru_cache(maxsize=16)
+def _split_tool(model: Model) -> tuple[Model, Array | None]:
+    """:func:`without_measured_tool`, once per model (models are immutable and hashable; every
+    calibration asks, and the measurement chain's templates hash the model anyway); the
+    tool read-only."""
     parts = split_tool(model)
-    return parts.robot, parts.T_flange_tool
+    T = parts.T_flange_tool
+    return parts.robot, None if T is None else read_only(T)
 
 
 _EYE4 = read_only(np.eye(4))  # the tool's start without a guess (the fits copy it)
