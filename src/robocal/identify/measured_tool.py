@@ -227,14 +227,14 @@ def _probe_point(
     step_on = {motion[1]: k for k, motion in enumerate(motions)}
     order = [step_on[axis] for axis in "xyz"]
     x, y, z = (0.0 + values[k] for k in order)
-    axes = [a for a, k in enumerate(order) if cols[k] is not None]  # the estimated components
-    at = [cols[order[a]] for a in axes]
+    estimated = [(a, c) for a, k in enumerate(order) if (c := cols[k]) is not None]
+    axes, at = [a for a, _ in estimated], [c for _, c in estimated]  # components, their columns
     block = covariance.take(at, axis=0).take(at, axis=1).tolist()
     C = [[0.0, 0.0, 0.0] for _ in range(3)]
     for i, a in enumerate(axes):
         for j, b in enumerate(axes):
             C[a][b] = 0.0 + block[i][j]
-    return (x, y, z), (tuple(C[0]), tuple(C[1]), tuple(C[2]))  # floats already
+    return (x, y, z), tuple((a, b, c) for a, b, c in C)  # floats already
 
 
 def _given_point(value: ArrayLike) -> Array:
