@@ -13,6 +13,9 @@ what the general code gives.
   model's;
 * the robot and tool of a calibrated model, split once per model, are what
   :func:`~robocal.model.flange_tool.split_tool` gives, the tool read-only;
+* the rank test's preference order, worked out once per robot and layout, is the one the
+  problem's free parameters and roles give, and is left to be worked out again wherever
+  the free parameters differ from the template's (a stated tool, joint effects, fixed ones);
 * the rank test's redundant parameters are the same :class:`Dropped` values as the
   dataclass builds.
 """
@@ -28,7 +31,10 @@ import pytest
 import robocal as rc
 from robocal import spatial
 from robocal.identify import measured_tool as mt
-from robocal.identify.problem_setup import without_measured_tool
+from robocal.identify import pipeline
+from robocal.identify.options import CalibrationOptions
+from robocal.identify.problem_setup import build_problem, without_measured_tool
+from robocal.identify.stages import preference_columns
 from robocal.measure.devices import LaserTracker
 from robocal.measure.simulate import VirtualRobot, simulate
 from robocal.measure.true_model import draw_true_model
@@ -152,6 +158,22 @@ def test_without_measured_tool_is_the_split_once_per_model(ur10):
         else:
             assert np.array_equal(tool, parts.T_flange_tool) and not tool.flags.writeable
         assert without_measured_tool(given)[0] is robot  # the same split, not worked out again
+
+
+@pytest.mark.parametrize(
+    ("keywords", "kept"),
+    [({}, True), ({"tool": np.array([0.0, 0.0, 0.1])}, False), ({"level": 1}, True), ({"level": 3}, False)],
+)
+def test_preference_order_from_the_template(ur10, keywords, kept):
+    model, data = ur10
+    options = CalibrationOptions.from_keywords(None, **keywords)
+    run = pipeline._check_inputs(model, data, "lm", options, None)
+    problem = build_problem(run, None).problem
+    assert (problem.preference is not None) == kept
+    if kept:
+        expected = preference_columns(problem.free_names, problem.chain.roles)
+        assert np.array_equal(problem.preference, expected) and not problem.preference.flags.writeable
+    assert problem.fix([problem.free_names[0]]).preference is None  # other unknowns: worked out again
 
 
 def test_redundant_parameters_are_dataclass_values(ur10):

@@ -117,9 +117,8 @@ def rank_test(problem: Problem) -> FirstPass | None:
     names = problem.free_names
     free_steps = np.flatnonzero(chain.free_mask)
     data = _chain_data(problem)
-    out = _FirstPass(*kernels.first_pass(
-        data, chain.values, free_steps, float(problem.length_scale), preference_columns(names, chain.roles)
-    ))  # fmt: skip
+    order = problem.preference if problem.preference is not None else preference_columns(names, chain.roles)
+    out = _FirstPass(*kernels.first_pass(data, chain.values, free_steps, float(problem.length_scale), order))
     if not out.finite or not len(out.ordered):
         return None
     selection = preference_subset(out.At.T, out.ordered.tolist(), out.norm, out.zero, names)

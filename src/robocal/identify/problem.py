@@ -33,11 +33,18 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.choices import Measure
 from robocal.model.chain import Model
-from robocal.model.chain_plan import derived_copy
+from robocal.model.chain_plan import derived_copy, read_only
 from robocal.model.conventions import frame6, sequence
 from robocal.model.steps import Role, Step
 
-__all__ = ["FRAME_PREFIX", "TOOL_PREFIX", "Problem", "frame_steps", "measurement_chain"]
+__all__ = [
+    "FRAME_PREFIX",
+    "TOOL_PREFIX",
+    "Problem",
+    "frame_steps",
+    "measurement_chain",
+    "measurement_chain_and_preference",
+]
 
 Array = NDArray[np.float64]
 # the names of the steps measurement_chain adds; tell them by their Step.role, not by name
@@ -77,9 +84,18 @@ def measurement_chain(
 ) -> Model:
     """The chain predicting observations in the device frame (see the module docstring;
     ``tool`` None: no tool, the model's end is measured)."""
+    return measurement_chain_and_preference(robot, T_device_base, tool, measure, fit_frame)[0]
+
+
+def measurement_chain_and_preference(
+    robot: Model, T_device_base: Array, tool: Array | None, measure: str, fit_frame: bool
+) -> tuple[Model, NDArray[np.intp]]:
+    """:func:`measurement_chain` and the rank test's preference order of its free
+    parameters (:func:`robocal.identify.stages.preference_columns`; read-only), which
+    depends on the robot and the layout only: worked out once for them."""
     fixed_frame = fit_frame or not np.allclose(T_device_base, np.eye(4))
     pose_tool = tool is not None and measure == "pose"
-    template = _chain_template(robot, (fixed_frame, fit_frame, tool is not None, pose_tool))
+    template, preference = _chain_template(robot, (fixed_frame, fit_frame, tool is not None, pose_tool))
     steps = list(template.steps)
     if fixed_frame:
         steps[:6] = _valued(template.steps[:6], _frame_values(T_device_base))
@@ -88,20 +104,23 @@ def measurement_chain(
         values = _frame_values(T_tool) if pose_tool else T_tool[:3, 3].tolist()
         first = len(steps) - len(values)
         steps[first:] = _valued(template.steps[first:], values)
-    return template._derived(tuple(steps), "free")
+    return template._derived(tuple(steps), "free"), preference
 
 
 # measurement chains at zero frame and tool values, by (robot, layout): keyed by the robot's
 # value (its hash is cached; an id could be reused by another robot once this one is
 # freed), equal robots share one; a few robots are calibrated in turn
-_TEMPLATES: dict[tuple, Model] = {}
+_TEMPLATES: dict[tuple, tuple[Model, NDArray[np.intp]]] = {}
 
 
-def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> Model:
+def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> tuple[Model, NDArray[np.intp]]:
     """The measurement chain of ``robot`` with, by ``layout``, the device frame's fixed
     steps, its free corrections, a tool and whether the tool is a frame (else a point),
     all at zero: every calibration of that robot sets the values of a copy, which shares
-    the template's structure (plan, names, free flags) instead of working it out again."""
+    the template's structure (plan, names, free flags) instead of working it out again;
+    and the rank test's preference order of its free parameters."""
+    from robocal.identify.stages import preference_columns  # (stages imports no problem)
+
     fixed_frame, fit_frame, has_tool, pose_tool = layout
     key = (robot, *layout)
     cached = _TEMPLATES.get(key)
@@ -129,10 +148,11 @@ def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> Mode
                             residual=None)  # fmt: skip
     for name in ("names", "roles", "_index", "_plan", "free_mask", "free_names"):
         getattr(template, name)  # worked out once, shared by every copy
+    preference = read_only(preference_columns(template.free_names, template.roles))
     if len(_TEMPLATES) >= 16:
         _TEMPLATES.clear()
-    _TEMPLATES[key] = template
-    return template
+    _TEMPLATES[key] = template, preference
+    return template, preference
 
 
 @dataclass
@@ -154,6 +174,9 @@ class Problem:
         known_perturbations: ``(n, dof, 3)`` joint perturbations added to every
             evaluation (known joint effects), or None.
         effect_start: ``(m,)`` start values of the coefficients (default zero).
+        preference: the rank test's order of the free parameters
+            (:func:`measurement_chain_and_preference`, for a chain whose free parameters
+            are its template's and no effect coefficients), or None: worked out when needed.
     """
 
     chain: Model
@@ -166,6 +189,7 @@ class Problem:
     effect_names: tuple[str, ...] = ()
     known_perturbations: Array | None = None
     effect_start: Array | None = None
+    preference: NDArray[np.intp] | None = None
     _cache: dict = dataclasses.field(default_factory=dict, repr=False)
     _tilts: bool = dataclasses.field(default=False, init=False, repr=False)
 
@@ -350,7 +374,7 @@ class Problem:
         if not self.n_effects:  # the chain alone changes: a copy without __post_init__'s checks
             fixed = object.__new__(Problem)
             fixed.__dict__.update(self.__dict__)
-            fixed.chain, fixed._cache = self.chain.fixed(named), {}
+            fixed.chain, fixed._cache, fixed.preference = self.chain.fixed(named), {}, None
             fixed.__dict__.pop("free_scale", None)
             fixed.__dict__.pop("_chain_values", None)
             return self._keep_start(fixed, named)
@@ -370,6 +394,7 @@ class Problem:
             effect_names=tuple(self.effect_names[k] for k in effect_keep),
             known_perturbations=known,
             effect_start=start[effect_keep],
+            preference=None,
             _cache={},
         )
         return self._keep_start(fixed, named)

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from robocal import spatial
 from robocal.identify.effects import EffectPlan
 from robocal.identify.options import CalibrationOptions, check_load_model
-from robocal.identify.problem import Problem, measurement_chain
+from robocal.identify.problem import Problem, measurement_chain_and_preference
 from robocal.identify.result import CalibrationWarning
 from robocal.identify.solve_result import SolveResult
 from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_sizes
@@ -272,9 +272,12 @@ def build_problem(run: Run, load_model: Model | None) -> Start:
     (warnings to ``run``'s log)."""
     setup, data, measure = run.options.setup, run.data, run.measure
     T_frame, T_tool, T_flange, fit_frame = _start_values(run)
-    chain = measurement_chain(run.model, T_frame, None if setup.tool is None else T_tool, measure, fit_frame)
+    chain, order = measurement_chain_and_preference(
+        run.model, T_frame, None if setup.tool is None else T_tool, measure, fit_frame
+    )
+    preference: NDArray[np.intp] | None = order
     if setup.tool is not None and not (isinstance(setup.tool, str) and setup.tool == "fit"):
-        chain = chain.fixed(chain.names_with_role(Role.TOOL))
+        chain, preference = chain.fixed(chain.names_with_role(Role.TOOL)), None  # other unknowns
     length = float(robot_sizes(T_flange[None])[0])
     rows = 3 if measure == "position" else 6
     w, known_noise = _row_weights(run, rows)
@@ -287,7 +290,7 @@ def build_problem(run: Run, load_model: Model | None) -> Start:
     start = None if effects is None else effects.start  # a pass without joint effects: none
     basis = None if effects is None else effects.basis
     problem = Problem(chain, data.q, _positions(data), data.orientation if rows == 6 else None, w.reshape(-1),
-                      length, basis, names, known, start)  # fmt: skip
+                      length, basis, names, known, start, None if names else preference)  # fmt: skip
     hint = _check_orientations(run, problem) if rows == 6 else ""
     return Start(problem, known_noise, length, names, kinds, start, hint)
 
