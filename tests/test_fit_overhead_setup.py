@@ -16,6 +16,8 @@ what the general code gives.
 * the rank test's preference order, worked out once per robot and layout, is the one the
   problem's free parameters and roles give, and is left to be worked out again wherever
   the free parameters differ from the template's (a stated tool, joint effects, fixed ones);
+* the diagnostics diagnose adds are those ``dataclasses.replace`` gives (an unknown field
+  refused);
 * the rank test's redundant parameters are the same :class:`Dropped` values as the
   dataclass builds.
 """
@@ -30,6 +32,7 @@ import pytest
 
 import robocal as rc
 from robocal import spatial
+from robocal.identify import diagnose as diagnose_module
 from robocal.identify import measured_tool as mt
 from robocal.identify import pipeline
 from robocal.identify.options import CalibrationOptions
@@ -174,6 +177,18 @@ def test_preference_order_from_the_template(ur10, keywords, kept):
         expected = preference_columns(problem.free_names, problem.chain.roles)
         assert np.array_equal(problem.preference, expected) and not problem.preference.flags.writeable
     assert problem.fix([problem.free_names[0]]).preference is None  # other unknowns: worked out again
+
+
+def test_diagnostics_changed_as_dataclasses_replace(ur10):
+    model, data = ur10
+    before = rc.calibrate(model, data).diagnostics
+    changes = {"outlier_poses": (3, 7), "fit_to_noise": before.fit_to_noise, "at_bounds": ("d1",)}
+    changed = diagnose_module._with_changes(before, changes)
+    expected = dataclasses.replace(before, **changes)
+    assert changed == expected and hash(changed) == hash(expected) and repr(changed) == repr(expected)
+    assert vars(before)["outlier_poses"] != (3, 7)  # the original is left as it was
+    with pytest.raises(TypeError, match="no_such"):
+        diagnose_module._with_changes(before, {"no_such": 1})
 
 
 def test_redundant_parameters_are_dataclass_values(ur10):

@@ -9,7 +9,6 @@ their bounds, an RMS error that rose under seed 001's objective) and diagnostics
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from collections.abc import Sequence
@@ -21,7 +20,7 @@ from numpy.typing import NDArray
 from robocal.identify.guards import CalibrationGuardError, check_solution
 from robocal.identify.noise_check import FitToNoise
 from robocal.identify.problem import Problem
-from robocal.identify.result import CalibrationResult, CalibrationWarning
+from robocal.identify.result import CalibrationResult, CalibrationWarning, Diagnostics
 from robocal.identify.stages import median
 from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
@@ -151,6 +150,17 @@ def _redundancy_warning(n: int, rows: int, unknowns: int) -> CalibrationWarning 
     )
 
 
+def _with_changes(diagnostics: Diagnostics, changes: dict[str, Any]) -> Diagnostics:
+    """``diagnostics`` with some fields changed, copied as :meth:`CalibrationResult.replace`
+    copies a result (a Diagnostics has no checks to repeat; ``dataclasses.replace`` costs
+    a few µs more per calibration); TypeError for an unknown field."""
+    if unknown := changes.keys() - vars(diagnostics).keys():
+        raise TypeError(f"Diagnostics has no field(s) {', '.join(sorted(unknown))}")
+    new = object.__new__(Diagnostics)
+    new.__dict__.update(vars(diagnostics), **changes)
+    return new
+
+
 def diagnose(
     result: CalibrationResult,
     problem: Problem,
@@ -202,5 +212,5 @@ def diagnose(
         out += [CalibrationWarning("solution", w) for w in check_solution(result)]
     except CalibrationGuardError as err:
         raise CalibrationGuardError(f"{err}; {orientation_hint}" if orientation_hint else str(err)) from None
-    diagnostics = dataclasses.replace(result.diagnostics, **changes)
+    diagnostics = _with_changes(result.diagnostics, changes)
     return result.replace(diagnostics=diagnostics, warnings=tuple(out))
