@@ -65,11 +65,13 @@ def without_measured_tool(model: Model) -> tuple[Model, Array | None]:
     """``model`` without the tool steps (``tcp_*``) an earlier calibration appended to
     its end, and their transform (4x4; None when there are none): a calibrated model's
     tool is the start value of the next calibration's (:func:`robocal.model.flange_tool.split_tool`)."""
-    try:
-        return _split_tool(model)
-    except TypeError:  # pragma: no cover - an unhashable model: split it every time
-        parts = split_tool(model)
-        return parts.robot, parts.T_flange_tool
+    if model.residual is None:  # the cache's key, the model's hash, leaves a learned residual out
+        try:
+            return _split_tool(model)
+        except TypeError:  # pragma: no cover - an unhashable model: split it every time
+            pass
+    parts = split_tool(model)
+    return parts.robot, parts.T_flange_tool
 
 
 @functools.lru_cache(maxsize=16)
