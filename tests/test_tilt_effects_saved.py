@@ -19,6 +19,7 @@ from robocal.cli.app import app
 from robocal.identify.constraints.fit import constraint_figures
 from robocal.identify.constraints.result import load_constraint_calibration
 from robocal.measure.constraints.data import read_constraints, write_constraints
+from robocal.measure.constraints.mounts import mounts_at_home
 from robocal.measure.constraints.sim import simulate_tilt_rows, simulate_tracker_rows
 from robocal.measure.true_model import draw_true_model
 from robocal.model.joints import effects_from_values
@@ -42,8 +43,9 @@ def files(tmp_path_factory):
     paths = SimpleNamespace(
         dir=folder, tilt=folder / "tilt.csv", test=folder / "held_out.csv", tracker=folder / "tracker.csv"
     )
-    write_constraints(simulate_tilt_rows(true, 30, seed=4), paths.tilt)
-    write_constraints(simulate_tilt_rows(true, 30, seed=5), paths.test)
+    # the sensors along the complete model's joint frames, stated at home (chain-independent)
+    write_constraints(mounts_at_home(simulate_tilt_rows(true, 30, seed=4), ur10), paths.tilt)
+    write_constraints(mounts_at_home(simulate_tilt_rows(true, 30, seed=5), ur10), paths.test)
     write_constraints(simulate_tracker_rows(true, 40, sigma=1e-5, seed=6), paths.tracker)
     return paths
 

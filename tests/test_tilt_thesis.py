@@ -2,9 +2,8 @@
 set-up (its Katana with Table 3.2's geometry and Table 5.2's joints, 30 configurations,
 level-at-home sensors, 0.001° counts) written as one tilt file and calibrated by the command
 line with clearance, backlash and compliance, ``--chain catalog``: a tilt file alone is then
-calibrated in the catalog chain, its base tilt free (:func:`robocal.cli.constraints.tilt_rows_only`).
-The default complete position model moves joint 5's frame along its axis, so the same joint
-effects become another robot."""
+calibrated in the catalog chain, its base tilt free (:func:`robocal.cli.constraints.tilt_rows_only`);
+the sensors are written as stated at home (``home_r*_deg``: level), the same in any chain."""
 
 import json
 import math
@@ -59,22 +58,16 @@ def test_the_one_fit_reproduces_tables_4_3_4_4_5_2(thesis_run):
     )
 
 
-def test_the_complete_position_chain_cannot_carry_the_thesis_robot(thesis_run, tmp_path):
-    """What ``--chain catalog`` avoids: the default complete position model on the same file
-    (its joint frames moved along their axes, the joint effects' moments taken about other
-    points; the mount angles restated in its frames) leaves a residual many times the noise."""
-    from robocal.model.catalog import robot
-    from robocal.model.complete import calibration_model
+def test_chain_catalog_calibrates_the_catalog_chain_of_sensors_stated_at_home(thesis_run):
+    """The file states its sensors at home (level: zeros), and ``--chain catalog``'s saved
+    model is the catalog chain with the base's tilt in front (not the complete model)."""
+    from robocal.model.files import load_model
 
-    moved_file = tmp_path / "complete_frames.csv"  # the same sensors, their mounts in its frames
-    thesis_tilt_file(moved_file, frames=calibration_model(robot("katana450"), "position"))
-    _, out = thesis_run
-    args = ["calibrate", "katana450", "--data", str(moved_file), *EFFECTS, "-o", str(tmp_path / "complete")]
-    moved = CliRunner().invoke(app, args)
-    assert moved.exit_code == 0, moved.output
-    complete = json.loads((tmp_path / "complete" / "constraints.json").read_text())["rms_after_m"]
-    catalog = json.loads((out / "constraints.json").read_text())["rms_after_m"]
-    assert complete > 5 * COUNT > 5 * catalog / 1.3
+    path, out = thesis_run
+    header = path.read_text().splitlines()[0].split(",")
+    assert {"home_rx_deg", "home_ry_deg", "home_rz_deg"} <= set(header) and "mount_rx_deg" not in header
+    names = load_model(out / "model.yaml").names
+    assert names[:2] == ("base_rx", "base_ry") and "beta4" in names and "tool_x" not in names
 
 
 def test_only_a_file_of_tilt_rows_alone_keeps_the_catalog_chain(thesis_run, tmp_path):

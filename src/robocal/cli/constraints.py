@@ -79,6 +79,7 @@ def calibrate_constraint_command(
     from robocal.model.complete import calibration_model
 
     paths = data_path if isinstance(data_path, list) else [data_path]
+    frames = model if from_catalog else None  # the robot's own chain (its mount_r*_deg frames)
     if chain == "catalog" and tilt_rows_only(paths):
         model = tilt_chain(model)  # the catalog chain, its base tilt free (tilt_rows_only)
     elif chain == "complete" or (chain is None and from_catalog):
@@ -93,19 +94,22 @@ def calibrate_constraint_command(
         )
     calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
                               level=levels[level], noise=noise, length_unit=length_unit,
-                              tilt_kinds=kinds)  # fmt: skip
+                              tilt_kinds=kinds, frames=frames)  # fmt: skip
 
 
 def tilt_rows_only(paths: list[Path]) -> bool:
     """Whether every file of the fit holds inclinometer readings only: then ``--chain catalog``
     calibrates the catalog chain with the base's tilt free
-    (:func:`robocal.identify.constraints.tilt_rows.tilt_chain`, which says why a tilt file
-    needs the robot's own chain when its joint effects are identified).
+    (:func:`robocal.identify.constraints.tilt_rows.tilt_chain`).  Not the default: a catalog
+    chain need not carry every tilt of a real robot's links (the UR10's DH chain has no
+    twist between its parallel joints; a tilt file of a true UR10 drawn around its complete
+    model is left at 0.03° there).
 
-    Not the default: a file's mount angles (none: the joint frame) are stated in the joint
-    frames of the chain calibrated, so the default stays the complete position model
-    whatever files join the fit; the same tilt file fitted alone or with a tracker file
-    then describes the same sensors."""
+    The sensors are the same in every chain: a mount stated at home (``home_r*_deg``) is
+    resolved against the calibrated chain's nominal robot at home, and joint-frame angles
+    (``mount_r*_deg``, none: the joint frame) are the robot's own chain's
+    (:mod:`robocal.measure.constraints.mounts`), so the same tilt file fitted alone or with
+    a tracker file (the complete position model) describes the same sensors."""
     from robocal.measure.constraints.data import tilt_only
 
     return bool(paths) and all(tilt_only(p) for p in paths)
@@ -162,7 +166,7 @@ def _option_words(err: ValueError) -> str:
 def calibrate_constraint_file(
     model, data_path: Path | list[Path], out: Path, *, angle_unit: AngleUnit, distances: list[str] | None,
     level: int | None, noise: str | None, length_unit: LengthUnit = "m",
-    tilt_kinds: tuple[str, ...] | None = None,
+    tilt_kinds: tuple[str, ...] | None = None, frames=None,
 ) -> None:  # fmt: skip
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
     file's chain) from a constraint file; write ``out``/model.yaml and constraints.json
@@ -172,7 +176,7 @@ def calibrate_constraint_file(
     paths = tuple(data_path) if isinstance(data_path, list) else (data_path,)
     stated, sigma = _distances(distances), _sigma(noise)
     request = ConstraintRequest(paths, model, out, angle_unit=angle_unit, length_unit=length_unit,
-                                distances=stated, level=level or 2, noise_m=sigma)  # fmt: skip
+                                distances=stated, level=level or 2, noise_m=sigma, frames=frames)  # fmt: skip
     if tilt_kinds is not None:
         request = dataclasses.replace(request, tilt_kinds=tilt_kinds)
     try:
@@ -213,6 +217,10 @@ def validate_constraint_file(
         from robocal.cli.report_constraints import load_constraint_folder
 
         cal = load_constraint_folder(directory)
+    from robocal.measure.constraints.mounts import mounts_in
+
+    # sensors stated at home sit where the person put them: resolved against the start robot
+    data = mounts_in(data, model if cal is None or cal.nominal is None else cal.nominal)
     figures = constraint_figures(model, data, tilt=None if cal is None else cal.tilt)
     console.print(f"{safe(model.name)} on {safe(data_path.name)} ({data.n} poses, {', '.join(data.kinds)}):",
                   highlight=False)  # fmt: skip
@@ -340,7 +348,11 @@ def simulate_constraint_file(
     from robocal.outdir import write_together
 
     truth_path = out.with_name(out.name + ".truth.json")
-    texts = {f: write_constraints(d).encode() for (d, _), f in zip(runs, files, strict=True)}
+    from robocal.measure.constraints.mounts import mounts_at_home
+
+    # the sensors stated at home (home_r*_deg): the same sensors whichever chain calibrates them
+    stated = [mounts_at_home(d, model) for d, _ in runs]
+    texts = {f: write_constraints(d).encode() for d, f in zip(stated, files, strict=True)}
     if tracked is not None:  # the same true robot: a tracker calibration to compare with
         texts[tracker_file(out)] = write_constraints(tracked).encode()
         truth["tracker_file"] = {"file": tracker_file(out).name, "rows": tracked.n, "sigma_m": 1e-5,

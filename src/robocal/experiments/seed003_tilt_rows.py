@@ -18,7 +18,6 @@ markdown table docs/inclinometer.md holds.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from pathlib import Path
@@ -38,11 +37,11 @@ ROWS = (
 )
 
 
-def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None, frames: Any = None) -> np.ndarray:
+def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None) -> np.ndarray:
     """Write the thesis' set-up's readings (module docstring) to ``path``; the configurations
-    ``(n, dof)`` (rad).  ``n``: fewer designed configurations (None: the thesis' 30);
-    ``frames``: the model whose joint frames the mount angles are stated in (None: the
-    catalog Katana's, the chain ``--chain catalog`` calibrates)."""
+    ``(n, dof)`` (rad).  ``n``: fewer designed configurations (None: the thesis' 30).  The
+    sensors are written as a person states them: level at home, x along the base's x
+    (``home_r*_deg`` = 0), whatever chain calibrates them."""
     from robocal.experiments.seed003_inclinometer import (
         N_CONFIGURATIONS,
         OFFSET_RANGE,
@@ -51,13 +50,10 @@ def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None, fram
         katana_sensors,
     )
     from robocal.measure.constraints.data import write_constraints
+    from robocal.measure.constraints.mounts import mounts_at_home
     from robocal.measure.constraints.sim import level_mounts, simulate_tilt_rows
 
     setup = katana_robots()
-    # level at home is a physical mount; its angles are stated in the joint frames of the
-    # model `robocal calibrate katana450 --chain catalog` calibrates: the catalog chain (base
-    # tilt free in front: the same frames), where Table 5.2's joint effects are stated
-    frames = setup.nominal if frames is None else frames
     q = design_configurations(setup.nominal, katana_sensors(setup.nominal), n or N_CONFIGURATIONS)
     rng = np.random.default_rng(noise_seed)
     zeros = {(k, a): float(rng.uniform(-OFFSET_RANGE, OFFSET_RANGE)) for k in range(5) for a in (0, 1)}
@@ -65,9 +61,7 @@ def thesis_tilt_file(path: Path, noise_seed: int = 1, n: int | None = None, fram
     noise = np.random.default_rng([noise_seed, 1])
     data = simulate_tilt_rows(setup.true, 0, configurations=q, mounts=level_mounts(setup.nominal),
                               zeros=zeros, sigma=count, resolution=count, seed=noise)  # fmt: skip
-    stated = level_mounts(frames)  # the same sensors, their angles in the calibrated model's frames
-    mount = np.array([stated[int(k)] for k in data.tilt_link])
-    write_constraints(dataclasses.replace(data, tilt_mount=mount), path)
+    write_constraints(mounts_at_home(data, setup.nominal), path)  # level at home: home_r*_deg = 0
     return q
 
 

@@ -61,6 +61,11 @@ class ConstraintRequest:
         progress: ``progress(stage, fraction)`` as each stage starts, or None.
         names: what ``constraints.json`` records as each of ``data``'s path (empty: the
             paths as given; the GUI gives the uploads' own file names, never its server paths).
+        tilt_kinds: the joint effects the tilt rows identify.
+        frames: the robot's own chain (a catalog robot's published chain) when ``model`` is
+            another chain of it (its complete model): the joint frames a file's
+            ``mount_r*_deg`` angles are stated in, and the joint effects' load moments are
+            taken at.  None: ``model``'s own.
     """
 
     data: tuple[Path, ...]
@@ -75,6 +80,7 @@ class ConstraintRequest:
     progress: Progress | None = field(default=None, compare=False)
     names: tuple[str, ...] = ()
     tilt_kinds: tuple[str, ...] = ("backlash", "compliance")  # tilt rows' joint effects (+ "clearance")
+    frames: Model | None = None
 
     def __post_init__(self) -> None:
         if self.names and len(self.names) != len(self.data):
@@ -236,10 +242,15 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
     first, trackers, data = read_mixed(
         paths, model, request.angle_unit, request.length_unit, request.distances, request.noise_m
     )
+    if request.frames is not None:  # joint-frame mounts: the robot's own chain's, stated at home
+        from robocal.measure.constraints.mounts import mounts_at_home
+
+        data = mounts_at_home(data, request.frames)
     _stage(request, "calibrate")
     try:
         result = calibrate_constraints(model, data, level=request.level, pruning=Pruning(), known_noise=False,
-                                       prior=NominalPrior(), tilt_kinds=request.tilt_kinds)  # fmt: skip
+                                       prior=NominalPrior(), tilt_kinds=request.tilt_kinds,
+                                       frames=request.frames)  # fmt: skip
     except ValueError as err:
         raise CalibrateFileError("data", str(err), ", ".join(str(p) for p in paths)) from None
     _stage(request, "save")

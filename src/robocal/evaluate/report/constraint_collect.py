@@ -85,7 +85,10 @@ def data_set_figures(
     cal: ConstraintCalibration, data: ConstraintSet, label: str, source: str
 ) -> DataSetFigures:
     """``data`` judged by ``cal``'s nominal robot (when recorded) and its calibrated robot."""
+    from robocal.measure.constraints.mounts import mounts_in
+
     nominal = cal.nominal
+    data = mounts_in(data, cal.model if nominal is None else nominal)  # sensors stated at home: the start's
     return DataSetFigures(
         label=label,
         source=source,

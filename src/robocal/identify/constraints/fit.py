@@ -48,6 +48,7 @@ from robocal.identify.stages import (
     uncertainty,
 )
 from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.measure.constraints.mounts import mounts_in
 from robocal.model.chain import Model
 from robocal.model.joints import effect_of
 from robocal.model.rank import Dropped
@@ -233,15 +234,15 @@ def build_constraint_problem(
     data: ConstraintSet,
     tool: Array | None = None,
     prior: NominalPrior | None = None,
-    tilt_kinds: tuple[str, ...] = EFFECT_KINDS,
-) -> ConstraintProblem:
-    """The problem at its start values; ``tool``: a tool point (m) on the robot's end to
-    fit with it, or None (the robot's end is the tool point); ``prior``: a prior of the
-    robot's parameters about their values in ``robot``."""
+    tilt_kinds: tuple[str, ...] = EFFECT_KINDS, frames: Model | None = None,
+) -> ConstraintProblem:  # fmt: skip
+    """The problem at its start values; ``tool``: a tool point (m) on the robot's end fitted
+    with it (None: the robot's end); ``prior``, ``frames``: as :func:`calibrate_constraints`'."""
     if data.q.shape[1] != robot.dof:
         raise ValueError(
             f"the data has {data.q.shape[1]} joint columns but model {robot.name!r} has {robot.dof} joints"
         )
+    data = mounts_in(data, robot)  # sensors stated at home: in this chain's frames, from its start
     T_frame, fit_frame = _start_frame(robot, data, tool)
     T_tool = None
     if tool is not None:
@@ -258,7 +259,7 @@ def build_constraint_problem(
     weights = None if prior is None else prior.weights(chain, robot.names)
     if not data.tilted.any():
         return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
-    terms = tilt_terms(robot, chain, data, tilt_kinds)
+    terms = tilt_terms(robot, chain, data, tilt_kinds, frames)
     empty = np.zeros(len(terms.zeros))
     values = dict(zip(chain.free_names, chain.free_values.tolist(), strict=True))
     r = tilt_rows(terms, data, values, empty, np.zeros(len(terms.effects)))[0]
@@ -327,8 +328,8 @@ def calibrate_constraints(
     pruning: Pruning | None = None,
     known_noise: bool = False,
     prior: NominalPrior | None = None,
-    tilt_kinds: tuple[str, ...] = EFFECT_KINDS,
-) -> ConstraintResult:
+    tilt_kinds: tuple[str, ...] = EFFECT_KINDS, frames: Model | None = None,
+) -> ConstraintResult:  # fmt: skip
     """Identify the robot (and the points, planes, device frame) from constraint data.
 
     Args:
@@ -349,13 +350,14 @@ def calibrate_constraints(
             times the real one would make the prior ten times too strong).  None: least
             squares.
         tilt_kinds: the joint effects the tilt rows identify (``ALL_KINDS`` adds clearance).
+        frames: the robot's own chain, the effects' moment points (tilt_rows.loads_about).
     """
     if level == 1:
         model = model.fixed([s.name for s in model.steps if s.joint is None])
     if fixed:
         model = model.fixed(fixed)
     data, notes = _clear_rows(model, data)
-    problem = build_constraint_problem(model, data, tool, prior, tilt_kinds)
+    problem = build_constraint_problem(model, data, tool, prior, tilt_kinds, frames)
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)

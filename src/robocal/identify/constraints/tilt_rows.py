@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.measure.constraints.data_set import TILT_AXES, ConstraintSet
+from robocal.measure.constraints.mounts import loads_about, mounts_in
 from robocal.model.chain import Model
 
 if TYPE_CHECKING:
@@ -127,11 +128,14 @@ def _sensors(robot: Model, data: ConstraintSet):
 
 
 def tilt_terms(
-    robot: Model, chain: Model, data: ConstraintSet, kinds: tuple[str, ...] = EFFECT_KINDS
-) -> TiltTerms:
+    robot: Model, chain: Model, data: ConstraintSet, kinds: tuple[str, ...] = EFFECT_KINDS,
+    frames: Model | None = None,
+) -> TiltTerms:  # fmt: skip
     """The tilt rows' unknowns for ``robot`` (measured through ``chain``) and ``data``,
-    the joint effects of ``kinds``."""
-    from robocal.model.joints import EFFECT_PREFIXES, effect_of, load_moments
+    the joint effects of ``kinds``; ``frames``: the robot's own chain, whose joint frames'
+    origins the effects' bending moments are taken about (:func:`loads_about`; None:
+    ``robot``'s)."""
+    from robocal.model.joints import EFFECT_PREFIXES, effect_of
 
     on = data.tilted
     names = robot.joint_names
@@ -144,7 +148,7 @@ def tilt_terms(
     deepest = int(data.tilt_link[on].max())
     joints = names[: deepest + 1]
     effects = tuple(EFFECT_PREFIXES[kind][0] + j for kind in kinds for j in joints)
-    eta = load_moments(robot, data.q[on])
+    eta = loads_about(robot, data.q[on], frames)
     moment = max(float(np.abs(eta[:, :, 2]).max()) if eta.size else 0.0, MOMENT_FLOOR)
     scale = np.array([moment if (effect_of(e) or ("",))[0] == "compliance" else 1.0 for e in effects])
     return TiltTerms(robot, geometry, zeros, channel, effects, scale, eta)
@@ -187,6 +191,7 @@ def tilt_figures(
 
     if not data.tilted.any():
         return (), np.zeros(0), ""
+    data = mounts_in(data, robot)  # callers with the nominal robot at hand resolve against it first
     effects = {} if learned is None else learned.effect_values
     left_out = 0
     if effects:  # backlash and clearance act with the load's sign: the fit's rows only

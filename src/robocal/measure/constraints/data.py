@@ -16,7 +16,13 @@ One CSV, one header line, one row per recorded configuration; ``#`` lines are co
 * ``mount_rx_deg``, ``mount_ry_deg``, ``mount_rz_deg`` (optional, with the tilt columns):
   the sensor's orientation on its link, degrees about the link's joint-frame x, y, z
   axes (fixed axes, in that order: ``R_joint_sensor = Rz Ry Rx``); absent or blank: the
-  sensor's axes are the joint frame's.  Every row of a link states the same mount.
+  sensor's axes are the joint frame's.  These angles are in the frames of the robot's own
+  chain (the catalog's, the model file's), whichever chain is calibrated;
+* ``home_rx_deg``, ``home_ry_deg``, ``home_rz_deg`` (optional, instead of the mount
+  columns on a row): the sensor's orientation in the robot's base frame with every joint
+  at zero (``R_base_sensor = Rz Ry Rx`` at home): 0, 0, 0 is a sensor mounted level at
+  home with its x axis along the base's x.  It does not depend on any chain
+  (:mod:`robocal.measure.constraints.mounts`).  Every row of a link states the same mount.
 
 A blank ``point``/``plane`` cell means the row has no such constraint.  Known distances
 between fixed points are not rows: ``--distance 0,1=50mm`` (points 0 and 1 are 50 mm apart).
@@ -56,6 +62,7 @@ __all__ = [
 KIND_COLUMNS = {"point": ("point",), "plane": ("plane",), "distance": ("pair", "distance_mm"),
                 "tilt": ("link", "axis", "tilt_deg")}  # fmt: skip
 MOUNT_COLUMNS = ("mount_rx_deg", "mount_ry_deg", "mount_rz_deg")
+HOME_COLUMNS = ("home_rx_deg", "home_ry_deg", "home_rz_deg")
 MAX_BYTES = 50_000_000  # a constraint file holds thousands of rows, not gigabytes
 MAX_INDEX = 1000  # points, planes: a handful; an index beyond this is a wrong column
 
@@ -186,7 +193,8 @@ def read_constraints(
         )
     col = {name: header.index(name) for name in header}
     scale = unit_factor(angle_unit, "angle", "angle_unit")
-    _check_mount_columns(path, header)
+    _check_mount_columns(path, header, MOUNT_COLUMNS)
+    _check_mount_columns(path, header, HOME_COLUMNS)
     q, point, plane, xyz, pair, length, tilt, mount = [], [], [], [], [], [], [], []
     for number, cells in rows:
         if len(cells) != len(header):
@@ -214,26 +222,37 @@ def read_constraints(
         return data
     link, axis, reading = (np.array(c) for c in zip(*tilt, strict=True))
     _check_one_mount(path, rows, link, mount)
-    return dataclasses.replace(data, tilt_link=link, tilt_axis=axis, tilt=reading, tilt_mount=np.array(mount))
+    angles, home = np.array([m[:3] for m in mount]), np.array([m[3] > 0 for m in mount])
+    return dataclasses.replace(data, tilt_link=link, tilt_axis=axis, tilt=reading, tilt_mount=angles,
+                               tilt_home=home)  # fmt: skip
 
 
-def _check_mount_columns(path: Path, header: list[str]) -> None:
-    """All three mount columns or none; only beside the tilt columns."""
-    present = [c for c in MOUNT_COLUMNS if c in header]
+def _check_mount_columns(path: Path, header: list[str], columns: tuple[str, ...]) -> None:
+    """All three of a mount's ``columns`` or none; only beside the tilt columns."""
+    present = [c for c in columns if c in header]
     if present and len(present) < 3:
-        missing = [c for c in MOUNT_COLUMNS if c not in header]
+        missing = [c for c in columns if c not in header]
         raise ConstraintFileError(f"{path}: column {present[0]} without {', '.join(missing)}")
     if present and not set(KIND_COLUMNS["tilt"]) <= set(header):
         raise ConstraintFileError(f"{path}: mount columns without the tilt columns (link, axis, tilt_deg)")
 
 
 def _mount(get, number: int, path: Path, tilted: bool) -> list[float]:
-    """A tilt row's mount angles (rad); blank cells (or no columns): the joint frame."""
-    cells = [c for name in MOUNT_COLUMNS for c in get(name)]
-    if not tilted or not any(c.strip() for c in cells):
-        return [0.0, 0.0, 0.0]
+    """A tilt row's mount: three angles (rad) and 1.0 when they are stated at home (the
+    home columns), else 0.0 (the mount columns; all blank or no columns: the joint frame)."""
+    stated = [
+        (columns, [c for name in columns for c in get(name)]) for columns in (MOUNT_COLUMNS, HOME_COLUMNS)
+    ]
+    given = [(columns, cells) for columns, cells in stated if any(c.strip() for c in cells)]
+    if not tilted or not given:
+        return [0.0, 0.0, 0.0, 0.0]
     where = f"{path}, row {number}, column"
-    return [math.radians(_cell(c, f"{where} {name}")) for c, name in zip(cells, MOUNT_COLUMNS, strict=True)]
+    if len(given) > 1:
+        raise ConstraintFileError(f"{where}s {', '.join(HOME_COLUMNS)}: a mount at home and on the link "
+                                  "on one row; state one of them")  # fmt: skip
+    columns, cells = given[0]
+    angles = [math.radians(_cell(c, f"{where} {name}")) for c, name in zip(cells, columns, strict=True)]
+    return angles + [1.0 if columns == HOME_COLUMNS else 0.0]
 
 
 def _check_one_mount(path: Path, rows: list, link: np.ndarray, mount: list[list[float]]) -> None:
@@ -245,7 +264,7 @@ def _check_one_mount(path: Path, rows: list, link: np.ndarray, mount: list[list[
         seen = first.setdefault(k, angles)
         if seen != angles:
             raise ConstraintFileError(
-                f"{path}, row {number}, columns {', '.join(MOUNT_COLUMNS)}: link {k + 1}'s sensor was "
+                f"{path}, row {number}, mount columns: link {k + 1}'s sensor was "
                 "stated with another mount on an earlier row; one sensor (one mount) per link"
             )
 
@@ -327,10 +346,21 @@ def _tilt_cells(data: ConstraintSet, i: int) -> list[str]:
     ]
 
 
-def _mount_cells(data: ConstraintSet, i: int) -> list[str]:
-    if data.tilt_link[i] < 0:
-        return ["", "", ""]
-    return [repr(math.degrees(float(v))) for v in data.tilt_mount[i]]
+def _mount_cells(data: ConstraintSet, i: int, columns: list[str]) -> list[str]:
+    """Row ``i``'s cells under the mount ``columns`` written (joint-frame, then home angles)."""
+    cells = {c: "" for c in columns}
+    if data.tilt_link[i] >= 0 and (data.tilt_home[i] or MOUNT_COLUMNS[0] in cells):
+        names = HOME_COLUMNS if data.tilt_home[i] else MOUNT_COLUMNS
+        cells |= {c: repr(math.degrees(float(v))) for c, v in zip(names, data.tilt_mount[i], strict=True)}
+    return list(cells.values())
+
+
+def _mount_header(data: ConstraintSet) -> list[str]:
+    """The mount columns ``data`` needs: joint-frame angles where a row's are not zero, the
+    home columns where a row is stated at home."""
+    on = data.tilted
+    joint = bool(np.any(data.tilt_mount[on & ~data.tilt_home] != 0.0))
+    return (list(MOUNT_COLUMNS) if joint else []) + (list(HOME_COLUMNS) if data.tilt_home.any() else [])
 
 
 def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> str:
@@ -339,7 +369,8 @@ def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> st
     header = [f"q{k + 1}" for k in range(dof)]
     kinds = data.kinds
     header += [c for kind in KINDS if kind in kinds for c in KIND_COLUMNS[kind]]
-    header += list(MOUNT_COLUMNS) if "tilt" in kinds and data.mounted else []
+    mounts = _mount_header(data) if "tilt" in kinds else []
+    header += mounts
     if "tracker" in kinds:
         header += ["x", "y", "z"]
     pair_of = {int(i): (k, data.pair_length[k]) for k, rows in enumerate(data.pairs) for i in rows}
@@ -357,7 +388,7 @@ def write_constraints(data: ConstraintSet, path: str | Path | None = None) -> st
             row += ["", ""] if pair is None else [str(pair[0]), repr(float(pair[1]) * 1e3)]
         if "tilt" in kinds:
             row += _tilt_cells(data, i)
-            row += _mount_cells(data, i) if data.mounted else []
+            row += _mount_cells(data, i, mounts)
         if "tracker" in kinds:
             row += ["", "", ""] if not data.tracked[i] else [repr(float(v)) for v in data.positions[i]]
         writer.writerow(row)

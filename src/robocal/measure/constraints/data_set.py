@@ -25,15 +25,16 @@ def _per_row(v, n: int, fill, dtype):
     return np.full(n, fill, dtype=dtype) if a.size == 0 else a
 
 
-def _mounts(v, link: IntArray) -> Array:
-    """``v`` as ``(n, 3)`` mount angles (rad; empty: zeros), one mount per sensed link."""
+def _mounts(v, link: IntArray, home: NDArray[np.bool_]) -> Array:
+    """``v`` as ``(n, 3)`` mount angles (rad; empty: zeros), one mount (angles and the
+    frame they are in, ``home``) per sensed link."""
     n = len(link)
     a = np.asarray(v, dtype=float)
     a = np.zeros((n, 3)) if a.size == 0 else a.reshape(n, 3)
     if not np.isfinite(a).all():
         raise ValueError("a tilt row's mount angles must be finite")
     for k in np.unique(link[link >= 0]):
-        rows = a[link == k]
+        rows = np.column_stack([a, home])[link == k]
         if np.ptp(rows, axis=0).max() > 0:
             raise ValueError(
                 f"the tilt rows of link {int(k) + 1} carry different mounts; one sensor per link"
@@ -75,6 +76,12 @@ class ConstraintSet:
             the link's joint-frame x, y and z axes (fixed axes, in that order:
             ``R_joint_sensor = Rz Ry Rx``); zeros (the default): the sensor's axes are the
             joint frame's.  One mount per link (the rows of a link share it).
+        tilt_home: ``(n,)`` whether row ``i``'s ``tilt_mount`` is instead the sensor's
+            orientation in the robot's base frame with every joint at zero (``R_base_sensor
+            = Rz Ry Rx`` at home; zeros: level, its x axis along the base's x), a statement
+            that does not depend on the chain calibrated
+            (:func:`robocal.measure.constraints.mounts.mounts_in` resolves it against a
+            chain's nominal robot at home).  Empty (the default): False.
     """
 
     q: Array
@@ -94,6 +101,7 @@ class ConstraintSet:
     tilt: Array = field(default_factory=lambda: np.zeros(0))
     tilt_sigma: float = TILT_SIGMA
     tilt_mount: Array = field(default_factory=lambda: np.zeros((0, 3)))
+    tilt_home: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def __post_init__(self) -> None:
         q = np.asarray(self.q, dtype=float)
@@ -109,7 +117,8 @@ class ConstraintSet:
             raise ValueError("a tilt row needs a finite reading and axis 0 (x) or 1 (y)")
         if not self.tilt_sigma > 0:
             raise ValueError("tilt_sigma must be > 0 (rad)")
-        object.__setattr__(self, "tilt_mount", _mounts(self.tilt_mount, self.tilt_link))
+        object.__setattr__(self, "tilt_home", _per_row(self.tilt_home, n, False, bool) & on)
+        object.__setattr__(self, "tilt_mount", _mounts(self.tilt_mount, self.tilt_link, self.tilt_home))
         object.__setattr__(self, "point", _ints(self.point, (n,)))
         object.__setattr__(self, "plane", _ints(self.plane, (n,)))
         object.__setattr__(self, "pairs", _ints(self.pairs, (-1, 2)))
@@ -165,14 +174,17 @@ class ConstraintSet:
 
     @property
     def mounted(self) -> bool:
-        """Whether any tilt row's sensor is mounted otherwise than along the joint frame."""
-        return bool(np.any(self.tilt_mount[self.tilted] != 0.0))
+        """Whether any tilt row's sensor is mounted otherwise than along the joint frame
+        (stated in the joint frame or at home)."""
+        return bool(np.any(self.tilt_mount[self.tilted] != 0.0) or self.tilt_home.any())
 
     def mount_matrix(self, link: int) -> Array:
         """``R_joint_sensor`` ``(3, 3)`` of the sensor on ``link``'s rows (joint index, 0-based)."""
         from scipy.spatial.transform import Rotation
 
         rows = np.flatnonzero(self.tilt_link == link)
+        if self.tilt_home[rows].any():  # a statement at home: resolve it against a chain first
+            raise ValueError(f"link {link + 1}'s sensor is stated at home; resolve it (mounts_in) first")
         angles = self.tilt_mount[rows[0]] if len(rows) else np.zeros(3)
         return np.asarray(Rotation.from_euler("xyz", angles).as_matrix(), dtype=float)
 
@@ -196,7 +208,7 @@ class ConstraintSet:
             point_pairs=self.point_pairs, point_length=self.point_length, known_planes=self.known_planes,
             sigma=self.sigma, distance_sigma=self.distance_sigma, tracker_sigma=self.tracker_sigma,
             tilt_link=self.tilt_link[rows], tilt_axis=self.tilt_axis[rows], tilt=self.tilt[rows],
-            tilt_sigma=self.tilt_sigma, tilt_mount=self.tilt_mount[rows],
+            tilt_sigma=self.tilt_sigma, tilt_mount=self.tilt_mount[rows], tilt_home=self.tilt_home[rows],
         )  # fmt: skip
 
     @property
@@ -260,4 +272,5 @@ def merge_sets(first: ConstraintSet, *others: ConstraintSet) -> ConstraintSet:
         tilt_axis=np.concatenate([s.tilt_axis for s in sets]),
         tilt=np.concatenate([s.tilt for s in sets]), tilt_sigma=first.tilt_sigma,
         tilt_mount=np.concatenate([s.tilt_mount for s in sets]),
+        tilt_home=np.concatenate([s.tilt_home for s in sets]),
     )  # fmt: skip
