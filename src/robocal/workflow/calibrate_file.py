@@ -219,8 +219,11 @@ def _validate(result: CalibrationResult, test: Measurements) -> tuple[Validation
     record: Any = result.records.get("physics_only")
     if not isinstance(record, dict) or result.model.residual is None:
         return validation, result
-    kinematic = kinematic_part(result).calibrated  # its held-out mean only: no expected error (frame given)
-    physics = validate(kinematic, test, frame=kinematic.frame)
+    from robocal.identify.result import CalibrationResult  # lazy, as the module's imports
+
+    kinematic = kinematic_part(result).calibrated  # a result here: the hybrid's stored physics-only fit
+    frame = kinematic.frame if isinstance(kinematic, CalibrationResult) else None
+    physics = validate(kinematic, test, frame=frame)  # its held-out mean only: no expected error
     held_out = {"held_out_mean_mm": physics.mean * 1e3, "held_out_n": physics.n}
     return validation, result.with_records(physics_only={**record, **held_out})
 
