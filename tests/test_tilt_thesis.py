@@ -1,9 +1,11 @@
 """Seed 003's Tables 4.3 / 4.4 / 5.2 through ``robocal calibrate`` (issue 33): the thesis'
 set-up (its Katana with Table 3.2's geometry and Table 5.2's joints, 30 configurations,
 level-at-home sensors, 0.001° counts) written as one tilt file and calibrated by the command
-line with clearance, backlash and compliance, ``--chain catalog``: a tilt file alone is then
-calibrated in the catalog chain, its base tilt free (:func:`robocal.cli.constraints.tilt_rows_only`);
-the sensors are written as stated at home (``home_r*_deg``: level), the same in any chain."""
+line with clearance, backlash and compliance, through both chains: ``--chain catalog`` (the
+catalog chain, its base tilt free: :func:`robocal.cli.constraints.tilt_rows_only`) and the
+default (the complete model with its link rotations freed:
+:func:`robocal.identify.constraints.tilt_rows.link_rotations_free`); the sensors are written
+as stated at home (``home_r*_deg``: level), the same in any chain."""
 
 import json
 import math
@@ -19,14 +21,23 @@ COUNT = math.radians(0.001)  # the thesis' resolution: the readings' σ
 
 
 @pytest.fixture(scope="module")
-def thesis_run(tmp_path_factory):
-    where = tmp_path_factory.mktemp("thesis")
-    path, out = where / "thesis_tilt.csv", where / "out"
+def thesis_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("thesis") / "thesis_tilt.csv"
     thesis_tilt_file(path)
-    args = ["calibrate", "katana450", "--chain", "catalog", "--data", str(path), *EFFECTS, "-o", str(out)]
-    result = CliRunner().invoke(app, args)
+    return path
+
+
+#: ``--chain catalog`` and the default (the complete model, its link rotations freed)
+CHAINS = {"catalog": ["--chain", "catalog"], "default": []}
+
+
+@pytest.fixture(scope="module", params=sorted(CHAINS))
+def thesis_run(request, thesis_file, tmp_path_factory):
+    out = tmp_path_factory.mktemp(f"thesis_{request.param}") / "out"
+    args = ["calibrate", "katana450", *CHAINS[request.param], "--data", str(thesis_file), *EFFECTS]
+    result = CliRunner().invoke(app, [*args, "-o", str(out)])
     assert result.exit_code == 0, result.output
-    return path, out
+    return thesis_file, out, request.param
 
 
 def test_the_one_fit_reproduces_tables_4_3_4_4_5_2(thesis_run):
@@ -35,7 +46,7 @@ def test_the_one_fit_reproduces_tables_4_3_4_4_5_2(thesis_run):
     where σ allows, as tests/test_inclinometer.py holds the old route); joint 1's backlash and
     stiffness (a vertical axis) and joint 5's stiffness (no moment about it) are not
     identified; the residual is the readings' noise."""
-    _, out = thesis_run
+    _, out, _ = thesis_run
     tables = tilt_rows_tables(out)
     for key, values in THESIS_TABLE_5_2.items():
         for row, thesis in zip(tables[key], values, strict=True):
@@ -58,24 +69,31 @@ def test_the_one_fit_reproduces_tables_4_3_4_4_5_2(thesis_run):
     )
 
 
-def test_chain_catalog_calibrates_the_catalog_chain_of_sensors_stated_at_home(thesis_run):
-    """The file states its sensors at home (level: zeros), and ``--chain catalog``'s saved
-    model is the catalog chain with the base's tilt in front (not the complete model)."""
+def test_each_chain_calibrates_its_chain_of_sensors_stated_at_home(thesis_run):
+    """The file states its sensors at home (level: zeros); ``--chain catalog``'s saved
+    model is the catalog chain with the base's tilt in front, the default's the complete
+    model with the last joint's offset (``theta5``, held for the tool by a position model)
+    freed and identified."""
     from robocal.model.files import load_model
 
-    path, out = thesis_run
+    path, out, chain = thesis_run
     header = path.read_text().splitlines()[0].split(",")
     assert {"home_rx_deg", "home_ry_deg", "home_rz_deg"} <= set(header) and "mount_rx_deg" not in header
-    names = load_model(out / "model.yaml").names
-    assert names[:2] == ("base_rx", "base_ry") and "beta4" in names and "tool_x" not in names
+    model = load_model(out / "model.yaml")
+    identified = json.loads((out / "constraints.json").read_text())["names"]
+    if chain == "catalog":
+        assert model.names[:2] == ("base_rx", "base_ry") and "beta4" in model.names
+        assert "tool_x" not in model.names
+    else:
+        assert "tool_x" in model.names and "theta5" in identified
 
 
-def test_only_a_file_of_tilt_rows_alone_keeps_the_catalog_chain(thesis_run, tmp_path):
+def test_only_a_file_of_tilt_rows_alone_keeps_the_catalog_chain(thesis_file, tmp_path):
     """Tilt rows alone: the catalog chain (base tilt free); a tracker file beside them, or position columns in
     the file, need the complete position model (positions see lengths the chain must carry)."""
     from robocal.cli.constraints import tilt_rows_only
 
-    path, _ = thesis_run
+    path = thesis_file
     assert tilt_rows_only([path]) and not tilt_rows_only([])
     header, *rows = path.read_text().splitlines()
     mixed = tmp_path / "mixed.csv"

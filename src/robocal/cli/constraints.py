@@ -68,14 +68,17 @@ def calibrate_constraint_command(
     force: bool = False, length_unit: LengthUnit = "m", effects: str | None = None,
 ) -> None:  # fmt: skip
     """``robocal calibrate`` of a constraint file (or several files: constraint files and
-    tracker files, one fit): a catalog robot's complete position model (``--chain
+    tracker files, one fit): a catalog robot's complete position model, its link rotations
+    freed when a file holds tilt rows (sensors read the angles a position model leaves to
+    the tool: :func:`~robocal.identify.constraints.tilt_rows.link_rotations_free`; ``--chain
     catalog``: its published chain, for inclinometer files alone with its base tilt free:
     :func:`tilt_rows_only`), a model file's chain as it is.  ``effects``
     (``--effects``): the joint effects the tilt rows identify (:func:`tilt_effect_kinds`)."""
     kinds = tilt_effect_kinds(effects)
     if (out / RESULT_FILE).exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
-    from robocal.identify.constraints.tilt_rows import tilt_chain
+    from robocal.identify.constraints.tilt_rows import link_rotations_free, tilt_chain
+    from robocal.measure.constraints.data import has_tilt_rows
     from robocal.model.complete import calibration_model
 
     paths = data_path if isinstance(data_path, list) else [data_path]
@@ -87,6 +90,8 @@ def calibrate_constraint_command(
             model = calibration_model(model, "position")
         except ValueError as err:
             raise fail(f"no complete model of {model.name}: {err}") from None
+        if any(has_tilt_rows(p) for p in paths):  # sensors read angles positions leave to the tool
+            model = link_rotations_free(model)
     levels = {None: None, "1": 1, "offsets": 1, "2": 2, "kinematic": 2}
     if level not in levels:
         raise fail(
@@ -103,7 +108,9 @@ def tilt_rows_only(paths: list[Path]) -> bool:
     (:func:`robocal.identify.constraints.tilt_rows.tilt_chain`).  Not the default: a catalog
     chain need not carry every tilt of a real robot's links (the UR10's DH chain has no
     twist between its parallel joints; a tilt file of a true UR10 drawn around its complete
-    model is left at 0.03° there).
+    model is left at 0.03° there); the default's complete model with its link rotations
+    freed spans the catalog chain's tilt columns and the complete model's
+    (:func:`~robocal.identify.constraints.tilt_rows.link_rotations_free`).
 
     The sensors are the same in every chain: a mount stated at home (``home_r*_deg``) is
     resolved against the calibrated chain's nominal robot at home, and joint-frame angles

@@ -68,6 +68,7 @@ __all__ = [
     "EFFECT_KINDS",
     "ZERO_PREFIX",
     "TiltTerms",
+    "link_rotations_free",
     "mixed_effects_note",
     "tilt_chain",
     "tilt_figures",
@@ -275,6 +276,27 @@ def tilt_chain(model: Model) -> Model:
         Step(axis, name) for axis, name in (("Rx", "base_rx"), ("Ry", "base_ry")) if name not in names
     )
     return dataclasses.replace(model, steps=base + tuple(model.steps))
+
+
+def link_rotations_free(model: Model) -> Model:
+    """``model`` (a complete *position* model) with the rotation steps it holds fixed up to
+    its last joint freed: the chain a fit with tilt rows calibrates (``robocal
+    calibrate``'s default for a catalog robot, tilt rows alone or beside tracker rows).
+
+    Why: a position model holds an angle fixed where positions cannot tell it from the tool
+    (the last joint's offset, the Katana's ``theta5``; the UR10's ``alpha5`` and
+    ``theta6``), but a sensor on that link reads it: on the thesis' Katana the catalog's
+    ``beta4``/``theta5`` direction lies outside the position model's tilt Jacobian (0.67 of
+    a unit column) and that fit was left at 0.025° RMS against 0.001° noise.  Freed, the
+    model spans every orientation column of the catalog chain and of the complete one (rank
+    31 of both's 31 at the thesis' configurations, tests/test_tilt_default_chain.py), so it
+    holds for a robot whose catalog chain lacks an angle (the UR10's DH chain has no twist
+    between its parallel joints) as for one whose position model does.  What the rows do not
+    see is the fit's rank test's to drop (a freed angle of an unsensed link is reported not
+    identifiable); the tool's rotations stay fixed (no link sensor turns with them)."""
+    last = max((k for k, s in enumerate(model.steps) if s.joint is not None), default=-1)
+    names = [s.name for s in model.steps[: last + 1] if s.is_rotation and not s.free]
+    return model.with_free(names) if names else model
 
 
 def mixed_effects_note(data: ConstraintSet, effects: tuple[str, ...]) -> str | None:

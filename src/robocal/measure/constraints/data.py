@@ -53,6 +53,7 @@ __all__ = [
     "KIND_COLUMNS",
     "ConstraintFileError",
     "constraint_kind",
+    "has_tilt_rows",
     "parse_distance",
     "read_constraints",
     "tilt_only",
@@ -101,6 +102,16 @@ def tilt_only(path: str | Path) -> bool:
         return False
     others = {c for kind in KINDS if kind != "tilt" for c in KIND_COLUMNS[kind]} | {"x", "y", "z"}
     return set(KIND_COLUMNS["tilt"]) <= columns and not columns & others
+
+
+def has_tilt_rows(path: str | Path) -> bool:
+    """Whether ``path``'s columns include the inclinometer's (``link, axis, tilt_deg``),
+    alone or beside another kind's."""
+    try:
+        columns = set(_header(Path(path)))
+    except (OSError, UnicodeDecodeError):
+        return False
+    return set(KIND_COLUMNS["tilt"]) <= columns
 
 
 def parse_distance(text: str) -> tuple[int, int, float]:
