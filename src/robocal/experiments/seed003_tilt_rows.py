@@ -2,14 +2,16 @@
 
 The thesis' virtual Katana of :mod:`robocal.experiments.seed003_inclinometer` (Table 3.2's
 geometric errors, Table 5.2's joints), its sensors (a dual-axis inclinometer on every
-link, level at the home configuration: the file's ``mount_r*_deg`` columns), its
+link, level at the home configuration: the file's ``home_r*_deg`` columns), its
 :data:`~robocal.experiments.seed003_inclinometer.N_CONFIGURATIONS` designed configurations,
 zero offsets within ±0.05° and the 0.001° resolution (σ 0.001°, rounded to the count) are
-written as one tilt file and calibrated by the command line (``robocal calibrate katana450
---chain catalog --data FILE --effects clearance,backlash,compliance``: the one constraint
-fit, geometry and joint effects together, in the chain whose joint frames Table 5.2's
-effects are stated in; the complete position model moves joint 5's frame 0.147 m along
-its axis, the effects' bending moments with it, and fits the same file to 0.025° RMS).
+written as one tilt file and calibrated by the command line (``robocal calibrate
+katana450 --data FILE --effects clearance,backlash,compliance``: the one constraint fit,
+geometry and joint effects together, in the default chain, the complete model with its
+link rotations freed, :func:`robocal.identify.constraints.tilt_rows.link_rotations_free`;
+the position model alone lacks the last joint's offset a sensor on link 5 reads and
+fitted the same file to 0.025° RMS; ``--chain catalog`` gives the same tables,
+tests/test_tilt_thesis.py).
 :func:`tilt_rows_tables` sets the joint effects it saved in
 ``constraints.json`` beside the thesis' values and the old route's (``identify_tilt``,
 orientation fitted); ``python -m robocal.experiments.seed003_tilt_rows`` prints the
@@ -139,7 +141,7 @@ def main() -> None:  # pragma: no cover - the documentation's table
     with tempfile.TemporaryDirectory() as tmp:
         path, out = Path(tmp) / "thesis_tilt.csv", Path(tmp) / "out"
         thesis_tilt_file(path)
-        args = ["calibrate", "katana450", "--chain", "catalog", "--data", str(path), *EFFECTS]
+        args = ["calibrate", "katana450", "--data", str(path), *EFFECTS]
         # the command as a user runs it (experiments sit below the CLI's layer: no import of it)
         result = subprocess.run([sys.executable, "-m", "robocal.cli", *args, "-o", str(out)],
                                 capture_output=True, text=True, check=False)  # fmt: skip

@@ -256,17 +256,16 @@ def unclear_contact(robot: Model, data: ConstraintSet) -> NDArray[np.bool_]:
 def tilt_chain(model: Model) -> Model:
     """``model``'s own chain with the base's tilt free in front (``base_rx``, ``base_ry``,
     rad, 0: the nominal robot unchanged, its FK, frames and loads the same): what a file of
-    tilt rows alone calibrates (``robocal calibrate``).
+    tilt rows alone calibrates with ``robocal calibrate --chain catalog``.
 
-    Not the complete *position* model: readings see the links' orientation only (its lengths
-    and tool are invisible to them), and building it moves joint frames along their axes
-    (the Katana's joint 5 by 0.15 m).  The joint effects' bending moments are taken about
-    the joint frame's origin, so in moved frames the same effects are another robot: Table
-    5.2's on the Katana's link 5 read up to 0.035° otherwise, and the thesis' set-up fitted
-    to 0.025° RMS against its 0.001° noise.  The robot's own chain is the one its joint
-    effects (and a file's ``mount_r*_deg`` angles) are stated in; a base that is not level
-    turns every link's reading with joint 1, hence its tilt (a chain that already has a
-    step of that name keeps its own)."""
+    The catalog chain is the one Table 5.2's joint effects are stated in; it is not the
+    default, since a catalog chain need not carry every tilt of a real robot's links (the
+    UR10's DH chain has no twist between its parallel joints): the default is the complete
+    model with its link rotations freed (:func:`link_rotations_free`), which spans this
+    chain's tilt columns.  The joint effects' bending moments are taken about the robot's own
+    chain's joint frame origins in either (:func:`loads_about`).  A base that is not level
+    turns every link's reading with joint 1, hence its tilt (a chain that already has a step
+    of that name keeps its own)."""
     import dataclasses
 
     from robocal.model.steps import Step
