@@ -127,8 +127,9 @@ def test_a_step_copy_is_a_checked_step_with_the_new_value():
 @pytest.mark.parametrize("sigma", [20e-6, None])
 def test_the_fused_fit_returns_its_last_evaluation_weighted_and_its_covariance(monkeypatch, sigma):
     # the fit weights each evaluation straight into the transposed layout of the LM kernels
-    # and forms the result's weighted residuals and Jacobian once at the end: they must be
-    # the last accepted evaluation's, and the covariance σ̂²(JᵀJ)⁻¹ of that Jacobian
+    # and hands the result those of the last accepted evaluation (not weighted a second
+    # time): they must be its residuals and Jacobian weighted, and the covariance σ̂²(JᵀJ)⁻¹
+    # of that Jacobian
     model = rc.robot("ur10")
     device = LaserTracker(p_tool_target=np.array([0.05, 0.0, 0.109]), sigma=sigma or 20e-6)
     robot = VirtualRobot(model, draw_true_model(model, seed=3), device)
@@ -148,9 +149,63 @@ def test_the_fused_fit_returns_its_last_evaluation_weighted_and_its_covariance(m
     (data_tuple, *_), out = seen[0]
     weights = data_tuple[2]
     T, r, J, rw, Jw = out[12]
-    np.testing.assert_array_equal(rw[0], r * weights)
-    np.testing.assert_array_equal(Jw[0], J * weights[:, None])
+    np.testing.assert_array_equal(rw, r * weights)
+    np.testing.assert_array_equal(Jw, J * weights[:, None])
     s2, cov = out[13][0], out[13][1]
-    np.testing.assert_allclose(cov, s2 * np.linalg.inv(Jw[0].T @ Jw[0]), rtol=1e-7, atol=0)
+    np.testing.assert_allclose(cov, s2 * np.linalg.inv(Jw.T @ Jw), rtol=1e-7, atol=0)
     np.testing.assert_allclose(result.residuals.ravel(), r, rtol=0, atol=1e-15)
     np.testing.assert_allclose(T[:, :3, 3] - data.position, r.reshape(-1, 3), rtol=0, atol=1e-15)
+
+
+def _spied_fit(monkeypatch, n_poses=40):
+    """The arguments and result of the one fused fit of a simulated UR10 calibration."""
+    model = rc.robot("ur10")
+    device = LaserTracker(p_tool_target=np.array([0.05, 0.0, 0.109]), sigma=20e-6)
+    robot = VirtualRobot(model, draw_true_model(model, seed=3), device)
+    data = simulate(robot, random_poses(model, n_poses, seed=4), seed=5)
+    seen = []
+    original = fused_kernels.fit
+
+    def spy(*args):
+        seen.append((args, original(*args)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(fused_kernels, "fit", spy)
+    rc.calibrate(model, data)
+    assert len(seen) == 1
+    return seen[0]
+
+
+def test_a_fit_without_an_accepted_step_returns_the_start_weighted(monkeypatch):
+    # no evaluation budget: no step is taken, and the result's evaluation is the first
+    # pass's over the live columns, weighted as the accepted ones are
+    args, _ = _spied_fit(monkeypatch)
+    data, values0, free_steps, live, first = args[:5]
+    out = fused_kernels.fit(data, values0, free_steps, live, first, args[5], args[6], 0, args[8])
+    assert out[8] == 0 and len(out[11]) == 1  # not converged, the start's RMS only
+    T, r, J, rw, Jw = out[12]
+    weights, final = data[2], out[5]
+    np.testing.assert_array_equal(T, first[0])
+    np.testing.assert_array_equal(r, first[1])
+    np.testing.assert_array_equal(J, first[2][:, final])
+    np.testing.assert_array_equal(rw, first[1] * weights)
+    np.testing.assert_array_equal(Jw, first[2][:, final] * weights[:, None])
+
+
+def test_the_first_pass_unit_columns_are_the_scaled_weighted_columns(monkeypatch):
+    # the sums of squares run along the Jacobian's rows and the unit-norm columns are formed
+    # from it directly (no scaled copy): the same numbers as from the scaled columns
+    args, _ = _spied_fit(monkeypatch)
+    data, values0, free_steps = args[:3]
+    scale = 1.7
+    step_rot = data[4]
+    preference = np.arange(len(free_steps))[::-1].copy()
+    first = fused_kernels.first_pass(data, values0, free_steps, scale, preference)
+    J, norm, zero, ordered, At, finite = first[2:]
+    assert finite
+    free_scale = np.where(step_rot[free_steps], scale, 1.0)
+    S = J * data[2][:, None] * free_scale
+    np.testing.assert_allclose(norm, np.sqrt(np.sum(S**2, axis=0)), rtol=1e-14, atol=0)
+    assert np.array_equal(zero, norm <= 1e-12 * norm.max())
+    assert np.array_equal(ordered, [a for a in preference if not zero[a]])
+    np.testing.assert_array_equal(At, (S[:, ordered] / norm[ordered]).T)

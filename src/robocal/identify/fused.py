@@ -102,7 +102,7 @@ class _Fused(NamedTuple):
     evaluations: int  # of the last fit
     total: int  # of all fits
     history: Array  # the last fit's RMS history
-    last: tuple[Array, Array, Array, Array, Array]  # frames, r, J, weighted r and J at x
+    last: tuple[Array, Array, Array, Array, Array]  # frames, r, J, weighted r (m,) and J (m, p) at x
     covariance: tuple[float, Array, Array, Array, float]  # as stages.Covariance
     J0: Array  # the first Jacobian's columns of the final unknowns
 
@@ -167,9 +167,7 @@ def fit(start: Start, first: FirstPass, solver: Mapping[str, Any], rules: Rules)
     fixed._cache[(x0.tobytes(), True)] = (first.evaluation[0], out.J0)
     success, evaluations = bool(out.success), int(out.evaluations)
     message = lm_message(success, evaluations, budget * (len(out.live) + 1))
-    solved = SolveResult(
-        x, success, message, len(out.history), evaluations, out.history.tolist(), rw[0], Jw[0]
-    )
+    solved = SolveResult(x, success, message, len(out.history), evaluations, out.history.tolist(), rw, Jw)
     s2, cov, std, corr, cond = out.covariance
     covariance = Covariance(float(s2), cov, std, corr, float(cond))
     return Fit(Selection(fixed, x0, all_dropped, solver), x, solved, covariance, int(out.total), seconds)

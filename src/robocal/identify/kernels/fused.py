@@ -80,20 +80,6 @@ def _evaluate(data, values, columns):
 
 
 @_jit
-def _weighted(r, J, weights):
-    """``(1, m)`` weighted residuals and ``(1, m, p)`` weighted Jacobian (the LM kernels' batch
-    of one)."""
-    m, p = J.shape
-    rw = np.empty((1, m))
-    Jw = np.empty((1, m, p))
-    for i in range(m):
-        rw[0, i] = r[i] * weights[i]
-        for a in range(p):
-            Jw[0, i, a] = J[i, a] * weights[i]
-    return rw, Jw
-
-
-@_jit
 def _weighted_transposed(r, J, weights):
     """``(1, m)`` weighted residuals and ``(1, p, m)`` weighted Jacobian, transposed: the
     layout the LM kernels' normal equations take without a copy (``transposed``)."""
@@ -127,19 +113,15 @@ def first_pass(data, values, free_steps, length_scale, preference):
     free_scale = np.empty(p)
     for a in range(p):
         free_scale[a] = length_scale if step_rot[free_steps[a]] else 1.0
-    # the scaled weighted columns, each contiguous: the sums and the unit-norm copies below
-    # run along them (the same operations in the same order as along J's rows)
-    St = np.empty((p, m))
+    # the columns' sums of squares along J's rows (for each column the same products summed
+    # in the same order as along the column), and the unit-norm columns below from J again:
+    # no (p, m) copy of the scaled columns is written and read back
+    norm = np.zeros(p)
     for i in range(m):
         w = weights[i]
         for a in range(p):
-            St[a, i] = J[i, a] * w * free_scale[a]
-    norm = np.zeros(p)
-    for a in range(p):
-        s = 0.0
-        for i in range(m):
-            s += St[a, i] * St[a, i]
-        norm[a] = s
+            v = J[i, a] * w * free_scale[a]
+            norm[a] += v * v
     largest = total = 0.0
     for a in range(p):
         total += norm[a]
@@ -158,8 +140,9 @@ def first_pass(data, values, free_steps, length_scale, preference):
     At = np.empty((k, m))
     for b in range(k):
         a = ordered[b]
+        scale, n_a = free_scale[a], norm[a]
         for i in range(m):
-            At[b, i] = St[a, i] / norm[a]
+            At[b, i] = J[i, a] * weights[i] * scale / n_a
     return T, r, J, norm, zero, ordered[:k], At, finite
 
 
@@ -253,7 +236,9 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
     D, mu, nu, x_new = np.zeros((1, p)), np.full(1, np.nan), np.full(1, 2.0), np.empty((1, p))
     evaluations, success = np.ones(1, dtype=np.intp), np.zeros(1, dtype=np.bool_)
     predicted, rms, accepted = np.empty(1), np.empty(1), np.empty((2, 1), dtype=np.intp)
-    last = (first[0], first[1], np.empty((m, 0)))
+    # the last accepted evaluation, with the weighted arrays its normal equations were formed
+    # from (the result's: not weighted a second time)
+    last = (first[0], first[1], np.empty((m, 0)), np.empty((1, m)), np.empty((1, 0, m)))
     while True:
         n = propose(ids, _count(1), x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
                     x_new, predicted)  # fmt: skip
@@ -266,13 +251,16 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
         if count:
             history[h] = rms[0]
             h += 1
-            last = (T2, r2, J2)
+            last = (T2, r2, J2, rw2, Jwt2)
     if h == 1:  # no step taken: the evaluation at the start
-        last = (first[0], first[1], _columns_of(first[2], live))
-    rw, Jw = _weighted(last[1], last[2], weights)  # the result's, once
+        J_start = _columns_of(first[2], live)
+        rw0, Jwt0 = _weighted_transposed(first[1], J_start, weights)
+        last = (first[0], first[1], J_start, rw0, Jwt0)
+    T, r, J, rw, Jwt = last
     low, high = chi2_bounds
     s2, cov, std, corr, cond, ok = _uncertainty(cost[0], G[0], m, low, high, known_noise, singular)
-    return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), (last[0], last[1], last[2], rw, Jw),
+    # the weighted Jacobian (m, p) as the transpose of the (p, m) rows: a view, no copy
+    return (x[0].copy(), success[0], evaluations[0], history[:h].copy(), (T, r, J, rw[0], Jwt[0].T),
             (s2, cov, std, corr, cond), ok)  # fmt: skip
 
 
