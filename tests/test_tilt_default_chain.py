@@ -146,3 +146,27 @@ def test_a_true_ur10_with_errors_the_position_model_holds_fits_to_its_noise(tmp_
     assert len(figures) >= 10
     for after, before in figures.values():
         assert after < 0.0015 and after < before  # deg; σ 0.001°
+
+
+def test_simulated_readings_take_the_effects_moments_about_the_robots_own_chain():
+    """``simulate_tilt_rows(true, frames=own)``: the Katana's complete model (joint 5's frame
+    0.147 m along its axis from the catalog's) with Table 5.2's effects reads as its catalog
+    chain does, the same level sensors at the same configurations; without ``frames`` the
+    effects' bending moments are taken about the moved frame and link 5 reads otherwise."""
+    from robocal.measure.constraints.sim import level_mounts
+
+    catalog = katana_robots().nominal
+    assert catalog.joint_effects  # Table 5.2's joints
+    complete = calibration_model(catalog, "position")
+    assert complete.joint_effects
+
+    def read(model, frames=None):
+        data = simulate_tilt_rows(model, 40, sigma=1e-12, seed=3, mounts=level_mounts(model), frames=frames)
+        return data.tilt_link, data.tilt  # the same seeded configurations and noise each time
+
+    links, own = read(catalog)
+    moved_links, moved = read(complete)
+    fixed_links, fixed = read(complete, frames=catalog)
+    assert np.array_equal(links, fixed_links) and np.array_equal(links, moved_links)
+    np.testing.assert_allclose(fixed, own, atol=1e-12)
+    assert np.abs(moved - own)[links == 4].max() > 1e-6  # rad: 0.0036° at most on link 5

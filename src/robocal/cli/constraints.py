@@ -255,10 +255,11 @@ def simulate_constraint_command(model_of, kind: str, poses, out, force: bool, op
         raise fail(f"--mount {safe(mount)}: joint or level, with --kind tilt")
     for path in placement_files(out, placements) + ([tracker_file(out)] if tracker else []):
         refuse_overwrite(path, force, "measurement file")
-    model = calibration_model(model_of(), "position")
+    own = model_of()  # the robot's own chain: the joint effects' moment points (simulate_tilt)
+    model = calibration_model(own, "position")
     simulate_constraint_file(model, kind, out, n=n, count=count, length=length, noise=noise, seed=seed,
                              length_tol=length_tol, angle_tol=angle_tol, placements=placements,
-                             tracker=tracker, level=mount == "level")  # fmt: skip
+                             tracker=tracker, level=mount == "level", frames=own)  # fmt: skip
 
 
 def tracker_file(out: Path) -> Path:
@@ -296,18 +297,22 @@ def _simulated_noise(kind: str, noise: str | None) -> float:
     return 1e-5 if noise is None else parse_quantity_option(noise, "length", "--noise")
 
 
-def simulate_level_tilt(model, true, n: int, sigma: float, seed: int | None):
-    """``--kind tilt --mount level``: every link's sensor level at the nominal ``model``'s home
-    configuration, read on the ``true`` robot at ``n`` random configurations."""
+def simulate_tilt(model, true, n: int, sigma: float, seed: int | None, level: bool, frames=None):
+    """``--kind tilt``: every link's sensor read on the ``true`` robot at ``n`` random
+    configurations, along its joint frame or (``level``, ``--mount level``) level at the
+    nominal ``model``'s home configuration; the joint effects' bending moments about
+    ``frames``' joint frame origins (the robot's own chain, as ``calibrate`` takes them)."""
     from robocal.measure.constraints.sim import SceneTruth, level_mounts, simulate_tilt_rows
 
-    data = simulate_tilt_rows(true, n, sigma=sigma, seed=seed, mounts=level_mounts(model))
+    mounts = level_mounts(model) if level else None
+    data = simulate_tilt_rows(true, n, sigma=sigma, seed=seed, mounts=mounts, frames=frames)
     return data, SceneTruth(np.zeros((0, 3)), np.zeros((0, 4)), 0.0)
 
 
 def simulate_constraint_file(
     model, kind: str, out: Path, *, n: int, count: int, length: str, noise: str | None, seed: int | None,
     length_tol: str, angle_tol: str, placements: int = 1, tracker: int = 0, level: bool = False,
+    frames=None,
 ) -> None:  # fmt: skip
     """Simulate ``kind`` on a true robot drawn around ``model``; write ``out`` and
     ``out``.truth.json (the true parameters and scene); ``placements`` > 1: the same true
@@ -315,7 +320,9 @@ def simulate_constraint_file(
     one file each (:func:`placement_files`), all in the one truth file: held-out data;
     ``tracker`` > 0: also that many tracker rows of the same true robot (random
     configurations, the tool point in the robot's base frame, 10 µm per axis) in
-    :func:`tracker_file`, a plain tracker file (``q1..qN, x, y, z`` in m)."""
+    :func:`tracker_file`, a plain tracker file (``q1..qN, x, y, z`` in m); ``frames``: the
+    robot's own chain, whose joint frame origins the tilt rows' joint effects' bending
+    moments are taken about (:func:`simulate_tilt`; None: the true robot's)."""
     from robocal.measure.constraints.data import write_constraints
     from robocal.measure.constraints.sim import moved_scene, simulate_constraints, simulate_tracker_rows
     from robocal.measure.true_model import draw_true_model, parse_quantity_option
@@ -331,8 +338,8 @@ def simulate_constraint_file(
     files, runs = placement_files(out, placements), []
     try:
         true = draw_true_model(model, length=length_tol, angle=angle_tol, seed=seed)
-        if level:  # the sensors level at home of the nominal robot (the mount a user states)
-            data, scene = simulate_level_tilt(model, true, n, sigma, seed)
+        if kind == "tilt":  # level: at home of the nominal robot (the mount a user states)
+            data, scene = simulate_tilt(model, true, n, sigma, seed, level, frames)
         else:
             data, scene = simulate_constraints(
                 true, kind, n, sigma=sigma, count=count, length=length_m, seed=seed

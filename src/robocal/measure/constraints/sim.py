@@ -21,6 +21,7 @@ from robocal.measure.ik_starts import random_configurations
 from robocal.model.chain import Model
 
 __all__ = [
+    "MAX_TILT",
     "SceneTruth",
     "level_mounts",
     "moved_scene",
@@ -174,6 +175,10 @@ def moved_scene(scene: SceneTruth, seed: int | np.random.Generator | None = 0) -
     return SceneTruth(points, planes, scene.length)
 
 
+#: a sensor's range (rad): readings beyond it are not taken (Inclinometer.max_tilt's default)
+MAX_TILT = float(np.radians(60.0))
+
+
 def simulate_tilt_rows(
     true: Model,
     n: int,
@@ -181,22 +186,27 @@ def simulate_tilt_rows(
     links: tuple[int, ...] | None = None,
     sigma: float = TILT_SIGMA,
     zeros: dict[tuple[int, int], float] | None = None,
-    max_tilt: float = np.radians(60.0),
     seed: int | np.random.Generator | None = 0,
     configurations: Array | None = None,
     mounts: dict[int, Array] | None = None,
     resolution: float = 0.0,
+    frames: Model | None = None,
 ) -> ConstraintSet:
     """Inclinometer readings of the ``true`` robot (its geometry and ``joint_effects`` under
     gravity, :func:`robocal.measure.inclinometer.readings`) at ``n`` random configurations:
     both channels of a sensor on each link of ``links`` (joint indices, 0-based; None:
     every joint's link), plus each channel's zero ``zeros[(link, axis)]`` (rad, default 0)
-    and normal noise ``sigma`` (rad).  Readings beyond ``max_tilt`` (a sensor's range;
+    and normal noise ``sigma`` (rad).  Readings beyond :data:`MAX_TILT` (a sensor's range;
     near the vertical a reading is insensitive) are left out.  ``configurations``
     ``(n, dof)``: read at these (a plan) instead of random ones.  ``mounts``: each sensed
     link's sensor orientation on it (joint index -> ``(3,)`` angles, rad, as
     ``ConstraintSet.tilt_mount``; e.g. :func:`level_mounts`), None or a link not named: the
-    joint frame.  ``resolution``: a reading is rounded to it (rad; 0: not rounded)."""
+    joint frame.  ``resolution``: a reading is rounded to it (rad; 0: not rounded).
+    ``frames``: the robot's own chain (its catalog chain when ``true`` is drawn around
+    another chain of it, the complete model), whose joint frame origins the effects'
+    bending moments are taken about, as the fit takes them
+    (:func:`~robocal.measure.constraints.mounts.loads_about`; None: ``true``'s own)."""
+    from robocal.measure.constraints.mounts import loads_about
     from robocal.measure.inclinometer import readings
     from robocal.model.joints import joint_perturbations
 
@@ -215,9 +225,10 @@ def simulate_tilt_rows(
     angles = np.array([(mounts or {}).get(int(k), np.zeros(3)) for k in link], dtype=float).reshape(-1, 3)
     matrices = Rotation.from_euler("xyz", angles).as_matrix() if len(angles) else np.zeros((0, 3, 3))
     axes = tuple("xy"[a] for a in axis)
-    tilt = readings(true, q_rows, names, axes, matrices, joint_perturbations(true, q_rows))
+    loads = loads_about(true, q_rows, frames)  # the effects as stated in the robot's own chain
+    tilt = readings(true, q_rows, names, axes, matrices, joint_perturbations(true, q_rows, loads=loads))
     zero = np.array([(zeros or {}).get((int(k), int(a)), 0.0) for k, a in zip(link, axis, strict=True)])
-    ok = np.abs(tilt) <= max_tilt
+    ok = np.abs(tilt) <= MAX_TILT
     read = tilt + zero + sigma * rng.standard_normal(len(tilt))
     if resolution > 0:  # the sensor's count (seed 003: 0.001°)
         read = np.round(read / resolution) * resolution
