@@ -427,6 +427,8 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
 def _start_constraint_run(page: _Page, session: str, path: Path, args: Sequence[Any]) -> tuple:
     """Queue a constraint file's run (the robot's complete position model for a catalog
     robot, the built model's chain as it is): ``(run_id, status)`` or ``(no_update, error)``."""
+    from robocal.identify.constraints.tilt_rows import link_rotations_free
+    from robocal.measure.constraints.data import has_tilt_rows
     from robocal.model.files import save_model
 
     choice, built, *_ = args[8:]
@@ -438,6 +440,8 @@ def _start_constraint_run(page: _Page, session: str, path: Path, args: Sequence[
         model = page.model_for(choice, built, "position")
         distances = constraint_view.distances_of(rows)
         more = mixed_files.more_paths(added, page.data_file)
+        if choice != "@built" and any(has_tilt_rows(p) for p in (path, *more)):
+            model = link_rotations_free(model)  # as the CLI: sensors read angles left to the tool
     except ValueError as err:
         message = gui_words(public_text(str(err), page.workdir))
         return no_update, html.Span(message, className="error", id="cal-error")
