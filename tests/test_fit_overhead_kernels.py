@@ -209,3 +209,24 @@ def test_the_first_pass_unit_columns_are_the_scaled_weighted_columns(monkeypatch
     assert np.array_equal(zero, norm <= 1e-12 * norm.max())
     assert np.array_equal(ordered, [a for a in preference if not zero[a]])
     np.testing.assert_array_equal(At, (S[:, ordered] / norm[ordered]).T)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_rank_kernel_skipping_r_zeros_fits_dropped_columns_as_numpy(seed):
+    # the kernel's products skip the rows below each column of R (zeros there): the kept
+    # mask, the dropped columns' coefficients and what they leave as the dense numpy form
+    from robocal.model import rank_kernels
+
+    rng = np.random.default_rng(seed)
+    B = rng.normal(size=(60, 9))
+    A = np.column_stack([B, B[:, :4] @ rng.normal(size=(4, 3)), rng.normal(size=(60, 2))])
+    A = A[:, rng.permutation(A.shape[1])]
+    A /= np.linalg.norm(A, axis=0)
+    qr = np.asfortranarray(np.linalg.qr(A, mode="raw")[0].T)
+    diag, keep, coefs, left, explained = rank_kernels.sequential_test(qr, 1e-7)
+    ref = rank.sequential_test_numpy(qr, 1e-7)
+    assert explained and ref[4] and keep.sum() == 11
+    assert np.array_equal(keep, ref[1]) and np.array_equal(diag, ref[0])
+    np.testing.assert_allclose(coefs, ref[2], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(left, ref[3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(A[:, keep] @ coefs, A[:, ~keep], rtol=0, atol=1e-10)

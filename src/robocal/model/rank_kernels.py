@@ -61,12 +61,16 @@ def _columns(qr, cols, d):
 
 
 @_jit
-def _products(X, Y):
-    """``XᵀY`` of two small ``(d, ·)`` matrices (loops: numba's BLAS products in several
-    memory layouts cost seconds of compilation, and these are p x p)."""
+def _products(X, Y, rows):
+    """``XᵀY`` of two small ``(d, ·)`` matrices whose column ``a`` of ``X`` is zero past row
+    ``rows[a]`` (columns of ``R``: those rows are skipped, a zero term leaves a sum as it
+    is) (loops: numba's BLAS products in several memory layouts cost seconds of
+    compilation, and these are p x p)."""
     out = np.zeros((X.shape[1], Y.shape[1]))
     for i in range(X.shape[0]):
         for a in range(X.shape[1]):
+            if i > rows[a]:
+                continue
             x = X[i, a]
             for b in range(Y.shape[1]):
                 out[a, b] += x * Y[i, b]
@@ -133,7 +137,7 @@ def sequential_test(qr, tolerance):
         return diag, keep, coefs, left, False
     RK, RD = _columns(qr, kept, d), _columns(qr, dropped, d)
     n = len(kept)
-    G, B = _products(RK, RK), _products(RK, RD)
+    G, B = _products(RK, RK, kept), _products(RK, RD, kept)
     L = np.zeros((n, n))
     if not cholesky(G, L):
         return diag, keep, coefs, left, False
@@ -144,7 +148,8 @@ def sequential_test(qr, tolerance):
         for i in range(d):
             t = RD[i, j]
             for k in range(n):
-                t -= RK[i, k] * coefs[k, j]
+                if kept[k] >= i:  # RK's column k is zero below its own row
+                    t -= RK[i, k] * coefs[k, j]
             s += t * t
         left[j] = math.sqrt(s)
         explained = explained and left[j] <= tolerance

@@ -326,5 +326,8 @@ def fit(data, values0, free_steps, live, first, screening, chi2_bounds, budget, 
         n_pruned += 1
         live, x0 = _without(live, worst), _without(x0, worst)
     status = OK if ok else SINGULAR
+    # the first Jacobian's columns of the final unknowns: the rank test's when none was
+    # screened or pruned (the unknowns only ever shrink), a copy of fewer columns otherwise
+    J_final = J_live if len(live) == J_live.shape[1] else _columns_of(J0, live)
     return (status, screened, sigmas[:count].copy(), pruned[:n_pruned].copy(), pruned_sigma[:n_pruned].copy(),
-            live, x0, x, success, evaluations, total, history, last, cov, _columns_of(J0, live))  # fmt: skip
+            live, x0, x, success, evaluations, total, history, last, cov, J_final)  # fmt: skip
