@@ -192,14 +192,17 @@ def test_a_fit_without_an_accepted_step_returns_the_start_weighted(monkeypatch):
     np.testing.assert_array_equal(Jw, first[2][:, final] * weights[:, None])
 
 
-def test_the_first_pass_unit_columns_are_the_scaled_weighted_columns(monkeypatch):
-    # the sums of squares run along the Jacobian's rows and the unit-norm columns are formed
-    # from it directly (no scaled copy): the same numbers as from the scaled columns
+@pytest.mark.parametrize("scale, partial", [(1.7, False), (1.7, True), (0.0, False)])
+def test_the_first_pass_unit_columns_are_the_scaled_weighted_columns(monkeypatch, scale, partial):
+    # the sums of squares run along the scaled columns written as rows in test order, and
+    # the unit-norm columns overwrite those rows (moved up past zero columns: a length scale
+    # of 0 makes every angle's column zero; a preference may leave columns out)
     args, _ = _spied_fit(monkeypatch)
     data, values0, free_steps = args[:3]
-    scale = 1.7
     step_rot = data[4]
     preference = np.arange(len(free_steps))[::-1].copy()
+    if partial:
+        preference = preference[::2].copy()
     first = fused_kernels.first_pass(data, values0, free_steps, scale, preference)
     J, norm, zero, ordered, At, finite = first[2:]
     assert finite
@@ -207,6 +210,9 @@ def test_the_first_pass_unit_columns_are_the_scaled_weighted_columns(monkeypatch
     S = J * data[2][:, None] * free_scale
     np.testing.assert_allclose(norm, np.sqrt(np.sum(S**2, axis=0)), rtol=1e-14, atol=0)
     assert np.array_equal(zero, norm <= 1e-12 * norm.max())
+    if scale == 0.0:  # a zero column before a non-zero one in test order: rows move up
+        in_order = zero[preference]
+        assert in_order.any() and not in_order[np.argmax(in_order) :].all()
     assert np.array_equal(ordered, [a for a in preference if not zero[a]])
     np.testing.assert_array_equal(At, (S[:, ordered] / norm[ordered]).T)
 

@@ -113,15 +113,28 @@ def first_pass(data, values, free_steps, length_scale, preference):
     free_scale = np.empty(p)
     for a in range(p):
         free_scale[a] = length_scale if step_rot[free_steps[a]] else 1.0
-    # the columns' sums of squares along J's rows (for each column the same products summed
-    # in the same order as along the column), and the unit-norm columns below from J again:
-    # no (p, m) copy of the scaled columns is written and read back
-    norm = np.zeros(p)
+    # the scaled weighted columns, each contiguous, as rows in test order (``preference``
+    # first, any other column after it): the sums below run along them, and the unit-norm
+    # columns overwrite them in place (no second (p, m) array)
+    row = np.full(p, -1, dtype=np.intp)
+    for b in range(len(preference)):
+        row[preference[b]] = b
+    n_rows = len(preference)
+    for a in range(p):
+        if row[a] < 0:
+            row[a] = n_rows
+            n_rows += 1
+    St = np.empty((p, m))
     for i in range(m):
         w = weights[i]
         for a in range(p):
-            v = J[i, a] * w * free_scale[a]
-            norm[a] += v * v
+            St[row[a], i] = J[i, a] * w * free_scale[a]
+    norm = np.zeros(p)
+    for a in range(p):
+        s, column = 0.0, St[row[a]]
+        for i in range(m):
+            s += column[i] * column[i]
+        norm[a] = s
     largest = total = 0.0
     for a in range(p):
         total += norm[a]
@@ -133,17 +146,19 @@ def first_pass(data, values, free_steps, length_scale, preference):
     zero = norm <= 1e-12 * max(largest, 1e-300)
     k = 0
     ordered = np.empty(p, dtype=np.intp)
-    for a in preference:
+    for b in range(len(preference)):  # row k <= b: a row is read before it is overwritten
+        a = preference[b]
         if not zero[a]:
             ordered[k] = a
+            source, target, n_a = St[b], St[k], norm[a]
+            if k == b:  # in place (every row, unless a zero column came before): vectorised
+                for i in range(m):
+                    source[i] = source[i] / n_a
+            else:
+                for i in range(m):
+                    target[i] = source[i] / n_a
             k += 1
-    At = np.empty((k, m))
-    for b in range(k):
-        a = ordered[b]
-        scale, n_a = free_scale[a], norm[a]
-        for i in range(m):
-            At[b, i] = J[i, a] * weights[i] * scale / n_a
-    return T, r, J, norm, zero, ordered[:k], At, finite
+    return T, r, J, norm, zero, ordered[:k], St[:k], finite
 
 
 @_jit
