@@ -202,3 +202,78 @@ def test_redundant_parameters_are_dataclass_values(ur10):
         assert list(vars(d)) == list(vars(built))
     direct = rank._redundant("a", (("b", 0.5),), 0.25)
     assert direct == Dropped("a", "redundant", (("b", 0.5),), 0.25)
+
+
+# ---------------------------------------------------------------------- session 15 (H18)
+def test_fixed_step_copies_are_reused_and_equal_a_fresh_copy(ur10):
+    model, _ = ur10
+    step = model.steps[3]
+    assert step.free
+    fixed = step._with_free(False)
+    assert fixed == dataclasses.replace(step, free=False)
+    assert step._with_free(False) is fixed  # the same step fixed again: its copy, reused
+    # an equal step that is another object gets its own copy (keyed by identity, not equality)
+    twin = dataclasses.replace(step)
+    assert twin == step and twin is not step
+    assert twin._with_free(False) is not fixed
+    assert twin._with_free(False) == fixed
+    # freeing a fixed step, or a step already as asked, still gives the right flag
+    assert fixed._with_free(True) == step
+    assert step._with_free(True) == step and fixed._with_free(False) == fixed
+
+
+def test_fixing_the_same_steps_of_chains_sharing_a_mask(ur10):
+    """Measurement chains of one template share its free mask: fixing the same steps of two
+    of them gives each the flags its steps say, and a chain with other flags (same names)
+    is not given the first one's."""
+    model, data = ur10
+    names = ["theta1", "d1", "a2"]
+    first = model.with_values({"a2": 0.61})  # shares model's mask and names ("free" kept)
+    a, b = model.fixed(names), first.fixed(names)
+    for chain in (a, b):
+        assert chain.free_mask.tolist() == [s.free for s in chain.steps]
+        assert chain.free_names == tuple(s.name for s in chain.steps if s.free)
+    assert a.step("a2").value != b.step("a2").value
+    other = model.fixed(["alpha1"])  # another mask, same names: fixing theta1 etc. of it
+    c = other.fixed(names)
+    assert c.free_mask.tolist() == [s.free for s in c.steps]
+    assert "alpha1" not in c.free_names and "alpha1" in a.free_names
+    # a calibration fixes the same dropped steps twice: the same result both times
+    r1 = rc.calibrate(model, data)
+    r2 = rc.calibrate(model, data)
+    assert r1.names == r2.names and np.array_equal(r1.estimates, r2.estimates)
+    assert [s.free for s in r1.measurement_chain.steps] == [s.free for s in r2.measurement_chain.steps]
+
+
+def test_measurement_chain_values_are_its_steps(ur10):
+    model, data = ur10
+    run = pipeline._check_inputs(model, data, "lm", CalibrationOptions.from_keywords(None), None)
+    chain = build_problem(run, None).problem.chain
+    assert np.array_equal(chain.values, [s.value for s in chain.steps])
+    assert not chain.values.flags.writeable
+    assert np.any(chain.values[:6] != 0)  # the device frame's start written in, not the template's zeros
+
+
+def test_with_free_values_of_huge_finite_values(ur10):
+    """Huge finite values are taken; a NaN or inf is refused by name, also next to +inf."""
+    model, _ = ur10
+    x = np.zeros(len(model.free_names))
+    x[0] = 1e200
+    assert model.with_free_values(x).values[model.free_mask][0] == 1e200
+    x[5] = -np.inf
+    with pytest.raises(ValueError, match=model.free_names[5]):
+        model.with_free_values(x)
+    x[0], x[5] = np.inf, -np.inf  # a sum of nan
+    with pytest.raises(ValueError, match=model.free_names[0]):
+        model.with_free_values(x)
+
+
+def test_derived_copy_shares_only_what_is_asked(ur10):
+    from robocal.model.chain_plan import derived_copy
+
+    model, _ = ur10
+    assert len(model.values) == len(model.names) and model.free_names  # worked out (cached) on the model
+    copy = derived_copy(model, model.steps, ("names",), notes="changed")
+    assert copy.notes == "changed" and copy.name == model.name and copy.steps is model.steps
+    assert "names" in copy.__dict__ and "values" not in copy.__dict__ and "free_names" not in copy.__dict__
+    assert copy == dataclasses.replace(model, notes="changed")

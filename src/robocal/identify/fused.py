@@ -115,7 +115,7 @@ def rank_test(problem: Problem) -> FirstPass | None:
 
     chain = problem.chain
     names = problem.free_names
-    free_steps = np.flatnonzero(chain.free_mask)
+    free_steps = chain.free_mask.nonzero()[0]  # (flatnonzero of the 1-D mask without its ravel)
     data = _chain_data(problem)
     order = problem.preference if problem.preference is not None else preference_columns(names, chain.roles)
     out = _FirstPass(*kernels.first_pass(data, chain.values, free_steps, float(problem.length_scale), order))

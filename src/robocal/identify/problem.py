@@ -97,14 +97,21 @@ def measurement_chain_and_preference(
     pose_tool = tool is not None and measure == "pose"
     template, preference = _chain_template(robot, (fixed_frame, fit_frame, tool is not None, pose_tool))
     steps = list(template.steps)
+    values = template.values.copy()  # the template's, with the frame's and the tool's written in
     if fixed_frame:
-        steps[:6] = _valued(template.steps[:6], _frame_values(T_device_base))
+        frame = _frame_values(T_device_base)
+        steps[:6] = _valued(template.steps[:6], frame)
+        values[:6] = frame
     if tool is not None:
         T_tool = np.asarray(tool, dtype=float)
-        values = _frame_values(T_tool) if pose_tool else T_tool[:3, 3].tolist()
-        first = len(steps) - len(values)
-        steps[first:] = _valued(template.steps[first:], values)
-    return template._derived(tuple(steps), "free"), preference
+        tool_values = _frame_values(T_tool) if pose_tool else T_tool[:3, 3].tolist()
+        first = len(steps) - len(tool_values)
+        steps[first:] = _valued(template.steps[first:], tool_values)
+        values[first:] = tool_values
+    chain = template._derived(tuple(steps), "free")
+    # the floats the new steps hold (checked finite by _valued): the rank test reads them
+    chain.__dict__["values"] = read_only(values)
+    return chain, preference
 
 
 # measurement chains at zero frame and tool values, by (robot, layout): keyed by the robot's
@@ -146,7 +153,7 @@ def _chain_template(robot: Model, layout: tuple[bool, bool, bool, bool]) -> tupl
     # names were checked against the robot's above: the chain's invariants hold
     template = derived_copy(robot, steps, (), name=robot.name + "+measurement", bodies=(), joint_effects=(),
                             residual=None)  # fmt: skip
-    for name in ("names", "roles", "_index", "_plan", "free_mask", "free_names"):
+    for name in ("names", "roles", "_index", "_plan", "free_mask", "free_names", "values"):
         getattr(template, name)  # worked out once, shared by every copy
     preference = read_only(preference_columns(template.free_names, template.roles))
     if len(_TEMPLATES) >= 16:

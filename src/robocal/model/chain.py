@@ -197,9 +197,11 @@ class Model:
     def with_free(self, names: Iterable[str] | None = None, free: bool = True) -> Model:
         """A new model with the named parameters (all when ``names`` is None) freed or fixed."""
         selected = set(self.names if names is None else names)
-        if unknown := [n for n in selected if n not in self._index]:
+        index = self._index
+        at = [index.get(name, -1) for name in selected]
+        if -1 in at:
+            unknown = [n for n in selected if n not in index]
             raise KeyError(f"model {self.name!r} has no parameter(s) {sorted(unknown)}")
-        at = [self._index[name] for name in selected]
         return chain_plan.with_free_copy(self, at, free, _STRUCTURE + ("values",))
 
     def _derived(self, steps: tuple[Step, ...], same: Literal["free", "values"]) -> Model:

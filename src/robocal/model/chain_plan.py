@@ -204,12 +204,23 @@ def derived_copy(model: Any, steps: tuple, shared: tuple[str, ...], **changes: A
     (its plan, names, index...) instead of working them out again (only for steps whose
     names, motions and joints are ``model``'s own).  The solvers derive several models per
     calibration."""
-    derived = object.__new__(type(model))
     cls: type = type(model)  # a class is hashable (mypy sees type[Any] otherwise)
-    fields = {name: model.__dict__[name] for name in _field_names(cls)}
-    derived.__dict__.update(fields, steps=steps, **changes)
-    derived.__dict__.update({k: model.__dict__[k] for k in shared if k in model.__dict__})
+    derived: Any = object.__new__(cls)
+    own = model.__dict__
+    # one pass over the fields and the shared properties (a cached property not yet worked
+    # out is not in the dict); a field is always there
+    fields = {name: own[name] for name in _copied_names(cls, shared) if name in own}
+    fields["steps"] = steps
+    if changes:
+        fields.update(changes)
+    derived.__dict__.update(fields)
     return derived
+
+
+@functools.cache
+def _copied_names(cls: type, shared: tuple[str, ...]) -> tuple[str, ...]:
+    """The names :func:`derived_copy` copies: the dataclass ``cls``'s fields, then ``shared``."""
+    return _field_names(cls) + tuple(name for name in shared if name not in _field_names(cls))
 
 
 def with_free_values_copy(model: Any, x: Array, shared: tuple[str, ...]) -> Any:
@@ -218,8 +229,12 @@ def with_free_values_copy(model: Any, x: Array, shared: tuple[str, ...]) -> Any:
     with ``x`` written in (the floats its steps hold: no second pass over the steps)."""
     steps = list(model.steps)
     mask = model.free_mask
-    for i, v in zip(np.flatnonzero(mask).tolist(), x.tolist(), strict=True):
-        steps[i] = steps[i]._copy_with("value", v)
+    new, set_ = object.__new__, object.__setattr__
+    for i, v in zip(mask.nonzero()[0].tolist(), x.tolist(), strict=True):  # mask: 1-D
+        fields = steps[i].__dict__.copy()  # Step._copy_with inline (some thirty steps a calibration)
+        fields["value"] = v
+        steps[i] = step = new(Step)
+        set_(step, "__dict__", fields)
     derived = derived_copy(model, tuple(steps), shared)
     values = model.values.copy()
     values[mask] = x
@@ -235,8 +250,28 @@ def with_free_copy(model: Any, at: list[int], free: bool, shared: tuple[str, ...
     for i in at:
         steps[i] = steps[i]._with_free(free)
     derived = derived_copy(model, tuple(steps), shared)
-    mask = model.free_mask.copy()
-    mask[at] = free
-    derived.__dict__["free_mask"] = read_only(mask)
-    derived.__dict__["free_names"] = tuple(itertools.compress(model.names, mask.tolist()))
+    derived.__dict__["free_mask"], derived.__dict__["free_names"] = _flags(model, at, free)
     return derived
+
+
+# with_free_copy's flags by (the model's mask, the steps changed, free): the measurement chains
+# of one robot share their template's mask and names, and every calibration of it fixes the
+# same steps; the entry keeps the mask and the names it was worked out from (compared by
+# identity, so an id reused after they are freed never matches)
+_FLAGS: dict[tuple[int, frozenset[int], bool], tuple[NDArray, tuple, NDArray, tuple[str, ...]]] = {}
+
+
+def _flags(model: Any, at: list[int], free: bool) -> tuple[NDArray[np.bool_], tuple[str, ...]]:
+    """``model``'s free mask (read-only) and free names with the steps ``at`` freed or fixed."""
+    before, names = model.free_mask, model.names
+    key = (id(before), frozenset(at), free)
+    hit = _FLAGS.get(key)
+    if hit is not None and hit[0] is before and hit[1] is names:
+        return hit[2], hit[3]
+    mask = before.copy()
+    mask[at] = free
+    flags = read_only(mask), tuple(itertools.compress(names, mask.tolist()))
+    if len(_FLAGS) >= 64:
+        _FLAGS.clear()
+    _FLAGS[key] = (before, names, *flags)
+    return flags
