@@ -68,7 +68,7 @@ def _outliers(errors: Array, median_error: float, noise: float | None, factor: f
     limit = factor * median_error
     if noise is not None:  # the 3D noise: √ of the mean of Σσ² over the poses
         limit = max(limit, factor * math.sqrt(noise / len(errors)))
-    return np.flatnonzero(errors > limit).tolist()
+    return (errors > limit).nonzero()[0].tolist()  # errors: 1-D (flatnonzero without its ravel)
 
 
 def _distance_objective(problem: Problem, x0: Array, x: Array) -> dict[str, Any]:

@@ -65,7 +65,7 @@ from robocal.model.chain import Model
 from robocal.model.chain_plan import derived_copy
 from robocal.model.joints import effect_of
 from robocal.model.rank import Dropped, IdentifiableSubset
-from robocal.model.steps import Role, Step
+from robocal.model.steps import Step
 
 __all__ = ["LEVELS", "calibrate_physics", "parse_level", "without_measured_tool"]
 
@@ -287,11 +287,12 @@ def _calibrated_models(run: Run, start: Start, fit: Fit) -> tuple[Model, Model, 
     problem, x = fit.selection.problem, fit.x
     chain, given = problem.chain, run.given_model
     calibrated_chain = chain.with_free_values(x[: len(x) - problem.n_effects])
-    steps = chain.steps  # the device frame's steps come first (0, 6 or 12 of them)
-    n_frame = next((i for i, s in enumerate(steps) if s.role is not Role.DEVICE), len(steps))
+    # the device frame's steps come first (0, 6 or 12 of them), then the robot's (the given
+    # model's names: level 1 fixes some of them) and the tool's
+    n_frame = chain._index[given.steps[0].name]
     plan = chain._plan
     T_device_base = kernels.leading_frame(calibrated_chain.values, plan.step_axis, plan.step_rot, n_frame)
-    robot_steps = _with_given_free_flags(calibrated_chain.steps[n_frame:], given.steps)
+    robot_steps = _with_given_free_flags(calibrated_chain, n_frame, given)
     # the given robot's checked steps with checked values, and the measured tool's
     effects = () if run.plan.mode == "none" else given.joint_effects
     notes = (given.notes + " calibrated").strip()
@@ -308,21 +309,27 @@ def _calibrated_models(run: Run, start: Start, fit: Fit) -> tuple[Model, Model, 
     return calibrated_chain, calibrated, T_device_base
 
 
-def _with_given_free_flags(chain_steps: tuple[Step, ...], given: tuple[Step, ...]) -> tuple[Step, ...]:
-    """The calibrated chain's robot and tool steps (``given``'s steps, in order, then the
-    tool's) with ``given``'s free flags and the tool's steps free: a step the fit kept at
-    its start value is ``given``'s own (no copy), a fitted one whose flag differs a copy."""
-    robot = [
-        c if c.free == g.free else g if c.value == g.value else c._with_free(g.free)
-        for c, g in zip(chain_steps, given, strict=False)
-    ]
-    tool = [c if c.free else c._with_free(True) for c in chain_steps[len(given) :]]
-    return tuple(robot + tool)
+def _with_given_free_flags(chain: Model, n_frame: int, given: Model) -> tuple[Step, ...]:
+    """The calibrated ``chain``'s robot and tool steps (from ``n_frame``: ``given``'s steps,
+    in order, then the tool's) with ``given``'s free flags and the tool's steps free: a step
+    the fit kept at its start value is ``given``'s own (no copy), a fitted one whose flag
+    differs a copy.  Only the steps whose flags differ are looked at (by the free masks)."""
+    steps = list(chain.steps[n_frame:])
+    n = len(given.steps)
+    differ = chain.free_mask[n_frame : n_frame + n] != given.free_mask
+    for i in differ.nonzero()[0].tolist():
+        c, g = steps[i], given.steps[i]
+        steps[i] = g if c.value == g.value else c._with_free(g.free)
+    for i in range(n, len(steps)):
+        if not steps[i].free:
+            steps[i] = steps[i]._with_free(True)
+    return tuple(steps)
 
 
 def _mean_square(r: Array) -> float:
     """The mean squared position error of residuals ``(n, rows)`` (m²)."""
-    p = np.ascontiguousarray(r[:, :3]).reshape(-1)
+    # position rows only: all of them (a view, the same order) or a contiguous copy
+    p = r.reshape(-1) if r.shape[1] == 3 else np.ascontiguousarray(r[:, :3]).reshape(-1)
     return float(p @ p) / len(r)
 
 
