@@ -277,3 +277,23 @@ def test_derived_copy_shares_only_what_is_asked(ur10):
     assert copy.notes == "changed" and copy.name == model.name and copy.steps is model.steps
     assert "names" in copy.__dict__ and "values" not in copy.__dict__ and "free_names" not in copy.__dict__
     assert copy == dataclasses.replace(model, notes="changed")
+
+
+@pytest.mark.parametrize("frame", ["fit", "fixed"])
+def test_calibrated_robot_flags_with_fixed_steps_and_any_device_frame(ur10, frame):
+    """The robot's steps are found in the chain by the given model's first name, whatever
+    the device frame adds before them (12 steps fitted, none for a fixed identity frame);
+    steps the user fixed stay fixed, the others keep their flags, the tool's are free."""
+    model, data = ur10
+    given = model.fixed(["a2", "d4", "alpha3"])
+    if frame == "fixed":  # the data in the robot's base frame: no device frame steps
+        data = dataclasses.replace(data, position=rc.calibrate(model, data).robot.fk(data.q)[:, :3, 3])
+    result = rc.calibrate(given, data, frame=frame)
+    n_device = sum(s.role.value == "device" for s in result.measurement_chain.steps)
+    assert n_device == (12 if frame == "fit" else 0)
+    robot = result.model.steps[: len(given.steps)]
+    assert [s.name for s in robot] == list(given.names)
+    assert [s.free for s in robot] == [s.free for s in given.steps]
+    assert all(s.free for s in result.model.steps[len(given.steps) :])
+    for name in ("a2", "d4", "alpha3"):
+        assert result.model.step(name) == given.step(name)  # not estimated: as given
