@@ -158,3 +158,24 @@ def test_measurement_chain_follows_the_robot_by_value():
     a = measurement_chain(base, eye, tool, "position", False)
     b = measurement_chain(twin, eye, tool, "position", False)
     assert a == b
+
+
+def test_no_cache_is_keyed_by_an_object_identity():
+    """Issue 32: work caches live in objects the caller owns (``Model.data()``), not in
+    module-level tables keyed by ``id()`` (an id is reused once its object is freed, and
+    such a table keeps model parts alive). A key built from ``id(...)`` is a regression."""
+    import re
+    from pathlib import Path
+
+    import robocal
+
+    # a key made of id(...), or a module-level table (UPPER_CASE) indexed or read by one
+    keyed = re.compile(r"(key\s*=\s*\(?\s*id\(|\b[A-Z_]+\[\s*\(?id\(|\b[A-Z_]+\.get\(\s*\(?id\()")
+    src = Path(robocal.__file__).parent
+    found = [
+        f"{path.relative_to(src)}:{n}"
+        for path in sorted(src.rglob("*.py"))
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if keyed.search(line)
+    ]
+    assert not found, f"caches keyed by id(): {found}"

@@ -254,24 +254,8 @@ def with_free_copy(model: Any, at: list[int], free: bool, shared: tuple[str, ...
     return derived
 
 
-# with_free_copy's flags by (the model's mask, the steps changed, free): the measurement chains
-# of one robot share their template's mask and names, and every calibration of it fixes the
-# same steps; the entry keeps the mask and the names it was worked out from (compared by
-# identity, so an id reused after they are freed never matches)
-_FLAGS: dict[tuple[int, frozenset[int], bool], tuple[NDArray, tuple, NDArray, tuple[str, ...]]] = {}
-
-
 def _flags(model: Any, at: list[int], free: bool) -> tuple[NDArray[np.bool_], tuple[str, ...]]:
     """``model``'s free mask (read-only) and free names with the steps ``at`` freed or fixed."""
-    before, names = model.free_mask, model.names
-    key = (id(before), frozenset(at), free)
-    hit = _FLAGS.get(key)
-    if hit is not None and hit[0] is before and hit[1] is names:
-        return hit[2], hit[3]
-    mask = before.copy()
+    mask = model.free_mask.copy()
     mask[at] = free
-    flags = read_only(mask), tuple(itertools.compress(names, mask.tolist()))
-    if len(_FLAGS) >= 64:
-        _FLAGS.clear()
-    _FLAGS[key] = (before, names, *flags)
-    return flags
+    return read_only(mask), tuple(itertools.compress(model.names, mask.tolist()))

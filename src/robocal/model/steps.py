@@ -20,8 +20,6 @@ __all__ = ["Body", "Joint", "JointEffects", "JointType", "Role", "Step", "check_
 JointType = Literal["revolute", "prismatic"]
 # bound once: a calibration derives some fifty steps (Step._copy_with)
 _new, _set = object.__new__, object.__setattr__
-# Step._with_free's copies by (the step's id, free), with the step itself
-_FLAGGED: dict[tuple[int, bool], tuple[Step, Step]] = {}
 
 
 def _check_name(kind: str, name: str) -> None:
@@ -134,21 +132,8 @@ class Step:
         return self._copy_with("value", value)
 
     def _with_free(self, free: bool) -> Step:
-        """This step freed or fixed (a checked copy, as :meth:`_with_value`; the same copy
-        of the same step each time: steps are immutable, and every calibration of a robot
-        fixes the same steps of its chain)."""
-        free = bool(free)
-        if self.free == free:
-            return self._copy_with("free", free)
-        key = (id(self), free)
-        hit = _FLAGGED.get(key)
-        if hit is not None and hit[0] is self:
-            return hit[1]
-        step = self._copy_with("free", free)
-        if len(_FLAGGED) >= 256:
-            _FLAGGED.clear()
-        _FLAGGED[key] = (self, step)  # the step kept: its id is not reused while cached
-        return step
+        """This step freed or fixed (a checked copy, as :meth:`_with_value`)."""
+        return self._copy_with("free", bool(free))
 
     def _copy_with(self, field_name: str, value: object) -> Step:
         fields = self.__dict__.copy()
