@@ -130,23 +130,7 @@ def test_the_fused_fit_returns_its_last_evaluation_weighted_and_its_covariance(m
     # and hands the result those of the last accepted evaluation (not weighted a second
     # time): they must be its residuals and Jacobian weighted, and the covariance σ̂²(JᵀJ)⁻¹
     # of that Jacobian
-    model = rc.robot("ur10")
-    device = LaserTracker(p_tool_target=np.array([0.05, 0.0, 0.109]), sigma=sigma or 20e-6)
-    robot = VirtualRobot(model, draw_true_model(model, seed=3), device)
-    data = simulate(robot, random_poses(model, 40, seed=4), seed=5)
-    if sigma is None:
-        data = dataclasses.replace(data, sigma=None)  # no stated noise: the variance estimated
-    seen = []
-    original = fused_kernels.fit
-
-    def spy(*args):
-        seen.append((args, original(*args)))
-        return seen[-1][1]
-
-    monkeypatch.setattr(fused_kernels, "fit", spy)
-    result = rc.calibrate(model, data)
-    assert len(seen) == 1
-    (data_tuple, *_), out = seen[0]
+    data, result, ((data_tuple, *_), out) = _spied_fit(monkeypatch, stated_noise=sigma is not None)
     weights = data_tuple[2]
     T, r, J, rw, Jw = out[12]
     np.testing.assert_array_equal(rw, r * weights)
@@ -157,12 +141,15 @@ def test_the_fused_fit_returns_its_last_evaluation_weighted_and_its_covariance(m
     np.testing.assert_allclose(T[:, :3, 3] - data.position, r.reshape(-1, 3), rtol=0, atol=1e-15)
 
 
-def _spied_fit(monkeypatch, n_poses=40):
-    """The arguments and result of the one fused fit of a simulated UR10 calibration."""
+def _spied_fit(monkeypatch, n_poses=40, stated_noise=True):
+    """The data, the result, and the arguments and result of the one fused fit of a
+    simulated UR10 calibration (``stated_noise`` False: the variance estimated)."""
     model = rc.robot("ur10")
     device = LaserTracker(p_tool_target=np.array([0.05, 0.0, 0.109]), sigma=20e-6)
     robot = VirtualRobot(model, draw_true_model(model, seed=3), device)
     data = simulate(robot, random_poses(model, n_poses, seed=4), seed=5)
+    if not stated_noise:
+        data = dataclasses.replace(data, sigma=None)
     seen = []
     original = fused_kernels.fit
 
@@ -171,15 +158,15 @@ def _spied_fit(monkeypatch, n_poses=40):
         return seen[-1][1]
 
     monkeypatch.setattr(fused_kernels, "fit", spy)
-    rc.calibrate(model, data)
+    result = rc.calibrate(model, data)
     assert len(seen) == 1
-    return seen[0]
+    return data, result, seen[0]
 
 
 def test_a_fit_without_an_accepted_step_returns_the_start_weighted(monkeypatch):
     # no evaluation budget: no step is taken, and the result's evaluation is the first
     # pass's over the live columns, weighted as the accepted ones are
-    args, _ = _spied_fit(monkeypatch)
+    _, _, (args, _) = _spied_fit(monkeypatch)
     data, values0, free_steps, live, first = args[:5]
     out = fused_kernels.fit(data, values0, free_steps, live, first, args[5], args[6], 0, args[8])
     assert out[8] == 0 and len(out[11]) == 1  # not converged, the start's RMS only
@@ -197,7 +184,7 @@ def test_the_first_pass_unit_columns_are_the_scaled_weighted_columns(monkeypatch
     # the sums of squares run along the scaled columns written as rows in test order, and
     # the unit-norm columns overwrite those rows (moved up past zero columns: a length scale
     # of 0 makes every angle's column zero; a preference may leave columns out)
-    args, _ = _spied_fit(monkeypatch)
+    _, _, (args, _) = _spied_fit(monkeypatch)
     data, values0, free_steps = args[:3]
     step_rot = data[4]
     preference = np.arange(len(free_steps))[::-1].copy()
