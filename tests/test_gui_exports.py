@@ -26,6 +26,7 @@ import yaml
 import robocal as rc
 from robocal.apps.gui.export_page import saved_calibration
 from robocal.measure.constraints.data import write_constraints
+from robocal.measure.constraints.mounts import mounts_at_home
 from robocal.measure.constraints.sim import simulate_constraints, simulate_tracker_rows
 from robocal.measure.true_model import draw_true_model
 from tests.test_gui import _radio, browser, gui_url  # noqa: F401 (fixtures)
@@ -37,9 +38,10 @@ def tilt_files(tmp_path_factory):
     UR10 (±0.5 mm / ±0.05° off its nominal model), written as ``robocal simulate --kind tilt
     --also-tracker`` writes them."""
     where = tmp_path_factory.mktemp("tilt")
-    true = draw_true_model(rc.calibration_model("ur10"), length=5e-4, angle=np.radians(0.05), seed=4)
+    nominal = rc.calibration_model("ur10")
+    true = draw_true_model(nominal, length=5e-4, angle=np.radians(0.05), seed=4)
     tilt, _ = simulate_constraints(true, "tilt", 25, sigma=np.radians(0.001), seed=4)
-    write_constraints(tilt, where / "incl.csv")
+    write_constraints(mounts_at_home(tilt, nominal), where / "incl.csv")  # as simulate states them
     write_constraints(simulate_tracker_rows(true, 30, sigma=1e-5, seed=5), where / "track.csv")
     return where / "incl.csv", where / "track.csv"
 

@@ -2,7 +2,7 @@
 set-up (its Katana with Table 3.2's geometry and Table 5.2's joints, 30 configurations,
 level-at-home sensors, 0.001° counts) written as one tilt file and calibrated by the command
 line with clearance, backlash and compliance, through both chains: ``--chain catalog`` (the
-catalog chain, its base tilt free: :func:`robocal.cli.constraints.tilt_rows_only`) and the
+catalog chain, its base tilt free: :func:`robocal.workflow.constraints.tilt_rows_only`) and the
 default (the complete model with its link rotations freed:
 :func:`robocal.identify.constraints.tilt_rows.link_rotations_free`); the sensors are written
 as stated at home (``home_r*_deg``: level), the same in any chain."""
@@ -91,7 +91,7 @@ def test_each_chain_calibrates_its_chain_of_sensors_stated_at_home(thesis_run):
 def test_only_a_file_of_tilt_rows_alone_keeps_the_catalog_chain(thesis_file, tmp_path):
     """Tilt rows alone: the catalog chain (base tilt free); a tracker file beside them, or position columns in
     the file, need the complete position model (positions see lengths the chain must carry)."""
-    from robocal.cli.constraints import tilt_rows_only
+    from robocal.workflow.constraints import tilt_rows_only
 
     path = thesis_file
     assert tilt_rows_only([path]) and not tilt_rows_only([])

@@ -32,7 +32,6 @@ __all__ = [
     "simulate_constraint_command",
     "simulate_constraint_file",
     "tilt_effect_kinds",
-    "tilt_rows_only",
     "tracker_file",
     "validate_constraint_file",
 ]
@@ -72,26 +71,18 @@ def calibrate_constraint_command(
     freed when a file holds tilt rows (sensors read the angles a position model leaves to
     the tool: :func:`~robocal.identify.constraints.tilt_rows.link_rotations_free`; ``--chain
     catalog``: its published chain, for inclinometer files alone with its base tilt free:
-    :func:`tilt_rows_only`), a model file's chain as it is.  ``effects``
+    :func:`robocal.workflow.constraints.tilt_rows_only`), a model file's chain as it is.  ``effects``
     (``--effects``): the joint effects the tilt rows identify (:func:`tilt_effect_kinds`)."""
     kinds = tilt_effect_kinds(effects)
     if (out / RESULT_FILE).exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
-    from robocal.identify.constraints.tilt_rows import link_rotations_free, tilt_chain
-    from robocal.measure.constraints.data import has_tilt_rows
-    from robocal.model.complete import calibration_model
+    from robocal.workflow.constraints import constraint_model
 
     paths = data_path if isinstance(data_path, list) else [data_path]
-    frames = model if from_catalog else None  # the robot's own chain (its mount_r*_deg frames)
-    if chain == "catalog" and tilt_rows_only(paths):
-        model = tilt_chain(model)  # the catalog chain, its base tilt free (tilt_rows_only)
-    elif chain == "complete" or (chain is None and from_catalog):
-        try:
-            model = calibration_model(model, "position")
-        except ValueError as err:
-            raise fail(f"no complete model of {model.name}: {err}") from None
-        if any(has_tilt_rows(p) for p in paths):  # sensors read angles positions leave to the tool
-            model = link_rotations_free(model)
+    try:
+        model, frames = constraint_model(model, paths, from_catalog=from_catalog, chain=chain)
+    except ValueError as err:
+        raise fail(str(err)) from None
     levels = {None: None, "1": 1, "offsets": 1, "2": 2, "kinematic": 2}
     if level not in levels:
         raise fail(
@@ -100,26 +91,6 @@ def calibrate_constraint_command(
     calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
                               level=levels[level], noise=noise, length_unit=length_unit,
                               tilt_kinds=kinds, frames=frames)  # fmt: skip
-
-
-def tilt_rows_only(paths: list[Path]) -> bool:
-    """Whether every file of the fit holds inclinometer readings only: then ``--chain catalog``
-    calibrates the catalog chain with the base's tilt free
-    (:func:`robocal.identify.constraints.tilt_rows.tilt_chain`).  Not the default: a catalog
-    chain need not carry every tilt of a real robot's links (the UR10's DH chain has no
-    twist between its parallel joints; a tilt file of a true UR10 drawn around its complete
-    model is left at 0.03° there); the default's complete model with its link rotations
-    freed spans the catalog chain's tilt columns and the complete model's
-    (:func:`~robocal.identify.constraints.tilt_rows.link_rotations_free`).
-
-    The sensors are the same in every chain: a mount stated at home (``home_r*_deg``) is
-    resolved against the calibrated chain's nominal robot at home, and joint-frame angles
-    (``mount_r*_deg``, none: the joint frame) are the robot's own chain's
-    (:mod:`robocal.measure.constraints.mounts`), so the same tilt file fitted alone or with
-    a tracker file (the complete position model) describes the same sensors."""
-    from robocal.measure.constraints.data import tilt_only
-
-    return bool(paths) and all(tilt_only(p) for p in paths)
 
 
 def tilt_effect_kinds(effects: str | None) -> tuple[str, ...] | None:

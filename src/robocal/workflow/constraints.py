@@ -31,10 +31,12 @@ __all__ = [
     "ConstraintRequest",
     "ConstraintRun",
     "calibrate_constraint_files",
+    "constraint_model",
     "each_kind_lines",
     "parse_distances",
     "read_constraint_file",
     "read_mixed",
+    "tilt_rows_only",
 ]
 
 #: the constraint calibration's record beside model.yaml
@@ -114,6 +116,57 @@ class ConstraintRun:
     def summary_lines(self) -> list[str]:
         """The fit's summary (mm, deg)."""
         return self.result.summary_lines()
+
+
+def constraint_model(
+    robot: Model, paths: tuple[Path, ...] | list[Path], *, from_catalog: bool, chain: str | None = None
+) -> tuple[Model, Model | None]:
+    """The model a fit of the constraint files ``paths`` calibrates, and the chain their
+    joint-frame sensor mounts are stated in (``ConstraintRequest.frames``), as ``robocal
+    calibrate`` and the GUI choose them: a catalog robot's complete position model, its link
+    rotations freed when a file holds tilt rows (sensors read the angles a position model
+    leaves to the tool); ``chain="catalog"`` with inclinometer files alone: the published
+    chain with its base tilt free; a model file's chain (``from_catalog`` False) as it is.
+
+    Raises:
+        ValueError: the robot has no complete model (one line naming it).
+    """
+    from robocal.identify.constraints.tilt_rows import link_rotations_free, tilt_chain
+    from robocal.measure.constraints.data import has_tilt_rows
+    from robocal.model.complete import calibration_model
+
+    frames = robot if from_catalog else None  # the robot's own chain (its mount_r*_deg frames)
+    if chain == "catalog" and tilt_rows_only(paths):
+        return tilt_chain(robot), frames
+    if chain == "complete" or (chain is None and from_catalog):
+        try:
+            model = calibration_model(robot, "position")
+        except ValueError as err:
+            raise ValueError(f"no complete model of {robot.name}: {err}") from None
+        if any(has_tilt_rows(p) for p in paths):
+            model = link_rotations_free(model)
+        return model, frames
+    return robot, frames
+
+
+def tilt_rows_only(paths: tuple[Path, ...] | list[Path]) -> bool:
+    """Whether every file of the fit holds inclinometer readings only: then ``--chain catalog``
+    calibrates the catalog chain with the base's tilt free
+    (:func:`robocal.identify.constraints.tilt_rows.tilt_chain`).  Not the default: a catalog
+    chain need not carry every tilt of a real robot's links (the UR10's DH chain has no
+    twist between its parallel joints; a tilt file of a true UR10 drawn around its complete
+    model is left at 0.03° there); the default's complete model with its link rotations
+    freed spans the catalog chain's tilt columns and the complete model's
+    (:func:`~robocal.identify.constraints.tilt_rows.link_rotations_free`).
+
+    The sensors are the same in every chain: a mount stated at home (``home_r*_deg``) is
+    resolved against the calibrated chain's nominal robot at home, and joint-frame angles
+    (``mount_r*_deg``, none: the joint frame) are the robot's own chain's
+    (:mod:`robocal.measure.constraints.mounts`), so the same tilt file fitted alone or with
+    a tracker file (the complete position model) describes the same sensors."""
+    from robocal.measure.constraints.data import tilt_only
+
+    return bool(paths) and all(tilt_only(p) for p in paths)
 
 
 def parse_distances(items: list[str] | None) -> tuple[tuple[int, int, float], ...]:

@@ -427,9 +427,9 @@ def _start_run(page: _Page, session: str, *args: Any) -> tuple:
 def _start_constraint_run(page: _Page, session: str, path: Path, args: Sequence[Any]) -> tuple:
     """Queue a constraint file's run (the robot's complete position model for a catalog
     robot, the built model's chain as it is): ``(run_id, status)`` or ``(no_update, error)``."""
-    from robocal.identify.constraints.tilt_rows import link_rotations_free
-    from robocal.measure.constraints.data import has_tilt_rows
+    import robocal as rc
     from robocal.model.files import save_model
+    from robocal.workflow.constraints import constraint_model
 
     choice, built, *_ = args[8:]
     rows, level, added = args[19], args[20], args[21]
@@ -437,18 +437,21 @@ def _start_constraint_run(page: _Page, session: str, path: Path, args: Sequence[
         options = _reader_options(args[:8])
         if choice is None:
             raise ValueError("choose the robot (its model)")
-        model = page.model_for(choice, built, "position")
         distances = constraint_view.distances_of(rows)
         more = mixed_files.more_paths(added, page.data_file)
-        if choice != "@built" and any(has_tilt_rows(p) for p in (path, *more)):
-            model = link_rotations_free(model)  # as the CLI: sensors read angles left to the tool
+        catalog = choice != "@built"  # the CLI's choice of model and of the mounts' frames
+        robot = rc.robot(choice) if catalog else page.model_for(choice, built, "position")
+        model, frames = constraint_model(robot, (path, *more), from_catalog=catalog)
     except ValueError as err:
         message = gui_words(public_text(str(err), page.workdir))
         return no_update, html.Span(message, className="error", id="cal-error")
     run_id = uuid.uuid4().hex[:12]
     (page.workdir / "runs").mkdir(exist_ok=True)
     model_file = save_model(model, page.workdir / "runs" / f"{run_id}.model.yaml")
-    kind = ConstraintOptions(distances, int(level or 2), more)
+    frames_file = (
+        None if frames is None else save_model(frames, page.workdir / "runs" / f"{run_id}.frames.yaml")
+    )
+    kind = ConstraintOptions(distances, int(level or 2), more, frames_file)
     job = CalibrationJob(data=path, reader=options, model_file=model_file, out=page.workdir / "runs" / run_id,
                          constraints=kind)  # fmt: skip
     page.runner.start(job, run_id, session, model.name)

@@ -22,11 +22,15 @@ FIGURES_FILE = "constraint_figures.json"
 class ConstraintOptions:
     """A constraint file's options: known distances ``(a, b, metres)`` between its fixed
     points, the level (1 joint offsets, 2 kinematic) and the further files of the same fit
-    (tracker or constraint files, after the job's own: ``robocal calibrate --data a --data b``)."""
+    (tracker or constraint files, after the job's own: ``robocal calibrate --data a --data b``)
+    and the chain their sensor mounts are stated in."""
 
     distances: tuple[tuple[int, int, float], ...] = ()
     level: int = 2
     more_data: tuple[Path, ...] = ()
+    #: the robot's own chain, the frames of the files' joint-frame sensor mounts
+    #: (``ConstraintRequest.frames``; None: the calibrated model's)
+    frames_file: Path | None = None
 
 
 def run_constraint_job(job: Any, progress: Callable[[str, float], None]) -> None:
@@ -45,6 +49,7 @@ def run_constraint_job(job: Any, progress: Callable[[str, float], None]) -> None
         distances=options.distances, level=options.level,
         report=True, progress=progress,
         names=tuple(p.name for p in paths),  # the uploads' own names: no server path
+        frames=None if options.frames_file is None else rc.load_model(options.frames_file),
     )  # fmt: skip
     run = calibrate_constraint_files(request)
     atomic_write_text(job.out / FIGURES_FILE, json.dumps(figures_doc(run)))
