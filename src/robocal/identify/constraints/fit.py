@@ -25,13 +25,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.constraints.effect_groups import group_dropped, held_groups, poorly_separated
+from robocal.identify.constraints.figures import (
+    ConstraintFigures,
+    constraint_figures,
+    robot_and_tool,
+    start_planes,
+    tool_points,
+)
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
 from robocal.identify.constraints.noise import weigh_by_kind
+from robocal.identify.constraints.position_effects import position_effects, with_position_effects
 from robocal.identify.constraints.tilt_record import TiltCalibration, effect_summary_lines, tilt_estimates
 from robocal.identify.constraints.tilt_rows import (
     EFFECT_KINDS,
     mixed_effects_note,
-    tilt_figures,
     tilt_rows,
     tilt_terms,
     unclear_contact,
@@ -54,56 +61,15 @@ from robocal.model.joints import effect_of
 from robocal.model.rank import Dropped
 from robocal.model.steps import Role
 
-__all__ = ["ConstraintFigures", "ConstraintResult", "calibrate_constraints", "constraint_figures"]
+__all__ = [
+    "ConstraintFigures",
+    "ConstraintResult",
+    "calibrate_constraints",
+    "constraint_figures",
+    "tool_points",
+]
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class ConstraintFigures:
-    """What a model makes of constraint data (all in m).
-
-    Attributes:
-        point_spread: ``(K,)`` RMS distance of the tool points from their point's centroid.
-        point_distance_error: ``(k,)`` centroid distance minus the stated distance.
-        plane_rms: ``(P,)`` RMS distance of the tool points from their plane (the stated
-            one when known, else the best-fit plane).
-        pair_error: ``(m,)`` distance between the pair's tool points minus the stated length.
-        tilt_channels, tilt_rms: each inclinometer channel (``<joint>_<axis>``) and the RMS
-            of its readings' residual (rad).
-        tilt_basis: what predicted the readings (:func:`~robocal.identify.constraints.
-            tilt_rows.tilt_figures`: a calibration's joint effects and zeros, or the geometry
-            alone with each channel about its mean).
-    """
-
-    point_spread: Array
-    point_distance_error: Array
-    plane_rms: Array
-    pair_error: Array
-    tilt_channels: tuple[str, ...] = ()
-    tilt_rms: Array = field(default_factory=lambda: np.zeros(0))
-    tilt_basis: str = ""
-
-    def lines(self) -> list[str]:
-        """One line per figure (mm)."""
-        mm = 1e3
-        out = [f"point {k}: RMS spread {s * mm:.3f} mm" for k, s in enumerate(self.point_spread)]
-        out += [
-            f"known distance {k}: error {e * mm:+.3f} mm" for k, e in enumerate(self.point_distance_error)
-        ]
-        out += [f"plane {k}: RMS residual {s * mm:.3f} mm" for k, s in enumerate(self.plane_rms)]
-        if len(self.pair_error):
-            rms = math.sqrt(float(np.mean(self.pair_error**2)))
-            out.append(
-                f"distances: RMS error {rms * mm:.3f} mm, "
-                f"max |error| {np.abs(self.pair_error).max() * mm:.3f} mm"
-            )
-        out += [f"tilt figures: {self.tilt_basis}"] if len(self.tilt_channels) and self.tilt_basis else []
-        out += [
-            f"tilt {name}: RMS residual {math.degrees(r):.5f} deg"
-            for name, r in zip(self.tilt_channels, self.tilt_rms, strict=True)
-        ]
-        return out
 
 
 @dataclass(frozen=True)
@@ -211,33 +177,16 @@ def _start_frame(robot: Model, data: ConstraintSet, tool: Array | None) -> tuple
     return T_frame[0], True
 
 
-def _start_planes(p: Array, data: ConstraintSet) -> Array:
-    """``(P, 4)`` each plane's stated normal and offset, or a least-squares fit to ``p``."""
-    planes = np.zeros((data.n_planes, 4))
-    for k in range(data.n_planes):
-        if not data.unknown_plane(k):
-            stated = data.planes_stated[k]
-            n = stated[:3] / np.linalg.norm(stated[:3])
-            planes[k] = [*n, stated[3]]
-            continue
-        on = p[data.plane == k]
-        if len(on) < 3:
-            raise ValueError(f"plane {k} has {len(on)} poses; an unknown plane needs at least 3")
-        centre = on.mean(axis=0)
-        n = np.linalg.svd(on - centre)[2][-1]
-        planes[k] = [*n, n @ centre]
-    return planes
-
-
 def build_constraint_problem(
     robot: Model,
     data: ConstraintSet,
     tool: Array | None = None,
     prior: NominalPrior | None = None,
-    tilt_kinds: tuple[str, ...] = EFFECT_KINDS, frames: Model | None = None,
+    tilt_kinds: tuple[str, ...] = EFFECT_KINDS, frames: Model | None = None, effects: tuple[str, ...] = (),
 ) -> ConstraintProblem:  # fmt: skip
     """The problem at its start values; ``tool``: a tool point (m) on the robot's end fitted
-    with it (None: the robot's end); ``prior``, ``frames``: as :func:`calibrate_constraints`'."""
+    with it (None: the robot's end); ``prior``, ``frames``, ``effects``: as
+    :func:`calibrate_constraints`'."""
     if data.q.shape[1] != robot.dof:
         raise ValueError(
             f"the data has {data.q.shape[1]} joint columns but model {robot.name!r} has {robot.dof} joints"
@@ -251,21 +200,27 @@ def build_constraint_problem(
     chain = measurement_chain(robot, T_frame, T_tool, "position", fit_frame)  # T_tool None: no tool
     p = chain.fk(data.q)[:, :3, 3]
     points = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
-    planes = _start_planes(p, data)
+    planes = start_planes(p, data)
     unknown = [k for k in range(data.n_planes) if data.unknown_plane(k)]
     plane_start = np.array([[0.0, 0.0, planes[k, 3]] for k in unknown]).reshape(-1)
     full0 = np.concatenate([chain.free_values, points.reshape(-1), plane_start])
     size = float(np.median(robot_sizes(robot.fk(data.q)[None])))
     weights = None if prior is None else prior.weights(chain, robot.names)
+    # the joints' deflections on the position rows; loads about the robot's own joint
+    # origins, as constraint_figures predicts them from the calibrated model
+    position = position_effects(robot, chain, data.q, effects) if effects else None
+    n_position = 0 if position is None else len(position.names)
     if not data.tilted.any():
-        return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights)
+        full0 = np.concatenate([full0, np.zeros(n_position)])
+        return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, None, position)
     terms = tilt_terms(robot, chain, data, tilt_kinds, frames)
     empty = np.zeros(len(terms.zeros))
     values = dict(zip(chain.free_names, chain.free_values.tolist(), strict=True))
     r = tilt_rows(terms, data, values, empty, np.zeros(len(terms.effects)))[0]
     zeros = np.array([-r[terms.channel == k].mean() for k in range(len(empty))])  # each channel's mean
-    full0 = np.concatenate([full0, zeros, np.zeros(len(terms.effects))])
-    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, terms)
+    shared = 0 if position is None else sum(n in terms.effects for n in position.names)
+    full0 = np.concatenate([full0, zeros, np.zeros(len(terms.effects) + n_position - shared)])
+    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, terms, position)
 
 
 # ---------------------------------------------------------------------- the fit
@@ -318,7 +273,7 @@ def identifiable(problem: ConstraintProblem):
     return identifiable_set(J, problem.free_names, roles=problem.roles)
 
 
-def calibrate_constraints(
+def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one constraint fit
     model: Model,
     data: ConstraintSet,
     *,
@@ -329,6 +284,7 @@ def calibrate_constraints(
     known_noise: bool = False,
     prior: NominalPrior | None = None,
     tilt_kinds: tuple[str, ...] = EFFECT_KINDS, frames: Model | None = None,
+    effects: tuple[str, ...] = (),
 ) -> ConstraintResult:  # fmt: skip
     """Identify the robot (and the points, planes, device frame) from constraint data.
 
@@ -351,13 +307,16 @@ def calibrate_constraints(
             squares.
         tilt_kinds: the joint effects the tilt rows identify (``ALL_KINDS`` adds clearance).
         frames: the robot's own chain, the effects' moment points (tilt_rows.loads_about).
+        effects: the joint effects every position row carries (``("compliance",)``,
+            ``"radial"``: :mod:`robocal.identify.constraints.position_effects`); needs the
+            model's link masses.  The calibrated model carries them in ``joint_effects``.
     """
     if level == 1:
         model = model.fixed([s.name for s in model.steps if s.joint is None])
     if fixed:
         model = model.fixed(fixed)
     data, notes = _clear_rows(model, data)
-    problem = build_constraint_problem(model, data, tool, prior, tilt_kinds, frames)
+    problem = build_constraint_problem(model, data, tool, prior, tilt_kinds, frames, effects)
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
@@ -373,8 +332,8 @@ def calibrate_constraints(
         problem, x, cov, refit = _prune(problem, x, cov, pruning, dropped, known_noise)
         fit = refit or fit
     result = _result(problem, model, x, cov, fit, dropped, selection.kept, tool is not None)
-    effects = tuple(n for n in result.names if effect_of(n) is not None)
-    notes += [note] if (note := mixed_effects_note(data, effects)) else []
+    found = tuple(n for n in result.names if effect_of(n) is not None and n not in problem.position_names)
+    notes += [note] if (note := mixed_effects_note(data, found)) else []
     return dataclasses.replace(result, prior=prior, notes=tuple(notes))
 
 
@@ -402,10 +361,11 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
     full = problem.full(x)
     calibrated_chain = chain.with_free_values(full[: problem.layout.n_chain])
     values = dict(zip(calibrated_chain.names, calibrated_chain.values.tolist(), strict=True))
-    robot = model.with_values({n: values[n] for n in model.names})
+    deflect = {n: float(full[problem.all_names.index(n)]) for n in problem.position_names}
+    robot = with_position_effects(model.with_values({n: values[n] for n in model.names}), deflect)
     tool = np.array([values[f"tcp_{c}"] for c in "xyz"]) if has_tool else None
     T_frame = chain.with_free_values(full[: problem.layout.n_chain]).fk(np.zeros((1, model.dof)))[0]
-    T_frame = T_frame @ np.linalg.inv(_robot_and_tool(robot, tool).fk(np.zeros((1, model.dof)))[0])
+    T_frame = T_frame @ np.linalg.inv(robot_and_tool(robot, tool).fk(np.zeros((1, model.dof)))[0])
     r0, r = problem.measurement_residual(problem.x0), problem.measurement_residual(x)
     tilt_only = problem.data.kinds == ("tilt",)  # the figures in rad, not m
     sigma = problem.data.tilt_sigma if tilt_only else problem.data.sigma
@@ -435,57 +395,6 @@ def _kind_sigma(data: ConstraintSet) -> tuple[tuple[str, float], ...]:
     groups += [("tracker", data.position_sigma)] if "tracker" in data.kinds else []
     groups += [("tilt", float(data.tilt_sigma))] if "tilt" in data.kinds else []
     return tuple(groups) if len(groups) > 1 else ()
-
-
-def _robot_and_tool(robot: Model, tool: Array | None) -> Model:
-    if tool is None:
-        return robot
-    T = np.eye(4)
-    T[:3, 3] = tool
-    return measurement_chain(robot, np.eye(4), T, "position", False)
-
-
-# ---------------------------------------------------------------------- figures
-def tool_points(
-    robot: Model, q: Array, tool: Array | None = None, T_device_base: Array | None = None
-) -> Array:
-    """``(n, 3)`` the tool point (m) in the device frame (the base frame by default)."""
-    p = _robot_and_tool(robot, tool).fk(q)[:, :3, 3]
-    if T_device_base is not None:
-        p = p @ T_device_base[:3, :3].T + T_device_base[:3, 3]
-    return p
-
-
-def constraint_figures(robot: Model, data: ConstraintSet, tool: Array | None = None,
-                       T_device_base: Array | None = None, tilt: TiltCalibration | None = None,
-                       ) -> ConstraintFigures:  # fmt: skip
-    """What ``robot`` makes of ``data`` (:class:`ConstraintFigures`): needs no fit, so it
-    judges held-out data, a nominal model and a calibrated one alike; ``tilt``: the joint
-    effects and channel zeros a calibration identified, which predict the tilt rows."""
-    p = tool_points(robot, data.q, tool, T_device_base)
-    centroids = np.array([p[data.point == k].mean(axis=0) for k in range(data.n_points)]).reshape(-1, 3)
-    spread = np.array(
-        [
-            math.sqrt(float(np.mean(np.sum((p[data.point == k] - centroids[k]) ** 2, axis=1))))
-            for k in range(data.n_points)
-        ]
-    )
-    a, b = data.point_pairs.T if len(data.point_pairs) else (np.zeros(0, int), np.zeros(0, int))
-    point_error = (
-        np.linalg.norm(centroids[a] - centroids[b], axis=1) - data.point_length if len(a) else np.zeros(0)
-    )
-    planes = _start_planes(p, data) if data.n_planes else np.zeros((0, 4))
-    plane_rms = np.array(
-        [
-            math.sqrt(float(np.mean((p[data.plane == k] @ planes[k, :3] - planes[k, 3]) ** 2)))
-            for k in range(data.n_planes)
-        ]
-    )
-    pair_error = np.zeros(0)
-    if len(data.pairs):
-        pair_error = np.linalg.norm(p[data.pairs[:, 0]] - p[data.pairs[:, 1]], axis=1) - data.pair_length
-    channels, tilt_rms, basis = tilt_figures(robot, data, tilt)
-    return ConstraintFigures(spread, point_error, plane_rms, pair_error, channels, tilt_rms, basis)
 
 
 def kind_identifiable(

@@ -44,6 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.identify.constraints.position_effects import PositionEffects
+from robocal.identify.constraints.prior import NominalPrior
 from robocal.identify.constraints.tilt_rows import TiltTerms, tilt_rows
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.chain import Model
@@ -53,44 +55,6 @@ __all__ = ["ConstraintProblem", "NominalPrior", "plane_normal"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.intp]
-
-
-@dataclass(frozen=True)
-class NominalPrior:
-    """A Gaussian prior of the robot's geometry around its nominal values (a MAP fit).
-
-    Few configurations in one region of joint space determine some parameter
-    combinations poorly; the prior holds those near the nominal geometry instead of
-    letting the noise set them (ridge regression in the measurement's units).  The
-    measured tool (``tool_*``, ``tcp_*``: a ball whose offset is nominal only) and the
-    device frame get none.
-
-    Attributes:
-        length_std: σ of each length parameter about its nominal value (m).
-        angle_std: σ of each angle parameter about its nominal value (rad).
-    """
-
-    length_std: float = 0.3e-3
-    angle_std: float = 5e-3
-
-    def __post_init__(self) -> None:
-        if not (self.length_std > 0 and self.angle_std > 0):
-            raise ValueError("a prior's length_std and angle_std must be > 0 (m, rad)")
-
-    def weights(self, chain: Model, robot_names: tuple[str, ...]) -> Array:
-        """``(p_chain,)`` 1/σ per free chain parameter (1/m, 1/rad); 0 where no prior."""
-        out = []
-        for step in (s for s in chain.steps if s.free):
-            robot = step.name in robot_names and not step.name.startswith(("tool_", "tcp_"))
-            out.append(0.0 if not robot else 1.0 / (self.angle_std if step.is_rotation else self.length_std))
-        return np.array(out, dtype=float)
-
-    def line(self) -> str:
-        """How the summary names it (mm, mrad)."""
-        return (
-            f"prior toward the nominal geometry: lengths sigma {self.length_std * 1e3:g} mm, "
-            f"angles sigma {self.angle_std * 1e3:g} mrad"
-        )
 
 
 def plane_normal(n0: Array, tangents: Array, ab: Array) -> tuple[Array, Array]:
@@ -120,6 +84,7 @@ class _Layout:
     planes: tuple[int, ...]  # the unknown planes' indices
     n_zeros: int = 0  # the inclinometer channels' zeros, then the joint effects
     n_effects: int = 0
+    n_position: int = 0  # the position rows' joint effects not shared with the tilt rows
 
     @property
     def n_scene(self) -> int:
@@ -127,7 +92,7 @@ class _Layout:
 
     @property
     def size(self) -> int:
-        return self.n_chain + self.n_scene + self.n_effects
+        return self.n_chain + self.n_scene + self.n_effects + self.n_position
 
     @property
     def zeros(self) -> slice:
@@ -136,7 +101,7 @@ class _Layout:
 
     @property
     def effects(self) -> slice:
-        return slice(self.size - self.n_effects, self.size)
+        return slice(self.size - self.n_position - self.n_effects, self.size - self.n_position)
 
     def point(self, k: int) -> int:
         return self.n_chain + 3 * k
@@ -158,14 +123,18 @@ class ConstraintProblem:
     n_effects = 0
 
     def __init__(self, chain: Model, data: ConstraintSet, full0: Array, planes0: Array, length_scale: float,
-                 prior_weight: Array | None = None, tilt: TiltTerms | None = None):  # fmt: skip
+                 prior_weight: Array | None = None, tilt: TiltTerms | None = None,
+                 position: PositionEffects | None = None):  # fmt: skip
         self.chain, self.data, self.length_scale = chain, data, float(length_scale)
         self.tilt = tilt  # the inclinometer rows' unknowns, None without tilt rows
         # (p_chain,) 1/σ of a prior about full0's chain values (NominalPrior.weights), or None
         self.prior_weight = None if prior_weight is None else np.asarray(prior_weight, dtype=float)
         planes = tuple(k for k in range(data.n_planes) if data.unknown_plane(k))
         n_zeros, n_effects = (0, 0) if tilt is None else (len(tilt.zeros), len(tilt.effects))
-        self.layout = _Layout(len(chain.free_names), data.n_points, planes, n_zeros, n_effects)
+        self.position = position  # joint effects on the position rows (position_effects), or None
+        shared = () if tilt is None else tilt.effects  # one unknown per effect for every row kind
+        n_position = 0 if position is None else sum(n not in shared for n in position.names)
+        self.layout = _Layout(len(chain.free_names), data.n_points, planes, n_zeros, n_effects, n_position)
         self.full0 = np.asarray(full0, dtype=float)
         self.planes0 = np.asarray(planes0, dtype=float)  # (P, 4): start / known normal, offset
         self.tangents = (
@@ -182,7 +151,20 @@ class ConstraintProblem:
         names += [f"plane{k}_{c}" for k in self.layout.planes for c in ("a", "b", "d")]
         if self.tilt is not None:
             names += [*self.tilt.zeros, *self.tilt.effects]
+        if self.position is not None:
+            names += [n for n in self.position.names if n not in names]
         return tuple(names)
+
+    @property
+    def position_names(self) -> tuple[str, ...]:
+        """The joint effects the position rows carry (empty without)."""
+        return () if self.position is None else self.position.names
+
+    @functools.cached_property
+    def _position_columns(self) -> IntArray:
+        """Where the position rows' joint effects sit in ``full``."""
+        names = () if self.position is None else self.position.names
+        return np.array([self.all_names.index(n) for n in names], dtype=np.intp)
 
     @property
     def free_names(self) -> tuple[str, ...]:
@@ -198,6 +180,7 @@ class ConstraintProblem:
         """The chain's roles, the scene's unknowns as the device's (kept first by the rank
         test), the joint effects as the robot's (last)."""
         effects = {} if self.tilt is None else dict.fromkeys(self.tilt.effects, Role.KINEMATIC)
+        effects |= {} if self.position is None else dict.fromkeys(self.position.names, Role.KINEMATIC)
         return {**self.chain.roles, **{n: Role.DEVICE for n in self.scene_names}, **effects}
 
     @property
@@ -225,7 +208,12 @@ class ConstraintProblem:
             for n in self.scene_names
         ]
         effects = np.zeros(0) if self.tilt is None else self.length_scale * self.tilt.effect_scale
-        return np.concatenate([np.where(rot, self.length_scale, 1.0), scene, effects])
+        out = np.concatenate(
+            [np.where(rot, self.length_scale, 1.0), scene, effects, np.zeros(self.layout.n_position)]
+        )
+        if self.position is not None:  # the largest tool displacement per unit (m)
+            out[self._position_columns] = self.position.scale
+        return out
 
     @property
     def free_scale(self) -> Array:
@@ -255,7 +243,10 @@ class ConstraintProblem:
             values = self.chain.values.copy()
             values[self.chain.free_mask] = full[: self.layout.n_chain]
             T, J = self.chain.evaluate(self.data.q, values, rows="position", jacobian=True)[:2]
-            self._cache[key] = (T[:, :3, 3], J)
+            p = T[:, :3, 3]
+            if self.position is not None:  # the joints' deflections under the held loads
+                p = p + self.position.displacement(full[self._position_columns])
+            self._cache[key] = (p, J)
         return self._cache[key]
 
     def consistent_jacobian(self, x: Array) -> Array:
@@ -328,6 +319,8 @@ class ConstraintProblem:
         d, lay = self.data, self.layout
         Jp = np.zeros((d.n, 3, lay.size))
         Jp[:, :, : lay.n_chain] = Jc.reshape(d.n, 3, -1)
+        if self.position is not None:
+            Jp[:, :, self._position_columns] += self.position.patterns
         r_parts, J_parts = [], []
         on_point = np.flatnonzero(d.point >= 0)
         if len(on_point):

@@ -1,0 +1,98 @@
+"""Joint deflections on the position rows of a constraint fit (issue 33).
+
+A joint that yields to its load turns the links beyond it: under gravity an elastic joint
+turns by ``δθ = c ηz`` about its axis (``compliance_<joint>``, rad/(N·m)) and, with radial
+elasticity, tilts by ``c_r ηx``, ``c_r ηy`` about the two other axes
+(``radial_compliance_<joint>``; :mod:`robocal.model.joints`, seed 003 eqs. 5.15-5.19).
+The tool point moves by ``P · B · c`` with ``P = ∂p/∂(δα, δβ, δθ)`` the chain's
+perturbation Jacobian and ``B`` the effect's pattern (:func:`robocal.model.joints.effect_basis`)
+under the static gravity loads of the robot's link masses (:class:`robocal.model.steps.Body`).
+Both are taken at the start geometry and held (the tilt rows do the same: a change of the
+geometry by 0.1° changes the loads by about 0.2 %), so each effect is one linear column
+of every position-like row: fixed points, planes, distances and tracker points alike.
+
+Without link masses there are no loads and no deflections to fit: a compliance model
+needs each link's mass and centre of mass (a model file's ``bodies``; for the Panda the
+published values of Gaz et al. 2019, RA-L 4(4), 4147-4154).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robocal.model.chain import Model
+
+__all__ = ["POSITION_EFFECT_KINDS", "PositionEffects", "position_effects", "with_position_effects"]
+
+Array = NDArray[np.float64]
+#: the joint effects a position row can carry (clearance and backlash act with a load's
+#: sign, a jump a hand-guided configuration can sit on either side of: not offered here)
+POSITION_EFFECT_KINDS = ("compliance", "radial")
+DISPLACEMENT_FLOOR = 1e-9  # m per unit: an effect column this small is none (the rank test drops it)
+
+
+@dataclass(frozen=True)
+class PositionEffects:
+    """The joint effects of the position rows and what each does to every tool point.
+
+    Attributes:
+        names: the effects' coefficient names (``compliance_<joint>``, SI units).
+        patterns: ``(n, 3, m)`` the tool point's displacement (m) per unit of each
+            coefficient at each row's configuration (zero rows for tilt rows).
+        scale: ``(m,)`` the largest displacement (m) per unit of each over the rows.
+    """
+
+    names: tuple[str, ...]
+    patterns: Array
+    scale: Array
+
+    def displacement(self, values: Array) -> Array:
+        """``(n, 3)`` the tool points' deflection (m) at coefficient ``values`` ``(m,)``."""
+        return self.patterns @ values
+
+
+def position_effects(robot: Model, chain: Model, q: Array, kinds: tuple[str, ...] = ("compliance",),
+                     frames: Model | None = None) -> PositionEffects:  # fmt: skip
+    """The effects of ``kinds`` at every joint of ``robot`` on the tool point of ``chain``
+    (``robot``'s measurement chain) at configurations ``q`` ``(n, dof)``; ``frames``: the
+    robot's own chain, whose joint origins the bending moments are taken about.
+
+    Raises:
+        ValueError: an unknown kind, or a robot without link masses (no loads to deflect by).
+    """
+    from robocal.measure.constraints.mounts import loads_about
+    from robocal.model.joints import effect_basis
+
+    unknown = sorted(set(kinds) - set(POSITION_EFFECT_KINDS))
+    if unknown:
+        raise ValueError(f"joint effects {unknown} cannot be fitted on position rows; choose from "
+                         f"{', '.join(POSITION_EFFECT_KINDS)}")  # fmt: skip
+    if not robot.bodies or not any(b.mass > 0 for b in robot.bodies):
+        raise ValueError(
+            f"joint compliance needs the link masses of model {robot.name!r} (the gravity loads "
+            "the joints yield to): give a model file with bodies (mass and centre of mass per link)"
+        )
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    loads = loads_about(robot, q, frames)
+    B, names, _ = effect_basis(robot, q, kinds=kinds, loads=loads)  # (m, n, dof, 3)
+    P = chain.perturbation_jacobian(q, "position")  # (n, 3, dof, 3)
+    patterns = np.einsum("nrjc,knjc->nrk", P, B)
+    scale = np.maximum(np.linalg.norm(patterns, axis=1).max(axis=0, initial=0.0), DISPLACEMENT_FLOOR)
+    return PositionEffects(tuple(names), patterns, scale)
+
+
+def with_position_effects(robot: Model, values: dict[str, float]) -> Model:
+    """``robot`` carrying the position rows' joint effects at ``values`` (by coefficient
+    name, SI) in ``model.joint_effects`` (:func:`robocal.model.joints.effects_from_values`);
+    ``robot`` itself when there are none."""
+    import dataclasses
+
+    from robocal.model.joints import effect_of, effects_from_values
+
+    if not values:
+        return robot
+    by_kind = {effect_of(n) or ("", n): float(v) for n, v in values.items()}
+    return dataclasses.replace(robot, joint_effects=effects_from_values(robot, by_kind))
