@@ -61,6 +61,7 @@ KERNELS = (
     ("robocal.model.kernels", "forward"),
     ("robocal.model.kernels_evaluate", "evaluate"),
     ("robocal.model.rank_kernels", "sequential_test"),
+    ("robocal.model.rank_kernels", "gram_sequential_test"),
     ("robocal.identify.kernels.start", "frames_and_tools"),
     ("robocal.identify.kernels.lm", "propose"),
     ("robocal.identify.kernels.stage", "screen"),
