@@ -1,8 +1,8 @@
 """The curvature of the learned residual's evidence in its hyperparameters, for the CV folds.
 
 Each cross-validation fold maximises its own evidence from the hyperparameters found on all
-poses (:func:`~robocal.identify.residual.fit.evidence`).  L-BFGS-B's first step is the raw
-gradient, in log units whose curvatures differ by three orders of magnitude (series A, 300
+poses (:func:`~robocal.identify.residual.fit.evidence`).  A quasi-Newton search's first step is
+the raw gradient, in log units whose curvatures differ by three orders of magnitude (series A, 300
 poses, 48 harmonics: ~45 per log-unit² along a joint's amplitude, ~1,300 along the noise),
 so it overshoots and its line search spends most of a fold's 4-6 evaluations.  In the
 coordinates ``θ_i √h_i`` (``h`` the diagonal of the Hessian of ``−log E`` at the optimum on

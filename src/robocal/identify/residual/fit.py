@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.linalg.lapack import dpotrf, dtrtri
-from scipy.optimize import minimize
 
+from robocal.identify.residual.boxmin import minimize_in_box
 from robocal.model.residual import FADE, JointAngleResidual, covered_intervals, fourier_gram, one_blas_thread
 
 __all__ = ["Hyper", "fit_joint_fourier"]
@@ -437,7 +437,8 @@ def _theta(hyper: Hyper) -> Array:
 def evidence(
     template: JointAngleResidual, normal: _Normal, start: Hyper | None, maxiter: int = 200, ftol: float = 1e-8
 ) -> Hyper:
-    """The hyperparameters that maximise the evidence (L-BFGS-B from ``start``, else a
+    """The hyperparameters that maximise the evidence (projected BFGS in the box of their
+    bounds, :func:`~robocal.identify.residual.boxmin.minimize_in_box`, from ``start``, else a
     neutral start), in its dual form when that is cheaper."""
     G, b, rr, N = normal.G, normal.b, normal.rr, normal.N
     groups, freq = layout(template)
@@ -462,12 +463,18 @@ def evidence(
         if start is None or start.curvature is None
         else np.sqrt(np.maximum(start.curvature, 1.0))
     )
-    opt = minimize(
-        _scaled(fun, w), theta0 * w, args=(*data, rr, N, groups, freq), jac=True, method="L-BFGS-B",
-        bounds=[(lo * s, hi * s) for (lo, hi), s in zip(bounds, w, strict=True)],
-        options={"maxiter": maxiter, "ftol": ftol},
-    )  # fmt: skip
-    theta = opt.x / w
+    lower, upper = (np.array(side) * w for side in zip(*bounds, strict=True))
+    found = minimize_in_box(
+        _scaled(fun, w),
+        theta0 * w,
+        lower,
+        upper,
+        (*data, rr, N, groups, freq),
+        maxiter,
+        ftol,
+        newton_scaled=start is not None and start.curvature is not None,
+    )
+    theta = found.x / w
     return Hyper(
         tuple(float(np.exp(t)) for t in theta[:k]), float(np.exp(theta[k])), float(np.exp(theta[-1]))
     )

@@ -1,0 +1,154 @@
+"""The default calibration's extra cost over the physics alone (issue 35, session 16).
+
+The learned residual's evidence is maximised by the package's own bounded quasi-Newton
+minimiser (:mod:`robocal.identify.residual.boxmin`), so the default command never imports
+:mod:`scipy.optimize` (0.12 s of CPU a process): it must find what L-BFGS-B finds.  The fits
+on all poses start from the optimum of another variant or of fewer harmonics: the same
+optimum, in fewer evaluations.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+import robocal.identify.residual.fit as fit
+from robocal.identify.residual.boxmin import minimize_in_box
+
+
+def _rosenbrock(x: np.ndarray) -> tuple[float, np.ndarray]:
+    f = 100.0 * (x[1] - x[0] ** 2) ** 2 + (1.0 - x[0]) ** 2
+    g = np.array([-400.0 * x[0] * (x[1] - x[0] ** 2) - 2.0 * (1.0 - x[0]), 200.0 * (x[1] - x[0] ** 2)])
+    return float(f), g
+
+
+def test_the_box_minimiser_finds_an_unconstrained_minimum():
+    found = minimize_in_box(_rosenbrock, np.array([-1.2, 1.0]), np.full(2, -5.0), np.full(2, 5.0), ftol=1e-14)
+    assert found.x == pytest.approx([1.0, 1.0], abs=1e-4)
+
+
+def test_the_box_minimiser_stops_on_an_active_bound_as_l_bfgs_b():
+    """A quadratic whose minimum lies outside the box: the box's nearest point in its metric,
+    with the gradient pushing outwards on the held variable only."""
+    rng = np.random.default_rng(4)
+    M = rng.normal(size=(5, 5))
+    H = M @ M.T + 5 * np.eye(5)
+    centre = np.array([3.0, -0.2, 0.1, 2.5, 0.0])
+
+    def quadratic(x):
+        d = x - centre
+        return float(0.5 * d @ H @ d), H @ d
+
+    lower, upper = np.full(5, -1.0), np.full(5, 1.0)
+    found = minimize_in_box(quadratic, np.zeros(5), lower, upper, ftol=1e-15, gtol=1e-10)
+    reference = minimize(
+        quadratic, np.zeros(5), jac=True, method="L-BFGS-B", bounds=list(zip(lower, upper, strict=True)),
+        options={"ftol": 1e-15, "gtol": 1e-10},
+    )  # fmt: skip
+    assert found.x == pytest.approx(reference.x, abs=1e-6)
+    assert found.f <= reference.fun + 1e-9
+    held = (found.x <= lower) | (found.x >= upper)
+    assert held.any()  # the case is one with an active bound
+    assert np.max(np.abs(found.g[~held])) < 1e-6
+
+
+def test_a_function_that_cannot_decrease_ends_at_the_start():
+    flat = minimize_in_box(lambda x: (0.0, np.zeros(3)), np.ones(3), np.zeros(3), np.full(3, 2.0))
+    assert np.array_equal(flat.x, np.ones(3)) and flat.evaluations == 1
+
+
+@pytest.fixture(scope="module")
+def normal_equations():
+    """The normal equations of 24 harmonics of a UR10 twin with transmission errors (300 poses)."""
+    from tests.test_residual_warm_start import _normal, transmission_case
+
+    case = transmission_case.__wrapped__()
+    return _normal(case, slice(None))
+
+
+def _lbfgsb_evidence(template, normal) -> np.ndarray:
+    """The evidence's optimum by scipy's L-BFGS-B (what robocal used before), tight tolerance."""
+    groups, freq = fit.layout(template)
+    k = len(template.joints)
+    theta0 = np.r_[np.full(k, np.log(2e-4)), np.log(0.02), np.log(np.sqrt(normal.rr / normal.N))]
+    scales = [(np.log(1e-4), np.log(2.0)), (np.log(1e-7), np.log(1e-2))]  # ℓ and σ
+    bounds = [(np.log(1e-9), np.log(fit.MAX_AMPLITUDE))] * k + scales
+    args = (normal.G, normal.b, normal.rr, normal.N, groups, freq)
+    opt = minimize(fit.nll_and_grad, theta0, args=args, jac=True, method="L-BFGS-B", bounds=bounds,
+                   options={"ftol": 1e-14, "gtol": 1e-9, "maxiter": 1000})  # fmt: skip
+    return opt.x
+
+
+def _theta(h: fit.Hyper) -> np.ndarray:
+    return np.r_[np.log(h.amplitudes), np.log(h.length_scale), np.log(h.noise)]
+
+
+def test_the_evidence_has_l_bfgs_bs_optimum(normal_equations):
+    template, normal = normal_equations
+    groups, freq = fit.layout(template)
+    args = (normal.G, normal.b, normal.rr, normal.N, groups, freq)
+    reference = _lbfgsb_evidence(template, normal)
+    found = _theta(fit.evidence(template, normal, None))
+    best = fit.nll_and_grad(reference, *args)[0]
+    # ftol 1e-8 of |−log E|: as close to the optimum as L-BFGS-B with the same tolerance
+    assert fit.nll_and_grad(found, *args)[0] - best < 1e-7 * abs(best)
+    assert np.exp(found[-1]) == pytest.approx(np.exp(reference[-1]), rel=1e-3)  # the noise σ
+
+
+def test_the_default_calibration_does_not_import_scipy_optimize():
+    """A twin with transmission errors the physics lacks: the default chooses a learned
+    residual, in a process that never loads :mod:`scipy.optimize`."""
+    code = textwrap.dedent(
+        """
+        import sys
+        from tests.test_residual import _calibrate, _case
+        train, _ = _case(errors=True, n_train=120, seed=1)
+        assert "scipy.optimize" not in sys.modules
+        result = _calibrate(train, "auto")
+        print(result.diagnostics.cv["chosen"])
+        print("scipy.optimize" in sys.modules)
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    chosen, loaded = done.stdout.strip().splitlines()[-2:]
+    assert "angle errors" in chosen
+    assert loaded == "False"
+
+
+def test_a_fit_on_all_poses_from_fewer_harmonics_optimum_ends_at_the_same_optimum_sooner(monkeypatch):
+    """``cv._warm_start``: 24 harmonics from the optimum of 8 (with its curvature, as the CV
+    keeps it) reach the neutral start's optimum in fewer evaluations."""
+    from robocal.identify.residual.curvature import with_curvature
+    from robocal.identify.residual.cv import _warm_start
+    from tests.test_residual_warm_start import _normal, transmission_case
+
+    case = transmission_case.__wrapped__()
+    small, small_normal = _normal(case, slice(None), H=8)
+    template, normal = _normal(case, slice(None), H=24)
+    eight = with_curvature(fit.evidence(small, small_normal, None), small_normal, *fit.layout(small))
+    hypers = {"geometry + angle errors H=8": eight}
+    start = _warm_start(hypers, 24, eight)
+    assert start is eight  # no other variant's 24 harmonics yet: the previous number's
+    assert _warm_start({**hypers, "other + angle errors H=24": eight}, 24, None) is eight
+    calls = [0]
+    nll = fit.nll_and_grad
+
+    def counted(*args):
+        calls[0] += 1
+        return nll(*args)
+
+    monkeypatch.setattr(fit, "nll_and_grad", counted)
+    found = {}
+    for label, begin in (("neutral", None), ("warm", start)):
+        calls[0] = 0
+        found[label] = (_theta(fit.evidence(template, normal, begin)), calls[0])
+    args = (normal.G, normal.b, normal.rr, normal.N, *fit.layout(template))
+    neutral, warm = (nll(found[k][0], *args)[0] for k in ("neutral", "warm"))
+    assert warm == pytest.approx(neutral, rel=1e-7)
+    assert found["warm"][1] < found["neutral"][1]
