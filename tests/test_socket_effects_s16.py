@@ -101,3 +101,24 @@ def test_no_masses_no_compliance(ur10):
         build_constraint_problem(bare, data, effects=("compliance",))
     with pytest.raises(ValueError, match="clearance"):
         build_constraint_problem(ur10, data, effects=("clearance",))
+
+
+def test_sockets_and_tilt_rows_share_one_compliance(ur10):
+    """A mixed fit: the tilt rows' compliance unknown is the socket rows' too (one name, one
+    column), and the sockets' deflections sharpen it beyond the tilt rows' own."""
+    from robocal.measure.constraints.data_set import merge_sets
+    from robocal.measure.constraints.sim import level_mounts, simulate_tilt_rows
+
+    true = _elastic(ur10, TRUE_COMPLIANCE)
+    sockets = _sockets_data(true, 25, 21)
+    tilts = simulate_tilt_rows(true, 15, links=(2, 3), seed=21, mounts=level_mounts(ur10, (2, 3)))
+    mixed = merge_sets(sockets, tilts)
+    kinds = ("compliance",)
+    alone = calibrate_constraints(ur10, tilts, known_noise=True, level=1, tilt_kinds=kinds)
+    both = calibrate_constraints(ur10, mixed, known_noise=True, level=1, tilt_kinds=kinds, effects=kinds)
+    name = f"compliance_{ur10.joint_names[2]}"
+    assert both.names.count(name) == 1
+    k, j = both.names.index(name), alone.names.index(name)
+    assert abs(both.estimates[k] - TRUE_COMPLIANCE["q3"]) < 4 * both.std[k]
+    assert both.std[k] < alone.std[j]
+    assert not any("tilt rows only" in note for note in both.notes)  # the sockets carry it too
