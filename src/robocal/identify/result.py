@@ -355,11 +355,15 @@ class CalibrationResult:
     def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
         """``(n, 3, m)`` derivatives of the tool position wrt the joint-effect coefficients
         ``names`` at ``q`` (the patterns the calibration identified them with)."""
-        from robocal.model.joints import EFFECT_KINDS, effect_basis
+        from robocal.model.joints import EFFECT_KINDS, effect_basis, effect_of
 
+        # the patterns of these kinds and joints only (all of them: 24 (n, dof, 3) arrays)
+        wanted = [effect_of(n) for n in names]
         B, basis_names, _ = effect_basis(
-            self.robot, q, kinds=EFFECT_KINDS, gravity=np.asarray(self.gravity), payload=self.payload
-        )
+            self.robot, q, kinds=[k for k in EFFECT_KINDS if any(w and w[0] == k for w in wanted)],
+            joints=[j for j in self.robot.joint_names if any(w and w[1] == j for w in wanted)],
+            gravity=np.asarray(self.gravity), payload=self.payload,
+        )  # fmt: skip
         B = B[[basis_names.index(n) for n in names]]  # (m, n, dof, 3)
         P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
         return np.einsum("nrjc,knjc->nrk", P, B)
