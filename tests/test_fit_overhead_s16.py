@@ -93,3 +93,37 @@ def test_nan_is_never_decided_by_the_normal_equations():
     A[3, 2] = np.nan
     *_, decided = rank_kernels.gram_sequential_test(np.ascontiguousarray(A.T), 1e-7)
     assert not decided
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_extreme_eigenvalues_are_lapacks(seed):
+    from robocal.identify.kernels import stage
+
+    rng = np.random.default_rng(seed)
+    for p in (1, 2, 5, 27, 36):
+        J = rng.normal(size=(3 * p + 3, p)) * np.logspace(0, rng.uniform(0, 5), p)
+        if p > 2 and seed % 2:  # a nearly redundant pair: a tiny smallest eigenvalue
+            J[:, -1] = 2.0 * J[:, 0] + 1e-8 * rng.normal(size=len(J))
+        _, A = stage.normalised(J.T @ J)
+        lam = np.linalg.eigvalsh(A)
+        ends = stage.extreme_eigenvalues(A)
+        np.testing.assert_allclose(ends, lam[[0, -1]], rtol=0, atol=1e-14 * lam[-1])
+    # indefinite and diagonal matrices (a Gershgorin bound on an eigenvalue): the same ends
+    S = rng.normal(size=(9, 9))
+    for M in (S + S.T, np.diag([3.0, -1.0, 2.0])):
+        np.testing.assert_allclose(stage.extreme_eigenvalues(M), np.linalg.eigvalsh(M)[[0, -1]], atol=1e-13)
+    assert stage.extreme_eigenvalues(np.zeros((0, 0))).shape == (0,)
+
+
+def test_the_covariance_reads_the_same_condition_number_and_singularity():
+    from robocal.identify.kernels import stage
+
+    rng = np.random.default_rng(11)
+    J = rng.normal(size=(300, 27)) * np.logspace(0, 3, 27)
+    G = J.T @ J
+    cov, _, _, cond, ok = stage.normal_covariance(G, 2.0, 1e-14)
+    assert ok and cond == pytest.approx(np.linalg.cond(J / np.linalg.norm(J, axis=0)), rel=1e-12)
+    np.testing.assert_allclose(cov, 2.0 * np.linalg.inv(G), rtol=1e-9)
+    J[:, 5] = J[:, 4]  # exactly redundant: singular, no covariance
+    *_, cond, ok = stage.normal_covariance(J.T @ J, 1.0, 1e-14)
+    assert not ok and cond == np.inf

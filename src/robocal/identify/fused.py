@@ -162,7 +162,7 @@ def fit(start: Start, first: FirstPass, solver: Mapping[str, Any], rules: Rules)
     all_dropped = (*first.selection.dropped, *poor)
     fixed = problem.fix([d.name for d in all_dropped])
     x, x0 = out.x, out.x0
-    T, _, J, rw, Jw = out.last
+    T, r, J, rw, Jw = out.last
     fixed._cache[(x.tobytes(), True)] = (T, J)  # the evaluations the result and checks read
     fixed._cache[(x0.tobytes(), True)] = (first.evaluation[0], out.J0)
     success, evaluations = bool(out.success), int(out.evaluations)
@@ -170,4 +170,8 @@ def fit(start: Start, first: FirstPass, solver: Mapping[str, Any], rules: Rules)
     solved = SolveResult(x, success, message, len(out.history), evaluations, out.history.tolist(), rw, Jw)
     s2, cov, std, corr, cond = out.covariance
     covariance = Covariance(float(s2), cov, std, corr, float(cond))
-    return Fit(Selection(fixed, x0, all_dropped, solver), x, solved, covariance, int(out.total), seconds)
+    # the unweighted residuals at the solution and the start (those of the evaluations above)
+    residuals = (r, first.evaluation[1])
+    return Fit(
+        Selection(fixed, x0, all_dropped, solver), x, solved, covariance, int(out.total), seconds, residuals
+    )

@@ -338,8 +338,10 @@ def _assemble(run: Run, start: Start, fit: Fit, t_start: float) -> CalibrationRe
     selection, x, n = fit.selection, fit.x, run.data.n
     problem = selection.problem
     names = problem.free_names
-    r_plain = problem.residual(x, weighted=False).reshape(n, problem.rows)
-    r_start = problem.residual(selection.x0, weighted=False).reshape(n, problem.rows)
+    # the fit's own unweighted residuals where it formed them (the same numbers: T - measured)
+    at_x, at_start = fit.plain_residuals or (problem.residual(x, weighted=False),
+                                             problem.residual(selection.x0, weighted=False))  # fmt: skip
+    r_plain, r_start = at_x.reshape(n, problem.rows), at_start.reshape(n, problem.rows)
     cov = fit.covariance
     after = _mean_square(r_plain)
     chain, calibrated, T_device_base = _calibrated_models(run, start, fit)

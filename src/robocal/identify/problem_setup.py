@@ -160,7 +160,9 @@ class Selection:
 class Fit:
     """A fit of a :class:`Selection`: the solution ``x`` ``(p,)``, the solver's result and
     the covariance there; ``evaluations`` and ``solve_seconds``: of all fits of the pass so
-    far (screening, pruning and held effects refit)."""
+    far (screening, pruning and held effects refit); ``plain_residuals``: the unweighted
+    residuals ``(n * rows,)`` at ``x`` and at ``selection.x0`` where the fit formed them
+    already (the compiled stages), else None (the result evaluates them)."""
 
     selection: Selection
     x: Array
@@ -168,6 +170,7 @@ class Fit:
     covariance: Covariance
     evaluations: int
     solve_seconds: float
+    plain_residuals: tuple[Array, Array] | None = None
 
 
 # ---------------------------------------------------------------------- 2. start values
