@@ -110,6 +110,10 @@ def _row(n: int, repeats: int, out: Path) -> list[str]:
         for residual in ("none", "auto"):
             seconds, mean[residual] = run(n, residual, out / residual)
             cpu[residual].append(seconds)
+    for residual, runs in cpu.items():  # every run, so that the spread is seen, not only the median
+        print(f"  {n} poses --residual {residual}: " + " ".join(f"{s:.2f}" for s in runs), flush=True)
+    pairs = " ".join(f"{a / b:.2f}" for a, b in zip(cpu["auto"], cpu["none"], strict=True))
+    print(f"  {n} poses ratios of the pairs: {pairs}", flush=True)
     none, auto = statistics.median(cpu["none"]), statistics.median(cpu["auto"])
     held = [f"{v:.4f}" if v is not None else "-" for v in (mean["none"], mean["auto"])]
     target = f"{TARGET[n]:.1f}x" if n in TARGET else "-"

@@ -174,3 +174,28 @@ def test_effect_columns_from_the_identified_kinds_only_equal_all_kinds():
     expected = np.einsum("nrjc,knjc->nrk", P, B[[names.index(n) for n in effects]])
     columns = result.position_columns(q)[:, :, [result.names.index(n) for n in effects]]
     np.testing.assert_allclose(columns, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_the_cli_enters_a_stage_once_whatever_the_engines_progress(monkeypatch):
+    """The engine reports its progress within the calibrate stage (the CV after each fold and
+    variant: 14 reports at 5 folds, two variants); the command's stage view enters the
+    kernels' first-use check (9 cache indexes read) and its spinner once per stage."""
+    import contextlib
+
+    import robocal.identify.kernel_cache as kernel_cache
+    from robocal.cli.calibrate import _Stages
+
+    entered = []
+
+    @contextlib.contextmanager
+    def counted(console):
+        entered.append(1)
+        yield
+
+    monkeypatch.setattr(kernel_cache, "first_use", counted)
+    with _Stages("test") as stages:
+        stages.enter("read", 0.0)
+        for fraction in np.linspace(0.05, 0.8, 16):
+            stages.enter("calibrate", float(fraction))
+        stages.enter("validate", 0.8)
+    assert len(entered) == 1

@@ -236,10 +236,14 @@ class _Stages:
 
         self.what = what
         self.stack = ExitStack()
+        self.stage: str | None = None
 
     def enter(self, stage: str, fraction: float) -> None:
         from robocal.identify.kernel_cache import first_use
 
+        if stage == self.stage:  # the engine's progress within the stage: the same note and spinner
+            return
+        self.stage = stage
         self.stack.close()
         if stage == "calibrate":
             self.stack.enter_context(first_use(console))
