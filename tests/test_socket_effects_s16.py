@@ -122,3 +122,16 @@ def test_sockets_and_tilt_rows_share_one_compliance(ur10):
     assert abs(both.estimates[k] - TRUE_COMPLIANCE["q3"]) < 4 * both.std[k]
     assert both.std[k] < alone.std[j]
     assert not any("tilt rows only" in note for note in both.notes)  # the sockets carry it too
+
+
+def test_a_models_stated_compliance_is_held_and_predicts(ur10):
+    """A model that states its compliances (and masses) is calibrated with them held: the
+    socket rows are predicted with the deflections, the values kept, none fitted."""
+    true = _elastic(ur10, TRUE_COMPLIANCE)
+    train, test = _sockets_data(true, 25, 30), _sockets_data(true, 25, 31)
+    result = calibrate_constraints(true, train, known_noise=True, level=1)
+    assert not any(n.startswith("compliance_") for n in result.names)  # held, not fitted
+    assert result.model.joint_effects == true.joint_effects
+    assert np.all(constraint_figures(result.model, test).point_spread < 3 * SIGMA)
+    rigid = calibrate_constraints(ur10, train, known_noise=True, level=1)
+    assert result.rms_after < 0.5 * rigid.rms_after  # the deflections explain the rows

@@ -34,7 +34,12 @@ from robocal.identify.constraints.figures import (
 )
 from robocal.identify.constraints.model import ConstraintProblem, NominalPrior
 from robocal.identify.constraints.noise import weigh_by_kind
-from robocal.identify.constraints.position_effects import position_effects, with_position_effects
+from robocal.identify.constraints.position_effects import (
+    position_effects,
+    stated_effects,
+    stated_kinds,
+    with_position_effects,
+)
 from robocal.identify.constraints.tilt_record import TiltCalibration, effect_summary_lines, tilt_estimates
 from robocal.identify.constraints.tilt_rows import (
     EFFECT_KINDS,
@@ -208,11 +213,13 @@ def build_constraint_problem(
     weights = None if prior is None else prior.weights(chain, robot.names)
     # the joints' deflections on the position rows; loads about the robot's own joint
     # origins, as constraint_figures predicts them from the calibrated model
-    position = position_effects(robot, chain, data.q, effects) if effects else None
+    kinds = effects or stated_kinds(robot, data)  # the model's own compliances predict the rows
+    position = position_effects(robot, chain, data.q, kinds) if kinds else None
     n_position = 0 if position is None else len(position.names)
     if not data.tilted.any():
         full0 = np.concatenate([full0, np.zeros(n_position)])
-        return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, None, position)
+        problem = ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, None, position)
+        return _stated_start(problem, robot)
     terms = tilt_terms(robot, chain, data, tilt_kinds, frames)
     empty = np.zeros(len(terms.zeros))
     values = dict(zip(chain.free_names, chain.free_values.tolist(), strict=True))
@@ -220,7 +227,18 @@ def build_constraint_problem(
     zeros = np.array([-r[terms.channel == k].mean() for k in range(len(empty))])  # each channel's mean
     shared = 0 if position is None else sum(n in terms.effects for n in position.names)
     full0 = np.concatenate([full0, zeros, np.zeros(len(terms.effects) + n_position - shared)])
-    return ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, terms, position)
+    problem = ConstraintProblem(chain, data, full0, planes, max(size, 1e-3), weights, terms, position)
+    return _stated_start(problem, robot)
+
+
+def _stated_start(problem: ConstraintProblem, robot: Model) -> ConstraintProblem:
+    """The position rows' joint effects start at the robot's own values (the tilt rows' own
+    unknowns at zero, as before)."""
+    shared = set(() if problem.tilt is None else problem.tilt.effects)
+    for name, value in stated_effects(robot).items():
+        if name in problem.position_names and name not in shared:
+            problem.full0[problem.all_names.index(name)] = value
+    return problem
 
 
 # ---------------------------------------------------------------------- the fit
@@ -317,6 +335,9 @@ def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one co
         model = model.fixed(fixed)
     data, notes = _clear_rows(model, data)
     problem = build_constraint_problem(model, data, tool, prior, tilt_kinds, frames, effects)
+    if not effects:  # a model's stated compliances are held: they predict, they are not fitted
+        shared = () if problem.tilt is None else problem.tilt.effects
+        problem = problem.fix([n for n in problem.position_names if n not in shared])
     selection = identifiable(problem)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
@@ -403,7 +424,7 @@ def kind_identifiable(
     """The identifiable set of ``robot``'s parameters from ``data`` (rank test at the start
     values): the kept robot parameters and what was dropped."""
     problem = build_constraint_problem(robot, _clear_rows(robot, data)[0], tool)
-    selection = identifiable(problem)
+    selection = identifiable(problem.fix(problem.position_names))  # stated compliances: held
     roles = problem.chain.roles
     kept = tuple(n for n in selection.kept if roles.get(n) not in (Role.DEVICE,) and n in roles)
     return kept, selection.dropped

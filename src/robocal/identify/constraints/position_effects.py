@@ -23,9 +23,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.chain import Model
 
-__all__ = ["POSITION_EFFECT_KINDS", "PositionEffects", "position_effects", "with_position_effects"]
+__all__ = [
+    "POSITION_EFFECT_KINDS",
+    "PositionEffects",
+    "position_effects",
+    "stated_effects",
+    "stated_kinds",
+    "with_position_effects",
+]
 
 Array = NDArray[np.float64]
 #: the joint effects a position row can carry (clearance and backlash act with a load's
@@ -96,3 +104,30 @@ def with_position_effects(robot: Model, values: dict[str, float]) -> Model:
         return robot
     by_kind = {effect_of(n) or ("", n): float(v) for n, v in values.items()}
     return dataclasses.replace(robot, joint_effects=effects_from_values(robot, by_kind))
+
+
+def stated_effects(robot: Model) -> dict[str, float]:
+    """The robot's own compliances (coefficient name -> SI, the nonzero ones) when it has
+    the link masses they act under; empty otherwise."""
+    from robocal.model.joints import EFFECT_PREFIXES
+
+    if not robot.bodies:
+        return {}
+    out = {}
+    for e in robot.joint_effects:
+        for kind, value in (("compliance", e.compliance), ("radial", e.radial_compliance)):
+            if value:
+                out[EFFECT_PREFIXES[kind][0] + e.joint] = float(value)
+    return out
+
+
+def stated_kinds(robot: Model, data: ConstraintSet) -> tuple[str, ...]:
+    """The kinds of the robot's own compliances that deflect ``data``'s position rows
+    (points, planes, distances, tracker points).  None with tilt rows: those identify the
+    effects, and their position rows carry them only when asked (``effects``)."""
+    from robocal.model.joints import effect_of
+
+    if data.tilted.any() or not (data.constrained.any() or data.tracked.any()):
+        return ()
+    stated = {(effect_of(n) or ("",))[0] for n in stated_effects(robot)}
+    return tuple(k for k in POSITION_EFFECT_KINDS if k in stated)
