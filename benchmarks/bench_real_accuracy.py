@@ -39,6 +39,11 @@ grows with the move; the previous pose is not an input of a calibration); consec
 (7 s apart) correlate +0.32, rows 30 apart (4 min) +0.04: the rest is error that is shared
 by measurements close in time, not a function of the pose.
 
+``--days 14,15`` keeps only the rows measured on those days (training and held-out rows
+alike): the splits on which the choice of harmonics was studied (issue 34, session 16: one
+standard error kept 24 harmonics where 48 were lower at 100 poses; days 14-15 0.1163 ->
+0.1084 mm, days 16-18 0.1378 -> 0.1334 mm with the lowest CV error).
+
 ``--pose`` adds the default path calibrated on pose data (the probe's measured
 orientation, XYZ Euler degrees, in the identification) to show whether orientation
 helps; ``--probe`` only prints which joints the physics' remaining error follows.
@@ -74,12 +79,19 @@ ROTATION = "rx=measurement_rx,ry=measurement_ry,rz=measurement_rz"
 PROBE = [0.0, 0.0, 0.109]
 
 
+DAYS: tuple[int, ...] = ()  # --days: only the rows measured on these days of July 2020 (all: empty)
+
+
 def read(path: Path, pose: bool = False) -> rc.Measurements:
     columns = f"{JOINTS},{POSITION}" + (f",{ROTATION}" if pose else "")
-    return rc.read_measurements(
+    data = rc.read_measurements(
         path, length_unit="mm", decimal=",", sep=";", columns=columns,
         orientation="euler:XYZ:deg" if pose else "none",
     )  # fmt: skip
+    if not DAYS:
+        return data
+    stamp = np.loadtxt(path, delimiter=";", skiprows=1, usecols=0, dtype=str)  # yyyymmddHHMMSS
+    return data.subset(np.flatnonzero(np.isin([int(s[6:8]) for s in stamp], DAYS)))
 
 
 def _features(q: np.ndarray) -> np.ndarray:
@@ -377,7 +389,14 @@ def main(argv: list[str] | None = None) -> None:
         "--floor", action="store_true", help="only: what explains the default's remaining error"
     )
     parser.add_argument("--cv-grid", default="", help="only: CV errors of these harmonics, e.g. 8,24,48")
+    parser.add_argument(
+        "--days",
+        default="",
+        help="only the rows of these days (14-18 July), training and held out, e.g. 14,15",
+    )
     args = parser.parse_args(argv)
+    global DAYS
+    DAYS = tuple(int(d) for d in args.days.split(",") if d)
     if args.probe:
         probe()
         return

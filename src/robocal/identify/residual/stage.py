@@ -37,8 +37,8 @@ maximises its own evidence from the hyperparameters found on all poses (fixing t
 leaked the held-out fold into the choice, which then picked a residual for robots without
 one).  The simplest candidate within three standard errors of the lowest mean
 cross-validated error wins (:func:`~robocal.identify.residual.cv._one_standard_error`); once
-that is a learned residual, its harmonics are the fewest within one standard error of the
-lowest residual candidate, and a residual whose CV error at the 95th percentile is above
+that is a learned residual, its harmonics are those of the lowest residual candidate
+(``cv.HARMONICS_SE``), and a residual whose CV error at the 95th percentile is above
 the physics alone's is no candidate (the tail).  Held-out data never enters.  The whole
 stage runs on one BLAS thread (idle OpenBLAS threads doubled its CPU time on a 2-core
 machine).  A joint whose angle error cannot move the measured point (a probe on the last
