@@ -267,7 +267,9 @@ def compliance_lines(model, data: Path, sets: dict[str, ConstraintSet]) -> list[
              "back-high (mm) |",
              "|---|---:|---:|---:|---:|---:|---|"]  # fmt: skip
     every = placements(data, list(PLACEMENTS))
-    for label, effects in (("complete + prior", ()), ("complete + prior + compliance", ("compliance",))):
+    rows = (("complete + prior", ()), ("complete + prior + compliance", ("compliance",)),
+            ("complete + prior + compliance + radial", ("compliance", "radial")))  # fmt: skip
+    for label, effects in rows:
         cv, inside, held = [], [], []
         for train in PLACEMENTS:
             cv.append(kfold(model, sets[train], effects))
@@ -279,6 +281,10 @@ def compliance_lines(model, data: Path, sets: dict[str, ConstraintSet]) -> list[
         floor = " / ".join(f"{figures(joint.model, sets[t])[0]:.3f}" for t in PLACEMENTS)
         lines.append(f"| {label} | {np.mean(cv):.3f} | {np.mean(inside):.3f} | {h[:, 0].mean():.3f} | "
                      f"{h[:, 0].max():.3f} | {h[:, 1].mean():.3f} | {floor} |")  # fmt: skip
+    joint = _fit(model, every, ("compliance",))
+    per = ", ".join(f"{t} {kfold(model, sets[t], ()):.3f} -> {kfold(model, sets[t], ('compliance',)):.3f}"
+                    for t in PLACEMENTS)  # fmt: skip
+    lines += ["", f"5-fold CV per training placement, without -> with compliance (mm): {per}"]
     return lines + ["", *_known_compliance(model, joint, sets), "", _repeat_noise(joint, every)]
 
 

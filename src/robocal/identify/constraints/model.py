@@ -234,19 +234,24 @@ class ConstraintProblem:
         return self.jacobian(x) * self.free_scale
 
     # ------------------------------------------------------------------ evaluation
-    def _chain(self, x: Array) -> tuple[Array, Array]:
-        """Tool points ``(n, 3)`` and their Jacobian ``(3n, p_chain)`` over the chain's free parameters."""
+    def _chain(self, x: Array) -> tuple[Array, Array, Array | None]:
+        """Tool points ``(n, 3)``, their Jacobian ``(3n, p_chain)`` over the chain's free
+        parameters and ``(n, 3, m)`` over the position rows' joint effects (None without)."""
         full = self.full(np.asarray(x, dtype=float))
         key = full.tobytes()
         if key not in self._cache:
             self._cache.clear()
             values = self.chain.values.copy()
             values[self.chain.free_mask] = full[: self.layout.n_chain]
-            T, J = self.chain.evaluate(self.data.q, values, rows="position", jacobian=True)[:2]
-            p = T[:, :3, 3]
-            if self.position is not None:  # the joints' deflections under the held loads
-                p = p + self.position.displacement(full[self._position_columns])
-            self._cache[key] = (p, J)
+            effects = self.position
+            if effects is None:
+                T, J = self.chain.evaluate(self.data.q, values, rows="position", jacobian=True)[:2]
+                self._cache[key] = (T[:, :3, 3], J, None)
+            else:  # the joints' deflections under the held loads, exact as Model.fk takes them
+                d = effects.perturbations(full[self._position_columns])
+                out = self.chain.evaluate(self.data.q, values, "position", True, d, perturbation_columns=True)
+                P = out[-1].reshape(self.data.n, 3, self.chain.dof, 3)
+                self._cache[key] = (out[0][:, :3, 3], out[1], effects.columns(P))
         return self._cache[key]
 
     def consistent_jacobian(self, x: Array) -> Array:
@@ -315,12 +320,12 @@ class ConstraintProblem:
     def _blocks(self, x: Array) -> tuple[Array, Array]:
         """Weighted residuals ``(m,)`` and Jacobian ``(m, size)`` over every unknown."""
         full = self.full(np.asarray(x, dtype=float))
-        p, Jc = self._chain(x)
+        p, Jc, Je = self._chain(x)
         d, lay = self.data, self.layout
         Jp = np.zeros((d.n, 3, lay.size))
         Jp[:, :, : lay.n_chain] = Jc.reshape(d.n, 3, -1)
-        if self.position is not None:
-            Jp[:, :, self._position_columns] += self.position.patterns
+        if Je is not None:
+            Jp[:, :, self._position_columns] += Je
         r_parts, J_parts = [], []
         on_point = np.flatnonzero(d.point >= 0)
         if len(on_point):

@@ -4,12 +4,14 @@ A joint that yields to its load turns the links beyond it: under gravity an elas
 turns by ``δθ = c ηz`` about its axis (``compliance_<joint>``, rad/(N·m)) and, with radial
 elasticity, tilts by ``c_r ηx``, ``c_r ηy`` about the two other axes
 (``radial_compliance_<joint>``; :mod:`robocal.model.joints`, seed 003 eqs. 5.15-5.19).
-The tool point moves by ``P · B · c`` with ``P = ∂p/∂(δα, δβ, δθ)`` the chain's
-perturbation Jacobian and ``B`` the effect's pattern (:func:`robocal.model.joints.effect_basis`)
-under the static gravity loads of the robot's link masses (:class:`robocal.model.steps.Body`).
-Both are taken at the start geometry and held (the tilt rows do the same: a change of the
-geometry by 0.1° changes the loads by about 0.2 %), so each effect is one linear column
-of every position-like row: fixed points, planes, distances and tracker points alike.
+The joints are perturbed by ``B · c`` (rad), ``B`` the effects' patterns
+(:func:`robocal.model.joints.effect_basis`) under the static gravity loads of the robot's
+link masses (:class:`robocal.model.steps.Body`), and the chain is evaluated with those
+perturbations, exactly as :func:`~robocal.identify.constraints.figures.tool_points` and
+``Model.fk`` predict them; each effect's column is ``P · B`` with ``P = ∂p/∂(δα, δβ, δθ)``
+the chain's perturbation Jacobian there.  The loads are the start geometry's, held (the
+tilt rows do the same: a change of the geometry by 0.1° changes them by about 0.2 %).  Every
+position-like row carries them: fixed points, planes, distances and tracker points alike.
 
 Without link masses there are no loads and no deflections to fit: a compliance model
 needs each link's mass and centre of mass (a model file's ``bodies``; for the Panda the
@@ -48,18 +50,22 @@ class PositionEffects:
 
     Attributes:
         names: the effects' coefficient names (``compliance_<joint>``, SI units).
-        patterns: ``(n, 3, m)`` the tool point's displacement (m) per unit of each
-            coefficient at each row's configuration (zero rows for tilt rows).
-        scale: ``(m,)`` the largest displacement (m) per unit of each over the rows.
+        basis: ``(m, n, dof, 3)`` each coefficient's joint perturbation pattern per unit.
+        scale: ``(m,)`` the largest tool displacement (m) per unit of each over the rows.
     """
 
     names: tuple[str, ...]
-    patterns: Array
+    basis: Array
     scale: Array
 
-    def displacement(self, values: Array) -> Array:
-        """``(n, 3)`` the tool points' deflection (m) at coefficient ``values`` ``(m,)``."""
-        return self.patterns @ values
+    def perturbations(self, values: Array) -> Array:
+        """``(n, dof, 3)`` the joints' deflections (rad) at coefficient ``values`` ``(m,)``."""
+        return np.einsum("k,knjc->njc", values, self.basis)
+
+    def columns(self, P: Array) -> Array:
+        """``(n, 3, m)`` the tool point's derivatives wrt the coefficients, from the
+        perturbation Jacobian ``P`` ``(n, 3, dof, 3)`` at the deflected joints."""
+        return np.einsum("nrjc,knjc->nrk", P, self.basis)
 
 
 def position_effects(robot: Model, chain: Model, q: Array, kinds: tuple[str, ...] = ("compliance",),
@@ -89,7 +95,7 @@ def position_effects(robot: Model, chain: Model, q: Array, kinds: tuple[str, ...
     P = chain.perturbation_jacobian(q, "position")  # (n, 3, dof, 3)
     patterns = np.einsum("nrjc,knjc->nrk", P, B)
     scale = np.maximum(np.linalg.norm(patterns, axis=1).max(axis=0, initial=0.0), DISPLACEMENT_FLOOR)
-    return PositionEffects(tuple(names), patterns, scale)
+    return PositionEffects(tuple(names), B, scale)
 
 
 def with_position_effects(robot: Model, values: dict[str, float]) -> Model:
