@@ -199,3 +199,29 @@ def test_the_cli_enters_a_stage_once_whatever_the_engines_progress(monkeypatch):
             stages.enter("calibrate", float(fraction))
         stages.enter("validate", 0.8)
     assert len(entered) == 1
+
+
+@pytest.mark.parametrize("case", ["compliance", "learned residual"])
+def test_the_mean_position_variance_is_the_mean_trace_of_the_covariances(case):
+    """``validate.mean_position_variance`` hands its perturbations and perturbation Jacobian to
+    ``position_columns`` (no second joint-load or chain pass at the held-out poses): the
+    same number as the mean trace of ``position_covariance``, which forms its own."""
+    import robocal as rc
+    from robocal.identify.validate import mean_position_variance
+
+    if case == "compliance":
+        from tests.test_residual_warm_start import TOOL, twin
+
+        model, _, train = twin.__wrapped__()
+        result = rc.calibrate(model, train, tool_guess=TOOL, compliance=True, residual="none")
+    else:
+        from tests.test_residual import PROBE, _case, _ur10
+
+        train, _ = _case(errors=True, n_train=120, seed=1)
+        result = rc.calibrate(_ur10(), train, tool_guess=PROBE, residual="auto")
+        assert result.model.residual is not None
+    q = train.q[::3]
+    expected = float(np.mean(np.trace(result.position_covariance(q), axis1=1, axis2=2)))
+    assert mean_position_variance(result, q) == pytest.approx(expected, rel=1e-9)
+    given = mean_position_variance(result, q, result.joint_perturbations(q))
+    assert given == pytest.approx(expected, rel=1e-9)

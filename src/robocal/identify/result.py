@@ -352,9 +352,12 @@ class CalibrationResult:
                 cov = cov + cross + np.swapaxes(cross, 1, 2)
         return cov
 
-    def _effect_columns(self, chain: Model, q: Array, perturbations: Array | None, names: list[str]) -> Array:
+    def _effect_columns(
+        self, chain: Model, q: Array, perturbations: Array | None, names: list[str], P: Array | None = None
+    ) -> Array:
         """``(n, 3, m)`` derivatives of the tool position wrt the joint-effect coefficients
-        ``names`` at ``q`` (the patterns the calibration identified them with)."""
+        ``names`` at ``q`` (the patterns the calibration identified them with); ``P``: the
+        chain's position perturbation Jacobian at ``q`` when the caller has it."""
         from robocal.model.joints import EFFECT_KINDS, effect_basis, effect_of
 
         # the patterns of these kinds and joints only (all of them: 24 (n, dof, 3) arrays)
@@ -365,24 +368,30 @@ class CalibrationResult:
             gravity=np.asarray(self.gravity), payload=self.payload,
         )  # fmt: skip
         B = B[[basis_names.index(n) for n in names]]  # (m, n, dof, 3)
-        P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
+        if P is None:
+            P = chain.perturbation_jacobian(q, "position", perturbations)  # (n, 3, dof, 3)
         return np.einsum("nrjc,knjc->nrk", P, B)
 
-    def position_columns(self, q: ArrayLike) -> Array:
+    def position_columns(
+        self, q: ArrayLike, perturbations: Array | None = None, P: Array | None = None
+    ) -> Array:
         """``(n, 3, p)`` derivatives of the predicted measurement (device frame, m) wrt the
-        estimated parameters (:attr:`names`, SI) at ``q``."""
+        estimated parameters (:attr:`names`, SI) at ``q``; ``perturbations`` (this result's
+        :meth:`joint_perturbations` at ``q``) and ``P`` (its measurement chain's position
+        perturbation Jacobian there) when the caller has them."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         chain = self.measurement_chain
         if chain is None:
             raise ValueError("this result has no measurement chain (saved by an older robocal?)")
-        perturbations = self.joint_perturbations(q)
+        if perturbations is None:
+            perturbations = self.joint_perturbations(q)
         geometric = [n for n in self.names if n in set(chain.names)]
         effects = [n for n in self.names if effect_of(n) is not None]
         model = chain.with_free(None, free=False).with_free(geometric)
         J = model.jacobian(q, perturbations=perturbations).reshape(len(q), 3, -1)
         J = J[:, :, [model.free_names.index(n) for n in geometric]]
         if effects:
-            J = np.concatenate([J, self._effect_columns(chain, q, perturbations, effects)], axis=2)
+            J = np.concatenate([J, self._effect_columns(chain, q, perturbations, effects, P)], axis=2)
         order = [(geometric + effects).index(n) for n in self.names]
         return J[:, :, order]
 

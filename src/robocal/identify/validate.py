@@ -225,16 +225,18 @@ def mean_position_variance(
     chain = result.measurement_chain
     if chain is None:
         raise ValueError("this result has no measurement chain (saved by an older robocal?)")
-    J = result.position_columns(q)  # (n, 3, p), the order of result.names
+    if perturbations is None:
+        perturbations = result.joint_perturbations(q)
+    learned = result.model.residual
+    # the perturbation Jacobian once for the effects' columns and the residual's design
+    P = None if learned is None else chain.perturbation_jacobian(q, "position", perturbations)
+    J = result.position_columns(q, perturbations, P)  # (n, 3, p), the order of result.names
     rows = J.reshape(-1, J.shape[2])
     with one_blas_thread():  # a thin product: threads would mostly wait (the machine is shared)
         total = float(np.vdot(result.covariance, rows.T @ rows)) / len(q)
-    learned = result.model.residual
     if learned is None:
         return total
-    if perturbations is None:
-        perturbations = result.joint_perturbations(q)
-    P = chain.perturbation_jacobian(q, "position", perturbations)
+    assert P is not None
     return total + learned.mean_position_variance(q, P, J, result.residual_cross_covariance)
 
 
