@@ -127,3 +127,14 @@ def test_the_covariance_reads_the_same_condition_number_and_singularity():
     J[:, 5] = J[:, 4]  # exactly redundant: singular, no covariance
     *_, cond, ok = stage.normal_covariance(J.T @ J, 1.0, 1e-14)
     assert not ok and cond == np.inf
+
+
+def test_one_robots_size_is_the_batchs():
+    from robocal.identify.stages import robot_size, robot_sizes
+
+    rng = np.random.default_rng(12)
+    for spread in (2.0, 0.01):  # a robot smaller than 0.1 m counts as 0.1 m
+        T = np.tile(np.eye(4), (80, 1, 1))
+        T[:, :3, 3] = rng.normal(scale=spread, size=(80, 3))
+        T[60, :3, 3] = 50.0  # past the first 50 poses: not read
+        assert robot_size(T) == robot_sizes(T[None])[0]

@@ -20,7 +20,7 @@ from robocal.identify.options import CalibrationOptions, check_load_model
 from robocal.identify.problem import Problem, measurement_chain_and_preference
 from robocal.identify.result import CalibrationWarning
 from robocal.identify.solve_result import SolveResult
-from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_sizes
+from robocal.identify.stages import Covariance, initial_frames_and_tools, robot_size
 from robocal.measure.measurements import Measurements
 from robocal.model.chain import Model
 from robocal.model.chain_plan import read_only
@@ -283,7 +283,7 @@ def build_problem(run: Run, load_model: Model | None) -> Start:
     preference: NDArray[np.intp] | None = order
     if setup.tool is not None and not (isinstance(setup.tool, str) and setup.tool == "fit"):
         chain, preference = chain.fixed(chain.names_with_role(Role.TOOL)), None  # other unknowns
-    length = float(robot_sizes(T_flange[None])[0])
+    length = robot_size(T_flange)
     rows = 3 if measure == "position" else 6
     w, known_noise = _row_weights(run, rows)
     effects = _effect_terms(run, load_model) if run.plan.mode != "none" else None

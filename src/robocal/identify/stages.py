@@ -48,6 +48,7 @@ __all__ = [
     "preference_columns",
     "preference_order",
     "residual_variance",
+    "robot_size",
     "robot_sizes",
     "screen_unidentifiable",
     "tool_displacement_scale",
@@ -175,6 +176,12 @@ def robot_sizes(T_flange: Array) -> Array:
     """``(K,)`` the robots' sizes (m), to weigh rotations against lengths: the largest
     coordinate of their end frames ``(K, n, 4, 4)`` at the first 50 poses (at least 0.1)."""
     return np.maximum(np.abs(T_flange[:, :50, :3, 3]).max(axis=(1, 2)), 0.1)
+
+
+def robot_size(T_flange: Array) -> float:
+    """:func:`robot_sizes` of one robot's end frames ``(n, 4, 4)`` (m; one reduction instead
+    of a batch's: every calibration asks)."""
+    return max(float(np.abs(T_flange[:50, :3, 3]).max()), 0.1)
 
 
 # ---------------------------------------------------------------------- identifiable set

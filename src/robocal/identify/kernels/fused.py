@@ -125,10 +125,10 @@ def first_pass(data, values, free_steps, length_scale, preference):
             row[a] = n_rows
             n_rows += 1
     St = np.empty((p, m))
-    for i in range(m):
-        w = weights[i]
-        for a in range(p):
-            St[row[a], i] = J[i, a] * w * free_scale[a]
+    for a in range(p):  # one contiguous row written at a time (faster than scattering along J's rows)
+        target, scale = St[row[a]], free_scale[a]
+        for i in range(m):
+            target[i] = J[i, a] * weights[i] * scale
     norm = np.zeros(p)
     for a in range(p):
         s, column = 0.0, St[row[a]]
