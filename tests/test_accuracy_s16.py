@@ -78,6 +78,59 @@ def test_a_flat_prior_is_no_start_for_more_harmonics():
     assert not _decays(rough, 8)
 
 
+def _physics_row(name: str, physics: str, harmonics: int | None, e: np.ndarray) -> CVCandidate:
+    rms = float(np.sqrt(np.mean(e**2)))
+    return CVCandidate(
+        name, physics, harmonics, float(e.mean()), rms, 0.0, float(np.percentile(e, 95)), float(e.max())
+    )
+
+
+def test_the_richer_physics_carries_the_residual_within_one_standard_error():
+    """Two physical variants with 48 harmonics: compliance's CV error above the geometry's by
+    half a standard error: compliance; by three: the geometry; a lower CV error with other
+    harmonics does not move the harmonics chosen."""
+    rng = np.random.default_rng(5)
+    geometry = np.abs(rng.normal(1.2e-4, 4e-5, 300))
+    z = rng.normal(size=300)
+    z = (z - z.mean()) / z.std(ddof=1)  # per-pose differences of unit spread: SE 1 / sqrt(300)
+    variants = ["geometry", "geometry + compliance"]
+    for shift, expected in ((0.5, "geometry + compliance"), (3.0, "geometry")):
+        compliance = geometry + 2e-5 * (z + shift / math.sqrt(300))
+        per_pose = {
+            "geometry": geometry + 3e-4,
+            "geometry + compliance": geometry + 3e-4,
+            "geometry + angle errors H=48": geometry,
+            "geometry + compliance + angle errors H=48": compliance,
+            "geometry + compliance + angle errors H=24": geometry + 1e-5,
+        }
+        rows = [
+            _physics_row(name, "geometry + compliance" if "compliance" in name else "geometry",
+                         int(name[-2:]) if "H=" in name else None, e)
+            for name, e in per_pose.items()
+        ]  # fmt: skip
+        chosen = _one_standard_error(rows, per_pose, variants)
+        assert (chosen.physics, chosen.harmonics) == (expected, 48)
+
+
+@real_data
+def test_on_series_a_days_the_residual_rides_on_compliance(monkeypatch):
+    """Series A, days 14-15, 100 training rows (seed 2): the geometry's CV error is 0.2 %
+    below compliance's; with compliance the other 5,427 rows are predicted better."""
+    split = _series_a((14, 15)).with_split(100, seed=2)
+    train, test = split.split_rows("train"), split.split_rows("test")
+    model = rc.calibration_model("ur10", "position")
+    held_out, chosen = {}, {}
+    for rule, se in (("richer", 1.0), ("lowest", 0.0)):
+        monkeypatch.setattr(cv, "PHYSICS_SE", se)
+        result = rc.calibrate(model, train, tool_guess=PROBE, residual="auto")
+        held_out[rule] = float(
+            np.linalg.norm(result.predict(test.q)[:, :3, 3] - test.position, axis=1).mean()
+        )
+        chosen[rule] = result.diagnostics.cv["chosen"]
+    assert "compliance" in chosen["richer"] and "compliance" not in chosen["lowest"]
+    assert held_out["richer"] < 0.95 * held_out["lowest"], held_out
+
+
 @real_data
 def test_the_fits_on_all_poses_reach_the_neutral_starts_optimum(monkeypatch):
     """Series A, 100 poses (seed 1: 24 harmonics' optimum on the plateau ℓ → 0): every

@@ -38,7 +38,8 @@ leaked the held-out fold into the choice, which then picked a residual for robot
 one).  The simplest candidate within three standard errors of the lowest mean
 cross-validated error wins (:func:`~robocal.identify.residual.cv._one_standard_error`); once
 that is a learned residual, its harmonics are those of the lowest residual candidate
-(``cv.HARMONICS_SE``), and a residual whose CV error at the 95th percentile is above
+(``cv.HARMONICS_SE``) on the richest physics within one standard error of it
+(``cv.PHYSICS_SE``), and a residual whose CV error at the 95th percentile is above
 the physics alone's is no candidate (the tail).  Held-out data never enters.  The whole
 stage runs on one BLAS thread (idle OpenBLAS threads doubled its CPU time on a 2-core
 machine).  A joint whose angle error cannot move the measured point (a probe on the last
