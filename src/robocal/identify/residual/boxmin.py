@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BoxMinimum", "minimize_in_box"]
+__all__ = ["BoxMinimum", "Gradient", "minimize_in_box"]
 
 Array = NDArray[np.float64]
 
@@ -28,19 +28,25 @@ ARMIJO = 1e-4  # the sufficient decrease of a step: this share of the gradient's
 MAX_BACKTRACKS = 30  # halvings (or shorter) of one step before giving up
 
 
+#: a function's gradient: the array, or a call that forms it (on demand: a search needs none
+#: at a point where it stops on the function's decrease or whose step it rejects)
+Gradient = Array | Callable[[], Array]
+
+
 @dataclass(frozen=True)
 class BoxMinimum:
-    """The point found ``x``, the function ``f`` and gradient ``g`` there, and the number of
-    function evaluations."""
+    """The point found ``x``, the function ``f`` there, its gradient ``g`` (None when the search
+    stopped on the function's decrease without forming it) and the number of function
+    evaluations."""
 
     x: Array
     f: float
-    g: Array
+    g: Array | None
     evaluations: int
 
 
 def minimize_in_box(
-    fun: Callable[..., tuple[float, Array]],
+    fun: Callable[..., tuple[float, Gradient]],
     x0: Array,
     lower: Array,
     upper: Array,
@@ -51,11 +57,13 @@ def minimize_in_box(
     newton_scaled: bool = False,
 ) -> BoxMinimum:
     """Minimise ``fun(x, *args) -> (f, ∇f)`` over ``lower <= x <= upper`` (``(n,)`` each)
-    from ``x0`` (clipped into the box); see the module docstring.  ``newton_scaled``: ``x``'s
-    coordinates are scaled so that the Hessian is near the identity (the gradient step is
-    near Newton's): the first step is tried whole, not cut to unit length."""
+    from ``x0`` (clipped into the box); see the module docstring.  ``∇f`` may be a call that
+    forms it (:data:`Gradient`).  ``newton_scaled``: ``x``'s coordinates are scaled so that
+    the Hessian is near the identity (the gradient step is near Newton's): the first step is
+    tried whole, not cut to unit length."""
     x = np.clip(np.asarray(x0, dtype=float), lower, upper)
-    f, g = fun(x, *args)
+    f, lazy = fun(x, *args)
+    g = _formed(lazy)
     evaluations = 1
     # the inverse Hessian: unknown (None) until the first step measures it, unless the
     # coordinates are scaled to make it the identity
@@ -67,17 +75,21 @@ def minimize_in_box(
         d = _direction(g, free, hinv)
         # no curvature known yet: a first step of unit length at most (as L-BFGS-B's)
         t = 1.0 if hinv is not None else min(1.0, 1.0 / float(np.linalg.norm(d)))
-        step = _backtrack(fun, args, x, f, g, d, t, lower, upper)
-        evaluations += step[3]
-        if step[0] is None:  # no decrease along a descent direction: converged to rounding
+        x_new, f_new, lazy, count = _backtrack(fun, args, x, f, g, d, t, lower, upper)
+        evaluations += count
+        if x_new is None:  # no decrease along a descent direction: converged to rounding
             break
-        x_new, f_new, g_new = step[0], step[1], step[2]
-        hinv = _bfgs(hinv, x_new - x, g_new - g, len(x))
         decrease = f - f_new
+        if decrease <= ftol * max(abs(f), abs(f_new), 1.0):  # stopped: no gradient needed there
+            return BoxMinimum(x_new, float(f_new), None, evaluations)
+        g_new = _formed(lazy)
+        hinv = _bfgs(hinv, x_new - x, g_new - g, len(x))
         x, f, g = x_new, f_new, g_new
-        if decrease <= ftol * max(abs(f), abs(f + decrease), 1.0):
-            break
     return BoxMinimum(x, float(f), g, evaluations)
+
+
+def _formed(gradient: Gradient) -> Array:
+    return gradient() if callable(gradient) else gradient
 
 
 def _free(x: Array, g: Array, lower: Array, upper: Array) -> NDArray[np.bool_]:
@@ -96,7 +108,7 @@ def _direction(g: Array, free: NDArray[np.bool_], hinv: Array | None) -> Array:
 
 
 def _backtrack(
-    fun: Callable[..., tuple[float, Array]],
+    fun: Callable[..., tuple[float, Gradient]],
     args: tuple[Any, ...],
     x: Array,
     f: float,
@@ -105,8 +117,8 @@ def _backtrack(
     t: float,
     lower: Array,
     upper: Array,
-) -> tuple[Array | None, float, Array, int]:
-    """``(x, f, g, evaluations)`` of the first projected step ``t d`` (shortened by quadratic
+) -> tuple[Array | None, float, Gradient, int]:
+    """``(x, f, ∇f, evaluations)`` of the first projected step ``t d`` (shortened by quadratic
     interpolation) with Armijo's decrease; ``x`` None when none was found."""
     for count in range(1, MAX_BACKTRACKS + 1):
         x_new = np.clip(x + t * d, lower, upper)
