@@ -22,11 +22,12 @@ from robocal.identify.residual.fit import (
     Hyper,
     Index,
     Raw,
-    Solver,
     apply,
     evidence,
+    evidence_and_mean,
     gram_matrices,
     kept_columns,
+    kept_normal,
     layout,
     posterior_mean,
     raw_blocks,
@@ -400,19 +401,21 @@ def _fold_errors_of_raws(
     for done, (held, raw) in enumerate(zip(parts, raws, strict=True), start=1):
         train = total - raw
         r_held, P_held, J_held = full.residuals[held], full.P[held], full.J[held]
-        try:
-            base = r_held - J_held @ Solver.of(train).step()
+        try:  # the largest number of harmonics' projection: each smaller one's is its sub-block
+            projected, solver = train.projected(np.arange(len(train.Ar)))
         except np.linalg.LinAlgError:  # the physics is not determined by this fold: not a candidate
             return {name: np.full(len(q), np.inf) for name, _ in specs}
+        base = r_held - J_held @ solver.step()
         train_q = q[np.setdiff1d(np.arange(len(q)), held)]
         for name, H in specs:
             e = base
             if H is not None:
                 keep = kept_columns(residual_template(names, index, 1), top, H)
-                normal, solver = train.projected(keep)
-                template = residual_template(names, index, H, train_q)  # fades beyond the fold's angles
-                hyper = evidence(template, normal, hypers[name], ftol=FOLD_FTOL)
-                c = posterior_mean(template, normal, hyper)
+                normal = kept_normal(projected, keep)
+                template = residual_template(names, index, H)  # its fade: covering(train_q) below
+                hyper, c = evidence_and_mean(template, normal, hypers[name], ftol=FOLD_FTOL)
+                if c is None:  # the dual form's search: no mean kept
+                    c = posterior_mean(template, normal, hyper)
                 learned = dataclasses.replace(template, coefficients=c, length_scale=hyper.length_scale)
                 learned = learned.covering(train_q)  # the fade of the final fit (fit_joint_fourier)
                 e = r_held - J_held @ solver.step(keep, c) - apply(learned, q[held], P_held)
