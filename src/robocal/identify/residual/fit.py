@@ -223,7 +223,14 @@ def raw_blocks(q: Array, r: Array, P: Array, template: JointAngleResidual, J: Ar
             J2 = Js.reshape(-1, p)
             JJ += J2.T @ J2
             Jr += J2.T @ y.reshape(-1)
-    return Raw(np.triu(AA) + np.triu(AA, 1).T, JA, Ar, JJ, Jr, rr, r.size)
+    # the symmetric matrix from its upper triangle, block by block (two (m, m) triu copies
+    # cost more than the blocks): lower blocks the upper ones transposed, diagonal blocks too
+    for j in range(k):
+        D = AA[block[j], block[j]]
+        AA[block[j], block[j]] = np.triu(D) + np.triu(D, 1).T
+        for i in range(j + 1, k):
+            AA[block[i], block[j]] = AA[block[j], block[i]].T
+    return Raw(AA, JA, Ar, JJ, Jr, rr, r.size)
 
 
 def kept_normal(normal: _Normal, keep: Index) -> _Normal:
