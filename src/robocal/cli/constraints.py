@@ -95,8 +95,9 @@ def calibrate_constraint_command(
 
 def tilt_effect_kinds(effects: str | None) -> tuple[str, ...] | None:
     """``--effects`` for constraint files: the joint effects the tilt rows identify.  None
-    (not given): backlash and compliance; ``none``: no joint effect; ``identify``: clearance,
-    backlash and compliance; or a list of those kinds (``clearance,backlash,compliance``).
+    (not given) or ``identify``: clearance, backlash and compliance (what the rows cannot
+    tell from the geometry held by name); ``none``: no joint effect; or a list of those kinds
+    (``clearance,backlash,compliance``).
     ``predict`` (the model's effects held) is the tracker calibration's only: refused."""
     from robocal.identify.constraints.tilt_rows import ALL_KINDS
 

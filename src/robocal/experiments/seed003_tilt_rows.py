@@ -6,7 +6,7 @@ link, level at the home configuration: the file's ``home_r*_deg`` columns), its
 :data:`~robocal.experiments.seed003_inclinometer.N_CONFIGURATIONS` designed configurations,
 zero offsets within ±0.05° and the 0.001° resolution (σ 0.001°, rounded to the count) are
 written as one tilt file and calibrated by the command line (``robocal calibrate
-katana450 --data FILE --effects clearance,backlash,compliance``: the one constraint fit,
+katana450 --data FILE``: the one constraint fit,
 geometry and joint effects together, in the default chain, the complete model with its
 link rotations freed, :func:`robocal.identify.constraints.tilt_rows.link_rotations_free`;
 the position model alone lacks the last joint's offset a sensor on link 5 reads and
@@ -29,8 +29,8 @@ import numpy as np
 
 __all__ = ["EFFECTS", "ROWS", "markdown_table", "thesis_tilt_file", "tilt_rows_tables"]
 
-#: the options of the one fit: clearance too (not identified by default)
-EFFECTS = ("--effects", "clearance,backlash,compliance")
+#: the options of the one fit: none (the default identifies clearance, backlash and compliance)
+EFFECTS: tuple[str, ...] = ()
 #: (table key, effect kind, the saved estimate's key) of the thesis' three tables
 ROWS = (
     ("clearance_tilt_deg", "clearance", "estimate_rad"),

@@ -81,7 +81,7 @@ class ConstraintRequest:
     report: bool = False
     progress: Progress | None = field(default=None, compare=False)
     names: tuple[str, ...] = ()
-    tilt_kinds: tuple[str, ...] = ("backlash", "compliance")  # tilt rows' joint effects (+ "clearance")
+    tilt_kinds: tuple[str, ...] = ("clearance", "backlash", "compliance")  # tilt rows' joint effects
     frames: Model | None = None
 
     def __post_init__(self) -> None:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal.identify.constraints.effect_groups import group_dropped, held_groups, poorly_separated
+from robocal.identify.constraints.effect_groups import held_for, held_groups
 from robocal.identify.constraints.figures import (
     ConstraintFigures,
     constraint_figures,
@@ -43,6 +43,7 @@ from robocal.identify.constraints.position_effects import (
 from robocal.identify.constraints.tilt_record import TiltCalibration, effect_summary_lines, tilt_estimates
 from robocal.identify.constraints.tilt_rows import (
     EFFECT_KINDS,
+    fixed_tilt_hints,
     mixed_effects_note,
     tilt_rows,
     tilt_terms,
@@ -260,8 +261,10 @@ def _prune(problem: ConstraintProblem, x: Array, cov: tuple, pruning: Pruning, d
         if found is None:
             break
         worst, sigma, names = int(robot[found[0]]), found[1], list(problem.free_names)
-        held = poorly_separated(names, worst, cov[1], problem.effect_scale(x), pruning.max_std)
-        dropped += group_dropped(names, held, sigma)  # joint effects told apart by none: all held
+        hints = fixed_tilt_hints(problem.tilt, problem.data)  # what poses would separate a clearance
+        held, records = held_for(names, worst, sigma, cov[1], problem.effect_scale(x), pruning.max_std,
+                                 _robot_columns(problem), hints)  # fmt: skip
+        dropped += records  # effects told apart by none: all held; the geometry before the effects
         problem = problem.fix([names[k] for k in held])
         fit = solve(problem, problem.x0, "lm")
         x = fit.x
@@ -278,7 +281,8 @@ def _screen(problem: ConstraintProblem, pruning: Pruning, known_noise: bool, dro
     robot = _robot_columns(problem)
     found = [(c, s) for c, s in found if robot[c]]
     cov = uncertainty(problem.residual(x0), problem.jacobian(x0), 3, known_noise)[1] if found else None
-    held = held_groups(list(problem.free_names), found, cov, problem.effect_scale(x0), pruning.max_std)
+    held = held_groups(list(problem.free_names), found, cov, problem.effect_scale(x0), pruning.max_std,
+                       robot, fixed_tilt_hints(problem.tilt, problem.data))  # fmt: skip
     dropped += held
     return problem.fix([d.name for d in held])
 

@@ -66,8 +66,11 @@ __all__ = [
     "ALL_KINDS",
     "CONTACT_FRACTION",
     "EFFECT_KINDS",
+    "FIXED_TILT",
     "ZERO_PREFIX",
     "TiltTerms",
+    "fixed_tilt_hints",
+    "fixed_tilt_joints",
     "link_rotations_free",
     "mixed_effects_note",
     "tilt_chain",
@@ -78,14 +81,18 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-# clearance is opt-in (``ALL_KINDS``): on random configurations of a UR10 (no effects in the
-# truth) it took 0.03° of the wrists' tilt the geometry alone then lacks (tests/test_tilt_rows)
-EFFECT_KINDS = ("backlash", "compliance")
 ALL_KINDS = ("clearance", "backlash", "compliance")
+# every kind by default, as the thesis identifies them; a clearance the rows cannot tell from
+# the geometry (its bending moment on one side at every row: fixed_tilt_joints) is held by
+# the pruning with its reason, the geometry kept (effect_groups.held_for)
+EFFECT_KINDS = ALL_KINDS
 #: a load within this fraction of its joint's largest over the rows has no reliable sign:
 #: 2 % is a 1.1° error of the moment's direction; the thesis' ±5° about the vertical is 8.7 %
 CONTACT_FRACTION = 0.02
 ZERO_PREFIX = "tilt_zero_"
+#: the mean of the clearance's unit tilt vectors (one per row) at least this long: a fixed
+#: tilt (0.99: fewer than 0.5 % of the rows with the moment on the other side)
+FIXED_TILT = 0.99
 MOMENT_FLOOR = 1.0  # N·m: the compliance column's scale when the loads are smaller
 MAX_EFFECT_ANGLE = 0.5  # rad: a clearance or backlash an LM trial step is capped at (real ones: < 1°)
 
@@ -309,3 +316,57 @@ def mixed_effects_note(data: ConstraintSet, effects: tuple[str, ...]) -> str | N
         f"{', '.join(others)} rows are predicted without the joints' deflections, so under load "
         "they carry them as error (calibrate those rows alone to compare)"
     )
+
+
+def fixed_tilt_joints(terms: TiltTerms, data: ConstraintSet) -> tuple[str, ...]:
+    """The joints (names) whose clearance turns their link by one fixed tilt at every tilt
+    row of ``data``: what the sensors' zeros and the geometry's rotation steps carry too.
+
+    A clearance tilts the joint's link by ``C`` about the bending moment's direction ``b``
+    (a unit vector perpendicular to the axis), which turns the vertical as the link sees it
+    by ``C (g × b)`` (``g``: the vertical in the link's frame).  Where ``g × b`` is the same
+    vector at every row (the mean of the unit vectors at least :data:`FIXED_TILT` long) the
+    clearance is a constant tilt: a UR10's parallel joints under gravity, where ``g × b`` is
+    ± the joint's axis with the sign of the links' offset along it, the same at every
+    configuration.  Poses where the bending moment is on the other side of zero tell them
+    apart (the thesis' last link 5° either side of the vertical, §4.4.1); a moment whose
+    direction turns as the link sees it (joint 1's, about a vertical axis) does too.  A
+    joint with no bending moment is not listed."""
+    from robocal.model.joints import DEADBAND
+
+    steps = [s for s in terms.robot.steps if s.joint is not None]
+    q = data.q[data.tilted]
+    if not len(q):
+        return ()
+    up = terms.robot.joint_frames(q)[:, :, 2, :3]  # the base's z in each joint frame: (m, dof, 3)
+    out = []
+    for j, step in enumerate(steps[: terms.loads.shape[1]]):
+        if not step.is_rotation:
+            continue
+        k = step.axis
+        b = np.zeros((len(q), 3))
+        b[:, (k + 1) % 3], b[:, (k + 2) % 3] = terms.loads[:, j, 0], terms.loads[:, j, 1]
+        size = np.linalg.norm(b, axis=1)
+        if size.max() <= DEADBAND:
+            continue
+        w = np.cross(up[:, j], b / np.maximum(size, DEADBAND)[:, None])
+        if np.linalg.norm(w.mean(axis=0)) >= FIXED_TILT:
+            out.append(terms.robot.joint_names[j])
+    return tuple(out)
+
+
+def fixed_tilt_hints(terms: TiltTerms | None, data: ConstraintSet) -> dict[str, str]:
+    """A sentence per ``clearance_<joint>`` of :func:`fixed_tilt_joints` saying why the rows
+    cannot see it and what poses would: the pruning's reason when it holds one."""
+    if terms is None:
+        return {}
+    prefix = "clearance_"
+    return {
+        f"{prefix}{j}": (
+            f"{j}'s bending moment keeps its side at every row, so its clearance tilts the link by the "
+            f"same angle everywhere, as the sensors' zeros and the geometry do; read poses with {j}'s "
+            "bending moment on both sides of zero to identify it"
+        )
+        for j in fixed_tilt_joints(terms, data)
+        if f"{prefix}{j}" in terms.effects
+    }
