@@ -123,7 +123,7 @@ def test_fused_kernels_pass_no_constants_to_the_shared_kernels():
     import inspect
 
     shared = {
-        "evaluate",
+        "position_columns_transposed",
         "segment_data",
         "start",
         "propose",

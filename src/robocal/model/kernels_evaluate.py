@@ -17,7 +17,7 @@ from robocal.model.kernels import (
     pose_forward,
 )
 
-__all__ = ["evaluate"]
+__all__ = ["evaluate", "position_columns_transposed"]
 
 
 @jit
@@ -81,59 +81,111 @@ def _column_constants(local, step_axis, steps):
 def _columns_batch(
     q, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis, step_rot, columns, rows
 ):
-    """:func:`evaluate` without perturbations or joint columns, by blocks of ``_BLOCK`` poses
+    """:func:`evaluate` without perturbations or joint columns, by blocks of ``BLOCK`` poses
     in structure-of-arrays form (poses innermost: LLVM vectorises every loop over them, as in
     :func:`forward_batch`); the same formulas as :func:`_evaluate_poses`."""
     n, dof = q.shape
     m = columns.shape[0]
-    qt = np.ascontiguousarray(q.T)
     T = np.empty((n, 4, 4))
     J = np.empty((n * rows, m))
-    a_loc, c_loc = _column_constants(local, step_axis, columns)
-    F = np.empty((3, 4, BLOCK))
-    A = np.empty((dof + 1, 3, 4, BLOCK))  # the anchors: the base (identity), then after each joint
-    D = np.empty((dof + 1, 3, BLOCK))  # the tool point seen from each anchor, in its axes
-    Jb = np.empty((m, rows, BLOCK))
+    work = _block_work(q, local, step_axis, columns, rows)
+    Jb = work[5]
     for start in range(0, n, BLOCK):
-        b = min(BLOCK, n - start)
-        anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, True)
-        for a in range(dof + 1):
-            for p in range(b):
-                d0 = F[0, 3, p] - A[a, 0, 3, p]
-                d1 = F[1, 3, p] - A[a, 1, 3, p]
-                d2 = F[2, 3, p] - A[a, 2, 3, p]
-                for r in range(3):
-                    D[a, r, p] = A[a, 0, r, p] * d0 + A[a, 1, r, p] * d1 + A[a, 2, r, p] * d2
-        for c in range(m):
-            s = columns[c]
-            a = anchor_of[s]
-            al0, al1, al2 = a_loc[c, 0], a_loc[c, 1], a_loc[c, 2]
-            if step_rot[s]:
-                cl0, cl1, cl2 = c_loc[c, 0], c_loc[c, 1], c_loc[c, 2]
-                for p in range(b):
-                    v0 = al1 * D[a, 2, p] - al2 * D[a, 1, p] - cl0
-                    v1 = al2 * D[a, 0, p] - al0 * D[a, 2, p] - cl1
-                    v2 = al0 * D[a, 1, p] - al1 * D[a, 0, p] - cl2
-                    for r in range(3):
-                        Jb[c, r, p] = A[a, r, 0, p] * v0 + A[a, r, 1, p] * v1 + A[a, r, 2, p] * v2
-                if rows == 6:
-                    for r in range(3):
-                        for p in range(b):
-                            Jb[c, 3 + r, p] = A[a, r, 0, p] * al0 + A[a, r, 1, p] * al1 + A[a, r, 2, p] * al2
-            else:
-                for r in range(3):
-                    for p in range(b):
-                        Jb[c, r, p] = A[a, r, 0, p] * al0 + A[a, r, 1, p] * al1 + A[a, r, 2, p] * al2
-                if rows == 6:
-                    for r in range(3):
-                        for p in range(b):
-                            Jb[c, 3 + r, p] = 0.0
+        b = _block_columns(
+            seg, offsets, joint_axis, joint_rot, anchor_of, step_rot, columns, rows, start, T, work
+        )
         for p in range(b):
             row = (start + p) * rows
             for r in range(rows):
                 for c in range(m):
                     J[row + r, c] = Jb[c, r, p]
     return T, J, np.zeros((0, dof, 3))
+
+
+@jit
+def position_columns_transposed(
+    q, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis, step_rot, columns
+):
+    """Tool frames ``T (n, 4, 4)`` and the position rows' columns of the steps ``columns``
+    as rows, ``Jt (len(columns), 3n)``: the transpose of :func:`evaluate`'s ``J`` (position
+    rows, no perturbations), the same numbers, written column by column (contiguous) for
+    the fits that form normal equations from the columns (no transpose of ``J`` later)."""
+    n = q.shape[0]
+    m = columns.shape[0]
+    T = np.empty((n, 4, 4))
+    Jt = np.empty((m, 3 * n))
+    work = _block_work(q, local, step_axis, columns, 3)
+    Jb = work[5]
+    for start in range(0, n, BLOCK):
+        b = _block_columns(
+            seg, offsets, joint_axis, joint_rot, anchor_of, step_rot, columns, 3, start, T, work
+        )
+        for c in range(m):
+            target = Jt[c]
+            for p in range(b):
+                i = 3 * (start + p)
+                target[i] = Jb[c, 0, p]
+                target[i + 1] = Jb[c, 1, p]
+                target[i + 2] = Jb[c, 2, p]
+    return T, Jt
+
+
+@jit
+def _block_work(q, local, step_axis, columns, rows):
+    """The work arrays of :func:`_block_columns`: the joint values transposed ``(dof, n)``,
+    the columns' constants (:func:`_column_constants`), a block's tool frames ``F (3, 4,
+    w)``, anchors ``A (dof + 1, 3, 4, w)`` (the base, then after each joint), the tool
+    point seen from each anchor in its axes ``D (dof + 1, 3, w)`` and the columns
+    ``Jb (m, rows, w)``, ``w`` the block's width (at most ``BLOCK`` poses)."""
+    n, dof = q.shape
+    m = columns.shape[0]
+    width = max(1, min(BLOCK, n))  # fewer poses than a block: arrays of their size (less memory to touch)
+    a_loc, c_loc = _column_constants(local, step_axis, columns)
+    F, A, D = np.empty((3, 4, width)), np.empty((dof + 1, 3, 4, width)), np.empty((dof + 1, 3, width))
+    return np.ascontiguousarray(q.T), a_loc, c_loc, F, A, np.empty((m, rows, width)), D
+
+
+@jit
+def _block_columns(seg, offsets, joint_axis, joint_rot, anchor_of, step_rot, columns, rows, start, T, work):
+    """Poses ``start ..`` (one block): their tool frames into ``T`` and their columns into
+    ``work``'s ``Jb[c, r, p]``; returns the block's number of poses."""
+    qt, a_loc, c_loc, F, A, Jb, D = work
+    dof, n = qt.shape
+    m = columns.shape[0]
+    b = min(BLOCK, n - start)
+    anchors_block(qt, seg, offsets, joint_axis, joint_rot, start, b, F, A, T, True)
+    for a in range(dof + 1):
+        for p in range(b):
+            d0 = F[0, 3, p] - A[a, 0, 3, p]
+            d1 = F[1, 3, p] - A[a, 1, 3, p]
+            d2 = F[2, 3, p] - A[a, 2, 3, p]
+            for r in range(3):
+                D[a, r, p] = A[a, 0, r, p] * d0 + A[a, 1, r, p] * d1 + A[a, 2, r, p] * d2
+    for c in range(m):
+        s = columns[c]
+        a = anchor_of[s]
+        al0, al1, al2 = a_loc[c, 0], a_loc[c, 1], a_loc[c, 2]
+        if step_rot[s]:
+            cl0, cl1, cl2 = c_loc[c, 0], c_loc[c, 1], c_loc[c, 2]
+            for p in range(b):
+                v0 = al1 * D[a, 2, p] - al2 * D[a, 1, p] - cl0
+                v1 = al2 * D[a, 0, p] - al0 * D[a, 2, p] - cl1
+                v2 = al0 * D[a, 1, p] - al1 * D[a, 0, p] - cl2
+                for r in range(3):
+                    Jb[c, r, p] = A[a, r, 0, p] * v0 + A[a, r, 1, p] * v1 + A[a, r, 2, p] * v2
+            if rows == 6:
+                for r in range(3):
+                    for p in range(b):
+                        Jb[c, 3 + r, p] = A[a, r, 0, p] * al0 + A[a, r, 1, p] * al1 + A[a, r, 2, p] * al2
+        else:
+            for r in range(3):
+                for p in range(b):
+                    Jb[c, r, p] = A[a, r, 0, p] * al0 + A[a, r, 1, p] * al1 + A[a, r, 2, p] * al2
+            if rows == 6:
+                for r in range(3):
+                    for p in range(b):
+                        Jb[c, 3 + r, p] = 0.0
+    return b
 
 
 # split into calls, the hot loop would pass and allocate a pose's frames and columns per pose

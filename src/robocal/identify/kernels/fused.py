@@ -31,7 +31,7 @@ from robocal.identify.kernels.lm import accept, propose, start
 from robocal.identify.kernels.stage import normal_covariance, prune_candidate, screen, variance_factor
 from robocal.identify.rules import NO_CANDIDATE
 from robocal.model.kernels import segment_data
-from robocal.model.kernels_evaluate import evaluate
+from robocal.model.kernels_evaluate import position_columns_transposed
 
 __all__ = ["OK", "SINGULAR", "first_pass", "fit"]
 
@@ -61,22 +61,21 @@ def _count(value):
 @_inline
 def _evaluate(data, values, columns):
     """Tool frames ``(n, 4, 4)``, predicted minus measured positions ``(3n,)`` and the
-    unweighted Jacobian columns ``(3n, len(columns))`` of the chain at ``values``."""
+    unweighted Jacobian columns ``(3n, len(columns))`` of the chain at ``values``, in Fortran
+    order (each column contiguous: the sums over rows below run along them)."""
     q, position, _, step_axis, step_rot, step_joint, joint_axis, joint_rot, anchor_of, joint_steps = data
     n, dof = q.shape
     seg, local = segment_data(values, step_axis, step_rot, step_joint, dof)
     offsets = np.empty(len(joint_steps))
     for j in range(len(joint_steps)):
         offsets[j] = values[joint_steps[j]]
-    pert = np.zeros((1, dof, 3))
-    no = _flag(False)
-    T, J, _ = evaluate(q, pert, no, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis,
-                       step_rot, columns, joint_steps, _count(3), no, no)  # fmt: skip
+    T, Jt = position_columns_transposed(q, seg, local, offsets, joint_axis, joint_rot, anchor_of, step_axis,
+                                        step_rot, columns)  # fmt: skip
     r = np.empty(3 * n)
     for i in range(n):
         for c in range(3):
             r[3 * i + c] = T[i, c, 3] - position[i, c]
-    return T, r, J
+    return T, r, Jt.T
 
 
 @_jit
@@ -87,10 +86,10 @@ def _weighted_transposed(r, J, weights):
     rw = np.empty((1, m))
     Jwt = np.empty((1, p, m))
     for i in range(m):
-        w = weights[i]
-        rw[0, i] = r[i] * w
-        for a in range(p):
-            Jwt[0, a, i] = J[i, a] * w
+        rw[0, i] = r[i] * weights[i]
+    for a in range(p):  # along J's columns (contiguous in its Fortran order)
+        for i in range(m):
+            Jwt[0, a, i] = J[i, a] * weights[i]
     return rw, Jwt
 
 
@@ -163,11 +162,11 @@ def first_pass(data, values, free_steps, length_scale, preference):
 
 @_jit
 def _columns_of(J, live):
-    out = np.empty((J.shape[0], len(live)))
-    for i in range(J.shape[0]):
-        for a in range(len(live)):
-            out[i, a] = J[i, live[a]]
-    return out
+    """``J[:, live]`` in Fortran order, as :func:`_evaluate`'s."""
+    out = np.empty((len(live), J.shape[0]))
+    for a in range(len(live)):
+        out[a] = J[:, live[a]]
+    return out.T
 
 
 @_jit
@@ -175,8 +174,8 @@ def _displacement_scale(J):
     """:func:`robocal.identify.stages.tool_displacement_scale` of position rows ``(3n, p)``."""
     m, p = J.shape
     scale = np.zeros(p)
-    for i in range(0, m, 3):  # along J's rows (the same values as column by column)
-        for a in range(p):
+    for a in range(p):  # along J's columns (contiguous in its Fortran order)
+        for i in range(0, m, 3):
             s = J[i, a] * J[i, a] + J[i + 1, a] * J[i + 1, a] + J[i + 2, a] * J[i + 2, a]
             scale[a] = max(scale[a], s)
     for a in range(p):
@@ -253,7 +252,7 @@ def _fit_once(data, values0, free_steps, live, x0, first, normal, settings, chi2
     predicted, rms, accepted = np.empty(1), np.empty(1), np.empty((2, 1), dtype=np.intp)
     # the last accepted evaluation, with the weighted arrays its normal equations were formed
     # from (the result's: not weighted a second time)
-    last = (first[0], first[1], np.empty((m, 0)), np.empty((1, m)), np.empty((1, 0, m)))
+    last = (first[0], first[1], np.empty((0, m)).T, np.empty((1, m)), np.empty((1, 0, m)))
     while True:
         n = propose(ids, _count(1), x, cost, G, Jr, D, mu, evaluations, success, tolerance, max_evaluations,
                     x_new, predicted)  # fmt: skip
