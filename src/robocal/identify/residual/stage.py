@@ -421,10 +421,12 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
     raw = None
     for s in range(0, len(q), CHUNK):  # the Fisher matrix over chunks of poses: O((p + m)²) memory
         qs = q[s : s + CHUNK]
-        P = chain.perturbation_jacobian(qs, "position", result.joint_perturbations(qs))
+        perturbations = result.joint_perturbations(qs)  # once for P and the parameters' columns
+        P = chain.perturbation_jacobian(qs, "position", perturbations)
         # by joint blocks (:func:`~robocal.identify.residual.fit._raw_blocks`): 5x fewer
         # operations than the products of the whole design
-        part = raw_blocks(qs, np.zeros((len(qs), 3)), P, learned, result.position_columns(qs))
+        J = result.position_columns(qs, perturbations, P)
+        part = raw_blocks(qs, np.zeros((len(qs), 3)), P, learned, J)
         raw = part if raw is None else raw + part
     assert raw is not None
     F = np.block([[raw.JJ, raw.JA * d], [(raw.JA * d).T, d[:, None] * raw.AA * d]])
