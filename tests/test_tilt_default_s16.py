@@ -20,7 +20,7 @@ from robocal.experiments.seed003_inclinometer import THESIS_TABLE_5_2
 from robocal.experiments.seed003_tilt_rows import thesis_tilt_file, tilt_rows_tables
 from robocal.identify.constraints.effect_groups import held_for
 from robocal.identify.constraints.fit import build_constraint_problem, calibrate_constraints
-from robocal.identify.constraints.tilt_rows import EFFECT_KINDS, fixed_tilt_joints
+from robocal.identify.constraints.tilt_rows import EFFECT_KINDS, PLAN_TRIES, fixed_tilt_joints
 from robocal.identify.options import Pruning
 from robocal.measure.constraints.sim import simulate_tilt_rows
 from robocal.measure.true_model import draw_true_model
@@ -100,6 +100,10 @@ def test_random_ur10_holds_the_parallel_clearances_by_name_and_keeps_the_geometr
     assert "alpha1" in result.names and "alpha1" not in held
     assert "clearance_shoulder_pan" in result.names
     assert result.rms_after < 1.2 * SIGMA
+    # the plan: one note names the joints; none of the robot's configurations turns their
+    # moment over under its own weight (the links' offsets along the axes), so it says so
+    plan = [n for n in result.notes if all(j in n for j in PARALLEL)]
+    assert len(plan) == 1 and str(PLAN_TRIES) in plan[0]
 
 
 def test_separable_clearances_at_the_cramer_rao_bound(ur10):

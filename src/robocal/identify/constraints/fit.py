@@ -44,6 +44,7 @@ from robocal.identify.constraints.tilt_record import TiltCalibration, effect_sum
 from robocal.identify.constraints.tilt_rows import (
     EFFECT_KINDS,
     fixed_tilt_hints,
+    fixed_tilt_note,
     mixed_effects_note,
     tilt_rows,
     tilt_terms,
@@ -359,6 +360,8 @@ def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one co
     result = _result(problem, model, x, cov, fit, dropped, selection.kept, tool is not None)
     found = tuple(n for n in result.names if effect_of(n) is not None and n not in problem.position_names)
     notes += [note] if (note := mixed_effects_note(data, found)) else []
+    held = {d.name for d in dropped}  # a clearance held as a fixed tilt: which poses would identify it
+    notes += [note] if (note := fixed_tilt_note(problem.tilt, problem.data, held)) else []
     return dataclasses.replace(result, prior=prior, notes=tuple(notes))
 
 

@@ -67,10 +67,12 @@ __all__ = [
     "CONTACT_FRACTION",
     "EFFECT_KINDS",
     "FIXED_TILT",
+    "PLAN_TRIES",
     "ZERO_PREFIX",
     "TiltTerms",
     "fixed_tilt_hints",
     "fixed_tilt_joints",
+    "fixed_tilt_note",
     "link_rotations_free",
     "mixed_effects_note",
     "tilt_chain",
@@ -93,6 +95,7 @@ ZERO_PREFIX = "tilt_zero_"
 #: the mean of the clearance's unit tilt vectors (one per row) at least this long: a fixed
 #: tilt (0.99: fewer than 0.5 % of the rows with the moment on the other side)
 FIXED_TILT = 0.99
+PLAN_TRIES = 2000  # random configurations tried for a pose that turns a bending moment over
 MOMENT_FLOOR = 1.0  # N·m: the compliance column's scale when the loads are smaller
 MAX_EFFECT_ANGLE = 0.5  # rad: a clearance or backlash an LM trial step is capped at (real ones: < 1°)
 
@@ -332,26 +335,31 @@ def fixed_tilt_joints(terms: TiltTerms, data: ConstraintSet) -> tuple[str, ...]:
     apart (the thesis' last link 5° either side of the vertical, §4.4.1); a moment whose
     direction turns as the link sees it (joint 1's, about a vertical axis) does too.  A
     joint with no bending moment is not listed."""
+    return _fixed_tilts(terms.robot, data.q[data.tilted], terms.loads)
+
+
+def _fixed_tilts(robot: Model, q: Array, loads: Array) -> tuple[str, ...]:
+    """:func:`fixed_tilt_joints` at configurations ``q`` ``(m, dof)`` under ``loads``
+    ``(m, dof, 3)`` (N·m, each joint's frame)."""
     from robocal.model.joints import DEADBAND
 
-    steps = [s for s in terms.robot.steps if s.joint is not None]
-    q = data.q[data.tilted]
     if not len(q):
         return ()
-    up = terms.robot.joint_frames(q)[:, :, 2, :3]  # the base's z in each joint frame: (m, dof, 3)
+    steps = [s for s in robot.steps if s.joint is not None]
+    up = robot.joint_frames(q)[:, :, 2, :3]  # the base's z in each joint frame: (m, dof, 3)
     out = []
-    for j, step in enumerate(steps[: terms.loads.shape[1]]):
+    for j, step in enumerate(steps[: loads.shape[1]]):
         if not step.is_rotation:
             continue
         k = step.axis
         b = np.zeros((len(q), 3))
-        b[:, (k + 1) % 3], b[:, (k + 2) % 3] = terms.loads[:, j, 0], terms.loads[:, j, 1]
+        b[:, (k + 1) % 3], b[:, (k + 2) % 3] = loads[:, j, 0], loads[:, j, 1]
         size = np.linalg.norm(b, axis=1)
         if size.max() <= DEADBAND:
             continue
         w = np.cross(up[:, j], b / np.maximum(size, DEADBAND)[:, None])
         if np.linalg.norm(w.mean(axis=0)) >= FIXED_TILT:
-            out.append(terms.robot.joint_names[j])
+            out.append(robot.joint_names[j])
     return tuple(out)
 
 
@@ -370,3 +378,35 @@ def fixed_tilt_hints(terms: TiltTerms | None, data: ConstraintSet) -> dict[str, 
         for j in fixed_tilt_joints(terms, data)
         if f"{prefix}{j}" in terms.effects
     }
+
+
+def fixed_tilt_note(terms: TiltTerms | None, data: ConstraintSet, held: set[str]) -> str | None:
+    """One sentence naming the joints whose clearance was ``held`` because it is a fixed
+    tilt at every row (:func:`fixed_tilt_joints`), and whether any configuration of the
+    robot under its own weight would turn their bending moment over (:data:`PLAN_TRIES`
+    random ones: the plan), else None."""
+    from robocal.measure.ik_starts import random_configurations
+    from robocal.model.joints import load_moments
+
+    if terms is None:
+        return None
+    joints = [j for j in fixed_tilt_joints(terms, data) if f"clearance_{j}" in held]
+    if not joints:
+        return None
+    q = random_configurations(terms.robot, PLAN_TRIES, rng=np.random.default_rng(0))
+    never = set(_fixed_tilts(terms.robot, q, load_moments(terms.robot, q)))
+    text = (
+        f"clearance of {', '.join(joints)} not identified: the joint's bending moment keeps its side at "
+        "every row, so its clearance tilts the link by a fixed angle the geometry and the sensors' zeros "
+        "carry; add poses with that joint's bending moment on both sides of zero"
+    )
+    can = [j for j in joints if j not in never]
+    cannot = [j for j in joints if j in never]
+    if can:
+        text += f" (some configurations of this robot do so for {', '.join(can)})"
+    if cannot:
+        text += (
+            f"; for {', '.join(cannot)} none of {PLAN_TRIES} random configurations does under the robot's "
+            "own weight: a payload off the joint's axis or a tilted base would"
+        )
+    return text
