@@ -398,6 +398,12 @@ def _fold_errors_of_raws(
     q, names, index, top = problem.q, problem.joint_names, problem.joint_index, max(problem.harmonics)
     total = functools.reduce(operator.add, raws)
     errors = {name: np.empty(len(q)) for name, _ in specs}
+    # each number of harmonics' template and coefficients among the largest's, once for all folds
+    layouts = {
+        H: (residual_template(names, index, H), kept_columns(residual_template(names, index, 1), top, H))
+        for _, H in specs
+        if H is not None
+    }
     for done, (held, raw) in enumerate(zip(parts, raws, strict=True), start=1):
         train = total - raw
         r_held, P_held, J_held = full.residuals[held], full.P[held], full.J[held]
@@ -410,9 +416,8 @@ def _fold_errors_of_raws(
         for name, H in specs:
             e = base
             if H is not None:
-                keep = kept_columns(residual_template(names, index, 1), top, H)
+                template, keep = layouts[H]  # the template's fade: covering(train_q) below
                 normal = kept_normal(projected, keep)
-                template = residual_template(names, index, H)  # its fade: covering(train_q) below
                 hyper, c = evidence_and_mean(template, normal, hypers[name], ftol=FOLD_FTOL)
                 if c is None:  # the dual form's search: no mean kept
                     c = posterior_mean(template, normal, hyper)
