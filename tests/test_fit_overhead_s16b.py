@@ -3,6 +3,8 @@ every calibration records, checked against the reference computations they repla
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -49,3 +51,31 @@ def test_the_transposed_columns_of_no_poses_and_no_steps():
     T1, Jt1 = _columns_transposed(fixed, np.zeros((3, model.dof)))
     assert Jt1.shape == (0, 9)
     np.testing.assert_array_equal(T1, fixed.fk(np.zeros((3, model.dof)), compiled=True))
+
+
+def _serial_squares(column) -> float:
+    s = 0.0
+    for v in column.tolist():
+        s += v * v
+    return s
+
+
+@pytest.mark.parametrize("p", [1, 3, 4, 7, 36])
+def test_the_interleaved_sums_are_the_serial_ones_to_the_bit(p):
+    # the first pass's column norms and the displacement scales run four columns at a time;
+    # each sum and maximum keeps its own order: the same bits as one column at a time (the
+    # staged rank test's norms, numpy's along the rows, are held to them in test_fused)
+    import robocal.identify.kernels.fused as fused_kernels
+
+    rng = np.random.default_rng(p)
+    m = 3 * 41
+    St = rng.normal(size=(p + 2, m)) * rng.uniform(1e-3, 1e3, size=(p + 2, 1))
+    row = rng.permutation(p + 2)[:p].astype(np.intp)
+    norm = fused_kernels._squared_norms(St, row)
+    assert norm.tolist() == [_serial_squares(St[r]) for r in row]
+    J = np.asfortranarray(St[:p].T)
+    scale = fused_kernels._displacement_scale(J)
+    points = J.reshape(-1, 3, p)
+    expected = [math.sqrt(max([0.0] + [_serial_squares(points[i, :, a]) for i in range(len(points))]))
+                for a in range(p)]  # fmt: skip
+    assert scale.tolist() == expected
