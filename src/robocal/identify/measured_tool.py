@@ -225,16 +225,18 @@ def _probe_point(
     there, None: not estimated, no variance), the numbers :func:`_point_and_derivative`'s
     unit columns give (``+ 0.0``: as their sums, a zero is +0)."""
     step_on = {motion[1]: k for k, motion in enumerate(motions)}
-    order = [step_on[axis] for axis in "xyz"]
-    x, y, z = (0.0 + values[k] for k in order)
-    estimated = [(a, c) for a, k in enumerate(order) if (c := cols[k]) is not None]
-    axes, at = [a for a, _ in estimated], [c for _, c in estimated]  # components, their columns
-    block = covariance.take(at, axis=0).take(at, axis=1).tolist()
-    C = [[0.0, 0.0, 0.0] for _ in range(3)]
-    for i, a in enumerate(axes):
-        for j, b in enumerate(axes):
-            C[a][b] = 0.0 + block[i][j]
-    return (x, y, z), tuple((a, b, c) for a, b, c in C)  # floats already
+    order = [step_on["x"], step_on["y"], step_on["z"]]
+    x, y, z = 0.0 + values[order[0]], 0.0 + values[order[1]], 0.0 + values[order[2]]
+    at = [cols[k] for k in order]  # each component's column, None: not estimated
+    item = covariance.item  # nine floats read one by one (no arrays for a 3 x 3 block)
+
+    def row(a: int | None) -> tuple[float, float, float]:
+        if a is None:
+            return 0.0, 0.0, 0.0
+        u, v, w = ((0.0 if b is None else 0.0 + item(a, b)) for b in at)
+        return u, v, w
+
+    return (x, y, z), (row(at[0]), row(at[1]), row(at[2]))
 
 
 def _given_point(value: ArrayLike) -> Array:
