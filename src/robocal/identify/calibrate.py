@@ -112,6 +112,7 @@ _KEEP = (_outlier_poses, _without_measured_tool)  # older private names some cal
 
 Array = NDArray[np.float64]
 Method = SolverMethod  # robocal.choices: the table the command line offers too
+_STREAMING = Streaming()  # the default (frozen): made once, not at every calibration
 
 
 def initial_frame_and_tool(
@@ -306,7 +307,7 @@ def calibrate(
             kind=residual, harmonics=residual_harmonics, folds=cv_folds, progress=progress,
         )  # fmt: skip
 
-    streaming = Streaming() if streaming is None else streaming
+    streaming = _STREAMING if streaming is None else streaming
     if streams(data, method, physics, streaming):  # large inputs: decisions on a subsample, fit streamed
 
         def facts(result: CalibrationResult, some: Measurements) -> CalibrationResult:
