@@ -64,9 +64,6 @@ HARMONICS_SE = 0.0
 #: a learned residual on the richer physical variant (compliance) is preferred within this
 #: many standard errors of the chosen one's CV error (:func:`_richer_physics_within`)
 PHYSICS_SE = 1.0
-#: a fit whose prior is still this flat at its last harmonic (its weight over the first's)
-#: wanted more harmonics than it had: its length scale is no start for more (:func:`_decays`)
-FLAT_SPECTRUM = 0.5
 
 
 @dataclass(frozen=True)
@@ -329,16 +326,14 @@ def _fit_candidates(
             H: total.projected(kept_columns(residual_template(names, index, 1), top, H))[0] for H in harmonics
         }
     gram_time = (time.perf_counter() - t1 + raw_seconds) / len(harmonics)  # shared: each one's share
-    previous: Hyper | None = None  # this variant's optimum with the previous number of harmonics
     for H in harmonics:
         t1 = time.perf_counter() - gram_time
         name = f"{pname} + angle errors H={H}"
         template = residual_template(names, index, H)
-        hyper = evidence(template, grams[H], _warm_start(hypers, H, previous))
+        hyper = evidence(template, grams[H], _warm_start(hypers, H))
         if grams[H].A is None:  # the folds' start with its curvature (not for the few poses' dual form)
             hyper = with_curvature(hyper, grams[H], *layout(template))
         hypers[name] = hyper
-        previous = hyper if _decays(hyper, H) else None
         if normals is not None:
             normals[name] = grams[H]
         fit_time[name] = full.result.seconds + time.perf_counter() - t1
@@ -346,24 +341,16 @@ def _fit_candidates(
     return specs, fit_time
 
 
-def _warm_start(hypers: dict[str, Hyper], H: int, previous: Hyper | None) -> Hyper | None:
+def _warm_start(hypers: dict[str, Hyper], H: int) -> Hyper | None:
     """The start of the evidence maximisation of ``H`` harmonics on all poses: the optimum of
     another physical variant with as many harmonics (its residuals differ by the variants'
-    few parameters), else this variant's optimum with the previous number of harmonics
-    (the same angle errors, fewer of their harmonics), else None (a neutral start).  The
-    optimum is the same whatever the start (to the evidence's tolerance); from these starts
-    it takes fewer evaluations (series A, 300 poses: 98 -> 33 for the six fits)."""
+    few parameters: series A, 100 and 300 poses, 3 seeds: the same optimum or a better one,
+    in fewer evaluations), else None (a neutral start).  Not the optimum of fewer harmonics:
+    the evidence has local optima there (series A, 100 poses, seed 0: 24 harmonics from 8's
+    optimum ended 28 nats below the neutral start's; from 24's flat ``ℓ = 1e-4``, 48 ended
+    23 nats below)."""
     same = [h for name, h in hypers.items() if name.endswith(f" + angle errors H={H}")]
-    return same[0] if same else previous
-
-
-def _decays(hyper: Hyper, H: int) -> bool:
-    """Whether the prior of ``hyper`` decays within its ``H`` harmonics (the weight
-    ``exp(-(h ℓ)²/2)`` of harmonic ``H`` below :data:`FLAT_SPECTRUM` of the first's).  A flat
-    one sits on the evidence's plateau ``ℓ → 0``, where its gradient in ``ℓ`` vanishes: started
-    there, the fit of more harmonics stays (series A, 100 poses: 48 harmonics from 24's
-    ``ℓ = 1e-4`` ended 23 nats below the neutral start's optimum; held-out 0.140 -> 0.161 mm)."""
-    return bool(np.exp(-0.5 * (H * H - 1) * hyper.length_scale**2) < FLAT_SPECTRUM)
+    return same[0] if same else None
 
 
 def _fold_raws(problem: _Problem, full: PhysicalFit, parts: Sequence[Index]) -> list[Raw] | None:
