@@ -227,3 +227,45 @@ def test_the_mean_position_variance_is_the_mean_trace_of_the_covariances(case):
     assert mean_position_variance(result, q) == pytest.approx(expected, rel=1e-9)
     given = mean_position_variance(result, q, result.joint_perturbations(q))
     assert given == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_box_minimiser_reaches_l_bfgs_bs_minimum_of_ill_conditioned_quadratics_in_a_box():
+    """Projected BFGS on random quadratics (condition 1e4) whose minimum lies outside the box:
+    the step of the free variables solves their own Hessian block, and a step the box cuts
+    until it no longer descends restarts from steepest descent (27 of 300 stopped short
+    before both)."""
+    short = []
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        Q = np.linalg.qr(rng.normal(size=(7, 7)))[0]
+        A = Q @ np.diag(np.logspace(0, 4, 7)) @ Q.T
+        c = rng.normal(size=7) * 3
+
+        def f(x, A=A, c=c):
+            return 0.5 * (x - c) @ A @ (x - c), A @ (x - c)
+
+        x0 = rng.uniform(-1, 1, 7)
+        x0[0] = -1.0
+        bounds = [(-1.0, 1.0)] * 7
+        options = {"ftol": 1e-15, "gtol": 1e-10, "maxiter": 2000}
+        best = minimize(f, x0, jac=True, method="L-BFGS-B", bounds=bounds, options=options).fun
+        found = minimize_in_box(f, x0, -np.ones(7), np.ones(7)).f
+        if found - best > 1e-4 * max(1.0, abs(best)):
+            short.append(seed)
+    assert not short
+
+
+def test_a_forced_48_harmonic_fit_reaches_the_evidence_optimum():
+    """A 60-pose twin (seed 1) with 48 harmonics forced: the old projected step stopped 91
+    nats short of the evidence's optimum and held out 93 µm against 34 µm."""
+    import robocal as rc
+    from tests.test_residual import PROBE, _case, _ur10
+
+    train, test = _case(errors=True, n_train=60, seed=1)
+    errors = []
+    for harmonics in (24, 48):
+        result = rc.calibrate(
+            _ur10(), train, tool_guess=PROBE, residual="joint_fourier", residual_harmonics=(harmonics,)
+        )
+        errors.append(np.linalg.norm(result.predict(test.q)[:, :3, 3] - test.position, axis=1).mean())
+    assert errors[1] < 1.05 * errors[0]

@@ -5,9 +5,10 @@ calibrate``; the physics-only command never imports it).
 
 Projected BFGS (Nocedal & Wright, *Numerical Optimization*, 2nd ed., §6.1 and §16.7): the
 variables at a bound whose gradient pushes outwards are held; the others take the BFGS step
-from a dense inverse Hessian (``n`` is the number of joints plus two), its first step scaled
-by Shanno and Phua's ``sᵀy / yᵀy``; the step is projected onto the box and backtracked
-(Armijo, quadratic interpolation).  It stops as L-BFGS-B does: the relative decrease of the
+from their block of a dense Hessian (``n`` is the number of joints plus two), its first
+estimate scaled by Shanno and Phua's ``yᵀy / sᵀy``; the step is projected onto the box and
+backtracked (Armijo, quadratic interpolation), and where the box cuts it until it no longer
+descends the search restarts from steepest descent.  It stops as L-BFGS-B does: the relative decrease of the
 function below ``ftol`` or the projected gradient below ``gtol``.
 """
 
@@ -65,27 +66,50 @@ def minimize_in_box(
     f, lazy = fun(x, *args)
     g = _formed(lazy)
     evaluations = 1
-    # the inverse Hessian: unknown (None) until the first step measures it, unless the
-    # coordinates are scaled to make it the identity
-    hinv = np.eye(len(x)) if newton_scaled else None
+    # the Hessian: unknown (None) until the first step measures it, unless the coordinates
+    # are scaled to make it the identity.  The Hessian, not its inverse, so that the step on
+    # the free variables solves their own block (a block of the inverse is not the inverse
+    # of the block once a variable is held at a bound)
+    hess = np.eye(len(x)) if newton_scaled else None
     for _ in range(maxiter):
         free = _free(x, g, lower, upper)
         if not free.any() or np.max(np.abs(g[free])) <= gtol:
             break
-        d = _direction(g, free, hinv)
-        # no curvature known yet: a first step of unit length at most (as L-BFGS-B's)
-        t = 1.0 if hinv is not None else min(1.0, 1.0 / float(np.linalg.norm(d)))
-        x_new, f_new, lazy, count = _backtrack(fun, args, x, f, g, d, t, lower, upper)
+        x_new, f_new, lazy, count = _step(fun, args, x, f, g, _direction(g, free, hess), hess, lower, upper)
         evaluations += count
-        if x_new is None:  # no decrease along a descent direction: converged to rounding
+        if x_new is None and hess is not None:
+            # the box cut the quasi-Newton step until it no longer descends (a variable at a
+            # bound that the curvature pushes outwards): restart from steepest descent
+            hess = None
+            steepest = _direction(g, free, None)
+            x_new, f_new, lazy, count = _step(fun, args, x, f, g, steepest, None, lower, upper)
+            evaluations += count
+        if x_new is None:  # no decrease along steepest descent: converged to rounding
             break
         decrease = f - f_new
         if decrease <= ftol * max(abs(f), abs(f_new), 1.0):  # stopped: no gradient needed there
             return BoxMinimum(x_new, float(f_new), None, evaluations)
         g_new = _formed(lazy)
-        hinv = _bfgs(hinv, x_new - x, g_new - g, len(x))
+        hess = _bfgs(hess, x_new - x, g_new - g, len(x))
         x, f, g = x_new, f_new, g_new
     return BoxMinimum(x, float(f), g, evaluations)
+
+
+def _step(
+    fun: Callable[..., tuple[float, Gradient]],
+    args: tuple[Any, ...],
+    x: Array,
+    f: float,
+    g: Array,
+    d: Array,
+    hess: Array | None,
+    lower: Array,
+    upper: Array,
+) -> tuple[Array | None, float, Gradient, int]:
+    """:func:`_backtrack` along ``d`` from the whole step, or, with no curvature known yet, from
+    a step of unit length at most (as L-BFGS-B's first)."""
+    t = 1.0 if hess is not None else min(1.0, 1.0 / float(np.linalg.norm(d)))
+    return _backtrack(fun, args, x, f, g, d, t, lower, upper)
 
 
 def _formed(gradient: Gradient) -> Array:
@@ -97,12 +121,12 @@ def _free(x: Array, g: Array, lower: Array, upper: Array) -> NDArray[np.bool_]:
     return ~(((x <= lower) & (g > 0.0)) | ((x >= upper) & (g < 0.0)))
 
 
-def _direction(g: Array, free: NDArray[np.bool_], hinv: Array | None) -> Array:
-    """The quasi-Newton step on the free variables (steepest descent when there is no
-    curvature yet or the step would not descend)."""
+def _direction(g: Array, free: NDArray[np.bool_], hess: Array | None) -> Array:
+    """The quasi-Newton step on the free variables, from their block of the Hessian
+    (steepest descent when there is no curvature yet or the step would not descend)."""
     d = np.zeros_like(g)
-    d[free] = -g[free] if hinv is None else -(hinv[np.ix_(free, free)] @ g[free])
-    if float(g @ d) >= 0.0:
+    d[free] = -g[free] if hess is None else -np.linalg.solve(hess[np.ix_(free, free)], g[free])
+    if not float(g @ d) < 0.0:  # also NaN
         d[free] = -g[free]
     return d
 
@@ -135,15 +159,14 @@ def _backtrack(
     return None, f, g, MAX_BACKTRACKS
 
 
-def _bfgs(hinv: Array | None, s: Array, y: Array, n: int) -> Array | None:
-    """The BFGS update of the inverse Hessian ``hinv`` (None: Shanno–Phua's scaled identity
-    first) by the step ``s`` and the gradient's change ``y``; unchanged when ``sᵀy`` is not
-    positive (no curvature seen along ``s``)."""
+def _bfgs(hess: Array | None, s: Array, y: Array, n: int) -> Array | None:
+    """The BFGS update of the Hessian ``hess`` (None: Shanno–Phua's scaled identity first,
+    ``yᵀy / sᵀy``) by the step ``s`` and the gradient's change ``y``; unchanged when ``sᵀy`` is
+    not positive (no curvature seen along ``s``), so it stays positive definite."""
     sy = float(s @ y)
     if sy <= 1e-12 * float(np.linalg.norm(s) * np.linalg.norm(y)):
-        return hinv
-    if hinv is None:
-        hinv = (sy / float(y @ y)) * np.eye(n)
-    rho = 1.0 / sy
-    V = np.eye(n) - rho * np.outer(s, y)
-    return V @ hinv @ V.T + rho * np.outer(s, s)
+        return hess
+    if hess is None:
+        hess = (float(y @ y) / sy) * np.eye(n)
+    Bs = hess @ s
+    return hess - np.outer(Bs, Bs) / float(s @ Bs) + np.outer(y, y) / sy
