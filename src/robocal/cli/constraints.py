@@ -26,6 +26,7 @@ __all__ = [
     "TILT_MOUNT_HELP",
     "calibrate_constraint_command",
     "calibrate_constraint_file",
+    "constraint_effect_kinds",
     "is_constraint_file",
     "placement_files",
     "plan_constraint_poses",
@@ -72,8 +73,9 @@ def calibrate_constraint_command(
     the tool: :func:`~robocal.identify.constraints.tilt_rows.link_rotations_free`; ``--chain
     catalog``: its published chain, for inclinometer files alone with its base tilt free:
     :func:`robocal.workflow.constraints.tilt_rows_only`), a model file's chain as it is.  ``effects``
-    (``--effects``): the joint effects the tilt rows identify (:func:`tilt_effect_kinds`)."""
-    kinds = tilt_effect_kinds(effects)
+    (``--effects``): the joint effects the tilt rows identify and the position rows carry
+    (:func:`constraint_effect_kinds`)."""
+    kinds, position_kinds = constraint_effect_kinds(effects)
     if (out / RESULT_FILE).exists() and not force:
         raise fail(f"{out} already holds a calibration result; use --force to overwrite it")
     from robocal.workflow.constraints import constraint_model
@@ -83,6 +85,7 @@ def calibrate_constraint_command(
         model, frames = constraint_model(model, paths, from_catalog=from_catalog, chain=chain)
     except ValueError as err:
         raise fail(str(err)) from None
+    _check_masses(model, position_kinds, effects)
     levels = {None: None, "1": 1, "offsets": 1, "2": 2, "kinematic": 2}
     if level not in levels:
         raise fail(
@@ -90,31 +93,54 @@ def calibrate_constraint_command(
         )
     calibrate_constraint_file(model, data_path, out, angle_unit=angle_unit, distances=distances,
                               level=levels[level], noise=noise, length_unit=length_unit,
-                              tilt_kinds=kinds, frames=frames)  # fmt: skip
+                              tilt_kinds=kinds, frames=frames, effects=position_kinds)  # fmt: skip
+
+
+def _check_masses(model, kinds: tuple[str, ...], effects: str | None) -> None:
+    """``--effects compliance`` on position rows needs the model's link masses: one line."""
+    from robocal.identify.constraints.position_effects import check_effect_kinds
+
+    try:
+        check_effect_kinds(model, kinds)
+    except ValueError as err:
+        raise fail(f"--effects {safe(effects or '')}: {err}") from None
 
 
 def tilt_effect_kinds(effects: str | None) -> tuple[str, ...] | None:
-    """``--effects`` for constraint files: the joint effects the tilt rows identify.  None
-    (not given) or ``identify``: clearance, backlash and compliance (what the rows cannot
-    tell from the geometry held by name); ``none``: no joint effect; or a list of those kinds
-    (``clearance,backlash,compliance``).
-    ``predict`` (the model's effects held) is the tracker calibration's only: refused."""
+    """``--effects`` for constraint files: the joint effects the tilt rows identify
+    (:func:`constraint_effect_kinds`' first)."""
+    return constraint_effect_kinds(effects)[0]
+
+
+def constraint_effect_kinds(effects: str | None) -> tuple[tuple[str, ...] | None, tuple[str, ...]]:
+    """``--effects`` for constraint files: ``(the joint effects the tilt rows identify,
+    the joint effects the position rows carry)``.  Not given: the tilt rows' default
+    (clearance, backlash, compliance; None) and no position effect (a model's stated
+    compliances predict the position rows, held); ``none``: no joint effect; ``identify``:
+    the tilt rows' three and compliance on the position rows; or a list of
+    ``clearance,backlash,compliance,radial``: the tilt rows identify those of the first three
+    named, the position rows (fixed points, planes, distances, tracker points) carry
+    ``compliance`` and ``radial`` (compliance about the axis, and tilting about the other
+    two) when named, under the gravity loads of the model's link masses.  ``predict`` (the
+    model's effects held) is the tracker calibration's only: refused."""
+    from robocal.identify.constraints.position_effects import POSITION_EFFECT_KINDS
     from robocal.identify.constraints.tilt_rows import ALL_KINDS
 
     if effects is None:
-        return None
+        return None, ()
     if effects.strip() == "none":
-        return ()
+        return (), ()
     if effects.strip() == "identify":
-        return ALL_KINDS
+        return ALL_KINDS, ("compliance",)
     kinds = tuple(k.strip() for k in effects.split(",") if k.strip())
-    wrong = [k for k in kinds if k not in ALL_KINDS]
+    known = ALL_KINDS + tuple(k for k in POSITION_EFFECT_KINDS if k not in ALL_KINDS)
+    wrong = [k for k in kinds if k not in known]
     if not kinds or wrong:
         raise fail(
-            f"--effects {safe(effects)}: a constraint file's tilt rows identify none, identify or some of "
-            f"{', '.join(ALL_KINDS)}"
+            f"--effects {safe(effects)}: a constraint file's rows take none, identify or some of "
+            f"{', '.join(known)}"
         )
-    return tuple(k for k in ALL_KINDS if k in kinds)
+    return tuple(k for k in ALL_KINDS if k in kinds), tuple(k for k in POSITION_EFFECT_KINDS if k in kinds)
 
 
 def _distances(items: list[str] | None) -> tuple[tuple[int, int, float], ...]:
@@ -137,7 +163,12 @@ def _read(path: Path, dof: int, angle_unit: str, distances, sigma: float):
 
 def _option_words(err: ValueError) -> str:
     """The use case's refusal with the command line's option named."""
-    options = {"out": "--out", "distances": "--distance", "angle_unit": "--angle-unit"}
+    options = {
+        "out": "--out",
+        "distances": "--distance",
+        "angle_unit": "--angle-unit",
+        "effects": "--effects",
+    }
     option = options.get(getattr(err, "field", ""))
     return f"{option} {err}" if option else str(err)
 
@@ -145,7 +176,7 @@ def _option_words(err: ValueError) -> str:
 def calibrate_constraint_file(
     model, data_path: Path | list[Path], out: Path, *, angle_unit: AngleUnit, distances: list[str] | None,
     level: int | None, noise: str | None, length_unit: LengthUnit = "m",
-    tilt_kinds: tuple[str, ...] | None = None, frames=None,
+    tilt_kinds: tuple[str, ...] | None = None, frames=None, effects: tuple[str, ...] = (),
 ) -> None:  # fmt: skip
     """Calibrate ``model`` (the complete position model of a catalog robot, or a model
     file's chain) from a constraint file; write ``out``/model.yaml and constraints.json
@@ -155,7 +186,8 @@ def calibrate_constraint_file(
     paths = tuple(data_path) if isinstance(data_path, list) else (data_path,)
     stated, sigma = _distances(distances), _sigma(noise)
     request = ConstraintRequest(paths, model, out, angle_unit=angle_unit, length_unit=length_unit,
-                                distances=stated, level=level or 2, noise_m=sigma, frames=frames)  # fmt: skip
+                                distances=stated, level=level or 2, noise_m=sigma, frames=frames,
+                                effects=effects)  # fmt: skip
     if tilt_kinds is not None:
         request = dataclasses.replace(request, tilt_kinds=tilt_kinds)
     try:
@@ -323,12 +355,16 @@ def simulate_constraint_file(
             runs.append(
                 simulate_constraints(true, kind, n, sigma=sigma, length=length_m, seed=rng, scene=moved)
             )
-        tracked = simulate_tracker_rows(true, tracker, sigma=1e-5, seed=rng) if tracker else None
+        # the same true robot yields to gravity on the tracker as in its sockets (tilt rows: rigid)
+        tracked = None
+        if tracker:
+            tracked = simulate_tracker_rows(true, tracker, sigma=1e-5, seed=rng, deflected=kind != "tilt")
     except ValueError as err:
         raise fail(str(err)) from None
     truth = {"kind": kind, "sigma_m": sigma,
              "true_parameters": dict(zip(true.names, true.values.tolist(), strict=True)),
              "length_m": scene.length} | _scene_doc(scene, out, data.n)  # fmt: skip
+    truth |= _true_effects(true)
     if placements > 1:
         truth["placements"] = [_scene_doc(s, f, d.n) for (d, s), f in zip(runs, files, strict=True)]
     from robocal.outdir import write_together
@@ -348,6 +384,19 @@ def simulate_constraint_file(
     written += [f"{safe(str(tracker_file(out)))} ({tracker} rows, tracker)"] if tracker else []
     console.print(f"wrote {', '.join(written)} and the truth {safe(str(truth_path))}", highlight=False,
                   soft_wrap=True)  # fmt: skip
+
+
+def _true_effects(true) -> dict:
+    """The truth file's record of the joint compliances the true robot yields to gravity
+    with (``compliance_<joint>``, ``radial_compliance_<joint>``, rad/(N·m); the model's
+    ``joint_effects`` under its link masses' loads), none when it states none."""
+    from robocal.identify.constraints.position_effects import stated_effects
+
+    stated = stated_effects(true)
+    if not stated:
+        return {}
+    loads = "the static gravity loads (9.81 m/s² along the base's -z) of the model's masses"
+    return {"true_joint_effects_rad_per_Nm": stated, "joint_effect_loads": loads}
 
 
 def plan_constraint_poses(model, kind: str, out: Path, *, n: int, pool: int, index: str, seed: int) -> None:

@@ -64,6 +64,11 @@ class ConstraintRequest:
         names: what ``constraints.json`` records as each of ``data``'s path (empty: the
             paths as given; the GUI gives the uploads' own file names, never its server paths).
         tilt_kinds: the joint effects the tilt rows identify.
+        effects: the joint effects every position row carries (fixed points, planes,
+            distances, tracker points: ``compliance``, ``radial``), identified with the
+            geometry under the gravity loads of the model's link masses (refused without);
+            a compliance is one unknown with the tilt rows' own.  Empty (the default): none
+            fitted; a model that states its compliances predicts the rows with them, held.
         frames: the robot's own chain (a catalog robot's published chain) when ``model`` is
             another chain of it (its complete model): the joint frames a file's
             ``mount_r*_deg`` angles are stated in, and the joint effects' load moments are
@@ -83,6 +88,7 @@ class ConstraintRequest:
     names: tuple[str, ...] = ()
     tilt_kinds: tuple[str, ...] = ("clearance", "backlash", "compliance")  # tilt rows' joint effects
     frames: Model | None = None
+    effects: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.names and len(self.names) != len(self.data):
@@ -292,9 +298,11 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
         raise CalibrateFileError("out", "is a file; give a directory", str(request.out))
     _stage(request, "read")
     model, paths = request.model, list(request.data)
+    _check_effects(model, request.effects)
     first, trackers, data = read_mixed(
         paths, model, request.angle_unit, request.length_unit, request.distances, request.noise_m
     )
+    effects = _position_effects(request.effects, data)
     if request.frames is not None:  # joint-frame mounts: the robot's own chain's, stated at home
         from robocal.measure.constraints.mounts import mounts_at_home
 
@@ -303,7 +311,7 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
     try:
         result = calibrate_constraints(model, data, level=request.level, pruning=Pruning(), known_noise=False,
                                        prior=NominalPrior(), tilt_kinds=request.tilt_kinds,
-                                       frames=request.frames)  # fmt: skip
+                                       frames=request.frames, effects=effects)  # fmt: skip
     except ValueError as err:
         raise CalibrateFileError("data", str(err), ", ".join(str(p) for p in paths)) from None
     _stage(request, "save")
@@ -313,6 +321,31 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
         _stage(request, "report")
         _write_report(request.out, first, request.angle_unit)
     return ConstraintRun(request.out, result, data, constraint_figures(model, data), tuple(each))
+
+
+def _check_effects(model: Model, effects: tuple[str, ...]) -> None:
+    """The position rows' joint effects need the model's link masses: refused before the
+    files are read (CalibrateFileError on ``effects``)."""
+    from robocal.identify.constraints.position_effects import check_effect_kinds
+
+    try:
+        check_effect_kinds(model, effects)
+    except ValueError as err:
+        raise CalibrateFileError("effects", str(err)) from None
+
+
+def _position_effects(effects: tuple[str, ...], data: ConstraintSet) -> tuple[str, ...]:
+    """``effects`` when ``data`` has position rows (points, planes, distances, tracker
+    points); none for tilt rows alone (their compliance is a tilt kind), where a radial
+    compliance, which only a position row carries here, is refused by name."""
+    if data.constrained.any() or data.tracked.any():
+        return effects
+    if "radial" in effects:
+        raise CalibrateFileError(
+            "effects", "radial compliance is fitted on position rows (points, planes, distances, tracker "
+            "points); these files hold tilt rows only"
+        )  # fmt: skip
+    return ()
 
 
 def _stage(request: ConstraintRequest, key: str) -> None:

@@ -185,6 +185,19 @@ def _parameter_rows(r: ConstraintReport) -> list[list[str]]:
     return rows
 
 
+def _effect_rows(r: ConstraintReport) -> list[list[str]]:
+    """The joint effects a constraint calibration identified: a compliance in µrad/(N·m),
+    a clearance or backlash in degrees."""
+    from robocal.model.joints import COMPLIANCE_UNIT, effect_of
+
+    rows = []
+    for e in r.calibration.joint_effects:
+        elastic = (effect_of(e.name) or ("",))[0] in ("compliance", "radial")
+        unit, scale = COMPLIANCE_UNIT if elastic else ("deg", float(np.degrees(1.0)))
+        rows.append([e.name, unit, m.g(e.value * scale, 5), m.g(e.std * scale, 3)])
+    return rows
+
+
 def identifiability(r: ConstraintReport, figs: m.Figures) -> Section:
     cal = r.calibration
     body = m.table(["parameter", "unit", "nominal", "estimate", "Δ", "σ"], _parameter_rows(r),
@@ -192,6 +205,11 @@ def identifiability(r: ConstraintReport, figs: m.Figures) -> Section:
     reasons = dict(cal.dropped)
     unseen = [[n, reasons[n], "nominal (not identifiable)"] for n in cal.unseen]
     unseen += [[n, reasons[n], "nominal (σ too large)"] for n in cal.poorly_identified]
+    if cal.joint_effects:  # identified beside the geometry (tilt rows, position rows' deflections)
+        from robocal.identify.constraints.tilt_record import LOADS
+
+        body += m.table(["joint effect", "unit", "estimate", "σ"], _effect_rows(r),
+                        caption=f"identified joint effects (under {LOADS})")  # fmt: skip
     body += m.table(["parameter", "reason", "value used"], unseen, caption="not identified")
     body += m.note(m.e(cal.base_note() + "."))
     body += m.note(

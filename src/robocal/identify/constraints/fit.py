@@ -101,7 +101,10 @@ class ConstraintResult:
             ("tracker", σ_t))`` (estimated unless ``known_noise``); empty for one kind.
         notes: sentences on what the fit left out or could not model (tilt rows whose
             contact side is unknown, joint effects seen by the tilt rows only).
-        tilt: the joint effects and channel zeros identified from tilt rows (None without).
+        tilt: the joint effects and channel zeros identified from tilt rows and the joint
+            effects the position rows' deflections identified (None without either).
+        position_effects: the joint effects fitted on the position rows (names; the
+            calibrated ``model`` carries them in ``joint_effects``).
     """
 
     model: Model
@@ -128,6 +131,7 @@ class ConstraintResult:
     kind_sigma: tuple[tuple[str, float], ...] = ()
     notes: tuple[str, ...] = ()
     tilt: TiltCalibration | None = None
+    position_effects: tuple[str, ...] = ()
 
     def summary_lines(self) -> list[str]:
         """A short human summary (mm, deg)."""
@@ -163,10 +167,17 @@ class ConstraintResult:
             )
         if self.tilt is not None:
             held = [(d.name, f"{d.reason}: {d.detail}" if d.detail else d.reason) for d in self.dropped]
-            lines += effect_summary_lines(self.tilt, held)
+            lines += effect_summary_lines(self.tilt, held, self._effect_source())
         if self.figures is not None:
             lines += self.figures.lines()
         return lines + [f"note: {note}" for note in self.notes]
+
+    def _effect_source(self) -> str:
+        """What identified the joint effects, as the summary says it."""
+        deflected = "the position rows' deflections"
+        if not self.position_effects:
+            return "the tilt rows"
+        return f"the tilt rows and {deflected}" if "tilt" in self.kinds else deflected
 
 
 # ---------------------------------------------------------------------- start values
@@ -399,7 +410,8 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
     sigma = problem.data.tilt_sigma if tilt_only else problem.data.sigma
     dof = max(len(r) - len(x), 1)
     tilt = None
-    if problem.tilt is not None:  # the effects and zeros, as saved and as the figures use them
+    fitted = tuple(n for n in problem.position_names if n in problem.free_names)
+    if problem.tilt is not None or fitted:  # the effects and zeros, as saved and as the figures use them
         tilt = tilt_estimates(
             problem.all_names, problem.full(x), dict(zip(problem.free_names, cov[2], strict=True))
         )
@@ -413,6 +425,7 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
         residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success),
         message=str(fit.message),
         kinds=problem.data.kinds, figures=figures, kind_sigma=_kind_sigma(problem.data), tilt=tilt,
+        position_effects=fitted,
     )  # fmt: skip
 
 

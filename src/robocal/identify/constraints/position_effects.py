@@ -31,6 +31,7 @@ from robocal.model.chain import Model
 __all__ = [
     "POSITION_EFFECT_KINDS",
     "PositionEffects",
+    "check_effect_kinds",
     "position_effects",
     "stated_effects",
     "stated_kinds",
@@ -80,15 +81,7 @@ def position_effects(robot: Model, chain: Model, q: Array, kinds: tuple[str, ...
     from robocal.measure.constraints.mounts import loads_about
     from robocal.model.joints import effect_basis
 
-    unknown = sorted(set(kinds) - set(POSITION_EFFECT_KINDS))
-    if unknown:
-        raise ValueError(f"joint effects {unknown} cannot be fitted on position rows; choose from "
-                         f"{', '.join(POSITION_EFFECT_KINDS)}")  # fmt: skip
-    if not robot.bodies or not any(b.mass > 0 for b in robot.bodies):
-        raise ValueError(
-            f"joint compliance needs the link masses of model {robot.name!r} (the gravity loads "
-            "the joints yield to): give a model file with bodies (mass and centre of mass per link)"
-        )
+    check_effect_kinds(robot, kinds)
     q = np.atleast_2d(np.asarray(q, dtype=float))
     loads = loads_about(robot, q, frames)
     B, names, _ = effect_basis(robot, q, kinds=kinds, loads=loads)  # (m, n, dof, 3)
@@ -96,6 +89,20 @@ def position_effects(robot: Model, chain: Model, q: Array, kinds: tuple[str, ...
     patterns = np.einsum("nrjc,knjc->nrk", P, B)
     scale = np.maximum(np.linalg.norm(patterns, axis=1).max(axis=0, initial=0.0), DISPLACEMENT_FLOOR)
     return PositionEffects(tuple(names), B, scale)
+
+
+def check_effect_kinds(robot: Model, kinds: tuple[str, ...]) -> None:
+    """Refuse joint effects a position row cannot carry, or ``robot`` without link masses
+    (no loads to deflect by): ValueError of one line naming the kinds or the model."""
+    unknown = sorted(set(kinds) - set(POSITION_EFFECT_KINDS))
+    if unknown:
+        raise ValueError(f"joint effects {unknown} cannot be fitted on position rows; choose from "
+                         f"{', '.join(POSITION_EFFECT_KINDS)}")  # fmt: skip
+    if kinds and (not robot.bodies or not any(b.mass > 0 for b in robot.bodies)):
+        raise ValueError(
+            f"joint compliance needs the link masses of model {robot.name!r} (the gravity loads "
+            "the joints yield to): give a model file with bodies (mass and centre of mass per link)"
+        )
 
 
 def with_position_effects(robot: Model, values: dict[str, float]) -> Model:

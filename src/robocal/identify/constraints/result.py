@@ -200,9 +200,25 @@ def _nominal(model: Model, doc: dict, names: tuple[str, ...]) -> Model | None:
     if not isinstance(start, list) or len(start) != len(names):
         return None
     values = {n: float(v) for n, v in zip(names, start, strict=True) if n in model.names}
-    if not all(math.isfinite(v) for v in values.values()):
+    if not all(math.isfinite(float(v)) for v in start):
         raise ValueError("start: not finite numbers")
-    return model.with_values(values)
+    return _start_effects(model.with_values(values), names, start)
+
+
+def _start_effects(robot: Model, names: tuple[str, ...], start: list) -> Model:
+    """``robot`` with the joint effects the fit identified on its position rows back at
+    their start values (zero, or the model's stated ones): ``model.yaml`` carries the
+    identified compliances, the robot it started from (the "before" figures, the
+    controller's model of compensate and filter) does not."""
+    import dataclasses
+
+    from robocal.model.joints import effect_of, effects_from_values
+
+    started = {effect_of(n): float(v) for n, v in zip(names, start, strict=True) if effect_of(n) is not None}
+    if not robot.joint_effects or not started:
+        return robot
+    values = {k: v for k, v in started.items() if k is not None}
+    return dataclasses.replace(robot, joint_effects=effects_from_values(robot, values))
 
 
 def load_constraint_calibration(directory: str | Path) -> ConstraintCalibration:

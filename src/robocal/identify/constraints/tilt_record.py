@@ -160,11 +160,13 @@ def tilt_calibration_of(
     return TiltCalibration(tuple(_effect(e) for e in effects), tuple(_zero(z) for z in zeros))
 
 
-def effect_summary_lines(tilt: TiltCalibration, dropped: Iterable[tuple[str, str]]) -> list[str]:
-    """The joint effects identified from the tilt rows as the tracker calibration prints
-    them (± 1σ; backlash and clearance in deg, a compliance in µrad/(N·m) with its
-    stiffness), those the data cannot tell from zero, and those not identified (by name,
-    with the reason)."""
+def effect_summary_lines(
+    tilt: TiltCalibration, dropped: Iterable[tuple[str, str]], source: str = "the tilt rows"
+) -> list[str]:
+    """The joint effects identified from ``source`` (the tilt rows, the position rows'
+    deflections) as the tracker calibration prints them (± 1σ; backlash and clearance in
+    deg, a compliance in µrad/(N·m) with its stiffness), those the data cannot tell from
+    zero, and those not identified (by name, with the reason)."""
     from robocal.identify.effects import EFFECT_SIGNIFICANCE, effect_lines
 
     lines = []
@@ -174,7 +176,7 @@ def effect_summary_lines(tilt: TiltCalibration, dropped: Iterable[tuple[str, str
             kind, joint = effect_of(e.name) or ("", "")
             std = e.std if math.isfinite(e.std) else None
             by_joint.setdefault(joint, {})[EFFECT_PREFIXES[kind][1]] = (e.value, std)
-        lines.append(f"joint effects from the tilt rows (± 1σ; under {LOADS}):")
+        lines.append(f"joint effects from {source} (± 1σ; under {LOADS}):")
         lines += [f"  {line}" for line in effect_lines(by_joint)]
         weak = [e.name for e in tilt.effects if not (e.value >= EFFECT_SIGNIFICANCE * e.std)]
         if weak:

@@ -5,6 +5,13 @@ noise σ (isotropic, m): a ball seated in a socket ``c_k + e``, a probe touching
 ``p + (n·e) n``, two tool points ``L + √2 σ e`` apart.  The recorded joint values are
 those the true robot needs for it (IK from random starting configurations, so the
 orientations vary as when the arm is moved by hand); a calibration sees only them.
+
+A true robot that states joint compliances (``joint_effects``) and its link masses
+(``bodies``) yields to gravity: its tool point is where the chain puts it with the joints
+deflected by those loads (:func:`tool_points`, as
+:func:`robocal.identify.constraints.figures.tool_points` predicts it), and the recorded
+joint values seat the deflected tool point (tracker rows: the deflected point measured,
+when asked: :func:`simulate_tracker_rows`).
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ __all__ = [
     "simulate_constraints",
     "simulate_tilt_rows",
     "simulate_tracker_rows",
+    "tool_points",
 ]
 
 Array = NDArray[np.float64]
@@ -43,15 +51,47 @@ class SceneTruth:
     length: float
 
 
+def _deflections(true: Model, q: Array) -> Array | None:
+    """``(n, dof, 3)`` the joints' elastic deflections (rad) under the gravity loads of
+    ``true``'s link masses (its compliance and radial compliance), None when it states none
+    or has no masses."""
+    from robocal.model.joints import joint_perturbations
+
+    elastic = any(e.compliance or e.radial_compliance for e in true.joint_effects)
+    if not elastic or not true.bodies:
+        return None
+    return joint_perturbations(true, np.atleast_2d(q), kinds=("compliance", "radial"))
+
+
+def tool_points(true: Model, q: Array) -> Array:
+    """``(n, 3)`` the ``true`` robot's tool point (m) at joint values ``q`` ``(n, dof)``,
+    its joints deflected under gravity when it states compliances (module docstring)."""
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    return true.fk(q, perturbations=_deflections(true, q))[:, :3, 3]
+
+
+#: rounds of IK with the deflection taken off the target (each shrinks the error by the
+#: deflection's change over the step: ~1e-3 of it for 5 mrad, below 1 nm after three)
+_SEAT_ROUNDS = 4
+
+
 def _reach(true: Model, targets: Array, rng: np.random.Generator) -> tuple[Array, NDArray[np.bool_]]:
+    """Joint values whose (deflected) tool point is at ``targets``, and which reached them."""
     q0 = random_configurations(true, len(targets), rng=rng)
     res = solve_ik(true, targets, kind="position", q0=q0, restarts=3, seed=rng, tol=1e-9)
-    return res.q, res.reachable
+    q, ok = res.q, res.reachable
+    if _deflections(true, q[:1]) is None:
+        return q, ok
+    for _ in range(_SEAT_ROUNDS):  # the rigid chain's target is the socket less the deflection
+        bend = tool_points(true, q) - true.fk(q)[:, :3, 3]
+        res = solve_ik(true, targets - bend, kind="position", q0=q, restarts=0, tol=1e-12)
+        q, ok = res.q, ok & res.reachable
+    return q, ok & (np.linalg.norm(tool_points(true, q) - targets, axis=1) < 1e-7)
 
 
 def _workspace(true: Model, rng: np.random.Generator, count: int) -> Array:
     """``(count, 3)`` tool points of random configurations (reachable by construction)."""
-    return true.fk(random_configurations(true, count, rng=rng))[:, :3, 3]
+    return tool_points(true, random_configurations(true, count, rng=rng))
 
 
 def _points(true, n, n_points, sigma, rng, scene=None) -> tuple[ConstraintSet, SceneTruth]:
@@ -85,7 +125,7 @@ def _planes(true, n, n_planes, sigma, rng, scene=None) -> tuple[ConstraintSet, S
 def _distances(true, n, length, sigma, rng) -> tuple[ConstraintSet, SceneTruth]:
     m = n // 2
     qa = random_configurations(true, m, rng=rng)
-    pa = true.fk(qa)[:, :3, 3]
+    pa = tool_points(true, qa)
     u = rng.standard_normal((m, 3))
     u /= np.linalg.norm(u, axis=1)[:, None]
     # each tool point carries noise σ: their distance along u, √2 σ
@@ -146,14 +186,22 @@ def simulate_tracker_rows(
     sigma: float = 1e-5,
     T_device_base: Array | None = None,
     seed: int | np.random.Generator | None = 0,
+    deflected: bool = False,
 ) -> ConstraintSet:
     """``n`` tracker rows to mix with constraint rows: random configurations of the
     ``true`` robot and its tool point in the device frame ``T_device_base`` (identity by
-    default) with noise ``sigma`` (m per axis); its ``tracker_sigma`` is ``sigma``."""
+    default) with noise ``sigma`` (m per axis); its ``tracker_sigma`` is ``sigma``.
+    ``deflected``: the tool point with the joints deflected under gravity by ``true``'s
+    compliances (:func:`tool_points`, as the fixed-point, plane and distance rows are);
+    False: the rigid chain (beside tilt rows, which carry the joint effects)."""
     rng = np.random.default_rng(seed)
     q = random_configurations(true, n, rng=rng)
     T = np.eye(4) if T_device_base is None else np.asarray(T_device_base, dtype=float)
-    p = true.fk(q)[:, :3, 3] @ T[:3, :3].T + T[:3, 3] + sigma * rng.standard_normal((n, 3))
+    p = (
+        (tool_points(true, q) if deflected else true.fk(q)[:, :3, 3]) @ T[:3, :3].T
+        + T[:3, 3]
+        + sigma * rng.standard_normal((n, 3))
+    )
     none = -np.ones(n, dtype=np.intp)
     return ConstraintSet(q, none, none, position=p, sigma=sigma, tracker_sigma=sigma)
 

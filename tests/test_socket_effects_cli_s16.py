@@ -1,0 +1,162 @@
+"""Issue 33: joint compliance for socket, plane and distance files through the command line.
+
+A true UR10 that yields to gravity (a model file: the catalog's UR10 with its link masses and
+a ``joint_effects`` block) is simulated by ``robocal simulate --kind point|plane``; ``robocal
+calibrate ur10 --effects compliance`` recovers the compliances within 4σ of the truth, the
+folder keeps them (constraints.json, model.yaml), ``validate`` / the report predict a held-out
+placement with the deflections at the noise, the exports say they cannot carry them, and a
+robot without link masses is refused by name.  The default (no --effects) fits none."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import robocal.model
+from robocal.cli import app
+from robocal.identify.constraints.fit import constraint_figures
+from robocal.identify.constraints.result import load_constraint_calibration
+from robocal.measure.constraints.data import read_constraints
+
+TRUE = {"shoulder_lift": 4e-5, "elbow": 6e-5, "wrist_1": 1e-4}  # rad/(N·m): mm at the tool
+NOISE = 1e-5  # m: simulate's default tool-point noise per axis
+
+
+def _run(args: list[str]):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def _elastic_model_file(folder: Path) -> Path:
+    """The documented way to state a true robot's compliance: the catalog file plus a block."""
+    catalog = Path(robocal.model.__file__).parent / "robots" / "ur10.yaml"
+    block = "joint_effects:\n" + "".join(
+        f"  - {{joint: {j}, compliance: {c:.1e}}}\n" for j, c in TRUE.items()
+    )
+    path = folder / "ur10_elastic.yaml"
+    path.write_text(catalog.read_text(encoding="utf-8").rstrip("\n") + "\n" + block, encoding="utf-8")
+    return path
+
+
+@pytest.fixture(scope="module")
+def sockets(tmp_path_factory):
+    """Two placements of two sockets recorded on the elastic true robot; calibrated with
+    ``--effects compliance`` and without."""
+    folder = tmp_path_factory.mktemp("sockets")
+    true = _elastic_model_file(folder)
+    data = folder / "s.csv"
+    made = _run(
+        ["simulate", true, "--kind", "point", "--n", "50", "--seed", "3", "--placements", "2", "-o", data]
+    )
+    assert made.exit_code == 0, made.output
+    elastic = _run(
+        ["calibrate", "ur10", "--data", data, "--effects", "compliance", "--out", folder / "elastic"]
+    )
+    assert elastic.exit_code == 0, elastic.output
+    rigid = _run(["calibrate", "ur10", "--data", data, "--out", folder / "rigid"])
+    assert rigid.exit_code == 0, rigid.output
+    return folder
+
+
+def _within_4_sigma(doc: dict) -> list[str]:
+    """Each fitted compliance's name, checked against the truth (zero where none is stated)."""
+    fitted = {e["name"]: e for e in doc["joint_effects"]}
+    for name, e in fitted.items():
+        truth = TRUE.get(name.removeprefix("compliance_"), 0.0)
+        assert abs(e["estimate_rad_per_Nm"] - truth) < 4 * e["std_rad_per_Nm"], name
+    return sorted(fitted)
+
+
+def test_simulated_rows_carry_the_deflections(sockets):
+    """The true robot's compliance reaches the simulated rows (the truth file states it):
+    the elastic robot seats them at the noise, its rigid twin leaves mm."""
+    import dataclasses
+
+    from robocal.model.complete import calibration_model
+    from robocal.model.files import load_model
+
+    truth = json.loads((sockets / "s.csv.truth.json").read_text())
+    stated = truth["true_joint_effects_rad_per_Nm"]
+    assert stated == {f"compliance_{j}": c for j, c in TRUE.items()}
+    true = calibration_model(load_model(sockets / "ur10_elastic.yaml"), "position")
+    true = true.with_values(truth["true_parameters"])
+    data = read_constraints(sockets / "s.csv", 6)
+    assert np.all(constraint_figures(true, data).point_spread < 2 * NOISE)
+    rigid = dataclasses.replace(true, joint_effects=())
+    assert np.all(constraint_figures(rigid, data).point_spread > 20 * NOISE)
+
+
+def test_compliance_recovered_saved_and_predicts_held_out(sockets):
+    doc = json.loads((sockets / "elastic" / "constraints.json").read_text())
+    assert {f"compliance_{j}" for j in TRUE} <= set(_within_4_sigma(doc))
+    cal = load_constraint_calibration(sockets / "elastic")
+    assert {e.name for e in cal.joint_effects} >= {f"compliance_{j}" for j in TRUE}
+    saved = {e.joint: e.compliance for e in cal.model.joint_effects}  # model.yaml carries them
+    for e in cal.joint_effects:
+        assert saved[e.name.removeprefix("compliance_")] == pytest.approx(e.value, rel=1e-12)
+    # the robot it started from has none: the "before" figures and the controller's model are rigid
+    assert cal.nominal is not None and not any(e.compliance for e in cal.nominal.joint_effects)
+    held_out = read_constraints(sockets / "s.placement2.csv", 6)
+    after = constraint_figures(cal.model, held_out).point_spread
+    assert np.all(after < 3 * NOISE)
+    rigid = load_constraint_calibration(sockets / "rigid")
+    assert not rigid.joint_effects and not rigid.model.joint_effects  # the default fits none
+    assert np.all(constraint_figures(rigid.model, held_out).point_spread > 5 * after)
+    checked = _run(["validate", sockets / "elastic", "--data", sockets / "s.placement2.csv"])
+    assert checked.exit_code == 0, checked.output
+    shown = [float(v) for v in checked.output.split("before calibration")[0].split() if _number(v)]
+    assert shown and max(shown) < 3 * NOISE * 1e3  # validate prints the deflected figures (mm)
+
+
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def test_report_and_exports_read_the_compliance(sockets, tmp_path):
+    page = tmp_path / "r.html"
+    made = _run(["report", sockets / "elastic", "--test-data", sockets / "s.placement2.csv", "-o", page])
+    assert made.exit_code == 0, made.output
+    assert "compliance_elbow" in page.read_text(encoding="utf-8")
+    for kind, out in (("urdf", tmp_path / "c.urdf"), ("ur-kinematics", tmp_path / "c.yaml")):
+        ex = _run(["export", kind, sockets / "elastic", "-o", out])
+        assert ex.exit_code == 0 and out.is_file(), ex.output
+        assert "not carried: joint effects (compliance" in ex.output
+        rigid = _run(["export", kind, sockets / "rigid", "-o", tmp_path / f"rigid_{out.name}"])
+        assert "joint effects" not in rigid.output
+
+
+def test_no_link_masses_refused_by_name(tmp_path):
+    data = tmp_path / "i.csv"
+    assert (
+        _run(["simulate", "irb120", "--kind", "point", "--n", "20", "--seed", "1", "-o", data]).exit_code == 0
+    )
+    out = tmp_path / "cal"
+    refused = _run(["calibrate", "irb120", "--data", data, "--effects", "compliance", "--out", out])
+    assert refused.exit_code != 0 and not out.exists()
+    line = refused.output.strip()
+    assert "\n" not in line and "--effects" in line and "mass" in line and "Traceback" not in line
+    wrong = _run(["calibrate", "ur10", "--data", data, "--effects", "stiction", "--out", out])
+    assert wrong.exit_code != 0 and "--effects" in wrong.output and not out.exists()
+
+
+def test_tracker_and_planes_with_compliance(tmp_path):
+    """A plane file and the same true robot's tracker rows (deflected too) in one fit."""
+    true = _elastic_model_file(tmp_path)
+    data = tmp_path / "p.csv"
+    made = _run(["simulate", true, "--kind", "plane", "--n", "60", "--count", "3", "--seed", "4",
+                 "--also-tracker", "30", "-o", data])  # fmt: skip
+    assert made.exit_code == 0, made.output
+    out = tmp_path / "cal"
+    fit = _run(["calibrate", "ur10", "--data", data, "--data", tmp_path / "p.tracker.csv", "--effects",
+                "compliance", "--out", out])  # fmt: skip
+    assert fit.exit_code == 0, fit.output
+    doc = json.loads((out / "constraints.json").read_text())
+    assert {f"compliance_{j}" for j in TRUE} <= set(_within_4_sigma(doc))
+    assert doc["tracker_data"]  # both files in the one fit
