@@ -130,6 +130,12 @@ def test_report_and_exports_read_the_compliance(sockets, tmp_path):
         assert "not carried: joint effects (compliance" in ex.output
         rigid = _run(["export", kind, sockets / "rigid", "-o", tmp_path / f"rigid_{out.name}"])
         assert "joint effects" not in rigid.output
+    targets = tmp_path / "targets.csv"
+    targets.write_text("name,x,y,z\nt1,0.5,0.2,0.6\n")
+    for folder, said in (("elastic", True), ("rigid", False)):  # the commands' model says what it leaves
+        done = _run(["compensate", sockets / folder, "--targets", targets, "-o", tmp_path / f"{folder}.csv"])
+        assert done.exit_code == 0, done.output
+        assert ("not applied: the joint compliances" in done.output) is said
 
 
 def test_no_link_masses_refused_by_name(tmp_path):
@@ -144,6 +150,16 @@ def test_no_link_masses_refused_by_name(tmp_path):
     assert "\n" not in line and "--effects" in line and "mass" in line and "Traceback" not in line
     wrong = _run(["calibrate", "ur10", "--data", data, "--effects", "stiction", "--out", out])
     assert wrong.exit_code != 0 and "--effects" in wrong.output and not out.exists()
+
+
+def test_radial_needs_position_rows(tmp_path):
+    """Radial compliance is a position row's effect: tilt rows alone refuse it by name."""
+    tilt = tmp_path / "t.csv"
+    assert _run(["simulate", "ur10", "--kind", "tilt", "--n", "12", "--seed", "2", "-o", tilt]).exit_code == 0
+    out = tmp_path / "cal"
+    refused = _run(["calibrate", "ur10", "--data", tilt, "--effects", "compliance,radial", "--out", out])
+    assert refused.exit_code != 0 and "--effects" in refused.output and "radial" in refused.output
+    assert not out.exists()
 
 
 def test_tracker_and_planes_with_compliance(tmp_path):

@@ -61,6 +61,12 @@ def load(source: Path):
 
             constraint = load_constraint_folder(source)  # its calibrated robot, its base nominal: say so
             note_constraint_base(constraint, "corrected relative to the nominal base")
+            if any(e.compliance or e.radial_compliance for e in constraint.model.joint_effects):
+                err_console.print(  # the bare model's compensation applies no joint effect: say so
+                    "[yellow]note:[/] not applied: the joint compliances this calibration identified "
+                    "(the commands are corrected for its geometry; gravity's deflection stays as it was)",
+                    highlight=False, markup=True,
+                )  # fmt: skip
             return constraint.model
         if not (source / "result.json").is_file():
             raise fail(
