@@ -63,6 +63,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dpotrf, dpotri
 
 from robocal.identify.residual.cv import (
     DEFAULT_HARMONICS,
@@ -433,7 +434,7 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
     F[p:, p:] += learned.noise_std**2 * np.eye(m)
     scale = np.sqrt(np.maximum(np.diag(F), 1e-300))  # columns scaled: J's units differ widely
     try:
-        cov = np.linalg.inv(F / np.outer(scale, scale)) / np.outer(scale, scale) * learned.noise_std**2
+        cov = _spd_inverse(F / np.outer(scale, scale)) / np.outer(scale, scale) * learned.noise_std**2
     except np.linalg.LinAlgError:
         return result
     cov = 0.5 * (cov + cov.T)
@@ -451,3 +452,16 @@ def _joint_uncertainty(result: Any, q: Array) -> Any:
         correlation=corr,
         residual_cross_covariance=cov[:p, p:] * d[None, :],
     )
+
+
+def _spd_inverse(F: Array) -> Array:
+    """``F⁻¹`` of a symmetric positive definite ``F`` (a Fisher matrix with its prior) from its
+    Cholesky factor (LAPACK's dpotrf and dpotri: half the work of the general inverse's LU,
+    507 x 507: 6 -> 3 ms); the general inverse when rounding leaves ``F`` not quite positive
+    definite (LinAlgError when it is singular)."""
+    L, info = dpotrf(F, lower=1, clean=1)
+    if info == 0:
+        lower, info = dpotri(L, lower=1, overwrite_c=1)
+    if info != 0:
+        return np.asarray(np.linalg.inv(F), dtype=float)
+    return np.tril(lower) + np.tril(lower, -1).T
