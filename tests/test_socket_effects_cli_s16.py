@@ -124,6 +124,12 @@ def test_report_and_exports_read_the_compliance(sockets, tmp_path):
     made = _run(["report", sockets / "elastic", "--test-data", sockets / "s.placement2.csv", "-o", page])
     assert made.exit_code == 0, made.output
     assert "compliance_elbow" in page.read_text(encoding="utf-8")
+    from robocal.evaluate.report.constraint_collect import collect_constraint_report
+
+    cal = load_constraint_calibration(sockets / "elastic")
+    report = collect_constraint_report(cal, test_data=read_constraints(sockets / "s.placement2.csv", 6))
+    held_out = report.sets[0]  # the page's held-out figures: with the deflections, at the noise
+    assert np.all(held_out.after.point_spread < 3 * NOISE) and np.all(held_out.before.point_spread > 0.3e-3)
     for kind, out in (("urdf", tmp_path / "c.urdf"), ("ur-kinematics", tmp_path / "c.yaml")):
         ex = _run(["export", kind, sockets / "elastic", "-o", out])
         assert ex.exit_code == 0 and out.is_file(), ex.output
@@ -176,3 +182,27 @@ def test_tracker_and_planes_with_compliance(tmp_path):
     doc = json.loads((out / "constraints.json").read_text())
     assert {f"compliance_{j}" for j in TRUE} <= set(_within_4_sigma(doc))
     assert doc["tracker_data"]  # both files in the one fit
+
+
+def test_sockets_and_tilt_rows_share_the_compliance(sockets, tmp_path):
+    """Tilt readings of the same true robot beside the socket file: one compliance per joint
+    (saved once), within 4σ of the truth and sharper than from the sockets alone."""
+    tilt = tmp_path / "tilt.csv"
+    made = _run(
+        ["simulate", sockets / "ur10_elastic.yaml", "--kind", "tilt", "--n", "20", "--seed", "3", "-o", tilt]
+    )
+    assert made.exit_code == 0, made.output
+    out = tmp_path / "mixed"
+    fit = _run(["calibrate", "ur10", "--data", sockets / "s.csv", "--data", tilt, "--effects", "compliance",
+                "--out", out])  # fmt: skip
+    assert fit.exit_code == 0, fit.output
+    doc = json.loads((out / "constraints.json").read_text())
+    names = [e["name"] for e in doc["joint_effects"]]
+    assert len(names) == len(set(names)) and {f"compliance_{j}" for j in TRUE} <= set(_within_4_sigma(doc))
+    alone = {
+        e["name"]: e
+        for e in json.loads((sockets / "elastic" / "constraints.json").read_text())["joint_effects"]
+    }
+    for e in doc["joint_effects"]:
+        if e["name"] in alone:
+            assert e["std_rad_per_Nm"] < alone[e["name"]]["std_rad_per_Nm"]

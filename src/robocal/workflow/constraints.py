@@ -251,8 +251,9 @@ def read_mixed(
     return constraint[0], trackers, data
 
 
-def each_kind_lines(model: Model, data: ConstraintSet) -> list[str]:
-    """What each kind alone could identify beside what the union does (mixed data)."""
+def each_kind_lines(model: Model, data: ConstraintSet, deflected: bool = False) -> list[str]:
+    """What each kind alone could identify beside what the union does (mixed data);
+    ``deflected``: the position rows carried joint effects too (not the tilt rows' alone)."""
     from robocal.identify.constraints.fit import kind_identifiable
 
     union = set(kind_identifiable(model, data)[0])
@@ -271,9 +272,8 @@ def each_kind_lines(model: Model, data: ConstraintSet) -> list[str]:
         missing = sorted(union - alone, key=list(model.names).index)
         line = f"{kind} alone ({int(rows.sum())} poses) identify {len(alone)} of the union's {len(union)}"
         line += f"; not {', '.join(missing)}" if missing else ""
-        lines.append(
-            line + ("; and the joint effects (only these rows see them)" if kind == "tilt rows" else "")
-        )
+        alone_sees = kind == "tilt rows" and not deflected  # else the position rows see them too
+        lines.append(line + ("; and the joint effects (only these rows see them)" if alone_sees else ""))
     return lines
 
 
@@ -316,7 +316,7 @@ def calibrate_constraint_files(request: ConstraintRequest) -> ConstraintRun:
         raise CalibrateFileError("data", str(err), ", ".join(str(p) for p in paths)) from None
     _stage(request, "save")
     _save(result, request, first, trackers)
-    each = each_kind_lines(model, data) if _groups(data) > 1 else []
+    each = each_kind_lines(model, data, bool(result.position_effects)) if _groups(data) > 1 else []
     if request.report:
         _stage(request, "report")
         _write_report(request.out, first, request.angle_unit)
