@@ -115,7 +115,8 @@ Effects = Annotated[
         metavar="none|predict|identify|KINDS",
         help="joint effects: none | predict (from the model's joint_effects, the Katana thesis' "
         "(seed 003) two-stage "
-        'method) | identify (default of --level 3) | kinds, e.g. "compliance,backlash"',
+        'method) | identify (default of --level 3) | kinds, e.g. "compliance,backlash"; constraint files: '
+        "clearance,backlash,compliance on tilt rows, compliance,radial on points, planes, distances",
     ),
 ]
 Loss = Annotated[
