@@ -168,12 +168,15 @@ def test_radial_needs_position_rows(tmp_path):
     assert not out.exists()
 
 
-def test_tracker_and_planes_with_compliance(tmp_path):
-    """A plane file and the same true robot's tracker rows (deflected too) in one fit."""
+@pytest.mark.parametrize("kind", ["point", "plane", "distance"])
+def test_tracker_beside_each_kind_with_compliance(kind, tmp_path):
+    """A socket, plane or ball-bar file and the same true robot's tracker rows (deflected
+    too) in one fit; the held-out placement (sockets, planes) predicted at the noise."""
     true = _elastic_model_file(tmp_path)
     data = tmp_path / "p.csv"
-    made = _run(["simulate", true, "--kind", "plane", "--n", "60", "--count", "3", "--seed", "4",
-                 "--also-tracker", "30", "-o", data])  # fmt: skip
+    placements = "1" if kind == "distance" else "2"  # a ball-bar has no placement to move
+    made = _run(["simulate", true, "--kind", kind, "--n", "60", "--count", "3", "--seed", "4",
+                 "--also-tracker", "30", "--placements", placements, "-o", data])  # fmt: skip
     assert made.exit_code == 0, made.output
     out = tmp_path / "cal"
     fit = _run(["calibrate", "ur10", "--data", data, "--data", tmp_path / "p.tracker.csv", "--effects",
@@ -182,6 +185,10 @@ def test_tracker_and_planes_with_compliance(tmp_path):
     doc = json.loads((out / "constraints.json").read_text())
     assert {f"compliance_{j}" for j in TRUE} <= set(_within_4_sigma(doc))
     assert doc["tracker_data"]  # both files in the one fit
+    if kind != "distance":
+        figures = constraint_figures(load_constraint_calibration(out).model,
+                                     read_constraints(tmp_path / "p.placement2.csv", 6))  # fmt: skip
+        assert np.all(np.concatenate([figures.point_spread, figures.plane_rms]) < 3 * NOISE)
 
 
 def test_sockets_and_tilt_rows_share_the_compliance(sockets, tmp_path):
