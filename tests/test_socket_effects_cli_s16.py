@@ -213,3 +213,20 @@ def test_sockets_and_tilt_rows_share_the_compliance(sockets, tmp_path):
     for e in doc["joint_effects"]:
         if e["name"] in alone:
             assert e["std_rad_per_Nm"] < alone[e["name"]]["std_rad_per_Nm"]
+
+
+def test_a_model_files_stated_compliance_held_or_left_out(sockets, tmp_path):
+    """A model file stating compliances and masses predicts the sockets with them, held (the
+    default); ``--effects none`` leaves them out, as the tracker calibration's ``none`` does."""
+    model = sockets / "ur10_elastic.yaml"
+    runs = {}
+    for name, extra in (("held", []), ("none", ["--effects", "none"])):
+        done = _run(["calibrate", model, "--data", sockets / "s.csv", *extra, "--out", tmp_path / name])
+        assert done.exit_code == 0, done.output
+        runs[name] = load_constraint_calibration(tmp_path / name)
+    held = {e.joint: e.compliance for e in runs["held"].model.joint_effects}
+    assert held == TRUE and not runs["held"].joint_effects  # carried, not fitted
+    assert not runs["none"].model.joint_effects
+    test = read_constraints(sockets / "s.placement2.csv", 6)
+    spread = {k: constraint_figures(c.model, test).point_spread for k, c in runs.items()}
+    assert np.all(spread["held"] < spread["none"])

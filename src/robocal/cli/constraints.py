@@ -86,6 +86,8 @@ def calibrate_constraint_command(
     except ValueError as err:
         raise fail(str(err)) from None
     _check_masses(model, position_kinds, effects)
+    if effects is not None and effects.strip() == "none":  # as the tracker calibration's: the model's own too
+        model = dataclasses.replace(model, joint_effects=())
     levels = {None: None, "1": 1, "offsets": 1, "2": 2, "kinematic": 2}
     if level not in levels:
         raise fail(
@@ -116,8 +118,9 @@ def constraint_effect_kinds(effects: str | None) -> tuple[tuple[str, ...] | None
     """``--effects`` for constraint files: ``(the joint effects the tilt rows identify,
     the joint effects the position rows carry)``.  Not given: the tilt rows' default
     (clearance, backlash, compliance; None) and no position effect (a model's stated
-    compliances predict the position rows, held); ``none``: no joint effect; ``identify``:
-    the tilt rows' three and compliance on the position rows; or a list of
+    compliances predict the position rows, held); ``none``: no joint effect (a model's
+    stated ones left out too); ``identify``: the tilt rows' three and compliance on the
+    position rows; or a list of
     ``clearance,backlash,compliance,radial``: the tilt rows identify those of the first three
     named, the position rows (fixed points, planes, distances, tracker points) carry
     ``compliance`` and ``radial`` (compliance about the axis, and tilting about the other
