@@ -129,3 +129,23 @@ def test_fewer_harmonics_normal_equations_are_sub_blocks_of_the_largest_projecti
         assert np.array_equal(sub.G, sub.G.T)
         assert sub.b == pytest.approx(own.b, rel=1e-9, abs=1e-12 * np.max(np.abs(own.b)))
         assert (sub.rr, sub.N) == (own.rr, own.N)
+
+
+def test_small_chunks_diagonal_blocks_by_products_equal_the_sums_of_harmonics(twin, monkeypatch):
+    """:func:`fit.raw_blocks` forms a chunk's diagonal blocks as products below
+    ``SUMS_FROM`` poses x harmonics (a CV fold's 60 poses), from sums of harmonics above:
+    the same normal equations either way, to rounding."""
+    result, data = twin
+    full = _fit_of(result, data)
+    rows = slice(0, 60)
+    q, r, P, J = data.q[rows], full.residuals[rows], full.P[rows], full.J[rows]
+    template = fit.residual_template([f"j{i}" for i in range(6)], list(range(6)), 24, data.q)
+    assert len(q) * template.harmonics < fit.SUMS_FROM
+    by_products = fit.raw_blocks(q, r, P, template, J)
+    monkeypatch.setattr(fit, "SUMS_FROM", 0)
+    by_sums = fit.raw_blocks(q, r, P, template, J)
+    scale = np.max(np.abs(by_sums.AA))
+    assert np.max(np.abs(by_products.AA - by_sums.AA)) < 1e-12 * scale
+    assert np.array_equal(by_products.AA, by_products.AA.T)
+    for name in ("JA", "Ar", "JJ", "Jr"):
+        assert np.array_equal(getattr(by_products, name), getattr(by_sums, name))
