@@ -149,3 +149,18 @@ def test_small_chunks_diagonal_blocks_by_products_equal_the_sums_of_harmonics(tw
     assert np.array_equal(by_products.AA, by_products.AA.T)
     for name in ("JA", "Ar", "JJ", "Jr"):
         assert np.array_equal(getattr(by_products, name), getattr(by_sums, name))
+
+
+def test_the_joint_by_joint_basis_is_the_templates_basis_faded_or_not(twin):
+    """``fit._joint_basis`` forms the basis in the normal equations' layout directly: equal,
+    bit for bit, to the residual's own ``basis`` transposed, where it fades and where not."""
+    q = twin[1].q
+    names, index = [f"j{i}" for i in range(6)], list(range(6))
+    covering_all = fit.residual_template(names, index, 12, q)
+    few = fit.residual_template(names, index, 12, q[:15]).covering(q[:15])  # fades elsewhere
+    no_coverage = fit.residual_template(names, index, 12)
+    for template, fades in ((covering_all, False), (few, True), (no_coverage, False)):
+        B, faded = fit._joint_basis(template, q)
+        assert faded == fades
+        assert B.flags.c_contiguous
+        assert np.array_equal(B, template.basis(q).transpose(1, 2, 0))
