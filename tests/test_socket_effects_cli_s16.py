@@ -17,10 +17,12 @@ import pytest
 from typer.testing import CliRunner
 
 import robocal.model
+import robocal.model.files
 from robocal.cli import app
 from robocal.identify.constraints.fit import constraint_figures
 from robocal.identify.constraints.result import load_constraint_calibration
 from robocal.measure.constraints.data import read_constraints
+from robocal.model.joints import joint_perturbations
 
 TRUE = {"shoulder_lift": 4e-5, "elbow": 6e-5, "wrist_1": 1e-4}  # rad/(N·m): mm at the tool
 NOISE = 1e-5  # m: simulate's default tool-point noise per axis
@@ -137,11 +139,38 @@ def test_report_and_exports_read_the_compliance(sockets, tmp_path):
         rigid = _run(["export", kind, sockets / "rigid", "-o", tmp_path / f"rigid_{out.name}"])
         assert "joint effects" not in rigid.output
     targets = tmp_path / "targets.csv"
-    targets.write_text("name,x,y,z\nt1,0.5,0.2,0.6\n")
-    for folder, said in (("elastic", True), ("rigid", False)):  # the commands' model says what it leaves
-        done = _run(["compensate", sockets / folder, "--targets", targets, "-o", tmp_path / f"{folder}.csv"])
-        assert done.exit_code == 0, done.output
-        assert ("not applied: the joint compliances" in done.output) is said
+    targets.write_text("name,x,y,z\nt1,0.5,0.2,0.6\nt2,-0.3,0.5,0.4\n")
+    done = _run(["compensate", sockets / "elastic", "--targets", targets, "-o", tmp_path / "elastic.csv"])
+    assert done.exit_code == 0, done.output
+    model = load_constraint_calibration(sockets / "elastic").model  # its commands carry its deflections
+    q = np.loadtxt(tmp_path / "elastic.csv", delimiter=",", skiprows=1, usecols=range(1, 7), ndmin=2)
+    landed = model.fk(q, joint_perturbations(model, q))[:, :3, 3]
+    assert np.abs(landed - [[0.5, 0.2, 0.6], [-0.3, 0.5, 0.4]]).max() < 1e-6
+    assert np.abs(model.fk(q)[:, :3, 3] - landed).max() > 2e-5  # the deflection is there to correct
+
+
+def test_commands_from_a_model_file_stating_compliance_land_on_the_elastic_robot(tmp_path):
+    """Closed loop: a model file stating compliances and link masses; ``compensate`` and
+    ``filter`` on it; the elastic robot it states executes the commands and lands on the
+    targets (before, the bare model's commands left the deflection in: ~mm)."""
+    true = robocal.model.files.load_model(_elastic_model_file(tmp_path))
+    rng = np.random.default_rng(4)
+    q_nominal = rng.uniform([-2, -2, 0.5, -2, 0.5, -2], [2, -0.5, 2, 0, 2.5, 2], (6, 6))
+    q_nominal[0] = [0.0, -np.pi / 2, 0.0, -np.pi / 2, 0.0, 0.0]  # upright: the wrist at its singularity
+    wanted = true.fk(q_nominal)[:, :3, 3]
+    targets = tmp_path / "targets.csv"
+    targets.write_text("name,x,y,z\n" + "".join(f"t{i},{x},{y},{z}\n" for i, (x, y, z) in enumerate(wanted)))
+    out = tmp_path / "q.csv"
+    done = _run(["compensate", tmp_path / "ur10_elastic.yaml", "--targets", targets, "-o", out])
+    assert done.exit_code in (0, 1), done.output
+    rows = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    q = np.array([[row[f"q{j}"] for j in range(1, 7)] for row in np.atleast_1d(rows)], dtype=float)
+    reached = np.isfinite(q).all(axis=1)
+    assert reached[1:].all()  # a refused target (the singular one) is named, not written wrong
+    landed = true.fk(q[reached], joint_perturbations(true, q[reached]))[:, :3, 3]
+    assert np.abs(landed - wanted[reached]).max() < 1e-6
+    sagged = true.fk(q_nominal, joint_perturbations(true, q_nominal))[:, :3, 3]
+    assert np.abs(sagged - wanted).max() > 1e-4  # uncompensated: the deflection
 
 
 def test_no_link_masses_refused_by_name(tmp_path):
@@ -230,3 +259,18 @@ def test_a_model_files_stated_compliance_held_or_left_out(sockets, tmp_path):
     test = read_constraints(sockets / "s.placement2.csv", 6)
     spread = {k: constraint_figures(c.model, test).point_spread for k, c in runs.items()}
     assert np.all(spread["held"] < spread["none"])
+
+
+def test_a_model_file_stating_compliance_without_masses_is_refused_by_compensate(tmp_path):
+    text = _elastic_model_file(tmp_path).read_text(encoding="utf-8")
+    start = text.index("bodies:")
+    end = text.index("\n", text.rindex("  - {name:", start))
+    bare = tmp_path / "no_masses.yaml"
+    bare.write_text(text[:start] + text[end + 1 :], encoding="utf-8")
+    targets = tmp_path / "t.csv"
+    targets.write_text("name,x,y,z\nt1,0.5,0.2,0.6\n")
+    out = tmp_path / "q.csv"
+    refused = _run(["compensate", bare, "--targets", targets, "-o", out])
+    line = refused.output.strip()
+    assert refused.exit_code != 0 and not out.exists()
+    assert "\n" not in line and "no_masses.yaml" in line and "mass" in line and "Traceback" not in line

@@ -61,12 +61,6 @@ def load(source: Path):
 
             constraint = load_constraint_folder(source)  # its calibrated robot, its base nominal: say so
             note_constraint_base(constraint, "corrected relative to the nominal base")
-            if any(e.compliance or e.radial_compliance for e in constraint.model.joint_effects):
-                err_console.print(  # the bare model's compensation applies no joint effect: say so
-                    "[yellow]note:[/] not applied: the joint compliances this calibration identified "
-                    "(the commands are corrected for its geometry; gravity's deflection stays as it was)",
-                    highlight=False, markup=True,
-                )  # fmt: skip
             return constraint.model
         if not (source / "result.json").is_file():
             raise fail(
@@ -77,10 +71,16 @@ def load(source: Path):
         except (OSError, ValueError, KeyError, ModelFileError) as err:
             raise fail(f"{source}: cannot read the calibration result: {err}") from None
     if source.is_file():
+        from robocal.compensate.compensation import model_perturbations
+
         try:
-            return load_model(source)
+            model = load_model(source)
+            model_perturbations(model)  # joint effects it states must be computable
         except (OSError, ModelFileError) as err:
             raise fail(str(err)) from None
+        except ValueError as err:
+            raise fail(f"{source}: {err}") from None
+        return model
     problem = input_problem(source, "calibration directory or model file") or f"{source} cannot be read"
     raise fail(problem + (" (a calibration directory or a model file)" if problem.endswith("exist") else ""))
 

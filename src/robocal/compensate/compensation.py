@@ -71,8 +71,9 @@ from robocal.measure.ik_regularized import solve_regularized
 from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
 from robocal.model.flange_tool import split_tool
+from robocal.model.joints import joint_perturbations
 
-__all__ = ["compensate_targets", "filter_program", "nominal_model"]
+__all__ = ["compensate_targets", "filter_program", "model_perturbations", "nominal_model"]
 
 Array = NDArray[np.float64]
 Calibrated = CalibrationResult | Model
@@ -122,6 +123,31 @@ class Setup:
         return self.result.expected_position_error(q)
 
 
+def model_perturbations(model: Model) -> PerturbationFunction | None:
+    """A bare model's joint perturbations ``q (n, dof) -> (n, dof, 3)``: the joint effects it
+    states (e.g. compliance a constraint calibration identified) under gravity along the
+    base's -z with no payload, as they were identified, and its learned residual (joint
+    angle errors); None when it has neither.  A model that states joint effects without the
+    link masses their loads need is refused (ValueError naming it): its commands would leave
+    the deflection out silently."""
+    physical = bool(model.joint_effects)
+    if physical and not model.bodies:
+        raise ValueError(
+            f"model {model.name!r} states joint effects but no link masses: their gravity loads "
+            "cannot be computed, so commands from it would leave the deflections out"
+        )
+    residual = model.residual
+    if not physical:
+        return None if residual is None else residual.perturbations
+
+    def perturbations(q: Array) -> Array:
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        out = joint_perturbations(model, q)
+        return out if residual is None else out + residual.perturbations(q, model.dof)
+
+    return perturbations
+
+
 def compensation_setup(
     calibrated: Calibrated, nominal: Model | None, joint_effects: PerturbationFunction | None
 ) -> Setup:
@@ -133,8 +159,7 @@ def compensation_setup(
         has_nominal = True
     elif isinstance(calibrated, Model):
         real, frame = calibrated, None
-        # a bare calibrated model still carries its learned residual (joint angle errors)
-        effects = None if calibrated.residual is None else calibrated.residual.perturbations
+        effects = model_perturbations(calibrated)
         nom = calibrated if nominal is None else nominal
         has_nominal = nominal is not None
     else:
