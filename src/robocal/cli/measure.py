@@ -5,6 +5,8 @@ Commands:
                        [--decimal ","] [--columns "q1=shoulder_pan_joint,..."]
                        [--orientation euler:XYZ:deg] [--limits error|warn|ignore]
         every problem of a measurement file (exit code 1 if any error), or a summary
+    robocal data sockets PLACEMENT/ -o sockets.csv [--deg]
+        ball-in-socket recordings (hole_0.csv, hole_1.csv ...) as a constraint CSV
     robocal simulate ROBOT --poses POSES.csv --device laser-tracker --noise 0.02mm --seed 1
                      -o meas.csv
         simulated measurements of a robot with drawn errors, and their truth beside them
@@ -46,6 +48,7 @@ from robocal.cli.options import (
     out_option,
     resolve_model,
 )
+from robocal.cli.sockets import data_sockets
 from robocal.console import console, err_console, fail, refuse_overwrite, safe
 from robocal.measure.devices import DEVICES, make_device
 
@@ -166,16 +169,9 @@ def data_check(
     from robocal.measure.dataset.read import check_measurements, read_measurements
 
     model = _model(robot)
-    options = ReaderOptions(
-        length_unit=length_unit,
-        angle_unit=angle_unit,
-        sep=sep,
-        decimal=decimal,
-        columns=columns,
-        orientation=orientation,
-        limits=limits,
-        incomplete=incomplete,
-    )
+    options = ReaderOptions(length_unit=length_unit, angle_unit=angle_unit, sep=sep, decimal=decimal,
+                            columns=columns, orientation=orientation, limits=limits,
+                            incomplete=incomplete)  # fmt: skip
     try:
         problems = check_measurements(file, model, options=options)
     except (ValueError, KeyError) as err:
@@ -214,6 +210,9 @@ def data_tilt(
     from robocal.cli.inclinometer import identify_tilt_file
 
     identify_tilt_file(file, robot, exact_geometry, json_out, force)
+
+
+data_app.command("sockets")(data_sockets)  # ball-in-socket recordings -> a constraint CSV
 
 
 # -------------------------------------------------------------------- simulate
@@ -495,6 +494,6 @@ def _noise_text(dev) -> str:
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``data check`` and ``simulate`` to the ``robocal`` app."""
+    """Add ``data check``, ``data tilt``, ``data sockets`` and ``simulate`` to the ``robocal`` app."""
     app.add_typer(data_app, name="data")
     app.command("simulate")(simulate_command)
