@@ -52,8 +52,10 @@ from robocal.units import unit_factor
 __all__ = [
     "KIND_COLUMNS",
     "ConstraintFileError",
+    "checked_text",
     "constraint_kind",
     "has_tilt_rows",
+    "number_cell",
     "parse_distance",
     "read_constraints",
     "tilt_only",
@@ -136,7 +138,9 @@ def parse_distance(text: str) -> tuple[int, int, float]:
     return a, b, value
 
 
-def _cell(value: str, where: str, integer: bool = False) -> float:
+def number_cell(value: str, where: str, integer: bool = False) -> float:
+    """A finite number read from a cell (an index 0..MAX_INDEX with ``integer``);
+    ConstraintFileError naming ``where`` otherwise."""
     text = value.strip()
     try:
         number = float(text)
@@ -149,15 +153,23 @@ def _cell(value: str, where: str, integer: bool = False) -> float:
     return number
 
 
-def _rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    if not path.is_file():
-        raise ConstraintFileError(f"{path}: no such file")
+def checked_text(path: Path) -> str:
+    """The text of a measurement file: refused by name when over ``MAX_BYTES``, not UTF-8 or
+    unreadable (ConstraintFileError)."""
     if path.stat().st_size > MAX_BYTES:
         raise ConstraintFileError(f"{path}: larger than {MAX_BYTES // 1_000_000} MB")
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        return path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise ConstraintFileError(f"{path}: not UTF-8 text") from None
+    except OSError as err:
+        raise ConstraintFileError(f"{path}: cannot be read ({err.strerror})") from None
+
+
+def _rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
+    if not path.is_file():
+        raise ConstraintFileError(f"{path}: no such file")
+    text = checked_text(path)
     lines = [
         (k + 1, line)
         for k, line in enumerate(text.splitlines())
@@ -171,7 +183,7 @@ def _rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
 
 
 def _index_column(cells: list[str], where: str) -> int:
-    return -1 if not cells or not cells[0].strip() else int(_cell(cells[0], where, integer=True))
+    return -1 if not cells or not cells[0].strip() else int(number_cell(cells[0], where, integer=True))
 
 
 def read_constraints(
@@ -216,12 +228,12 @@ def read_constraints(
         def get(name: str, number=number, cells=cells) -> list[str]:
             return [cells[col[name]]] if name in col else []
 
-        q.append([_cell(cells[col[j]], f"{path}, row {number}, column {j}") * scale for j in joints])
+        q.append([number_cell(cells[col[j]], f"{path}, row {number}, column {j}") * scale for j in joints])
         point.append(_index_column(get("point"), f"{path}, row {number}, column point"))
         plane.append(_index_column(get("plane"), f"{path}, row {number}, column plane"))
         pair.append(_index_column(get("pair"), f"{path}, row {number}, column pair"))
         length.append(
-            _cell(get("distance_mm")[0], f"{path}, row {number}, column distance_mm") * 1e-3
+            number_cell(get("distance_mm")[0], f"{path}, row {number}, column distance_mm") * 1e-3
             if pair[-1] >= 0
             else math.nan
         )
@@ -262,7 +274,7 @@ def _mount(get, number: int, path: Path, tilted: bool) -> list[float]:
         raise ConstraintFileError(f"{where}s {', '.join(HOME_COLUMNS)}: a mount at home and on the link "
                                   "on one row; state one of them")  # fmt: skip
     columns, cells = given[0]
-    angles = [math.radians(_cell(c, f"{where} {name}")) for c, name in zip(cells, columns, strict=True)]
+    angles = [math.radians(number_cell(c, f"{where} {name}")) for c, name in zip(cells, columns, strict=True)]
     return angles + [1.0 if columns == HOME_COLUMNS else 0.0]
 
 
@@ -286,20 +298,22 @@ def _tilt(get, number: int, path: Path, dof: int) -> tuple[int, int, float]:
     if len(cells) < 3 or not any(c.strip() for c in cells):
         return -1, 0, math.nan
     where = f"{path}, row {number}, column"
-    link = int(_cell(cells[0], f"{where} link", integer=True))
+    link = int(number_cell(cells[0], f"{where} link", integer=True))
     if not 1 <= link <= dof:
         raise ConstraintFileError(f"{where} link: {link} is not a joint 1..{dof}")
     axis = cells[1].strip()
     if axis not in TILT_AXES:
         raise ConstraintFileError(f"{where} axis: {short(axis)} is not one of {', '.join(TILT_AXES)}")
-    return link - 1, TILT_AXES.index(axis), math.radians(_cell(cells[2], f"{where} tilt_deg"))
+    return link - 1, TILT_AXES.index(axis), math.radians(number_cell(cells[2], f"{where} tilt_deg"))
 
 
 def _tracker(get, number: int, path: Path) -> list[float]:
     cells = [c for name in "xyz" for c in get(name)]
     if len(cells) < 3 or not any(c.strip() for c in cells):
         return [math.nan] * 3
-    return [_cell(c, f"{path}, row {number}, column {name}") for c, name in zip(cells, "xyz", strict=True)]
+    return [
+        number_cell(c, f"{path}, row {number}, column {name}") for c, name in zip(cells, "xyz", strict=True)
+    ]
 
 
 def _pairs(path: Path, pair: list[int], length: list[float]) -> tuple[np.ndarray, np.ndarray]:

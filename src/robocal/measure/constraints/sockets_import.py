@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from robocal.csvfile import short
-from robocal.measure.constraints.data import MAX_BYTES, ConstraintFileError
+from robocal.measure.constraints.data import ConstraintFileError, checked_text, number_cell
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.units import unit_factor
 
@@ -92,28 +92,11 @@ def _folder_files(folder: Path) -> list[Path]:
     return [holes[k] for k in sorted(holes)]
 
 
-def _text(path: Path) -> str:
-    if path.stat().st_size > MAX_BYTES:
-        raise ConstraintFileError(f"{path}: larger than {MAX_BYTES // 1_000_000} MB")
-    try:
-        return path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise ConstraintFileError(f"{path}: not UTF-8 text") from None
-    except OSError as err:
-        raise ConstraintFileError(f"{path}: cannot be read ({err.strerror})") from None
-
-
 def _angle(text: str, where: str, scale: float) -> float:
-    cell = text.strip()
-    try:
-        value = float(cell)
-    except ValueError:
-        raise ConstraintFileError(f"{where}: {short(cell)} is not a number") from None
-    if not math.isfinite(value):
-        raise ConstraintFileError(f"{where}: {short(cell)} is not a finite number")
+    value = number_cell(text, where)
     if abs(value * scale) > MAX_ANGLE_RAD:
         raise ConstraintFileError(
-            f"{where}: {short(cell)} rad is more than two turns; a recording in degrees needs --deg"
+            f"{where}: {short(text.strip())} rad is more than two turns; a recording in degrees needs --deg"
         )
     return value * scale
 
@@ -126,7 +109,7 @@ def read_joint_file(path: Path, scale: float = 1.0) -> np.ndarray:
         ConstraintFileError: an empty file, a non-numeric or non-finite cell, a row with
             another number of joints than the first (named by row and column, from 1).
     """
-    lines = [(k + 1, line) for k, line in enumerate(_text(path).splitlines()) if line.strip()]
+    lines = [(k + 1, line) for k, line in enumerate(checked_text(path).splitlines()) if line.strip()]
     if not lines:
         raise ConstraintFileError(f"{path}: empty: no configuration")
     rows: list[list[float]] = []
