@@ -105,7 +105,10 @@ def register(app: Dash, runner: JobRunner, workdir: Path, run_states: tuple, sta
         prevent_initial_call=True,
     )
     def cancel(_n, run_id):
-        return "cancelling ..." if runner.cancel(run_id) else "nothing is running"
+        # runner.cancel stops the run before it returns: say "cancelled" as the poll does, so
+        # the page ends there whichever of the two answers the browser applies last (it
+        # showed "cancelling ..." for good when the poll's answer came first)
+        return "cancelled" if runner.cancel(run_id) else "nothing is running"
 
     @app.callback(
         Output("run-list", "children"),
