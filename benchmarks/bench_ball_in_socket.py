@@ -44,7 +44,12 @@ Chosen by 5-fold CV on the training placement only; the held-out placements, the
 three and the compliance held at that fit's values are diagnostics.  Last, the noise of a
 hand-guided seat, from the few configurations of one socket recorded twice within 0.3 rad.
 
-Run: ``python benchmarks/bench_ball_in_socket.py [--data DIR]`` (about 30 s).
+Last, every robot MUKCa recorded (:mod:`bench_ball_in_socket_robots`: a KUKA iiwa 14, two
+Kinova Gen3 lite, eight Pandas): leave one placement out, each placement's floor, a summary
+table and the verdict.
+
+Run: ``python benchmarks/bench_ball_in_socket.py [--data DIR] [--robots all|panda_1,kuka_14,...]``
+(about 1 min; ``--robots`` picks the series, panda_1's study above runs when it is among them).
 """
 
 from __future__ import annotations
@@ -185,9 +190,21 @@ def floors(model, data: Path, sets: dict[str, ConstraintSet], inside: dict) -> l
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=DATA)
+    parser.add_argument("--robots", default="all", help="all, or a comma list of series (panda_1's study "
+                        "runs when it is among them)")  # fmt: skip
     args = parser.parse_args()
-    model = panda(args.data)
-    sets = {name: placement(args.data, name) for name in PLACEMENTS}
+    import bench_ball_in_socket_robots as robots
+
+    if "panda_1" in robots.parse_robots(args.robots):
+        panda_1_study(args.data)
+    print("\nEvery robot MUKCa recorded, leave one placement out (mm):\n")
+    robots.main(args.robots)
+
+
+def panda_1_study(data: Path) -> None:
+    """panda_1's tables: held-out per model, the floors, the joint compliance."""
+    model = panda(data)
+    sets = {name: placement(data, name) for name in PLACEMENTS}
     lines, every, inside = held_out(model, sets)
     print("\n".join(lines))
     print("\nLeave-one-placement-out CV (6 held-out evaluations each):\n")
@@ -199,9 +216,9 @@ def main() -> None:
     met = every[best][:, 0].max() <= 0.2 and every[best][:, 1].max() <= 0.2
     print(f"\nCV chooses: {best}; the issue's check (spread <= 0.2 mm, distance within 0.2 mm): "
           f"{'met' if met else 'NOT met'}\n")  # fmt: skip
-    print("\n".join(floors(model, args.data, sets, inside)))
+    print("\n".join(floors(model, data, sets, inside)))
     print("\nJoint compliance under gravity (Gaz et al. 2019 link masses):\n")
-    print("\n".join(compliance_lines(with_masses(model, args.data), args.data, sets)))
+    print("\n".join(compliance_lines(with_masses(model, data), data, sets)))
 
 
 # ---------------------------------------------------------------------- joint compliance
@@ -313,17 +330,22 @@ def _known_compliance(model, joint, sets: dict[str, ConstraintSet]) -> list[str]
             f"{h[:, 1].mean():.3f} mm mean"]  # fmt: skip
 
 
-def _repeat_noise(joint, every: ConstraintSet, within: float = 0.3) -> str:
-    """The seat's noise per axis from pairs of one socket's configurations within ``within``
-    rad of each other (a smooth unmodelled error cancels in their difference)."""
+def seat_noise(joint, every: ConstraintSet, within: float = 0.3) -> tuple[float, int]:
+    """The seat's noise per axis (mm) from pairs of one socket's configurations within
+    ``within`` rad of each other (a smooth unmodelled error cancels in their difference),
+    and the number of pairs (NaN, 0 without any); ``joint``: a fit of ``every``."""
     from robocal.identify.constraints.fit import tool_points
 
     r = tool_points(joint.model, every.q) - joint.points[every.point]
     d = [r[a] - r[b] for a in range(every.n) for b in range(a + 1, every.n)
          if every.point[a] == every.point[b] and np.abs(every.q[a] - every.q[b]).max() < within]  # fmt: skip
-    sigma = 1e3 * math.sqrt(float(np.mean(np.square(d))) / 2) if d else float("nan")
+    return (1e3 * math.sqrt(float(np.mean(np.square(d))) / 2) if d else float("nan")), len(d)
+
+
+def _repeat_noise(joint, every: ConstraintSet, within: float = 0.3) -> str:
+    sigma, pairs = seat_noise(joint, every, within)
     return (
-        f"seat noise from {len(d)} pairs of one socket's configurations within {within} rad: "
+        f"seat noise from {pairs} pairs of one socket's configurations within {within} rad: "
         f"{sigma:.3f} mm per axis (a perfect model's spread about sqrt(3) times that); the "
         f"three-placement fit's sigma-hat {joint.residual_std * 1e3:.3f} mm per axis"
     )
