@@ -152,6 +152,14 @@ def validate_command(
     from robocal.cli.constraints import is_constraint_file, validate_constraint_file
 
     if data_path is not None and is_constraint_file(data_path, None):
+        # the constraint figures read the joint columns only: an option they would ignore is refused
+        unread = {"--json": as_json, "--refit-frame": refit_frame, "--all-rows": all_rows,
+                  "--columns": columns, "--length-unit": length_unit != "m", "--sep": sep,
+                  "--decimal": decimal != ".", "--orientation": orientation != "auto",
+                  "--incomplete": incomplete != "error"}  # fmt: skip
+        if given := [name for name, value in unread.items() if value]:
+            raise fail(f"{', '.join(given)}: not available for a constraint file ({data_path}): its "
+                       "figures (spread, distance, plane residual) are printed as text")  # fmt: skip
         return validate_constraint_file(directory, data_path, angle_unit, distances=None)
 
     result = load_result(directory)
