@@ -80,7 +80,8 @@ class Series:
     spread; every: placement -> the spread of one complete-LS fit of all placements;
     below: figures under their placement's floor by more than ``BELOW``; noise: seat noise
     per axis (NaN without near-repeated configurations) and the number of pairs behind it;
-    unseen: placement -> what the default trained there held at nominal, (name, reason)."""
+    unseen: placement -> what the default trained there held at nominal, (name, reason);
+    judged: the placement each row of ``held`` judges."""
 
     name: str
     dof: int
@@ -91,6 +92,13 @@ class Series:
     below: int
     noise: tuple[float, int]
     unseen: dict[str, tuple[tuple[str, str], ...]]
+    judged: tuple[str, ...]
+
+    def within_target(self) -> tuple[int, int, int]:
+        """The default's held-out evaluations within the target, those whose placement's
+        floor allows it, and all."""
+        ok = (self.held[DEFAULT] <= TARGET).all(axis=1)
+        return int(ok.sum()), sum(self.floor[p] <= TARGET for p in self.judged), len(self.judged)
 
 
 def run_series(name: str) -> Series:
@@ -116,9 +124,9 @@ def run_series(name: str) -> Series:
     below += sum(every[p] < floor[p] - BELOW for p in sets)
     figures_mm = {h: np.array(v) for h, v in held.items()}
     noise = seat_noise(joint, pooled(folder, list(sets)))
-    return Series(
-        name, model.dof, sum(s.n for s in sets.values()), figures_mm, floor, every, int(below), noise, unseen
-    )
+    judged = tuple(test for train in sets for test in sets if test != train)
+    n = sum(s.n for s in sets.values())
+    return Series(name, model.dof, n, figures_mm, floor, every, int(below), noise, unseen, judged)
 
 
 def _progress(text: str) -> None:
@@ -135,16 +143,18 @@ def summary(all_series: list[Series]) -> list[str]:
         "| series | axes | placements | configurations | nominal spread mean / worst | joint offsets | "
         "complete LS | complete + prior (default) | default abs(distance - 50) mean / worst | "
         "floor: in-sample complete LS per placement, mean / worst | all placements in one fit, "
-        "judged on each: mean / worst | seat noise per axis under that fit (pairs) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "judged on each: mean / worst | seat noise per axis under that fit (pairs) | default's held-out "
+        "evaluations within the target / floor allows / all |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for s in all_series:
         floor, every = np.array(list(s.floor.values())), np.array(list(s.every.values()))
         noise = f"{s.noise[0]:.3f} ({s.noise[1]})" if s.noise[1] else "- (0)"
         spreads = " | ".join(_mean_worst(s.held[how][:, 0]) for how in HELD_OUT)
+        counts = " / ".join(map(str, s.within_target()))
         lines.append(f"| {s.name} | {s.dof} | {len(s.floor)} | {s.n} | {spreads} | "
                      f"{_mean_worst(s.held[DEFAULT][:, 1])} | {_mean_worst(floor)} | "
-                     f"{_mean_worst(every)} | {noise} |")  # fmt: skip
+                     f"{_mean_worst(every)} | {noise} | {counts} |")  # fmt: skip
     return lines + [""] + verdict(all_series)
 
 
@@ -155,12 +165,14 @@ def verdict(all_series: list[Series]) -> list[str]:
     on_mean = [s.name for s in all_series if np.mean(list(s.floor.values())) > TARGET]
     below = sum(s.below for s in all_series)
     checked = sum(sum(len(s.held[h]) for h in HELD_OUT) + len(s.every) for s in all_series)
+    ok, allowed, total = np.sum([s.within_target() for s in all_series], axis=0)
     return [
         f"verdict: the target (every held-out spread and abs(distance - 50) <= {TARGET} mm, the default "
         f"fit) is met for {len(met)} of {len(all_series)} series ({', '.join(met) or 'none'}); the floor "
         f"alone is above {TARGET} mm on some placement for {len(impossible)} of {len(all_series)} "
         f"({', '.join(impossible) or 'none'}: no geometric calibration can meet the target there), "
-        f"its mean over the placements for {len(on_mean)}",
+        f"its mean over the placements for {len(on_mean)}; of the default's {total} held-out evaluations "
+        f"{ok} are within the target, {allowed} judge a placement whose floor is within it",
         f"floor check: {below} of {checked} held-out and pooled-fit spreads fall below their "
         f"placement's floor by more than {BELOW * 1e3:.0f} um (the distance row's weight allows some)",
     ]
