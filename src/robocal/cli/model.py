@@ -13,6 +13,7 @@ from robocal.cli.options import CONTEXT, Force, Robot, measure_option, out_optio
 from robocal.console import console, fail, input_problem, refuse_overwrite, safe, warn
 
 if TYPE_CHECKING:
+    from robocal.model.chain import Model
     from robocal.model.geometry import Measure
 
 __all__ = ["register"]
@@ -133,8 +134,28 @@ def build_command(
     )
     for warning in result.warnings:
         warn(warning)
+    if geometry.suffix.lower() == ".urdf":
+        console.print(_masses_line(geometry, model, tip), highlight=False)
     save_model(model, out)
     console.print(f"wrote {out}", highlight=False)
+
+
+def _masses_line(urdf: Path, model: Model, tip: str | None) -> str:
+    """One line: how many link masses the model carries from the URDF's ``<inertial>``."""
+    from robocal.model.urdf.read import urdf_link_masses
+
+    masses = urdf_link_masses(urdf, model, tip)
+    if not masses.bodies:
+        return (
+            "link masses: none read (no <inertial> with a mass on the moving links): joint compliance "
+            "(--effects compliance) needs a model file with bodies"
+        )
+    parts = [f"link masses: {len(masses.bodies)} read from the URDF's <inertial> ({masses.mass_kg:.4g} kg)"]
+    if masses.off_chain:
+        parts.append(f"{len(masses.off_chain)} behind joints off the chain taken at their zero")
+    if masses.on_base:
+        parts.append(f"on the base, no joint load: {', '.join(safe(n) for n in masses.on_base)}")
+    return "; ".join(parts)
 
 
 @model_app.command("show")

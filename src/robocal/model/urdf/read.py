@@ -14,7 +14,8 @@ candidates named.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import overload
 
@@ -23,8 +24,16 @@ import numpy as np
 from robocal.model.builder import BuildResult, build
 from robocal.model.chain import Model
 from robocal.model.geometry import GeometryError, JointGeometry, JointType, Measure, Tcp
+from robocal.model.urdf.inertials import LinkMasses, UrdfJoint, link_masses
 
-__all__ = ["URDFError", "build_from_urdf", "default_tip", "geometry_from_urdf", "model_from_urdf"]
+__all__ = [
+    "URDFError",
+    "build_from_urdf",
+    "default_tip",
+    "geometry_from_urdf",
+    "model_from_urdf",
+    "urdf_link_masses",
+]
 
 MAX_URDF_BYTES = 20_000_000
 #: Movable joints a URDF may have: Pinocchio's work arrays grow faster than the square of
@@ -80,11 +89,13 @@ _KEPT = {"origin": ("xyz", "rpy"), "axis": ("xyz",), "limit": ("lower", "upper",
 @dataclass(frozen=True)
 class _Tree:
     """A URDF's robot name, links (file order) and joints (file order, each a dict: name,
-    type, line, parent and child as (link, line), and its elements as tag -> (attrs, line))."""
+    type, line, parent and child as (link, line), and its elements as tag -> (attrs, line)),
+    and each link's ``<inertial>`` as tag -> (attrs, line) (``inertial`` and its elements)."""
 
     name: str
     links: list[str]
     joints: list[dict]
+    inertials: dict[str, dict[str, tuple[dict, int]]] = field(default_factory=dict)
 
 
 @overload
@@ -125,6 +136,7 @@ def _scan_xml(path: Path) -> _Tree:
     links: dict[str, None] = {}  # ordered, and the check stays linear in the link count
     joints: list[dict] = []
     joint_names: set[str | None] = set()
+    inertials: dict[str, dict[str, tuple[dict, int]]] = {}
     stack: list[str] = []
     robot: list[str] = []
 
@@ -154,6 +166,9 @@ def _scan_xml(path: Path) -> _Tree:
                 joints[-1][tag] = (attrs.get("link"), line)
             else:
                 joints[-1]["el"].setdefault(tag, (dict(attrs), line))
+        elif stack[1:3] == ["link", "inertial"] and len(stack) <= 4 and links:
+            # a link's <inertial> and its <origin>, <mass>, <inertia> (the first of each)
+            inertials.setdefault(next(reversed(links)), {}).setdefault(tag, (dict(attrs), line))
 
     parser.StartDoctypeDeclHandler = refuse
     parser.EntityDeclHandler = refuse
@@ -169,7 +184,7 @@ def _scan_xml(path: Path) -> _Tree:
         ) from None
     except URDFError as err:
         raise URDFError(f"{path}: {err}") from None
-    return _Tree(robot[0] if robot else "", list(links), joints)
+    return _Tree(robot[0] if robot else "", list(links), joints, inertials)
 
 
 def _check_chain_joint(path: Path, j: dict) -> None:
@@ -380,12 +395,19 @@ def geometry_from_urdf(path: str | Path, tip: str | None = None) -> tuple[str, l
         tip: name of the link to end at (a joint's name stands for its child link); default:
             the deepest link of the single longest chain (:func:`default_tip`).
     """
-    import pinocchio as pin
-
     path = Path(path)
     _, tree = _load(path)
     tip_link = _tip_link(path, tree, tip)
     chain = _chain(tree, tip_link)
+    return _chain_geometry(path, tree, chain, tip_link)
+
+
+def _chain_geometry(
+    path: Path, tree: _Tree, chain: list[dict], tip_link: str
+) -> tuple[str, list[JointGeometry], Tcp]:
+    """:func:`geometry_from_urdf` of the ``chain`` of joints to ``tip_link``, checked here."""
+    import pinocchio as pin
+
     if not _movable(chain):
         raise URDFError(f"{path}: link {tip_link!r} is not moved by any joint")
     for joint in chain:
@@ -432,10 +454,38 @@ def build_from_urdf(
     Returns the builder's :class:`~robocal.model.builder.BuildResult` (``.model`` is the
     model); the continuous joints of the URDF become revolute joints without limits.
     """
-    robot_name, joints, tcp = geometry_from_urdf(path, tip)
+    path = Path(path)
+    _, tree = _load(path)
+    tip_link = _tip_link(path, tree, tip)
+    chain = _chain(tree, tip_link)
+    robot_name, joints, tcp = _chain_geometry(path, tree, chain, tip_link)
     try:
-        return build(joints, tcp, measure, name=name or robot_name, source=f"URDF {Path(path).name}")
+        built = build(joints, tcp, measure, name=name or robot_name, source=f"URDF {path.name}")
     except GeometryError as err:
+        raise URDFError(f"{path}: {err}") from None
+    masses = _link_masses(path, tree, chain, built.model)
+    return dataclasses.replace(built, model=dataclasses.replace(built.model, bodies=masses.bodies))
+
+
+def urdf_link_masses(path: str | Path, model: Model, tip: str | None = None) -> LinkMasses:
+    """The URDF's link masses (``<inertial>``) as bodies of ``model``, built from its chain to
+    ``tip`` (:func:`build_from_urdf` attaches them), with the links left out: on the base, behind
+    a movable joint off the chain (:mod:`robocal.model.urdf.inertials`)."""
+    path = Path(path)
+    _, tree = _load(path)
+    return _link_masses(path, tree, _chain(tree, _tip_link(path, tree, tip)), model)
+
+
+def _link_masses(path: Path, tree: _Tree, chain: list[dict], model: Model) -> LinkMasses:
+    """:func:`~robocal.model.urdf.inertials.link_masses` of the URDF's links rigid to the chain;
+    a bad ``<inertial>`` (or joint origin) is refused naming the file, the link (joint) and line."""
+    joints = [
+        UrdfJoint.read(j["name"], j["type"], j["parent"][0], j["child"][0], j["el"], j["line"])
+        for j in tree.joints
+    ]
+    try:
+        return link_masses(model, joints, [j["name"] for j in chain], tree.inertials)
+    except ValueError as err:
         raise URDFError(f"{path}: {err}") from None
 
 

@@ -4,23 +4,19 @@ origins, the chain to a tip and in-place attribute edits (for :mod:`robocal.mode
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
-from robocal import spatial
+from robocal.model.urdf.inertials import urdf_transform
 from robocal.model.urdf.read import URDFError
 
 Array = NDArray[np.float64]
 
 
-def urdf_origin(xyz: Sequence[float] | Array, rpy: Sequence[float] | Array) -> Array:
-    """The 4x4 transform of a URDF ``<origin xyz rpy>`` (m, rad)."""
-    r, p, y = rpy
-    return spatial.homogeneous(spatial.rotz(y) @ spatial.roty(p) @ spatial.rotx(r), xyz)
+urdf_origin = urdf_transform  # the 4x4 transform of a URDF <origin xyz rpy> (m, rad)
 
 
 # ---------------------------------------------------------------------- the source URDF
