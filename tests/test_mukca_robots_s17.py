@@ -129,3 +129,17 @@ def test_the_benchmark_series_keep_above_their_floor(monkeypatch):
         series = bench.run_series(name)
         assert series.below == 0
         assert series.held["complete + prior"][:, 0].mean() < series.held["nominal"][:, 0].mean()
+
+
+def test_data_sockets_prints_a_long_path_on_one_line(tmp_path):
+    """The paths it names and the next command stay copyable (not broken at the console's width)."""
+    import shutil
+
+    deep = tmp_path / ("a_placement_folder_with_a_long_name_" * 3) / "front"
+    shutil.copytree(MUKCA / "kuka_14" / "front", deep)
+    out = deep.parent / "front.csv"
+    converted = _run("data", "sockets", deep, "-o", out)
+    assert converted.exit_code == 0, converted.output
+    lines = converted.output.splitlines()
+    assert any(line.endswith(str(deep / "hole_0.csv")) for line in lines), converted.output
+    assert any(str(out) in line and "--distance" in line for line in lines), converted.output

@@ -60,7 +60,10 @@ def data_sockets(
 def _print_summary(recording, out: Path) -> None:
     dof = recording.data.q.shape[1]
     for k, (source, rows) in enumerate(zip(recording.sources, recording.rows_per_point, strict=True)):
-        console.print(f"point {k}: {rows} configurations from {safe(source)}", highlight=False)
+        # soft_wrap: a long path stays on one line (copyable), not broken at the console width
+        console.print(
+            f"point {k}: {rows} configurations from {safe(source)}", highlight=False, soft_wrap=True
+        )
     console.print(f"wrote {safe(out)} ({recording.data.n} rows, {dof} joints, columns q1..q{dof}, point)",
                   highlight=False, soft_wrap=True)  # fmt: skip
     console.print(
@@ -68,4 +71,5 @@ def _print_summary(recording, out: Path) -> None:
         "  (the distance between the sockets is your tool's: measure it and state it;"
         " 50 mm is MUKCa's plate)",
         highlight=False,
+        soft_wrap=True,
     )
