@@ -92,8 +92,8 @@ class ConstraintResult:
         dropped: what was not identified, and why (never invented: held at the start).
         identifiable: the names the rank test kept before pruning.
         points: ``(K, 3)`` the fixed points (m). planes: ``(P, 4)`` normal and offset (m).
-        rms_before, rms_after: RMS weighted residual times σ (m) at the start and after
-            (rad for inclinometer readings alone).
+        rms_before, rms_after: RMS of the position rows (m) at the start and after (rad
+            for inclinometer readings alone; a stated distance is in ``figures``).
         residual_std: σ̂ of the tool point (m; a reading's, rad, for readings alone).
         kinds: the measurement kinds used.
         prior: the prior toward the nominal geometry the fit used (None: a least-squares fit).
@@ -405,7 +405,7 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
     tool = np.array([values[f"tcp_{c}"] for c in "xyz"]) if has_tool else None
     T_frame = chain.with_free_values(full[: problem.layout.n_chain]).fk(np.zeros((1, model.dof)))[0]
     T_frame = T_frame @ np.linalg.inv(robot_and_tool(robot, tool).fk(np.zeros((1, model.dof)))[0])
-    r0, r = problem.measurement_residual(problem.x0), problem.measurement_residual(x)
+    r = problem.measurement_residual(x)
     tilt_only = problem.data.kinds == ("tilt",)  # the figures in rad, not m
     sigma = problem.data.tilt_sigma if tilt_only else problem.data.sigma
     dof = max(len(r) - len(x), 1)
@@ -420,13 +420,32 @@ def _result(problem, model, x, cov, fit, dropped, kept, has_tool) -> ConstraintR
         model=robot, tool=tool, T_device_base=T_frame, names=problem.free_names, estimates=x,
         start=problem.x0, std=cov[2], covariance=cov[1], correlation=cov[3], dropped=tuple(dropped),
         identifiable=tuple(kept), points=problem.points(x), planes=problem.plane_values(x),
-        rms_before=sigma * math.sqrt(float(r0 @ r0) / len(r0)),
-        rms_after=sigma * math.sqrt(float(r @ r) / len(r)),
+        rms_before=_rms_in_units(problem, problem.x0, tilt_only),
+        rms_after=_rms_in_units(problem, x, tilt_only),
         residual_std=sigma * math.sqrt(float(r @ r) / dof), success=bool(fit.success),
         message=str(fit.message),
         kinds=problem.data.kinds, figures=figures, kind_sigma=_kind_sigma(problem.data), tilt=tilt,
         position_effects=fitted,
     )  # fmt: skip
+
+
+def _rms_in_units(problem, x: Array, tilt_only: bool) -> float:
+    """RMS of the measurement rows in their own unit (m; rad for inclinometer readings alone).
+
+    The position rows (points, planes, pairs, tracker) when there are any, else the tilt
+    rows.  A stated distance between fixed points is not among them: it is held to
+    ``distance_sigma`` (1 µm), and its row weighted and scaled back by the points' σ read
+    σ/distance_sigma times its error (a Gen3 lite's start printed as 178 mm against a 5 mm
+    spread); the figures report the distance on its own.
+    """
+    r = problem.residual(x, weighted=False)
+    groups = ("tilt",) if tilt_only else ("constraint", "pair", "tracker")
+    rows = [r[s] for name, s in problem.row_groups() if name in groups]
+    if not rows:  # e.g. tilt rows mixed only with a stated distance: the weighted figure
+        w = problem.measurement_residual(x)
+        return float(problem.data.sigma * math.sqrt(float(w @ w) / len(w)))
+    kept = np.concatenate(rows)
+    return float(math.sqrt(float(kept @ kept) / len(kept)))
 
 
 def _kind_sigma(data: ConstraintSet) -> tuple[tuple[str, float], ...]:

@@ -1,0 +1,41 @@
+"""The constraint fit's "residual before -> after" is the measurements' own figure.
+
+A stated distance between fixed points is held to 1 µm; its row, weighted and scaled back by
+the points' σ, used to enter the figure: a Gen3 lite whose configurations spread by ~5 mm
+around their socket printed "178 mm -> 1.0 mm".  The figure is now the RMS of the position
+rows (m) alone, so before the fit it is the nominal model's spread per axis."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robocal.identify.constraints.fit import calibrate_constraints, constraint_figures
+from robocal.measure.constraints.data_set import ConstraintSet
+from robocal.model.urdf.read import model_from_urdf
+
+MUKCA = Path(__file__).resolve().parents[1] / "benchmarks" / "data" / "mukca"
+
+
+def _placement(folder: Path, distance_m: float) -> ConstraintSet:
+    holes = [np.loadtxt(folder / f"hole_{h}.csv", delimiter=",") for h in (0, 1)]
+    label = np.repeat([0, 1], [len(holes[0]), len(holes[1])])
+    return ConstraintSet(np.vstack(holes), label, -np.ones(len(label), dtype=int),
+                         point_pairs=[[0, 1]], point_length=[distance_m], sigma=1e-4)  # fmt: skip
+
+
+@pytest.mark.parametrize("distance_m", [0.05, 0.06])  # 0.06: a stated distance 10 mm off
+def test_residual_before_is_the_spread_not_the_weighted_distance(distance_m):
+    model = model_from_urdf(MUKCA / "urdf" / "gen3lite.urdf", measure="position", tip="ball_link")
+    data = _placement(MUKCA / "dinova_2" / "front", distance_m)
+    result = calibrate_constraints(model, data)
+    f = constraint_figures(model, data)  # the nominal model: each socket's RMS spread (3-D)
+    counts = np.bincount(data.point)
+    per_axis = math.sqrt(float(np.sum(f.point_spread**2 * counts) / counts.sum()) / 3)
+    # the fit starts each socket at the nominal model's centroid: the same figure per axis
+    assert result.rms_before == pytest.approx(per_axis, rel=0.02)
+    assert result.rms_after < result.rms_before
+    assert "residual: " + f"{result.rms_before * 1e3:.3f} mm" in "\n".join(result.summary_lines())
