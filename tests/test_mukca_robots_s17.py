@@ -102,7 +102,7 @@ def test_gen3_lite_fit_reports_what_one_placement_cannot_identify(tmp_path):
     assert any(abs(after[n] - before[n]) > 1e-6 for n in saved["names"] if n in before)  # the rest moved
 
 
-def test_validate_refuses_options_a_constraint_file_would_ignore(tmp_path):
+def test_validate_refuses_options_a_constraint_file_would_ignore_and_writes_json(tmp_path):
     _build(MUKCA / "urdf" / "iiwa14.urdf", tmp_path / "kuka.yaml")
     front = _sockets(MUKCA / "kuka_14" / "front", tmp_path / "front.csv")
     cal = tmp_path / "cal"
@@ -112,11 +112,21 @@ def test_validate_refuses_options_a_constraint_file_would_ignore(tmp_path):
         ).exit_code
         == 0
     )
-    for extra in (["--json"], ["--refit-frame"], ["--length-unit", "mm"], ["--sep", ";"]):
+    for extra in (["--refit-frame"], ["--length-unit", "mm"], ["--sep", ";"]):
         refused = _run("validate", cal, "--data", front, *extra)
         assert refused.exit_code != 0
         assert extra[0] in refused.output and "Traceback" not in refused.output
         assert not refused.output.lstrip().startswith("{")  # no JSON pretending to be the figures
+    # --json: the same figures as one document (mm), the calibrated and the nominal robot's
+    held = _sockets(MUKCA / "kuka_14" / "left_back", tmp_path / "left_back.csv")
+    shown = _run("validate", cal, "--data", held, "--json")
+    assert shown.exit_code == 0, shown.output
+    doc = json.loads(shown.stdout)
+    data = read_constraints(held, 7, distances=FIFTY_MM, sigma=1e-4)
+    expected = constraint_figures(load_model(cal / "model.yaml"), data)
+    assert doc["figures"]["point_spread_mm"] == pytest.approx(expected.point_spread * 1e3, rel=1e-9)
+    assert doc["figures"]["point_distance_error_mm"] == pytest.approx(expected.point_distance_error * 1e3)
+    assert doc["poses"] == data.n and min(doc["nominal_figures"]["point_spread_mm"]) > 0.5
 
 
 def test_the_benchmark_series_keep_above_their_floor(monkeypatch):

@@ -205,10 +205,11 @@ def calibrate_constraint_file(
 
 
 def validate_constraint_file(
-    directory: Path, data_path: Path, angle_unit: str, distances: list[str] | None
+    directory: Path, data_path: Path, angle_unit: str, distances: list[str] | None, as_json: bool = False
 ) -> None:
     """The calibrated model of ``directory`` (and the model it started from, when it is a
-    constraint calibration) on a constraint file: each kind's own figures."""
+    constraint calibration) on a constraint file: each kind's own figures, as text or
+    (``as_json``) one JSON document on stdout."""
     from robocal.identify.constraints.fit import constraint_figures
     from robocal.model.files import load_model
 
@@ -236,16 +237,21 @@ def validate_constraint_file(
     # sensors stated at home sit where the person put them: resolved against the start robot
     data = mounts_in(data, model if cal is None or cal.nominal is None else cal.nominal)
     figures = constraint_figures(model, data, tilt=None if cal is None else cal.tilt)
+    nominal = None if cal is None else cal.nominal
+    if as_json:  # the data's own strings go through json.dumps: escaped
+        before = None if nominal is None else constraint_figures(nominal, data).as_dict()
+        doc = {"model": model.name, "data": str(data_path), "poses": data.n, "kinds": list(data.kinds),
+               "figures": figures.as_dict(), "nominal_figures": before}  # fmt: skip
+        print(json.dumps(doc, indent=2))
+        return
     console.print(f"{safe(model.name)} on {safe(data_path.name)} ({data.n} poses, {', '.join(data.kinds)}):",
                   highlight=False)  # fmt: skip
     for line in figures.lines():
         console.print("  " + safe(line), highlight=False)
-    if cal is not None:  # the robot it started from too
-        nominal = cal.nominal
-        if nominal is not None:
-            console.print("before calibration (the nominal robot):", highlight=False)
-            for line in constraint_figures(nominal, data).lines():
-                console.print("  " + line, highlight=False)
+    if nominal is not None:  # the robot a constraint calibration started from too
+        console.print("before calibration (the nominal robot):", highlight=False)
+        for line in constraint_figures(nominal, data).lines():
+            console.print("  " + line, highlight=False)
 
 
 def simulate_constraint_command(model_of, kind: str, poses, out, force: bool, options: tuple) -> None:

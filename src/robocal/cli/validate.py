@@ -153,14 +153,14 @@ def validate_command(
 
     if data_path is not None and is_constraint_file(data_path, None):
         # the constraint figures read the joint columns only: an option they would ignore is refused
-        unread = {"--json": as_json, "--refit-frame": refit_frame, "--all-rows": all_rows,
+        unread = {"--refit-frame": refit_frame, "--all-rows": all_rows,
                   "--columns": columns, "--length-unit": length_unit != "m", "--sep": sep,
                   "--decimal": decimal != ".", "--orientation": orientation != "auto",
                   "--incomplete": incomplete != "error"}  # fmt: skip
         if given := [name for name, value in unread.items() if value]:
             raise fail(f"{', '.join(given)}: not available for a constraint file ({data_path}): its "
-                       "figures (spread, distance, plane residual) are printed as text")  # fmt: skip
-        return validate_constraint_file(directory, data_path, angle_unit, distances=None)
+                       "figures read only its joint columns")  # fmt: skip
+        return validate_constraint_file(directory, data_path, angle_unit, distances=None, as_json=as_json)
 
     result = load_result(directory)
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)

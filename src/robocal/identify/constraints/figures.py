@@ -59,6 +59,22 @@ class ConstraintFigures:
     tilt_rms: Array = field(default_factory=lambda: np.zeros(0))
     tilt_basis: str = ""
 
+    def as_dict(self) -> dict[str, object]:
+        """The figures for a JSON document (mm; the tilt residuals in deg), keyed by unit."""
+        mm = 1e3
+        out: dict[str, object] = {
+            "point_spread_mm": (self.point_spread * mm).tolist(),
+            "point_distance_error_mm": (self.point_distance_error * mm).tolist(),
+            "plane_rms_mm": (self.plane_rms * mm).tolist(),
+            "pair_error_mm": (self.pair_error * mm).tolist(),
+        }
+        if len(self.tilt_channels):
+            out["tilt_rms_deg"] = dict(
+                zip(self.tilt_channels, np.degrees(self.tilt_rms).tolist(), strict=True)
+            )
+            out["tilt_basis"] = self.tilt_basis
+        return out
+
     def lines(self) -> list[str]:
         """One line per figure (mm)."""
         mm = 1e3
