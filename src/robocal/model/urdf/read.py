@@ -9,7 +9,8 @@ as real descriptions come (gripper fingers coupled by ``<mimic>``, camera and se
 meshes that are not there) is ignored, and so is a fixed joint's ``<axis>`` (Kinova and KUKA
 descriptions write ``xyz="0 0 0"``).  The default tip is the deepest link of the single
 longest chain (:func:`default_tip`); a robot that branches into several is refused with the
-candidates named.
+candidates named.  The links' ``<inertial>`` masses become the model's bodies
+(:mod:`robocal.model.urdf.inertials`).
 """
 
 from __future__ import annotations
@@ -452,7 +453,8 @@ def build_from_urdf(
     """Build a complete, minimal, singularity-free calibration model of a URDF robot.
 
     Returns the builder's :class:`~robocal.model.builder.BuildResult` (``.model`` is the
-    model); the continuous joints of the URDF become revolute joints without limits.
+    model); the continuous joints of the URDF become revolute joints without limits, and the
+    links' ``<inertial>`` masses the model's ``bodies`` (:mod:`robocal.model.urdf.inertials`).
     """
     path = Path(path)
     _, tree = _load(path)
