@@ -49,7 +49,8 @@ orientation, XYZ Euler degrees, in the identification) to show whether orientati
 helps; ``--probe`` only prints which joints the physics' remaining error follows.
 Times are the fit on this machine (BLAS single-threaded); the held-out columns
 are means over the seeds.  Run: ``python benchmarks/bench_real_accuracy.py [--seeds 5]
-[--sizes 100,300,1000] [--no-gp] [--pose] [--tail]`` (about 5 minutes with the GP peers).
+[--sizes 100,300,1000] [--no-gp] [--pose] [--tail]`` (about 5 minutes with the GP peers);
+``--transfer`` runs ``bench_transfer.py`` (calibrated on 14-17 July, re-registered on 18 July).
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -390,6 +392,11 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--cv-grid", default="", help="only: CV errors of these harmonics, e.g. 8,24,48")
     parser.add_argument(
+        "--transfer",
+        action="store_true",
+        help="only: 14-17 July, re-registered on 18 July",
+    )
+    parser.add_argument(
         "--days",
         default="",
         help="only the rows of these days (14-18 July), training and held out, e.g. 14,15",
@@ -402,6 +409,12 @@ def main(argv: list[str] | None = None) -> None:
         return
     if args.floor:
         floor()
+        return
+    if args.transfer:  # calibrate once, re-register later: its own module, this file's reader
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        import bench_transfer
+
+        bench_transfer.main(["--seeds", str(min(args.seeds, 3))])
         return
     sizes = [int(s) for s in args.sizes.split(",")]
     if args.cv_grid:
