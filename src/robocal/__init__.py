@@ -88,7 +88,14 @@ __all__ = [
 def model_from_urdf(
     path: str | Path, measure: Literal["position", "pose"] = "pose", tip: str | None = None
 ) -> Model:
-    """A complete, minimal, singularity-free calibration model of a URDF robot."""
+    """A complete, minimal, singularity-free calibration model of a URDF robot.
+
+    The chain runs from the URDF's root to ``tip`` (default: the end of its one chain of
+    joints; a branching robot must name it); what is off the chain is ignored.  The links'
+    ``<inertial>`` masses become the model's ``bodies`` (each on the frame after the last
+    joint before it), so joint compliance under gravity can be identified
+    (``effects=("compliance",)``, ``--effects compliance``).
+    """
     from robocal.model.urdf.read import model_from_urdf as _from_urdf  # Pinocchio: imported on use
 
     return _from_urdf(path, measure, tip)
