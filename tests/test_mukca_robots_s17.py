@@ -42,6 +42,17 @@ def _sockets(placement: Path, out: Path) -> Path:
     return out
 
 
+def _calibrated(tmp_path: Path, urdf: str, placement: str):
+    """The nominal model built from ``urdf`` and the calibration folder of ``placement``'s
+    sockets through the CLI (50 mm apart)."""
+    nominal = _build(MUKCA / "urdf" / urdf, tmp_path / "nominal.yaml")
+    data = _sockets(MUKCA / placement, tmp_path / "train.csv")
+    cal = tmp_path / "cal"
+    fit = _run("calibrate", tmp_path / "nominal.yaml", "--data", data, "--distance", "0,1=50mm", "-o", cal)
+    assert fit.exit_code == 0, fit.output
+    return nominal, cal
+
+
 def _figures_mm(model, data) -> tuple[float, float]:
     """RMS spread of both sockets pooled and |distance - 50 mm| (the benchmark's figures)."""
     f = constraint_figures(model, data)
@@ -62,11 +73,7 @@ def test_model_build_reads_mukcas_urdfs_as_they_come(tmp_path, urdf, dof):
 
 
 def test_kuka_calibrated_on_one_placement_through_the_cli_judges_the_others(tmp_path):
-    nominal = _build(MUKCA / "urdf" / "iiwa14.urdf", tmp_path / "kuka.yaml")
-    front = _sockets(MUKCA / "kuka_14" / "front", tmp_path / "front.csv")
-    cal = tmp_path / "cal"
-    fit = _run("calibrate", tmp_path / "kuka.yaml", "--data", front, "--distance", "0,1=50mm", "-o", cal)
-    assert fit.exit_code == 0, fit.output
+    nominal, cal = _calibrated(tmp_path, "iiwa14.urdf", "kuka_14/front")
     calibrated = load_model(cal / "model.yaml")
     for name in ("left_back", "raised_left"):
         held = _sockets(MUKCA / "kuka_14" / name, tmp_path / f"{name}.csv")
@@ -84,11 +91,7 @@ def test_kuka_calibrated_on_one_placement_through_the_cli_judges_the_others(tmp_
 
 
 def test_gen3_lite_fit_reports_what_one_placement_cannot_identify(tmp_path):
-    nominal = _build(MUKCA / "urdf" / "gen3lite.urdf", tmp_path / "gen3.yaml")
-    front = _sockets(MUKCA / "dinova_2" / "front", tmp_path / "front.csv")
-    cal = tmp_path / "cal"
-    fit = _run("calibrate", tmp_path / "gen3.yaml", "--data", front, "--distance", "0,1=50mm", "-o", cal)
-    assert fit.exit_code == 0, fit.output
+    nominal, cal = _calibrated(tmp_path, "gen3lite.urdf", "dinova_2/front")
     saved = json.loads((cal / "constraints.json").read_text())
     unseen = {d["name"] for d in saved["not_identifiable"]}
     # fixed points cannot see the base frame nor the first joint's zero and height
@@ -103,15 +106,8 @@ def test_gen3_lite_fit_reports_what_one_placement_cannot_identify(tmp_path):
 
 
 def test_validate_refuses_options_a_constraint_file_would_ignore_and_writes_json(tmp_path):
-    _build(MUKCA / "urdf" / "iiwa14.urdf", tmp_path / "kuka.yaml")
-    front = _sockets(MUKCA / "kuka_14" / "front", tmp_path / "front.csv")
-    cal = tmp_path / "cal"
-    assert (
-        _run(
-            "calibrate", tmp_path / "kuka.yaml", "--data", front, "--distance", "0,1=50mm", "-o", cal
-        ).exit_code
-        == 0
-    )
+    _, cal = _calibrated(tmp_path, "iiwa14.urdf", "kuka_14/front")
+    front = tmp_path / "train.csv"
     for extra in (["--refit-frame"], ["--length-unit", "mm"], ["--sep", ";"]):
         refused = _run("validate", cal, "--data", front, *extra)
         assert refused.exit_code != 0
