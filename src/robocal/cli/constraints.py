@@ -86,6 +86,7 @@ def calibrate_constraint_command(
     except ValueError as err:
         raise fail(str(err)) from None
     _check_masses(model, position_kinds, effects)
+    _check_sign_kinds(effects, paths)
     if effects is not None and effects.strip() == "none":  # as the tracker calibration's: the model's own too
         model = dataclasses.replace(model, joint_effects=())
     levels = {None: None, "1": 1, "offsets": 1, "2": 2, "kinematic": 2}
@@ -106,6 +107,20 @@ def _check_masses(model, kinds: tuple[str, ...], effects: str | None) -> None:
         check_effect_kinds(model, kinds)
     except ValueError as err:
         raise fail(f"--effects {safe(effects or '')}: {err}") from None
+
+
+def _check_sign_kinds(effects: str | None, paths: list[Path]) -> None:
+    """``--effects backlash`` (or clearance) named for files without tilt rows: one line, not
+    a calibration that quietly leaves them out (``identify`` asks for what each row can see)."""
+    from robocal.identify.constraints.position_effects import check_sign_kinds
+    from robocal.measure.constraints.data import has_tilt_rows
+
+    if effects is None or effects.strip() in ("none", "identify"):
+        return
+    try:
+        check_sign_kinds(tuple(k.strip() for k in effects.split(",")), any(map(has_tilt_rows, paths)))
+    except ValueError as err:
+        raise fail(f"--effects {safe(effects)}: {err}") from None
 
 
 def tilt_effect_kinds(effects: str | None) -> tuple[str, ...] | None:

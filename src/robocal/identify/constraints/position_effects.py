@@ -16,6 +16,17 @@ position-like row carries them: fixed points, planes, distances and tracker poin
 Without link masses there are no loads and no deflections to fit: a compliance model
 needs each link's mass and centre of mass (a model file's ``bodies``; for the Panda the
 published values of Gaz et al. 2019, RA-L 4(4), 4147-4154).
+
+Clearance and backlash are not offered here (:data:`SIGN_KINDS`, refused by name:
+:func:`check_sign_kinds`): they act with the sign of a joint's load, and a configuration
+guided by hand sits on whichever flank the hand last pushed it to.  Tried on MUKCa's
+ball-in-socket recordings (issue 33, session 17; docs/tutorials/no-tracker.md), backlash on
+the position rows did not earn its place on the Kinova Gen3 lite: the 5-fold CV within the
+training placement moved by under 1 % on one arm and got worse on the other at every
+deadband tried, the fitted values changed sign between placements (without a deadband they
+put 0.1-0.5 rad on the unloaded wrist roll), and pairs of configurations that differ only by
+the wrist's roll (the loads on joints 1-5 equal within 0.02 N·m) are 1.4-1.8 mm apart under
+every fit: an error no load-driven effect can model.
 """
 
 from __future__ import annotations
@@ -30,8 +41,10 @@ from robocal.model.chain import Model
 
 __all__ = [
     "POSITION_EFFECT_KINDS",
+    "SIGN_KINDS",
     "PositionEffects",
     "check_effect_kinds",
+    "check_sign_kinds",
     "position_effects",
     "stated_effects",
     "stated_kinds",
@@ -42,6 +55,9 @@ Array = NDArray[np.float64]
 #: the joint effects a position row can carry (clearance and backlash act with a load's
 #: sign, a jump a hand-guided configuration can sit on either side of: not offered here)
 POSITION_EFFECT_KINDS = ("compliance", "radial")
+#: the joint effects only tilt rows identify: they act with the sign of a load (the module's
+#: docstring says why position rows do not carry them)
+SIGN_KINDS = ("clearance", "backlash")
 DISPLACEMENT_FLOOR = 1e-9  # m per unit: an effect column this small is none (the rank test drops it)
 
 
@@ -102,6 +118,20 @@ def check_effect_kinds(robot: Model, kinds: tuple[str, ...]) -> None:
         raise ValueError(
             f"joint compliance needs the link masses of model {robot.name!r} (the gravity loads "
             "the joints yield to): give a model file with bodies (mass and centre of mass per link)"
+        )
+
+
+def check_sign_kinds(kinds: tuple[str, ...], tilt_rows: bool) -> None:
+    """Refuse clearance or backlash asked of data without tilt rows (ValueError of one line
+    naming them): only tilt rows identify them, and a fit that quietly left them out would
+    give the user a robot without what was asked for."""
+    named = [k for k in SIGN_KINDS if k in kinds]
+    if named and not tilt_rows:
+        verb = "are" if len(named) > 1 else "is"
+        raise ValueError(
+            f"{' and '.join(named)} {verb} identified from tilt rows only and these files hold none "
+            "(the sign of a joint's load picks the flank, and a hand-guided configuration can sit "
+            "on either); ask for compliance or radial, or add inclinometer rows"
         )
 
 
