@@ -210,7 +210,10 @@ def compensate_command(
     from robocal.identify.coverage import coverage_warnings
     from robocal.identify.measured_tool import orientation_warnings
 
-    for line in (  # what the poses left open, and where they never went
+    flanks = [f"{name}: {note}" for name, note in zip(result.names, result.flank_notes, strict=False) if note]
+    for line in (  # what the poses left open, and where they never went; flanks not known
+        *result.notes,
+        *flanks,
         *orientation_warnings(calibrated, result.q, result.names),
         *coverage_warnings(calibrated, result.q, result.names),
     ):

@@ -62,6 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from robocal import choices, spatial
 from robocal.compensate import safety
+from robocal.compensate.flanks import FlankEffects, command_effects, flank_note
 from robocal.compensate.ik_options import IKOptions
 from robocal.compensate.nominal_ik import nominal_solutions
 from robocal.compensate.result import Compensation
@@ -71,7 +72,6 @@ from robocal.measure.ik_regularized import solve_regularized
 from robocal.measure.ik_starts import TargetKind
 from robocal.model.chain import Model
 from robocal.model.flange_tool import split_tool
-from robocal.model.joints import joint_perturbations
 
 __all__ = ["compensate_targets", "filter_program", "model_perturbations", "nominal_model"]
 
@@ -129,23 +129,15 @@ def model_perturbations(model: Model) -> PerturbationFunction | None:
     base's -z with no payload, as they were identified, and its learned residual (joint
     angle errors); None when it has neither.  A model that states joint effects without the
     link masses their loads need is refused (ValueError naming it): its commands would leave
-    the deflection out silently."""
+    the deflection out silently.  Backlash and clearance are evaluated as
+    :class:`~robocal.compensate.flanks.FlankEffects` (continuous across a zero load)."""
     physical = bool(model.joint_effects)
     if physical and not model.bodies:
         raise ValueError(
             f"model {model.name!r} states joint effects but no link masses: their gravity loads "
             "cannot be computed, so commands from it would leave the deflections out"
         )
-    residual = model.residual
-    if not physical:
-        return None if residual is None else residual.perturbations
-
-    def perturbations(q: Array) -> Array:
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        out = joint_perturbations(model, q)
-        return out if residual is None else out + residual.perturbations(q, model.dof)
-
-    return perturbations
+    return command_effects(model)
 
 
 def compensation_setup(
@@ -153,7 +145,7 @@ def compensation_setup(
 ) -> Setup:
     if isinstance(calibrated, CalibrationResult):
         real = calibrated.model
-        effects: PerturbationFunction | None = calibrated.joint_perturbations
+        effects = command_effects(calibrated)
         frame: Array | None = np.asarray(calibrated.frame, dtype=float)
         nom = nominal_model(calibrated) if nominal is None else nominal
         has_nominal = True
@@ -298,8 +290,12 @@ def correct(
     refused = np.array([st == "refused" for st in verdict.status], dtype=bool)
     q[refused] = q_nominal[refused]  # left as written: the controller's own command
     after, angle_after = errors(predict(setup, q), T, kind, tool_axis)
-    if not setup.has_nominal:
+    if not setup.has_nominal and setup.effects is None:  # a bare model: its own nominal, no error known
         before, angle_before = np.full(len(T), np.nan), np.full(len(T), np.nan)
+    spread, flank_notes, notes = flank_spread(setup, q, verdict, ik.tol)
+    reasons = tuple(
+        f"{r}; {f}" if r and f else r or f for r, f in zip(verdict.reasons, flank_notes, strict=True)
+    )
     change = np.abs(q - q_nominal).max(axis=1) if len(T) else np.zeros(0)
     moved = setup.nominal.fk(q)[:, :3, 3] - setup.nominal.fk(q_nominal)[:, :3, 3]
     return Compensation(
@@ -321,12 +317,32 @@ def correct(
         iterations=res.iterations,
         expected_error_after=setup.expected_error(q),
         status=verdict.status,
-        reasons=verdict.reasons,
+        reasons=reasons,
         sigma_min=sigma,
         configuration=verdict.configuration,
         joint_bound=bound,
         tool_correction=np.linalg.norm(moved, axis=1),
+        flank_spread=spread,
+        flank_notes=flank_notes,
+        notes=notes,
     )
+
+
+def flank_spread(
+    setup: Setup, q: Array, verdict: safety.Verdict, tol: float
+) -> tuple[Array, tuple[str, ...], tuple[str, ...]]:
+    """``(n,)`` each command's flank spread (m; :mod:`robocal.compensate.flanks`, zeros
+    without backlash or clearance), per target the note naming it where it exceeds ``tol``
+    (m) on a target not refused (else empty), and the run's notes (joints no load sets)."""
+    reasons = [""] * len(q)
+    if not isinstance(setup.effects, FlankEffects) or not len(q):
+        return np.zeros(len(q)), tuple(reasons), ()
+    spread, joints = setup.effects.spread(setup.real, q)
+    unloaded = setup.effects.unloaded_note(setup.real, q)
+    for i in np.flatnonzero(spread > tol):
+        if verdict.status[i] != "refused":
+            reasons[i] = flank_note(float(spread[i]), joints[i])
+    return spread, tuple(reasons), (unloaded,) if unloaded else ()
 
 
 def compensate_targets(  # noqa: PLR0913 - public keyword options, documented in README and docs
@@ -430,7 +446,9 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
     The target of each programmed configuration is where the nominal model puts the
     tool there (``nominal.fk(q_program)``); the correction is the calibrated-model IK
     started from the programmed joints (with the joint effects at the commanded
-    configuration, iterated to the fixed point).
+    configuration, iterated to the fixed point).  A programmed configuration outside the
+    model's joint limits is refused naming the joint, its value and the limits (the IK,
+    which stays within them, would start elsewhere and find another configuration).
 
     Args:
         calibrated: :class:`CalibrationResult` or calibrated :class:`Model`.
@@ -459,4 +477,5 @@ def filter_program(  # noqa: PLR0913 - public keyword options, documented in REA
         joint_names(names, len(q)),
         ik=options,
         max_joint_change=max_joint_change,
+        nominal_reasons=safety.outside_limits(setup.real, q),
     )

@@ -67,6 +67,12 @@ class Compensation:
             may make (:func:`robocal.compensate.safety.joint_bound`).
         tool_correction: ``(n,)`` how far (m) the corrected command moves the tool on the
             controller's (nominal) model.
+        flank_spread: ``(n,)`` how far (m) the tool may land from where the command aims
+            because a joint's load is too small to know the flank its backlash or clearance
+            sits on (:mod:`robocal.compensate.flanks`; zero where every flank is known).
+        flank_notes: ``(n,)`` the warning of a target whose flank spread exceeds the IK's
+            position tolerance (also in its reason; empty elsewhere).
+        notes: warnings about the whole run (e.g. a joint whose backlash no load ever sets).
     """
 
     q: Array
@@ -92,6 +98,9 @@ class Compensation:
     configuration: tuple[str, ...] = ()
     joint_bound: Array = field(default_factory=lambda: np.zeros(0))
     tool_correction: Array = field(default_factory=lambda: np.zeros(0))
+    flank_spread: Array = field(default_factory=lambda: np.zeros(0))
+    flank_notes: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     @property
     def n(self) -> int:
@@ -172,6 +181,7 @@ class Compensation:
                 "branch_kept": bool(self.branch_kept[i]),
                 "status": _at(self.status, i, "corrected" if self.accepted[i] else "refused"),
                 "reason": _at(self.reasons, i, ""),
+                "flank_spread_mm": _num(_at(self.flank_spread, i, 0.0) * 1e3),
             }
             if self.kind != "position":
                 row["predicted_angle_error_before_deg"] = _num(math.degrees(self.angle_before[i]))

@@ -58,6 +58,7 @@ __all__ = [
     "configurations",
     "joint_bound",
     "judge",
+    "outside_limits",
     "same_configuration",
     "sigma_min",
 ]
@@ -253,3 +254,23 @@ def limit_damped(dq: Array, bound: Array, revolute: NDArray[np.bool_]) -> Array:
     cap = np.where(revolute, np.minimum(bound, MAX_DAMPED), bound)
     ratio = (np.abs(dq) / cap).max(axis=1, initial=0.0)
     return dq / np.maximum(ratio, 1.0)[:, None]
+
+
+def outside_limits(model: Model, q: Array) -> tuple[str, ...]:
+    """Per row of ``q`` ``(n, dof)``: why it is outside ``model``'s joint limits (the first
+    joint beyond them, its value and the limits), or empty.  A command there is no command
+    to correct: the IK stays within the limits, so it would start from another
+    configuration and move the joints by whatever brings it back."""
+    q = np.asarray(q, dtype=float).reshape(-1, model.dof)
+    lim = model.joint_limits
+    slack = 1e-9  # rad, m: a value written at its limit is within it
+    out = (q < lim[:, 0] - slack) | (q > lim[:, 1] + slack)
+    reasons = []
+    for i, row in enumerate(out):
+        if not row.any():
+            reasons.append("")
+            continue
+        j = int(np.argmax(row))
+        value, lo, hi = (_amount(float(v), model, j) for v in (q[i, j], lim[j, 0], lim[j, 1]))
+        reasons.append(f"the programmed {model.joint_names[j]} = {value} is outside its limits [{lo}, {hi}]")
+    return tuple(reasons)

@@ -120,6 +120,14 @@ def _sign(x: Array, deadband: float) -> Array:
     return np.where(np.abs(x) > deadband, np.sign(x), 0.0)
 
 
+def _flank(x: Array, deadband: float, band: float | None) -> Array:
+    """The flank a load ``x`` presses on: its sign, or with ``band`` (N·m, N) the ramp
+    ``clip(x / band, -1, 1)`` across it (continuous: see :func:`joint_perturbations`)."""
+    if band is None:
+        return _sign(x, deadband)
+    return np.clip(x / max(float(band), deadband), -1.0, 1.0)
+
+
 def contact_angle(
     eta_x: ArrayLike, eta_y: ArrayLike, rule: ContactRule = "thesis", deadband: float = DEADBAND
 ) -> Array:
@@ -233,6 +241,7 @@ def joint_perturbations(  # noqa: PLR0913 - the load model's keyword-only option
     rule: ContactRule = "thesis",
     deadband: float = DEADBAND,
     loads: ArrayLike | None = None,
+    flank_band: ArrayLike | None = None,
 ) -> Array:
     """Joint perturbations ``(n, dof, 3)`` = (δα, δβ, δθ) (rad; δθ in m for a prismatic
     joint) of the joint effects at joint values ``q`` (seed 003 eqs. 5.15-5.19).
@@ -250,12 +259,19 @@ def joint_perturbations(  # noqa: PLR0913 - the load model's keyword-only option
         deadband: loads within this of zero have no sign.
         loads: precomputed :func:`load_moments` ``(n, dof, 3)`` (then ``qd``, ``qdd``,
             ``gravity`` and ``payload`` are not used).
+        flank_band: ``(dof, 2)`` loads (N·m; N for a prismatic joint's axial force)
+            within which the flank is not known, per joint: the moment across the axis
+            (clearance) and the load about it (backlash).  Given, the sign of eqs.
+            5.17-5.19 becomes the ramp ``clip(η / band, -1, 1)`` (clearance: the tilt
+            scaled by ``min(|(ηx, ηy)| / band, 1)``), so the perturbations are continuous
+            in ``q`` (the mid-flank at zero load); None: the thesis' sign (default).
 
     The result plugs into ``model.fk(q, perturbations=...)``.
     """
     kinds = _check_kinds(kinds)
     q_arr = np.atleast_2d(np.asarray(q, dtype=float))
     by_joint = _effects_by_joint(model, effects)
+    bands = None if flank_band is None else np.asarray(flank_band, dtype=float).reshape(model.dof, 2)
     out = np.zeros((len(q_arr), model.dof, 3))
     if not by_joint or not kinds:
         return out
@@ -268,13 +284,16 @@ def joint_perturbations(  # noqa: PLR0913 - the load model's keyword-only option
         eu, ew, ek = eta[:, j, 0], eta[:, j, 1], eta[:, j, 2]
         if "clearance" in kinds and e.clearance_tilt:
             a, b = tilt_angles(e.clearance_tilt, eu, ew, rule, deadband)
+            if bands is not None:  # the contact's direction fades out with the moment
+                scale = _flank(np.hypot(eu, ew), deadband, float(bands[j, 0]))
+                a, b = a * scale, b * scale
             out[:, j, 0] += a
             out[:, j, 1] += b
         if "radial" in kinds and e.radial_compliance:
             out[:, j, 0] += e.radial_compliance * eu
             out[:, j, 1] += e.radial_compliance * ew
         if "backlash" in kinds and e.backlash:
-            out[:, j, 2] += e.backlash * _sign(ek, deadband)
+            out[:, j, 2] += e.backlash * _flank(ek, deadband, None if bands is None else float(bands[j, 1]))
         if "compliance" in kinds and e.compliance:
             out[:, j, 2] += e.compliance * ek
     return out

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from robocal import spatial
+from robocal.compensate.flanks import command_effects
 from robocal.compensate.programs.krl import (
     krl_config_frames,
     krl_settings,
@@ -31,15 +32,17 @@ from robocal.model.flange_tool import split_tool
 def robot_models(
     calibrated: CalibrationResult | Model, nominal: Model | None, tool: Array | None, probe: ArrayLike | None
 ) -> tuple[Model, Model, Callable[[Array], Array | None] | None]:
-    """(real, nominal) robot models with the program's tool, and the joint effects."""
-    from robocal.compensate.compensation import nominal_model
+    """(real, nominal) robot models with the program's tool, and the joint effects (a bare
+    model's own too: they were left out, so its commands ignored the effects it states)."""
+    from robocal.compensate.compensation import model_perturbations, nominal_model
 
     if isinstance(calibrated, CalibrationResult):
         real = calibrated.model
         nom = nominal_model(calibrated) if nominal is None else nominal
-        effects = calibrated.joint_perturbations
+        effects = command_effects(calibrated)
     else:
-        real, nom, effects = calibrated, (calibrated if nominal is None else nominal), None
+        real, nom = calibrated, (calibrated if nominal is None else nominal)
+        effects = model_perturbations(calibrated)
 
     # the measured tool as built (``probe``) is known: how far the identified tool is from it
     # is robot geometry the tool absorbed (e.g. d6 under position measurement), kept with the robot

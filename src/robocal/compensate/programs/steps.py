@@ -67,6 +67,7 @@ class _Corrections:
     reasons: list[str] = field(default_factory=list)
     rows: list[dict | None] = field(default_factory=list)
     joints: list[Array | None] = field(default_factory=list)  # the command written (rad, m)
+    flanks: list[str] = field(default_factory=list)  # Compensation.flank_notes
 
     @classmethod
     def start(cls, values: list[Array], problems: list[str]) -> _Corrections:
@@ -82,6 +83,7 @@ class _Corrections:
             reasons=[""] * n,
             rows=[None] * n,
             joints=[None] * n,
+            flanks=[""] * n,
         )
 
     def take(self, i: int, res: Compensation, k: int, table: list[dict] | None = None) -> None:
@@ -95,6 +97,9 @@ class _Corrections:
         self.kept[i] = res.status[k] != "refused"
         self.rows[i] = (res.table() if table is None else table)[k]
         self.joints[i] = np.asarray(res.q[k], dtype=float)
+        # a flank not known: the command is written, the target named with its spread
+        self.flanks[i] = res.flank_notes[k] if len(res.flank_notes) > k else ""
+        self.problems.extend(note for note in res.notes if note not in self.problems)
 
     def refuse(self, i: int, reason: str) -> None:
         """Target ``i`` refused by the filter itself (e.g. its written configuration)."""
@@ -361,6 +366,8 @@ def report_refused(targets: list[ProgramTarget], c: _Corrections) -> None:
     for i, t in enumerate(targets):
         if c.status[i] == "refused":
             c.problems.append(f"{t.file}: line {t.line}: target {t.name}: {c.reasons[i]}; left as written")
+        elif c.flanks[i]:
+            c.problems.append(f"{t.file}: line {t.line}: target {t.name}: {c.flanks[i]}")
 
 
 def target_table(targets: list[ProgramTarget], c: _Corrections) -> tuple[dict, ...]:
