@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Annotated
 
@@ -150,21 +151,16 @@ def validate_command(
     point, the distance errors, the plane residual."""
     import robocal as rc
     from robocal.cli.constraints import is_constraint_file, validate_constraint_file
+    from robocal.identify.constraints.result import is_constraint_folder
 
-    if data_path is not None and is_constraint_file(data_path, None):
-        # the constraint figures read the joint columns only: an option they would ignore is refused
-        unread = {"--refit-frame": refit_frame, "--all-rows": all_rows,
-                  "--columns": columns, "--length-unit": length_unit != "m", "--sep": sep,
-                  "--decimal": decimal != ".", "--orientation": orientation != "auto",
-                  "--incomplete": incomplete != "error"}  # fmt: skip
-        if given := [name for name, value in unread.items() if value]:
-            raise fail(f"{', '.join(given)}: not available for a constraint file ({data_path}): its "
-                       "figures read only its joint columns")  # fmt: skip
-        return validate_constraint_file(directory, data_path, angle_unit, distances=None, as_json=as_json)
-
-    result = load_result(directory)
     values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
     values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
+    if data_path is not None and is_constraint_file(data_path, None):
+        _check_unread(data_path, values, refit_frame=refit_frame, all_rows=all_rows)
+        return validate_constraint_file(directory, data_path, angle_unit, distances=None, as_json=as_json)
+    if is_constraint_folder(directory):  # tracker rows judging a constraint calibration
+        return validate_constraint_calibration(directory, data_path, refit_frame, as_json, values, all_rows)
+    result = load_result(directory)
     notes, extra = [], {}
     if data_path is None and result.provenance is None and (directory / "test.csv").is_file():
         data_path = directory / "test.csv"  # the held-out poses written with the result (robocal demo)
@@ -195,6 +191,113 @@ def validate_command(
     console.print(stats_table(f"{result.model.name} on {data_path.name} ({data.n} poses)", stats))
     for note in filter(None, notes):
         console.print(note, highlight=False, markup=True)
+
+
+def _check_unread(data_path: Path, values: dict, refit_frame: bool, all_rows: bool) -> None:
+    """The constraint figures read a constraint file's joint columns only: an option they
+    would ignore is refused, named (one line)."""
+    unread = {"--refit-frame": refit_frame, "--all-rows": all_rows,
+              "--columns": values["columns"], "--length-unit": values["length_unit"] != "m",
+              "--sep": values["sep"], "--decimal": values["decimal"] != ".",
+              "--orientation": values["orientation"] != "auto",
+              "--incomplete": values["incomplete"] != "error"}  # fmt: skip
+    if given := [name for name, value in unread.items() if value]:
+        raise fail(f"{', '.join(given)}: not available for a constraint file ({data_path}): its "
+                   "figures read only its joint columns")  # fmt: skip
+
+
+def validate_constraint_calibration(
+    directory: Path, data_path: Path | None, refit_frame: bool, as_json: bool, values: dict, all_rows: bool
+) -> None:
+    """``robocal validate`` of a constraint calibration folder on a tracker file: the
+    position errors of its calibrated robot (its tool, its joints' elastic deflections) in
+    the device frame its tracker rows identified, or (``refit_frame``) in a frame fitted to
+    the file and scored K-fold; the nominal robot's beside them, as text or JSON."""
+    import robocal as rc
+    from robocal.cli.report_constraints import load_constraint_folder
+
+    cal = load_constraint_folder(directory)
+    kinds = ", ".join(cal.kinds) or "constraint"
+    if data_path is None:
+        raise fail(
+            f"{directory}: a constraint calibration ({kinds}): give the measurements to judge it on with "
+            "--data (a constraint file, or a tracker file of x, y, z)"
+        )
+    if cal.T_device_base is None and not refit_frame:
+        raise fail(
+            f"{directory}: calibrated from {kinds} rows without tracker rows, so it has no device frame for "
+            f"{data_path}: add --refit-frame (the frame fitted to the file, each row scored by a frame "
+            "fitted on the others)"
+        )
+    data = read_data(data_path, cal.model, **values)
+    fitted = _fitted(cal, data_path)
+    notes, extra = (
+        _constraint_notes(cal, data_path, fitted),
+        {"calibration": "constraint", "kinds": list(cal.kinds)},
+    )
+    if data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
+        data = data.split_rows("test")
+        notes.insert(0, f"the {data.n} rows marked test in the file's set column (--all-rows: every row)")
+        extra["rows"] = "test"
+    result = cal.tracker_result()
+    try:
+        stats = _no_expectation(rc.validate(result, data, refit_frame=refit_frame))
+        nominal = None
+        if cal.nominal is not None:  # the robot it started from, its frame obtained the same way
+            nominal = _no_expectation(
+                rc.validate(cal.tracker_result(cal.nominal), data, refit_frame=refit_frame)
+            )
+    except ValueError as err:
+        raise fail(f"{data_path}: {as_cli_text(str(err))}") from None
+    more_notes, warning = validation_notes(stats, result)
+    extra |= {"warning": warning} if warning else {}
+    if as_json:
+        doc = stats.to_dict() | extra | {"expected_rms_mm": None, "fitted_file": fitted}
+        print(strict_json(doc | {"nominal": None if nominal is None else nominal.to_dict()}))
+        return
+    console.print(stats_table(f"{safe(cal.model.name)} on {safe(data_path.name)} ({data.n} poses)", stats))
+    for note in filter(None, more_notes[:1] + notes + more_notes[1:]):
+        console.print(note, highlight=False, markup=True)
+    if nominal is not None:
+        console.print(stats_table("before calibration (the nominal robot it started from)", nominal))
+
+
+def _no_expectation(stats):
+    """``stats`` without an expected error: a constraint calibration has no covariance, so
+    a refitted frame's expectation would count none of the robot's uncertainty."""
+    return dataclasses.replace(stats, expected_rms=None, parameter_rms=None, scatter=None)
+
+
+def _fitted(cal, data_path: Path) -> bool:
+    """Whether ``data_path`` is one of the tracker files the calibration fitted."""
+    from robocal.identify.result_io import file_hash
+
+    return bool(cal.tracker_sha256) and file_hash(data_path) in cal.tracker_sha256
+
+
+def _constraint_notes(cal, data_path: Path, fitted: bool) -> list[str]:
+    """What a constraint calibration's tracker validation leaves out, and an in-sample file."""
+    notes = [
+        "a constraint calibration records no covariance of the robot's parameters: the error it "
+        "expected here is not available"
+    ]
+    if cal.T_device_base is None and not cal.distances and "distance" not in cal.kinds:
+        # fixed points and planes of unknown size leave the arm's scale to the prior (issue 33)
+        notes.append(
+            "nothing in its data measured a length (no --distance, no ball-bar or tracker rows): its "
+            "scale is not calibrated, and position errors grow with the reach"
+        )
+    if cal.joint_effects:
+        notes.append(
+            "the joint effects its tilt rows identified (clearance, backlash, compliance) are left out, "
+            "as its fit left them out of position rows"
+        )
+    if fitted:
+        notes.append(
+            f"[yellow]warning:[/] {safe(data_path.name)} is a tracker file this calibration was fitted to: "
+            "in-sample, it looks better than it is; give held-out rows"
+        )
+    return notes
 
 
 def register(app: typer.Typer) -> None:

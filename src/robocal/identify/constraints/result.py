@@ -19,12 +19,16 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.constraints.tilt_record import TiltCalibration, TiltEstimate, tilt_calibration_of
 from robocal.model.chain import Model
+
+if TYPE_CHECKING:
+    from robocal.identify.result import CalibrationResult
 
 __all__ = [
     "CONSTRAINT_FILE",
@@ -68,6 +72,10 @@ class ConstraintCalibration:
             1σ; empty without tilt rows (those not identified are in ``dropped``).
         tilt_zeros: each inclinometer channel's zero (``<joint>_<axis>``, rad) and 1σ
             (NaN: held at the channel's mean, not estimated).
+        T_device_base: ``(4, 4)`` the tracker's frame the fit identified from tracker rows
+            (mixed data), or None: no tracker rows, the device frame is unknown.
+        tracker_sha256: the SHA-256 of each tracker file fitted with the constraint rows.
+        tracker_noise: the tracker rows' σ per axis the fit estimated (m), or None.
     """
 
     directory: Path
@@ -91,6 +99,9 @@ class ConstraintCalibration:
     run_id: str | None
     joint_effects: tuple[TiltEstimate, ...] = ()
     tilt_zeros: tuple[TiltEstimate, ...] = ()
+    T_device_base: Array | None = None
+    tracker_sha256: tuple[str, ...] = ()
+    tracker_noise: float | None = None
 
     @property
     def tilt(self) -> TiltCalibration | None:
@@ -109,6 +120,34 @@ class ConstraintCalibration:
 
         values = {effect_of(e.name) or ("", ""): e.value for e in self.joint_effects}
         return dataclasses.replace(self.model, joint_effects=effects_from_values(self.model, values))
+
+    def tracker_result(self, robot: Model | None = None) -> CalibrationResult:
+        """The calibration as the object :func:`robocal.validate` takes, to judge it on
+        tracker (position) rows: ``robot`` (default the calibrated one; :attr:`nominal` for
+        the comparison) ending at the constraint point, predicted as the fit predicted its
+        tracker rows — with the joints' elastic deflections under gravity only (compliance,
+        radial compliance: :func:`~robocal.identify.constraints.figures.deflections`; the
+        clearance and backlash tilt rows identify reach no position row) — in
+        :attr:`T_device_base` (identity when the calibration had no tracker rows: validate
+        with ``refit_frame=True`` then).  It carries no estimates and no covariance (the
+        constraint fit's unknowns are not a tracker calibration's): the validation has no
+        expected error, and a refitted frame's expectation counts no parameter uncertainty."""
+        import dataclasses
+
+        from robocal.identify.result import CalibrationResult
+
+        robot = self.model if robot is None else robot
+        elastic = tuple(dataclasses.replace(e, clearance_tilt=0.0, backlash=0.0) for e in robot.joint_effects)
+        frame = np.eye(4) if self.T_device_base is None else self.T_device_base
+        empty = np.zeros(0)
+        return CalibrationResult(
+            model=dataclasses.replace(robot, joint_effects=elastic), T_device_base=frame,
+            measure="position", method="constraints", names=(), estimates=empty, nominal=empty,
+            std=empty, covariance=np.zeros((0, 0)), correlation=np.zeros((0, 0)), dropped=(),
+            residual_std=self.tracker_noise or self.rms_after, rms_before=self.rms_before,
+            rms_after=self.rms_after, condition_number=math.nan, n=0, success=self.success,
+            message="constraint calibration", iterations=0, seconds=0.0, run_id=self.run_id,
+        )  # fmt: skip
 
     @property
     def robot_names(self) -> tuple[str, ...]:
@@ -284,6 +323,22 @@ def _fields(doc: dict, n: int) -> dict:
         angle_unit=unit if unit in ("rad", "deg") else None,
         distances=tuple((int(a), int(b), float(d)) for a, b, d in doc.get("distances_m", [])),
         prior=doc.get("prior") if isinstance(doc.get("prior"), dict) else None,
+        **_tracker_fields(doc),
+    )
+
+
+def _tracker_fields(doc: dict) -> dict:
+    """The device frame (only when tracker rows identified it), the tracker files' digests
+    and the tracker rows' noise."""
+    kinds = doc.get("measurements", [])
+    frame = _array(doc, "T_device_base", 4) if "tracker" in kinds and "T_device_base" in doc else None
+    if frame is not None and (frame.shape != (4, 4) or not np.allclose(frame[3], [0, 0, 0, 1])):
+        raise ValueError("T_device_base: not a (4, 4) rigid transform")
+    noise = (doc.get("noise_per_kind_m") or {}).get("tracker")
+    return dict(
+        T_device_base=frame,
+        tracker_sha256=tuple(str(t["sha256"]) for t in doc.get("tracker_data", [])),
+        tracker_noise=None if noise is None else float(noise),
     )
 
 
