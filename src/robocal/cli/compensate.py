@@ -4,8 +4,9 @@
     robocal compensate DIR --program FILE.csv [--angle-unit deg] -o corrected.csv
 
 ``DIR`` is a calibration output directory (``robocal calibrate --out DIR``: ``model.yaml``
-and ``result.json``) or a calibrated model file (``.yaml``; base frame only, no
-predicted errors "before").  ``--targets`` is a CSV of Cartesian targets ``name,x,y,z``
+and ``result.json``) or a calibrated model file (``.yaml``; base frame only; the
+errors "before" are those its joint effects cause, none without).  ``--targets`` is a
+CSV of Cartesian targets ``name,x,y,z``
 (+ ``qw,qx,qy,qz`` for tool orientations) in the robot's base frame or in the
 measurement (cell) frame identified by the calibration; ``--program`` a joint program
 ``[name,]q1..qN`` computed with the nominal model (the calibration-filter use).  The
