@@ -152,3 +152,19 @@ def test_the_api_refuses_out_of_limit_program_points_and_reports_the_spread():
     assert res.status == ("refused", "corrected", "corrected")
     assert "limits" in res.reasons[0] and res.flank_spread[2] > 1e-4 and res.flank_notes[2]
     assert res.notes and "q1" in res.notes[0]  # joint 1 (vertical) carries no load anywhere
+
+
+@pytest.mark.parametrize("method", ["ik", "jacobian"])
+def test_a_path_through_the_zero_load_is_corrected_without_a_jump(method):
+    """Joint 2's load crosses zero mid-path: every sample corrected (the samples past zero
+    were refused as not reachable, the correction stepping 0.58 deg between neighbours), the
+    correction changing smoothly; a path sample outside the limits is refused by name."""
+    from robocal.compensate.paths import compensate_path
+
+    q = np.array([[0.3, q2, -1.0, 0.2, 0.1] for q2 in np.linspace(1.72, 1.745, 26)])
+    res = compensate_path(rc.robot("katana450"), q, method=method, kind="position")
+    assert set(res.status) == {"corrected"}
+    assert res.correction_step.max() < math.radians(0.02)
+    assert res.flank_spread.max() > 1e-4  # the samples near zero load are named
+    beyond = compensate_path(rc.robot("katana450"), np.array(REPRO), method=method, kind="position")
+    assert beyond.status[0] == "refused" and "limits" in beyond.reasons[0]

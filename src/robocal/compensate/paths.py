@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from robocal import spatial
+from robocal.compensate import safety
 from robocal.compensate.compensation import (
     Setup,
     as_frames,
@@ -183,10 +184,11 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
     q_nom = program(q_path, setup.real.dof, "q_path")
     T, kind_ = _path_targets(setup, q_nom, targets, kind, frame)
     labels = joint_names(names, len(q_nom))
+    outside = safety.outside_limits(setup.real, q_nom)  # refused by name, as filter_program's
     if method == "ik":
         base = correct(
             setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, ik=options,
-            max_joint_change=max_joint_change,
+            max_joint_change=max_joint_change, nominal_reasons=outside,
         )  # fmt: skip
     elif method == "jacobian":
         if iterations < 1:
@@ -195,18 +197,14 @@ def compensate_path(  # noqa: PLR0913 - public keyword options, documented in RE
         solved = _jacobian_solved(setup, q, q_nom, T, kind_, int(iterations))
         base = correct(
             setup, T, kind_, q_nom, np.ones(len(q_nom), dtype=bool), labels, ik=options,
-            max_joint_change=max_joint_change, solved=solved,
+            max_joint_change=max_joint_change, solved=solved, nominal_reasons=outside,
         )  # fmt: skip
         after, angle_after = base.error_after, base.angle_after  # reachable: within tol, as for "ik"
         base = dataclasses.replace(base, reachable=(after < options.tol) & (angle_after < options.tol_angle))
     else:
         raise ValueError(f"method must be 'ik' or 'jacobian', got {method!r}")
     correction = base.q - q_nom
-    step = (
-        np.r_[0.0, np.abs(np.diff(correction, axis=0)).max(axis=1)]
-        if len(q_nom) > 1
-        else np.zeros(len(q_nom))
-    )
+    step = np.r_[0.0, np.abs(np.diff(correction, axis=0)).max(axis=1, initial=0.0)][: len(q_nom)]
     fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(Compensation)}
     return PathCompensation(
         **fields,
