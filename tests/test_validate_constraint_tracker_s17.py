@@ -50,17 +50,11 @@ def scene(tmp_path_factory) -> Path:
     truth = json.loads((d / "sock.csv.truth.json").read_text())
     assert truth["true_parameters"] == json.loads((d / "held.csv.truth.json").read_text())["true_parameters"]
     _ok("calibrate", "ur10", "--data", d / "sock.csv", "--data", d / "sock.tracker.csv", "-o", d / "mixed")
-    length_mm = truth["point_distances_m"][0][2] * 1e3
-    _ok(
-        "calibrate",
-        "ur10",
-        "--data",
-        d / "sock.csv",
-        "--distance",
-        f"0,1={length_mm:.6f}mm",
-        "-o",
-        d / "sockets",
-    )
+    length_mm = truth["point_distances_m"][0][2] * 1e3  # the sockets' true distance, stated
+    sockets = ("--data", d / "sock.csv", "--distance", f"0,1={length_mm:.6f}mm")
+    _ok("calibrate", "ur10", *sockets, "-o", d / "sockets")
+    other = ("--kind", "point", "--n", 20, "--also-tracker", 20, "--seed", 1)  # another robot: 5 joints
+    _ok("simulate", "katana450", *other, "-o", d / "katana.csv")
     return d
 
 
@@ -95,9 +89,26 @@ def test_socket_only_calibration_needs_and_takes_a_refitted_frame(scene):
 
 
 def test_wrong_robot_and_missing_data_are_refused_by_name(scene):
-    _ok("simulate", "katana450", "--kind", "point", "--n", 20, "--also-tracker", 20, "--seed", 1,
-        "-o", scene / "katana.csv")  # fmt: skip
     wrong = scene / "katana.tracker.csv"  # five joint columns for a six-joint calibration
     _refused(_run("validate", scene / "mixed", "--data", wrong), wrong.name, "q6")
     _refused(_run("validate", scene / "mixed"), "--data")
     _refused(_run("validate", scene / "mixed", "--data", scene / "absent.csv"), "absent.csv")
+
+
+def test_report_shows_the_tracker_files_position_errors(scene):
+    held = scene / "held.tracker.csv"
+    doc = _json("validate", scene / "mixed", "--data", held)
+    _ok("report", scene / "mixed", "--test-data", held, "-o", scene / "mixed.html")
+    page = (scene / "mixed.html").read_text()
+    section = page[page.rindex("Position errors on a tracker file") :]
+    # the page's table is the validation's: the calibrated and the nominal robot's RMS, mm
+    assert f"{doc['rms_mm']:.4f}" in section and f"{doc['nominal']['rms_mm']:.4f}" in section
+    refit = _json("validate", scene / "sockets", "--data", held, "--refit-frame")
+    _ok("report", scene / "sockets", "--test-data", held, "-o", scene / "sockets.html")
+    section = (scene / "sockets.html").read_text().split("Position errors on a tracker file")[-1]
+    assert f"{refit['rms_mm']:.4f}" in section and "5-fold" in section
+    wrong = _run(
+        "report", scene / "mixed", "--test-data", scene / "katana.tracker.csv", "-o", scene / "w.html"
+    )
+    _refused(wrong, "katana.tracker.csv")
+    assert not (scene / "w.html").exists()

@@ -76,20 +76,20 @@ def report_command(
     refuse_overwrite(out, force, "report")
     from robocal.identify.constraints.result import is_constraint_folder
 
+    values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
+    values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     if is_constraint_folder(directory):  # fixed points, planes, distances: the kind's own report
         from robocal.cli.report_constraints import constraint_report
 
         if iso9283_log is not None:
             raise fail("--iso9283: the report of a constraint calibration does not take a measurement log")
         given = _given(ctx, "angle_unit")
-        constraint_report(directory, out, data_path, test_path, angle_unit if given else None, title)
+        constraint_report(directory, out, data_path, test_path, angle_unit if given else None, title, values)
         return
     from robocal.cli.reading import load_result
     from robocal.evaluate.report import write_report
 
     result = load_result(directory)
-    values = dict(length_unit=length_unit, angle_unit=angle_unit, columns=columns, sep=sep, decimal=decimal)
-    values |= dict(orientation=orientation, limits=limits, incomplete=incomplete)
     data, test = _data_sets(ctx, directory, result, data_path, test_path, values)
     evaluation = _evaluation(directory, iso9283_log)
     try:

@@ -9,6 +9,7 @@ after (:mod:`robocal.evaluate.report.constraint_sections`).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from robocal.console import console, err_console, fail, safe
@@ -74,6 +75,22 @@ def _recorded_file(cal) -> tuple[Path | None, str]:
     return None, f"the calibration file {recorded} is not found: give --data FILE for its figures"
 
 
+def _tracker(cal, path: Path, values: dict):
+    """``cal`` judged on the tracker file ``path``: in the device frame its tracker rows
+    identified, else in a frame fitted to the file and scored K-fold (the report has no
+    --refit-frame: a calibration without a frame can only be judged so)."""
+    from robocal.cli.options import as_cli_text
+    from robocal.cli.reading import read_data
+    from robocal.identify.constraints.result import validate_on_tracker
+
+    data = read_data(path, cal.model, **values)
+    try:
+        judged = validate_on_tracker(cal, data, cal.T_device_base is None, cal.fitted_tracker_file(path))
+    except ValueError as err:
+        raise fail(f"{path}: {as_cli_text(str(err))}") from None
+    return dataclasses.replace(judged, source=path.name)
+
+
 def constraint_report(
     directory: Path,
     out: Path,
@@ -81,12 +98,16 @@ def constraint_report(
     test_path: Path | None,
     angle_unit: str | None,
     title: str | None,
+    values: dict | None = None,
 ) -> None:
     """Write the HTML report of the constraint calibration in ``directory`` to ``out``.
 
-    ``angle_unit``: the joint unit of the files (None: the one the calibration recorded)."""
+    ``angle_unit``: the joint unit of the files (None: the one the calibration recorded);
+    ``test_path`` a constraint file or a tracker file (read with the reader options
+    ``values``: its position errors, :func:`_tracker`)."""
     from robocal.evaluate.report.constraint_collect import collect_constraint_report
     from robocal.evaluate.report.constraint_sections import write_constraint_report
+    from robocal.measure.constraints.data import constraint_kind
 
     cal = load_constraint_folder(directory)
     unit = angle_unit or cal.angle_unit or "rad"
@@ -95,11 +116,15 @@ def constraint_report(
         data_path, why = _recorded_file(cal)
         missing += [why] if why else []
     data = None if data_path is None else _read(data_path, cal, unit)
+    tracker = None
+    if test_path is not None and test_path.is_file() and constraint_kind(test_path) is None:
+        tracker, test_path = _tracker(cal, test_path, dict(values or {}, angle_unit=unit)), None
     test = None if test_path is None else _read(test_path, cal, unit)
-    if test is None:
+    if test is None and tracker is None:
         missing.append("no held-out file: give --test-data FILE (another placement) to judge the calibration")
     names = (data_path.name if data_path else "", test_path.name if test_path else "")
-    report = collect_constraint_report(cal, data, test, sources=names, missing=tuple(missing), title=title)
+    report = collect_constraint_report(cal, data, test, sources=names, missing=tuple(missing), title=title,
+                                       tracker=tracker)  # fmt: skip
     try:
         with console.status("writing the report ..."):
             path = write_constraint_report(report, out)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import Annotated
 
@@ -213,7 +212,6 @@ def validate_constraint_calibration(
     position errors of its calibrated robot (its tool, its joints' elastic deflections) in
     the device frame its tracker rows identified, or (``refit_frame``) in a frame fitted to
     the file and scored K-fold; the nominal robot's beside them, as text or JSON."""
-    import robocal as rc
     from robocal.cli.report_constraints import load_constraint_folder
 
     cal = load_constraint_folder(directory)
@@ -229,27 +227,22 @@ def validate_constraint_calibration(
             f"{data_path}: add --refit-frame (the frame fitted to the file, each row scored by a frame "
             "fitted on the others)"
         )
+    from robocal.identify.constraints.result import validate_on_tracker
+
     data = read_data(data_path, cal.model, **values)
-    fitted = _fitted(cal, data_path)
-    notes, extra = (
-        _constraint_notes(cal, data_path, fitted),
-        {"calibration": "constraint", "kinds": list(cal.kinds)},
-    )
+    fitted = cal.fitted_tracker_file(data_path)
+    notes = _constraint_notes(cal, data_path, fitted)
+    extra: dict = {"calibration": "constraint", "kinds": list(cal.kinds)}
     if data.split is not None and "test" in set(data.split.tolist()) and not all_rows:
         data = data.split_rows("test")
         notes.insert(0, f"the {data.n} rows marked test in the file's set column (--all-rows: every row)")
         extra["rows"] = "test"
-    result = cal.tracker_result()
     try:
-        stats = _no_expectation(rc.validate(result, data, refit_frame=refit_frame))
-        nominal = None
-        if cal.nominal is not None:  # the robot it started from, its frame obtained the same way
-            nominal = _no_expectation(
-                rc.validate(cal.tracker_result(cal.nominal), data, refit_frame=refit_frame)
-            )
+        judged = validate_on_tracker(cal, data, refit_frame, fitted)
     except ValueError as err:
         raise fail(f"{data_path}: {as_cli_text(str(err))}") from None
-    more_notes, warning = validation_notes(stats, result)
+    stats, nominal = judged.after, judged.before
+    more_notes, warning = validation_notes(stats, cal.tracker_result())
     extra |= {"warning": warning} if warning else {}
     if as_json:
         doc = stats.to_dict() | extra | {"expected_rms_mm": None, "fitted_file": fitted}
@@ -260,19 +253,6 @@ def validate_constraint_calibration(
         console.print(note, highlight=False, markup=True)
     if nominal is not None:
         console.print(stats_table("before calibration (the nominal robot it started from)", nominal))
-
-
-def _no_expectation(stats):
-    """``stats`` without an expected error: a constraint calibration has no covariance, so
-    a refitted frame's expectation would count none of the robot's uncertainty."""
-    return dataclasses.replace(stats, expected_rms=None, parameter_rms=None, scatter=None)
-
-
-def _fitted(cal, data_path: Path) -> bool:
-    """Whether ``data_path`` is one of the tracker files the calibration fitted."""
-    from robocal.identify.result_io import file_hash
-
-    return bool(cal.tracker_sha256) and file_hash(data_path) in cal.tracker_sha256
 
 
 def _constraint_notes(cal, data_path: Path, fitted: bool) -> list[str]:

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robocal.identify.constraints.fit import ConstraintFigures, constraint_figures, tool_points
-from robocal.identify.constraints.result import ConstraintCalibration
+from robocal.identify.constraints.result import ConstraintCalibration, TrackerValidation
 from robocal.measure.constraints.data_set import ConstraintSet
 
 __all__ = ["ConstraintReport", "DataSetFigures", "collect_constraint_report", "data_set_figures"]
@@ -60,6 +60,7 @@ class ConstraintReport:
         sets: the calibration file's and a held-out file's figures (those given).
         missing: why a data set is not shown (e.g. the recorded file is gone or changed).
         title, version: the page's heading and robocal's version.
+        tracker: the position errors on a tracker file (before and after), or None.
     """
 
     calibration: ConstraintCalibration
@@ -67,6 +68,7 @@ class ConstraintReport:
     missing: tuple[str, ...]
     title: str
     version: str
+    tracker: TrackerValidation | None = None
 
 
 def _radial(robot, data: ConstraintSet) -> Array:
@@ -109,10 +111,12 @@ def collect_constraint_report(
     sources: tuple[str, str] = ("", ""),
     missing: tuple[str, ...] = (),
     title: str | None = None,
+    tracker: TrackerValidation | None = None,
 ) -> ConstraintReport:
     """The report's content: ``data`` (the calibration file) and ``test_data`` (a held-out
     file) judged before and after; ``sources`` their file names; ``missing`` the reasons a
-    set is absent, shown on the page."""
+    set is absent, shown on the page; ``tracker`` the position errors on a tracker file
+    (:func:`~robocal.identify.constraints.result.validate_on_tracker`)."""
     from robocal._version import __version__
 
     sets = []
@@ -121,7 +125,7 @@ def collect_constraint_report(
     if test_data is not None:
         sets.append(data_set_figures(cal, test_data, "held-out data", sources[1]))
     heading = title or f"Calibration report: {cal.model.title or cal.model.name} (no tracker)"
-    return ConstraintReport(cal, tuple(sets), missing, heading, __version__)
+    return ConstraintReport(cal, tuple(sets), missing, heading, __version__, tracker)
 
 
 def rms(values: Array) -> float:

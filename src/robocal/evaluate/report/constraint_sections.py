@@ -82,6 +82,10 @@ def summary(r: ConstraintReport, figs: m.Figures) -> Section:
             old = None if s.before is None else rms(s.before.point_distance_error)
             cards += _card(f"known distance error, RMS ({s.label})",
                            _before_after(old, rms(s.after.point_distance_error)), f"{s.source}")  # fmt: skip
+    if (t := r.tracker) is not None:  # a device measured positions: the error a user asks for first
+        old = None if t.before is None else t.before.rms
+        cards += _card("position error RMS (tracker file)", _before_after(old, t.after.rms),
+                       f"{t.after.n} poses of {t.source}")  # fmt: skip
     cards += _card("fit residual (calibration data)", _before_after(cal.rms_before, cal.rms_after),
                    "converged" if cal.success else "the fit did NOT converge")  # fmt: skip
     held = f"{len(cal.unseen)} not identifiable, {len(cal.poorly_identified)} held at nominal"
@@ -91,7 +95,12 @@ def summary(r: ConstraintReport, figs: m.Figures) -> Section:
         "(no measuring device). "
         "Before = the nominal robot, after = the calibrated one, each judged by the constraints alone: "
         "the spread of the tool point around each fixed point's centroid, the error of each known "
-        "distance, the residual of each plane. There are no position errors: no device measured positions."
+        "distance, the residual of each plane."
+    )
+    text += (
+        " There are no position errors: no device measured positions."
+        if r.tracker is None
+        else " Position errors on a tracker file: see Tracker positions."
     )
     if cal.nominal is None:
         text += " This folder does not record the nominal robot: after only."
@@ -143,6 +152,35 @@ def kind_figures(r: ConstraintReport, figs: m.Figures) -> Section:
         "a plane's residual is the RMS distance from the plane (the stated one, else the best fit)."
     )
     return "figures", "Constraint figures", m.section("figures", "Constraint figures", body, intro)
+
+
+def tracker_positions(r: ConstraintReport, figs: m.Figures) -> Section:
+    """The position errors on a tracker file, the nominal and the calibrated robot."""
+    t = r.tracker
+    if t is None:
+        return None
+    robots = [("nominal (before)", t.before), ("calibrated (after)", t.after)]
+    cells = [
+        [name, s.frame, str(s.n), _mm(s.mean, 4), _mm(s.rms, 4), _mm(s.p95, 4), _mm(s.max, 4)]
+        for name, s in robots
+        if s is not None
+    ]
+    body = m.table(["robot", "device frame", "poses", "mean mm", "RMS mm", "p95 mm", "max mm"], cells)
+    frame = (
+        "the device frame the calibration's tracker rows identified, used as it is"
+        if t.after.frame == "calibrated"
+        else f"a device frame fitted to this file, each row scored by a frame fitted on the others "
+        f"({t.after.scoring}; the calibration has no device frame of its own)"
+    )
+    text = (
+        f"{t.source}: the distance between each measured position and the robot's prediction (its tool "
+        f"point, its joints' elastic deflections) in {frame}. A constraint calibration records no "
+        "covariance of the robot's parameters: the error it expected here is not available."
+    )
+    if t.fitted_file:
+        text += " This is a tracker file the calibration was fitted to: in-sample, it flatters it."
+    body += m.note(m.e(text))
+    return "tracker", "Tracker positions", m.section("tracker", "Position errors on a tracker file", body)
 
 
 def _tilt_table(s: DataSetFigures) -> str:
@@ -212,10 +250,12 @@ def identifiability(r: ConstraintReport, figs: m.Figures) -> Section:
                         caption=f"identified joint effects (under {LOADS})")  # fmt: skip
     body += m.table(["parameter", "reason", "value used"], unseen, caption="not identified")
     body += m.note(m.e(cal.base_note() + "."))
-    body += m.note(
-        "What this calibration does not give: the robot's absolute position accuracy in a measuring "
-        "device's frame. Check it with a tracker file when you have one (robocal validate DIR --data FILE)."
-    )
+    if r.tracker is None:
+        body += m.note(
+            "What this calibration does not give: the robot's absolute position accuracy in a measuring "
+            "device's frame. Check it with a tracker file when you have one (robocal validate DIR --data "
+            "FILE, or robocal report DIR --test-data FILE)."
+        )
     return (
         "identifiability",
         "Identifiability",
@@ -254,7 +294,7 @@ def provenance(r: ConstraintReport, figs: m.Figures) -> Section:
     return "provenance", "Provenance", m.section("provenance", "Provenance", m.table(["", ""], rows))
 
 
-SECTIONS = (summary, kind_figures, identifiability, scene, provenance)
+SECTIONS = (summary, kind_figures, tracker_positions, identifiability, scene, provenance)
 
 
 def render_constraint_report(r: ConstraintReport) -> str:

@@ -29,12 +29,16 @@ from robocal.model.chain import Model
 
 if TYPE_CHECKING:
     from robocal.identify.result import CalibrationResult
+    from robocal.identify.validate import ValidationStats
+    from robocal.measure.measurements import Measurements
 
 __all__ = [
     "CONSTRAINT_FILE",
     "ConstraintCalibration",
+    "TrackerValidation",
     "is_constraint_folder",
     "load_constraint_calibration",
+    "validate_on_tracker",
 ]
 
 Array = NDArray[np.float64]
@@ -149,6 +153,12 @@ class ConstraintCalibration:
             message="constraint calibration", iterations=0, seconds=0.0, run_id=self.run_id,
         )  # fmt: skip
 
+    def fitted_tracker_file(self, path: Path) -> bool:
+        """Whether ``path`` is (by its SHA-256) a tracker file this calibration was fitted to."""
+        from robocal.identify.result_io import file_hash
+
+        return bool(self.tracker_sha256) and file_hash(path) in self.tracker_sha256
+
     @property
     def robot_names(self) -> tuple[str, ...]:
         """The robot's identified parameters (not the scene's unknowns)."""
@@ -198,6 +208,54 @@ class ConstraintCalibration:
             f"({', '.join(self.unseen)}); "
             "the chain is calibrated relative to that nominal base"
         )
+
+
+@dataclass(frozen=True)
+class TrackerValidation:
+    """A constraint calibration judged on tracker rows (:func:`validate_on_tracker`).
+
+    Attributes:
+        after: the calibrated robot's position errors (m; ``frame`` ``"calibrated"``: the
+            device frame its tracker rows identified, ``"refit"``: fitted to these rows, each
+            scored by a frame fitted on the others); no expected error (no covariance).
+        before: the nominal robot's, its frame obtained the same way (None: not recorded).
+        fitted_file: whether the rows are a tracker file the calibration was fitted to
+            (in-sample: they flatter it).
+        source: the tracker file's name (for a report; empty when not given).
+    """
+
+    after: ValidationStats
+    before: ValidationStats | None
+    fitted_file: bool = False
+    source: str = ""
+
+
+def validate_on_tracker(
+    cal: ConstraintCalibration, data: Measurements, refit_frame: bool = False, fitted_file: bool = False
+) -> TrackerValidation:
+    """``cal``'s calibrated and nominal robots on tracker rows ``data`` (positions in the
+    device frame), by :func:`robocal.validate` of :meth:`ConstraintCalibration.tracker_result`.
+
+    Raises:
+        ValueError: ``cal`` has no device frame (no tracker rows) and not ``refit_frame``;
+            the rows do not fit the robot or cannot determine a frame.
+    """
+    import dataclasses
+
+    from robocal.identify.validate import validate
+
+    if cal.T_device_base is None and not refit_frame:
+        raise ValueError(
+            f"calibrated from {', '.join(cal.kinds)} rows without tracker rows: no device frame for "
+            "these positions; refit it to them"
+        )
+
+    def judged(robot: Model) -> ValidationStats:  # no covariance: no expectation to state
+        stats = validate(cal.tracker_result(robot), data, refit_frame=refit_frame)
+        return dataclasses.replace(stats, expected_rms=None, parameter_rms=None, scatter=None)
+
+    before = None if cal.nominal is None else judged(cal.nominal)
+    return TrackerValidation(judged(cal.model), before, fitted_file)
 
 
 def _scene(kinds: tuple[str, ...]) -> str:
