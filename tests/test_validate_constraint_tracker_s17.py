@@ -112,3 +112,17 @@ def test_report_shows_the_tracker_files_position_errors(scene):
     )
     _refused(wrong, "katana.tracker.csv")
     assert not (scene / "w.html").exists()
+
+
+def test_sockets_without_a_stated_length_are_said_to_leave_the_scale(scene):
+    """Fixed points of unknown distance measure no length: the tracker shows the arm's scale
+    off (an error several times the stated-distance calibration's) and validate says why."""
+    held = scene / "held.tracker.csv"
+    _ok("calibrate", "ur10", "--data", scene / "sock.csv", "-o", scene / "unscaled")
+    unscaled = _json("validate", scene / "unscaled", "--data", held, "--refit-frame")
+    scaled = _json("validate", scene / "sockets", "--data", held, "--refit-frame")
+    assert unscaled["rms_mm"] > 3 * scaled["rms_mm"]
+    said = [
+        _ok("validate", scene / d, "--data", held, "--refit-frame").output for d in ("unscaled", "sockets")
+    ]
+    assert ["scale is not calibrated" in " ".join(text.split()) for text in said] == [True, False]
