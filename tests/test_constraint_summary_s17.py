@@ -7,6 +7,7 @@ rows (m) alone, so before the fit it is the nominal model's spread per axis."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -39,3 +40,25 @@ def test_residual_before_is_the_spread_not_the_weighted_distance(distance_m):
     assert result.rms_before == pytest.approx(per_axis, rel=0.02)
     assert result.rms_after < result.rms_before
     assert "residual: " + f"{result.rms_before * 1e3:.3f} mm" in "\n".join(result.summary_lines())
+
+
+def test_a_fit_without_any_length_says_the_scale_is_not_calibrated(tmp_path):
+    """Fixed points alone cannot see the arm's size (scaled as a whole it fits them as well):
+    the summary says so, and says nothing of it once a distance is stated."""
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    def run(*args):
+        done = CliRunner().invoke(app, [str(a) for a in args])
+        assert done.exit_code == 0, done.output
+        return done.output
+
+    data = tmp_path / "s.csv"
+    run("simulate", "ur10", "--kind", "point", "--n", "40", "--count", "2", "--seed", "3", "-o", data)
+    bare = run("calibrate", "ur10", "--data", data, "-o", tmp_path / "a")
+    centres = np.array(json.loads((tmp_path / "s.csv.truth.json").read_text())["points_m"])
+    stated = ["--distance", f"0,1={np.linalg.norm(centres[0] - centres[1]) * 1e3:.4f}mm"]
+    with_length = run("calibrate", "ur10", "--data", data, *stated, "-o", tmp_path / "b")
+    assert "scale is not calibrated" in " ".join(bare.split())
+    assert "scale is not calibrated" not in " ".join(with_length.split())

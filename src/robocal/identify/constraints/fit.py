@@ -373,7 +373,25 @@ def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one co
     notes += [note] if (note := mixed_effects_note(data, found)) else []
     held = {d.name for d in dropped}  # a clearance held as a fixed tilt: which poses would identify it
     notes += [note] if (note := fixed_tilt_note(problem.tilt, problem.data, held)) else []
+    notes += [note] if (note := _scale_note(model, data, dropped)) else []
     return dataclasses.replace(result, prior=prior, notes=tuple(notes))
+
+
+def _scale_note(model: Model, data: ConstraintSet, dropped: list) -> str | None:
+    """Fixed points and unknown planes do not see the arm's size: scaled as a whole, the robot
+    fits them as well.  The rank test then holds a length at its nominal value, and that
+    nominal length sets the scale of everything else: said, with what would measure it."""
+    measured = len(data.point_pairs) or len(data.pairs) or data.tracked.any()
+    stated = data.known_planes is not None and np.isfinite(np.asarray(data.known_planes)).all(axis=1).any()
+    lengths = {s.name for s in model.steps if s.free and not s.is_rotation and not s.name.startswith("base_")}
+    held = [d.name for d in dropped if d.name in lengths]
+    if measured or stated or not data.constrained.any() or not held:
+        return None
+    return (
+        "no length was measured (no known distance, ball-bar pair, tracker row or stated plane): the "
+        "arm's overall scale is not calibrated, it rests on the nominal lengths held as not "
+        "identifiable; state a distance between two points (--distance 0,1=50mm) to calibrate it"
+    )
 
 
 def _clear_rows(model: Model, data: ConstraintSet) -> tuple[ConstraintSet, list[str]]:
