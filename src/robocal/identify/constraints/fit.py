@@ -40,6 +40,7 @@ from robocal.identify.constraints.position_effects import (
     stated_kinds,
     with_position_effects,
 )
+from robocal.identify.constraints.scale import scale_anchor, scale_note
 from robocal.identify.constraints.tilt_record import TiltCalibration, effect_summary_lines, tilt_estimates
 from robocal.identify.constraints.tilt_rows import (
     EFFECT_KINDS,
@@ -54,9 +55,9 @@ from robocal.identify.options import Pruning
 from robocal.identify.problem import measurement_chain
 from robocal.identify.solvers import solve
 from robocal.identify.stages import (
-    identifiable_set,
     initial_frames_and_tools,
     poorly_identifiable,
+    preference_order,
     robot_sizes,
     screen_unidentifiable,
     uncertainty,
@@ -65,7 +66,7 @@ from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.measure.constraints.mounts import mounts_in
 from robocal.model.chain import Model
 from robocal.model.joints import effect_of
-from robocal.model.rank import Dropped
+from robocal.model.rank import Dropped, identifiable_subset
 from robocal.model.steps import Role
 
 __all__ = [
@@ -299,12 +300,17 @@ def _screen(problem: ConstraintProblem, pruning: Pruning, known_noise: bool, dro
     return problem.fix([d.name for d in held])
 
 
-def identifiable(problem: ConstraintProblem):
+def identifiable(problem: ConstraintProblem, last: str | None = None):
     """The rank test (scene unknowns first, then the device frame, the tool, the robot) on
-    the Jacobian at consistent data (:meth:`ConstraintProblem.consistent_jacobian`)."""
+    the Jacobian at consistent data (:meth:`ConstraintProblem.consistent_jacobian`);
+    ``last``: a parameter tested after all others (held if anything it shares is kept:
+    :func:`~robocal.identify.constraints.scale.scale_anchor`)."""
     J = problem.consistent_jacobian(problem.x0) * problem.free_scale
     J = J[: len(J) - problem.n_prior_rows]  # what the measurements see, not the prior
-    return identifiable_set(J, problem.free_names, roles=problem.roles)
+    prefer = preference_order(problem.free_names, problem.roles)
+    if last in prefer:
+        prefer = [n for n in prefer if n != last] + [last]
+    return identifiable_subset(J, problem.free_names, order="preference", prefer=prefer)
 
 
 def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one constraint fit
@@ -354,7 +360,8 @@ def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one co
     if not effects:  # a model's stated compliances are held: they predict, they are not fitted
         shared = () if problem.tilt is None else problem.tilt.effects
         problem = problem.fix([n for n in problem.position_names if n not in shared])
-    selection = identifiable(problem)
+    anchor = scale_anchor(model, data)  # no length measured: the scale held on the longest length
+    selection = identifiable(problem, last=anchor)
     dropped = list(selection.dropped)
     problem = problem.fix(selection.dropped_names)
     mixed = sum((bool(data.constrained.any()), "tracker" in data.kinds, "tilt" in data.kinds)) > 1
@@ -373,25 +380,9 @@ def calibrate_constraints(  # noqa: PLR0913 - keyword-only options of the one co
     notes += [note] if (note := mixed_effects_note(data, found)) else []
     held = {d.name for d in dropped}  # a clearance held as a fixed tilt: which poses would identify it
     notes += [note] if (note := fixed_tilt_note(problem.tilt, problem.data, held)) else []
-    notes += [note] if (note := _scale_note(model, data, dropped)) else []
+    if anchor is not None:
+        notes.append(scale_note(anchor, anchor in held))
     return dataclasses.replace(result, prior=prior, notes=tuple(notes))
-
-
-def _scale_note(model: Model, data: ConstraintSet, dropped: list) -> str | None:
-    """Fixed points and unknown planes do not see the arm's size: scaled as a whole, the robot
-    fits them as well.  The rank test then holds a length at its nominal value, and that
-    nominal length sets the scale of everything else: said, with what would measure it."""
-    measured = len(data.point_pairs) or len(data.pairs) or data.tracked.any()
-    stated = data.known_planes is not None and np.isfinite(np.asarray(data.known_planes)).all(axis=1).any()
-    lengths = {s.name for s in model.steps if s.free and not s.is_rotation and not s.name.startswith("base_")}
-    held = [d.name for d in dropped if d.name in lengths]
-    if measured or stated or not data.constrained.any() or not held:
-        return None
-    return (
-        "no length was measured (no known distance, ball-bar pair, tracker row or stated plane): the "
-        "arm's overall scale is not calibrated, it rests on the nominal lengths held as not "
-        "identifiable; state a distance between two points (--distance 0,1=50mm) to calibrate it"
-    )
 
 
 def _clear_rows(model: Model, data: ConstraintSet) -> tuple[ConstraintSet, list[str]]:
