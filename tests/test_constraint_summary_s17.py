@@ -88,3 +88,28 @@ def test_without_a_length_the_scale_rests_on_the_longest_link_not_the_tool(tmp_p
     tracker = tmp_path / "held.tracker.csv"
     doc = json.loads(run("validate", tmp_path / "cal", "--data", tracker, "--refit-frame", "--json"))
     assert doc["rms_mm"] < 0.75 * doc["nominal"]["rms_mm"]  # better than the nominal robot (was 3.7x worse)
+
+
+def test_compensating_with_a_calibration_that_measured_no_length_says_so(tmp_path):
+    """The commands of such a calibration carry a nominal scale: robocal compensate says so."""
+    from typer.testing import CliRunner
+
+    from robocal.cli.app import app
+
+    def run(*args):
+        done = CliRunner().invoke(app, [str(a) for a in args])
+        assert done.exit_code == 0, done.output
+        return " ".join(done.stderr.split())
+
+    data = tmp_path / "s.csv"
+    run("simulate", "ur10", "--kind", "point", "--n", 40, "--count", 2, "--seed", 3, "-o", data)
+    targets = tmp_path / "t.csv"
+    targets.write_text("name,x,y,z\nA,0.5,0.3,0.6\n")
+    centres = np.array(json.loads((tmp_path / "s.csv.truth.json").read_text())["points_m"])
+    stated = f"0,1={np.linalg.norm(centres[0] - centres[1]) * 1e3:.4f}mm"
+    said = {}
+    for name, extra in (("bare", ()), ("stated", ("--distance", stated))):
+        run("calibrate", "ur10", "--data", data, *extra, "-o", tmp_path / name)
+        said[name] = "measured a length" in run("compensate", tmp_path / name, "--targets", targets,
+                                                "-o", tmp_path / f"{name}.csv")  # fmt: skip
+    assert said == {"bare": True, "stated": False}

@@ -42,9 +42,18 @@ def constraint_nominal(directory: Path, required: bool):
 
 
 def note_constraint_base(cal, use: str) -> None:
-    """Say on stderr, once, that ``use`` (e.g. "the URDF") holds the nominal base."""
+    """Say on stderr, once, that ``use`` (e.g. "the URDF") holds the nominal base, and that
+    the arm's scale was not measured when nothing in the data measured a length."""
     if cal.unseen:
         err_console.print(f"[yellow]note:[/] {use}: {safe(cal.base_note())}", highlight=False, markup=True)
+    if not cal.length_measured and "tilt" not in cal.kinds:
+        err_console.print(
+            f"[yellow]note:[/] {use}: nothing in the calibration's data measured a length (no "
+            "--distance, ball-bar or tracker rows): the arm's overall scale rests on a nominal length, "
+            "and its error grows with the reach",
+            highlight=False,
+            markup=True,
+        )
 
 
 def _read(path: Path, cal, angle_unit: str):

@@ -261,7 +261,7 @@ def _constraint_notes(cal, data_path: Path, fitted: bool) -> list[str]:
         "a constraint calibration records no covariance of the robot's parameters: the error it "
         "expected here is not available"
     ]
-    if cal.T_device_base is None and not cal.distances and "distance" not in cal.kinds:
+    if not cal.length_measured:
         # fixed points and planes of unknown size leave the arm's scale to the prior (issue 33)
         notes.append(
             "nothing in its data measured a length (no --distance, no ball-bar or tracker rows): its "

@@ -108,6 +108,13 @@ class ConstraintCalibration:
     tracker_noise: float | None = None
 
     @property
+    def length_measured(self) -> bool:
+        """Whether its data measured a length (a stated distance, ball-bar pairs, tracker
+        rows); without one the arm's scale rests on a nominal length
+        (:mod:`robocal.identify.constraints.scale`)."""
+        return bool(self.distances) or "distance" in self.kinds or self.T_device_base is not None
+
+    @property
     def tilt(self) -> TiltCalibration | None:
         """The joint effects and channel zeros as the tilt figures use them (None without)."""
         if not self.joint_effects and not self.tilt_zeros:
