@@ -119,10 +119,11 @@ def test_report_refuses_an_edited_model_and_notes_a_changed_file(folder, tmp_pat
     assert res.exit_code == 0 and "changed since the calibration" in res.output
     assert "socket.csv" not in _cells(page_path.read_text()).split("Provenance")[0]
     yaml_text = (out / "model.yaml").read_text()
-    a2 = next(s for s in (out / "model.yaml").read_text().splitlines() if "param: a2," in s)
-    (out / "model.yaml").write_text(yaml_text.replace(a2, a2.replace("value: 0.6", "value: 0.7")))
+    # an estimated length (a2 is held for the scale when no length was measured: issue 33)
+    a3 = next(s for s in (out / "model.yaml").read_text().splitlines() if "param: a3," in s)
+    (out / "model.yaml").write_text(yaml_text.replace(a3, a3.replace("value: 0.5", "value: 0.6")))
     res = runner.invoke(app, ["report", str(out), "-o", str(tmp_path / "r2.html")])
-    assert res.exit_code == 2 and "a2" in res.output and "Traceback" not in res.output
+    assert res.exit_code == 2 and "a3" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "r2.html").exists()
 
 
