@@ -32,8 +32,8 @@ Then why held-out is not 0.2 mm: the in-sample spread on the training placement 
 own floor), the default trained on two placements and judged on the third, and one fit of
 all three placements judged on each (what the geometric model can do with all the data).
 
-The model is built from the URDF's chain to ``ball_link``; the finger's ``<mimic>`` (off
-that chain) is removed first while ``model build`` refuses it.
+The model is built from the URDF's chain to ``ball_link`` (the finger's ``<mimic>``, off that
+chain, is ignored).
 
 Then the non-geometric candidate (issue 33): the joints' compliance under gravity, with the
 Panda's published link masses and centres of mass (Gaz, Cognetti, Oliva, Robuffo Giordano,
@@ -56,8 +56,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +64,7 @@ from robocal.identify.constraints.fit import calibrate_constraints, constraint_f
 from robocal.identify.constraints.model import NominalPrior
 from robocal.identify.options import Pruning
 from robocal.measure.constraints.data_set import ConstraintSet
-from robocal.model.urdf.read import URDFError, model_from_urdf
+from robocal.model.urdf.read import model_from_urdf
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "ball_in_socket"
 PLACEMENTS = ("front", "right", "back-high")
@@ -74,14 +72,7 @@ SOCKET_DISTANCE = 0.05  # m
 
 
 def panda(data: Path):
-    urdf = data / "urdf" / "panda.urdf"
-    try:
-        return model_from_urdf(urdf, measure="position", tip="ball_link")
-    except URDFError:  # the finger's <mimic>, off the chain to the ball
-        with tempfile.TemporaryDirectory() as folder:
-            path = Path(folder) / "panda.urdf"
-            path.write_text(re.sub(r"<mimic[^>]*/>", "", urdf.read_text()))
-            return model_from_urdf(path, measure="position", tip="ball_link")
+    return model_from_urdf(data / "urdf" / "panda.urdf", measure="position", tip="ball_link")
 
 
 def placement(data: Path, name: str) -> ConstraintSet:
@@ -232,11 +223,7 @@ HAND = (0.73, (-0.01, 0.0, 0.03))  # kg, m in panda_hand's frame (franka_descrip
 
 def _link_frame(data: Path, link: str):
     """The URDF's chain to ``link`` (its frame, the frame its inertial is stated in)."""
-    urdf = data / "urdf" / "panda.urdf"
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "panda.urdf"
-        path.write_text(re.sub(r"<mimic[^>]*/>", "", urdf.read_text()))
-        return model_from_urdf(path, measure="position", tip=link)
+    return model_from_urdf(data / "urdf" / "panda.urdf", measure="position", tip=link)
 
 
 def with_masses(model, data: Path):
