@@ -29,8 +29,9 @@ reader of numbers may ask for the fast path (:func:`iter_chunks` with ``decimal`
 chunk that is plain numbers only (:class:`PlainNumbers`: no quotes, comments, blank,
 short or long rows, text or a space inside a cell; exactly the header's count of finite
 numbers on every line) is read at once by pandas' C reader, whose floats are correctly
-rounded (the same bits as :func:`to_numbers`); every other chunk is read as above, so that
-a bad file's messages and line numbers do not depend on the path.
+rounded (the same bits as :func:`to_numbers`); every other chunk is read as above (a
+fast-path block that is not, in parts each tried again: a bad cell now and then costs its
+part's cells, not the block's), so that messages and line numbers do not depend on the path.
 """
 
 from __future__ import annotations
