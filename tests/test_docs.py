@@ -92,10 +92,12 @@ def test_cli_reference_lists_every_command() -> None:
 
 
 def _scratch_checkout(tmp_path: Path) -> Path:
-    """A folder laid out like the repository's root: examples/ and ../shared beside it."""
+    """A folder laid out like the repository's root: examples/, benchmarks/ (its data) and
+    ../shared beside it."""
     work = tmp_path / "work"
     work.mkdir()
     (work / "examples").symlink_to(ROOT / "examples")
+    (work / "benchmarks").symlink_to(ROOT / "benchmarks")
     if SHARED.is_dir():
         (tmp_path / "shared").symlink_to(SHARED)
     return work
