@@ -47,7 +47,7 @@ import numpy as np
 import robocal.identify.constraints.figures as figures_module
 import robocal.identify.constraints.fit as fit_module
 import robocal.identify.constraints.position_effects as effects_module
-from bench_ball_in_socket import DATA, SOCKET_DISTANCE, figures, with_masses
+from bench_ball_in_socket import DATA, SOCKET_DISTANCE, figures, kfold, with_masses
 from robocal.identify.constraints.fit import calibrate_constraints, tool_points
 from robocal.identify.constraints.model import NominalPrior
 from robocal.identify.options import Pruning
@@ -134,17 +134,6 @@ def backlash_on_position_rows(deadband: float) -> Iterator[None]:
 def fit(model, data: ConstraintSet, effects: tuple[str, ...]):
     """The default constraint fit (complete + prior, pruning) with ``effects`` on the rows."""
     return calibrate_constraints(model, data, pruning=Pruning(), prior=NominalPrior(), effects=effects)
-
-
-def kfold(model, data: ConstraintSet, effects: tuple[str, ...], k: int = 5) -> float:
-    """RMS distance (mm) of each fold's configurations from their socket as the others fitted it."""
-    fold = np.random.default_rng(0).permutation(data.n) % k
-    err = []
-    for f in range(k):
-        result = fit(model, data.select(fold != f), effects)
-        test = data.select(fold == f)
-        err.append(np.sum((tool_points(result.model, test.q) - result.points[test.point]) ** 2, axis=1))
-    return 1e3 * math.sqrt(float(np.mean(np.concatenate(err))))
 
 
 def roll_pairs(data: ConstraintSet) -> list[tuple[int, int]]:
