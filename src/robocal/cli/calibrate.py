@@ -205,9 +205,7 @@ def calibrate_command(
         console.print(stats_table(f"held-out validation ({validation.n} poses)", validation))
         for note in validation_notes(validation, result, frame_note=False)[0]:  # frame: the calibrated one
             console.print(note, highlight=False, markup=True)
-    console.print(
-        f"wrote {written_files(out)}", highlight=False, soft_wrap=True
-    )  # a path is not wrapped
+    console.print(f"wrote {written_files(out)}", highlight=False, soft_wrap=True)  # a path is not wrapped
     if report:
         console.print(f"report: {out / 'report.html'}", highlight=False)
 
