@@ -251,13 +251,15 @@ def validate_constraint_file(
 
     # sensors stated at home sit where the person put them: resolved against the start robot
     data = mounts_in(data, model if cal is None or cal.nominal is None else cal.nominal)
+    from robocal.safe_output import strict_json
+
     figures = constraint_figures(model, data, tilt=None if cal is None else cal.tilt)
     nominal = None if cal is None else cal.nominal
     if as_json:  # the data's own strings go through json.dumps: escaped
         before = None if nominal is None else constraint_figures(nominal, data).as_dict()
         doc = {"model": model.name, "data": str(data_path), "poses": data.n, "kinds": list(data.kinds),
                "figures": figures.as_dict(), "nominal_figures": before}  # fmt: skip
-        print(json.dumps(doc, indent=2))
+        print(strict_json(doc, indent=2))  # NaN as null: a standard JSON document
         return
     console.print(f"{safe(model.name)} on {safe(data_path.name)} ({data.n} poses, {', '.join(data.kinds)}):",
                   highlight=False)  # fmt: skip
