@@ -60,6 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robocal.identify.constraints.figures import pooled_spread
 from robocal.identify.constraints.fit import calibrate_constraints, constraint_figures
 from robocal.identify.constraints.model import NominalPrior
 from robocal.identify.options import Pruning
@@ -123,9 +124,7 @@ def calibrated(model, train: ConstraintSet, how: str):
 def figures(model, data: ConstraintSet) -> tuple[float, float]:
     """RMS spread (mm, both sockets pooled) and |socket distance - 50 mm| (mm)."""
     f = constraint_figures(model, data)
-    counts = np.bincount(data.point)
-    spread = math.sqrt(float(np.sum(f.point_spread**2 * counts) / counts.sum()))
-    return spread * 1e3, abs(float(f.point_distance_error[0])) * 1e3
+    return pooled_spread(f, data) * 1e3, abs(float(f.point_distance_error[0])) * 1e3
 
 
 def _row(label: str, values: np.ndarray) -> str:

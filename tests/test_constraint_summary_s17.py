@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from robocal.identify.constraints.figures import pooled_spread
 from robocal.identify.constraints.fit import calibrate_constraints, constraint_figures
 from robocal.measure.constraints.data_set import ConstraintSet
 from robocal.model.urdf.read import model_from_urdf
@@ -34,8 +35,7 @@ def test_residual_before_is_the_spread_not_the_weighted_distance(distance_m):
     data = _placement(MUKCA / "dinova_2" / "front", distance_m)
     result = calibrate_constraints(model, data)
     f = constraint_figures(model, data)  # the nominal model: each socket's RMS spread (3-D)
-    counts = np.bincount(data.point)
-    per_axis = math.sqrt(float(np.sum(f.point_spread**2 * counts) / counts.sum()) / 3)
+    per_axis = pooled_spread(f, data) / math.sqrt(3)
     # the fit starts each socket at the nominal model's centroid: the same figure per axis
     assert result.rms_before == pytest.approx(per_axis, rel=0.02)
     assert result.rms_after < result.rms_before

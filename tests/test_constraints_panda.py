@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import robocal as rc
+from robocal.identify.constraints.figures import pooled_spread
 from robocal.identify.constraints.fit import (
     build_constraint_problem,
     calibrate_constraints,
@@ -137,9 +138,7 @@ def _placement(name: str) -> ConstraintSet:
 
 
 def _spread_mm(model, data: ConstraintSet) -> float:
-    f = constraint_figures(model, data)
-    counts = np.bincount(data.point)
-    return float(np.sqrt(np.sum(f.point_spread**2 * counts) / counts.sum())) * 1e3
+    return pooled_spread(constraint_figures(model, data), data) * 1e3
 
 
 @needs_panda

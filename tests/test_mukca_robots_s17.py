@@ -17,6 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from robocal.cli.app import app
+from robocal.identify.constraints.figures import pooled_spread
 from robocal.identify.constraints.fit import constraint_figures
 from robocal.measure.constraints.data import read_constraints
 from robocal.model.files import load_model
@@ -56,9 +57,7 @@ def _calibrated(tmp_path: Path, urdf: str, placement: str):
 def _figures_mm(model, data) -> tuple[float, float]:
     """RMS spread of both sockets pooled and |distance - 50 mm| (the benchmark's figures)."""
     f = constraint_figures(model, data)
-    counts = np.bincount(data.point)
-    spread = float(np.sqrt(np.sum(f.point_spread**2 * counts) / counts.sum()))
-    return spread * 1e3, abs(float(f.point_distance_error[0])) * 1e3
+    return pooled_spread(f, data) * 1e3, abs(float(f.point_distance_error[0])) * 1e3
 
 
 @pytest.mark.parametrize(("urdf", "dof"), [("iiwa14.urdf", 7), ("gen3lite.urdf", 6)])

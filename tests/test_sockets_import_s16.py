@@ -15,6 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from robocal.cli.app import app
+from robocal.identify.constraints.figures import pooled_spread
 from robocal.identify.constraints.fit import calibrate_constraints, constraint_figures
 from robocal.identify.constraints.model import NominalPrior
 from robocal.identify.options import Pruning
@@ -47,9 +48,7 @@ def _placement(folder: Path, sockets: int = 2, dof: int = 6) -> list[np.ndarray]
 
 
 def _spread_mm(model, data: ConstraintSet) -> float:
-    f = constraint_figures(model, data)
-    counts = np.bincount(data.point)
-    return float(np.sqrt(np.sum(f.point_spread**2 * counts) / counts.sum())) * 1e3
+    return pooled_spread(constraint_figures(model, data), data) * 1e3
 
 
 # ------------------------------------------------------------------ the real Panda

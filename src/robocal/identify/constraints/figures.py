@@ -26,6 +26,7 @@ __all__ = [
     "ConstraintFigures",
     "constraint_figures",
     "deflections",
+    "pooled_spread",
     "robot_and_tool",
     "start_planes",
     "tool_points",
@@ -179,3 +180,10 @@ def constraint_figures(robot: Model, data: ConstraintSet, tool: Array | None = N
         pair_error = np.linalg.norm(p[data.pairs[:, 0]] - p[data.pairs[:, 1]], axis=1) - data.pair_length
     channels, tilt_rms, basis = tilt_figures(robot, data, tilt)
     return ConstraintFigures(spread, point_error, plane_rms, pair_error, channels, tilt_rms, basis)
+
+
+def pooled_spread(figures: ConstraintFigures, data: ConstraintSet) -> float:
+    """RMS distance (m) of every fixed-point row's tool point from its point's centroid: each
+    point's spread weighted by its rows (the ball-in-socket figure, both sockets pooled)."""
+    counts = np.bincount(data.point[data.point >= 0], minlength=len(figures.point_spread))
+    return math.sqrt(float(np.sum(figures.point_spread**2 * counts) / counts.sum()))
