@@ -45,6 +45,22 @@ def _series_a(days: tuple[int, ...] | None = None) -> rc.Measurements:
     return data.subset(np.flatnonzero(np.isin(day, days)))
 
 
+def _days_14_15_under(monkeypatch, rule_name: str, rules: dict[str, float], seed: int):
+    """Series A's days 14-15, 100 training rows (``seed``), calibrated by the default with
+    ``cv.<rule_name>`` at each of ``rules``' values: the mean held-out error (m) of the other
+    rows and the result, per rule."""
+    split = _series_a((14, 15)).with_split(100, seed=seed)
+    train, test = split.split_rows("train"), split.split_rows("test")
+    model = rc.calibration_model("ur10", "position")
+    held_out, results = {}, {}
+    for rule, se in rules.items():
+        monkeypatch.setattr(cv, rule_name, se)
+        results[rule] = rc.calibrate(model, train, tool_guess=PROBE, residual="auto")
+        predicted = results[rule].predict(test.q)[:, :3, 3]
+        held_out[rule] = float(np.linalg.norm(predicted - test.position, axis=1).mean())
+    return held_out, results
+
+
 def _row(name: str, harmonics: int | None, e: np.ndarray) -> CVCandidate:
     rms = float(np.sqrt(np.mean(e**2)))
     return CVCandidate(
@@ -105,17 +121,9 @@ def test_the_richer_physics_carries_the_residual_within_one_standard_error():
 def test_on_series_a_days_the_residual_rides_on_compliance(monkeypatch):
     """Series A, days 14-15, 100 training rows (seed 2): the geometry's CV error is 0.2 %
     below compliance's; with compliance the other 5,427 rows are predicted better."""
-    split = _series_a((14, 15)).with_split(100, seed=2)
-    train, test = split.split_rows("train"), split.split_rows("test")
-    model = rc.calibration_model("ur10", "position")
-    held_out, chosen = {}, {}
-    for rule, se in (("richer", 1.0), ("lowest", 0.0)):
-        monkeypatch.setattr(cv, "PHYSICS_SE", se)
-        result = rc.calibrate(model, train, tool_guess=PROBE, residual="auto")
-        held_out[rule] = float(
-            np.linalg.norm(result.predict(test.q)[:, :3, 3] - test.position, axis=1).mean()
-        )
-        chosen[rule] = result.diagnostics.cv["chosen"]
+    rules = {"richer": 1.0, "lowest": 0.0}
+    held_out, results = _days_14_15_under(monkeypatch, "PHYSICS_SE", rules, seed=2)
+    chosen = {rule: result.diagnostics.cv["chosen"] for rule, result in results.items()}
     assert "compliance" in chosen["richer"] and "compliance" not in chosen["lowest"]
     assert held_out["richer"] < 0.95 * held_out["lowest"], held_out
 
@@ -153,17 +161,9 @@ def test_the_fits_on_all_poses_reach_the_neutral_starts_optimum(monkeypatch):
 def test_on_series_a_days_the_lowest_cv_error_predicts_better_than_one_standard_error(monkeypatch):
     """Series A, days 14-15 (5,527 rows), 100 training rows (seed 0): the one-SE rule keeps 24
     harmonics, the lowest CV error 48, which predicts the other 5,427 rows better."""
-    split = _series_a((14, 15)).with_split(100, seed=0)
-    train, test = split.split_rows("train"), split.split_rows("test")
-    model = rc.calibration_model("ur10", "position")
-    held_out, chosen = {}, {}
-    for rule, se in (("lowest", 0.0), ("one SE", 1.0)):
-        monkeypatch.setattr(cv, "HARMONICS_SE", se)
-        result = rc.calibrate(model, train, tool_guess=PROBE, residual="auto")
-        held_out[rule] = float(
-            np.linalg.norm(result.predict(test.q)[:, :3, 3] - test.position, axis=1).mean()
-        )
-        chosen[rule] = result.model.residual.harmonics
+    rules = {"lowest": 0.0, "one SE": 1.0}
+    held_out, results = _days_14_15_under(monkeypatch, "HARMONICS_SE", rules, seed=0)
+    chosen = {rule: result.model.residual.harmonics for rule, result in results.items()}
     assert chosen == {"lowest": 48, "one SE": 24}
     assert held_out["lowest"] < 0.95 * held_out["one SE"], held_out
 
