@@ -22,8 +22,7 @@ def no_length_measured(data: ConstraintSet) -> bool:
     """Whether ``data`` has position-like rows but nothing that measures a length (a known
     distance between points, a ball-bar pair, a tracker row, a stated plane)."""
     measured = len(data.point_pairs) or len(data.pairs) or data.tracked.any()
-    planes = data.known_planes
-    stated = planes is not None and bool((planes == planes).all(axis=1).any())  # NaN rows: unknown
+    stated = any(not data.unknown_plane(k) for k in range(data.n_planes))
     return bool(data.constrained.any()) and not measured and not stated
 
 
